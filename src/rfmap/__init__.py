@@ -1,0 +1,2 @@
+"""rfmap: resolution-free neural surrogates for geometric mapping."""
+__version__ = "0.1.0"
