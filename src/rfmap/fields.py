@@ -436,7 +436,9 @@ class RandomDensity:
         self.noise = cfg.noise if rng.random() < cfg.p_noise else 0.0
         self.contrast = float(_log_uniform(rng, *cfg.contrast, ()))
         self._rng = np.random.default_rng(rng.integers(2**63))
-        probe = self._raw(grid_points(33, d))
+        self.scale, noise, self.noise = 1.0, self.noise, 0.0
+        probe = self.on_grid(33)
+        self.noise = noise
         span = float(probe.max() - probe.min())
         self.scale = self.contrast / span if span > 1e-12 else 1.0
 
@@ -445,12 +447,31 @@ class RandomDensity:
         t = np.sin(arg)
         if self.dim >= 2:
             t[..., 1] = np.cos(arg[..., 1])
-        out = (self.amp[None] * t.prod(-1)).sum(-1)
+        return (self.amp[None] * t.prod(-1)).sum(-1) + self._nonsmooth(x)
+
+    def _nonsmooth(self, x: np.ndarray) -> np.ndarray:
+        out = np.zeros(x.shape[0])
         for lo, hi, h in self.steps:
             out = out + h * ((x >= lo) & (x <= hi)).all(-1)
         for c, width, f, ph, a in self.patches:
             w = np.exp(-((x - c) ** 2).sum(-1) / (2 * width**2))
             out = out + a * w * np.sin(TWO_PI * (x * f).sum(-1) + ph[0])
+        return out
+
+    def on_grid(self, n: int) -> np.ndarray:
+        """Raw values on the regular ``N``-grid, flat shape (N**d,), by separable evaluation of the modes."""
+        t = np.linspace(0.0, 1.0, n)
+        arg = TWO_PI * self.freq[:, :, None] * t[None, None, :] + self.phase[:, :, None]  # (K, d, N)
+        tab = np.sin(arg)
+        tab[:, 1] = np.cos(arg[:, 1])
+        if self.dim == 2:
+            smooth = np.einsum("k,ki,kj->ij", self.amp, tab[:, 0], tab[:, 1])
+        else:
+            smooth = np.einsum("k,ki,kj,kl->ijl", self.amp, tab[:, 0], tab[:, 1], tab[:, 2])
+        out = smooth.reshape(-1) + self._nonsmooth(grid_points(n, self.dim))
+        out = self.scale * out
+        if self.noise:
+            out = out + self.noise * self.contrast * self._rng.standard_normal(out.shape)
         return out
 
     def __call__(self, x) -> np.ndarray:
@@ -510,6 +531,7 @@ class RandomBeltrami:
         level = min(cfg.k, rng.uniform(*cfg.sup))
         peak = np.abs(probe).max()
         self.scale = level / peak if peak > 0 else 0.0
+        self.k = float(cfg.k)
 
     def _raw(self, x):
         arg = TWO_PI * x[:, None, :] * self.freq[None] + self.phase[None]
@@ -519,7 +541,14 @@ class RandomBeltrami:
 
     def __call__(self, x) -> np.ndarray:
         """Complex :math:`\\mu` at points (P, 2)."""
-        return self.scale * self._raw(np.asarray(x, dtype=np.float64))
+        mu = self.scale * self._raw(np.asarray(x, dtype=np.float64))
+        # the scale is set on a probe grid; between probe points |mu| can exceed the level by a few per cent,
+        # so enforce the bound k exactly by a radial clip (inactive unless the level is within that of k)
+        a = np.abs(mu)
+        over = a > self.k
+        if over.any():
+            mu = np.where(over, mu * (self.k / np.maximum(a, 1e-300)), mu)
+        return mu
 
 
 def random_beltrami(rng: np.random.Generator, cfg: RandomBeltramiConfig | None = None) -> RandomBeltrami:
@@ -530,61 +559,102 @@ def random_beltrami(rng: np.random.Generator, cfg: RandomBeltramiConfig | None =
 class RandomMap:
     r"""A random smooth map of the unit square that is the identity on the boundary, with its exact :math:`\mu`.
 
-    :math:`f(x) = x + c\, x(1-x)y(1-y) \sum_i A_i \sin(2\pi f_{x,i}x + \phi_{x,i}) \cos(2\pi f_{y,i}y + \phi_{y,i})`
-    (one sum per component, paper-style modes), scaled by :math:`c` so that :math:`\|\mu\|_\infty` equals a random
-    level :math:`\le k`, and :math:`\det J > 0`.  Its :math:`\mu` (exact, by automatic differentiation) is a
-    Beltrami training input whose solution is known to be a homeomorphism fixing the boundary, unlike a tapered
-    random :math:`\mu`.
+    :math:`f(x) = x + c\, b(x) \sum_i A_i \sin(2\pi f_{x,i}x + \phi_{x,i}) \cos(2\pi f_{y,i}y + \phi_{y,i})`
+    with the bump :math:`b = 16\,x(1-x)\,y(1-y)` (one sum per component, paper-style modes), scaled by :math:`c`
+    so that :math:`\|\mu\|_\infty` equals a random level :math:`\le k` with :math:`\det J > 0`.  Its exact
+    :math:`\mu` (closed-form derivatives) is a Beltrami training input whose solution is known to be a
+    homeomorphism fixing the boundary, unlike a tapered random :math:`\mu`.
     """
 
+    dim = 2
+    kind = "beltrami"
+
     def __init__(self, rng: np.random.Generator, cfg: RandomBeltramiConfig = RandomBeltramiConfig()):
+        if not 0 < cfg.k < 1:
+            raise ValueError(f"the bound k must lie in (0, 1), got {cfg.k}")
         n = int(rng.integers(cfg.modes[0], cfg.modes[1] + 1))
-        self.amp = torch.as_tensor(rng.uniform(-1, 1, (2, n)))
-        self.freq = torch.as_tensor(_log_uniform(rng, cfg.freq[0], cfg.freq[1], (2, n, 2)))
-        self.phase = torch.as_tensor(rng.uniform(0, TWO_PI, (2, n, 2)))
+        self.amp = rng.uniform(-1, 1, (2, n))
+        self.freq = TWO_PI * _log_uniform(rng, cfg.freq[0], cfg.freq[1], (2, n, 2))  # angular
+        self.phase = rng.uniform(0, TWO_PI, (2, n, 2))
         self.scale = 1.0
-        probe = grid_points(65, 2)
         level = min(cfg.k, rng.uniform(*cfg.sup))
-        J0 = self.jacobian(probe) - np.eye(2)
-        # mu of x + c*D is monotone in c for small c; bisection on c for sup|mu| = level
+        pts = grid_points(65, 2)
+        J0 = self.jacobian(pts) - np.eye(2)
+        self.scale = self._fit_scale(J0, level)
+        # |mu| can peak between probe points (up to a few per cent above the probe maximum): add fine local
+        # grids around the largest values, a quarter of the previous spacing per round, and fit the scale again
+        spacing = 1.0 / 64
+        for _ in range(3):
+            a0, b0 = self._wirtinger0(J0)
+            top = pts[np.argsort(b0 / np.abs(1 + self.scale * a0))[-16:]]
+            t = np.linspace(-spacing, spacing, 9)
+            patch = np.stack(np.meshgrid(t, t, indexing="ij"), -1).reshape(1, -1, 2)
+            local = np.clip(top[:, None, :] + patch, 0.0, 1.0).reshape(-1, 2)
+            scale, self.scale = self.scale, 1.0
+            J0 = np.concatenate([J0, self.jacobian(local) - np.eye(2)])
+            self.scale = scale
+            pts = np.concatenate([pts, local])
+            spacing /= 4
+            self.scale = self._fit_scale(J0, level)
+
+    @staticmethod
+    def _wirtinger0(J0):
+        # with J = I + c J0: f_z = 1 + c a0 and f_zbar = c b0, so |mu| = c |b0| / |1 + c a0|; det J > 0 iff |mu| < 1
+        a0 = 0.5 * ((J0[..., 0, 0] + J0[..., 1, 1]) + 1j * (J0[..., 1, 0] - J0[..., 0, 1]))
+        b0 = np.abs(0.5 * ((J0[..., 0, 0] - J0[..., 1, 1]) + 1j * (J0[..., 1, 0] + J0[..., 0, 1])))
+        return a0, b0
+
+    @classmethod
+    def _fit_scale(cls, J0, level):
+        # sup|mu| of x + c D grows with c: bisection for sup|mu| = level
+        a0, b0 = cls._wirtinger0(J0)
+
+        def sup_mu(c):
+            fz = np.abs(1 + c * a0)
+            return np.inf if (fz <= c * b0).any() else float((c * b0 / fz).max())
+
         lo, hi = 0.0, 1.0
-        while self._sup_mu(J0, hi) < level and hi < 1e6:
+        while sup_mu(hi) < level and hi < 1e6:
             hi *= 2
         for _ in range(40):
             mid = 0.5 * (lo + hi)
-            if self._sup_mu(J0, mid) < level:
+            if sup_mu(mid) < level:
                 lo = mid
             else:
                 hi = mid
-        self.scale = lo
+        return lo
 
-    @staticmethod
-    def _sup_mu(J0, c):
-        J = np.eye(2) + c * J0
-        a = 0.5 * ((J[..., 0, 0] + J[..., 1, 1]) + 1j * (J[..., 1, 0] - J[..., 0, 1]))
-        b = 0.5 * ((J[..., 0, 0] - J[..., 1, 1]) + 1j * (J[..., 1, 0] + J[..., 0, 1]))
-        det = np.linalg.det(J)
-        if (det <= 0).any():
-            return np.inf
-        return float(np.abs(b / a).max())
-
-    def displacement(self, x: torch.Tensor) -> torch.Tensor:
-        bump = 16 * x[..., 0] * (1 - x[..., 0]) * x[..., 1] * (1 - x[..., 1])
-        arg = TWO_PI * x[..., None, None, :] * self.freq + self.phase  # (..., 2, n, 2)
-        modes = (self.amp * torch.sin(arg[..., 0]) * torch.cos(arg[..., 1])).sum(-1)  # (..., 2)
-        return self.scale * bump[..., None] * modes
-
-    def fn(self, x: torch.Tensor) -> torch.Tensor:
-        return x + self.displacement(x)
+    def _parts(self, x):
+        x = np.asarray(x, dtype=np.float64)
+        X, Y = x[..., 0], x[..., 1]
+        ax = self.freq[..., 0] * X[..., None, None] + self.phase[..., 0]  # (..., 2, n)
+        ay = self.freq[..., 1] * Y[..., None, None] + self.phase[..., 1]
+        sx, cx, sy, cy = np.sin(ax), np.cos(ax), np.sin(ay), np.cos(ay)
+        M = (self.amp * sx * cy).sum(-1)  # (..., 2)
+        Mx = (self.amp * self.freq[..., 0] * cx * cy).sum(-1)
+        My = (-self.amp * self.freq[..., 1] * sx * sy).sum(-1)
+        b = 16 * X * (1 - X) * Y * (1 - Y)
+        bx = 16 * (1 - 2 * X) * Y * (1 - Y)
+        by = 16 * X * (1 - X) * (1 - 2 * Y)
+        return b, bx, by, M, Mx, My
 
     def __call__(self, x) -> np.ndarray:
-        return self.fn(torch.as_tensor(np.asarray(x, dtype=np.float64))).numpy()
+        """Image of the points ``x`` (..., 2)."""
+        b, _, _, M, _, _ = self._parts(x)
+        return np.asarray(x, dtype=np.float64) + self.scale * b[..., None] * M
 
     def jacobian(self, x) -> np.ndarray:
-        return BeltramiMap.jacobian(self, x)  # type: ignore[arg-type]
+        """Exact Jacobian, shape (..., 2, 2)."""
+        b, bx, by, M, Mx, My = self._parts(x)
+        dx = self.scale * (bx[..., None] * M + b[..., None] * Mx)  # d f_c / dx, (..., 2)
+        dy = self.scale * (by[..., None] * M + b[..., None] * My)
+        return np.stack([dx, dy], -1) + np.eye(2)
 
     def mu(self, x) -> np.ndarray:
-        return BeltramiMap.mu(self, x)  # type: ignore[arg-type]
+        """Exact Beltrami coefficient, complex (...)."""
+        from .geometry import beltrami_from_jacobian
+
+        return beltrami_from_jacobian(torch.as_tensor(self.jacobian(x))).numpy()
 
 
 def random_boundary_map(rng: np.random.Generator, cfg: RandomBeltramiConfig | None = None) -> RandomMap:
@@ -593,6 +663,15 @@ def random_boundary_map(rng: np.random.Generator, cfg: RandomBeltramiConfig | No
 
 
 # --------------------------------------------------------------------------------------------------- sampling
+@lru_cache(maxsize=16)
+def _sobol_base(count: int, dim: int) -> np.ndarray:
+    from scipy.stats import qmc
+
+    pts = qmc.Sobol(d=dim, scramble=False).random_base2(int(math.ceil(math.log2(max(count, 2)))))[:count]
+    pts.setflags(write=False)
+    return pts
+
+
 def jittered_points(
     n: int,
     dim: int,
@@ -604,26 +683,28 @@ def jittered_points(
     r"""Sobol-jittered vertices of the ``N``-grid (paper Sec. 5: stochastic jittered sampling).
 
     Vertex :math:`x_v` moves to :math:`x_v + \text{strength}\cdot h\cdot g_v\,(2 s_v - 1)` where :math:`s_v` is a
-    scrambled Sobol point in :math:`[0,1]^d` and :math:`g_v \in [0, 1]` is the local gradient magnitude of the field
-    normalised by its maximum (1 everywhere when ``grad_magnitude`` is ``None``).  Boundary vertices only slide
-    along the boundary and corners stay fixed, so the jittered mesh still tiles :math:`[0,1]^d`; with
-    ``strength <= 0.2`` no element can flip.
+    randomly shifted (Cranley–Patterson) Sobol point in :math:`[0,1]^d` and :math:`g_v \in [0, 1]` is the local
+    gradient magnitude of the field normalised by its maximum (1 everywhere when ``grad_magnitude`` is ``None``).
+    Boundary vertices only slide along the boundary and corners stay fixed, so the jittered mesh still tiles
+    :math:`[0,1]^d`; with ``strength <= 0.2`` no element can flip.  (A Kuhn tetrahedron can degenerate once its
+    vertices move :math:`h/6` per axis, so in 3D the offsets are scaled by 3/4 to keep that guarantee.)
 
     Returns
     -------
     ndarray, shape (N**d, d)
     """
-    from scipy.stats import qmc
-
     n = check_n(n)
     dim = check_dim(dim)
     if not 0 <= strength <= 0.2:
         raise ValueError(f"jitter strength must lie in [0, 0.2] (fraction of the grid spacing), got {strength}")
     pts = grid_points(n, dim)
-    sob = qmc.Sobol(d=dim, scramble=True, seed=rng).random_base2(int(math.ceil(math.log2(pts.shape[0]))))
-    off = (2 * sob[: pts.shape[0]] - 1) * strength / (n - 1)
+    sob = (_sobol_base(pts.shape[0], dim) + rng.random(dim)) % 1.0
+    sob = sob[rng.permutation(pts.shape[0])]
+    off = (2 * sob - 1) * (strength if dim == 2 else 0.75 * strength) / (n - 1)
     if grad_magnitude is not None:
         g = np.abs(np.asarray(grad_magnitude, dtype=np.float64)).reshape(-1)
+        if g.shape[0] != pts.shape[0]:
+            raise ValueError(f"grad_magnitude has {g.shape[0]} values for {pts.shape[0]} vertices")
         g = g / g.max() if g.max() > 0 else g
         off = off * g[:, None]
     on_wall = (pts <= 0) | (pts >= 1)

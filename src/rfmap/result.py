@@ -18,9 +18,10 @@ def save_npz_atomic(path, **arrays) -> None:
     d = os.path.dirname(os.path.abspath(path))
     os.makedirs(d, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=d, suffix=".npz.part")
-    os.close(fd)
     try:
-        np.savez(tmp, **arrays)
+        # write through the open handle: given a file name, np.savez would append ".npz" to it
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, **arrays)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):

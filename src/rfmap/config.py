@@ -1,0 +1,169 @@
+r"""Typed training configurations with named ``ci`` and ``full`` presets.
+
+``RFMAP_SCALE`` (``ci`` or ``full``, default ``full``) chooses the preset wherever none is named.  ``ci`` presets
+train tiny models for a few steps (seconds on a laptop CPU, used by the tests and by the notebooks under CI);
+``full`` presets are the ones that produced the shipped weights.
+"""
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+from dataclasses import asdict, dataclass, field, replace
+
+from .fields import RandomBeltramiConfig, RandomDensityConfig
+from .tasks import LossWeights, TaskSpec
+
+__all__ = ["TrainConfig", "ModelConfig", "CONFIGS", "PRESETS", "get_config", "config_names", "scale",
+           "config_from_dict"]
+
+PRESETS = ("ci", "full")
+
+
+def scale() -> str:
+    """The active scale from ``RFMAP_SCALE`` (``'full'`` when unset)."""
+    s = os.environ.get("RFMAP_SCALE", "full").strip().lower() or "full"
+    if s not in PRESETS:
+        raise ValueError(f"RFMAP_SCALE must be one of {PRESETS}, got {s!r}")
+    return s
+
+
+@dataclass(frozen=True)
+class ModelConfig:
+    """Constructor arguments of :class:`rfmap.nn.MultiResUNet` (``dim`` and ``n_params`` come from the task)."""
+
+    base: int = 16
+    depth: int = 3
+    attention: bool = True
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    r"""Everything that defines a training run.
+
+    Optimiser defaults follow the paper: AdamW, gradient clipping at 1.0, a random training resolution per step,
+    Sobol-jittered sampling.  ``schedule`` is ``'cosine'`` (linear warm-up then cosine decay), ``'step'``
+    (decay by ``gamma`` every ``step_size`` steps) or ``'restarts'`` (cosine annealing with warm restarts,
+    ``T0``, ``T_mult``).
+    """
+
+    name: str
+    task: TaskSpec
+    preset: str = "full"
+    model: ModelConfig = ModelConfig()
+    steps: int = 2000
+    batch: int = 8
+    n_range: tuple[int, int] = (64, 96)
+    jitter: float = 0.2
+    lr: float = 1e-3
+    weight_decay: float = 1e-4
+    betas: tuple[float, float] = (0.9, 0.999)
+    schedule: str = "cosine"
+    warmup: int = 100
+    step_size: int = 200
+    gamma: float = 0.5
+    T0: int = 600
+    T_mult: int = 2
+    lr_min: float = 1e-6
+    clip: float = 1.0
+    loss: LossWeights = LossWeights()
+    density_field: RandomDensityConfig | None = None
+    beltrami_field: RandomBeltramiConfig | None = None
+    beltrami_source: str = "map"
+    seed: int = 0
+    val_every: int = 250
+    val_n: int = 51
+    ckpt_every: int = 250
+    threads: int = 0
+    time_limit: float = 0.0
+    description: str = ""
+
+    def to_dict(self) -> dict:
+        return json.loads(json.dumps(asdict(self)))
+
+    def with_overrides(self, **kw) -> "TrainConfig":
+        return replace(self, **kw)
+
+
+def _build(cls, data):
+    if data is None or not dataclasses.is_dataclass(cls):
+        return data
+    kw = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in data:
+            continue
+        v = data[f.name]
+        t = f.type if not isinstance(f.type, str) else eval(f.type.split("|")[0].strip(), globals())
+        if dataclasses.is_dataclass(t) and isinstance(v, dict):
+            v = _build(t, v)
+        elif isinstance(v, list):
+            v = tuple(v)
+        kw[f.name] = v
+    return cls(**kw)
+
+
+def config_from_dict(d: dict) -> TrainConfig:
+    """Rebuild a :class:`TrainConfig` from :meth:`TrainConfig.to_dict` output (e.g. stored weight metadata)."""
+    return _build(TrainConfig, d)
+
+
+def _pair(name, task, description, ci: dict, full: dict, **common) -> dict[str, TrainConfig]:
+    base = TrainConfig(name=name, task=task, description=description, **common)
+    return {"ci": replace(base, preset="ci", **ci), "full": replace(base, preset="full", **full)}
+
+
+_CI = dict(model=ModelConfig(base=4, depth=2), steps=20, batch=2, n_range=(17, 25), warmup=2, val_every=10,
+           ckpt_every=10, val_n=17)
+_CI3 = dict(model=ModelConfig(base=4, depth=2), steps=10, batch=1, n_range=(9, 13), warmup=2, val_every=5,
+            ckpt_every=5, val_n=9)
+
+CONFIGS: dict[str, dict[str, TrainConfig]] = {
+    **{
+        "beltrami2d": _pair(
+            "beltrami2d", TaskSpec("beltrami", 2, "fixed"),
+            "Reconstruction of a boundary-fixing map from its Beltrami coefficient; loss ||mu(u) - mu_in||^2 "
+            "on the Beltrami coefficients of random boundary-fixing maps (no solver data).",
+            _CI, dict(steps=6000, batch=4, time_limit=3000.0, val_every=500, threads=1),
+            beltrami_field=RandomBeltramiConfig(sup=(0.05, 0.6)), loss=LossWeights(fold=1.0),
+        ),
+    },
+    **{
+        name: _pair(
+            name, TaskSpec("density", 2, boundary), desc, _CI,
+            dict(steps=6000, batch=4, time_limit=3000.0, val_every=500, threads=1),
+            loss=LossWeights(beltrami=lam),
+        )
+        for name, boundary, lam, desc in [
+            ("deq2d-square", "square", 0.1, "2D density-equalizing quasi-conformal map (DEQ: density loss + "
+             "0.1 Beltrami energy), square boundary."),
+            ("deq2d-free", "free", 0.1, "2D DEQ map, free boundary."),
+            ("dem2d-square", "square", 0.0, "2D density-equalizing map (density loss only), square boundary."),
+        ]
+    },
+    **{
+        name: _pair(
+            name, TaskSpec("density", 3, boundary), desc, _CI3,
+            dict(steps=4000, batch=2, time_limit=3300.0),
+            model=ModelConfig(base=8, depth=2), n_range=(32, 48), jitter=0.0, lr=2e-4, weight_decay=5e-5,
+            betas=(0.9, 0.995), schedule="restarts", T0=600, T_mult=2, lr_min=2e-6, val_n=24,
+        )
+        for name, boundary, desc in [
+            ("dem3d-cube", "square", "3D density-equalizing map, cube boundary."),
+            ("dem3d-free", "free", "3D density-equalizing map, free boundary."),
+        ]
+    },
+}
+
+
+def config_names() -> list[str]:
+    return list(CONFIGS)
+
+
+def get_config(name: str, preset: str | None = None) -> TrainConfig:
+    """The named configuration at ``preset`` (default: :func:`scale`)."""
+    if name not in CONFIGS:
+        raise ValueError(f"unknown config {name!r}; known configs: {', '.join(CONFIGS)}")
+    preset = preset or scale()
+    if preset not in PRESETS:
+        raise ValueError(f"unknown preset {preset!r}; expected one of {PRESETS}")
+    return CONFIGS[name][preset]

@@ -1,0 +1,95 @@
+r"""Data-free training losses (paper Sec. 5), integrated over element measures.
+
+Every loss is an average over elements weighted by the reference element measure, i.e. a quadrature of an
+integral over :math:`\Omega`, so its value does not depend on the grid resolution.
+
+Shapes: ``ref`` and ``mapped`` are (B, n, d) vertex positions, ``elements`` is (m, d+1).
+"""
+from __future__ import annotations
+
+import torch
+from torch import Tensor
+from torch.nn import functional as F
+
+from .geometry import beltrami_coefficient, signed_measures
+
+__all__ = ["weighted_mean", "beltrami_loss", "density_loss", "beltrami_energy", "fold_penalty", "area_penalty",
+           "element_density"]
+
+
+def weighted_mean(values: Tensor, weights: Tensor) -> Tensor:
+    """:math:`\\sum_i w_i v_i / \\sum_i w_i` over the last axis, averaged over the batch."""
+    return ((values * weights).sum(-1) / weights.sum(-1)).mean()
+
+
+def beltrami_loss(ref: Tensor, mapped: Tensor, elements: Tensor, mu_target: Tensor) -> Tensor:
+    r"""Beltrami loss :math:`\int_\Omega |\mu(u) - \mu_{\text{in}}|^2` (paper Sec. 5.1).
+
+    Parameters
+    ----------
+    mu_target : complex Tensor, shape (B, m)
+        Target coefficient per triangle.
+    """
+    area = signed_measures(ref, elements)
+    mu = beltrami_coefficient(ref, mapped, elements)
+    return weighted_mean((mu - mu_target).abs() ** 2, area)
+
+
+def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, *,
+                    ref_meas: Tensor | None = None, meas: Tensor | None = None) -> tuple[Tensor, Tensor]:
+    r"""Relative density :math:`\tilde\rho_i = (p_i / A_i) / (P / A)` on the mapped mesh, and reference measures.
+
+    :math:`p_i` is the population of element :math:`i` (mean vertex density times reference measure),
+    :math:`A_i` its mapped measure, :math:`P` and :math:`A` the totals.
+
+    Returns
+    -------
+    (rho_tilde, ref_measure) : Tensors, shape (B, m)
+    """
+    ref_meas = signed_measures(ref, elements) if ref_meas is None else ref_meas
+    meas = signed_measures(mapped, elements) if meas is None else meas
+    pop = density[:, elements].mean(-1) * ref_meas
+    rho = pop / meas
+    mean_rho = pop.sum(-1, keepdim=True) / meas.sum(-1, keepdim=True)
+    return rho / mean_rho, ref_meas
+
+
+def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, beta: float = 1.0, *,
+                 ref_meas: Tensor | None = None, meas: Tensor | None = None) -> Tensor:
+    r"""Density-equalizing loss :math:`\int_\Omega L(p_i/A_i - P/A)` with smooth-L1 :math:`L` (paper Sec. 5.2).
+
+    The difference is taken relative to the mean density :math:`P/A`, i.e. :math:`L(\tilde\rho_i - 1)`; this
+    makes the loss invariant to a uniform rescaling of the mapped domain, so a free-boundary model cannot lower
+    it by inflating the domain.
+
+    Parameters
+    ----------
+    density : Tensor, shape (B, n)
+        Vertex densities.
+    """
+    rho, w = element_density(ref, mapped, elements, density, ref_meas=ref_meas, meas=meas)
+    err = F.smooth_l1_loss(rho, torch.ones_like(rho), reduction="none", beta=beta)
+    return weighted_mean(err, w)
+
+
+def beltrami_energy(ref: Tensor, mapped: Tensor, elements: Tensor) -> Tensor:
+    r"""Beltrami energy :math:`\int_\Omega |\mu(u)|^2` (paper Eq. (beltrami_energy)); the DEQ regulariser."""
+    return weighted_mean(beltrami_coefficient(ref, mapped, elements).abs() ** 2, signed_measures(ref, elements))
+
+
+def fold_penalty(ref: Tensor, mapped: Tensor, elements: Tensor, threshold: float = 0.02, *,
+                 ref_meas: Tensor | None = None, meas: Tensor | None = None) -> Tensor:
+    r"""Fold penalty :math:`\int_\Omega \mathrm{relu}(\tau - \det J)` that keeps elements away from flipping."""
+    ref_meas = signed_measures(ref, elements) if ref_meas is None else ref_meas
+    meas = signed_measures(mapped, elements) if meas is None else meas
+    det = meas / ref_meas
+    return weighted_mean(torch.relu(threshold - det), ref_meas)
+
+
+def area_penalty(ref: Tensor, mapped: Tensor, elements: Tensor, *, ref_meas: Tensor | None = None,
+                 meas: Tensor | None = None) -> Tensor:
+    r"""Free-boundary area constraint :math:`(|u(\Omega)| / |\Omega| - 1)^2`."""
+    ref_meas = signed_measures(ref, elements) if ref_meas is None else ref_meas
+    meas = signed_measures(mapped, elements) if meas is None else meas
+    ratio = meas.sum(-1) / ref_meas.sum(-1)
+    return ((ratio - 1) ** 2).mean()

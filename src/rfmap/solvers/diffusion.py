@@ -1,0 +1,497 @@
+r"""Diffusion-based density-equalizing maps (Gastner & Newman 2004) on the unit square and cube.
+
+The density :math:`\rho(x, 0)` given at the vertices of the ``N``-grid is diffused with no-flux walls on the box
+:math:`[0,1]^d`,
+
+.. math:: \partial_t \rho = \Delta \rho, \qquad \partial_n \rho = 0 \text{ on the walls},
+
+and every vertex is carried by the velocity field :math:`v = -\nabla\rho / \rho`.  The continuity equation
+:math:`\partial_t\rho + \nabla\cdot(\rho v) = 0` holds, so the mass of every material region is conserved while the
+density tends to its mean; the vertex positions at :math:`t \to \infty` define the density-equalizing map.
+
+Numerical method:
+
+1. **Initial density.**  The piecewise-linear (P1) interpolant of the vertex values on the simplicial mesh of
+   :func:`rfmap.mesh.grid_mesh` -- the density whose element integrals :mod:`rfmap.metrics` uses -- is sampled on a
+   grid ``refine`` times finer, with :math:`M = \text{refine}\,(N-1) + 1` points per side (:func:`p1_upsample`).
+   Starting from the P1 rather than the cosine interpolant of the vertex values avoids Gibbs ringing at steep
+   features and lowers the final :math:`\mathrm{Std}(\tilde\rho)` markedly (e.g. 0.041 → 0.026 on rect-peak at
+   ``N = 51``).
+2. **Exact diffusion.**  The diffusion equation is solved exactly in the cosine basis of the box,
+
+   .. math::
+
+       \rho(x, t) = \sum_{k \in \{0..M-1\}^d} a_k \prod_{i=1}^d \cos(\pi k_i x_i)\; e^{-\pi^2 |k|^2 t},
+
+   with :math:`a_k` from a type-I discrete cosine transform (:func:`cosine_coefficients`), so that
+   :math:`\rho(\cdot, 0)` interpolates the fine-grid values.
+3. **Velocity.**  :math:`\rho` and :math:`\nabla\rho` are evaluated on the fine grid by separable products with
+   cosine / sine tables (dense matrix products, :math:`O(M^{d} K)` per evaluation with :math:`K \le M` the modes
+   not yet decayed below 1e-17), :math:`v = -\nabla\rho/\rho` is formed there and interpolated multilinearly at the
+   current vertex positions (:func:`multilinear_interpolate`).
+4. **Time integration.**  :math:`\dot x = v(x, t)` is integrated with the embedded Bogacki–Shampine 3(2) pair
+   (FSAL, 3 evaluations per step) with the local error per step bounded by ``rtol`` times the grid spacing, until
+   the remaining displacement, estimated as :math:`\max|v| / \lambda_1` with :math:`\lambda_1 = \pi^2` the decay
+   rate of the slowest mode, falls below ``tol_end`` times the grid spacing.
+
+Boundary conditions:
+
+* ``"square"`` (the unit cube in 3D): the box is the unit square itself.  The sine factor of the normal derivative
+  vanishes on the walls, so boundary vertices slide along their walls; they are re-projected onto their walls after
+  every step (round-off only) and corners stay fixed.  The total area (volume) is exactly conserved.
+* ``"free"``: the unit square sits in a larger box :math:`[-L, 1+L]^d` (same grid spacing, ``margin`` :math:`= L`)
+  filled with a "sea" of (nearly) the mean density; all mesh vertices move and the boundary deforms.  The sea level
+  is chosen so that the exact flow conserves the domain's area (see ``_balanced_sea``); the measured area of the
+  mapped mesh is then 1 up to a discretisation error of order :math:`h` with a small constant (about
+  :math:`3\cdot 10^{-4}` for ring at ``N = 51``).
+
+References
+----------
+M. T. Gastner, M. E. J. Newman, "Diffusion-based method for producing density-equalizing maps",
+Proc. Natl. Acad. Sci. USA 101(20), 7499–7504 (2004).
+"""
+from __future__ import annotations
+
+import contextlib
+import math
+import time
+
+import numpy as np
+import torch
+from scipy.fft import dctn
+
+from ..fields import check_density
+from ..mesh import check_n, grid_mesh
+from ..result import MapResult
+
+__all__ = [
+    "solve_dem",
+    "CosineDiffusion",
+    "cosine_coefficients",
+    "multilinear_interpolate",
+    "p1_upsample",
+    "DEM_BOUNDARIES",
+]
+
+#: Boundary conditions understood by :func:`solve_dem`.
+DEM_BOUNDARIES = ("square", "free")
+
+# Bogacki–Shampine 3(2) tableau
+_BS_C = (0.5, 0.75)
+_BS_B = (2.0 / 9.0, 1.0 / 3.0, 4.0 / 9.0)
+_BS_E = (-5.0 / 72.0, 1.0 / 12.0, 1.0 / 9.0, -1.0 / 8.0)  # 3rd-order minus embedded 2nd-order solution
+
+
+def multilinear_interpolate(values: np.ndarray | torch.Tensor, points: np.ndarray) -> np.ndarray:
+    r"""Bi-/trilinear interpolation of a vector field given on a uniform grid of the unit box.
+
+    Uses ``torch.nn.functional.grid_sample`` (``align_corners=True``) on float64 data, which is several times
+    faster than a numpy gather for large point sets.
+
+    Parameters
+    ----------
+    values : ndarray or Tensor, shape (C,) + (M,)*d
+        Field components (channel first) at the grid nodes :math:`j / (M-1)`, grid axes ordered
+        :math:`x_1, \dots, x_d`.
+    points : ndarray, shape (P, d)
+        Query points; coordinates are clamped to :math:`[0, 1]`.
+
+    Returns
+    -------
+    ndarray, shape (P, C)
+    """
+    d = points.shape[1]
+    c = values.shape[0]
+    v = torch.as_tensor(values, dtype=torch.float64).contiguous()[None]
+    g = torch.from_numpy(np.ascontiguousarray(2.0 * points[:, ::-1] - 1.0))  # grid_sample wants (x_d, ..., x_1)
+    g = g.clamp_(-1.0, 1.0).reshape(1, *([1] * (d - 1)), points.shape[0], d)
+    out = torch.nn.functional.grid_sample(v, g, mode="bilinear", padding_mode="border", align_corners=True)
+    return out.reshape(c, -1).T.numpy()
+
+
+def p1_upsample(values: np.ndarray, refine: int) -> np.ndarray:
+    r"""Sample the piecewise-linear interpolant of grid vertex values on a ``refine`` times finer grid.
+
+    The interpolant is linear on every element of :func:`rfmap.mesh.grid_mesh` (P1), i.e. exactly the density whose
+    element integrals :mod:`rfmap.metrics` uses (mean vertex value times measure).  In 2D the square with local
+    coordinates :math:`(s, t)` is split by :math:`s + t = 1`; in 3D the Kuhn split gives the barycentric weights
+    :math:`(1-c_1, c_1-c_2, c_2-c_3, c_3)` of the sorted local coordinates :math:`c_1 \ge c_2 \ge c_3` along the
+    path :math:`v_{000} \to v_{000}+e_{\sigma_1} \to \dots \to v_{111}`.
+
+    Parameters
+    ----------
+    values : ndarray, shape (N,)*d
+    refine : int
+        Refinement factor ``r``; the fine grid has ``M = r (N-1) + 1`` points per side.
+
+    Returns
+    -------
+    ndarray, shape (M,)*d
+        Equals ``values`` on the coarse nodes (``fine[::r, ::r] == values``).
+    """
+    if refine == 1:
+        return values.copy()
+    d, n = values.ndim, values.shape[0]
+    m = refine * (n - 1) + 1
+    xf = np.arange(m) / refine
+    i = np.minimum(xf.astype(np.intp), n - 2)
+    f = xf - i
+    idx = np.meshgrid(*([i] * d), indexing="ij")
+    loc = np.stack(np.meshgrid(*([f] * d), indexing="ij"), axis=-1).reshape(-1, d)
+    base = np.stack([a.reshape(-1) for a in idx], axis=-1)
+    strides = np.array([n ** (d - 1 - a) for a in range(d)])
+    flat = values.reshape(-1)
+    b = base @ strides
+    if d == 2:
+        s_, t_ = loc[:, 0], loc[:, 1]
+        v00, v10, v01, v11 = flat[b], flat[b + n], flat[b + 1], flat[b + n + 1]
+        lower = v00 + s_ * (v10 - v00) + t_ * (v01 - v00)
+        upper = v11 + (1.0 - s_) * (v01 - v11) + (1.0 - t_) * (v10 - v11)
+        out = np.where(s_ + t_ <= 1.0, lower, upper)
+    else:
+        order = np.argsort(-loc, axis=1, kind="stable")
+        c = np.take_along_axis(loc, order, axis=1)
+        weights = np.stack([1.0 - c[:, 0], c[:, 0] - c[:, 1], c[:, 1] - c[:, 2], c[:, 2]], axis=1)
+        out = weights[:, 0] * flat[b]
+        for k in range(3):
+            b = b + strides[order[:, k]]
+            out = out + weights[:, k + 1] * flat[b]
+    return out.reshape((m,) * d)
+
+
+def cosine_coefficients(values: np.ndarray) -> np.ndarray:
+    r"""Coefficients :math:`a_k` of the cosine interpolant :math:`\sum_k a_k \prod_i \cos(\pi k_i x_i)` of grid values.
+
+    With the unnormalised type-I DCT :math:`y = \mathrm{DCT\text{-}I}(p)` (``scipy.fft.dctn(p, type=1)``),
+    :math:`a_k = y_k \prod_i c_{k_i} / (2(M-1))^d`, :math:`c_0 = c_{M-1} = 1`, :math:`c_k = 2` otherwise.
+
+    Parameters
+    ----------
+    values : ndarray, shape (M,)*d
+        Values at the grid nodes :math:`j/(M-1)` of :math:`[0,1]^d`.
+
+    Returns
+    -------
+    ndarray, shape (M,)*d
+    """
+    d, m = values.ndim, values.shape[0]
+    c = np.full(m, 2.0)
+    c[0] = c[-1] = 1.0
+    coef = dctn(values, type=1) / (2.0 * (m - 1)) ** d
+    for ax in range(d):
+        shape = [1] * d
+        shape[ax] = m
+        coef = coef * c.reshape(shape)
+    return coef
+
+
+def _cosine_box_integral(coef: np.ndarray, lo: float, hi: float) -> float:
+    r""":math:`\int_{[lo, hi]^d} \sum_k a_k \prod_i \cos(\pi k_i y_i)\,dy` (separable, exact)."""
+    k = np.arange(coef.shape[0])
+    w = np.empty(k.size)
+    w[0] = hi - lo
+    w[1:] = (np.sin(math.pi * k[1:] * hi) - np.sin(math.pi * k[1:] * lo)) / (math.pi * k[1:])
+    out = coef
+    for _ in range(coef.ndim):
+        out = out @ w  # contracts the last axis
+    return float(out)
+
+
+def _balanced_sea(dens: np.ndarray, pad: int, refine: int) -> tuple[np.ndarray, float]:
+    r"""Box values with a sea level :math:`s` for which the cosine model conserves the domain's area exactly.
+
+    At :math:`t\to\infty` the density is uniform, :math:`a_0`, and the mapped domain has area
+    :math:`m_{\Omega} / a_0` where :math:`m_\Omega` is the mass of the initial (cosine) density on the unit
+    square/cube.  Both are affine in :math:`s`, so :math:`m_\Omega(s) = a_0(s)\,|\Omega|` is solved exactly.  (A
+    plain mean-density sea is off by :math:`O(h)` because the cells just outside the coast carry part of the
+    coastal density.)
+    """
+    d, n = dens.ndim, dens.shape[0]
+    nb = n + 2 * pad
+    lo, hi = pad / (nb - 1), (pad + n - 1) / (nb - 1)
+    inner = (slice(pad, pad + n),) * d
+    f = []
+    for level in (0.0, 1.0):
+        vals = np.full((nb,) * d, level)
+        vals[inner] = dens
+        coef = cosine_coefficients(p1_upsample(vals, refine))
+        f.append(_cosine_box_integral(coef, lo, hi) - coef.flat[0] * (hi - lo) ** d)
+    sea = f[0] / (f[0] - f[1])
+    vals = np.full((nb,) * d, sea)
+    vals[inner] = dens
+    return vals, sea
+
+
+class CosineDiffusion:
+    r"""Exact solution of the diffusion equation with no-flux walls on :math:`[0,1]^d` in the cosine basis.
+
+    :math:`\rho(x,t) = \sum_k a_k \prod_i \cos(\pi k_i x_i)\, e^{-\pi^2 |k|^2 t}`, :math:`0 \le k_i \le M-1`,
+    with :math:`a_k` such that :math:`\rho(\cdot, 0)` interpolates the grid values: with the unnormalised type-I DCT
+    :math:`y = \mathrm{DCT\text{-}I}(p)` (``scipy.fft.dctn(p, type=1)``),
+    :math:`a_k = y_k \prod_i c_{k_i} / (2(M-1))^d` where :math:`c_0 = c_{M-1} = 1` and :math:`c_k = 2` otherwise.
+    :math:`\rho` and :math:`\nabla\rho` are evaluated on the same grid by separable products with the tables
+    :math:`\cos(\pi k x_j)` and :math:`-\pi k \sin(\pi k x_j)`; modes whose per-axis decay factor
+    :math:`e^{-\pi^2 k^2 t}` has dropped below ``1e-17`` are skipped, so late evaluations are cheap.
+
+    Parameters
+    ----------
+    values : ndarray, shape (M,)*d
+        Grid values of the initial density at :math:`j/(M-1)` (positive).
+    """
+
+    def __init__(self, values: np.ndarray):
+        self.dim = values.ndim
+        self.m = m = values.shape[0]
+        self.coef = torch.from_numpy(cosine_coefficients(values))
+        k = np.arange(m)
+        x = np.linspace(0.0, 1.0, m)
+        arg = math.pi * np.outer(x, k)
+        dsin = -math.pi * k[None, :] * np.sin(arg)  # d/dx cos(pi k x), (M, K)
+        dsin[0] = dsin[-1] = 0.0  # exact zero normal derivative on the walls
+        self.cos = torch.from_numpy(np.cos(arg))  # (M, K)
+        self.dsin = torch.from_numpy(dsin)
+        self.k2 = torch.from_numpy((math.pi * k) ** 2)  # per-axis decay rates
+
+    def n_modes(self, t: float) -> int:
+        """Modes per axis still significant at time ``t`` (per-axis decay factor above 1e-17)."""
+        if t <= 0:
+            return self.m
+        return int(min(self.m, max(2, math.ceil(math.sqrt(39.2 / (math.pi**2 * t))) + 1)))
+
+    def fields(self, t: float) -> torch.Tensor:
+        r""":math:`\rho` and :math:`\nabla\rho` at time ``t`` on the grid.
+
+        Returns
+        -------
+        Tensor, float64, shape (d+1,) + (M,)*d
+            ``[rho, d rho/dx_1, ..., d rho/dx_d]``.
+        """
+        kk = self.n_modes(t)
+        decay = torch.exp(-self.k2[:kk] * t)  # separable time factor
+        C = self.cos[:, :kk] * decay
+        S = self.dsin[:, :kk] * decay
+        m, d = self.m, self.dim
+        a = self.coef[(slice(0, kk),) * d]
+        if d == 2:
+            out = torch.empty(3, m, m, dtype=torch.float64)
+            ac = a @ C.T  # (K, M): last axis transformed
+            torch.mm(C, ac, out=out[0])
+            torch.mm(S, ac, out=out[1])
+            torch.mm(C, a @ S.T, out=out[2])
+            return out
+        out = torch.empty(4, m, m * m, dtype=torch.float64)
+        zc = a @ C.T  # (K, K, M)
+        zs = a @ S.T
+        ycc = torch.matmul(C, zc).reshape(kk, m * m)  # (K, M, M) -> (K, M*M)
+        torch.mm(C, ycc, out=out[0])
+        torch.mm(S, ycc, out=out[1])
+        torch.mm(C, torch.matmul(S, zc).reshape(kk, m * m), out=out[2])
+        torch.mm(C, torch.matmul(C, zs).reshape(kk, m * m), out=out[3])
+        return out.reshape(4, m, m, m)
+
+    def velocity(self, t: float) -> torch.Tensor:
+        r"""The Gastner–Newman velocity :math:`v = -\nabla\rho/\rho` on the grid, float64 Tensor (d,) + (M,)*d."""
+        f = self.fields(t)
+        inv = f[0].reciprocal_().neg_()
+        return f[1:].mul_(inv)
+
+
+@contextlib.contextmanager
+def _torch_threads(n: int | None):
+    """Temporarily set the torch intra-op thread count (``None``: leave it alone)."""
+    if n is None:
+        yield
+        return
+    old = torch.get_num_threads()
+    torch.set_num_threads(max(1, int(n)))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)
+
+
+def _check_grid_density(density) -> np.ndarray:
+    arr = np.asarray(density)
+    if arr.ndim not in (2, 3):
+        raise ValueError(f"density must be a grid field of shape (N, N) or (N, N, N); got {arr.ndim} dimension(s), "
+                         f"shape {arr.shape}")
+    if len(set(arr.shape)) != 1:
+        raise ValueError(f"density must have the same number of vertices per side, got shape {arr.shape}")
+    check_n(arr.shape[0], 3)
+    return check_density(arr)
+
+
+def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol: float, tol_end: float,
+               max_steps: int, progress: bool, label: str) -> tuple[np.ndarray, dict]:
+    r"""Integrate :math:`\dot y = v(y, t)` with the Bogacki–Shampine 3(2) pair until the flow has settled."""
+    n_eval = 0
+
+    def rhs(t: float, p: np.ndarray) -> np.ndarray:
+        nonlocal n_eval
+        n_eval += 1
+        return multilinear_interpolate(field.velocity(t), p)
+
+    def max_norm(v: np.ndarray) -> float:
+        return float(np.sqrt(np.einsum("ij,ij->i", v, v).max()))
+
+    lam1 = math.pi**2  # decay rate of the slowest mode in box units
+    err_scale = rtol * h
+    end_scale = tol_end * h * lam1  # max|v| below which the remaining displacement max|v|/lam1 < tol_end * h
+    k1 = rhs(0.0, y)
+    vmax = max_norm(k1)
+    t = 0.0
+    dt = 1.0 / (lam1 * (field.m - 1) ** 2)  # the decay time of the fastest mode; the controller grows it
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        t_est = max(math.log(max(vmax, end_scale) / end_scale) / lam1, 1e-6)  # when the slowest mode is gone
+        bar = tqdm(total=round(t_est, 6), desc=label, unit="t", leave=False,
+                   bar_format="{l_bar}{bar}| t={n:.4f}/{total:.4f} [{elapsed}<{remaining}]")
+    accepted = rejected = 0
+    try:
+        while vmax > end_scale:
+            if accepted + rejected >= max_steps:
+                raise RuntimeError(f"diffusion map did not converge in {max_steps} steps (t={t:.4g}, "
+                                   f"max|v|={vmax:.3g}); increase max_steps or rtol")
+            k2 = rhs(t + _BS_C[0] * dt, project(y + (_BS_C[0] * dt) * k1))
+            k3 = rhs(t + _BS_C[1] * dt, project(y + (_BS_C[1] * dt) * k2))
+            y_new = project(y + dt * (_BS_B[0] * k1 + _BS_B[1] * k2 + _BS_B[2] * k3))
+            k4 = rhs(t + dt, y_new)  # FSAL: the first stage of the next step
+            err = max_norm(dt * (_BS_E[0] * k1 + _BS_E[1] * k2 + _BS_E[2] * k3 + _BS_E[3] * k4)) / err_scale
+            if err <= 1.0:
+                t += dt
+                y, k1 = y_new, k4
+                accepted += 1
+                vmax = max_norm(k1)
+                if bar is not None:
+                    bar.update(round(min(dt, max(bar.total - bar.n, 0.0)), 6))
+            else:
+                rejected += 1
+            dt *= min(5.0, max(0.2, 0.9 * max(err, 1e-12) ** (-1.0 / 3.0)))
+        if bar is not None:
+            bar.update(round(max(bar.total - bar.n, 0.0), 6))
+    finally:
+        if bar is not None:
+            bar.close()
+    info = {"iterations": accepted, "rejected": rejected, "evaluations": n_eval, "t_end": t,
+            "residual_velocity": vmax}
+    return y, info
+
+
+def solve_dem(
+    density,
+    *,
+    boundary: str = "square",
+    progress: bool = False,
+    rtol: float = 1e-2,
+    tol_end: float = 1e-4,
+    refine: int = 2,
+    margin: float = 0.5,
+    max_steps: int = 10_000,
+    num_threads: int | None = None,
+) -> MapResult:
+    r"""Diffusion density-equalizing map (Gastner & Newman 2004) of the unit square or cube.
+
+    Every vertex :math:`x` of the ``N``-grid follows :math:`\dot x = -\nabla\rho(x,t)/\rho(x,t)` where
+    :math:`\rho` solves :math:`\partial_t\rho = \Delta\rho` with no-flux walls, started from the
+    piecewise-linear interpolant of the vertex densities (see the module docstring for the numerical method).
+
+    Parameters
+    ----------
+    density : ndarray, shape (N, N) or (N, N, N)
+        Preprocessed vertex densities on the ``N``-grid (strictly positive, finite; unit mass is the convention,
+        any positive scale works).  The dimension is ``density.ndim``; ``N >= 3``.
+    boundary : {"square", "free"}
+        ``"square"``: the walls of the unit square/cube are fixed, boundary vertices slide along them, corners stay.
+        ``"free"``: the domain floats in a sea of its mean density inside :math:`[-L, 1+L]^d`; all vertices move.
+    progress : bool
+        Show a ``tqdm`` progress bar over simulated time.
+    rtol : float
+        Bound on the local error of one time step (max over vertices of the Euclidean error estimate), relative to
+        the grid spacing :math:`h`.  The default 1e-2 keeps the final positions within about :math:`0.01\,h` of a
+        converged integration.
+    tol_end : float
+        Stop when the estimated remaining displacement :math:`\max|v|/\pi^2` (box units) is below
+        ``tol_end`` times the grid spacing.
+    refine : int
+        The initial density is the piecewise-linear interpolant sampled on a grid ``refine`` times finer than the
+        vertex grid (``M = refine (N_box - 1) + 1`` points per side, ``N_box = N`` for ``"square"``); its cosine
+        interpolant is diffused and :math:`v` is evaluated and interpolated on that grid.  ``refine=1`` uses the
+        cosine interpolant of the vertex values.
+    margin : float
+        Sea width :math:`L` for ``boundary="free"``, rounded to whole grid cells (at least one).
+    max_steps : int
+        Maximum number of (accepted + rejected) time steps; ``RuntimeError`` if exceeded.
+    num_threads : int, optional
+        Torch threads for the dense transforms during the solve (restored afterwards).  Default: 1 in 2D (the
+        products are too small to gain from threads, which only add synchronisation cost), torch's setting in 3D.
+
+    Returns
+    -------
+    MapResult
+        ``kind="density"``, ``field`` the vertex densities (shape (N**d,)), ``elements`` from
+        :func:`rfmap.mesh.grid_mesh`, ``time`` the wall-clock seconds; ``info`` holds ``iterations`` (accepted
+        steps), ``rejected``, ``evaluations`` (velocity-field evaluations), ``t_end`` (simulated time, box units),
+        ``residual_velocity``, ``eval_grid`` (``M``), ``box_grid`` (``N_box``) and, for ``"free"``,
+        ``sea_density``.
+
+    Raises
+    ------
+    ValueError
+        For a density that is not an (N,)*d array with ``d`` in {2, 3} and ``N >= 3``, contains NaN/inf or
+        non-positive values, an unknown ``boundary``, or non-positive ``rtol``/``tol_end``/``refine``/``margin``.
+    """
+    t_start = time.perf_counter()
+    if boundary not in DEM_BOUNDARIES:
+        raise ValueError(f"unknown boundary {boundary!r} for the diffusion solver; choose one of {DEM_BOUNDARIES}")
+    dens = _check_grid_density(density)
+    for name, val in (("rtol", rtol), ("tol_end", tol_end), ("margin", margin)):
+        if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val) or val <= 0:
+            raise ValueError(f"{name} must be a positive finite number, got {val!r}")
+    if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 1:
+        raise ValueError(f"refine must be a positive integer, got {refine!r}")
+    d, n = dens.ndim, dens.shape[0]
+    mesh = grid_mesh(n, d)
+    ref = mesh.points
+
+    # the diffusion box is [0, 1]^d in its own coordinates y; x = scale * y - shift
+    if boundary == "square":
+        box_vals, pad, scale = dens, 0, 1.0
+    else:
+        pad = max(1, int(round(margin * (n - 1))))
+        box_vals, sea = _balanced_sea(dens, pad, int(refine))  # close to the mean density
+        if not sea > 0:
+            raise RuntimeError(f"could not balance the sea density (got {sea:.4g})")
+        scale = (n - 1 + 2 * pad) / (n - 1)
+    shift = pad / (n - 1)
+    nb = box_vals.shape[0]
+    y0 = (ref + shift) / scale
+
+    if boundary == "square":
+        wall_idx = np.nonzero((ref == 0.0) | (ref == 1.0))
+        wall_val = ref[wall_idx]
+
+        def project(p: np.ndarray) -> np.ndarray:
+            np.clip(p, 0.0, 1.0, out=p)
+            p[wall_idx] = wall_val  # boundary vertices stay exactly on their walls
+            return p
+    else:
+
+        def project(p: np.ndarray) -> np.ndarray:
+            return np.clip(p, 0.0, 1.0, out=p)
+
+    threads = num_threads if num_threads is not None else (1 if d == 2 else None)
+    with _torch_threads(threads):
+        field = CosineDiffusion(p1_upsample(box_vals, int(refine)))
+        y, info = _integrate(field, y0, project, h=1.0 / (nb - 1), rtol=float(rtol), tol_end=float(tol_end),
+                             max_steps=int(max_steps), progress=progress, label=f"DEM {d}D N={n}")
+    mapped = y * scale - shift
+    if boundary == "square":
+        mapped = project(mapped)
+    elapsed = time.perf_counter() - t_start
+    info = {"method": "dem", "boundary": boundary, "n": n, "dim": d, **info, "eval_grid": field.m, "box_grid": nb}
+    if boundary == "free":
+        info["sea_density"] = sea
+    return MapResult(ref_points=ref, mapped_points=mapped, elements=mesh.elements, field=dens.reshape(-1),
+                     kind="density", time=elapsed, info=info)

@@ -1,0 +1,399 @@
+r"""Trained surrogates: weights on disk, and inference at any resolution or at arbitrary query points.
+
+Weights are stored as ``NAME.safetensors`` (tensors only; loading never unpickles) next to ``NAME.json`` with the
+metadata: model constructor arguments, task, boundary, preset, the full training configuration, rfmap version,
+steps, wall time and final validation metrics.
+
+Inference (paper Secs. 4.1–4.3): the input field is sampled on a working grid whose side lies in the range the
+model was trained on, encoded as :math:`[x, p(x)]`, and mapped to a displacement :math:`\psi` on that grid;
+:math:`\psi` is interpolated (bi/trilinearly) to the requested points :math:`x_q`, which may form any grid or an
+unstructured cloud, and :math:`u(x_q) = x_q + \mathcal{B}(x_q) \odot (\alpha \odot \psi(x_q))`.
+"""
+from __future__ import annotations
+
+import json
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+import torch
+
+from . import __version__
+from .fields import (BeltramiMap, DensityField, check_density, check_mu, get_field, preprocess_density,
+                     vertex_weights)
+from .geometry import beltrami_coefficient, jacobian_determinants
+from .mesh import check_n, grid_mesh, grid_points, interpolate
+from .metrics import compute_metrics
+from .nn.model import MultiResUNet, apply_displacement
+from .refine import RefineResult, refine_alpha
+from .result import MapResult
+from .tasks import TaskSpec, encode
+
+__all__ = ["Surrogate", "models", "WEIGHTS_DIR", "density_objective", "beltrami_objective"]
+
+WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
+
+
+def models() -> list[str]:
+    """Names of the pretrained models shipped with the package."""
+    return sorted(p.stem for p in WEIGHTS_DIR.glob("*.json") if p.with_suffix(".safetensors").exists())
+
+
+@dataclass
+class _Input:
+    grid: np.ndarray  # (N_in,)*d real density or complex mu at the vertices of the input grid
+    fn: Callable | None  # exact evaluator when available (names, callables)
+
+
+class Surrogate:
+    """A trained (or untrained) neural surrogate for one task.
+
+    Parameters
+    ----------
+    model : MultiResUNet
+    spec : TaskSpec
+    meta : dict, optional
+        Metadata (see module docstring); ``n_range`` gives the training resolutions.
+    """
+
+    def __init__(self, model: MultiResUNet, spec: TaskSpec, meta: dict | None = None):
+        if model.dim != spec.dim or model.n_params != spec.n_params:
+            raise ValueError(f"model (dim={model.dim}, {model.n_params} parameter channels) does not fit task "
+                             f"{spec}")
+        self.model = model.eval()
+        self.spec = spec
+        self.meta = dict(meta or {})
+
+    # ------------------------------------------------------------------ io
+    @classmethod
+    def untrained(cls, spec: TaskSpec, *, base: int = 16, depth: int = 3, seed: int = 0, **meta) -> "Surrogate":
+        torch.manual_seed(seed)
+        return cls(MultiResUNet(spec.dim, spec.n_params, base, depth), spec, meta)
+
+    @property
+    def name(self) -> str:
+        return self.meta.get("name", "unnamed")
+
+    @property
+    def n_range(self) -> tuple[int, int]:
+        r = self.meta.get("n_range")
+        return (int(r[0]), int(r[1])) if r else (self.model.min_size, 1 << 30)
+
+    def save(self, path) -> tuple[Path, Path]:
+        """Write ``path`` (``.safetensors``) and the metadata JSON beside it."""
+        from safetensors.torch import save_file
+
+        path = Path(path).with_suffix(".safetensors")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        meta = {**self.meta, "model": self.model.kwargs(), "task": {"kind": self.spec.kind, "dim": self.spec.dim,
+                                                                    "boundary": self.spec.boundary},
+                "rfmap_version": self.meta.get("rfmap_version", __version__)}
+        state = {k: v.detach().contiguous() for k, v in self.model.state_dict().items()}
+        tmp = path.with_suffix(".safetensors.part")
+        save_file(state, str(tmp), metadata={"format": "rfmap", "name": str(meta.get("name", ""))})
+        os.replace(tmp, path)
+        jpath = path.with_suffix(".json")
+        jpath.write_text(json.dumps(meta, indent=2, sort_keys=True))
+        return path, jpath
+
+    @classmethod
+    def load(cls, path) -> "Surrogate":
+        """Load weights ``path`` (``.safetensors``, metadata ``.json`` beside it). Clear errors on bad files."""
+        from safetensors import SafetensorError
+        from safetensors.torch import load_file
+
+        path = Path(path)
+        if path.suffix != ".safetensors":
+            path = path.with_suffix(".safetensors")
+        jpath = path.with_suffix(".json")
+        if not path.exists():
+            raise FileNotFoundError(f"no weight file {path}")
+        if not jpath.exists():
+            raise FileNotFoundError(f"no metadata {jpath} next to the weights")
+        try:
+            meta = json.loads(jpath.read_text())
+        except json.JSONDecodeError as e:
+            raise ValueError(f"corrupt metadata {jpath}: {e}") from e
+        try:
+            spec = TaskSpec(**meta["task"])
+            kw = meta["model"]
+            model = MultiResUNet(int(kw["dim"]), int(kw["n_params"]), int(kw["base"]), int(kw["depth"]),
+                                 bool(kw.get("attention", True)))
+        except (KeyError, TypeError) as e:
+            raise ValueError(f"metadata {jpath} lacks the model/task description: {e}") from e
+        try:
+            state = load_file(str(path))
+        except (SafetensorError, OSError, ValueError) as e:
+            raise ValueError(f"corrupt or truncated weight file {path}: {e}") from e
+        own = model.state_dict()
+        missing, extra = set(own) - set(state), set(state) - set(own)
+        if missing or extra:
+            raise ValueError(f"weights {path} do not match the model in {jpath.name}: missing "
+                             f"{sorted(missing)[:3]}, unexpected {sorted(extra)[:3]}")
+        bad = [k for k in own if own[k].shape != state[k].shape]
+        if bad:
+            raise ValueError(f"weights {path} do not match the model: shape mismatch for {bad[:3]}")
+        model.load_state_dict(state)
+        return cls(model, spec, meta)
+
+    @classmethod
+    def pretrained(cls, name: str) -> "Surrogate":
+        """Load a model shipped with the package (see :func:`models`)."""
+        if name not in models():
+            raise ValueError(f"no pretrained model {name!r}; available: {', '.join(models()) or 'none'}")
+        return cls.load(WEIGHTS_DIR / f"{name}.safetensors")
+
+    def __repr__(self) -> str:
+        return f"Surrogate({self.name!r}, {self.spec}, n_range={self.n_range})"
+
+    # ------------------------------------------------------------------ inputs
+    def _resolve(self, field, n: int | None, preprocess: bool) -> tuple[_Input, int]:
+        d, kind = self.spec.dim, self.spec.kind
+        if isinstance(field, str):
+            field = get_field(field)
+        if isinstance(field, (DensityField, BeltramiMap)):
+            if field.kind != kind:
+                raise ValueError(f"field {field.name!r} is a {field.kind} field but model {self.name!r} maps "
+                                 f"{kind} fields")
+            if field.dim != d:
+                raise ValueError(f"field {field.name!r} is {field.dim}D but the model is {d}D")
+        if isinstance(field, tuple) and len(field) == 2:
+            pts, vals = (np.asarray(a) for a in field)
+            if pts.ndim != 2 or pts.shape[1] != d or vals.shape[0] != pts.shape[0]:
+                raise ValueError(f"scattered samples must be (points (P, {d}), values (P,)); got {pts.shape}, "
+                                 f"{vals.shape}")
+            n = check_n(n or (51 if d == 2 else 48))
+            from scipy.interpolate import griddata
+
+            g = grid_points(n, d)
+            lin = griddata(pts, vals, g, method="linear")
+            near = griddata(pts, vals, g, method="nearest")
+            lin = np.where(np.isnan(lin), near, lin)
+            return self._finish(lin.reshape((n,) * d), None, preprocess), n
+        if callable(field):
+            fn = field.mu if isinstance(field, BeltramiMap) else field
+            n = check_n(n or (51 if d == 2 else 48))
+            vals = np.asarray(fn(grid_points(n, d)))
+            return self._finish(vals.reshape((n,) * d), fn, preprocess), n
+        arr = np.asarray(field)
+        if arr.ndim != d or len(set(arr.shape)) != 1:
+            raise ValueError(f"a {d}D model needs a field sampled on an N^{d} grid, got an array of shape "
+                             f"{arr.shape}")
+        check_n(arr.shape[0])
+        return self._finish(arr, None, preprocess), int(n or arr.shape[0])
+
+    def _finish(self, grid: np.ndarray, fn, preprocess: bool) -> _Input:
+        if self.spec.kind == "density":
+            if np.iscomplexobj(grid):
+                raise ValueError("a density model needs a real density field, got complex values")
+            grid = self._unit_mass(grid, preprocess)
+        else:
+            if not np.iscomplexobj(grid) and self.spec.kind == "beltrami":
+                grid = grid.astype(np.complex128)
+            grid = check_mu(grid, name="Beltrami coefficient")
+        return _Input(grid, fn)
+
+    @staticmethod
+    def _unit_mass(grid, preprocess):
+        if preprocess:
+            return preprocess_density(grid)
+        g = check_density(grid)
+        w = vertex_weights(grid_points(g.shape[0], g.ndim), grid_mesh(g.shape[0], g.ndim).elements)
+        return g / float((w.reshape(g.shape) * g).sum())
+
+    def _work_grid(self, inp: _Input, n_work: int) -> np.ndarray:
+        g = inp.grid
+        if g.shape[0] == n_work:
+            return g
+        d = self.spec.dim
+        src = torch.as_tensor(np.stack([g.real, g.imag]) if np.iscomplexobj(g) else g[None])[None]
+        out = interpolate(src.double(), torch.as_tensor(grid_points(n_work, d)))[0].numpy()
+        if np.iscomplexobj(g):
+            return (out[:, 0] + 1j * out[:, 1]).reshape((n_work,) * d)
+        return self._unit_mass(out[:, 0].reshape((n_work,) * d), False)
+
+    # ------------------------------------------------------------------ inference
+    def work_n(self, n: int) -> int:
+        """The working grid side used for an output of side ``n``: ``n`` clipped to the training range."""
+        lo, hi = self.n_range
+        return int(min(max(n, lo), hi))
+
+    @torch.no_grad()
+    def displacement(self, grids: np.ndarray) -> torch.Tensor:
+        r"""Network output :math:`\psi` for a batch of preprocessed fields on one regular grid.
+
+        Parameters
+        ----------
+        grids : array, shape (B, N, ..., N), real density (unit mass) or complex Beltrami coefficient
+
+        Returns
+        -------
+        Tensor, float32, shape (B, d, N, ..., N)
+        """
+        g = np.asarray(grids)
+        B, n, d = g.shape[0], g.shape[1], self.spec.dim
+        if g.ndim != d + 1:
+            raise ValueError(f"expected fields of shape (B, {', '.join(['N'] * d)}), got {g.shape}")
+        pts = torch.as_tensor(grid_points(n, d), dtype=torch.float32).expand(B, -1, -1)
+        par = torch.as_tensor(g.reshape(B, -1))
+        par = par.to(torch.complex64) if par.is_complex() else par.float()
+        return self.model(encode(pts, par, self.spec, n))
+
+    def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
+            alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=(0.1, 3.0)) -> MapResult:
+        """Map one field.
+
+        Parameters
+        ----------
+        field : str, callable, array or (points, values)
+            A built-in field name; a callable on points (P, d) (a raw density, or a complex Beltrami coefficient);
+            an array sampled on an N^d grid (resampled to the working grid); or scattered samples.
+        n : int, optional
+            Side of the output grid (default: the input array's side, else 51 in 2D and 48 in 3D).
+        points : array (P, d), optional
+            Evaluate the map at these arbitrary query points instead of the output grid; the result's elements
+            are a Delaunay triangulation of them.
+        refine : bool
+            Apply weight refinement (paper Sec. 4.3) before returning.
+        work_n : int, optional
+            Working grid side of the network (default :meth:`work_n`).
+        alpha : sequence of d floats, optional
+            A fixed stretching vector (ignored when ``refine``).
+        preprocess : bool
+            Apply the paper's density preprocessing (shift to minimum 0.1, unit mass) to raw values; with
+            ``False`` a positive density is only scaled to unit mass.
+
+        Returns
+        -------
+        MapResult
+            ``info`` holds ``alpha``, ``work_n`` and, with refinement, the objective before/after.
+        """
+        inp, n = self._resolve(field, n, preprocess)
+        return self._map_one(inp, n, points, refine, work_n, alpha, refine_bounds)
+
+    def map_batch(self, fields: Sequence, n: int | None = None, **kw) -> list[MapResult]:
+        """Map several fields with one batched network evaluation (same ``n`` for all)."""
+        inps = [self._resolve(f, n, kw.get("preprocess", True)) for f in fields]
+        ns = {k for _, k in inps}
+        if len(ns) != 1:
+            raise ValueError(f"map_batch needs one output size, got {sorted(ns)}")
+        nn_ = ns.pop()
+        nw = kw.get("work_n") or self.work_n(nn_)
+        t0 = time.perf_counter()
+        psi = self.displacement(np.stack([self._work_grid(i, nw) for i, _ in inps]))
+        dt = (time.perf_counter() - t0) / len(inps)
+        return [self._map_one(i, nn_, kw.get("points"), kw.get("refine", False), nw, kw.get("alpha"),
+                              kw.get("refine_bounds", (0.1, 3.0)), psi=psi[k:k + 1], net_time=dt)
+                for k, (i, _) in enumerate(inps)]
+
+    def _map_one(self, inp: _Input, n: int, points, refine, work_n, alpha, bounds, psi=None, net_time=None):
+        d = self.spec.dim
+        nw = int(work_n or self.work_n(n))
+        if nw < self.model.min_size:
+            raise ValueError(f"working grid N={nw} is smaller than this model accepts ({self.model.min_size})")
+        t0 = time.perf_counter()
+        if psi is None:
+            psi = self.displacement(self._work_grid(inp, nw)[None])
+        t_net = time.perf_counter() - t0 if net_time is None else net_time
+        # query points and mesh
+        if points is None:
+            mesh = grid_mesh(n, d)
+            ref, elements = mesh.points, mesh.elements
+        else:
+            ref = np.asarray(points, dtype=np.float64)
+            if ref.ndim != 2 or ref.shape[1] != d:
+                raise ValueError(f"query points must have shape (P, {d}), got {ref.shape}")
+            if not np.isfinite(ref).all():
+                raise ValueError("query points contain NaN or infinite values")
+            if ref.min() < -1e-9 or ref.max() > 1 + 1e-9:
+                raise ValueError(f"query points must lie in the unit {'square' if d == 2 else 'cube'}; got "
+                                 f"coordinates in [{ref.min():.4g}, {ref.max():.4g}]")
+            from scipy.spatial import Delaunay
+
+            elements = Delaunay(ref).simplices.astype(np.int64)
+            from .geometry import signed_measures
+
+            vol = signed_measures(torch.as_tensor(ref), torch.as_tensor(elements)).numpy()
+            elements[vol < 0] = elements[vol < 0][:, [1, 0] + list(range(2, d + 1))]
+            keep = np.abs(vol) > 1e-14
+            elements = elements[keep]
+        t1 = time.perf_counter()
+        ref_t = torch.as_tensor(ref, dtype=torch.float32)
+        if points is None and n == nw:
+            psi_q = psi[0].reshape(d, -1).T
+        else:
+            psi_q = interpolate(psi, ref_t)[0]
+        ref64, psi64 = torch.as_tensor(ref, dtype=torch.float64), psi_q.double()
+        mapped = apply_displacement(ref64, psi64, self.spec.boundary)
+        t_map = t_net + time.perf_counter() - t1
+        # the field on the output mesh
+        el_t = torch.as_tensor(elements)
+        if self.spec.kind == "density":
+            if inp.fn is not None:
+                w = vertex_weights(ref, elements)
+                raw = np.asarray(inp.fn(ref), dtype=np.float64)
+                fvals = preprocess_density(raw, weights=w)
+            else:
+                src = torch.as_tensor(inp.grid)[None, None]
+                fvals = interpolate(src, torch.as_tensor(ref))[0, :, 0].numpy()
+                fvals = fvals / float((vertex_weights(ref, elements) * fvals).sum())
+        else:
+            cen = ref[elements].mean(1)
+            if inp.fn is not None:
+                fvals = np.asarray(inp.fn(cen))
+            else:
+                g = inp.grid
+                src = torch.as_tensor(np.stack([g.real, g.imag]))[None]
+                v = interpolate(src, torch.as_tensor(cen))[0].numpy()
+                fvals = v[:, 0] + 1j * v[:, 1]
+        info: dict[str, Any] = {"work_n": nw, "network_time": t_net}
+        a = np.ones(d) if alpha is None else np.asarray(alpha, dtype=np.float64)
+        if refine:
+            obj = (density_objective if self.spec.kind == "density" else beltrami_objective)(
+                ref64, psi64, el_t, fvals, self.spec.boundary)
+            t2 = time.perf_counter()
+            rr: RefineResult = refine_alpha(obj, d, bounds=bounds, tol=1e-2)
+            t_map += time.perf_counter() - t2
+            a = rr.alpha
+            info.update(refine_objective_start=rr.objective_start, refine_objective=rr.objective,
+                        refine_evaluations=rr.evaluations)
+        if refine or alpha is not None:
+            mapped = apply_displacement(ref64, psi64, self.spec.boundary, torch.as_tensor(a))
+        info["alpha"] = a.tolist()
+        return MapResult(ref_points=ref, mapped_points=mapped.numpy(), elements=elements, field=fvals,
+                         kind=self.spec.kind, time=t_map, info=info)
+
+
+def density_objective(ref, psi, elements, density, boundary, flip_weight: float = 10.0):
+    r""":math:`\mathcal{J}(\alpha) = \mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m` for
+    weight refinement of density maps."""
+    from .geometry import signed_measures
+    from .metrics import density_std, element_population
+
+    pop = element_population(ref, elements, np.asarray(density, dtype=np.float64))
+    ref_meas = signed_measures(ref, elements)
+
+    def J(alpha):
+        mapped = apply_displacement(ref, psi, boundary, torch.as_tensor(alpha))
+        meas = signed_measures(mapped, elements)
+        flipped = float((meas <= 0).double().mean())
+        return density_std(pop, meas) + flip_weight * flipped
+
+    return J
+
+
+def beltrami_objective(ref, psi, elements, mu_in, boundary, flip_weight: float = 10.0):
+    r""":math:`\mathcal{J}(\alpha) = \mathrm{mean}|\mu(u_\alpha) - \mu_{\text{in}}| + \lambda\,\#\text{flipped}/m`
+    for weight refinement of Beltrami reconstructions."""
+    mu_in_t = torch.as_tensor(np.asarray(mu_in))
+
+    def J(alpha):
+        mapped = apply_displacement(ref, psi, boundary, torch.as_tensor(alpha))
+        det = jacobian_determinants(ref, mapped, elements)
+        mu = beltrami_coefficient(ref, mapped, elements)
+        return float((mu - mu_in_t).abs().mean()) + flip_weight * float((det <= 0).double().mean())
+
+    return J

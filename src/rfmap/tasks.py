@@ -1,0 +1,225 @@
+r"""Tasks: what a surrogate maps from, how its inputs are encoded, and how training batches are drawn.
+
+A task couples the input field (a density, or a Beltrami coefficient), the boundary condition and the losses.
+The input encoding (paper Sec. 4.1) stacks the vertex coordinates and the parameter channels,
+:math:`\mathcal{U} = [x_1, \dots, x_d, p_1, \dots, p_m]`, as a (B, d+m, *S) tensor in grid order:
+
+* density tasks (m = 1): the channel is :math:`\log p` of the unit-mass density, a discretisation-consistent
+  normalisation (mass :math:`\int p = 1` on every grid);
+* Beltrami tasks (m = 2): the channels are :math:`\mathrm{Re}\,\mu` and :math:`\mathrm{Im}\,\mu` at the vertices.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from . import losses as L
+from .geometry import signed_measures
+from .fields import (RandomBeltramiConfig, RandomDensity, RandomDensityConfig, RandomMap, RandomBeltrami,
+                     jittered_points, preprocess_density, vertex_weights)
+from .mesh import grid_mesh, interpolate
+from .nn.model import BOUNDARIES, apply_displacement
+
+__all__ = ["TaskSpec", "Batch", "encode", "grid_elements", "sample_batch", "task_loss", "KINDS"]
+
+KINDS = ("density", "beltrami")
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """What a surrogate computes.
+
+    Attributes
+    ----------
+    kind : str
+        ``'density'`` (DEM / DEQ) or ``'beltrami'`` (reconstruction of a map from its Beltrami coefficient).
+    dim : int
+        2 or 3 (Beltrami tasks are 2D).
+    boundary : str
+        ``'square'`` (sliding walls), ``'fixed'`` (identity on the boundary) or ``'free'``.
+    """
+
+    kind: str = "density"
+    dim: int = 2
+    boundary: str = "square"
+
+    def __post_init__(self):
+        if self.kind not in KINDS:
+            raise ValueError(f"unknown task kind {self.kind!r}; expected one of {KINDS}")
+        if self.dim not in (2, 3):
+            raise ValueError(f"dimension must be 2 or 3, got {self.dim}")
+        if self.kind == "beltrami" and self.dim != 2:
+            raise ValueError("Beltrami tasks are two-dimensional")
+        if self.boundary not in BOUNDARIES:
+            raise ValueError(f"unknown boundary {self.boundary!r}; expected one of {BOUNDARIES}")
+
+    @property
+    def n_params(self) -> int:
+        return 1 if self.kind == "density" else 2
+
+
+@lru_cache(maxsize=64)
+def grid_elements(n: int, dim: int) -> Tensor:
+    """Elements of the ``N``-grid mesh as a LongTensor (cached)."""
+    return torch.as_tensor(grid_mesh(n, dim).elements)
+
+
+def encode(points: Tensor, params: Tensor, spec: TaskSpec, n: int) -> Tensor:
+    r"""Stack coordinates and parameter channels into the network input.
+
+    Parameters
+    ----------
+    points : Tensor, shape (B, N**d, d)
+        Vertex positions in grid order (regular or jittered).
+    params : Tensor, shape (B, N**d) real (density, already unit mass) or complex (Beltrami coefficient)
+    n : int
+        Grid side ``N``.
+
+    Returns
+    -------
+    Tensor, shape (B, d + m, N, ..., N)
+    """
+    B, P, d = points.shape
+    if P != n**d:
+        raise ValueError(f"{P} points do not form an N={n} grid in {d}D")
+    if spec.kind == "density":
+        ch = torch.log(params).unsqueeze(-1)
+    else:
+        ch = torch.stack([params.real, params.imag], -1)
+    x = torch.cat([points, ch.to(points.dtype)], -1)  # (B, P, d+m)
+    return x.transpose(1, 2).reshape(B, d + spec.n_params, *([n] * d)).contiguous()
+
+
+@dataclass
+class Batch:
+    """A training batch on an ``N``-grid (possibly jittered).
+
+    Attributes
+    ----------
+    inputs : Tensor, shape (B, d+m, *S)
+    ref : Tensor, shape (B, n, d)
+    elements : LongTensor, shape (m, d+1)
+    density : Tensor, shape (B, n) — density tasks
+    mu_target : complex Tensor, shape (B, m) — Beltrami tasks: target per triangle
+    """
+
+    inputs: Tensor
+    ref: Tensor
+    elements: Tensor
+    n: int
+    density: Tensor | None = None
+    mu_target: Tensor | None = None
+    extra: dict = field(default_factory=dict)
+
+
+def _grad_magnitude(values: np.ndarray, n: int, dim: int) -> np.ndarray:
+    g = np.gradient(values.reshape((n,) * dim))
+    return np.sqrt(sum(gi**2 for gi in g)).reshape(-1)
+
+
+def _density_sample(rng, n, dim, cfg: RandomDensityConfig, jitter: float, elements_np):
+    fld = RandomDensity(rng, cfg)
+    if jitter > 0:
+        grid_vals = fld.on_grid(n)
+        pts = jittered_points(n, dim, rng, grad_magnitude=_grad_magnitude(grid_vals, n, dim), strength=jitter)
+        raw = fld(pts)
+        w = vertex_weights(pts, elements_np)
+        p = preprocess_density(raw, weights=w)
+    else:
+        pts = grid_mesh(n, dim).points
+        p = preprocess_density(fld.on_grid(n).reshape((n,) * dim)).reshape(-1)
+    return pts, p
+
+
+def _beltrami_sample(rng, n, cfg: RandomBeltramiConfig, jitter: float, source: str):
+    gen = RandomMap(rng, cfg) if source == "map" else RandomBeltrami(rng, cfg)
+    if jitter > 0:
+        probe_n = 33
+        probe = grid_mesh(probe_n, 2).points
+        g = _grad_magnitude(np.abs(gen.mu(probe) if source == "map" else gen(probe)), probe_n, 2)
+        g_n = interpolate(g.reshape(1, 1, probe_n, probe_n), grid_mesh(n, 2).points)[0, :, 0]
+        pts = jittered_points(n, 2, rng, grad_magnitude=g_n, strength=jitter)
+    else:
+        pts = grid_mesh(n, 2).points
+    mu = gen.mu(pts) if source == "map" else gen(pts)
+    return pts, mu
+
+
+def sample_batch(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
+                 density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
+                 beltrami_source: str = "map") -> Batch:
+    """Draw the training samples ``indices`` of step ``step`` on an ``N``-grid.
+
+    Sample ``i`` of step ``t`` is generated from ``np.random.default_rng([seed, t, i])`` only, so a batch split
+    across processes (data-parallel training) reproduces the single-process batch exactly.
+    """
+    elements = grid_elements(n, spec.dim)
+    el_np = elements.numpy()
+    pts_l, par_l = [], []
+    for i in indices:
+        rng = np.random.default_rng([seed, step, int(i)])
+        if spec.kind == "density":
+            cfg = density_cfg or RandomDensityConfig.for_dim(spec.dim)
+            pts, par = _density_sample(rng, n, spec.dim, cfg, jitter, el_np)
+        else:
+            pts, par = _beltrami_sample(rng, n, beltrami_cfg or RandomBeltramiConfig(), jitter, beltrami_source)
+        pts_l.append(pts)
+        par_l.append(par)
+    ref = torch.as_tensor(np.stack(pts_l), dtype=torch.float32)
+    par = torch.as_tensor(np.stack(par_l))
+    par = par.to(torch.complex64) if par.is_complex() else par.float()
+    inputs = encode(ref, par, spec, n)
+    if spec.kind == "density":
+        return Batch(inputs, ref, elements, n, density=par)
+    return Batch(inputs, ref, elements, n, mu_target=par[:, elements].mean(-1))
+
+
+@dataclass(frozen=True)
+class LossWeights:
+    """Weights of the loss terms.
+
+    Attributes
+    ----------
+    beltrami : float
+        :math:`\\lambda` of the Beltrami energy :math:`\\int|\\mu|^2` in the DEQ loss (0 gives DEM).
+    fold : float
+        Weight of the fold penalty; ``fold_threshold`` is its :math:`\\tau`.
+    area : float
+        Free boundary: weight of the area constraint.
+    """
+
+    beltrami: float = 0.0
+    fold: float = 10.0
+    fold_threshold: float = 0.02
+    area: float = 1.0
+
+
+def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights) -> tuple[Tensor, dict]:
+    """Total loss and its parts for network output ``psi`` of shape (B, d, *S)."""
+    B, d = psi.shape[:2]
+    disp = psi.reshape(B, d, -1).transpose(1, 2)
+    mapped = apply_displacement(batch.ref, disp, spec.boundary)
+    ref_meas = signed_measures(batch.ref, batch.elements)
+    meas = signed_measures(mapped, batch.elements)
+    mk = {"ref_meas": ref_meas, "meas": meas}
+    parts: dict[str, Tensor] = {}
+    if spec.kind == "beltrami":
+        parts["beltrami"] = L.beltrami_loss(batch.ref, mapped, batch.elements, batch.mu_target)
+        total = parts["beltrami"]
+    else:
+        parts["density"] = L.density_loss(batch.ref, mapped, batch.elements, batch.density, **mk)
+        total = parts["density"]
+        if weights.beltrami and d == 2:
+            parts["mu2"] = L.beltrami_energy(batch.ref, mapped, batch.elements)
+            total = total + weights.beltrami * parts["mu2"]
+        if spec.boundary == "free" and weights.area:
+            parts["area"] = L.area_penalty(batch.ref, mapped, batch.elements, **mk)
+            total = total + weights.area * parts["area"]
+    if weights.fold:
+        parts["fold"] = L.fold_penalty(batch.ref, mapped, batch.elements, weights.fold_threshold, **mk)
+        total = total + weights.fold * parts["fold"]
+    return total, {k: float(v.detach()) for k, v in parts.items()}
