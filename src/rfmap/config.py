@@ -131,7 +131,7 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
         name: _pair(
             name, TaskSpec("density", 2, boundary), desc, _CI,
             dict(steps=6000, batch=4, time_limit=3000.0, val_every=500, threads=1),
-            loss=LossWeights(beltrami=lam),
+            loss=LossWeights(beltrami=lam), lr=5e-4, warmup=300,
         )
         for name, boundary, lam, desc in [
             ("deq2d-square", "square", 0.1, "2D density-equalizing quasi-conformal map (DEQ: density loss + "

@@ -40,7 +40,8 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
     r"""Relative density :math:`\tilde\rho_i = (p_i / A_i) / (P / A)` on the mapped mesh, and reference measures.
 
     :math:`p_i` is the population of element :math:`i` (mean vertex density times reference measure),
-    :math:`A_i` its mapped measure, :math:`P` and :math:`A` the totals.
+    :math:`A_i` its mapped measure (floored at 1% of the reference measure, so the density and its gradient stay
+    bounded when an element degenerates), :math:`P` and :math:`A` the totals.
 
     Returns
     -------
@@ -49,7 +50,9 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
     ref_meas = signed_measures(ref, elements) if ref_meas is None else ref_meas
     meas = signed_measures(mapped, elements) if meas is None else meas
     pop = density[:, elements].mean(-1) * ref_meas
-    rho = pop / meas
+    # guard: an element shrunk below 1% of its reference measure (or flipped) counts as 1% (the fold penalty
+    # handles it); this keeps the density and its gradient bounded
+    rho = pop / torch.maximum(meas, 0.01 * ref_meas)
     mean_rho = pop.sum(-1, keepdim=True) / meas.sum(-1, keepdim=True)
     return rho / mean_rho, ref_meas
 

@@ -145,8 +145,8 @@ def p1_upsample(values: np.ndarray, refine: int) -> np.ndarray:
     if d == 2:
         s_, t_ = loc[:, 0], loc[:, 1]
         v00, v10, v01, v11 = flat[b], flat[b + n], flat[b + 1], flat[b + n + 1]
-        lower = v00 + s_ * (v10 - v00) + t_ * (v01 - v00)
-        upper = v11 + (1.0 - s_) * (v01 - v11) + (1.0 - t_) * (v10 - v11)
+        lower = (1.0 - s_ - t_) * v00 + s_ * v10 + t_ * v01  # barycentric: exact at the vertices
+        upper = (s_ + t_ - 1.0) * v11 + (1.0 - s_) * v01 + (1.0 - t_) * v10
         out = np.where(s_ + t_ <= 1.0, lower, upper)
     else:
         order = np.argsort(-loc, axis=1, kind="stable")

@@ -1,0 +1,191 @@
+"""The ``rfmap`` command line.
+
+Subcommands: ``solve`` (classical solvers), ``metrics``, ``map`` (neural surrogates), ``train``, ``models``,
+``reproduce`` (the paper's tables).  Errors in the input print one line and exit with status 2; no partial output
+file is left behind.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+
+import numpy as np
+
+__all__ = ["main"]
+
+
+class CLIError(Exception):
+    """A user-facing error: printed as one line."""
+
+
+def _field_names() -> str:
+    from .fields import field_names
+
+    return ", ".join(field_names())
+
+
+def cmd_solve(args) -> int:
+    from .fields import BELTRAMI_MAPS, DENSITIES, get_field
+    from .mesh import grid_mesh
+    from .solvers import solve_dem, solve_lbs
+
+    f = get_field(args.field)
+    if args.method == "lbs":
+        if f.kind != "beltrami":
+            raise CLIError(f"method lbs needs a Beltrami test map ({', '.join(BELTRAMI_MAPS)}), got {args.field!r}")
+        mesh = grid_mesh(args.n, 2)
+        mu = f.mu(mesh.points[mesh.elements].mean(1))
+        res = solve_lbs(mu, args.n, boundary="fixed" if args.boundary in (None, "fixed") else args.boundary)
+    else:
+        if f.kind != "density":
+            raise CLIError(f"method dem needs a density ({', '.join(DENSITIES)}), got {args.field!r}")
+        res = solve_dem(f.sample(args.n), boundary=args.boundary or "square", progress=not args.quiet)
+    res.save(args.out)
+    if not args.quiet:
+        print(f"wrote {args.out}: {res.metrics()}")
+    return 0
+
+
+def cmd_metrics(args) -> int:
+    from .fields import BELTRAMI_MAPS
+    from .result import load_result
+
+    res = load_result(args.file)
+    m = res.metrics()
+    if args.exact:
+        f = BELTRAMI_MAPS.get(args.exact)
+        if f is None:
+            raise CLIError(f"--exact must name a Beltrami test map ({', '.join(BELTRAMI_MAPS)}), got {args.exact!r}")
+        cen = res.ref_points[res.elements].mean(1)
+        m = res.metrics(exact_points=f(res.ref_points), mu_ref=f.mu(cen))
+    print(m.to_json())
+    return 0
+
+
+def cmd_models(args) -> int:
+    from .surrogate import Surrogate, models
+
+    names = models()
+    if not names:
+        print("no pretrained models are shipped")
+    for name in names:
+        meta = Surrogate.pretrained(name).meta
+        t = meta.get("task", {})
+        print(f"{name:16s} {t.get('kind', '?'):9s} {t.get('dim', '?')}D {t.get('boundary', '?'):7s} "
+              f"steps={meta.get('steps')} wall={meta.get('wall_time')}s  {meta.get('description', '')}")
+    return 0
+
+
+def cmd_map(args) -> int:
+    from .surrogate import Surrogate, models
+
+    sur = Surrogate.pretrained(args.model) if args.model in models() else Surrogate.load(args.model) \
+        if os.path.exists(args.model) else None
+    if sur is None:
+        raise CLIError(f"unknown model {args.model!r}: not a shipped model ({', '.join(models()) or 'none'}) "
+                       "nor a weight file")
+    if args.field_file:
+        try:
+            field = np.load(args.field_file, allow_pickle=False)
+        except Exception as e:  # noqa: BLE001
+            raise CLIError(f"cannot read {args.field_file}: {e}") from e
+    else:
+        field = args.field
+    points = None
+    if args.points:
+        try:
+            points = np.load(args.points, allow_pickle=False)
+        except Exception as e:  # noqa: BLE001
+            raise CLIError(f"cannot read {args.points}: {e}") from e
+    res = sur.map(field, args.n, points, refine=args.refine)
+    res.save(args.out)
+    if args.vtk:
+        res.to_vtk(args.vtk)
+    print(f"wrote {args.out}: {res.metrics()}")
+    return 0
+
+
+def cmd_train(args) -> int:
+    from .train import run
+
+    sur = run(args)
+    print(f"trained {sur.name}: {sur.meta.get('final_metrics', {}).get('mean')}")
+    return 0
+
+
+def cmd_reproduce(args) -> int:
+    from .experiments import reproduce
+
+    for path in reproduce(args.experiment, args.out, refine=not args.no_refine):
+        print(f"wrote {path}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .train import build_parser as train_parser
+
+    p = argparse.ArgumentParser(prog="rfmap", description="Resolution-free neural surrogates for geometric mapping.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    s = sub.add_parser("solve", help="run a classical solver (Linear Beltrami Solver or diffusion DEM)")
+    s.add_argument("--method", choices=["lbs", "dem"], required=True)
+    s.add_argument("--field", required=True, help="a built-in field name")
+    s.add_argument("--n", type=int, required=True, help="grid side N")
+    s.add_argument("--boundary", choices=["square", "free", "fixed"], default=None,
+                   help="dem: square (default) or free; lbs: fixed (default) or square")
+    s.add_argument("--out", required=True, help="output .npz")
+    s.add_argument("--quiet", action="store_true")
+    s.set_defaults(func=cmd_solve)
+
+    s = sub.add_parser("metrics", help="print the metrics of a result file as JSON")
+    s.add_argument("file")
+    s.add_argument("--exact", default=None, help="Beltrami test map to measure |Δd| and |Δμ| against")
+    s.set_defaults(func=cmd_metrics)
+
+    s = sub.add_parser("map", help="map a field with a neural surrogate")
+    s.add_argument("--model", required=True, help="a shipped model name (rfmap models) or a .safetensors path")
+    g = s.add_mutually_exclusive_group(required=True)
+    g.add_argument("--field", help="a built-in field name")
+    g.add_argument("--field-file", help=".npy array sampled on an N^d grid")
+    s.add_argument("--n", type=int, default=None, help="output grid side N")
+    s.add_argument("--points", default=None, help=".npy array (P, d) of query points")
+    s.add_argument("--refine", action="store_true", help="apply weight refinement")
+    s.add_argument("--out", required=True, help="output .npz")
+    s.add_argument("--vtk", default=None, help="also write the mapped mesh as VTK (.vtu)")
+    s.set_defaults(func=cmd_map)
+
+    s = sub.add_parser("train", help="train a surrogate from a named configuration")
+    train_parser(s)
+    s.set_defaults(func=cmd_train)
+
+    s = sub.add_parser("models", help="list the shipped pretrained models")
+    s.set_defaults(func=cmd_models)
+
+    s = sub.add_parser("reproduce", help="write the paper's tables (Markdown and CSV)")
+    s.add_argument("experiment", choices=["beltrami", "dem2d", "dem3d"])
+    s.add_argument("--out", default="reproduction", help="output directory")
+    s.add_argument("--no-refine", action="store_true", help="skip weight refinement")
+    s.set_defaults(func=cmd_reproduce)
+    return p
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    out = getattr(args, "out", None)
+    existed = bool(out) and os.path.isfile(out)
+    try:
+        return args.func(args)
+    except (CLIError, ValueError, FileNotFoundError) as e:
+        if out and not existed and os.path.isfile(out) and args.cmd in ("solve", "map"):
+            os.remove(out)
+        print(f"rfmap {args.cmd}: error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

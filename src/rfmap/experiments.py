@@ -1,0 +1,275 @@
+r"""The paper's experiments as functions: each runs our surrogate, the classical solver and puts the paper's
+published row beside them, returning a :class:`Table` (Markdown / CSV) and the computed maps for plotting.
+
+Times are wall-clock seconds on the machine that runs them; the paper's times were measured on a GPU, so only
+ratios measured in one run (``speedup`` = classical time / surrogate time) are comparable.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+from .fields import BELTRAMI_MAPS, DENSITIES, get_field
+from .mesh import grid_mesh
+from .result import MapResult
+
+__all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table", "population_table",
+           "resolution_table", "reproduce", "exact_beltrami_result", "COLUMN_TITLES"]
+
+DATA = Path(__file__).resolve().parent / "data"
+
+COLUMN_TITLES = {
+    "time": "Time (s)", "speedup": "classical / ours time", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
+    "mean_dmu_pl": "mean |Δμ| vs PL", "std_rho_orig": "Std(ρ̃_orig)", "std_rho_map": "Std(ρ̃_map)",
+    "min_jacobian": "Min Jacobian", "n_flipped": "flipped", "max_mu": "Max |μ|", "mean_mu": "Mean |μ|",
+    "alpha": "α",
+}
+
+
+@lru_cache(maxsize=1)
+def _paper() -> dict:
+    return json.loads((DATA / "paper_tables.json").read_text())["tables"]
+
+
+def paper_table(label: str) -> dict:
+    """Published values of a paper table (``tab:...``): ``{'columns': [...], 'rows': {key: {col: value}}}``."""
+    t = _paper()
+    if label not in t:
+        raise ValueError(f"unknown paper table {label!r}; known: {', '.join(t)}")
+    return t[label]
+
+
+@dataclass
+class Table:
+    """Rows of ``(case, method, {column: value})`` with Markdown and CSV output."""
+
+    label: str
+    title: str
+    columns: list[str]
+    rows: list[tuple[str, str, dict]] = field(default_factory=list)
+
+    def add(self, case: str, method: str, values: dict) -> None:
+        self.rows.append((str(case), method, dict(values)))
+
+    def value(self, case: str, method: str, column: str):
+        for c, m, v in self.rows:
+            if c == str(case) and m == method:
+                return v.get(column)
+        raise KeyError((case, method, column))
+
+    @staticmethod
+    def _fmt(v) -> str:
+        if v is None:
+            return "—"
+        if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+            return str(int(v))
+        if isinstance(v, (list, tuple)):
+            return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
+        if isinstance(v, float):
+            return f"{v:.3g}" if abs(v) >= 100 else f"{v:.6f}" if abs(v) >= 1e-3 or v == 0 else f"{v:.3e}"
+        return str(v)
+
+    def to_markdown(self) -> str:
+        head = ["case", "method"] + [COLUMN_TITLES.get(c, c) for c in self.columns]
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for case, method, vals in self.rows:
+            lines.append("| " + " | ".join([case, method] + [self._fmt(vals.get(c)) for c in self.columns]) + " |")
+        return "\n".join(lines)
+
+    def to_csv(self) -> str:
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(["case", "method"] + self.columns)
+        for case, method, vals in self.rows:
+            w.writerow([case, method] + ["" if vals.get(c) is None else vals.get(c) for c in self.columns])
+        return buf.getvalue()
+
+    def _repr_markdown_(self) -> str:
+        return f"**{self.title}**\n\n" + self.to_markdown()
+
+    def save(self, out_dir) -> list[Path]:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        stem = self.label.replace(":", "-").replace("_", "-")
+        md, cs = out / f"{stem}.md", out / f"{stem}.csv"
+        md.write_text(f"{self.title}\n\n{self.to_markdown()}\n")
+        cs.write_text(self.to_csv())
+        return [md, cs]
+
+
+def _timed_map(sur, name, n, refine=False, repeats: int = 3):
+    sur.map(name, n)  # warm-up
+    best = None
+    for _ in range(repeats):
+        r = sur.map(name, n, refine=refine)
+        best = r if best is None or r.time < best.time else best
+    return best
+
+
+def exact_beltrami_result(name: str, n: int) -> MapResult:
+    """The exact map of a Beltrami test map sampled on the ``N``-grid (its piecewise-linear interpolant)."""
+    f = BELTRAMI_MAPS[name]
+    mesh = grid_mesh(n, 2)
+    cen = mesh.points[mesh.elements].mean(1)
+    return MapResult(mesh.points, f(mesh.points), mesh.elements, f.mu(cen), kind="beltrami")
+
+
+def _beltrami_metrics(res: MapResult, name: str) -> dict:
+    import torch
+
+    from .geometry import beltrami_coefficient
+
+    f = BELTRAMI_MAPS[name]
+    cen = res.ref_points[res.elements].mean(1)
+    exact_pts = f(res.ref_points)
+    m = res.metrics(exact_points=exact_pts, mu_ref=f.mu(cen))
+    mu_pl = beltrami_coefficient(torch.as_tensor(res.ref_points), torch.as_tensor(exact_pts),
+                                 torch.as_tensor(res.elements)).numpy()
+    mu = beltrami_coefficient(torch.as_tensor(res.ref_points), torch.as_tensor(res.mapped_points),
+                              torch.as_tensor(res.elements)).numpy()
+    return {"time": res.time, "mean_dd": m.mean_dd, "mean_dmu": m.mean_dmu,
+            "mean_dmu_pl": float(np.abs(mu - mu_pl).mean()), "n_flipped": m.n_flipped,
+            "min_jacobian": m.min_jacobian}
+
+
+def _lbs(name: str, n: int) -> MapResult:
+    from .solvers import solve_lbs
+
+    mesh = grid_mesh(n, 2)
+    mu = BELTRAMI_MAPS[name].mu(mesh.points[mesh.elements].mean(1))
+    solve_lbs(mu, n)  # warm-up
+    return min((solve_lbs(mu, n) for _ in range(3)), key=lambda r: r.time)
+
+
+def _beltrami_rows(sur, table: Table, cases: list[tuple[str, str, int]], paper: dict, refine: bool):
+    results = {}
+    for case, name, n in cases:
+        ours = _timed_map(sur, name, n, refine=refine)
+        lbs = _lbs(name, n)
+        mo, ml = _beltrami_metrics(ours, name), _beltrami_metrics(lbs, name)
+        mo["speedup"] = ml["time"] / mo["time"]
+        table.add(case, "ours", mo)
+        table.add(case, "LBS", ml)
+        if case in paper["rows"]:
+            table.add(case, "paper", paper["rows"][case])
+        results[case] = {"ours": ours, "lbs": lbs, "exact": exact_beltrami_result(name, n)}
+    return table, results
+
+
+_BEL_COLS = ["time", "speedup", "mean_dd", "mean_dmu", "mean_dmu_pl", "n_flipped", "min_jacobian"]
+
+
+def beltrami_table(sur, n: int = 51, maps=("T1", "T2", "T3", "T4"), refine: bool = False):
+    """tab:reconstruction_results_mu: our model, the Linear Beltrami Solver and the paper on T1–T4 at ``n``."""
+    t = Table("tab:reconstruction_results_mu", f"Reconstruction from Beltrami coefficients (N = {n})", _BEL_COLS)
+    return _beltrami_rows(sur, t, [(m, m, n) for m in maps], paper_table(t.label), refine)
+
+
+def beltrami_resolution_table(sur, ns=(48, 64, 80, 96), name: str = "T1-res", refine: bool = False):
+    """tab:reconstruction_results_res: the same model on ``name`` at several resolutions."""
+    t = Table("tab:reconstruction_results_res", f"Reconstruction of {name} at several resolutions", _BEL_COLS)
+    return _beltrami_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(t.label), refine)
+
+
+def _density_values(res: MapResult, with_mu: bool) -> dict:
+    m = res.metrics()
+    out = {"time": res.time, "std_rho_orig": m.std_rho_orig, "std_rho_map": m.std_rho_map,
+           "min_jacobian": m.min_jacobian, "n_flipped": m.n_flipped}
+    if with_mu:
+        out.update(max_mu=m.max_mu, mean_mu=m.mean_mu)
+    return out
+
+
+def _classical(name: str, n: int, boundary: str) -> MapResult:
+    from .solvers import solve_dem
+
+    return solve_dem(DENSITIES[name].sample(n), boundary=boundary)
+
+
+def _density_rows(sur, table, cases, paper, refine, boundary, classical=True):
+    results = {}
+    with_mu = sur.spec.dim == 2
+    for case, name, n in cases:
+        ours = _timed_map(sur, name, n)
+        vo = _density_values(ours, with_mu)
+        entry = {"ours": ours}
+        if refine:
+            ref = sur.map(name, n, refine=True)
+            vr = _density_values(ref, with_mu)
+            vr["alpha"] = ref.info["alpha"]
+            entry["ours+refine"] = ref
+        if classical:
+            cl = _classical(name, n, boundary)
+            vc = _density_values(cl, with_mu)
+            vo["speedup"] = cl.time / ours.time
+            entry["classical"] = cl
+        table.add(case, "ours", vo)
+        if refine:
+            table.add(case, "ours + refinement", vr)
+        if classical:
+            table.add(case, "diffusion DEM", vc)
+        if case in paper["rows"]:
+            table.add(case, "paper", paper["rows"][case])
+        results[case] = entry
+    return table, results
+
+
+def population_table(sur, fields=None, n: int | None = None, refine: bool = True, classical: bool = True):
+    """tab:population_test(_fb) / tab:3d_population_test(_fb): the four population tests."""
+    d, b = sur.spec.dim, sur.spec.boundary
+    fields = list(fields or (["sin-cos", "exp-log", "rect-peak", "ring"] if d == 2 else
+                             ["sin-cos-3d", "shell-3d", "octant-3d", "prism-peak-3d"]))
+    n = n or (51 if d == 2 else 48)
+    label = ("tab:population_test" if d == 2 else "tab:3d_population_test") + ("_fb" if b == "free" else "")
+    cols = ["time", "speedup", "std_rho_orig", "std_rho_map", "min_jacobian", "n_flipped"]
+    cols += ["max_mu", "mean_mu"] if d == 2 else []
+    cols += ["alpha"] if refine else []
+    t = Table(label, f"{d}D population tests, {b} boundary (N = {n}), model {sur.name}", cols)
+    return _density_rows(sur, t, [(f, f, n) for f in fields], paper_table(label), refine,
+                         "free" if b == "free" else "square", classical)
+
+
+def resolution_table(sur, ns=None, refine: bool = False, classical: bool = True, work_n=None):
+    """tab:resolution_test / tab:3d_resolution_test: the multi-frequency field at several resolutions."""
+    d = sur.spec.dim
+    ns = list(ns or ((32, 64, 128, 256) if d == 2 else (32, 40, 56, 64)))
+    name = "multi-freq" if d == 2 else "multi-freq-3d"
+    label = "tab:resolution_test" if d == 2 else "tab:3d_resolution_test"
+    cols = ["time", "speedup", "std_rho_orig", "std_rho_map", "min_jacobian", "n_flipped"]
+    cols += ["max_mu", "mean_mu"] if d == 2 else []
+    t = Table(label, f"{d}D resolution test on {name}, model {sur.name}", cols)
+    return _density_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(label), refine, "square", classical)
+
+
+def reproduce(experiment: str, out_dir, *, refine: bool = True) -> list[Path]:
+    """Write the tables of one experiment (``beltrami``, ``dem2d``, ``dem3d``) as Markdown and CSV."""
+    from .surrogate import Surrogate, models
+
+    def need(name):
+        if name not in models():
+            raise ValueError(f"the pretrained model {name!r} is not shipped with this version; train it with "
+                             f"`rfmap train --config {name} --preset full`")
+        return Surrogate.pretrained(name)
+
+    paths: list[Path] = []
+    if experiment == "beltrami":
+        sur = need("beltrami2d")
+        paths += beltrami_table(sur)[0].save(out_dir)
+        paths += beltrami_resolution_table(sur)[0].save(out_dir)
+    elif experiment == "dem2d":
+        paths += population_table(need("deq2d-square"), refine=refine)[0].save(out_dir)
+        paths += population_table(need("deq2d-free"), refine=refine)[0].save(out_dir)
+        paths += resolution_table(need("deq2d-square"))[0].save(out_dir)
+    elif experiment == "dem3d":
+        paths += population_table(need("dem3d-cube"), refine=refine)[0].save(out_dir)
+        paths += population_table(need("dem3d-free"), refine=refine)[0].save(out_dir)
+        paths += resolution_table(need("dem3d-cube"))[0].save(out_dir)
+    else:
+        raise ValueError(f"unknown experiment {experiment!r}; expected beltrami, dem2d or dem3d")
+    return paths
