@@ -32,7 +32,7 @@ from .refine import RefineResult, refine_alpha
 from .result import MapResult
 from .tasks import TaskSpec, encode
 
-__all__ = ["Surrogate", "models", "WEIGHTS_DIR", "density_objective", "beltrami_objective"]
+__all__ = ["Surrogate", "models", "load_or_train", "WEIGHTS_DIR", "density_objective", "beltrami_objective"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 
@@ -397,3 +397,20 @@ def beltrami_objective(ref, psi, elements, mu_in, boundary, flip_weight: float =
         return float((mu - mu_in_t).abs().mean()) + flip_weight * float((det <= 0).double().mean())
 
     return J
+
+
+def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progress: bool = False) -> "Surrogate":
+    """The model a chapter of the book uses: the shipped weights at ``full`` scale; at ``ci`` scale a tiny model
+    trained on the spot with the named config's ``ci`` preset (seconds), so every notebook runs end to end on a
+    laptop CPU.  ``preset`` defaults to :func:`rfmap.config.scale`."""
+    import tempfile
+
+    from .config import get_config, scale
+    from .train import train
+
+    preset = preset or scale()
+    if preset == "full":
+        return Surrogate.pretrained(name)
+    cfg = get_config(name, preset)
+    out = out_dir or tempfile.mkdtemp(prefix=f"rfmap-{name}-")
+    return train(cfg, out, progress=progress)

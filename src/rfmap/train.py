@@ -257,8 +257,29 @@ def _loop(cfg, spec, model, net, opt, sched, loader, bar, log, surrogate, ckpt, 
         final = validate(sur, cfg.val_n)
         log({"step": step, "validation": final, "elapsed": round(elapsed, 2), "final": True})
         sur = surrogate(step, elapsed, final)
+        sur.meta["history"] = history(out / "log.jsonl")
         sur.save(out / f"{cfg.name}.safetensors")
     return sur
+
+
+def history(log_path, points: int = 200) -> dict:
+    """A compact training history from ``log.jsonl``: up to ``points`` (step, loss) pairs of a running mean of the
+    loss, and the mean validation metrics over time (stored in the weight metadata for the book's plots)."""
+    steps, losses, val = [], [], []
+    with open(log_path) as f:
+        for line in f:
+            rec = json.loads(line)
+            if "validation" in rec:
+                val.append({"step": rec["step"], **rec["validation"]["mean"]})
+            elif "loss" in rec:
+                steps.append(rec["step"])
+                losses.append(rec["loss"])
+    if losses:
+        w = max(1, len(losses) // points)
+        sm = np.convolve(losses, np.ones(w) / w, mode="valid")[::w]
+        steps = steps[w - 1::w][: len(sm)]
+        losses = [float(x) for x in sm]
+    return {"step": steps, "loss": losses, "validation": val}
 
 
 def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:

@@ -53,12 +53,13 @@ Proc. Natl. Acad. Sci. USA 101(20), 7499–7504 (2004).
 from __future__ import annotations
 
 import contextlib
+import itertools
 import math
 import time
 
 import numpy as np
 import torch
-from scipy.fft import dctn
+from scipy.fft import dct, dctn
 
 from ..fields import check_density
 from ..mesh import check_n, grid_mesh
@@ -132,31 +133,43 @@ def p1_upsample(values: np.ndarray, refine: int) -> np.ndarray:
     if refine == 1:
         return values.copy()
     d, n = values.ndim, values.shape[0]
-    m = refine * (n - 1) + 1
-    xf = np.arange(m) / refine
-    i = np.minimum(xf.astype(np.intp), n - 2)
-    f = xf - i
-    idx = np.meshgrid(*([i] * d), indexing="ij")
-    loc = np.stack(np.meshgrid(*([f] * d), indexing="ij"), axis=-1).reshape(-1, d)
-    base = np.stack([a.reshape(-1) for a in idx], axis=-1)
-    strides = np.array([n ** (d - 1 - a) for a in range(d)])
-    flat = values.reshape(-1)
-    b = base @ strides
+    r = int(refine)
+    m = r * (n - 1) + 1
+    # pad one layer so that offset 0 of the (virtual) cell n-1 gives the last fine layer
+    padded = np.pad(values, [(0, 1)] * d, mode="edge")
+    fine = np.empty((r * n,) * d)
+    corners = list(itertools.product((0, 1), repeat=d))
+    for offset in itertools.product(range(r), repeat=d):
+        weights = _p1_corner_weights(np.array(offset) / r)
+        acc = np.zeros((n,) * d)
+        for corner, w in zip(corners, weights):
+            if w != 0.0:
+                acc += w * padded[tuple(slice(c, c + n) for c in corner)]
+        fine[tuple(slice(o, None, r) for o in offset)] = acc
+    return fine[(slice(0, m),) * d]
+
+
+def _p1_corner_weights(loc: np.ndarray) -> list[float]:
+    """Weights of the 2**d cell corners (in ``itertools.product((0, 1), repeat=d)`` order) of the P1 interpolant
+    at local coordinates ``loc`` in the cell, for the element splits of :func:`rfmap.mesh.grid_mesh`."""
+    d = loc.size
+    w = {}
     if d == 2:
-        s_, t_ = loc[:, 0], loc[:, 1]
-        v00, v10, v01, v11 = flat[b], flat[b + n], flat[b + 1], flat[b + n + 1]
-        lower = (1.0 - s_ - t_) * v00 + s_ * v10 + t_ * v01  # barycentric: exact at the vertices
-        upper = (s_ + t_ - 1.0) * v11 + (1.0 - s_) * v01 + (1.0 - t_) * v10
-        out = np.where(s_ + t_ <= 1.0, lower, upper)
-    else:
-        order = np.argsort(-loc, axis=1, kind="stable")
-        c = np.take_along_axis(loc, order, axis=1)
-        weights = np.stack([1.0 - c[:, 0], c[:, 0] - c[:, 1], c[:, 1] - c[:, 2], c[:, 2]], axis=1)
-        out = weights[:, 0] * flat[b]
-        for k in range(3):
-            b = b + strides[order[:, k]]
-            out = out + weights[:, k + 1] * flat[b]
-    return out.reshape((m,) * d)
+        s_, t_ = float(loc[0]), float(loc[1])
+        if s_ + t_ <= 1.0:  # triangle (x, y), (x+h, y), (x, y+h)
+            w = {(0, 0): 1.0 - s_ - t_, (1, 0): s_, (0, 1): t_}
+        else:  # triangle (x+h, y), (x+h, y+h), (x, y+h)
+            w = {(1, 1): s_ + t_ - 1.0, (0, 1): 1.0 - s_, (1, 0): 1.0 - t_}
+    else:  # Kuhn simplex along the axes sorted by decreasing local coordinate
+        order = np.argsort(-loc, kind="stable")
+        c = loc[order]
+        bary = [1.0 - c[0], c[0] - c[1], c[1] - c[2], c[2]]
+        vertex = [0] * d
+        w[tuple(vertex)] = bary[0]
+        for k in range(d):
+            vertex[order[k]] = 1
+            w[tuple(vertex)] = w.get(tuple(vertex), 0.0) + bary[k + 1]
+    return [w.get(c, 0.0) for c in itertools.product((0, 1), repeat=d)]
 
 
 def cosine_coefficients(values: np.ndarray) -> np.ndarray:
@@ -185,41 +198,61 @@ def cosine_coefficients(values: np.ndarray) -> np.ndarray:
     return coef
 
 
-def _cosine_box_integral(coef: np.ndarray, lo: float, hi: float) -> float:
-    r""":math:`\int_{[lo, hi]^d} \sum_k a_k \prod_i \cos(\pi k_i y_i)\,dy` (separable, exact)."""
-    k = np.arange(coef.shape[0])
-    w = np.empty(k.size)
-    w[0] = hi - lo
-    w[1:] = (np.sin(math.pi * k[1:] * hi) - np.sin(math.pi * k[1:] * lo)) / (math.pi * k[1:])
-    out = coef
-    for _ in range(coef.ndim):
-        out = out @ w  # contracts the last axis
+def _interval_weights(m: int, lo: float, hi: float) -> np.ndarray:
+    r"""Weights :math:`w_j` with :math:`\int_{lo}^{hi} \rho = \sum_j w_j p_j` for the 1D cosine interpolant of
+    values :math:`p_j` at :math:`j/(M-1)`: :math:`w_j = e_j\,\mathrm{DCT\text{-}I}(I)_j / (2(M-1))` with
+    :math:`I_k = \int_{lo}^{hi} \cos(\pi k y)\,dy` and :math:`e_j = 1` at the ends, 2 inside."""
+    k = np.arange(m)
+    integ = np.empty(m)
+    integ[0] = hi - lo
+    integ[1:] = (np.sin(math.pi * k[1:] * hi) - np.sin(math.pi * k[1:] * lo)) / (math.pi * k[1:])
+    e = np.full(m, 2.0)
+    e[0] = e[-1] = 1.0
+    return e * dct(integ, type=1) / (2.0 * (m - 1))
+
+
+def _contract(values: np.ndarray, w: np.ndarray) -> float:
+    """:math:`\sum_j w_{j_1} \cdots w_{j_d} v_j` (the same 1D weights along every axis)."""
+    out = values
+    for _ in range(values.ndim):
+        out = out @ w
     return float(out)
 
 
 def _balanced_sea(dens: np.ndarray, pad: int, refine: int) -> tuple[np.ndarray, float]:
-    r"""Box values with a sea level :math:`s` for which the cosine model conserves the domain's area exactly.
+    r"""Fine-grid initial density of the free-boundary box and its sea level :math:`s`.
 
-    At :math:`t\to\infty` the density is uniform, :math:`a_0`, and the mapped domain has area
-    :math:`m_{\Omega} / a_0` where :math:`m_\Omega` is the mass of the initial (cosine) density on the unit
-    square/cube.  Both are affine in :math:`s`, so :math:`m_\Omega(s) = a_0(s)\,|\Omega|` is solved exactly.  (A
-    plain mean-density sea is off by :math:`O(h)` because the cells just outside the coast carry part of the
-    coastal density.)
+    At :math:`t\to\infty` the density is uniform, equal to the box mean :math:`a_0`, and the mapped domain has area
+    :math:`m_{\Omega} / a_0` where :math:`m_\Omega` is the mass of the initial (cosine-interpolated) density on the
+    unit square/cube.  With the P1 density :math:`p = p_A + s\,p_B` (``p_A``: the domain's values with a zero sea,
+    ``p_B``: the P1 interpolant of the sea indicator), both are affine in :math:`s`, and
+    :math:`m_\Omega(s) = a_0(s)\,|\Omega|` is solved exactly.  A plain mean-density sea is off by :math:`O(h)`
+    because the cells just outside the coast carry part of the coastal density.
+
+    Returns
+    -------
+    fine : ndarray, shape (M,)*d
+        P1-upsampled initial density on the box, ``M = refine (N_box - 1) + 1``.
+    sea : float
     """
     d, n = dens.ndim, dens.shape[0]
     nb = n + 2 * pad
-    lo, hi = pad / (nb - 1), (pad + n - 1) / (nb - 1)
     inner = (slice(pad, pad + n),) * d
-    f = []
-    for level in (0.0, 1.0):
-        vals = np.full((nb,) * d, level)
-        vals[inner] = dens
-        coef = cosine_coefficients(p1_upsample(vals, refine))
-        f.append(_cosine_box_integral(coef, lo, hi) - coef.flat[0] * (hi - lo) ** d)
-    sea = f[0] / (f[0] - f[1])
-    vals = np.full((nb,) * d, sea)
+    vals = np.zeros((nb,) * d)
     vals[inner] = dens
-    return vals, sea
+    ind = np.ones((nb,) * d)
+    ind[inner] = 0.0
+    fine_a, fine_b = p1_upsample(vals, refine), p1_upsample(ind, refine)
+    m = fine_a.shape[0]
+    lo, hi = pad / (nb - 1), (pad + n - 1) / (nb - 1)
+    w_in = _interval_weights(m, lo, hi)
+    w_all = _interval_weights(m, 0.0, 1.0)  # the trapezoid weights
+    vol = (hi - lo) ** d
+    f_a = _contract(fine_a, w_in) - vol * _contract(fine_a, w_all)
+    f_b = _contract(fine_b, w_in) - vol * _contract(fine_b, w_all)
+    sea = -f_a / f_b
+    fine_a += sea * fine_b
+    return fine_a, float(sea)
 
 
 class CosineDiffusion:
@@ -258,42 +291,75 @@ class CosineDiffusion:
             return self.m
         return int(min(self.m, max(2, math.ceil(math.sqrt(39.2 / (math.pi**2 * t))) + 1)))
 
-    def fields(self, t: float) -> torch.Tensor:
-        r""":math:`\rho` and :math:`\nabla\rho` at time ``t`` on the grid.
+    def fields(self, t: float, window: tuple[tuple[int, int], ...] | None = None) -> torch.Tensor:
+        r""":math:`\rho` and :math:`\nabla\rho` at time ``t`` on the grid (or on a window of it).
+
+        Parameters
+        ----------
+        t : float
+            Time (box units).
+        window : tuple of d (start, stop) index pairs, optional
+            Evaluate only on the grid nodes ``start <= j < stop`` along each axis (the whole grid by default).
 
         Returns
         -------
-        Tensor, float64, shape (d+1,) + (M,)*d
-            ``[rho, d rho/dx_1, ..., d rho/dx_d]``.
+        Tensor, float64, shape (d+1, W_1, ..., W_d)
+            ``[rho, d rho/dx_1, ..., d rho/dx_d]``; ``W_i = stop_i - start_i`` (``M`` without a window).
         """
+        d = self.dim
+        if window is None:
+            window = ((0, self.m),) * d
         kk = self.n_modes(t)
         decay = torch.exp(-self.k2[:kk] * t)  # separable time factor
-        C = self.cos[:, :kk] * decay
-        S = self.dsin[:, :kk] * decay
-        m, d = self.m, self.dim
+        C = [self.cos[lo:hi, :kk] * decay for lo, hi in window]  # per-axis (W_i, K) tables
+        S = [self.dsin[lo:hi, :kk] * decay for lo, hi in window]
+        w = [hi - lo for lo, hi in window]
         a = self.coef[(slice(0, kk),) * d]
         if d == 2:
-            out = torch.empty(3, m, m, dtype=torch.float64)
-            ac = a @ C.T  # (K, M): last axis transformed
-            torch.mm(C, ac, out=out[0])
-            torch.mm(S, ac, out=out[1])
-            torch.mm(C, a @ S.T, out=out[2])
+            out = torch.empty(3, w[0], w[1], dtype=torch.float64)
+            ac = a @ C[1].T  # (K, W_2): last axis transformed
+            torch.mm(C[0], ac, out=out[0])
+            torch.mm(S[0], ac, out=out[1])
+            torch.mm(C[0], a @ S[1].T, out=out[2])
             return out
-        out = torch.empty(4, m, m * m, dtype=torch.float64)
-        zc = a @ C.T  # (K, K, M)
-        zs = a @ S.T
-        ycc = torch.matmul(C, zc).reshape(kk, m * m)  # (K, M, M) -> (K, M*M)
-        torch.mm(C, ycc, out=out[0])
-        torch.mm(S, ycc, out=out[1])
-        torch.mm(C, torch.matmul(S, zc).reshape(kk, m * m), out=out[2])
-        torch.mm(C, torch.matmul(C, zs).reshape(kk, m * m), out=out[3])
-        return out.reshape(4, m, m, m)
+        out = torch.empty(4, w[0], w[1] * w[2], dtype=torch.float64)
+        zc = a @ C[2].T  # (K, K, W_3)
+        zs = a @ S[2].T
+        plane = w[1] * w[2]
+        ycc = torch.matmul(C[1], zc).reshape(kk, plane)  # (K, W_2, W_3) -> (K, W_2 W_3)
+        torch.mm(C[0], ycc, out=out[0])
+        torch.mm(S[0], ycc, out=out[1])
+        torch.mm(C[0], torch.matmul(S[1], zc).reshape(kk, plane), out=out[2])
+        torch.mm(C[0], torch.matmul(C[1], zs).reshape(kk, plane), out=out[3])
+        return out.reshape(4, *w)
 
-    def velocity(self, t: float) -> torch.Tensor:
-        r"""The Gastner–Newman velocity :math:`v = -\nabla\rho/\rho` on the grid, float64 Tensor (d,) + (M,)*d."""
-        f = self.fields(t)
+    def velocity(self, t: float, window: tuple[tuple[int, int], ...] | None = None) -> torch.Tensor:
+        r"""The Gastner–Newman velocity :math:`v = -\nabla\rho/\rho` on the grid (or a window, see :meth:`fields`).
+
+        Returns
+        -------
+        Tensor, float64, shape (d, W_1, ..., W_d)
+        """
+        f = self.fields(t, window)
         inv = f[0].reciprocal_().neg_()
         return f[1:].mul_(inv)
+
+    def velocity_at(self, t: float, points: np.ndarray) -> np.ndarray:
+        r""":math:`v(x, t)` at arbitrary points (P, d) of the unit box: multilinear interpolation of the grid velocity.
+
+        The velocity is evaluated only on the window of grid nodes that covers the points' bounding box (much
+        cheaper when the points occupy a small part of the box, as with the free boundary).
+
+        Returns
+        -------
+        ndarray, shape (P, d)
+        """
+        top = self.m - 1
+        lo = np.clip(np.floor(points.min(axis=0) * top).astype(int), 0, top - 1)
+        hi = np.clip(np.ceil(points.max(axis=0) * top).astype(int), lo + 1, top)
+        window = tuple((int(a), int(b) + 1) for a, b in zip(lo, hi))
+        local = (points * top - lo) / (hi - lo)
+        return multilinear_interpolate(self.velocity(t, window), local)
 
 
 @contextlib.contextmanager
@@ -329,7 +395,7 @@ def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol
     def rhs(t: float, p: np.ndarray) -> np.ndarray:
         nonlocal n_eval
         n_eval += 1
-        return multilinear_interpolate(field.velocity(t), p)
+        return field.velocity_at(t, p)
 
     def max_norm(v: np.ndarray) -> float:
         return float(np.sqrt(np.einsum("ij,ij->i", v, v).max()))
@@ -457,15 +523,16 @@ def solve_dem(
 
     # the diffusion box is [0, 1]^d in its own coordinates y; x = scale * y - shift
     if boundary == "square":
-        box_vals, pad, scale = dens, 0, 1.0
+        pad, scale = 0, 1.0
+        fine = p1_upsample(dens, int(refine))
     else:
         pad = max(1, int(round(margin * (n - 1))))
-        box_vals, sea = _balanced_sea(dens, pad, int(refine))  # close to the mean density
+        fine, sea = _balanced_sea(dens, pad, int(refine))  # sea close to the mean density
         if not sea > 0:
             raise RuntimeError(f"could not balance the sea density (got {sea:.4g})")
         scale = (n - 1 + 2 * pad) / (n - 1)
     shift = pad / (n - 1)
-    nb = box_vals.shape[0]
+    nb = n + 2 * pad
     y0 = (ref + shift) / scale
 
     if boundary == "square":
@@ -483,7 +550,7 @@ def solve_dem(
 
     threads = num_threads if num_threads is not None else (1 if d == 2 else None)
     with _torch_threads(threads):
-        field = CosineDiffusion(p1_upsample(box_vals, int(refine)))
+        field = CosineDiffusion(fine)
         y, info = _integrate(field, y0, project, h=1.0 / (nb - 1), rtol=float(rtol), tol_end=float(tol_end),
                              max_steps=int(max_steps), progress=progress, label=f"DEM {d}D N={n}")
     mapped = y * scale - shift

@@ -1,0 +1,54 @@
+# rfmap: set-up, tests and the Jupyter Book.
+#   make install     create .venv and install torch (CPU, pinned) and the package with its dev extras
+#   make test        unit tests, notebooks (nbval) and the book build, all at RFMAP_SCALE=ci
+#   make book        execute the notebooks at full scale and build the HTML book into _build/html
+#   make book-check  screenshot every page of the built book and fail on error output
+#   make clean       remove build outputs (make distclean also removes .venv)
+
+SHELL := /bin/bash
+.SHELLFLAGS := -eu -o pipefail -c
+
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+TORCH := torch==2.13.0
+NOTEBOOKS := $(wildcard notebooks/*.ipynb)
+RFMAP_SCALE ?= full
+# environment of the notebook and book steps: VTK renders off-screen through EGL; the venv's scripts (rfmap) on PATH
+NB_ENV := VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow PATH="$(CURDIR)/$(BIN):$$PATH"
+BOOK_FLAGS := -W -n --keep-going
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+
+.PHONY: install test book book-check clean distclean
+
+install: $(STAMP)
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install $(TORCH)
+	$(BIN)/python -m pip install -e ".[dev]"
+	touch $@
+
+test: install
+	RFMAP_SCALE=ci $(BIN)/pytest tests/
+ifneq ($(strip $(NOTEBOOKS)),)
+	$(NB_ENV) RFMAP_SCALE=ci $(BIN)/pytest --nbval-lax notebooks/
+endif
+	$(NB_ENV) RFMAP_SCALE=ci $(BIN)/jupyter-book build . $(BOOK_FLAGS)
+
+book: install
+	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter-book build . $(BOOK_FLAGS)
+	@echo "book: open _build/html/index.html"
+
+book-check: install
+	command -v chromium >/dev/null 2>&1 || { $(SUDO) apt-get update && $(SUDO) apt-get install -y chromium; }
+	$(BIN)/python scripts/book_check.py --html _build/html --out _build/screenshots
+
+clean:
+	rm -rf _build .pytest_cache .hypothesis
+	find . -path ./$(VENV) -prune -o -name __pycache__ -type d -prune -exec rm -rf {} +
+	find . -path ./$(VENV) -prune -o -name .ipynb_checkpoints -type d -prune -exec rm -rf {} +
+
+distclean: clean
+	rm -rf $(VENV) src/*.egg-info

@@ -1,0 +1,170 @@
+"""Map quality metrics in the paper's conventions (rfmap.metrics) and the MapResult container (rfmap.result)."""
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from rfmap.fields import BELTRAMI_MAPS, sample_density
+from rfmap.geometry import signed_measures
+from rfmap.mesh import grid_mesh
+from rfmap.metrics import MapMetrics, compute_metrics, density_std, element_population
+from rfmap.result import MapResult, load_result
+
+MESH = grid_mesh(11, 2)
+
+
+def _smooth(p, eps=0.04):
+    x, y = p[:, 0], p[:, 1]
+    return np.stack([x + eps * np.sin(np.pi * x) * np.sin(2 * np.pi * y),
+                     y + eps * np.sin(2 * np.pi * x) * np.sin(np.pi * y)], -1)
+
+
+def test_identity_map_metrics():
+    dens = sample_density("sin-cos", 11).reshape(-1)
+    m = compute_metrics(MESH.points, MESH.points, MESH.elements, density=dens, time=0.5)
+    assert m.std_rho_orig == pytest.approx(m.std_rho_map, abs=1e-14)
+    assert m.min_jacobian == pytest.approx(1.0, abs=1e-14)
+    assert m.n_flipped == 0
+    assert m.max_mu == pytest.approx(0.0, abs=1e-14) and m.mean_mu == pytest.approx(0.0, abs=1e-14)
+    assert m.time == 0.5
+    assert m.mean_dd is None and m.mean_dmu is None
+
+
+def test_uniform_density_has_zero_std():
+    dens = np.ones(MESH.points.shape[0])
+    m = compute_metrics(MESH.points, MESH.points, MESH.elements, density=dens)
+    assert m.std_rho_orig == pytest.approx(0.0, abs=1e-12)
+
+
+def test_std_rho_by_hand():
+    """rho = population / measure, normalised by its mean, std with ddof = 1."""
+    dens = sample_density("ring", 11).reshape(-1)
+    mapped = _smooth(MESH.points)
+    def areas(p):
+        e = p[MESH.elements]
+        u, v = e[:, 1] - e[:, 0], e[:, 2] - e[:, 0]
+        return (u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]) / 2
+
+    ref_area, map_area = areas(MESH.points), areas(mapped)
+    pop = dens[MESH.elements].mean(1) * ref_area
+    m = compute_metrics(MESH.points, mapped, MESH.elements, density=dens)
+    for area, value in [(ref_area, m.std_rho_orig), (map_area, m.std_rho_map)]:
+        rho = pop / area
+        assert value == pytest.approx(np.std(rho / rho.mean(), ddof=1), rel=1e-12)
+    assert m.min_jacobian == pytest.approx((map_area / ref_area).min(), rel=1e-12)
+
+
+def test_uniform_scaling_changes_jacobian_not_density_spread():
+    dens = sample_density("exp-log", 11).reshape(-1)
+    m = compute_metrics(MESH.points, 3.0 * MESH.points, MESH.elements, density=dens)
+    assert m.min_jacobian == pytest.approx(9.0)
+    assert m.std_rho_map == pytest.approx(m.std_rho_orig, rel=1e-12)
+    assert m.max_mu == pytest.approx(0.0, abs=1e-12)
+
+
+def test_flipped_elements_are_counted():
+    mapped = MESH.points.copy()
+    centre = 5 * 11 + 5  # vertex (0.5, 0.5)
+    mapped[centre] += [0.15, 0.15]  # pushed beyond its neighbours' diagonal
+    m = compute_metrics(MESH.points, mapped, MESH.elements)
+    dets = signed_measures(torch.as_tensor(mapped), torch.as_tensor(MESH.elements)) / (0.5 * 0.1**2)
+    assert m.n_flipped == int((dets <= 0).sum()) > 0
+    assert m.min_jacobian <= 0
+    assert m.max_mu >= 1.0  # a flipped triangle has |mu| >= 1
+
+
+def test_mean_dd_and_mean_dmu():
+    mapped = MESH.points + np.array([0.03, -0.04])
+    m = compute_metrics(MESH.points, mapped, MESH.elements, exact_points=MESH.points,
+                        mu_ref=np.full(MESH.elements.shape[0], 0.1 + 0.0j))
+    assert m.mean_dd == pytest.approx(0.05, rel=1e-12)
+    assert m.mean_dmu == pytest.approx(0.1, rel=1e-12)
+
+
+def test_given_mu_is_used():
+    mu = np.full(MESH.elements.shape[0], 0.3j)
+    mu[0] = 0.6
+    m = compute_metrics(MESH.points, MESH.points, MESH.elements, mu=mu)
+    assert m.max_mu == pytest.approx(0.6)
+    assert m.mean_mu == pytest.approx((0.6 + 0.3 * (mu.size - 1)) / mu.size)
+
+
+def test_exact_test_map_metrics():
+    f = BELTRAMI_MAPS["T1"]
+    mapped = f(MESH.points)
+    m = compute_metrics(MESH.points, mapped, MESH.elements, exact_points=mapped)
+    assert m.mean_dd == 0.0
+    assert m.n_flipped == 0 and 0 < m.max_mu < 1
+
+
+def test_3d_metrics_have_no_mu():
+    mesh = grid_mesh(4, 3)
+    dens = sample_density("sin-cos-3d", 4).reshape(-1)
+    m = compute_metrics(mesh.points, 2 * mesh.points, mesh.elements, density=dens)
+    assert m.max_mu is None and m.mean_mu is None
+    assert m.min_jacobian == pytest.approx(8.0)
+    assert m.std_rho_map == pytest.approx(m.std_rho_orig, rel=1e-12)
+
+
+def test_element_population_and_density_std():
+    dens = sample_density("sin-cos", 11).reshape(-1)
+    pop = element_population(MESH.points, MESH.elements, dens)
+    assert pop.shape == (MESH.elements.shape[0],)
+    assert float(pop.sum()) == pytest.approx(1.0, abs=1e-12)
+    meas = signed_measures(torch.as_tensor(MESH.points), torch.as_tensor(MESH.elements))
+    assert density_std(meas * 7.0, meas) == pytest.approx(0.0, abs=1e-12)
+
+
+def test_bad_input():
+    with pytest.raises(ValueError):
+        compute_metrics(MESH.points, MESH.points[:-1], MESH.elements)
+    with pytest.raises(ValueError):
+        compute_metrics(MESH.points, MESH.points, MESH.elements, density=np.ones(5))
+
+
+def test_map_metrics_container():
+    m = MapMetrics(std_rho_orig=0.5, n_flipped=2, time=1.25)
+    assert m.to_dict() == {"std_rho_orig": 0.5, "n_flipped": 2, "time": 1.25}
+    assert set(m.to_dict(drop_none=False)) == set(MapMetrics.columns())
+    assert json.loads(m.to_json()) == m.to_dict()
+    assert m.row() == "| 0.5 | 2 | 1.25 |"
+    assert m.row(["std_rho_orig", "max_mu"]) == "| 0.5 | — |"
+    assert "n_flipped=2" in str(m)
+    # a map collapsing everything to a point: every element is degenerate, mu is undefined (NaN), no exception
+    collapsed = compute_metrics(MESH.points, np.zeros_like(MESH.points), MESH.elements)
+    assert collapsed.min_jacobian == 0.0 and collapsed.n_flipped == MESH.elements.shape[0]
+    assert math.isnan(collapsed.max_mu) and math.isnan(collapsed.mean_mu)
+
+
+def test_map_result_roundtrip(tmp_path):
+    dens = sample_density("sin-cos", 11)
+    mapped = _smooth(MESH.points)
+    r = MapResult(MESH.points, mapped, MESH.elements, dens.reshape(-1), kind="density", time=0.25)
+    assert r.dim == 2
+    np.testing.assert_allclose(r.displacement, mapped - MESH.points)
+    path = tmp_path / "sub" / "map.npz"
+    r.save(path)
+    back = load_result(path)
+    np.testing.assert_array_equal(back.mapped_points, mapped)
+    np.testing.assert_array_equal(back.elements, MESH.elements)
+    assert back.kind == "density" and back.time == 0.25
+    assert back.metrics().to_dict() == pytest.approx(r.metrics().to_dict())
+    assert sorted(f.name for f in (tmp_path / "sub").iterdir()) == ["map.npz"]  # no temporary file left
+    mu = np.zeros(MESH.elements.shape[0], dtype=complex)
+    rb = MapResult(MESH.points, mapped, MESH.elements, mu, kind="beltrami")
+    assert rb.metrics(mu_ref=mu).std_rho_orig is None
+
+
+def test_load_result_rejects_bad_files(tmp_path):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip file")
+    with pytest.raises(ValueError):
+        load_result(bad)
+    partial = tmp_path / "partial.npz"
+    np.savez(partial, ref_points=np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="missing"):
+        load_result(partial)
+    with pytest.raises(ValueError):
+        load_result(tmp_path / "does-not-exist.npz")
