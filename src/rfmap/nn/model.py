@@ -41,6 +41,7 @@ class MultiResUNet(nn.Module):
         if dim not in (2, 3):
             raise ValueError(f"dim must be 2 or 3, got {dim}")
         self.dim, self.n_params, self.base, self.depth = dim, n_params, base, depth
+        self.attention = bool(attention)
         self.in_channels = dim + n_params
         Conv, ConvT = conv_cls(dim), conv_transpose_cls(dim)
         ch = [base * 2**i for i in range(depth + 1)]
@@ -56,7 +57,8 @@ class MultiResUNet(nn.Module):
 
     def kwargs(self) -> dict:
         """Constructor arguments (stored with the weights so the model can be rebuilt)."""
-        return {"dim": self.dim, "n_params": self.n_params, "base": self.base, "depth": self.depth}
+        return {"dim": self.dim, "n_params": self.n_params, "base": self.base, "depth": self.depth,
+                "attention": self.attention}
 
     @property
     def min_size(self) -> int:

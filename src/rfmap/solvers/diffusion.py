@@ -55,6 +55,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import math
+import numbers
 import time
 
 import numpy as np
@@ -212,7 +213,7 @@ def _interval_weights(m: int, lo: float, hi: float) -> np.ndarray:
 
 
 def _contract(values: np.ndarray, w: np.ndarray) -> float:
-    """:math:`\sum_j w_{j_1} \cdots w_{j_d} v_j` (the same 1D weights along every axis)."""
+    r""":math:`\sum_j w_{j_1} \cdots w_{j_d} v_j` (the same 1D weights along every axis)."""
     out = values
     for _ in range(values.ndim):
         out = out @ w
@@ -403,6 +404,10 @@ def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol
     lam1 = math.pi**2  # decay rate of the slowest mode in box units
     err_scale = rtol * h
     end_scale = tol_end * h * lam1  # max|v| below which the remaining displacement max|v|/lam1 < tol_end * h
+    def t_remaining(t: float, v: float) -> float:
+        """Estimated end time: the slowest mode decays as exp(-lam1 t)."""
+        return t + max(math.log(max(v, end_scale) / end_scale), 0.0) / lam1
+
     k1 = rhs(0.0, y)
     vmax = max_norm(k1)
     t = 0.0
@@ -411,8 +416,7 @@ def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol
     if progress:
         from tqdm.auto import tqdm
 
-        t_est = max(math.log(max(vmax, end_scale) / end_scale) / lam1, 1e-6)  # when the slowest mode is gone
-        bar = tqdm(total=round(t_est, 6), desc=label, unit="t", leave=False,
+        bar = tqdm(total=round(t_remaining(0.0, vmax), 4), desc=label, leave=False,
                    bar_format="{l_bar}{bar}| t={n:.4f}/{total:.4f} [{elapsed}<{remaining}]")
     accepted = rejected = 0
     try:
@@ -430,13 +434,16 @@ def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol
                 y, k1 = y_new, k4
                 accepted += 1
                 vmax = max_norm(k1)
-                if bar is not None:
-                    bar.update(round(min(dt, max(bar.total - bar.n, 0.0)), 6))
+                if bar is not None:  # the end time is re-estimated as the flow slows down
+                    bar.total = round(t_remaining(t, vmax), 4)
+                    bar.n = round(t, 4)
+                    bar.refresh()
             else:
                 rejected += 1
             dt *= min(5.0, max(0.2, 0.9 * max(err, 1e-12) ** (-1.0 / 3.0)))
         if bar is not None:
-            bar.update(round(max(bar.total - bar.n, 0.0), 6))
+            bar.total = bar.n = round(t, 4)
+            bar.refresh()
     finally:
         if bar is not None:
             bar.close()
@@ -513,7 +520,7 @@ def solve_dem(
         raise ValueError(f"unknown boundary {boundary!r} for the diffusion solver; choose one of {DEM_BOUNDARIES}")
     dens = _check_grid_density(density)
     for name, val in (("rtol", rtol), ("tol_end", tol_end), ("margin", margin)):
-        if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val) or val <= 0:
+        if isinstance(val, bool) or not isinstance(val, numbers.Real) or not math.isfinite(val) or val <= 0:
             raise ValueError(f"{name} must be a positive finite number, got {val!r}")
     if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 1:
         raise ValueError(f"refine must be a positive integer, got {refine!r}")

@@ -1,0 +1,111 @@
+"""Inference and training-step times of the surrogates against N, next to the classical solver on the same field.
+
+    python benchmarks/inference.py [--model NAME ...] [--threads T] [--quick]
+
+Prints Markdown tables. The surrogate's time covers encoding, the network and building the map on the output
+grid; the classical time is one solve of the same field on the same grid; ``ratio`` = classical / surrogate.
+Models that are not shipped are replaced by an untrained network of the ``full`` preset's size (same cost).
+"""
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+from rfmap.config import get_config
+from rfmap.fields import BELTRAMI_MAPS, DENSITIES
+from rfmap.mesh import grid_mesh
+from rfmap.solvers import solve_dem, solve_lbs
+from rfmap.surrogate import Surrogate, models
+from rfmap.tasks import sample_batch, task_loss
+
+
+def surrogate(name: str) -> Surrogate:
+    if name in models():
+        return Surrogate.pretrained(name)
+    cfg = get_config(name, "full")
+    sur = Surrogate.untrained(cfg.task, base=cfg.model.base, depth=cfg.model.depth, name=name + " (untrained)",
+                              n_range=list(cfg.n_range))
+    return sur
+
+
+def best_of(fn, repeats=3):
+    fn()
+    ts = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t)
+    return min(ts), out
+
+
+def inference_rows(name: str, ns, repeats: int):
+    sur = surrogate(name)
+    kind, dim = sur.spec.kind, sur.spec.dim
+    field = "T1" if kind == "beltrami" else ("multi-freq" if dim == 2 else "multi-freq-3d")
+    print(f"\n### {sur.name}: {kind}, {dim}D, field {field}\n")
+    print("| N | working grid | surrogate (s) | network only (s) | classical (s) | ratio |")
+    print("|---|---|---|---|---|---|")
+    for n in ns:
+        t_sur, r = best_of(lambda: sur.map(field, n), repeats)
+        if kind == "beltrami":
+            mesh = grid_mesh(n, 2)
+            mu = BELTRAMI_MAPS[field].mu(mesh.points[mesh.elements].mean(1))
+            t_cl, _ = best_of(lambda: solve_lbs(mu, n), repeats)
+        else:
+            dens = DENSITIES[field].sample(n)
+            t_cl, _ = best_of(lambda: solve_dem(dens, boundary="square"), 1 if dim == 3 else repeats)
+        print(f"| {n} | {r.info['work_n']} | {r.time:.4f} | {r.info['network_time']:.4f} | {t_cl:.4f} | "
+              f"{t_cl / r.time:.1f} |")
+
+
+def train_step_rows(names, repeats: int):
+    print("\n### one training step of the `full` presets\n")
+    print("| config | batch | N | data (s) | step (s) |")
+    print("|---|---|---|---|---|")
+    for name in names:
+        cfg = get_config(name, "full")
+        from rfmap.nn import MultiResUNet
+
+        model = MultiResUNet(cfg.task.dim, cfg.task.n_params, cfg.model.base, cfg.model.depth)
+        opt = torch.optim.AdamW(model.parameters(), lr=1e-4)
+        n = int(np.mean(cfg.n_range))
+        tds, tss = [], []
+        for i in range(repeats + 1):
+            t0 = time.perf_counter()
+            b = sample_batch(cfg.task, seed=0, step=i, indices=range(cfg.batch), n=n, jitter=cfg.jitter)
+            t1 = time.perf_counter()
+            loss, _ = task_loss(cfg.task, b, model(b.inputs), cfg.loss)
+            opt.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip)
+            opt.step()
+            t2 = time.perf_counter()
+            if i:
+                tds.append(t1 - t0)
+                tss.append(t2 - t1)
+        print(f"| {name} | {cfg.batch} | {n} | {min(tds):.3f} | {min(tss):.3f} |")
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__)
+    p.add_argument("--model", nargs="*", default=["beltrami2d", "deq2d-square", "dem3d-cube"])
+    p.add_argument("--threads", type=int, default=None)
+    p.add_argument("--quick", action="store_true", help="fewer sizes and repeats")
+    a = p.parse_args()
+    if a.threads:
+        torch.set_num_threads(a.threads)
+    print(f"torch threads: {torch.get_num_threads()}")
+    reps = 1 if a.quick else 3
+    for name in a.model:
+        dim = get_config(name, "full").task.dim
+        ns = ((32, 51, 64, 128, 256) if not a.quick else (51, 128)) if dim == 2 else \
+            ((32, 48, 64) if not a.quick else (32, 48))
+        inference_rows(name, ns, reps)
+    train_step_rows(a.model, reps)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,37 @@
+"""Plotting helpers of rfmap.viz."""
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import pytest  # noqa: E402
+
+from rfmap.nn.model import MultiResUNet  # noqa: E402
+from rfmap.viz import architecture_diagram  # noqa: E402
+
+
+@pytest.mark.parametrize("dim,n_params,base,depth,attention", [(2, 1, 16, 3, True), (3, 1, 4, 1, False),
+                                                               (2, 2, 8, 2, True)])
+def test_architecture_diagram_reads_the_model(dim, n_params, base, depth, attention):
+    model = MultiResUNet(dim, n_params, base, depth, attention)
+    ax = architecture_diagram(model)
+    texts = [t.get_text() for t in ax.texts]
+    edc = [t for t in texts if "EDC" in t]
+    assert len(edc) == 2 * depth + 1  # encoder stages, bottleneck, decoder stages
+    assert all(("attn" in t) == attention for t in edc)
+    ch = [base * 2**i for i in range(depth + 1)]
+    assert any(f"{ch[-2]}→{ch[-1]}" in t and "bottleneck" in t for t in edc)
+    for i in range(depth):  # decoders concatenate the skip: 2 c_i -> c_i
+        assert any(f"decoder {i}" in t and f"{2 * ch[i]}→{ch[i]}" in t for t in edc)
+        assert any(t == f"skip, {ch[i]} ch" for t in texts)
+    assert any(f"{dim + n_params} channels" in t for t in texts)
+    assert any(f"1×1: {dim + n_params}→{base} each" in t for t in texts)
+    assert any(f"{base}→{dim}" in t and "head" in t for t in texts)
+    plt.close(ax.figure)
+
+
+def test_architecture_diagram_draws_into_a_given_axes():
+    fig, ax = plt.subplots()
+    assert architecture_diagram(MultiResUNet(2, 1, 4, 2), ax=ax) is ax
+    assert len(ax.patches) == 2 * 2 + 1 + 4  # EDC stages + input, lift, head, output
+    plt.close(fig)
