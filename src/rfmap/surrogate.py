@@ -401,8 +401,9 @@ def beltrami_objective(ref, psi, elements, mu_in, boundary, flip_weight: float =
 
 def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progress: bool = False) -> "Surrogate":
     """The model a chapter of the book uses: the shipped weights at ``full`` scale; at ``ci`` scale a tiny model
-    trained on the spot with the named config's ``ci`` preset (seconds), so every notebook runs end to end on a
-    laptop CPU.  ``preset`` defaults to :func:`rfmap.config.scale`."""
+    trained on the spot with the named config's ``ci`` preset (seconds; cached in the temporary directory and
+    reused while the configuration is unchanged), so every notebook runs end to end on a laptop CPU.
+    ``preset`` defaults to :func:`rfmap.config.scale`."""
     import tempfile
 
     from .config import get_config, scale
@@ -412,5 +413,13 @@ def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progres
     if preset == "full":
         return Surrogate.pretrained(name)
     cfg = get_config(name, preset)
-    out = out_dir or tempfile.mkdtemp(prefix=f"rfmap-{name}-")
+    out = Path(out_dir or Path(tempfile.gettempdir()) / "rfmap-ci-models" / name)
+    weights = out / f"{name}.safetensors"
+    if weights.exists():  # trained earlier with the same configuration (training is seeded): reuse it
+        try:
+            cached = Surrogate.load(weights)
+            if cached.meta.get("config") == cfg.to_dict():
+                return cached
+        except (ValueError, FileNotFoundError):
+            pass
     return train(cfg, out, progress=progress)

@@ -83,7 +83,9 @@ class SpatialAttention(nn.Module):
     def forward(self, f: Tensor) -> Tensor:
         s = torch.cat([f.mean(1, keepdim=True), f.amax(1, keepdim=True)], 1)
         pool = F.avg_pool2d if self.dim == 2 else F.avg_pool3d
-        coarse = pool(s, self.kernel, stride=self.kernel, ceil_mode=True)
+        # a side shorter than the kernel is averaged whole (what ceil_mode does in 2D; 3D pooling would raise)
+        k = tuple(min(self.kernel, n) for n in s.shape[2:])
+        coarse = pool(s, k, stride=k, ceil_mode=True)
         s = torch.cat([s, resize(coarse, tuple(s.shape[2:]))], 1)
         return f * torch.sigmoid(self.proj(s))
 
