@@ -169,6 +169,15 @@ def test_unknown_boundary_raises():
 # ----------------------------------------------------------------------------------------------- validation
 
 
+@pytest.mark.parametrize("n", [5, 9, 12])
+def test_small_3d_grids_down_to_min_size(n):
+    """3D grids whose coarsest level is smaller than the attention pooling kernel (4) work like in 2D."""
+    model = tiny(3)
+    with torch.no_grad():
+        assert model(torch.rand(1, 4, n, n, n)).shape == (1, 3, n, n, n)
+        assert tiny(2)(torch.rand(1, 3, n, n)).shape == (1, 2, n, n)
+
+
 def test_bad_input_raises_value_error():
     model = tiny(2)
     with pytest.raises(ValueError, match="channels"):
@@ -208,10 +217,15 @@ def test_map_at_fixed_work_grid_is_consistent_across_output_resolutions():
     for n in (33, 65):
         assert res[n].info["work_n"] == 33
         np.testing.assert_allclose(_on_17_grid(res[n].displacement, n), base, atol=1e-5, rtol=0)
-    # between shared vertices the n = 65 map is the bilinear interpolant of the n = 33 one (midpoints of edges)
-    d33 = res[33].displacement.reshape(33, 33, 2)
-    d65 = res[65].displacement.reshape(65, 65, 2)
+    # between shared vertices the network output psi at n = 65 is the bilinear interpolant of the one at n = 33
+    # (free boundary, so that the displacement is psi itself and not B(x) psi)
+    free = Surrogate(sur.model, TaskSpec("density", 2, "free"))
+    d33 = free.map(field, 33, work_n=33).displacement.reshape(33, 33, 2)
+    d65 = free.map(field, 65, work_n=33).displacement.reshape(65, 65, 2)
+    np.testing.assert_allclose(d65[::2, ::2], d33, atol=1e-6, rtol=0)
     np.testing.assert_allclose(d65[1::2, ::2], 0.5 * (d33[:-1] + d33[1:]), atol=1e-5, rtol=0)
+    np.testing.assert_allclose(d65[1::2, 1::2], 0.25 * (d33[:-1, :-1] + d33[1:, :-1] + d33[:-1, 1:] + d33[1:, 1:]),
+                               atol=1e-5, rtol=0)
 
 
 def test_native_resolutions_agree_loosely():

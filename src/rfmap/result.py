@@ -89,7 +89,17 @@ class MapResult:
 def load_result(path) -> MapResult:
     """Read a result written by :meth:`MapResult.save` (or by ``rfmap solve`` / ``rfmap map``)."""
     try:
-        with np.load(os.fspath(path), allow_pickle=False) as z:
+        z = np.load(os.fspath(path), allow_pickle=False)
+    except ValueError as e:
+        # numpy takes any file that is neither .npy nor .npz for a pickle and suggests allow_pickle=True, which
+        # would execute code from the file: name the file and say what is wrong instead
+        raise ValueError(f"cannot read {path}: not an .npz result file") from e
+    except (OSError, EOFError) as e:
+        raise ValueError(f"cannot read {path}: {e}") from e
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise ValueError(f"cannot read {path}: a single .npy array, not an .npz result file")
+    try:
+        with z:
             missing = {"ref_points", "mapped_points", "elements", "field"} - set(z.files)
             if missing:
                 raise ValueError(f"{path}: not a map result, missing keys {sorted(missing)}")

@@ -46,6 +46,7 @@ def models() -> list[str]:
 class _Input:
     grid: np.ndarray  # (N_in,)*d real density or complex mu at the vertices of the input grid
     fn: Callable | None  # exact evaluator when available (names, callables)
+    preprocess: bool = True
 
 
 class Surrogate:
@@ -194,7 +195,7 @@ class Surrogate:
             if not np.iscomplexobj(grid) and self.spec.kind == "beltrami":
                 grid = grid.astype(np.complex128)
             grid = check_mu(grid, name="Beltrami coefficient")
-        return _Input(grid, fn)
+        return _Input(grid, fn, preprocess)
 
     @staticmethod
     def _unit_mass(grid, preprocess):
@@ -209,6 +210,9 @@ class Surrogate:
         if g.shape[0] == n_work:
             return g
         d = self.spec.dim
+        if inp.fn is not None:  # sample the field itself on the working grid rather than resampling samples
+            vals = np.asarray(inp.fn(grid_points(n_work, d))).reshape((n_work,) * d)
+            return self._finish(vals, inp.fn, inp.preprocess).grid
         src = torch.as_tensor(np.stack([g.real, g.imag]) if np.iscomplexobj(g) else g[None])[None]
         out = interpolate(src.double(), torch.as_tensor(grid_points(n_work, d)))[0].numpy()
         if np.iscomplexobj(g):

@@ -1,0 +1,243 @@
+"""Tests of the ``rfmap`` command line (:mod:`rfmap.cli`): the subcommands write complete results, and bad input
+prints one line on stderr, exits with status 2 and leaves no output file behind.
+
+Most tests call :func:`rfmap.cli.main` in-process (starting Python costs seconds); one runs the module as a
+subprocess to check the real entry point, exit status and stderr."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import torch
+
+from rfmap.cli import main
+from rfmap.nn import MultiResUNet
+from rfmap.result import load_result
+from rfmap.surrogate import Surrogate
+from rfmap.tasks import TaskSpec
+
+
+@pytest.fixture(scope="module")
+def tiny_model(tmp_path_factory):
+    torch.manual_seed(0)
+    model = MultiResUNet(2, 1, base=4, depth=2)
+    with torch.no_grad():
+        model.head.weight.normal_(0.0, 0.1)
+    path = tmp_path_factory.mktemp("model") / "tiny.safetensors"
+    Surrogate(model, TaskSpec("density", 2, "square"), {"name": "tiny", "n_range": [17, 25]}).save(path)
+    return path
+
+
+def run_main(capsys, *args):
+    rc = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def assert_one_line_error(rc, err, *, match=None):
+    assert rc == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1, err
+    assert lines[0].startswith("rfmap ") and "error:" in lines[0]
+    assert "Traceback" not in err
+    if match:
+        assert match in lines[0], lines[0]
+
+
+# ----------------------------------------------------------------------------------------------- solve / metrics
+
+
+def test_solve_lbs(tmp_path, capsys):
+    out = tmp_path / "x.npz"
+    rc, stdout, _ = run_main(capsys, "solve", "--method", "lbs", "--field", "T1", "--n", 17, "--out", out)
+    assert rc == 0 and f"wrote {out}" in stdout
+    n = 17
+    with np.load(out, allow_pickle=False) as z:
+        assert z["ref_points"].shape == (n * n, 2)
+        assert z["mapped_points"].shape == (n * n, 2)
+        assert z["elements"].shape == (2 * (n - 1) ** 2, 3)
+        assert z["field"].shape == (2 * (n - 1) ** 2,) and np.iscomplexobj(z["field"])
+        assert str(z["kind"]) == "beltrami"
+        # lbs keeps the boundary fixed by default
+        ref, mapped = z["ref_points"], z["mapped_points"]
+        on = ((ref == 0) | (ref == 1)).any(1)
+        np.testing.assert_allclose(mapped[on], ref[on], atol=1e-12)
+        assert np.abs(mapped - ref).max() > 1e-3
+
+
+def test_solve_dem_and_metrics(tmp_path, capsys):
+    out = tmp_path / "d.npz"
+    rc, _, _ = run_main(capsys, "solve", "--method", "dem", "--field", "sin-cos", "--n", 17, "--boundary", "square",
+                        "--out", out, "--quiet")
+    assert rc == 0
+    res = load_result(out)
+    assert res.kind == "density" and res.ref_points.shape == (17 * 17, 2) and res.field.shape == (17 * 17,)
+    ref, mapped = res.ref_points, res.mapped_points
+    for i in range(2):
+        for wall in (0.0, 1.0):
+            np.testing.assert_allclose(mapped[ref[:, i] == wall, i], wall, atol=1e-9)
+    rc, stdout, _ = run_main(capsys, "metrics", out)
+    assert rc == 0
+    m = json.loads(stdout)
+    assert set(m) == {"std_rho_orig", "std_rho_map", "min_jacobian", "n_flipped", "max_mu", "mean_mu", "time"}
+    assert m["std_rho_map"] < 0.5 * m["std_rho_orig"]  # the solver equalised the density
+    assert m["n_flipped"] == 0
+
+
+def test_metrics_of_a_beltrami_result_with_exact_map(tmp_path, capsys):
+    out = tmp_path / "b.npz"
+    assert run_main(capsys, "solve", "--method", "lbs", "--field", "T2", "--n", 17, "--out", out)[0] == 0
+    rc, stdout, _ = run_main(capsys, "metrics", out, "--exact", "T2")
+    assert rc == 0
+    m = json.loads(stdout)
+    assert {"min_jacobian", "n_flipped", "max_mu", "mean_mu", "mean_dd", "mean_dmu"} <= set(m)
+    assert "std_rho_map" not in m
+    assert m["mean_dd"] < 0.05
+    rc, _, err = run_main(capsys, "metrics", out, "--exact", "sin-cos")
+    assert_one_line_error(rc, err, match="--exact")
+
+
+@pytest.mark.parametrize("args,match", [
+    (["--method", "lbs", "--field", "no-such-field", "--n", "17"], "unknown field"),
+    (["--method", "dem", "--field", "no-such-field", "--n", "17"], "unknown field"),
+    (["--method", "lbs", "--field", "T1", "--n", "2"], "N must be >= 3"),
+    (["--method", "dem", "--field", "sin-cos", "--n", "2"], "N must be >= 3"),
+    (["--method", "lbs", "--field", "sin-cos", "--n", "17"], "lbs needs a Beltrami"),
+    (["--method", "dem", "--field", "T1", "--n", "17"], "dem needs a density"),
+])
+def test_solve_bad_input(tmp_path, capsys, args, match):
+    out = tmp_path / "bad.npz"
+    rc, stdout, err = run_main(capsys, "solve", *args, "--out", out, "--quiet")
+    assert_one_line_error(rc, err, match=match)
+    assert not out.exists()
+    assert list(tmp_path.iterdir()) == []  # no partial file either
+
+
+def test_errors_do_not_remove_an_existing_file(tmp_path, capsys):
+    out = tmp_path / "keep.npz"
+    out.write_bytes(b"previous result")
+    rc, _, err = run_main(capsys, "solve", "--method", "dem", "--field", "T1", "--n", "17", "--out", out)
+    assert_one_line_error(rc, err)
+    assert out.read_bytes() == b"previous result"
+
+
+def test_metrics_of_a_bad_file(tmp_path, capsys):
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a zip file")
+    rc, _, err = run_main(capsys, "metrics", bad)
+    assert_one_line_error(rc, err, match="cannot read")
+    rc, _, err = run_main(capsys, "metrics", tmp_path / "missing.npz")
+    assert_one_line_error(rc, err)
+
+
+def test_entry_point_as_subprocess(tmp_path):
+    """The real process: status 2, exactly one line on stderr, nothing on stdout, no output file."""
+    out = tmp_path / "x.npz"
+    proc = subprocess.run([sys.executable, "-m", "rfmap.cli", "solve", "--method", "lbs", "--field", "nope",
+                           "--n", "17", "--out", str(out)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "unknown field 'nope'" in lines[0], proc.stderr
+    assert not out.exists()
+
+
+# ----------------------------------------------------------------------------------------------- models / map
+
+
+def test_models(capsys):
+    rc, stdout, err = run_main(capsys, "models")
+    assert rc == 0 and err == ""
+    from rfmap.surrogate import models
+
+    names = models()
+    if names:
+        assert all(any(line.startswith(name) for line in stdout.splitlines()) for name in names)
+    else:
+        assert "no pretrained models" in stdout
+
+
+def test_map_grid(tmp_path, capsys, tiny_model):
+    out = tmp_path / "y.npz"
+    rc, stdout, _ = run_main(capsys, "map", "--model", tiny_model, "--field", "sin-cos", "--n", 17, "--out", out)
+    assert rc == 0 and f"wrote {out}" in stdout
+    res = load_result(out)
+    assert res.ref_points.shape == (17 * 17, 2) and res.elements.shape == (2 * 16 * 16, 3)
+    want = Surrogate.load(tiny_model).map("sin-cos", 17)
+    np.testing.assert_allclose(res.mapped_points, want.mapped_points, atol=1e-12)
+    assert np.abs(res.displacement).max() > 1e-4
+
+
+def test_map_field_file_and_refine(tmp_path, capsys, tiny_model):
+    from rfmap.fields import sample_density
+
+    f = tmp_path / "field.npy"
+    np.save(f, sample_density("ring", 21))
+    out = tmp_path / "r.npz"
+    rc, _, _ = run_main(capsys, "map", "--model", tiny_model, "--field-file", f, "--refine", "--out", out)
+    assert rc == 0
+    assert load_result(out).ref_points.shape == (21 * 21, 2)  # n defaults to the array's side
+
+
+def test_map_points(tmp_path, capsys, tiny_model):
+    rng = np.random.default_rng(0)
+    q = np.concatenate([rng.random((50, 2)), [[0, 0], [0, 1], [1, 0], [1, 1]]])
+    qf = tmp_path / "q.npy"
+    np.save(qf, q)
+    out = tmp_path / "p.npz"
+    rc, _, _ = run_main(capsys, "map", "--model", tiny_model, "--field", "sin-cos", "--points", qf, "--out", out)
+    assert rc == 0
+    res = load_result(out)
+    assert np.array_equal(res.ref_points, q)
+    assert res.mapped_points.shape == q.shape and res.elements.shape[1] == 3
+    want = Surrogate.load(tiny_model).map("sin-cos", None, points=q)
+    np.testing.assert_allclose(res.mapped_points, want.mapped_points, atol=1e-12)
+
+
+def test_map_bad_input(tmp_path, capsys, tiny_model):
+    out = tmp_path / "m.npz"
+    rc, _, err = run_main(capsys, "map", "--model", tmp_path / "none.safetensors", "--field", "sin-cos",
+                          "--out", out)
+    assert_one_line_error(rc, err, match="unknown model")
+    rc, _, err = run_main(capsys, "map", "--model", tiny_model, "--field", "T1", "--out", out)
+    assert_one_line_error(rc, err, match="beltrami field")
+    outside = tmp_path / "outside.npy"
+    np.save(outside, np.array([[0.5, 0.5], [1.5, 0.2], [0.1, 0.1]]))
+    rc, _, err = run_main(capsys, "map", "--model", tiny_model, "--field", "sin-cos", "--points", outside,
+                          "--out", out)
+    assert_one_line_error(rc, err, match="unit square")
+    junk = tmp_path / "junk.npy"
+    junk.write_bytes(b"junk")
+    rc, _, err = run_main(capsys, "map", "--model", tiny_model, "--field", "sin-cos", "--points", junk,
+                          "--out", out)
+    assert_one_line_error(rc, err, match="cannot read")
+    assert not out.exists()
+
+
+def test_map_vtk(tmp_path, capsys, tiny_model):
+    pv = pytest.importorskip("pyvista")
+    out, vtk = tmp_path / "v.npz", tmp_path / "v.vtu"
+    rc, _, _ = run_main(capsys, "map", "--model", tiny_model, "--field", "sin-cos", "--n", 9, "--out", out,
+                        "--vtk", vtk)
+    assert rc == 0 and vtk.exists() and vtk.stat().st_size > 0
+    grid = pv.read(str(vtk))
+    assert grid.n_points == 81 and grid.n_cells == 2 * 8 * 8
+    np.testing.assert_allclose(np.asarray(grid.points)[:, :2], load_result(out).mapped_points, atol=1e-6)
+
+
+# ----------------------------------------------------------------------------------------------- train
+
+
+def test_train(tmp_path, capsys):
+    out = tmp_path / "run"
+    rc, stdout, _ = run_main(capsys, "train", "--config", "deq2d-square", "--preset", "ci", "--steps", 3,
+                             "--out", out, "--no-progress")
+    assert rc == 0 and "trained deq2d-square" in stdout
+    assert (out / "deq2d-square.safetensors").exists() and (out / "deq2d-square.json").exists()
+    sur = Surrogate.load(out / "deq2d-square.safetensors")
+    assert sur.meta["steps"] == 3 and sur.meta["preset"] == "ci"
+    rc, _, err = run_main(capsys, "train", "--config", "no-such-config", "--preset", "ci", "--out", out)
+    assert_one_line_error(rc, err, match="unknown config")

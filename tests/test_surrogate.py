@@ -1,0 +1,329 @@
+"""Tests of :class:`rfmap.surrogate.Surrogate`: safe weight files (safetensors + JSON, never unpickled) with clear
+errors for bad files, and inference from every kind of field input, at grids or arbitrary query points."""
+from __future__ import annotations
+
+import json
+import os
+import pickle
+
+import numpy as np
+import pytest
+import torch
+
+import rfmap.surrogate as S
+from rfmap.fields import get_field, vertex_weights
+from rfmap.mesh import element_measures, grid_points
+from rfmap.nn import MultiResUNet
+from rfmap.surrogate import Surrogate
+from rfmap.tasks import TaskSpec
+
+DENSITY = TaskSpec("density", 2, "square")
+BELTRAMI = TaskSpec("beltrami", 2, "fixed")
+
+
+def tiny(spec=DENSITY, seed=0, head_seed=None, **meta) -> Surrogate:
+    torch.manual_seed(seed)
+    sur = Surrogate(MultiResUNet(spec.dim, spec.n_params, base=4, depth=2), spec, {"name": "tiny", **meta})
+    if head_seed is not None:
+        g = torch.Generator().manual_seed(head_seed)
+        with torch.no_grad():
+            sur.model.head.weight.copy_(0.2 * torch.randn(sur.model.head.weight.shape, generator=g))
+            sur.model.head.bias.copy_(0.02 * torch.randn(sur.model.head.bias.shape, generator=g))
+    return sur
+
+
+def bump(x):
+    return 1.0 + 0.5 * np.sin(np.pi * x[..., 0]) * np.cos(np.pi * x[..., 1])
+
+
+@pytest.fixture
+def saved(tmp_path):
+    sur = tiny(head_seed=3, n_range=[17, 25])
+    w, j = sur.save(tmp_path / "tiny.safetensors")
+    return sur, w, j
+
+
+# ----------------------------------------------------------------------------------------------- files
+
+
+def test_save_load_roundtrip(saved):
+    sur, w, j = saved
+    assert w.name == "tiny.safetensors" and j.name == "tiny.json"
+    loaded = Surrogate.load(w)
+    assert loaded.spec == sur.spec and loaded.n_range == (17, 25) and loaded.name == "tiny"
+    for k, v in sur.model.state_dict().items():
+        assert torch.equal(loaded.model.state_dict()[k], v), k
+    a, b = sur.map("sin-cos", 21), loaded.map("sin-cos", 21)
+    assert np.abs(a.displacement).max() > 1e-3
+    assert np.array_equal(a.mapped_points, b.mapped_points)
+    meta = json.loads(j.read_text())
+    assert meta["model"] == {"dim": 2, "n_params": 1, "base": 4, "depth": 2, "attention": True}
+    assert meta["task"] == {"kind": "density", "dim": 2, "boundary": "square"}
+    # the path may be given without the suffix
+    assert Surrogate.load(w.with_suffix("")).name == "tiny"
+
+
+def test_model_without_attention_roundtrips(tmp_path):
+    sur = Surrogate(MultiResUNet(2, 1, base=4, depth=2, attention=False), DENSITY, {"name": "plain"})
+    w, _ = sur.save(tmp_path / "plain.safetensors")
+    loaded = Surrogate.load(w)
+    assert set(loaded.model.state_dict()) == set(sur.model.state_dict())
+
+
+def test_weight_file_is_safetensors_not_pickle(saved):
+    _, w, _ = saved
+    raw = w.read_bytes()
+    header_len = int.from_bytes(raw[:8], "little")
+    header = json.loads(raw[8:8 + header_len])
+    assert header["__metadata__"]["format"] == "rfmap"
+    assert "head.weight" in header
+    assert not raw.startswith(b"\x80") and not raw.startswith(b"PK")  # neither a pickle nor a torch zip
+
+
+def test_loading_never_unpickles(saved, monkeypatch):
+    _, w, _ = saved
+
+    def forbidden(*a, **k):
+        raise AssertionError("unpickling during Surrogate.load")
+
+    monkeypatch.setattr(pickle, "load", forbidden)
+    monkeypatch.setattr(pickle, "loads", forbidden)
+    monkeypatch.setattr(pickle, "Unpickler", forbidden)
+    monkeypatch.setattr(torch, "load", forbidden)
+    Surrogate.load(w)
+
+
+class _Evil:
+    def __reduce__(self):
+        return (open, (os.environ["RFMAP_TEST_MARKER"], "w"))
+
+
+def test_pickle_disguised_as_weights_is_rejected_without_running_it(saved, tmp_path, monkeypatch):
+    _, w, j = saved
+    marker = tmp_path / "pwned"
+    monkeypatch.setenv("RFMAP_TEST_MARKER", str(marker))
+    bad = tmp_path / "evil.safetensors"
+    bad.write_bytes(pickle.dumps({"head.weight": _Evil()}))
+    (tmp_path / "evil.json").write_text(j.read_text())
+    with pytest.raises(ValueError, match="corrupt or truncated"):
+        Surrogate.load(bad)
+    assert not marker.exists()
+
+
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "empty"])
+def test_corrupt_weight_file_raises_value_error(saved, tmp_path, damage):
+    _, w, j = saved
+    raw = w.read_bytes()
+    data = {"garbage": np.random.default_rng(0).bytes(len(raw)), "truncated": raw[: len(raw) // 2],
+            "empty": b""}[damage]
+    bad = tmp_path / f"{damage}.safetensors"
+    bad.write_bytes(data)
+    (tmp_path / f"{damage}.json").write_text(j.read_text())
+    with pytest.raises(ValueError, match="corrupt or truncated weight file"):
+        Surrogate.load(bad)
+
+
+@pytest.mark.parametrize("change,match", [({"base": 8}, "shape mismatch"), ({"depth": 3}, "do not match"),
+                                          ({"n_params": 2}, "shape mismatch")])
+def test_mismatched_metadata_raises_value_error(saved, change, match):
+    _, w, j = saved
+    meta = json.loads(j.read_text())
+    meta["model"].update(change)
+    j.write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match=match):
+        Surrogate.load(w)
+
+
+def test_bad_metadata(saved):
+    _, w, j = saved
+    meta = json.loads(j.read_text())
+    j.write_text("{not json")
+    with pytest.raises(ValueError, match="corrupt metadata"):
+        Surrogate.load(w)
+    j.write_text(json.dumps({k: v for k, v in meta.items() if k != "model"}))
+    with pytest.raises(ValueError, match="lacks the model"):
+        Surrogate.load(w)
+    j.write_text(json.dumps({**meta, "task": {"kind": "curvature", "dim": 2, "boundary": "square"}}))
+    with pytest.raises(ValueError, match="unknown task kind"):
+        Surrogate.load(w)
+
+
+def test_missing_files(saved, tmp_path):
+    _, w, j = saved
+    with pytest.raises(FileNotFoundError, match="no weight file"):
+        Surrogate.load(tmp_path / "nothing.safetensors")
+    j.unlink()
+    with pytest.raises(FileNotFoundError, match="no metadata"):
+        Surrogate.load(w)
+
+
+def test_model_and_task_must_fit():
+    with pytest.raises(ValueError, match="does not fit"):
+        Surrogate(MultiResUNet(2, 1, base=4, depth=2), BELTRAMI)
+
+
+def test_models_and_pretrained():
+    names = S.models()
+    assert isinstance(names, list) and names == sorted(names)
+    for name in names:
+        assert (S.WEIGHTS_DIR / f"{name}.safetensors").exists()
+    with pytest.raises(ValueError, match="no pretrained model 'nope'"):
+        Surrogate.pretrained("nope")
+
+
+# ----------------------------------------------------------------------------------------------- inputs
+
+
+def test_map_accepts_name_callable_array_and_scattered():
+    sur = tiny(head_seed=1)
+    n = 17
+    by_name = sur.map("sin-cos", n)
+    fn = get_field("sin-cos")
+    by_callable = sur.map(lambda x: fn(x), n)
+    by_array = sur.map(fn(grid_points(n, 2)).reshape(n, n), n)
+    # scattered samples at exactly the grid vertices (shuffled): linear interpolation reproduces the grid values
+    perm = np.random.default_rng(0).permutation(n * n)
+    pts = grid_points(n, 2)[perm]
+    by_scattered = sur.map((pts, fn(pts)), n)
+    for r in (by_name, by_callable, by_array, by_scattered):
+        assert r.ref_points.shape == (n * n, 2) and r.mapped_points.shape == (n * n, 2)
+        assert r.elements.shape == (2 * (n - 1) ** 2, 3) and r.field.shape == (n * n,)
+        assert r.kind == "density" and r.info["work_n"] == n
+        np.testing.assert_allclose(r.mapped_points, by_name.mapped_points, atol=1e-6, rtol=0)
+        # the field is returned with unit mass
+        w = vertex_weights(r.ref_points, r.elements)
+        assert float(w @ r.field) == pytest.approx(1.0, abs=1e-9)
+    assert np.abs(by_name.displacement).max() > 1e-3
+    # genuinely scattered samples (1000 random points and the boundary at spacing 1/32) give nearly the same map:
+    # the model sees the field up to the O(spacing^2) error of linear interpolation (measured: 2-5% of the
+    # displacement for 1500-600 points)
+    rng = np.random.default_rng(1)
+    t = np.linspace(0, 1, 33)[:-1]
+    edge = np.concatenate([np.stack([t, 0 * t], 1), np.stack([1 + 0 * t, t], 1), np.stack([1 - t, 1 + 0 * t], 1),
+                           np.stack([0 * t, 1 - t], 1)])
+    cloud = np.concatenate([rng.random((1000, 2)), edge])
+    r = sur.map((cloud, fn(cloud)), n)
+    assert np.abs(r.mapped_points - by_name.mapped_points).max() < 0.1 * np.abs(by_name.displacement).max()
+
+
+def test_map_beltrami_inputs():
+    sur = tiny(BELTRAMI)
+    n = 17
+    r = sur.map("T1", n)
+    assert r.kind == "beltrami" and r.field.shape == (2 * (n - 1) ** 2,) and np.iscomplexobj(r.field)
+    assert np.array_equal(r.mapped_points, r.ref_points)  # untrained: the identity
+    mu = get_field("T1").mu
+    r2 = sur.map(mu(grid_points(n, 2)).reshape(n, n), n)
+    assert r2.field.shape == r.field.shape
+    r3 = sur.map(lambda x: 0.2 * x[..., 0] + 0.1j * x[..., 1], n)
+    assert float(np.abs(r3.field).max()) < 0.3
+
+
+def test_wrong_kind_of_field():
+    with pytest.raises(ValueError, match="density field"):
+        tiny(BELTRAMI).map("sin-cos", 17)
+    with pytest.raises(ValueError, match="beltrami field"):
+        tiny().map("T1", 17)
+    with pytest.raises(ValueError, match="3D"):
+        tiny().map("sin-cos-3d", 17)
+    with pytest.raises(ValueError, match="unknown field"):
+        tiny().map("no-such-field", 17)
+    with pytest.raises(ValueError, match="real density"):
+        tiny().map(np.ones((17, 17), dtype=complex), 17)
+    with pytest.raises(ValueError, match="< 1"):
+        tiny(BELTRAMI).map(np.full((17, 17), 1.2 + 0j), 17)
+
+
+def test_bad_field_values():
+    sur = tiny()
+    bad = bump(grid_points(17, 2)).reshape(17, 17)
+    bad[3, 4] = np.nan
+    with pytest.raises(ValueError, match="NaN"):
+        sur.map(bad, 17)
+    with pytest.raises(ValueError, match="NaN"):
+        sur.map(lambda x: np.where(x[..., 0] > 0.5, np.nan, 1.0), 17)
+    with pytest.raises(ValueError, match="NaN"):
+        tiny(BELTRAMI).map(lambda x: np.full(x.shape[0], np.nan + 0j), 17)
+    with pytest.raises(ValueError, match="N\\^2 grid"):
+        sur.map(np.ones((17, 16)), 17)
+    with pytest.raises(ValueError, match="scattered"):
+        sur.map((np.random.rand(10, 3), np.ones(10)), 17)
+    with pytest.raises(ValueError, match="N must be >= 3"):
+        sur.map("sin-cos", 2)
+    with pytest.raises(ValueError, match="smaller than this model"):
+        sur.map("sin-cos", 17, work_n=sur.model.min_size - 1)
+
+
+# ----------------------------------------------------------------------------------------------- query points
+
+
+def test_points_outside_the_domain():
+    sur = tiny()
+    for pts in (np.array([[0.5, 0.5], [1.2, 0.3], [0.1, 0.9]]), np.array([[0.5, -0.01], [0.2, 0.3], [0.7, 0.9]])):
+        with pytest.raises(ValueError, match="unit square"):
+            sur.map("sin-cos", 17, points=pts)
+    with pytest.raises(ValueError, match="NaN"):
+        sur.map("sin-cos", 17, points=np.array([[0.5, np.nan], [0.2, 0.3], [0.7, 0.9]]))
+    with pytest.raises(ValueError, match="shape"):
+        sur.map("sin-cos", 17, points=np.random.rand(10, 3))
+
+
+@pytest.mark.parametrize("spec,n", [(DENSITY, 17), (BELTRAMI, 17), (TaskSpec("density", 3, "free"), 9)], ids=str)
+def test_points_give_the_map_at_those_points(spec, n):
+    rng = np.random.default_rng(0)
+    d = spec.dim
+    corners = np.array(np.meshgrid(*([[0.0, 1.0]] * d), indexing="ij")).reshape(d, -1).T
+    pts = np.concatenate([rng.random((80, d)), corners])
+    r = tiny(spec).map(get_field({"density": "sin-cos", "beltrami": "T2"}[spec.kind] + ("-3d" if d == 3 else "")),
+                       n, points=pts)
+    assert np.array_equal(r.ref_points, pts)
+    assert np.array_equal(r.mapped_points, pts)  # untrained: u(x) = x at every query point
+    # a Delaunay triangulation of the points, positively oriented, covering the unit square / cube
+    assert r.elements.shape[1] == d + 1 and r.elements.max() < len(pts)
+    meas = element_measures(pts, r.elements)
+    assert (meas > 0).all()
+    assert meas.sum() == pytest.approx(1.0, abs=1e-9)
+    if spec.kind == "density":
+        assert r.field.shape == (len(pts),)
+    else:
+        assert r.field.shape == (len(r.elements),)
+
+
+def test_points_agree_with_the_grid_map():
+    """Query points at grid vertices give the same map as the grid output (interpolation of psi)."""
+    sur = tiny(head_seed=2)
+    grid = sur.map("exp-log", 17, work_n=17)
+    idx = np.array([0, 5, 40, 100, 150, 288])
+    pts = grid.ref_points[idx]
+    extra = np.array([[0.0, 1.0], [1.0, 0.0], [1.0, 1.0], [0.3, 0.31]])
+    q = sur.map("exp-log", 17, points=np.concatenate([pts, extra]), work_n=17)
+    np.testing.assert_allclose(q.mapped_points[: len(idx)], grid.mapped_points[idx], atol=1e-6, rtol=0)
+
+
+def test_map_batch_equals_individual_maps():
+    sur = tiny(head_seed=4)
+    fields = ["sin-cos", "ring", bump]
+    batch = sur.map_batch(fields, 17)
+    assert len(batch) == 3
+    for f, rb in zip(fields, batch):
+        r1 = sur.map(f, 17)
+        np.testing.assert_allclose(rb.mapped_points, r1.mapped_points, atol=1e-6, rtol=0)
+        np.testing.assert_array_equal(rb.field, r1.field)
+    assert not np.allclose(batch[0].mapped_points, batch[1].mapped_points)
+    with pytest.raises(ValueError, match="one output size"):
+        sur.map_batch([np.ones((17, 17)), np.ones((21, 21))])
+
+
+def test_work_n_is_clipped_to_the_training_range():
+    sur = tiny(n_range=[17, 25])
+    assert (sur.work_n(9), sur.work_n(21), sur.work_n(65)) == (17, 21, 25)
+    assert sur.map("sin-cos", 65).info["work_n"] == 25
+    assert tiny().n_range == (5, 1 << 30)  # no range: native resolution
+
+
+def test_alpha_scales_the_displacement():
+    sur = tiny(head_seed=5)
+    r1 = sur.map("sin-cos", 17)
+    r2 = sur.map("sin-cos", 17, alpha=[0.5, 2.0])
+    np.testing.assert_allclose(r2.displacement, r1.displacement * np.array([0.5, 2.0]), atol=1e-12)
+    assert r2.info["alpha"] == [0.5, 2.0]
