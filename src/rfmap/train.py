@@ -137,8 +137,9 @@ def validate(sur: Surrogate, n: int, fields: list[str] | None = None) -> dict:
 
 
 def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, progress: bool = True,
-          log_every: int = 10) -> Surrogate:
-    """Train ``cfg``; returns the trained :class:`Surrogate` (also written to ``out_dir``)."""
+          log_every: int = 10, command: str | None = None) -> Surrogate:
+    """Train ``cfg``; returns the trained :class:`Surrogate` (also written to ``out_dir``).  ``command`` (the
+    command line that started the run) is recorded in the metadata."""
     rank, world = _dist_info()
     out = Path(out_dir or Path("runs") / cfg.name)
     if rank == 0:
@@ -178,6 +179,8 @@ def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, progress: boo
         meta = {"name": cfg.name, "preset": cfg.preset, "n_range": list(cfg.n_range), "config": cfg.to_dict(),
                 "rfmap_version": __version__, "steps": step, "wall_time": round(elapsed, 1),
                 "world_size": world, "global_batch": cfg.batch * world, "description": cfg.description}
+        if command:
+            meta["command"] = command
         if final is not None:
             meta["final_metrics"] = final
         s = Surrogate(model, spec, meta)
@@ -307,10 +310,24 @@ def run(args) -> Surrogate:
         backend = "nccl" if torch.cuda.is_available() else "gloo"
         torch.distributed.init_process_group(backend)
     try:
-        return train(cfg, args.out, resume=args.resume, progress=not args.no_progress)
+        return train(cfg, args.out, resume=args.resume, progress=not args.no_progress,
+                     command=_command_line(args))
     finally:
         if world > 1 and torch.distributed.is_initialized():
             torch.distributed.destroy_process_group()
+
+
+def _command_line(args) -> str:
+    parts = ["rfmap train", f"--config {args.config}"]
+    if args.preset:
+        parts.append(f"--preset {args.preset}")
+    for flag, val in [("--steps", args.steps), ("--batch", args.batch), ("--time-limit", args.time_limit),
+                      ("--threads", args.threads), ("--seed", args.seed)]:
+        if val is not None:
+            parts.append(f"{flag} {val:g}" if isinstance(val, float) else f"{flag} {val}")
+    if args.resume:
+        parts.append("--resume")
+    return " ".join(parts)
 
 
 def main(argv=None) -> int:
