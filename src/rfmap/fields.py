@@ -268,14 +268,14 @@ class BeltramiMap:
 
     def __call__(self, x) -> np.ndarray:
         """Image of the points ``x`` (..., 2) under the map."""
-        t = torch.as_tensor(np.asarray(x, dtype=np.float64))
+        t = torch.as_tensor(np.ascontiguousarray(x, dtype=np.float64))
         if t.shape[-1] != 2:
             raise ValueError(f"map {self.name!r} is 2D; points have dimension {t.shape[-1]}")
         return self.fn(t).numpy()
 
     def jacobian(self, x) -> np.ndarray:
         """Exact Jacobian :math:`\\partial f_a / \\partial x_b`, shape (..., 2, 2)."""
-        t = torch.as_tensor(np.asarray(x, dtype=np.float64)).clone().requires_grad_(True)
+        t = torch.as_tensor(np.ascontiguousarray(x, dtype=np.float64)).clone().requires_grad_(True)
         f = self.fn(t)
         rows = [torch.autograd.grad(f[..., a].sum(), t, retain_graph=a == 0)[0] for a in range(2)]
         return torch.stack(rows, dim=-2).detach().numpy()
