@@ -130,14 +130,15 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
     **{
         name: _pair(
             name, TaskSpec("density", 2, boundary), desc, _CI,
-            dict(steps=6000, batch=4, time_limit=3000.0, val_every=500, threads=1),
+            dict(steps=steps, batch=4, time_limit=limit, val_every=500, threads=1),
             loss=LossWeights(beltrami=lam), lr=5e-4, warmup=300,
         )
-        for name, boundary, lam, desc in [
-            ("deq2d-square", "square", 0.1, "2D density-equalizing quasi-conformal map (DEQ: density loss + "
-             "0.1 Beltrami energy), square boundary."),
-            ("deq2d-free", "free", 0.1, "2D DEQ map, free boundary."),
-            ("dem2d-square", "square", 0.0, "2D density-equalizing map (density loss only), square boundary."),
+        for name, boundary, lam, steps, limit, desc in [
+            ("deq2d-square", "square", 0.1, 6000, 3000.0, "2D density-equalizing quasi-conformal map (DEQ: density "
+             "loss + 0.1 Beltrami energy), square boundary."),
+            ("deq2d-free", "free", 0.1, 2500, 2700.0, "2D DEQ map, free boundary."),
+            ("dem2d-square", "square", 0.0, 2500, 2700.0, "2D density-equalizing map (density loss only), square "
+             "boundary."),
         ]
     },
     **{
