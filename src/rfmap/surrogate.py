@@ -96,6 +96,7 @@ class Surrogate:
         tmp = path.with_suffix(".safetensors.part")
         save_file(state, str(tmp), metadata={"format": "rfmap", "name": str(meta.get("name", ""))})
         os.replace(tmp, path)
+        os.chmod(path, 0o644)
         jpath = path.with_suffix(".json")
         jpath.write_text(json.dumps(meta, indent=2, sort_keys=True))
         return path, jpath
