@@ -17,7 +17,7 @@ NOTEBOOKS := $(wildcard notebooks/*.ipynb)
 RFMAP_SCALE ?= full
 # environment of the notebook and book steps: VTK renders off-screen through EGL; the venv's scripts (rfmap) on PATH
 NB_ENV := VTK_DEFAULT_OPENGL_WINDOW=vtkEGLRenderWindow PATH="$(CURDIR)/$(BIN):$$PATH"
-BOOK_FLAGS := -W -n --keep-going
+BOOK_FLAGS := -W -n --keep-going --all
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: install test book book-check clean distclean
