@@ -76,7 +76,7 @@ class Table:
         return str(v)
 
     def to_markdown(self) -> str:
-        head = ["case", "method"] + [COLUMN_TITLES.get(c, c) for c in self.columns]
+        head = ["case", "method"] + [COLUMN_TITLES.get(c, c).replace("|", "\\|") for c in self.columns]
         lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for case, method, vals in self.rows:
             lines.append("| " + " | ".join([case, method] + [self._fmt(vals.get(c)) for c in self.columns]) + " |")
