@@ -144,7 +144,7 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
     **{
         name: _pair(
             name, TaskSpec("density", 3, boundary), desc, _CI3,
-            dict(steps=4000, batch=2, time_limit=3300.0),
+            dict(steps=1400, batch=2, time_limit=1440.0, val_every=350, ckpt_every=100),
             model=ModelConfig(base=8, depth=2), n_range=(32, 48), jitter=0.0, lr=2e-4, weight_decay=5e-5,
             betas=(0.9, 0.995), schedule="restarts", T0=600, T_mult=2, lr_min=2e-6, val_n=24,
         )
