@@ -214,3 +214,28 @@ def test_gradcheck_beltrami_coefficient():
         return mu.real, mu.imag
 
     assert torch.autograd.gradcheck(parts, (_perturbed(SREF2, 5), _perturbed(SREF2, 6)))
+
+
+@pytest.mark.parametrize("dim,n", [(2, 2), (2, 6), (3, 2), (3, 5)])
+def test_grid_fast_path_matches_the_element_list(dim, n):
+    """Strided grid measures and element means equal the gathered ones exactly, element by element, and so do
+    their gradients (the training losses use the strided path)."""
+    from rfmap.geometry import grid_element_mean, grid_signed_measures
+
+    mesh = grid_mesh(n, dim)
+    el = torch.as_tensor(mesh.elements)
+    g = torch.Generator().manual_seed(dim * 10 + n)
+    x = torch.as_tensor(mesh.points)[None].repeat(3, 1, 1) + 0.05 * torch.randn(3, n**dim, dim, generator=g,
+                                                                                dtype=torch.float64)
+    x1, x2 = x.clone().requires_grad_(True), x.clone().requires_grad_(True)
+    fast, slow = grid_signed_measures(x1, n), signed_measures(x2, el)
+    assert fast.shape == (3, math.factorial(dim) * (n - 1) ** dim)
+    torch.testing.assert_close(fast, slow, rtol=0, atol=1e-15)
+    w = torch.randn(fast.shape, generator=g, dtype=torch.float64)
+    (fast * w).sum().backward()
+    (slow * w).sum().backward()
+    torch.testing.assert_close(x1.grad, x2.grad, rtol=0, atol=1e-13)
+    v = torch.rand(3, n**dim, generator=g, dtype=torch.float64)
+    torch.testing.assert_close(grid_element_mean(v, n, dim), v[:, el].mean(-1), rtol=0, atol=1e-15)
+    with pytest.raises(ValueError, match="do not form"):
+        grid_signed_measures(x[:, :-1], n)

@@ -144,13 +144,16 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
     **{
         name: _pair(
             name, TaskSpec("density", 3, boundary), desc, _CI3,
-            dict(steps=1400, batch=2, time_limit=1440.0, val_every=350, ckpt_every=100),
-            model=ModelConfig(base=8, depth=2), n_range=(32, 48), jitter=0.0, lr=2e-4, weight_decay=5e-5,
-            betas=(0.9, 0.995), schedule="restarts", T0=600, T_mult=2, lr_min=2e-6, val_n=24,
+            dict(steps=3000, batch=2, time_limit=3300.0, val_every=500, ckpt_every=100),
+            model=ModelConfig(base=8, depth=2), n_range=(32, 48), jitter=0.0, lr=5e-4, weight_decay=5e-5,
+            betas=(0.9, 0.995), schedule="cosine", warmup=200, lr_min=2e-6, val_n=24,
         )
         for name, boundary, desc in [
-            ("dem3d-cube", "square", "3D density-equalizing map, cube boundary."),
-            ("dem3d-free", "free", "3D density-equalizing map, free boundary."),
+            ("dem3d-cube", "square", "3D density-equalizing map, cube boundary (density loss on tetrahedra, fold "
+             "penalty). The paper trains 4000 epochs with cosine warm restarts at lr 2e-4 on a GPU; on a CPU budget "
+             "of under an hour a single cosine cycle at lr 5e-4 gets further."),
+            ("dem3d-free", "free", "3D density-equalizing map, free boundary (density loss, volume constraint, fold "
+             "penalty); same schedule as dem3d-cube."),
         ]
     },
 }

@@ -10,6 +10,7 @@ in float64).
 """
 from __future__ import annotations
 
+import itertools
 import math
 
 import torch
@@ -18,6 +19,9 @@ from torch import Tensor
 __all__ = [
     "edge_matrices",
     "signed_measures",
+    "grid_simplices",
+    "grid_signed_measures",
+    "grid_element_mean",
     "element_jacobians",
     "jacobian_determinants",
     "beltrami_from_jacobian",
@@ -70,15 +74,97 @@ def signed_measures(points: Tensor, elements) -> Tensor:
     return det(edge_matrices(points, elements)) / math.factorial(d)
 
 
+def _grid_simplex_offsets(dim: int) -> list[list[tuple[int, ...]]]:
+    """Corner offsets of the simplices of one grid cell, in the order of :func:`rfmap.mesh.grid_mesh`."""
+    if dim == 2:
+        return [[(0, 0), (1, 0), (0, 1)], [(1, 0), (1, 1), (0, 1)]]
+    out = []
+    for perm in itertools.permutations(range(3)):
+        corners = [[0, 0, 0]]
+        for ax in perm:
+            nxt = list(corners[-1])
+            nxt[ax] += 1
+            corners.append(nxt)
+        sign = 1
+        for i in range(3):
+            for j in range(i + 1, 3):
+                sign *= 1 if perm[i] < perm[j] else -1
+        if sign < 0:
+            corners[1], corners[2] = corners[2], corners[1]
+        out.append([tuple(c) for c in corners])
+    return out
+
+
+def grid_simplices(values: Tensor, n: int, dim: int) -> list[list[Tensor]]:
+    r"""Vertex values of every simplex of the ``N``-grid mesh, gathered by slicing instead of indexing.
+
+    The simplices of :func:`rfmap.mesh.grid_mesh` come in ``d!`` types per grid cell (2 triangles, 6 Kuhn
+    tetrahedra); for each type this returns its ``d + 1`` corners as strided views of the grid, which is much
+    cheaper than a gather (and its scatter-add backward) on the millions of indices of a 3D mesh.
+
+    Parameters
+    ----------
+    values : Tensor, shape (B, N**d, C)
+        Per-vertex values in grid order (e.g. vertex positions, C = d).
+
+    Returns
+    -------
+    list over simplex types of lists of ``d + 1`` Tensors of shape (B, N-1, ..., N-1, C).
+    """
+    B, P, C = values.shape
+    if P != n**dim:
+        raise ValueError(f"{P} values do not form an N={n} grid in {dim}D")
+    g = values.reshape(B, *([n] * dim), C)
+
+    def corner(off):
+        return g[(slice(None),) + tuple(slice(o, n - 1 + o) for o in off)]
+
+    return [[corner(off) for off in simplex] for simplex in _grid_simplex_offsets(dim)]
+
+
+def grid_signed_measures(points: Tensor, n: int) -> Tensor:
+    r"""Signed measures of the elements of the ``N``-grid mesh at vertex positions ``points``.
+
+    Equal to ``signed_measures(points, grid_mesh(n, d).elements)`` (same element order), computed from strided
+    views (:func:`grid_simplices`); used by the training losses.
+
+    Shapes: points (B, N**d, d) -> (B, d! (N-1)**d).
+    """
+    B, _, d = points.shape
+    out = []
+    for corners in grid_simplices(points, n, d):
+        edges = [c - corners[0] for c in corners[1:]]
+        if d == 2:
+            a, b = edges
+            m = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+        else:
+            a, b, c = edges
+            m = (a * torch.linalg.cross(b, c, dim=-1)).sum(-1)
+        out.append(m.reshape(B, -1))
+    return torch.cat(out, -1) / math.factorial(d)
+
+
+def grid_element_mean(values: Tensor, n: int, dim: int) -> Tensor:
+    """Mean of per-vertex ``values`` (B, N**d) over the vertices of each grid-mesh element: (B, m)."""
+    B = values.shape[0]
+    out = []
+    for corners in grid_simplices(values.unsqueeze(-1), n, dim):
+        out.append((sum(corners) / len(corners)).reshape(B, -1))
+    return torch.cat(out, -1)
+
+
 def det(A: Tensor) -> Tensor:
-    """Determinant of (..., 2, 2) or (..., 3, 3) matrices by the explicit formula (fast for many small matrices)."""
+    """Determinant of (..., 2, 2) or (..., 3, 3) matrices by the explicit formula (fast for many small matrices).
+
+    The 3x3 case is the triple product of the columns, :math:`c_0 \\cdot (c_1 \\times c_2)`; unbinding the
+    columns (rather than indexing nine entries) keeps the backward pass to a few full-size buffers.
+    """
     if A.shape[-2:] == (2, 2):
-        return A[..., 0, 0] * A[..., 1, 1] - A[..., 0, 1] * A[..., 1, 0]
+        c0, c1 = A.unbind(-1)
+        return c0[..., 0] * c1[..., 1] - c0[..., 1] * c1[..., 0]
     if A.shape[-2:] == (3, 3):
-        a, b, c = A[..., 0, 0], A[..., 0, 1], A[..., 0, 2]
-        d_, e, f = A[..., 1, 0], A[..., 1, 1], A[..., 1, 2]
-        g, h, i = A[..., 2, 0], A[..., 2, 1], A[..., 2, 2]
-        return a * (e * i - f * h) - b * (d_ * i - f * g) + c * (d_ * h - e * g)
+        c0, c1, c2 = A.unbind(-1)
+        return (c0 * torch.linalg.cross(c1, c2, dim=-1)).sum(-1)
     return torch.linalg.det(A)
 
 

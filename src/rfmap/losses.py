@@ -36,12 +36,16 @@ def beltrami_loss(ref: Tensor, mapped: Tensor, elements: Tensor, mu_target: Tens
 
 
 def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, *,
-                    ref_meas: Tensor | None = None, meas: Tensor | None = None) -> tuple[Tensor, Tensor]:
+                    ref_meas: Tensor | None = None, meas: Tensor | None = None,
+                    elem_density: Tensor | None = None) -> tuple[Tensor, Tensor]:
     r"""Relative density :math:`\tilde\rho_i = (p_i / A_i) / (P / A)` on the mapped mesh, and reference measures.
 
     :math:`p_i` is the population of element :math:`i` (mean vertex density times reference measure),
     :math:`A_i` its mapped measure (floored at 1% of the reference measure, so the density and its gradient stay
     bounded when an element degenerates), :math:`P` and :math:`A` the totals.
+
+    ``ref_meas``, ``meas`` (B, m) and ``elem_density`` (B, m, the mean vertex density of each element) may be
+    passed precomputed (e.g. by :func:`rfmap.geometry.grid_signed_measures` on a grid mesh).
 
     Returns
     -------
@@ -49,7 +53,8 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
     """
     ref_meas = signed_measures(ref, elements) if ref_meas is None else ref_meas
     meas = signed_measures(mapped, elements) if meas is None else meas
-    pop = density[:, elements].mean(-1) * ref_meas
+    elem_density = density[:, elements].mean(-1) if elem_density is None else elem_density
+    pop = elem_density * ref_meas
     # guard: an element shrunk below 1% of its reference measure (or flipped) counts as 1% (the fold penalty
     # handles it); this keeps the density and its gradient bounded
     rho = pop / torch.maximum(meas, 0.01 * ref_meas)
@@ -58,7 +63,8 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
 
 
 def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, beta: float = 1.0, *,
-                 ref_meas: Tensor | None = None, meas: Tensor | None = None) -> Tensor:
+                 ref_meas: Tensor | None = None, meas: Tensor | None = None,
+                 elem_density: Tensor | None = None) -> Tensor:
     r"""Density-equalizing loss :math:`\int_\Omega L(p_i/A_i - P/A)` with smooth-L1 :math:`L` (paper Sec. 5.2).
 
     The difference is taken relative to the mean density :math:`P/A`, i.e. :math:`L(\tilde\rho_i - 1)`; this
@@ -70,7 +76,8 @@ def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor,
     density : Tensor, shape (B, n)
         Vertex densities.
     """
-    rho, w = element_density(ref, mapped, elements, density, ref_meas=ref_meas, meas=meas)
+    rho, w = element_density(ref, mapped, elements, density, ref_meas=ref_meas, meas=meas,
+                             elem_density=elem_density)
     err = F.smooth_l1_loss(rho, torch.ones_like(rho), reduction="none", beta=beta)
     return weighted_mean(err, w)
 

@@ -18,10 +18,10 @@ import torch
 from torch import Tensor
 
 from . import losses as L
-from .geometry import signed_measures
+from .geometry import grid_element_mean, grid_signed_measures, signed_measures
 from .fields import (RandomBeltramiConfig, RandomDensity, RandomDensityConfig, RandomMap, RandomBeltrami,
                      jittered_points, preprocess_density, vertex_weights)
-from .mesh import grid_mesh, interpolate
+from .mesh import grid_mesh, grid_points, interpolate
 from .nn.model import BOUNDARIES, apply_displacement
 
 __all__ = ["TaskSpec", "Batch", "encode", "grid_elements", "sample_batch", "task_loss", "KINDS"]
@@ -130,7 +130,7 @@ def _density_sample(rng, n, dim, cfg: RandomDensityConfig, jitter: float, elemen
         w = vertex_weights(pts, elements_np)
         p = preprocess_density(raw, weights=w)
     else:
-        pts = grid_mesh(n, dim).points
+        pts = grid_points(n, dim)
         p = preprocess_density(fld.on_grid(n).reshape((n,) * dim)).reshape(-1)
     return pts, p
 
@@ -141,10 +141,10 @@ def _beltrami_sample(rng, n, cfg: RandomBeltramiConfig, jitter: float, source: s
         probe_n = 33
         probe = grid_mesh(probe_n, 2).points
         g = _grad_magnitude(np.abs(gen.mu(probe) if source == "map" else gen(probe)), probe_n, 2)
-        g_n = interpolate(g.reshape(1, 1, probe_n, probe_n), grid_mesh(n, 2).points)[0, :, 0]
+        g_n = interpolate(g.reshape(1, 1, probe_n, probe_n), grid_points(n, 2))[0, :, 0]
         pts = jittered_points(n, 2, rng, grad_magnitude=g_n, strength=jitter)
     else:
-        pts = grid_mesh(n, 2).points
+        pts = grid_points(n, 2)
     mu = gen.mu(pts) if source == "map" else gen(pts)
     return pts, mu
 
@@ -203,15 +203,23 @@ def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights) -
     B, d = psi.shape[:2]
     disp = psi.reshape(B, d, -1).transpose(1, 2)
     mapped = apply_displacement(batch.ref, disp, spec.boundary)
-    ref_meas = signed_measures(batch.ref, batch.elements)
-    meas = signed_measures(mapped, batch.elements)
+    dim = batch.ref.shape[-1]
+    if batch.elements is grid_elements(batch.n, dim):  # the (cached) grid mesh: strided fast path
+        ref_meas = grid_signed_measures(batch.ref, batch.n)
+        meas = grid_signed_measures(mapped, batch.n)
+        elem_density = None if batch.density is None else grid_element_mean(batch.density, batch.n, dim)
+    else:
+        ref_meas = signed_measures(batch.ref, batch.elements)
+        meas = signed_measures(mapped, batch.elements)
+        elem_density = None
     mk = {"ref_meas": ref_meas, "meas": meas}
     parts: dict[str, Tensor] = {}
     if spec.kind == "beltrami":
         parts["beltrami"] = L.beltrami_loss(batch.ref, mapped, batch.elements, batch.mu_target)
         total = parts["beltrami"]
     else:
-        parts["density"] = L.density_loss(batch.ref, mapped, batch.elements, batch.density, **mk)
+        parts["density"] = L.density_loss(batch.ref, mapped, batch.elements, batch.density, elem_density=elem_density,
+                                          **mk)
         total = parts["density"]
         if weights.beltrami and d == 2:
             parts["mu2"] = L.beltrami_energy(batch.ref, mapped, batch.elements)
