@@ -327,3 +327,17 @@ def test_alpha_scales_the_displacement():
     r2 = sur.map("sin-cos", 17, alpha=[0.5, 2.0])
     np.testing.assert_allclose(r2.displacement, r1.displacement * np.array([0.5, 2.0]), atol=1e-12)
     assert r2.info["alpha"] == [0.5, 2.0]
+
+
+def test_3d_single_field_matches_its_row_in_a_batch():
+    """A single 3D field (evaluated as a batch of two to avoid a slow batch-1 Conv3d kernel) gives exactly its row
+    of a batched evaluation: the network acts on every sample independently."""
+    sur = tiny(TaskSpec("density", 3, "square"), head_seed=1)
+    rng = np.random.default_rng(0)
+    g = rng.uniform(0.5, 1.5, size=(2, 9, 9, 9))
+    with torch.no_grad():
+        one = sur.displacement(g[:1])
+        both = sur.displacement(g)
+    assert one.shape == (1, 3, 9, 9, 9)
+    assert float(one.abs().max()) > 1e-3
+    torch.testing.assert_close(one, both[:1], rtol=1e-5, atol=1e-6)
