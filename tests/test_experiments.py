@@ -58,3 +58,14 @@ def test_population_and_resolution_tables_on_untrained_model():
     assert table.value("sin-cos", "ours + refinement", "std_rho_map") <= ours + 1e-12
     rt, _ = resolution_table(sur, ns=(9, 17), classical=False)
     assert [c for c, m, _ in rt.rows if m == "ours"] == ["9", "17"]
+
+
+def test_resolution_table_with_refinement_adds_refined_rows():
+    sur = Surrogate.untrained(TaskSpec("density", 3, "square"), base=4, depth=2, name="tiny3d", n_range=[6, 8])
+    rt, maps = resolution_table(sur, ns=(6, 8), refine=True, classical=False)
+    assert "alpha" in rt.columns
+    for n in ("6", "8"):
+        raw = rt.value(n, "ours", "std_rho_map")
+        assert raw == pytest.approx(rt.value(n, "ours", "std_rho_orig"))  # untrained: identity map
+        assert rt.value(n, "ours + refinement", "std_rho_map") <= raw + 1e-12
+        assert set(maps[n]) >= {"ours", "ours+refine"}

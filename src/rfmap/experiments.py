@@ -243,6 +243,7 @@ def resolution_table(sur, ns=None, refine: bool = False, classical: bool = True,
     label = "tab:resolution_test" if d == 2 else "tab:3d_resolution_test"
     cols = ["time", "speedup", "std_rho_orig", "std_rho_map", "min_jacobian", "n_flipped"]
     cols += ["max_mu", "mean_mu"] if d == 2 else []
+    cols += ["alpha"] if refine else []
     t = Table(label, f"{d}D resolution test on {name}, model {sur.name}", cols)
     return _density_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(label), refine, "square", classical)
 
@@ -268,7 +269,7 @@ def reproduce(experiment: str, out_dir, *, refine: bool = True) -> list[Path]:
         paths += resolution_table(need("deq2d-square"))[0].save(out_dir)
     elif experiment == "dem3d":
         paths += population_table(need("dem3d-cube"), refine=refine)[0].save(out_dir)
-        paths += resolution_table(need("dem3d-cube"))[0].save(out_dir)
+        paths += resolution_table(need("dem3d-cube"), refine=refine)[0].save(out_dir)
         if "dem3d-free" in models():
             paths += population_table(need("dem3d-free"), refine=refine)[0].save(out_dir)
         else:
