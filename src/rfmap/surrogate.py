@@ -362,8 +362,11 @@ class Surrogate:
         info: dict[str, Any] = {"work_n": nw, "network_time": t_net}
         a = np.ones(d) if alpha is None else np.asarray(alpha, dtype=np.float64)
         if refine:
-            obj = (density_objective if self.spec.kind == "density" else beltrami_objective)(
-                ref64, psi64, el_t, fvals, self.spec.boundary)
+            if self.spec.kind == "density":
+                obj = density_objective(ref64, psi64, el_t, fvals, self.spec.boundary,
+                                        grid_n=n if points is None else None)
+            else:
+                obj = beltrami_objective(ref64, psi64, el_t, fvals, self.spec.boundary)
             t2 = time.perf_counter()
             rr: RefineResult = refine_alpha(obj, d, bounds=bounds, tol=1e-2)
             t_map += time.perf_counter() - t2
@@ -377,18 +380,24 @@ class Surrogate:
                          kind=self.spec.kind, time=t_map, info=info)
 
 
-def density_objective(ref, psi, elements, density, boundary, flip_weight: float = 10.0):
+def density_objective(ref, psi, elements, density, boundary, flip_weight: float = 10.0, grid_n: int | None = None):
     r""":math:`\mathcal{J}(\alpha) = \mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m` for
-    weight refinement of density maps."""
-    from .geometry import signed_measures
+    weight refinement of density maps.
+
+    ``grid_n``: set when ``ref``/``elements`` are :func:`rfmap.mesh.grid_mesh` ``(N, d)``; the measures are then
+    computed from strided views (:func:`rfmap.geometry.grid_signed_measures`, same values, several times faster
+    on 3D grids)."""
+    from .geometry import grid_signed_measures, signed_measures
     from .metrics import density_std, element_population
 
     pop = element_population(ref, elements, np.asarray(density, dtype=np.float64))
-    ref_meas = signed_measures(ref, elements)
+
+    def measures(x):
+        return grid_signed_measures(x[None], grid_n)[0] if grid_n else signed_measures(x, elements)
 
     def J(alpha):
         mapped = apply_displacement(ref, psi, boundary, torch.as_tensor(alpha))
-        meas = signed_measures(mapped, elements)
+        meas = measures(mapped)
         flipped = float((meas <= 0).double().mean())
         return density_std(pop, meas) + flip_weight * flipped
 
