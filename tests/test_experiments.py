@@ -69,3 +69,21 @@ def test_resolution_table_with_refinement_adds_refined_rows():
         assert raw == pytest.approx(rt.value(n, "ours", "std_rho_orig"))  # untrained: identity map
         assert rt.value(n, "ours + refinement", "std_rho_map") <= raw + 1e-12
         assert set(maps[n]) >= {"ours", "ours+refine"}
+
+
+def test_reproduce_dem3d_writes_every_table(tmp_path, monkeypatch):
+    """``rfmap reproduce dem3d`` writes the cube, free-boundary and resolution tables (Markdown and CSV) from the
+    shipped models; the table builders are shrunk to one small case so this runs in seconds."""
+    import rfmap.experiments as E
+
+    pop, res = E.population_table, E.resolution_table
+    monkeypatch.setattr(E, "population_table", lambda sur, refine=True: pop(sur, ["sin-cos-3d"], n=9, refine=refine))
+    monkeypatch.setattr(E, "resolution_table", lambda sur, refine=False: res(sur, ns=(9,), refine=refine))
+    paths = E.reproduce("dem3d", tmp_path, refine=True)
+    assert sorted(p.name for p in paths) == sorted(
+        f"tab-{s}.{ext}" for s in ("3d-population-test", "3d-population-test-fb", "3d-resolution-test")
+        for ext in ("md", "csv"))
+    text = (tmp_path / "tab-3d-resolution-test.md").read_text()
+    assert "ours + refinement" in text and "diffusion DEM" in text
+    with pytest.raises(ValueError, match="unknown experiment"):
+        E.reproduce("dem4d", tmp_path)
