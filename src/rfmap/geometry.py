@@ -19,6 +19,7 @@ from torch import Tensor
 __all__ = [
     "edge_matrices",
     "signed_measures",
+    "grid_cell_simplices",
     "grid_simplices",
     "grid_signed_measures",
     "grid_element_mean",
@@ -74,8 +75,15 @@ def signed_measures(points: Tensor, elements) -> Tensor:
     return det(edge_matrices(points, elements)) / math.factorial(d)
 
 
-def _grid_simplex_offsets(dim: int) -> list[list[tuple[int, ...]]]:
-    """Corner offsets of the simplices of one grid cell, in the order of :func:`rfmap.mesh.grid_mesh`."""
+def grid_cell_simplices(dim: int) -> list[list[tuple[int, ...]]]:
+    r"""The split of one grid cell into simplices: corner offsets (0 or 1 per axis) of each simplex.
+
+    2D: the square is cut along the diagonal from :math:`(1, 0)` to :math:`(0, 1)` into two triangles.  3D: the
+    cube is cut into the six Kuhn tetrahedra :math:`0 \to e_{\sigma_1} \to e_{\sigma_1} + e_{\sigma_2} \to
+    (1, 1, 1)`, one per permutation :math:`\sigma` (in ``itertools.permutations`` order), with the two middle
+    corners swapped for odd permutations so that every simplex is positively oriented.  This is the one definition
+    of the split: :func:`rfmap.mesh.grid_mesh` builds its elements from it, in this order.
+    """
     if dim == 2:
         return [[(0, 0), (1, 0), (0, 1)], [(1, 0), (1, 1), (0, 1)]]
     out = []
@@ -119,7 +127,7 @@ def grid_simplices(values: Tensor, n: int, dim: int) -> list[list[Tensor]]:
     def corner(off):
         return g[(slice(None),) + tuple(slice(o, n - 1 + o) for o in off)]
 
-    return [[corner(off) for off in simplex] for simplex in _grid_simplex_offsets(dim)]
+    return [[corner(off) for off in simplex] for simplex in grid_cell_simplices(dim)]
 
 
 def grid_signed_measures(points: Tensor, n: int) -> Tensor:

@@ -9,14 +9,22 @@ Conventions (shared by every part of :mod:`rfmap`):
 * 2D: every grid square is split into two triangles by the diagonal from :math:`(x+h, y)` to :math:`(x, y+h)`.
 * 3D: every grid cube is split into six tetrahedra around its main diagonal (Kuhn / Freudenthal split).
 * Every element is positively oriented on the reference grid.
+
+The split of one grid cell is :func:`rfmap.geometry.grid_cell_simplices`; the mesh here and the strided grid
+operators of :mod:`rfmap.geometry` both use it, so their element orders agree.  Beside the mesh: the vertex
+quadrature weights (:func:`vertex_weights`), element centroids, multilinear interpolation of grid fields and the
+Sobol-jittered vertices used in training (:func:`jittered_points`).
 """
 from __future__ import annotations
 
-import itertools
+import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import torch
+
+from .geometry import grid_cell_simplices, signed_measures
 
 __all__ = [
     "Mesh",
@@ -25,7 +33,11 @@ __all__ = [
     "square_triangles",
     "cube_tetrahedra",
     "element_measures",
+    "element_centroids",
+    "vertex_weights",
+    "grid_vertex_weights",
     "interpolate",
+    "jittered_points",
     "check_n",
     "check_dim",
 ]
@@ -62,6 +74,16 @@ def grid_points(n: int, dim: int = 2, dtype=np.float64) -> np.ndarray:
     return np.stack([a.reshape(-1) for a in axes], axis=-1)
 
 
+def _grid_elements(n: int, dim: int) -> np.ndarray:
+    """Elements of the ``N``-grid: every simplex type of :func:`rfmap.geometry.grid_cell_simplices`, over all
+    cells (C order), one type after the other."""
+    cells = np.stack([a.reshape(-1) for a in np.meshgrid(*([np.arange(n - 1)] * dim), indexing="ij")], axis=-1)
+    stride = n ** np.arange(dim - 1, -1, -1)
+    blocks = [np.stack([((cells + np.array(c)) * stride).sum(-1) for c in corners], axis=-1)
+              for corners in grid_cell_simplices(dim)]
+    return np.concatenate(blocks, axis=0).astype(np.int64)
+
+
 def square_triangles(n: int) -> np.ndarray:
     """Triangles of the ``N``-grid on the unit square, shape ``(2 (N-1)^2, 3)``, counter-clockwise.
 
@@ -69,15 +91,7 @@ def square_triangles(n: int) -> np.ndarray:
     :math:`[(x,y), (x+h,y), (x,y+h)]` and :math:`[(x+h,y), (x+h,y+h), (x,y+h)]`,
     i.e. the diagonal runs from :math:`(x+h, y)` to :math:`(x, y+h)`.
     """
-    n = check_n(n, 2)
-    i, j = np.meshgrid(np.arange(n - 1), np.arange(n - 1), indexing="ij")
-    v00 = (i * n + j).reshape(-1)
-    v10 = ((i + 1) * n + j).reshape(-1)  # (x+h, y)
-    v01 = (i * n + j + 1).reshape(-1)  # (x, y+h)
-    v11 = ((i + 1) * n + j + 1).reshape(-1)
-    t1 = np.stack([v00, v10, v01], axis=-1)
-    t2 = np.stack([v10, v11, v01], axis=-1)
-    return np.concatenate([t1, t2], axis=0).astype(np.int64)
+    return _grid_elements(check_n(n, 2), 2)
 
 
 def cube_tetrahedra(n: int) -> np.ndarray:
@@ -87,24 +101,7 @@ def cube_tetrahedra(n: int) -> np.ndarray:
     v_{000}+e_{\\sigma_1}+e_{\\sigma_2} \\to v_{111}` for the six permutations :math:`\\sigma`;
     vertices are ordered so that every tetrahedron has positive volume.
     """
-    n = check_n(n, 2)
-    i, j, k = np.meshgrid(*([np.arange(n - 1)] * 3), indexing="ij")
-    base = np.stack([i.reshape(-1), j.reshape(-1), k.reshape(-1)], axis=-1)  # (c, 3)
-    stride = np.array([n * n, n, 1])
-    tets = []
-    for perm in itertools.permutations(range(3)):
-        corners = [np.zeros(3, dtype=np.int64)]
-        for ax in perm:
-            nxt = corners[-1].copy()
-            nxt[ax] += 1
-            corners.append(nxt)
-        idx = [((base + c) * stride).sum(-1) for c in corners]
-        # orientation of the path simplex equals the sign of the permutation
-        parity = np.linalg.det(np.eye(3)[list(perm)])
-        if parity < 0:
-            idx[1], idx[2] = idx[2], idx[1]
-        tets.append(np.stack(idx, axis=-1))
-    return np.concatenate(tets, axis=0).astype(np.int64)
+    return _grid_elements(check_n(n, 2), 3)
 
 
 @dataclass(frozen=True)
@@ -156,15 +153,46 @@ def element_measures(points, elements):
     Accepts numpy arrays or torch tensors (returned in the same kind); see
     :func:`rfmap.geometry.signed_measures`.
     """
-    from .geometry import signed_measures
-
     if isinstance(points, torch.Tensor):
         return signed_measures(points, torch.as_tensor(elements, device=points.device))
     return signed_measures(torch.as_tensor(np.asarray(points, dtype=np.float64)),
                            torch.as_tensor(np.asarray(elements))).numpy()
 
 
-def interpolate(values, points, *, tol: float = 1e-9):
+def element_centroids(points, elements) -> np.ndarray:
+    """Centroids of the elements, shape (m, d): the mean of their vertices."""
+    return np.asarray(points)[np.asarray(elements)].mean(1)
+
+
+def vertex_weights(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    r"""Quadrature weights :math:`w_v = \sum_{T \ni v} |T| / (d+1)`.
+
+    :math:`\sum_v w_v p_v` is the exact integral of the piecewise-linear interpolant of the vertex values
+    :math:`p_v`, i.e. the total population in the paper's convention (element population = mean vertex value times
+    element measure).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    el = np.asarray(elements)
+    meas = element_measures(pts, el)
+    w = np.zeros(pts.shape[0])
+    np.add.at(w, el.reshape(-1), np.repeat(meas / el.shape[1], el.shape[1]))
+    return w
+
+
+@lru_cache(maxsize=32)
+def grid_vertex_weights(n: int, dim: int) -> np.ndarray:
+    """:func:`vertex_weights` of the ``N``-grid mesh, shape (N**d,) (cached, read-only)."""
+    mesh = grid_mesh(n, dim)
+    w = vertex_weights(mesh.points, mesh.elements)
+    w.setflags(write=False)
+    return w
+
+
+def interpolate(values, points, *, tol: float = 1e-9, check: bool = True):
     r"""Multilinear (bi-/trilinear) interpolation of grid fields at arbitrary query points.
 
     Parameters
@@ -176,6 +204,9 @@ def interpolate(values, points, *, tol: float = 1e-9):
         Query points in :math:`[0, 1]^d` (a shared point set is broadcast over the batch).
     tol : float
         Points outside :math:`[-tol, 1+tol]^d` raise ``ValueError``.
+    check : bool
+        Validate shapes and coordinates; ``False`` skips the checks (for callers in an inner loop whose points are
+        known to be finite).  Either way coordinates are clamped to :math:`[0, 1]`.
 
     Returns
     -------
@@ -191,16 +222,66 @@ def interpolate(values, points, *, tol: float = 1e-9):
         p = p.unsqueeze(0).expand(v.shape[0], -1, -1)
     if p.dim() != 3 or p.shape[-1] != d:
         raise ValueError(f"points must have shape (B, P, {d}) or (P, {d}), got {tuple(p.shape)}")
-    if p.shape[0] != v.shape[0]:
-        raise ValueError(f"batch of points ({p.shape[0]}) does not match batch of values ({v.shape[0]})")
-    if not torch.isfinite(p).all():
-        raise ValueError("query points contain NaN or infinite values")
-    lo, hi = float(p.min()), float(p.max())
-    if lo < -tol or hi > 1 + tol:
-        raise ValueError(f"query points must lie in [0, 1]^{d}; got coordinates in [{lo:.4g}, {hi:.4g}]")
+    if check:
+        if p.shape[0] != v.shape[0]:
+            raise ValueError(f"batch of points ({p.shape[0]}) does not match batch of values ({v.shape[0]})")
+        if not torch.isfinite(p).all():
+            raise ValueError("query points contain NaN or infinite values")
+        lo, hi = float(p.min()), float(p.max())
+        if lo < -tol or hi > 1 + tol:
+            raise ValueError(f"query points must lie in [0, 1]^{d}; got coordinates in [{lo:.4g}, {hi:.4g}]")
     # grid_sample wants the last coordinate along the last grid axis, in [-1, 1]
     g = (2.0 * p.flip(-1) - 1.0).clamp(-1, 1)
     g = g.reshape(g.shape[0], *([1] * (d - 1)), g.shape[1], d)
     out = torch.nn.functional.grid_sample(v, g, mode="bilinear", padding_mode="border", align_corners=True)
     out = out.reshape(v.shape[0], v.shape[1], -1).transpose(1, 2)
     return out.numpy() if is_np else out
+
+
+@lru_cache(maxsize=16)
+def _sobol_base(count: int, dim: int) -> np.ndarray:
+    from scipy.stats import qmc
+
+    pts = qmc.Sobol(d=dim, scramble=False).random_base2(int(math.ceil(math.log2(max(count, 2)))))[:count]
+    pts.setflags(write=False)
+    return pts
+
+
+def jittered_points(
+    n: int,
+    dim: int,
+    rng: np.random.Generator,
+    *,
+    grad_magnitude: np.ndarray | None = None,
+    strength: float = 0.2,
+) -> np.ndarray:
+    r"""Sobol-jittered vertices of the ``N``-grid (paper Sec. 5: stochastic jittered sampling).
+
+    Vertex :math:`x_v` moves to :math:`x_v + \text{strength}\cdot h\cdot g_v\,(2 s_v - 1)` where :math:`s_v` is a
+    randomly shifted (Cranley–Patterson) Sobol point in :math:`[0,1]^d` and :math:`g_v \in [0, 1]` is the local
+    gradient magnitude of the field normalised by its maximum (1 everywhere when ``grad_magnitude`` is ``None``).
+    Boundary vertices only slide along the boundary and corners stay fixed, so the jittered mesh still tiles
+    :math:`[0,1]^d`; with ``strength <= 0.2`` no element can flip.  (A Kuhn tetrahedron can degenerate once its
+    vertices move :math:`h/6` per axis, so in 3D the offsets are scaled by 3/4 to keep that guarantee.)
+
+    Returns
+    -------
+    ndarray, shape (N**d, d)
+    """
+    n = check_n(n)
+    dim = check_dim(dim)
+    if not 0 <= strength <= 0.2:
+        raise ValueError(f"jitter strength must lie in [0, 0.2] (fraction of the grid spacing), got {strength}")
+    pts = grid_points(n, dim)
+    sob = (_sobol_base(pts.shape[0], dim) + rng.random(dim)) % 1.0
+    sob = sob[rng.permutation(pts.shape[0])]
+    off = (2 * sob - 1) * (strength if dim == 2 else 0.75 * strength) / (n - 1)
+    if grad_magnitude is not None:
+        g = np.abs(np.asarray(grad_magnitude, dtype=np.float64)).reshape(-1)
+        if g.shape[0] != pts.shape[0]:
+            raise ValueError(f"grad_magnitude has {g.shape[0]} values for {pts.shape[0]} vertices")
+        g = g / g.max() if g.max() > 0 else g
+        off = off * g[:, None]
+    on_wall = (pts <= 0) | (pts >= 1)
+    off[on_wall] = 0.0
+    return np.clip(pts + off, 0.0, 1.0)

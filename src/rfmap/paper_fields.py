@@ -1,0 +1,300 @@
+r"""The paper's test fields: densities (paper Sec. 5.2) and analytic Beltrami test maps (paper Sec. 5.1).
+
+Densities are functions :math:`p: [0,1]^d \to \mathbb{R}`; before use they are evaluated at the mesh vertices,
+shifted to minimum 0.1 and scaled to unit mass (:func:`rfmap.inputs.preprocess_density`).  Beltrami test maps
+(Eqs. T1–T4) are analytic maps of the unit square; their exact Beltrami coefficient :math:`\mu = f_{\bar z}/f_z` is
+computed by automatic differentiation in float64 (exact to round-off).
+
+:data:`TEST_FIELDS` lists the fields of the paper's tables per (kind, dimension) and :data:`PAPER_N` the grid sizes
+of those tables.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+import torch
+
+from .geometry import beltrami_from_jacobian
+from .inputs import preprocess_density
+from .mesh import check_n, element_centroids, grid_mesh, grid_points
+
+__all__ = [
+    "DensityField",
+    "BeltramiMap",
+    "DENSITIES",
+    "BELTRAMI_MAPS",
+    "RECT_PEAK_BOX",
+    "TEST_FIELDS",
+    "PAPER_N",
+    "field_names",
+    "get_field",
+    "sample_density",
+    "sample_mu",
+]
+
+TWO_PI = 2.0 * math.pi
+
+#: The paper's population tests and Beltrami reconstructions: the test fields of each table, by (kind, dimension).
+TEST_FIELDS: dict[tuple[str, int], tuple[str, ...]] = {
+    ("density", 2): ("sin-cos", "exp-log", "rect-peak", "ring"),
+    ("density", 3): ("sin-cos-3d", "shell-3d", "octant-3d", "prism-peak-3d"),
+    ("beltrami", 2): ("T1", "T2", "T3", "T4"),
+}
+
+#: The grid size (vertices per side) of the paper's test tables, by dimension: 51 in 2D, 48 in 3D.
+PAPER_N: dict[int, int] = {2: 51, 3: 48}
+
+
+@dataclass(frozen=True)
+class DensityField:
+    """A named test density of the paper.
+
+    Attributes
+    ----------
+    name : str
+    dim : int
+    fn : callable
+        ``fn(x)`` with ``x`` of shape (..., d) returns the raw density, shape (...).
+    label : str
+        The paper's equation label.
+    description : str
+    """
+
+    name: str
+    dim: int
+    fn: Callable[[np.ndarray], np.ndarray] = field(repr=False)
+    label: str = ""
+    description: str = ""
+    kind: str = "density"
+
+    def __call__(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape[-1] != self.dim:
+            raise ValueError(f"field {self.name!r} is {self.dim}D; points have dimension {x.shape[-1]}")
+        return self.fn(x)
+
+    def sample(self, n: int, *, preprocess: bool = True) -> np.ndarray:
+        """Vertex values on the ``N``-grid, shape ``(N,)*d`` (shifted and unit mass unless ``preprocess=False``)."""
+        n = check_n(n)
+        raw = self(grid_points(n, self.dim)).reshape((n,) * self.dim)
+        return preprocess_density(raw) if preprocess else raw
+
+
+#: The box of the rect-peak test (c): the paper leaves ``rect(x, y)`` unspecified; we add ``+2`` on this box.
+RECT_PEAK_BOX = ((0.6, 0.8), (0.2, 0.4), 2.0)
+
+
+def _sin_cos(x):
+    return 2 + np.sin(TWO_PI * x[..., 0]) * np.cos(TWO_PI * x[..., 1])
+
+
+def _exp_log(x):
+    return 2 + np.sin(TWO_PI * np.exp(x[..., 0])) * np.cos(math.pi * np.log(2 * x[..., 1] + 0.1))
+
+
+def _rect_peak(x):
+    (x0, x1), (y0, y1), height = RECT_PEAK_BOX
+    box = (x[..., 0] >= x0) & (x[..., 0] <= x1) & (x[..., 1] >= y0) & (x[..., 1] <= y1)
+    return _sin_cos(x) + height * box
+
+
+def _ring(x):
+    r = np.sqrt((x[..., 0] - 0.5) ** 2 + (x[..., 1] - 0.5) ** 2)
+    return np.exp(-((r - 1.0) ** 2) / (2 * 0.5**2))
+
+
+def _multi_freq(x):
+    return 2 + np.sin(2 * TWO_PI * x[..., 0]) * np.cos(2 * TWO_PI * x[..., 1]) + 0.3 * np.sin(3 * TWO_PI * x[..., 0])
+
+
+def _sin_cos_3d(x):
+    return 2 + np.sin(TWO_PI * x[..., 0]) * np.cos(TWO_PI * x[..., 1]) * np.sin(TWO_PI * x[..., 2])
+
+
+def _shell_3d(x):
+    def g(r):
+        return np.exp(-((r - 1.0) ** 2) / (2 * 0.5**2))
+
+    r = np.sqrt(((x - 0.5) ** 2).sum(-1))
+    return g(math.sqrt(3) / 2) - g(r)  # max of the Gaussian term over the cube is at the corners
+
+
+def _octant_3d(x):
+    s = 1.0 / (1.0 + np.exp(-(x - 0.5) / 0.1))
+    sx, sy, sz = s[..., 0], s[..., 1], s[..., 2]
+    out = np.zeros(x.shape[:-1])
+    for level, (a, b, c) in enumerate(
+        [(0, 0, 0), (1, 0, 0), (0, 1, 0), (1, 1, 0), (0, 0, 1), (1, 0, 1), (0, 1, 1), (1, 1, 1)], start=1
+    ):
+        out = out + level * (sx if a else 1 - sx) * (sy if b else 1 - sy) * (sz if c else 1 - sz)
+    return out
+
+
+def _multi_freq_3d(x):
+    return 2 + np.sin(2 * TWO_PI * x[..., 0]) * np.cos(TWO_PI * x[..., 1]) * np.cos(TWO_PI * x[..., 2])
+
+
+def _prism_peak_3d(x):
+    inside = (
+        (x[..., 0] > 0.6) & (x[..., 0] < 1.0) & (x[..., 1] > 0.0) & (x[..., 1] < 0.4)
+        & (x[..., 2] > 0.4) & (x[..., 2] < 0.8)
+    )
+    return np.where(inside, 1.0, _multi_freq_3d(x))
+
+
+DENSITIES: dict[str, DensityField] = {
+    f.name: f
+    for f in [
+        DensityField("sin-cos", 2, _sin_cos, "eqn:sin-cos", "2 + sin(2 pi x) cos(2 pi y)"),
+        DensityField("exp-log", 2, _exp_log, "eqn:exp-log", "2 + sin(2 pi e^x) cos(pi log(2y + 0.1))"),
+        DensityField("rect-peak", 2, _rect_peak, "eqn:rect-peak",
+                     "sin-cos + 2 on the box [0.6, 0.8] x [0.2, 0.4] (our choice of rect)"),
+        DensityField("ring", 2, _ring, "eqn:ring", "exp(-(|x - c| - 1)^2 / (2 * 0.5^2)), c = (0.5, 0.5)"),
+        DensityField("multi-freq", 2, _multi_freq, "exp:res_test_f", "2 + sin(4 pi x) cos(4 pi y) + 0.3 sin(6 pi x)"),
+        DensityField("sin-cos-3d", 3, _sin_cos_3d, "eqn:sin-cos-3d", "2 + sin(2 pi x) cos(2 pi y) sin(2 pi z)"),
+        DensityField("shell-3d", 3, _shell_3d, "eqn:sp-3d", "max(g) - g, g = exp(-(|x - c| - 1)^2 / (2 * 0.5^2))"),
+        DensityField("octant-3d", 3, _octant_3d, "eqn:oct-3d", "smooth blend of levels 1..8 over the octants"),
+        DensityField("prism-peak-3d", 3, _prism_peak_3d, "eqn:peak-3d",
+                     "1 on (0.6,1)x(0,0.4)x(0.4,0.8), else 2 + sin(4 pi x) cos(2 pi y) cos(2 pi z)"),
+        DensityField("multi-freq-3d", 3, _multi_freq_3d, "exp:res_test_f_3d", "2 + sin(4 pi x) cos(2 pi y) cos(2 pi z)"),
+    ]
+}
+
+
+# --------------------------------------------------------------------------------------------------- test maps
+@dataclass(frozen=True)
+class BeltramiMap:
+    """An analytic map of the unit square with its exact Beltrami coefficient.
+
+    Attributes
+    ----------
+    name : str
+    fn : callable
+        ``fn(x)`` with a float64 tensor ``x`` of shape (..., 2) returns the image points, shape (..., 2).
+    label : str
+        The paper's equation label.
+    """
+
+    name: str
+    fn: Callable[[torch.Tensor], torch.Tensor] = field(repr=False)
+    label: str = ""
+    description: str = ""
+    dim: int = 2
+    kind: str = "beltrami"
+
+    def __call__(self, x) -> np.ndarray:
+        """Image of the points ``x`` (..., 2) under the map."""
+        t = torch.as_tensor(np.ascontiguousarray(x, dtype=np.float64))
+        if t.shape[-1] != 2:
+            raise ValueError(f"map {self.name!r} is 2D; points have dimension {t.shape[-1]}")
+        return self.fn(t).numpy()
+
+    def jacobian(self, x) -> np.ndarray:
+        """Exact Jacobian :math:`\\partial f_a / \\partial x_b`, shape (..., 2, 2)."""
+        t = torch.as_tensor(np.ascontiguousarray(x, dtype=np.float64)).clone().requires_grad_(True)
+        f = self.fn(t)
+        rows = [torch.autograd.grad(f[..., a].sum(), t, retain_graph=a == 0)[0] for a in range(2)]
+        return torch.stack(rows, dim=-2).detach().numpy()
+
+    def mu(self, x) -> np.ndarray:
+        """Exact Beltrami coefficient at the points ``x`` (..., 2), complex128 of shape (...)."""
+        return beltrami_from_jacobian(torch.as_tensor(self.jacobian(x))).numpy()
+
+
+def _s(x):
+    return torch.sin(math.pi * x[..., 0]) * torch.sin(math.pi * x[..., 1])
+
+
+def _r2(x):
+    return (x[..., 0] - 0.5) ** 2 + (x[..., 1] - 0.5) ** 2
+
+
+def _t1(a, b):
+    def f(x):
+        X, Y = x[..., 0], x[..., 1]
+        u = X + a * torch.sin(math.pi * X) * torch.sin(TWO_PI * Y)
+        v = Y + b * torch.sin(TWO_PI * X) * torch.sin(math.pi * Y)
+        return torch.stack([u, v], -1)
+
+    return f
+
+
+def _t2(x, a=0.03, b=0.02):
+    X, Y = x[..., 0], x[..., 1]
+    u = X + a * torch.sin(TWO_PI * Y) * torch.sin(math.pi * X) + b * torch.sin(2 * TWO_PI * Y) * torch.sin(TWO_PI * X)
+    v = Y + a * torch.sin(TWO_PI * X) * torch.sin(math.pi * Y) + b * torch.sin(2 * TWO_PI * X) * torch.sin(TWO_PI * Y)
+    return torch.stack([u, v], -1)
+
+
+def _t3(x):
+    X, Y = x[..., 0], x[..., 1]
+    g = torch.exp(-_r2(x) / 0.045)
+    s = _s(x)
+    # implemented as printed: the -0.60 and +0.70 terms add up to a net +0.10 swirl
+    u = X + s * (-0.60 * (Y - 0.5) * g + 0.70 * (Y - 0.5) * g + 0.06 * torch.sin(TWO_PI * Y))
+    v = Y + s * (0.60 * (X - 0.5) * g - 0.70 * (X - 0.5) * g - 0.06 * torch.sin(TWO_PI * X))
+    return torch.stack([u, v], -1)
+
+
+def _t4(x, a=0.55, sigma=0.10):
+    X, Y = x[..., 0], x[..., 1]
+    w = a * _s(x) * torch.exp(-_r2(x) / sigma)
+    return torch.stack([X + w * (X - 0.5), Y + w * (Y - 0.5)], -1)
+
+
+BELTRAMI_MAPS: dict[str, BeltramiMap] = {
+    m.name: m
+    for m in [
+        BeltramiMap("T1", _t1(0.08, 0.08), "eq:test_map_T1", "mild sinusoidal perturbation, a = b = 0.08"),
+        BeltramiMap("T2", _t2, "eq:test_map_T2", "multi-frequency sinusoidal deformation, a = 0.03, b = 0.02"),
+        BeltramiMap("T3", _t3, "eq:test_map_T3", "localized rotational deformation"),
+        BeltramiMap("T4", _t4, "eq:test_map_T4", "boundary-preserving radial expansion, a = 0.55, sigma = 0.10"),
+        BeltramiMap("T1-res", _t1(0.06, 0.04), "eq:test_map_T1", "T1 with a = 0.06, b = 0.04 (resolution test)"),
+    ]
+}
+
+
+def field_names(kind: str | None = None, dim: int | None = None) -> list[str]:
+    """Names of the built-in fields; ``kind`` is ``'density'`` or ``'beltrami'``."""
+    out = []
+    if kind in (None, "density"):
+        out += [k for k, f in DENSITIES.items() if dim is None or f.dim == dim]
+    if kind in (None, "beltrami") and dim in (None, 2):
+        out += list(BELTRAMI_MAPS)
+    return out
+
+
+def get_field(name: str) -> DensityField | BeltramiMap:
+    """Look up a built-in field by name (``ValueError`` listing the valid names if unknown)."""
+    if name in DENSITIES:
+        return DENSITIES[name]
+    if name in BELTRAMI_MAPS:
+        return BELTRAMI_MAPS[name]
+    raise ValueError(f"unknown field {name!r}; known fields: {', '.join(field_names())}")
+
+
+def sample_density(name: str, n: int) -> np.ndarray:
+    """Preprocessed vertex values of the named density on the ``N``-grid, shape ``(N,)*d``."""
+    f = get_field(name)
+    if not isinstance(f, DensityField):
+        raise ValueError(f"field {name!r} is a Beltrami test map, not a density")
+    return f.sample(n)
+
+
+def sample_mu(name: str, n: int | None = None, *, points=None, elements=None) -> np.ndarray:
+    r"""Exact Beltrami coefficient of the named test map at the element centroids, complex128 of shape (m,).
+
+    The elements are those of the ``N``-grid mesh (:func:`rfmap.mesh.grid_mesh`), or ``points``/``elements`` of any
+    triangle mesh; the per-triangle :math:`\mu` is the input of :func:`rfmap.solvers.solve_lbs` and the reference
+    of the ``mean |Δμ|`` metric.
+    """
+    f = get_field(name)
+    if not isinstance(f, BeltramiMap):
+        raise ValueError(f"field {name!r} is a density, not a Beltrami test map")
+    if points is None:
+        mesh = grid_mesh(n, 2)
+        points, elements = mesh.points, mesh.elements
+    return f.mu(element_centroids(points, elements))

@@ -1,0 +1,320 @@
+r"""Random training fields (paper Sec. 4.1): densities, Beltrami coefficients and boundary-fixing maps.
+
+A smooth superposition of sinusoidal modes :math:`\sum_k A_k \prod_i \mathrm{trig}(2\pi f_{k,i} x_i + \varphi_{k,i})`
+with log-uniform frequencies, plus sparse non-smooth parts (steps, noise, compact high-frequency patches).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from .geometry import beltrami_from_jacobian
+from .mesh import check_dim, grid_points
+
+__all__ = [
+    "RandomDensity",
+    "RandomDensityConfig",
+    "random_density",
+    "RandomMap",
+    "RandomBeltramiConfig",
+    "random_boundary_map",
+    "RandomBeltrami",
+    "random_beltrami",
+]
+
+TWO_PI = 2.0 * math.pi
+
+
+def _log_uniform(rng: np.random.Generator, lo: float, hi: float, size) -> np.ndarray:
+    return np.exp(rng.uniform(math.log(lo), math.log(hi), size=size))
+
+
+@dataclass(frozen=True)
+class RandomDensityConfig:
+    """Ranges of the random training densities (paper Sec. 5.2; 3D: modes [4, 40], frequencies [0.1, 5]).
+
+    Attributes
+    ----------
+    dim : int
+    modes : (int, int)
+        Number of sinusoidal modes, uniform in this closed range.
+    freq : (float, float)
+        Log-uniform range of every frequency :math:`f_{k,i}`.
+    contrast : (float, float)
+        Log-uniform range of the raw field's peak-to-peak value before the shift (the shifted field then spans
+        ``[0.1, 0.1 + contrast]``; the test fields span about 2).
+    p_step, p_patch, p_noise : float
+        Probabilities of adding a step (box indicator), a compact high-frequency patch, and vertex noise.
+    """
+
+    dim: int = 2
+    modes: tuple[int, int] = (1, 50)
+    freq: tuple[float, float] = (0.1, 8.0)
+    contrast: tuple[float, float] = (0.3, 4.0)
+    p_step: float = 0.3
+    p_patch: float = 0.2
+    p_noise: float = 0.1
+    noise: float = 0.02
+
+    @classmethod
+    def for_dim(cls, dim: int, **kw) -> "RandomDensityConfig":
+        if check_dim(dim) == 3:
+            kw = {"modes": (4, 40), "freq": (0.1, 5.0), **kw}
+        return cls(dim=dim, **kw)
+
+
+class RandomDensity:
+    r"""One random density :math:`p = s\,(p_{\text{smooth}} + p_{\text{nonsmooth}})` (paper Sec. 4.1).
+
+    The smooth part is :math:`\sum_k A_k \sin(2\pi f_{k,1}x_1+\varphi_{k,1})\cos(2\pi f_{k,2}x_2+\varphi_{k,2})
+    [\sin(2\pi f_{k,3} x_3 + \varphi_{k,3})]` with :math:`A_k \in [-1,1]`; the non-smooth part holds optional box
+    steps and Gaussian-windowed high-frequency patches; the scale :math:`s` sets a random peak-to-peak contrast.
+    Call it on points of shape (P, d) to get raw values (P,); :func:`preprocess_density` does shift and mass.
+    """
+
+    def __init__(self, rng: np.random.Generator, cfg: RandomDensityConfig = RandomDensityConfig()):
+        d = check_dim(cfg.dim)
+        self.dim = d
+        k = int(rng.integers(cfg.modes[0], cfg.modes[1] + 1))
+        self.amp = rng.uniform(-1, 1, size=k)
+        self.freq = _log_uniform(rng, cfg.freq[0], cfg.freq[1], (k, d))
+        self.phase = rng.uniform(0, TWO_PI, size=(k, d))
+        self.steps = []
+        if rng.random() < cfg.p_step:
+            for _ in range(int(rng.integers(1, 3))):
+                lo = rng.uniform(0, 0.8, size=d)
+                hi = lo + rng.uniform(0.1, 0.4, size=d)
+                self.steps.append((lo, hi, rng.uniform(-1, 1) * 0.5 * max(1.0, math.sqrt(k))))
+        self.patches = []
+        if rng.random() < cfg.p_patch:
+            c = rng.uniform(0.15, 0.85, size=d)
+            self.patches.append((c, rng.uniform(0.04, 0.1), rng.uniform(10, 20, size=d),
+                                 rng.uniform(0, TWO_PI, size=d), 0.5 * max(1.0, math.sqrt(k))))
+        self.noise = cfg.noise if rng.random() < cfg.p_noise else 0.0
+        self.contrast = float(_log_uniform(rng, *cfg.contrast, ()))
+        self._rng = np.random.default_rng(rng.integers(2**63))
+        self.scale, noise, self.noise = 1.0, self.noise, 0.0
+        probe = self.on_grid(33)
+        self.noise = noise
+        span = float(probe.max() - probe.min())
+        self.scale = self.contrast / span if span > 1e-12 else 1.0
+
+    def _raw(self, x: np.ndarray) -> np.ndarray:
+        arg = TWO_PI * x[:, None, :] * self.freq[None] + self.phase[None]  # (P, K, d)
+        t = np.sin(arg)
+        if self.dim >= 2:
+            t[..., 1] = np.cos(arg[..., 1])
+        return (self.amp[None] * t.prod(-1)).sum(-1) + self._nonsmooth(x)
+
+    def _nonsmooth(self, x: np.ndarray) -> np.ndarray:
+        out = np.zeros(x.shape[0])
+        for lo, hi, h in self.steps:
+            out = out + h * ((x >= lo) & (x <= hi)).all(-1)
+        for c, width, f, ph, a in self.patches:
+            w = np.exp(-((x - c) ** 2).sum(-1) / (2 * width**2))
+            out = out + a * w * np.sin(TWO_PI * (x * f).sum(-1) + ph[0])
+        return out
+
+    def on_grid(self, n: int) -> np.ndarray:
+        """Raw values on the regular ``N``-grid, flat shape (N**d,), by separable evaluation of the modes."""
+        t = np.linspace(0.0, 1.0, n)
+        arg = TWO_PI * self.freq[:, :, None] * t[None, None, :] + self.phase[:, :, None]  # (K, d, N)
+        tab = np.sin(arg)
+        tab[:, 1] = np.cos(arg[:, 1])
+        if self.dim == 2:
+            smooth = np.einsum("k,ki,kj->ij", self.amp, tab[:, 0], tab[:, 1])
+        else:
+            smooth = np.einsum("k,ki,kj,kl->ijl", self.amp, tab[:, 0], tab[:, 1], tab[:, 2])
+        out = smooth.reshape(-1) + self._nonsmooth(grid_points(n, self.dim))
+        out = self.scale * out
+        if self.noise:
+            out = out + self.noise * self.contrast * self._rng.standard_normal(out.shape)
+        return out
+
+    def __call__(self, x) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        if x.ndim != 2 or x.shape[1] != self.dim:
+            raise ValueError(f"points must have shape (P, {self.dim}), got {x.shape}")
+        out = self.scale * self._raw(x)
+        if self.noise:
+            out = out + self.noise * self.contrast * self._rng.standard_normal(out.shape)
+        return out
+
+
+def random_density(rng: np.random.Generator, cfg: RandomDensityConfig | None = None, dim: int = 2) -> RandomDensity:
+    """Draw one random training density (see :class:`RandomDensity`)."""
+    return RandomDensity(rng, cfg or RandomDensityConfig.for_dim(dim))
+
+
+@dataclass(frozen=True)
+class RandomBeltramiConfig:
+    """Ranges of the random Beltrami training fields (paper Sec. 5.1).
+
+    Attributes
+    ----------
+    modes : (int, int)
+        Number of modes, uniform.
+    freq : (float, float)
+        Log-uniform frequency range.
+    k : float
+        Bound :math:`\\|\\mu\\|_\\infty \\le k < 1`.
+    sup : (float, float)
+        Range of the drawn sup-norm level (uniform), capped by ``k``.
+    """
+
+    modes: tuple[int, int] = (1, 50)
+    freq: tuple[float, float] = (0.1, 8.0)
+    k: float = 0.9
+    sup: tuple[float, float] = (0.05, 0.9)
+
+
+class RandomBeltrami:
+    r"""A random Beltrami coefficient as in paper Eq. (train_beltrami).
+
+    :math:`\mu = \tau(x)\, s \sum_i A_i \sin(2\pi f_{x,i} x + \phi_{x,i}) \cos(2\pi f_{y,i} y + \phi_{y,i})` with
+    complex amplitudes :math:`A_i = |A_i| e^{i\theta_i}`, :math:`|A_i| \le 1`, a boundary taper
+    :math:`\tau = \min(1, \mathrm{dist}(x, \partial\Omega)/0.1)` so that :math:`\mu = 0` on the boundary, and
+    a scale :math:`s` making :math:`\|\mu\|_\infty` a random level :math:`\le k`.
+    """
+
+    def __init__(self, rng: np.random.Generator, cfg: RandomBeltramiConfig = RandomBeltramiConfig()):
+        if not 0 < cfg.k < 1:
+            raise ValueError(f"the bound k must lie in (0, 1), got {cfg.k}")
+        n = int(rng.integers(cfg.modes[0], cfg.modes[1] + 1))
+        self.amp = rng.uniform(0, 1, n) * np.exp(1j * rng.uniform(0, TWO_PI, n))
+        self.freq = _log_uniform(rng, cfg.freq[0], cfg.freq[1], (n, 2))
+        self.phase = rng.uniform(0, TWO_PI, (n, 2))
+        probe = self._raw(grid_points(65, 2))
+        level = min(cfg.k, rng.uniform(*cfg.sup))
+        peak = np.abs(probe).max()
+        self.scale = level / peak if peak > 0 else 0.0
+        self.k = float(cfg.k)
+
+    def _raw(self, x):
+        arg = TWO_PI * x[:, None, :] * self.freq[None] + self.phase[None]
+        base = (self.amp[None] * np.sin(arg[..., 0]) * np.cos(arg[..., 1])).sum(-1)
+        dist = np.minimum(x, 1 - x).min(-1)
+        return base * np.clip(dist / 0.1, 0, 1)
+
+    def __call__(self, x) -> np.ndarray:
+        """Complex :math:`\\mu` at points (P, 2)."""
+        mu = self.scale * self._raw(np.asarray(x, dtype=np.float64))
+        # the scale is set on a probe grid; between probe points |mu| can exceed the level by a few per cent,
+        # so enforce the bound k exactly by a radial clip (inactive unless the level is within that of k)
+        a = np.abs(mu)
+        over = a > self.k
+        if over.any():
+            mu = np.where(over, mu * (self.k / np.maximum(a, 1e-300)), mu)
+        return mu
+
+
+def random_beltrami(rng: np.random.Generator, cfg: RandomBeltramiConfig | None = None) -> RandomBeltrami:
+    """Draw one random Beltrami coefficient (see :class:`RandomBeltrami`)."""
+    return RandomBeltrami(rng, cfg or RandomBeltramiConfig())
+
+
+class RandomMap:
+    r"""A random smooth map of the unit square that is the identity on the boundary, with its exact :math:`\mu`.
+
+    :math:`f(x) = x + c\, b(x) \sum_i A_i \sin(2\pi f_{x,i}x + \phi_{x,i}) \cos(2\pi f_{y,i}y + \phi_{y,i})`
+    with the bump :math:`b = 16\,x(1-x)\,y(1-y)` (one sum per component, paper-style modes), scaled by :math:`c`
+    so that :math:`\|\mu\|_\infty` equals a random level :math:`\le k` with :math:`\det J > 0`.  Its exact
+    :math:`\mu` (closed-form derivatives) is a Beltrami training input whose solution is known to be a
+    homeomorphism fixing the boundary, unlike a tapered random :math:`\mu`.
+    """
+
+    dim = 2
+    kind = "beltrami"
+
+    def __init__(self, rng: np.random.Generator, cfg: RandomBeltramiConfig = RandomBeltramiConfig()):
+        if not 0 < cfg.k < 1:
+            raise ValueError(f"the bound k must lie in (0, 1), got {cfg.k}")
+        n = int(rng.integers(cfg.modes[0], cfg.modes[1] + 1))
+        self.amp = rng.uniform(-1, 1, (2, n))
+        self.freq = TWO_PI * _log_uniform(rng, cfg.freq[0], cfg.freq[1], (2, n, 2))  # angular
+        self.phase = rng.uniform(0, TWO_PI, (2, n, 2))
+        self.scale = 1.0
+        level = min(cfg.k, rng.uniform(*cfg.sup))
+        pts = grid_points(65, 2)
+        J0 = self.jacobian(pts) - np.eye(2)
+        self.scale = self._fit_scale(J0, level)
+        # |mu| can peak between probe points (up to a few per cent above the probe maximum): add fine local
+        # grids around the largest values, a quarter of the previous spacing per round, and fit the scale again
+        spacing = 1.0 / 64
+        for _ in range(3):
+            a0, b0 = self._wirtinger0(J0)
+            top = pts[np.argsort(b0 / np.abs(1 + self.scale * a0))[-16:]]
+            t = np.linspace(-spacing, spacing, 9)
+            patch = np.stack(np.meshgrid(t, t, indexing="ij"), -1).reshape(1, -1, 2)
+            local = np.clip(top[:, None, :] + patch, 0.0, 1.0).reshape(-1, 2)
+            scale, self.scale = self.scale, 1.0
+            J0 = np.concatenate([J0, self.jacobian(local) - np.eye(2)])
+            self.scale = scale
+            pts = np.concatenate([pts, local])
+            spacing /= 4
+            self.scale = self._fit_scale(J0, level)
+
+    @staticmethod
+    def _wirtinger0(J0):
+        # with J = I + c J0: f_z = 1 + c a0 and f_zbar = c b0, so |mu| = c |b0| / |1 + c a0|; det J > 0 iff |mu| < 1
+        a0 = 0.5 * ((J0[..., 0, 0] + J0[..., 1, 1]) + 1j * (J0[..., 1, 0] - J0[..., 0, 1]))
+        b0 = np.abs(0.5 * ((J0[..., 0, 0] - J0[..., 1, 1]) + 1j * (J0[..., 1, 0] + J0[..., 0, 1])))
+        return a0, b0
+
+    @classmethod
+    def _fit_scale(cls, J0, level):
+        # sup|mu| of x + c D grows with c: bisection for sup|mu| = level
+        a0, b0 = cls._wirtinger0(J0)
+
+        def sup_mu(c):
+            fz = np.abs(1 + c * a0)
+            return np.inf if (fz <= c * b0).any() else float((c * b0 / fz).max())
+
+        lo, hi = 0.0, 1.0
+        while sup_mu(hi) < level and hi < 1e6:
+            hi *= 2
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if sup_mu(mid) < level:
+                lo = mid
+            else:
+                hi = mid
+        return lo
+
+    def _parts(self, x):
+        x = np.asarray(x, dtype=np.float64)
+        X, Y = x[..., 0], x[..., 1]
+        ax = self.freq[..., 0] * X[..., None, None] + self.phase[..., 0]  # (..., 2, n)
+        ay = self.freq[..., 1] * Y[..., None, None] + self.phase[..., 1]
+        sx, cx, sy, cy = np.sin(ax), np.cos(ax), np.sin(ay), np.cos(ay)
+        M = (self.amp * sx * cy).sum(-1)  # (..., 2)
+        Mx = (self.amp * self.freq[..., 0] * cx * cy).sum(-1)
+        My = (-self.amp * self.freq[..., 1] * sx * sy).sum(-1)
+        b = 16 * X * (1 - X) * Y * (1 - Y)
+        bx = 16 * (1 - 2 * X) * Y * (1 - Y)
+        by = 16 * X * (1 - X) * (1 - 2 * Y)
+        return b, bx, by, M, Mx, My
+
+    def __call__(self, x) -> np.ndarray:
+        """Image of the points ``x`` (..., 2)."""
+        b, _, _, M, _, _ = self._parts(x)
+        return np.asarray(x, dtype=np.float64) + self.scale * b[..., None] * M
+
+    def jacobian(self, x) -> np.ndarray:
+        """Exact Jacobian, shape (..., 2, 2)."""
+        b, bx, by, M, Mx, My = self._parts(x)
+        dx = self.scale * (bx[..., None] * M + b[..., None] * Mx)  # d f_c / dx, (..., 2)
+        dy = self.scale * (by[..., None] * M + b[..., None] * My)
+        return np.stack([dx, dy], -1) + np.eye(2)
+
+    def mu(self, x) -> np.ndarray:
+        """Exact Beltrami coefficient, complex (...)."""
+        return beltrami_from_jacobian(torch.as_tensor(self.jacobian(x))).numpy()
+
+
+def random_boundary_map(rng: np.random.Generator, cfg: RandomBeltramiConfig | None = None) -> RandomMap:
+    """Draw one random boundary-fixing map with its exact Beltrami coefficient (see :class:`RandomMap`)."""
+    return RandomMap(rng, cfg or RandomBeltramiConfig())
