@@ -14,8 +14,8 @@ from rfmap.geometry import jacobian_determinants
 from rfmap.mesh import element_measures
 from rfmap.metrics import compute_metrics
 from rfmap.nn import MultiResUNet
-from rfmap.refine import golden_section, refine_alpha
-from rfmap.surrogate import Surrogate, density_objective
+from rfmap.refine import density_objective, golden_section, refine_alpha
+from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
 
 

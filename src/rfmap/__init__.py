@@ -10,8 +10,8 @@ Quick start::
     print(res.metrics())
     sur = Surrogate.pretrained(models()[0])               # a shipped neural surrogate
 """
-__version__ = "0.1.0"
-
-from .surrogate import Surrogate, load_or_train, models  # noqa: E402
+from ._version import __version__
+from .pretrained import load_or_train
+from .surrogate import Surrogate, models
 
 __all__ = ["Surrogate", "models", "load_or_train", "__version__"]

@@ -34,6 +34,7 @@ __all__ = [
     "cube_tetrahedra",
     "element_measures",
     "element_centroids",
+    "triangulate",
     "vertex_weights",
     "grid_vertex_weights",
     "interpolate",
@@ -162,6 +163,38 @@ def element_measures(points, elements):
 def element_centroids(points, elements) -> np.ndarray:
     """Centroids of the elements, shape (m, d): the mean of their vertices."""
     return np.asarray(points)[np.asarray(elements)].mean(1)
+
+
+def triangulate(points, *, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
+    r"""A simplicial mesh of scattered points of the unit square or cube: Delaunay, positively oriented.
+
+    Elements of measure :math:`\le 10^{-14}` (slivers of the Delaunay triangulation) are dropped.
+
+    Parameters
+    ----------
+    points : array, shape (P, d)
+        Points in :math:`[0, 1]^d` (up to ``tol``).
+
+    Returns
+    -------
+    points : ndarray, float64, shape (P, d)
+    elements : ndarray, int64, shape (m, d+1)
+    """
+    from scipy.spatial import Delaunay
+
+    ref = np.asarray(points, dtype=np.float64)
+    if ref.ndim != 2 or ref.shape[1] not in (2, 3):
+        raise ValueError(f"query points must have shape (P, 2) or (P, 3), got {ref.shape}")
+    d = ref.shape[1]
+    if not np.isfinite(ref).all():
+        raise ValueError("query points contain NaN or infinite values")
+    if ref.min() < -tol or ref.max() > 1 + tol:
+        raise ValueError(f"query points must lie in the unit {'square' if d == 2 else 'cube'}; got "
+                         f"coordinates in [{ref.min():.4g}, {ref.max():.4g}]")
+    elements = Delaunay(ref).simplices.astype(np.int64)
+    vol = signed_measures(torch.as_tensor(ref), torch.as_tensor(elements)).numpy()
+    elements[vol < 0] = elements[vol < 0][:, [1, 0] + list(range(2, d + 1))]
+    return ref, elements[np.abs(vol) > 1e-14]
 
 
 def vertex_weights(points: np.ndarray, elements: np.ndarray) -> np.ndarray:

@@ -4,7 +4,9 @@ The refined map is :math:`u_\alpha = x + \mathcal{B}(x) \odot (\alpha \odot \psi
 condition for every :math:`\alpha`.  :math:`\alpha^* = \arg\min_\alpha \mathcal{J}(u_\alpha)` with
 :math:`\mathcal{J} = \mathcal{L}_{\text{geom}} + \lambda \mathcal{P}` is found by derivative-free alternating
 golden-section searches over the components; the result never has a larger :math:`\mathcal{J}` than
-:math:`\alpha = (1, \dots, 1)`.
+:math:`\alpha = (1, \dots, 1)`.  :func:`density_objective` and :func:`beltrami_objective` build
+:math:`\mathcal{J}` for the two tasks; :class:`RefineConfig` holds the search interval, :math:`\lambda` and the
+tolerance used by :meth:`rfmap.Surrogate.map`.
 """
 from __future__ import annotations
 
@@ -13,8 +15,37 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+import torch
 
-__all__ = ["golden_section", "refine_alpha", "RefineResult"]
+from .geometry import beltrami_coefficient, grid_signed_measures, jacobian_determinants, signed_measures
+from .metrics import density_std, element_population
+from .nn.model import apply_displacement
+
+__all__ = ["golden_section", "refine_alpha", "RefineResult", "RefineConfig", "REFINE", "density_objective",
+           "beltrami_objective"]
+
+
+@dataclass(frozen=True)
+class RefineConfig:
+    r"""Settings of weight refinement.
+
+    Attributes
+    ----------
+    bounds : (float, float)
+        Search interval of every component of :math:`\alpha`.
+    flip_weight : float
+        :math:`\lambda`, the weight of the flipped-element fraction :math:`\mathcal{P}` in :math:`\mathcal{J}`.
+    tol : float
+        Interval length at which each golden-section search stops.
+    """
+
+    bounds: tuple[float, float] = (0.1, 3.0)
+    flip_weight: float = 10.0
+    tol: float = 1e-2
+
+
+#: The refinement settings of :meth:`rfmap.Surrogate.map`.
+REFINE = RefineConfig()
 
 _INV_PHI = (math.sqrt(5) - 1) / 2
 
@@ -56,7 +87,7 @@ class RefineResult:
     history: list = field(default_factory=list)
 
 
-def refine_alpha(objective: Callable[[np.ndarray], float], dim: int, *, bounds: tuple[float, float] = (0.1, 3.0),
+def refine_alpha(objective: Callable[[np.ndarray], float], dim: int, *, bounds: tuple[float, float] = REFINE.bounds,
                  sweeps: int = 2, tol: float = 1e-3) -> RefineResult:
     r"""Alternating golden-section search for :math:`\alpha^* = \arg\min \mathcal{J}(\alpha)` over
     :math:`\alpha \in [\text{lo}, \text{hi}]^d`.
@@ -99,3 +130,52 @@ def refine_alpha(objective: Callable[[np.ndarray], float], dim: int, *, bounds: 
                 alpha[i], best = t, jt
                 history.append((alpha.copy(), best))
     return RefineResult(alpha=alpha, objective=best, objective_start=j0, evaluations=count, history=history)
+
+
+def density_objective(ref, psi, elements, density, boundary, flip_weight: float = REFINE.flip_weight,
+                      grid_n: int | None = None):
+    r""":math:`\mathcal{J}(\alpha) = \mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m` for
+    weight refinement of density maps.
+
+    Parameters
+    ----------
+    ref, psi : Tensor, float64, shape (n, d)
+        Reference vertices and the network's displacement at them.
+    elements : LongTensor, shape (m, d+1)
+    density : array, shape (n,)
+        Vertex densities (unit mass).
+    boundary : str
+        The boundary condition of :func:`rfmap.nn.model.apply_displacement`.
+    flip_weight : float
+        :math:`\lambda`.
+    grid_n : int, optional
+        Set when ``ref``/``elements`` are :func:`rfmap.mesh.grid_mesh` ``(N, d)``; the measures are then computed
+        from strided views (:func:`rfmap.geometry.grid_signed_measures`, same values, several times faster on 3D
+        grids).
+    """
+    pop = element_population(ref, elements, np.asarray(density, dtype=np.float64))
+
+    def measures(x):
+        return grid_signed_measures(x[None], grid_n)[0] if grid_n else signed_measures(x, elements)
+
+    def J(alpha):
+        mapped = apply_displacement(ref, psi, boundary, torch.as_tensor(alpha))
+        meas = measures(mapped)
+        flipped = float((meas <= 0).double().mean())
+        return density_std(pop, meas) + flip_weight * flipped
+
+    return J
+
+
+def beltrami_objective(ref, psi, elements, mu_in, boundary, flip_weight: float = REFINE.flip_weight):
+    r""":math:`\mathcal{J}(\alpha) = \mathrm{mean}|\mu(u_\alpha) - \mu_{\text{in}}| + \lambda\,\#\text{flipped}/m`
+    for weight refinement of Beltrami reconstructions (``mu_in``: the input coefficient per triangle, shape (m,))."""
+    mu_in_t = torch.as_tensor(np.asarray(mu_in))
+
+    def J(alpha):
+        mapped = apply_displacement(ref, psi, boundary, torch.as_tensor(alpha))
+        det = jacobian_determinants(ref, mapped, elements)
+        mu = beltrami_coefficient(ref, mapped, elements)
+        return float((mu - mu_in_t).abs().mean()) + flip_weight * float((det <= 0).double().mean())
+
+    return J

@@ -21,18 +21,16 @@ from typing import Any, Callable, Sequence
 import numpy as np
 import torch
 
-from . import __version__
-from .fields import (BeltramiMap, DensityField, check_density, check_mu, get_field, preprocess_density,
-                     vertex_weights)
-from .geometry import beltrami_coefficient, jacobian_determinants
-from .mesh import check_n, grid_mesh, grid_points, interpolate
-from .metrics import compute_metrics
+from ._version import __version__
+from .inputs import check_density, check_mu, preprocess_density, unit_mass
+from .mesh import check_n, element_centroids, grid_mesh, grid_points, interpolate, triangulate, vertex_weights
 from .nn.model import MultiResUNet, apply_displacement
-from .refine import RefineResult, refine_alpha
+from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
+from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
 from .result import MapResult
 from .tasks import TaskSpec, encode
 
-__all__ = ["Surrogate", "models", "load_or_train", "WEIGHTS_DIR", "density_objective", "beltrami_objective"]
+__all__ = ["Surrogate", "models", "WEIGHTS_DIR"]
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"
 
@@ -167,7 +165,7 @@ class Surrogate:
             if pts.ndim != 2 or pts.shape[1] != d or vals.shape[0] != pts.shape[0]:
                 raise ValueError(f"scattered samples must be (points (P, {d}), values (P,)); got {pts.shape}, "
                                  f"{vals.shape}")
-            n = check_n(n or (51 if d == 2 else 48))
+            n = check_n(n or PAPER_N[d])
             from scipy.interpolate import griddata
 
             g = grid_points(n, d)
@@ -177,7 +175,7 @@ class Surrogate:
             return self._finish(lin.reshape((n,) * d), None, preprocess), n
         if callable(field):
             fn = field.mu if isinstance(field, BeltramiMap) else field
-            n = check_n(n or (51 if d == 2 else 48))
+            n = check_n(n or PAPER_N[d])
             vals = np.asarray(fn(grid_points(n, d)))
             return self._finish(vals.reshape((n,) * d), fn, preprocess), n
         arr = np.asarray(field)
@@ -200,11 +198,7 @@ class Surrogate:
 
     @staticmethod
     def _unit_mass(grid, preprocess):
-        if preprocess:
-            return preprocess_density(grid)
-        g = check_density(grid)
-        w = vertex_weights(grid_points(g.shape[0], g.ndim), grid_mesh(g.shape[0], g.ndim).elements)
-        return g / float((w.reshape(g.shape) * g).sum())
+        return preprocess_density(grid) if preprocess else unit_mass(check_density(grid))
 
     def _work_grid(self, inp: _Input, n_work: int) -> np.ndarray:
         g = inp.grid
@@ -253,7 +247,7 @@ class Surrogate:
         return self.model(x)
 
     def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
-            alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=(0.1, 3.0)) -> MapResult:
+            alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None) -> MapResult:
         """Map one field.
 
         Parameters
@@ -275,6 +269,8 @@ class Surrogate:
         preprocess : bool
             Apply the paper's density preprocessing (shift to minimum 0.1, unit mass) to raw values; with
             ``False`` a positive density is only scaled to unit mass.
+        refine_bounds : (float, float), optional
+            Search interval of every component of :math:`\\alpha` (default :data:`rfmap.refine.REFINE`).
 
         Returns
         -------
@@ -296,11 +292,12 @@ class Surrogate:
         psi = self.displacement(np.stack([self._work_grid(i, nw) for i, _ in inps]))
         dt = (time.perf_counter() - t0) / len(inps)
         return [self._map_one(i, nn_, kw.get("points"), kw.get("refine", False), nw, kw.get("alpha"),
-                              kw.get("refine_bounds", (0.1, 3.0)), psi=psi[k:k + 1], net_time=dt)
+                              kw.get("refine_bounds"), psi=psi[k:k + 1], net_time=dt)
                 for k, (i, _) in enumerate(inps)]
 
     def _map_one(self, inp: _Input, n: int, points, refine, work_n, alpha, bounds, psi=None, net_time=None):
-        d = self.spec.dim
+        """Evaluate the network on the working grid (unless ``psi`` is given), resample its displacement and the
+        input field on the output mesh, and apply the stretching vector (refined or given)."""
         nw = int(work_n or self.work_n(n))
         if nw < self.model.min_size:
             raise ValueError(f"working grid N={nw} is smaller than this model accepts ({self.model.min_size})")
@@ -308,67 +305,19 @@ class Surrogate:
         if psi is None:
             psi = self.displacement(self._work_grid(inp, nw)[None])
         t_net = time.perf_counter() - t0 if net_time is None else net_time
-        # query points and mesh
-        if points is None:
-            mesh = grid_mesh(n, d)
-            ref, elements = mesh.points, mesh.elements
-        else:
-            ref = np.asarray(points, dtype=np.float64)
-            if ref.ndim != 2 or ref.shape[1] != d:
-                raise ValueError(f"query points must have shape (P, {d}), got {ref.shape}")
-            if not np.isfinite(ref).all():
-                raise ValueError("query points contain NaN or infinite values")
-            if ref.min() < -1e-9 or ref.max() > 1 + 1e-9:
-                raise ValueError(f"query points must lie in the unit {'square' if d == 2 else 'cube'}; got "
-                                 f"coordinates in [{ref.min():.4g}, {ref.max():.4g}]")
-            from scipy.spatial import Delaunay
-
-            elements = Delaunay(ref).simplices.astype(np.int64)
-            from .geometry import signed_measures
-
-            vol = signed_measures(torch.as_tensor(ref), torch.as_tensor(elements)).numpy()
-            elements[vol < 0] = elements[vol < 0][:, [1, 0] + list(range(2, d + 1))]
-            keep = np.abs(vol) > 1e-14
-            elements = elements[keep]
+        ref, elements = self._output_mesh(n, points)
         t1 = time.perf_counter()
-        ref_t = torch.as_tensor(ref, dtype=torch.float32)
-        if points is None and n == nw:
-            psi_q = psi[0].reshape(d, -1).T
-        else:
-            psi_q = interpolate(psi, ref_t)[0]
-        ref64, psi64 = torch.as_tensor(ref, dtype=torch.float64), psi_q.double()
+        ref64 = torch.as_tensor(ref, dtype=torch.float64)
+        psi64 = self._displacement_at(psi, ref, n if points is None and n == nw else None)
         mapped = apply_displacement(ref64, psi64, self.spec.boundary)
         t_map = t_net + time.perf_counter() - t1
-        # the field on the output mesh
-        el_t = torch.as_tensor(elements)
-        if self.spec.kind == "density":
-            if inp.fn is not None:
-                w = vertex_weights(ref, elements)
-                raw = np.asarray(inp.fn(ref), dtype=np.float64)
-                fvals = preprocess_density(raw, weights=w)
-            else:
-                src = torch.as_tensor(inp.grid)[None, None]
-                fvals = interpolate(src, torch.as_tensor(ref))[0, :, 0].numpy()
-                fvals = fvals / float((vertex_weights(ref, elements) * fvals).sum())
-        else:
-            cen = ref[elements].mean(1)
-            if inp.fn is not None:
-                fvals = np.asarray(inp.fn(cen))
-            else:
-                g = inp.grid
-                src = torch.as_tensor(np.stack([g.real, g.imag]))[None]
-                v = interpolate(src, torch.as_tensor(cen))[0].numpy()
-                fvals = v[:, 0] + 1j * v[:, 1]
+        fvals = self._field_on(inp, ref, elements)
         info: dict[str, Any] = {"work_n": nw, "network_time": t_net}
-        a = np.ones(d) if alpha is None else np.asarray(alpha, dtype=np.float64)
+        a = np.ones(self.spec.dim) if alpha is None else np.asarray(alpha, dtype=np.float64)
         if refine:
-            if self.spec.kind == "density":
-                obj = density_objective(ref64, psi64, el_t, fvals, self.spec.boundary,
-                                        grid_n=n if points is None else None)
-            else:
-                obj = beltrami_objective(ref64, psi64, el_t, fvals, self.spec.boundary)
+            grid_n = n if points is None else None
             t2 = time.perf_counter()
-            rr: RefineResult = refine_alpha(obj, d, bounds=bounds, tol=1e-2)
+            rr = self._refine(ref64, psi64, torch.as_tensor(elements), fvals, grid_n, bounds)
             t_map += time.perf_counter() - t2
             a = rr.alpha
             info.update(refine_objective_start=rr.objective_start, refine_objective=rr.objective,
@@ -379,66 +328,48 @@ class Surrogate:
         return MapResult(ref_points=ref, mapped_points=mapped.numpy(), elements=elements, field=fvals,
                          kind=self.spec.kind, time=t_map, info=info)
 
+    def _output_mesh(self, n: int, points) -> tuple[np.ndarray, np.ndarray]:
+        """The output mesh: the ``N``-grid, or a Delaunay triangulation of the query points."""
+        d = self.spec.dim
+        if points is None:
+            mesh = grid_mesh(n, d)
+            return mesh.points, mesh.elements
+        ref = np.asarray(points, dtype=np.float64)
+        if ref.ndim != 2 or ref.shape[1] != d:
+            raise ValueError(f"query points must have shape (P, {d}), got {ref.shape}")
+        return triangulate(ref)
 
-def density_objective(ref, psi, elements, density, boundary, flip_weight: float = 10.0, grid_n: int | None = None):
-    r""":math:`\mathcal{J}(\alpha) = \mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m` for
-    weight refinement of density maps.
+    @staticmethod
+    def _displacement_at(psi: torch.Tensor, ref: np.ndarray, grid_n: int | None) -> torch.Tensor:
+        r"""The displacement :math:`\psi` (1, d, *grid) at the output vertices, float64 (P, d): read off the
+        working grid when the output is that grid (``grid_n``), else interpolated multilinearly."""
+        if grid_n is not None:
+            psi_q = psi[0].reshape(psi.shape[1], -1).T
+        else:
+            psi_q = interpolate(psi, torch.as_tensor(ref, dtype=torch.float32))[0]
+        return psi_q.double()
 
-    ``grid_n``: set when ``ref``/``elements`` are :func:`rfmap.mesh.grid_mesh` ``(N, d)``; the measures are then
-    computed from strided views (:func:`rfmap.geometry.grid_signed_measures`, same values, several times faster
-    on 3D grids)."""
-    from .geometry import grid_signed_measures, signed_measures
-    from .metrics import density_std, element_population
+    def _field_on(self, inp: _Input, ref: np.ndarray, elements: np.ndarray) -> np.ndarray:
+        r"""The input field on the output mesh: unit-mass vertex densities (n,), or :math:`\mu` per element (m,)
+        at the centroids; from the exact evaluator when there is one, else interpolated from the input grid."""
+        if self.spec.kind == "density":
+            w = vertex_weights(ref, elements)
+            if inp.fn is not None:
+                return preprocess_density(np.asarray(inp.fn(ref), dtype=np.float64), weights=w)
+            src = torch.as_tensor(inp.grid)[None, None]
+            return unit_mass(interpolate(src, torch.as_tensor(ref))[0, :, 0].numpy(), w)
+        cen = element_centroids(ref, elements)
+        if inp.fn is not None:
+            return np.asarray(inp.fn(cen))
+        g = inp.grid
+        v = interpolate(torch.as_tensor(np.stack([g.real, g.imag]))[None], torch.as_tensor(cen))[0].numpy()
+        return v[:, 0] + 1j * v[:, 1]
 
-    pop = element_population(ref, elements, np.asarray(density, dtype=np.float64))
-
-    def measures(x):
-        return grid_signed_measures(x[None], grid_n)[0] if grid_n else signed_measures(x, elements)
-
-    def J(alpha):
-        mapped = apply_displacement(ref, psi, boundary, torch.as_tensor(alpha))
-        meas = measures(mapped)
-        flipped = float((meas <= 0).double().mean())
-        return density_std(pop, meas) + flip_weight * flipped
-
-    return J
-
-
-def beltrami_objective(ref, psi, elements, mu_in, boundary, flip_weight: float = 10.0):
-    r""":math:`\mathcal{J}(\alpha) = \mathrm{mean}|\mu(u_\alpha) - \mu_{\text{in}}| + \lambda\,\#\text{flipped}/m`
-    for weight refinement of Beltrami reconstructions."""
-    mu_in_t = torch.as_tensor(np.asarray(mu_in))
-
-    def J(alpha):
-        mapped = apply_displacement(ref, psi, boundary, torch.as_tensor(alpha))
-        det = jacobian_determinants(ref, mapped, elements)
-        mu = beltrami_coefficient(ref, mapped, elements)
-        return float((mu - mu_in_t).abs().mean()) + flip_weight * float((det <= 0).double().mean())
-
-    return J
-
-
-def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progress: bool = False) -> "Surrogate":
-    """The model a chapter of the book uses: the shipped weights at ``full`` scale; at ``ci`` scale a tiny model
-    trained on the spot with the named config's ``ci`` preset (seconds; cached in the temporary directory and
-    reused while the configuration is unchanged), so every notebook runs end to end on a laptop CPU.
-    ``preset`` defaults to :func:`rfmap.config.scale`."""
-    import tempfile
-
-    from .config import get_config, scale
-    from .train import train
-
-    preset = preset or scale()
-    if preset == "full":
-        return Surrogate.pretrained(name)
-    cfg = get_config(name, preset)
-    out = Path(out_dir or Path(tempfile.gettempdir()) / "rfmap-ci-models" / name)
-    weights = out / f"{name}.safetensors"
-    if weights.exists():  # trained earlier with the same configuration (training is seeded): reuse it
-        try:
-            cached = Surrogate.load(weights)
-            if cached.meta.get("config") == cfg.to_dict():
-                return cached
-        except (ValueError, FileNotFoundError):
-            pass
-    return train(cfg, out, progress=progress)
+    def _refine(self, ref64, psi64, elements, fvals, grid_n: int | None, bounds) -> RefineResult:
+        """Weight refinement (paper Sec. 4.3) of the task's objective, with :data:`rfmap.refine.REFINE`."""
+        if self.spec.kind == "density":
+            obj = density_objective(ref64, psi64, elements, fvals, self.spec.boundary, REFINE.flip_weight,
+                                    grid_n=grid_n)
+        else:
+            obj = beltrami_objective(ref64, psi64, elements, fvals, self.spec.boundary, REFINE.flip_weight)
+        return refine_alpha(obj, self.spec.dim, bounds=bounds or REFINE.bounds, tol=REFINE.tol)

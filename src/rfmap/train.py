@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import __version__
+from ._version import __version__
 from .config import TrainConfig, config_names, get_config
 from .nn.model import MultiResUNet
 from .surrogate import Surrogate

@@ -1,0 +1,37 @@
+"""The models the book's chapters use: shipped weights at ``full`` scale, tiny models trained on the spot at ``ci``.
+
+This sits above both inference (:mod:`rfmap.surrogate`) and training (:mod:`rfmap.train`): the class that serves
+users never depends on the code that makes its weights.
+"""
+from __future__ import annotations
+
+import tempfile
+from pathlib import Path
+
+from .config import get_config, scale
+from .surrogate import Surrogate
+
+__all__ = ["load_or_train"]
+
+
+def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progress: bool = False) -> Surrogate:
+    """The model a chapter of the book uses: the shipped weights at ``full`` scale; at ``ci`` scale a tiny model
+    trained on the spot with the named config's ``ci`` preset (seconds; cached in the temporary directory and
+    reused while the configuration is unchanged), so every notebook runs end to end on a laptop CPU.
+    ``preset`` defaults to :func:`rfmap.config.scale`."""
+    preset = preset or scale()
+    if preset == "full":
+        return Surrogate.pretrained(name)
+    cfg = get_config(name, preset)
+    out = Path(out_dir or Path(tempfile.gettempdir()) / "rfmap-ci-models" / name)
+    weights = out / f"{name}.safetensors"
+    if weights.exists():  # trained earlier with the same configuration (training is seeded): reuse it
+        try:
+            cached = Surrogate.load(weights)
+            if cached.meta.get("config") == cfg.to_dict():
+                return cached
+        except (ValueError, FileNotFoundError):
+            pass
+    from .train import train  # training code is needed only here, at ci scale
+
+    return train(cfg, out, progress=progress)
