@@ -1,0 +1,525 @@
+r"""Making a computed map bijective: detect folded elements and repair them, in 2D and 3D.
+
+A piecewise-linear map of a simplicial mesh is *folded* when an element has a non-positive signed measure
+(:math:`\det J \le 0`).  With every element positively oriented, a map that keeps the boundary of the unit square or
+cube on itself (``fixed`` or ``square`` boundary conditions) is a bijection of the domain onto itself (degree
+argument); with a ``free`` boundary in 2D the image of the boundary must also be a simple polygon.
+
+:func:`repair_map` is the entry point.  It first runs a cheap check (strided grid measures,
+:func:`rfmap.geometry.grid_signed_measures`, and on a free 2D boundary a bucketed segment-crossing test) and returns
+the map untouched when nothing is folded.  Otherwise:
+
+**2D, grid meshes: μ-truncation and the Linear Beltrami Solver.**  The Beltrami coefficient of the current map is
+computed per triangle (paper Eq. (1)); a flipped triangle has :math:`|\mu| > 1`.  Every coefficient is radially
+truncated,
+
+.. math:: \mu \leftarrow \mu \, \min\Bigl(1, \frac{1 - \delta}{|\mu|}\Bigr), \qquad \delta = 0.1,
+
+and the map is rebuilt from the truncated :math:`\mu` by :func:`rfmap.solvers.lbs.solve_lbs` with the model's boundary
+condition: the identity on the boundary (``fixed``), vertices sliding on their walls (``square``), or the boundary
+vertices where the network put them (``free``), after moving crossing boundary vertices back towards the square until
+the boundary polygon is simple (:func:`untangle_boundary`).  Where the map was not folded and :math:`|\mu| \le 1 - \delta`
+the coefficient is unchanged (flipped triangles get :math:`\mu = 0`, see :func:`cap_mu`), and the LBS reproduces a piecewise-linear map from its own coefficient, so the rebuilt
+map stays close to the input.  The discrete LBS has no bijectivity theorem (its stiffness weights may be negative),
+so its output is checked and, if still folded, handed to the displacement scaling below.
+
+**3D (and any mesh where the above does not apply): fold-free displacement scaling.**  Write the map as
+:math:`u = x + d(x)` with the displacement :math:`d` (for a surrogate :math:`d = \mathcal{B} \odot \psi`).  The
+identity (:math:`s = 0` in :math:`u_s = x + s\,d`) has every element positive, and every :math:`u_s` satisfies the
+same boundary condition as :math:`u`.  For one element, :math:`\det E(s) = \det(E_x + s E_d)` is a polynomial of
+degree :math:`d` in :math:`s` with :math:`\det E(0) > 0`, so its first root :math:`s_T` in :math:`(0, 1]` is computed
+exactly (closed form in 2D, companion-matrix eigenvalues in 3D; elements whose coefficients bound the polynomial away
+from zero on :math:`[0, 1]` are skipped).  The largest fold-free uniform scale is
+:math:`s^\* = \min_T s_T`, and the map :math:`u_{s^\*}` is fold-free.  Then the per-vertex scale :math:`s_v` is raised
+locally towards 1 by bisection: a proposed raise is kept unless an element touching the vertex would drop below its
+threshold, in which case the vertices of every such element go back to their accepted values (repeating until no
+element fails, which ends because the accepted state passes).  Vertices far from the folds thus recover the input map
+exactly and only a neighbourhood of the folds keeps a shortened displacement.
+
+Why the result is fold-free: every accepted state is *verified* by direct evaluation of all element measures that
+changed, the starting state :math:`u_{s^\*}` is verified the same way (halving :math:`s` until it passes, the identity
+being the last resort), and a rejected proposal restores an accepted state.  So the returned map has every element
+measure above a positive threshold :math:`\tau_T` (a fraction :math:`\eta = 0.05` of the reference measure for
+elements that were folded, :math:`\min(\eta |T|, \tfrac12 |u(T)|)` for the others) whatever the root-finding accuracy.
+
+References
+----------
+G. P. T. Choi, C. H. Rycroft, "Density-equalizing maps for simply connected open surfaces", SIAM J. Imaging Sci.
+11(2), 1134–1178 (2018) (μ-truncation and LBS reconstruction to keep density-equalizing maps bijective).
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import torch
+
+from .geometry import beltrami_coefficient, grid_signed_measures, grid_simplices, signed_measures
+from .mesh import grid_points
+
+__all__ = ["repair_map", "fold_free", "cap_mu", "boundary_loop", "boundary_crossings", "untangle_boundary",
+           "scale_repair", "lbs_repair", "DELTA"]
+
+#: Margin of the μ-truncation: :math:`|\mu| \le 1 - \delta` after repair.
+DELTA = 0.1
+#: Fraction of the reference measure that a formerly folded element must reach in the displacement scaling.
+ETA = 0.05
+
+
+# ----------------------------------------------------------------------------------------------- detection
+def _measures(points: np.ndarray, elements: np.ndarray, grid_n: int | None) -> np.ndarray:
+    p = torch.as_tensor(np.asarray(points, dtype=np.float64))
+    if grid_n is not None:
+        return grid_signed_measures(p[None], grid_n)[0].numpy()
+    return signed_measures(p, torch.as_tensor(np.asarray(elements))).numpy()
+
+
+def _grid_min_det(points: torch.Tensor, n: int) -> float:
+    r"""Smallest :math:`\det E` over the grid-mesh elements (explicit formula on strided views, no gather)."""
+    d = points.shape[-1]
+    out = np.inf
+    for corners in grid_simplices(points[None], n, d):
+        e = [(c - corners[0]).unbind(-1) for c in corners[1:]]
+        if d == 2:
+            det = e[0][0] * e[1][1] - e[0][1] * e[1][0]
+        else:
+            (ax, ay, az), (bx, by, bz), (cx, cy, cz) = e
+            det = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
+        out = min(out, float(det.min()))
+    return out
+
+
+def grid_min_measure(points: np.ndarray, n: int) -> float:
+    r"""Smallest signed element measure of a map of the ``N``-grid mesh, cheaply.
+
+    A float32 pass decides whenever the minimum exceeds :math:`10^{-3}` of the reference measure (float32 rounding
+    of :math:`\det E` is far below that); otherwise the minimum is recomputed in float64.
+    """
+    d = points.shape[1]
+    ref = (1.0 / (n - 1)) ** d
+    m = _grid_min_det(torch.as_tensor(points, dtype=torch.float32), n)
+    if not m > 1e-3 * ref:
+        m = _grid_min_det(torch.as_tensor(np.asarray(points, np.float64)), n)
+    return m / (2 if d == 2 else 6)
+
+
+def boundary_loop(n: int) -> np.ndarray:
+    """Indices of the boundary vertices of the 2D ``N``-grid, counter-clockwise from the origin, shape (4 (N-1),)."""
+    i = np.arange(n)
+    bottom = i[:-1] * n  # (i, 0)
+    right = (n - 1) * n + i[:-1]  # (N-1, j)
+    top = i[::-1][:-1] * n + n - 1  # (i, N-1), i descending
+    left = i[::-1][:-1]  # (0, j), j descending
+    return np.concatenate([bottom, right, top, left])
+
+
+def boundary_crossings(poly: np.ndarray) -> np.ndarray:
+    r"""Pairs of properly crossing edges of a closed polygon (edge ``k`` joins vertices ``k`` and ``k+1``).
+
+    Candidate pairs come from a uniform bucket grid whose cell is the largest edge extent, so the cost is about
+    linear in the number of edges for the near-square boundaries met here.  Edges sharing a vertex are not
+    compared; two edges cross when each one's endpoints lie strictly on opposite sides of the other (orientation
+    test), or when they touch (a zero orientation with overlapping extents counts as a crossing).
+
+    Parameters
+    ----------
+    poly : ndarray, shape (k, 2)
+
+    Returns
+    -------
+    ndarray of int, shape (c, 2): edge index pairs ``(i, j)`` with ``i < j``.
+    """
+    P = np.asarray(poly, dtype=np.float64)
+    k = P.shape[0]
+    a, b = P, np.roll(P, -1, axis=0)
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    cell = max(float((hi - lo).max()), 1e-12)
+    c0 = np.floor(lo / cell).astype(np.int64)
+    c1 = np.floor(hi / cell).astype(np.int64)  # c1 - c0 in {0, 1} per axis
+    ids, keys = [], []
+    for dx in (0, 1):
+        for dy in (0, 1):
+            ok = (c0[:, 0] + dx <= c1[:, 0]) & (c0[:, 1] + dy <= c1[:, 1])
+            e = np.flatnonzero(ok)
+            ids.append(e)
+            keys.append((c0[e, 0] + dx) * 1_000_003 + (c0[e, 1] + dy))
+    ids, keys = np.concatenate(ids), np.concatenate(keys)
+    order = np.argsort(keys, kind="stable")
+    ids, keys = ids[order], keys[order]
+    pi, pj = [], []
+    off = 1
+    while off < len(keys):
+        same = keys[off:] == keys[:-off]
+        if not same.any():
+            break
+        pi.append(ids[:-off][same])
+        pj.append(ids[off:][same])
+        off += 1
+    if not pi:
+        return np.zeros((0, 2), dtype=np.int64)
+    i, j = np.concatenate(pi), np.concatenate(pj)
+    i, j = np.minimum(i, j), np.maximum(i, j)
+    gap = j - i
+    keep = (gap > 1) & (gap < k - 1)
+    pairs = np.unique(np.stack([i[keep], j[keep]], 1), axis=0)
+    if pairs.size == 0:
+        return pairs.reshape(0, 2)
+    i, j = pairs[:, 0], pairs[:, 1]
+    box = (lo[i] <= hi[j]).all(1) & (lo[j] <= hi[i]).all(1)
+    i, j = i[box], j[box]
+
+    def orient(p, q, r):
+        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
+
+    o1, o2 = orient(a[i], b[i], a[j]), orient(a[i], b[i], b[j])
+    o3, o4 = orient(a[j], b[j], a[i]), orient(a[j], b[j], b[i])
+    cross = (o1 * o2 <= 0) & (o3 * o4 <= 0)
+    return np.stack([i[cross], j[cross]], 1)
+
+
+def fold_free(points: np.ndarray, elements: np.ndarray, *, grid_n: int | None = None,
+              boundary: str = "fixed") -> bool:
+    """True when every element has positive measure (and, for a free 2D grid boundary, the boundary is simple).
+
+    ``grid_n``: the mesh is :func:`rfmap.mesh.grid_mesh` ``(N, d)`` and the strided measures are used (fast path).
+    """
+    if not np.isfinite(points).all():
+        return False
+    if (grid_min_measure(points, grid_n) if grid_n else _measures(points, elements, None).min()) <= 0:
+        return False
+    if boundary == "free" and points.shape[1] == 2 and grid_n is not None:
+        return len(boundary_crossings(points[boundary_loop(grid_n)])) == 0
+    return True
+
+
+# ----------------------------------------------------------------------------------------------- 2D: μ and LBS
+def cap_mu(mu: np.ndarray, delta: float = DELTA) -> tuple[np.ndarray, np.ndarray]:
+    r"""Truncate a Beltrami coefficient into the disk :math:`|\mu| \le 1 - \delta`.
+
+    Orientation-preserving triangles with :math:`1 - \delta < |\mu| < 1` are truncated radially,
+    :math:`\mu \leftarrow \mu\,(1-\delta)/|\mu|`; flipped triangles (:math:`|\mu| \ge 1`, where :math:`\mu` no
+    longer describes a distortion of the triangle) and non-finite values get :math:`\mu = 0`.  (Truncating a flipped
+    triangle radially to :math:`1 - \delta`, or reflecting it to :math:`1/\bar\mu`, leaves most single-vertex folds
+    in place after the LBS solve; :math:`\mu = 0` removes them.)
+
+    Returns
+    -------
+    (capped, mask) : complex ndarray (m,) and the boolean mask of the changed entries.
+    """
+    mu = np.asarray(mu, dtype=np.complex128)
+    bad = ~np.isfinite(mu)
+    a = np.abs(np.where(bad, 0, mu))
+    over = a > 1 - delta
+    out = np.where(over, mu * ((1 - delta) / np.maximum(a, 1e-300)), mu)
+    out[bad | (a >= 1)] = 0
+    return out, over | bad
+
+
+def untangle_boundary(ref_b: np.ndarray, mapped_b: np.ndarray, *, max_rounds: int = 30) -> np.ndarray:
+    r"""Move boundary vertices towards their reference positions until the boundary polygon is simple.
+
+    The polygon :math:`q_v = x_v + t_v (p_v - x_v)` starts at :math:`t = 1`; the endpoints of every crossing edge
+    get :math:`t_v \leftarrow t_v / 2`, round after round.  If crossings remain after ``max_rounds``, a uniform
+    :math:`t` is halved instead; :math:`t = 0` is the square itself, which is simple.
+
+    Parameters
+    ----------
+    ref_b, mapped_b : ndarray, shape (k, 2), in boundary order (:func:`boundary_loop`)
+    """
+    ref_b, mapped_b = np.asarray(ref_b, np.float64), np.asarray(mapped_b, np.float64)
+    t = np.ones(len(ref_b))
+    for _ in range(max_rounds):
+        q = ref_b + t[:, None] * (mapped_b - ref_b)
+        c = boundary_crossings(q)
+        if len(c) == 0:
+            return q
+        v = np.unique(np.concatenate([c.ravel(), (c.ravel() + 1) % len(q)]))
+        t[v] *= 0.5
+    s = 1.0
+    while s > 1e-6:
+        s *= 0.5
+        q = ref_b + s * t[:, None] * (mapped_b - ref_b)
+        if len(boundary_crossings(q)) == 0:
+            return q
+    return ref_b.copy()
+
+
+def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
+               passes: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    r"""Rebuild a 2D grid map from its truncated Beltrami coefficient with the Linear Beltrami Solver.
+
+    Up to ``passes`` times: :math:`\mu` of the current map, :func:`cap_mu`, LBS; stops as soon as no triangle is
+    flipped.
+
+    Parameters
+    ----------
+    mapped : ndarray, shape (N**2, 2)
+        The map on :func:`rfmap.mesh.grid_mesh` ``(N, 2)``.
+    boundary : {"fixed", "square", "free"}
+        ``fixed``: identity on the boundary; ``square``: :func:`rfmap.solvers.lbs.solve_lbs` with sliding walls;
+        ``free``: Dirichlet values at the (untangled) boundary positions of ``mapped``.
+
+    Returns
+    -------
+    (points, capped) : the rebuilt map (N**2, 2) and the mask of the triangles whose :math:`\mu` was truncated.
+    """
+    from .mesh import grid_mesh
+    from .solvers.lbs import solve_lbs
+
+    mesh = grid_mesh(n, 2)
+    ref_t, el_t = torch.as_tensor(mesh.points), torch.as_tensor(mesh.elements)
+    bv = None
+    if boundary == "free":
+        loop = boundary_loop(n)
+        bv = mesh.points.copy()
+        bv[loop] = untangle_boundary(mesh.points[loop], mapped[loop])
+    capped = np.zeros(len(mesh.elements), bool)
+    out = np.asarray(mapped, np.float64)
+    for _ in range(passes):
+        mu = beltrami_coefficient(ref_t, torch.as_tensor(out), el_t).numpy()
+        mu_c, mask = cap_mu(mu, delta)
+        capped |= mask
+        if boundary == "free":
+            out = solve_lbs(mu_c, n, boundary="fixed", boundary_values=bv).mapped_points
+        else:
+            out = solve_lbs(mu_c, n, boundary=boundary).mapped_points
+        if _measures(out, mesh.elements, n).min() > 0:
+            break
+    return out, capped
+
+
+# ----------------------------------------------------------------------------------------------- any dim: scaling
+def _det_coefficients(E_ref: np.ndarray, E_d: np.ndarray) -> np.ndarray:
+    r"""Coefficients :math:`c_k` of :math:`\det(E_x + s E_d) = \sum_k c_k s^k`, shape (m, d+1)."""
+    d = E_ref.shape[-1]
+    if d == 2:
+        a0, a1 = E_ref[..., 0], E_ref[..., 1]
+        b0, b1 = E_d[..., 0], E_d[..., 1]
+
+        def c2(u, v):
+            return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+
+        return np.stack([c2(a0, a1), c2(b0, a1) + c2(a0, b1), c2(b0, b1)], -1)
+    a = [E_ref[..., i] for i in range(3)]
+    b = [E_d[..., i] for i in range(3)]
+
+    def t3(u, v, w):
+        return (u * np.cross(v, w)).sum(-1)
+
+    return np.stack([t3(a[0], a[1], a[2]),
+                     t3(b[0], a[1], a[2]) + t3(a[0], b[1], a[2]) + t3(a[0], a[1], b[2]),
+                     t3(a[0], b[1], b[2]) + t3(b[0], a[1], b[2]) + t3(b[0], b[1], a[2]),
+                     t3(b[0], b[1], b[2])], -1)
+
+
+def _first_root(c: np.ndarray) -> np.ndarray:
+    """Smallest root in (0, 1] of every polynomial ``sum_k c[:, k] s^k`` with ``c[:, 0] > 0``; 1 where none."""
+    out = np.ones(len(c))
+    if len(c) == 0:
+        return out
+    scale = np.abs(c).max(1)
+    deg = c.shape[1] - 1
+    roots = np.full((len(c), deg), np.nan, dtype=np.complex128)
+    lead = np.abs(c[:, -1]) > 1e-12 * scale
+    if deg == 3 and lead.any():
+        cc = c[lead] / c[lead, 3:4]
+        comp = np.zeros((len(cc), 3, 3))
+        comp[:, 1, 0] = comp[:, 2, 1] = 1.0
+        comp[:, :, 2] = -cc[:, :3]
+        roots[lead] = np.linalg.eigvals(comp)
+    quad = ~lead if deg == 3 else np.ones(len(c), bool)
+    if quad.any():  # c0 + c1 s + c2 s^2 (c3 negligible in 3D)
+        c0, c1, c2 = c[quad, 0], c[quad, 1], c[quad, 2]
+        disc = np.sqrt((c1 * c1 - 4 * c0 * c2).astype(np.complex128))
+        big = np.abs(c2) > 1e-12 * scale[quad]
+        r1 = np.where(big, (-c1 + disc) / np.where(big, 2 * c2, 1), -c0 / np.where(c1 == 0, 1, c1))
+        r2 = np.where(big, (-c1 - disc) / np.where(big, 2 * c2, 1), np.nan)
+        roots[quad, 0], roots[quad, 1] = r1, r2
+    real = np.abs(roots.imag) <= 1e-9 * np.maximum(1, np.abs(roots.real))
+    r = np.where(real & (roots.real > 0) & (roots.real <= 1), roots.real, np.inf).min(1)
+    return np.minimum(out, r)
+
+
+def _thresholds(ref_meas: np.ndarray, target_meas: np.ndarray, eta: float) -> np.ndarray:
+    folded = target_meas <= 0
+    return np.where(folded, eta * ref_meas, np.minimum(eta * ref_meas, 0.5 * np.maximum(target_meas, 0)))
+
+
+def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, boundary: str = "fixed",
+                 eta: float = ETA, rounds: int = 16) -> tuple[np.ndarray, dict]:
+    r"""Fold-free map closest to ``target`` among :math:`u_v = x_v + s_v (t_v - x_v)`, :math:`s_v \in [0, 1]`.
+
+    See the module docstring: a verified fold-free uniform scale :math:`s^\*` (first root of the per-element
+    determinant polynomials), then ``rounds`` rounds of per-vertex bisection of :math:`s_v` towards 1 that keep
+    every element above its threshold.  Works on any simplicial mesh in 2D or 3D and keeps the boundary condition
+    of ``target`` (the displacement is only shortened).
+
+    Parameters
+    ----------
+    ref, target : ndarray, shape (n, d)
+    elements : int ndarray, shape (m, d+1), positively oriented on ``ref``
+    boundary : str
+        With ``"free"`` in 2D the boundary polygon of a grid mesh must also stay simple.
+
+    Returns
+    -------
+    (points, info) : the repaired map (n, d) and ``{"s_uniform", "affected"}`` (vertices with :math:`s_v < 1`).
+    """
+    ref = np.asarray(ref, np.float64)
+    target = np.asarray(target, np.float64)
+    el = np.asarray(elements, np.int64)
+    n_pts, d = ref.shape
+    disp = np.where(np.isfinite(target), target - ref, 0.0)
+    E_ref = (ref[el[:, 1:]] - ref[el[:, :1]]).transpose(0, 2, 1)
+    E_d = (disp[el[:, 1:]] - disp[el[:, :1]]).transpose(0, 2, 1)
+    coef = _det_coefficients(E_ref, E_d)
+    ref_meas = coef[:, 0]
+    tau = _thresholds(ref_meas, coef.sum(1), eta)
+    q = coef.copy()
+    q[:, 0] -= tau
+    safe = q[:, 0] - np.maximum(-q[:, 1:], 0).sum(1) > 0  # q > 0 on [0, 1] by the triangle inequality
+    sus = np.flatnonzero(~safe)
+    s_star = float(_first_root(q[sus]).min()) if len(sus) else 1.0
+    loop = None
+    if boundary == "free" and d == 2:
+        side = round(n_pts ** 0.5)
+        if side * side == n_pts and np.allclose(ref, grid_points(side, 2)):
+            loop = boundary_loop(side)
+
+    def failing(u, els):
+        """Vertices to revert: those of elements below threshold (and of crossing free-boundary edges)."""
+        E = (u[el[els, 1:]] - u[el[els, :1]]).transpose(0, 2, 1)
+        det = np.linalg.det(E) if d == 3 else E[:, 0, 0] * E[:, 1, 1] - E[:, 0, 1] * E[:, 1, 0]
+        bad = els[~(det >= tau[els])]
+        v = el[bad].ravel()
+        if loop is not None:
+            c = boundary_crossings(u[loop])
+            if len(c):
+                v = np.concatenate([v, loop[c.ravel()], loop[(c.ravel() + 1) % len(loop)]])
+        return np.unique(v)
+
+    all_el = np.arange(len(el))
+    s0 = 0.999 * s_star
+    while True:  # verify the uniform start; the identity (s = 0) always passes
+        s = np.full(n_pts, s0)
+        if s0 == 0 or len(failing(ref + s[:, None] * disp, all_el)) == 0:
+            break
+        s0 = 0.0 if s0 < 1e-6 else 0.5 * s0
+    if s0 == 0:
+        s[:] = 0
+    # vertex -> elements incidence, for evaluating only the elements touched by a change
+    order = np.argsort(el.ravel(), kind="stable")
+    el_of = order // (d + 1)
+    starts = np.searchsorted(el.ravel()[order], np.arange(n_pts + 1))
+
+    def touching(verts):
+        if len(verts) == 0:
+            return np.zeros(0, np.int64)
+        idx = np.concatenate([el_of[starts[v]:starts[v + 1]] for v in verts]) if len(verts) < 2000 else \
+            np.flatnonzero(np.isin(el, verts).any(1))
+        return np.unique(idx)
+
+    hi = np.ones(n_pts)
+    for _ in range(rounds):
+        active = np.flatnonzero(s < 1.0)
+        if len(active) == 0:
+            break
+        prop = s.copy()
+        prop[active] = np.where(hi[active] >= 1.0, 1.0, 0.5 * (s[active] + hi[active]))
+        changed = active
+        while len(changed):
+            u = ref + prop[:, None] * disp
+            bad = failing(u, touching(changed))
+            bad = bad[prop[bad] != s[bad]]
+            if len(bad) == 0:
+                break
+            hi[bad] = np.minimum(hi[bad], prop[bad])
+            prop[bad] = s[bad]
+            changed = bad
+        s = prop
+        hi = np.maximum(hi, s)
+    u = ref + s[:, None] * disp
+    return u, {"s_uniform": float(s0), "affected": int((s < 1.0).sum())}
+
+
+# ----------------------------------------------------------------------------------------------- entry point
+def _metrics(ref, pts, elements, density, mu_ref) -> dict:
+    from .metrics import compute_metrics
+
+    m = compute_metrics(ref, pts, elements, density=density, mu_ref=mu_ref).to_dict()
+    m.pop("time", None)
+    return m
+
+
+def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, boundary: str,
+               grid_n: int | None = None, density: np.ndarray | None = None, mu: np.ndarray | None = None,
+               delta: float = DELTA, method: str = "auto") -> tuple[np.ndarray, dict[str, Any]]:
+    r"""Return a fold-free version of the map ``ref -> mapped`` and a report of what was done.
+
+    Parameters
+    ----------
+    ref, mapped : ndarray, shape (n, d)
+    elements : int ndarray, shape (m, d+1), positively oriented on ``ref``
+    boundary : {"fixed", "square", "free"}
+        The boundary condition the repaired map must keep.
+    grid_n : int, optional
+        Set when the mesh is :func:`rfmap.mesh.grid_mesh` ``(N, d)``: enables the fast strided check and, in 2D,
+        the LBS repair.
+    density : ndarray (n,), optional
+        Vertex densities, for the density metrics in the report.
+    mu : complex ndarray (m,), optional
+        Target Beltrami coefficient, for ``mean_dmu`` in the report.
+    delta : float
+        Truncation margin, :math:`|\mu| \le 1 - \delta`.
+    method : {"auto", "lbs", "scale"}
+        ``auto``: LBS for 2D grid meshes, displacement scaling otherwise.
+
+    Returns
+    -------
+    (points, report)
+        ``points`` is ``mapped`` itself (the same object) when nothing was folded.  ``report`` holds ``needed``,
+        ``method``, ``n_flipped_before``, ``n_flipped_after``, ``affected`` (triangles with truncated :math:`\mu`
+        for the LBS, vertices with a shortened displacement for the scaling), ``time`` (s), ``metrics_before`` and
+        ``metrics_after``.
+    """
+    t0 = time.perf_counter()
+    ref = np.asarray(ref, np.float64)
+    d = ref.shape[1]
+    el = np.asarray(elements)
+    mapped = np.asarray(mapped)
+    finite = bool(np.isfinite(mapped).all())
+    if grid_n and finite:
+        m = grid_min_measure(mapped, grid_n)
+        min_jac = m * (grid_n - 1) ** d * (2 if d == 2 else 6)
+    elif finite:
+        meas = _measures(mapped, el, None) / _measures(ref, el, None)
+        m = min_jac = float(meas.min())
+    ok = finite and m > 0
+    if ok and boundary == "free" and d == 2 and grid_n:
+        ok = len(boundary_crossings(mapped[boundary_loop(grid_n)])) == 0
+    if ok:
+        cheap = {"n_flipped": 0, "min_jacobian": float(min_jac)}
+        return mapped, {"needed": False, "method": "none", "n_flipped_before": 0, "n_flipped_after": 0,
+                        "affected": 0, "time": time.perf_counter() - t0, "metrics_before": cheap,
+                        "metrics_after": dict(cheap)}
+    mapped = np.asarray(mapped, np.float64)
+    before = _metrics(ref, np.where(np.isfinite(mapped), mapped, ref), el, density, mu)
+    if method == "auto":
+        method = "lbs" if d == 2 and grid_n else "scale"
+    affected = 0
+    out = mapped
+    used = method
+    if method == "lbs":
+        if not (d == 2 and grid_n):
+            raise ValueError("the LBS repair needs a 2D grid mesh (grid_n)")
+        out, capped = lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, delta)
+        affected = int(capped.sum())
+    if method == "scale" or not fold_free(out, el, grid_n=grid_n, boundary=boundary):
+        out, info = scale_repair(ref, out, el, boundary=boundary)
+        affected = max(affected, info["affected"])
+        used = "scale" if method == "scale" else method + "+scale"
+    after = _metrics(ref, out, el, density, mu)
+    return out, {"needed": True, "method": used, "n_flipped_before": int(before["n_flipped"]),
+                 "n_flipped_after": int(after["n_flipped"]), "affected": affected,
+                 "time": time.perf_counter() - t0, "metrics_before": before, "metrics_after": after}

@@ -1,0 +1,67 @@
+r"""Random fields built to be hard for a surrogate: the stress tests of the bijectivity repair.
+
+Densities are positive fields sampled on an ``N``-grid and meant to be mapped with ``preprocess=False`` (so that
+near-zero regions survive):
+
+.. math:: p = p_{\min} + (p_{\max} - p_{\min})\,\frac{g - \min g}{\max g - \min g},
+          \qquad g = \sum_k a_k\,\mathrm{bump}_k(x) + \text{steps} + \text{ramps},
+
+with sharp Gaussian peaks (widths 0.01–0.06), box steps, linear ramps, and a contrast :math:`p_{\min}/p_{\max}`
+drawn log-uniformly in :math:`[10^{-3}, 0.3]`.
+
+Beltrami coefficients have a smooth random part plus one to three localized bulges (Gaussian, width 0.03–0.12),
+are tapered to 0 at the boundary, and are scaled so that :math:`\|\mu\|_\infty` is drawn in :math:`[0.5, 0.95]`.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .mesh import grid_points
+
+__all__ = ["hard_density", "hard_beltrami"]
+
+
+def _log_uniform(rng, lo, hi):
+    return float(np.exp(rng.uniform(math.log(lo), math.log(hi))))
+
+
+def hard_density(rng: np.random.Generator, n: int, dim: int = 2, *, ratio: tuple[float, float] = (1e-3, 0.3)
+                 ) -> np.ndarray:
+    """One hard positive density on the ``N``-grid, shape ``(N,)*dim``; ``min/max`` is drawn in ``ratio``."""
+    x = grid_points(n, dim)
+    g = np.zeros(len(x))
+    for _ in range(int(rng.integers(1, 6))):  # sharp peaks, positive or negative (holes)
+        c = rng.uniform(0.1, 0.9, dim)
+        w = _log_uniform(rng, 0.01, 0.06)
+        g += rng.choice([-1.0, 1.0], p=[0.3, 0.7]) * rng.uniform(0.5, 3) * np.exp(-((x - c) ** 2).sum(1) / (2 * w * w))
+    for _ in range(int(rng.integers(0, 3))):  # steps
+        lo = rng.uniform(0, 0.7, dim)
+        hi = lo + rng.uniform(0.1, 0.4, dim)
+        g += rng.uniform(-1, 1) * ((x >= lo) & (x <= hi)).all(1)
+    if rng.random() < 0.5:  # ramp
+        g += rng.uniform(-2, 2) * (x @ rng.normal(size=dim))
+    span = g.max() - g.min()
+    g = (g - g.min()) / span if span > 1e-12 else np.ones_like(g)
+    r = _log_uniform(rng, *ratio)
+    return (r + (1 - r) * g).reshape((n,) * dim)
+
+
+def hard_beltrami(rng: np.random.Generator, n: int, *, sup: tuple[float, float] = (0.5, 0.95)) -> np.ndarray:
+    """One hard Beltrami coefficient at the vertices of the 2D ``N``-grid, complex, shape (N, N)."""
+    x = grid_points(n, 2)
+    mu = np.zeros(len(x), np.complex128)
+    for _ in range(int(rng.integers(1, 8))):
+        f = _log_uniform(rng, 0.3, 6.0)
+        ph = rng.uniform(0, 2 * np.pi, 2)
+        mu += rng.uniform(0, 1) * np.exp(1j * rng.uniform(0, 2 * np.pi)) * \
+            np.sin(2 * np.pi * f * x[:, 0] + ph[0]) * np.cos(2 * np.pi * f * x[:, 1] + ph[1])
+    for _ in range(int(rng.integers(1, 4))):
+        c = rng.uniform(0.2, 0.8, 2)
+        w = rng.uniform(0.03, 0.12)
+        mu += 3 * np.exp(1j * rng.uniform(0, 2 * np.pi)) * np.exp(-((x - c) ** 2).sum(1) / (2 * w * w))
+    mu *= np.clip(np.minimum(x, 1 - x).min(1) / 0.1, 0, 1)
+    peak = np.abs(mu).max()
+    mu *= rng.uniform(*sup) / peak if peak > 0 else 0.0
+    return mu.reshape(n, n)

@@ -1,0 +1,218 @@
+"""Tests of :mod:`rfmap.repair`: hand-built folded maps in 2D and 3D come back fold-free with their boundary
+condition, unfolded maps come back untouched, and the surrogate never returns a folded map."""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import torch
+
+from rfmap.geometry import beltrami_coefficient
+from rfmap.mesh import element_measures, grid_mesh
+from rfmap.nn import MultiResUNet
+from rfmap.repair import (DELTA, boundary_crossings, boundary_loop, cap_mu, grid_min_measure, lbs_repair,
+                          repair_map, scale_repair)
+from rfmap.stress import hard_beltrami, hard_density
+from rfmap.surrogate import Surrogate
+from rfmap.tasks import TaskSpec
+
+
+def flipped(points, mesh):
+    return int((element_measures(points, mesh.elements) <= 0).sum())
+
+
+def pushed(n, dim, shift):
+    """The identity of the N-grid with its centre vertex pushed by ``shift`` (folds the triangles around it)."""
+    mesh = grid_mesh(n, dim)
+    p = mesh.points.copy()
+    c = np.ravel_multi_index((n // 2,) * dim, (n,) * dim)
+    p[c] += shift
+    return mesh, p
+
+
+@pytest.mark.parametrize("boundary", ["fixed", "square", "free"])
+@pytest.mark.parametrize("shift", [(0.12, 0.07), (0.2, 0.0), (-0.06, 0.1)])
+def test_2d_folded_grid_repaired(boundary, shift):
+    mesh, p = pushed(17, 2, shift)
+    assert flipped(p, mesh) > 0
+    out, rep = repair_map(mesh.points, p, mesh.elements, boundary=boundary, grid_n=17)
+    assert rep["needed"] and rep["n_flipped_before"] == flipped(p, mesh) and rep["n_flipped_after"] == 0
+    assert flipped(out, mesh) == 0 and rep["method"].startswith("lbs")
+    bmask = mesh.boundary_mask()
+    if boundary == "fixed":
+        assert np.abs(out[bmask] - mesh.points[bmask]).max() < 1e-12
+    if boundary == "square":  # every boundary vertex stays on its wall, the corners in place
+        x = mesh.points
+        for c in range(2):
+            wall = (x[:, c] == 0) | (x[:, c] == 1)
+            assert np.abs(out[wall, c] - x[wall, c]).max() < 1e-12
+        assert ((out >= -1e-12) & (out <= 1 + 1e-12)).all()
+    # far from the fold the map is (nearly) the input
+    far = np.linalg.norm(mesh.points - 0.5, axis=1) > 0.35
+    assert np.abs(out[far] - p[far]).max() < 0.02
+
+
+def test_2d_capped_triangles_within_disk():
+    mesh, p = pushed(17, 2, (0.12, 0.07))
+    ref, el = torch.as_tensor(mesh.points), torch.as_tensor(mesh.elements)
+    mu = beltrami_coefficient(ref, torch.as_tensor(p), el).numpy()
+    out, capped = lbs_repair(p, 17, "fixed")
+    assert capped.sum() >= flipped(p, mesh)
+    mu_out = beltrami_coefficient(ref, torch.as_tensor(out), el).numpy()
+    # the truncated coefficient is what the LBS reproduces: |mu| <= 1 - delta on the truncated triangles
+    assert np.abs(mu_out[capped]).max() <= 1 - DELTA + 0.05
+    c, mask = cap_mu(mu)
+    assert np.abs(c).max() <= 1 - DELTA + 1e-12 and mask.sum() == (np.abs(mu) > 1 - DELTA).sum()
+    assert (c[np.abs(mu) >= 1] == 0).all()
+
+
+def test_2d_folded_free_boundary():
+    n = 17
+    mesh = grid_mesh(n, 2)
+    loop = boundary_loop(n)
+    p = mesh.points.copy()
+    p[loop[3]] = (0.55, -0.03)  # a bottom vertex thrown past its neighbours ...
+    p[loop[8]] = (0.5, -0.1)  # ... and one pulled down across its edge: the boundary crosses itself
+    assert len(boundary_crossings(p[loop])) > 0
+    out, rep = repair_map(mesh.points, p, mesh.elements, boundary="free", grid_n=n)
+    assert rep["needed"] and flipped(out, mesh) == 0
+    assert len(boundary_crossings(out[loop])) == 0
+
+
+def test_boundary_loop_and_crossings():
+    n = 5
+    mesh = grid_mesh(n, 2)
+    loop = boundary_loop(n)
+    assert len(loop) == 4 * (n - 1) and set(loop) == set(np.flatnonzero(mesh.boundary_mask()))
+    poly = mesh.points[loop]
+    area = 0.5 * (poly[:, 0] * np.roll(poly[:, 1], -1) - np.roll(poly[:, 0], -1) * poly[:, 1]).sum()
+    assert area == pytest.approx(1.0)  # counter-clockwise unit square
+    assert len(boundary_crossings(poly)) == 0
+    bow = np.array([[0, 0], [1, 1], [1, 0], [0, 1]], float)  # a bow tie
+    assert len(boundary_crossings(bow)) == 1
+
+
+@pytest.mark.parametrize("boundary", ["square", "free"])
+def test_3d_inverted_region_repaired(boundary):
+    n = 11
+    mesh = grid_mesh(n, 3)
+    x = mesh.points
+    bump = np.exp(-((x - 0.5) ** 2).sum(1) / 0.01)[:, None]
+    p = x + 0.3 * bump * np.array([1.0, 0.5, 0.2]) * (4 * x * (1 - x))
+    assert flipped(p, mesh) > 0
+    out, rep = repair_map(x, p, mesh.elements, boundary=boundary, grid_n=n)
+    assert rep["needed"] and rep["method"] == "scale" and rep["n_flipped_after"] == 0 and flipped(out, mesh) == 0
+    assert rep["metrics_after"]["min_jacobian"] > 0
+    if boundary == "square":
+        for c in range(3):
+            wall = (x[:, c] == 0) | (x[:, c] == 1)
+            assert np.abs(out[wall, c] - x[wall, c]).max() < 1e-12
+    far = np.linalg.norm(x - 0.5, axis=1) > 0.4
+    assert np.array_equal(out[far], p[far])  # away from the folds the input map is kept exactly
+    assert 0 < rep["affected"] < len(x) // 4
+
+
+def test_scale_repair_on_any_mesh():
+    """The scaling repair needs no grid: a Delaunay mesh of scattered points with one inverted triangle."""
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(1)
+    pts = np.vstack([rng.random((60, 2)), [[0, 0], [1, 0], [0, 1], [1, 1]]])
+    el = Delaunay(pts).simplices
+    el[element_measures(pts, el) < 0] = el[element_measures(pts, el) < 0][:, [1, 0, 2]]
+    q = pts.copy()
+    q[0] += 0.3 * (np.array([0.5, 0.5]) - q[0])
+    q[1] = q[1] + (q[2] - q[1]) * 1.5
+    out, info = scale_repair(pts, q, el, boundary="free")
+    assert (element_measures(out, el) > 0).all()
+
+
+@pytest.mark.parametrize("dim,n", [(2, 17), (3, 9)])
+def test_unfolded_map_untouched(dim, n):
+    mesh = grid_mesh(n, dim)
+    x = mesh.points
+    p = x + 0.02 * np.sin(np.pi * x) * (4 * x * (1 - x))
+    before = p.copy()
+    out, rep = repair_map(x, p, mesh.elements, boundary="square", grid_n=n)
+    assert rep["needed"] is False and rep["method"] == "none" and rep["n_flipped_after"] == 0
+    assert out is p and np.array_equal(p, before)
+
+
+def test_grid_min_measure_matches_gather():
+    mesh = grid_mesh(9, 3)
+    rng = np.random.default_rng(0)
+    p = mesh.points + 0.03 * rng.standard_normal(mesh.points.shape)
+    assert grid_min_measure(p, 9) == pytest.approx(element_measures(p, mesh.elements).min(), rel=1e-9)
+
+
+# ----------------------------------------------------------------------------------------------- the surrogate
+def random_surrogate(spec, seed, scale=1.5):
+    """A small network with a large random head: its raw maps fold often."""
+    torch.manual_seed(seed)
+    sur = Surrogate(MultiResUNet(spec.dim, spec.n_params, base=4, depth=2), spec, {"name": "wild"})
+    g = torch.Generator().manual_seed(seed)
+    with torch.no_grad():
+        sur.model.head.weight.copy_(scale * torch.randn(sur.model.head.weight.shape, generator=g))
+    return sur
+
+
+@pytest.mark.parametrize("spec,n", [(TaskSpec("density", 2, "square"), 21), (TaskSpec("density", 2, "free"), 21),
+                                    (TaskSpec("beltrami", 2, "fixed"), 21), (TaskSpec("density", 3, "square"), 9),
+                                    (TaskSpec("density", 3, "free"), 9)])
+def test_surrogate_never_folds(spec, n):
+    rng = np.random.default_rng(7)
+    raw_folds = 0
+    for k in range(3):
+        sur = random_surrogate(spec, k)
+        if spec.kind == "density":
+            f, kw = hard_density(rng, n, spec.dim), {"preprocess": False}
+        else:
+            f, kw = hard_beltrami(rng, n), {}
+        raw = sur.map(f, n, repair=False, **kw)
+        res = sur.map(f, n, **kw)
+        raw_folds += raw.metrics().n_flipped
+        rep = res.info["repair"]
+        assert res.metrics().n_flipped == 0 and rep["n_flipped_after"] == 0
+        assert rep["needed"] == (raw.metrics().n_flipped > 0 or rep["needed"])
+    assert raw_folds > 0  # the test exercises the repair
+
+
+def test_surrogate_points_never_fold():
+    spec = TaskSpec("density", 2, "square")
+    sur = random_surrogate(spec, 0)
+    pts = np.random.default_rng(3).random((300, 2))
+    res = sur.map("multi-freq", 21, points=pts)
+    assert res.metrics().n_flipped == 0 and "repair" in res.info
+
+
+def test_refinement_never_folds():
+    spec = TaskSpec("density", 2, "square")
+    sur = random_surrogate(spec, 1)
+    res = sur.map("multi-freq", 21, refine=True)
+    assert res.metrics().n_flipped == 0
+
+
+@pytest.mark.parametrize("field,kw,spec", [
+    (np.full((17, 17), np.nan), {}, TaskSpec("density", 2, "square")),
+    (-np.ones((17, 17)), {"preprocess": False}, TaskSpec("density", 2, "square")),
+    (np.full((17, 17), 1.0 + 0j), {}, TaskSpec("beltrami", 2, "fixed")),
+])
+def test_bad_input_rejected(field, kw, spec):
+    sur = random_surrogate(spec, 0)
+    with pytest.raises(ValueError):
+        sur.map(field, **kw)
+
+
+def test_fast_path_is_cheap():
+    """Nothing folded: the check costs a few per cent of the surrogate's own time."""
+    spec = TaskSpec("density", 3, "square")
+    torch.manual_seed(0)
+    sur = Surrogate(MultiResUNet(3, 1, base=4, depth=2), spec, {"name": "identity"})  # zero head: identity map
+    sur.map("multi-freq-3d", 17)
+    t = time.perf_counter()
+    res = sur.map("multi-freq-3d", 17, repair=False)
+    t_sur = time.perf_counter() - t
+    res = sur.map("multi-freq-3d", 17)
+    assert res.info["repair"]["needed"] is False
+    assert res.info["repair"]["time"] < 0.1 * t_sur
