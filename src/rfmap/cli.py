@@ -21,22 +21,20 @@ class CLIError(Exception):
 
 
 def _field_names() -> str:
-    from .fields import field_names
+    from .paper_fields import field_names
 
     return ", ".join(field_names())
 
 
 def cmd_solve(args) -> int:
-    from .fields import BELTRAMI_MAPS, DENSITIES, get_field
-    from .mesh import grid_mesh
+    from .paper_fields import BELTRAMI_MAPS, DENSITIES, get_field, sample_mu
     from .solvers import solve_dem, solve_lbs
 
     f = get_field(args.field)
     if args.method == "lbs":
         if f.kind != "beltrami":
             raise CLIError(f"method lbs needs a Beltrami test map ({', '.join(BELTRAMI_MAPS)}), got {args.field!r}")
-        mesh = grid_mesh(args.n, 2)
-        mu = f.mu(mesh.points[mesh.elements].mean(1))
+        mu = sample_mu(f.name, args.n)
         res = solve_lbs(mu, args.n, boundary="fixed" if args.boundary in (None, "fixed") else args.boundary)
     else:
         if f.kind != "density":
@@ -49,7 +47,7 @@ def cmd_solve(args) -> int:
 
 
 def cmd_metrics(args) -> int:
-    from .fields import BELTRAMI_MAPS
+    from .paper_fields import BELTRAMI_MAPS, sample_mu
     from .result import load_result
 
     res = load_result(args.file)
@@ -58,8 +56,8 @@ def cmd_metrics(args) -> int:
         f = BELTRAMI_MAPS.get(args.exact)
         if f is None:
             raise CLIError(f"--exact must name a Beltrami test map ({', '.join(BELTRAMI_MAPS)}), got {args.exact!r}")
-        cen = res.ref_points[res.elements].mean(1)
-        m = res.metrics(exact_points=f(res.ref_points), mu_ref=f.mu(cen))
+        m = res.metrics(exact_points=f(res.ref_points),
+                        mu_ref=sample_mu(args.exact, points=res.ref_points, elements=res.elements))
     print(m.to_json())
     return 0
 

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .fields import BELTRAMI_MAPS, DENSITIES, get_field
 from .mesh import grid_mesh
+from .paper_fields import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
 from .result import MapResult
 
 __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table", "population_table",
@@ -114,25 +114,16 @@ def _timed_map(sur, name, n, refine=False, repeats: int = 3):
 
 def exact_beltrami_result(name: str, n: int) -> MapResult:
     """The exact map of a Beltrami test map sampled on the ``N``-grid (its piecewise-linear interpolant)."""
-    f = BELTRAMI_MAPS[name]
     mesh = grid_mesh(n, 2)
-    cen = mesh.points[mesh.elements].mean(1)
-    return MapResult(mesh.points, f(mesh.points), mesh.elements, f.mu(cen), kind="beltrami")
+    return MapResult(mesh.points, BELTRAMI_MAPS[name](mesh.points), mesh.elements, sample_mu(name, n),
+                     kind="beltrami")
 
 
 def _beltrami_metrics(res: MapResult, name: str) -> dict:
-    import torch
-
-    from .geometry import beltrami_coefficient
-
-    f = BELTRAMI_MAPS[name]
-    cen = res.ref_points[res.elements].mean(1)
-    exact_pts = f(res.ref_points)
-    m = res.metrics(exact_points=exact_pts, mu_ref=f.mu(cen))
-    mu_pl = beltrami_coefficient(torch.as_tensor(res.ref_points), torch.as_tensor(exact_pts),
-                                 torch.as_tensor(res.elements)).numpy()
-    mu = beltrami_coefficient(torch.as_tensor(res.ref_points), torch.as_tensor(res.mapped_points),
-                              torch.as_tensor(res.elements)).numpy()
+    exact = MapResult(res.ref_points, BELTRAMI_MAPS[name](res.ref_points), res.elements, res.field, "beltrami")
+    m = res.metrics(exact_points=exact.mapped_points,
+                    mu_ref=sample_mu(name, points=res.ref_points, elements=res.elements))
+    mu_pl, mu = exact.mu(), res.mu()
     return {"time": res.time, "mean_dd": m.mean_dd, "mean_dmu": m.mean_dmu,
             "mean_dmu_pl": float(np.abs(mu - mu_pl).mean()), "n_flipped": m.n_flipped,
             "min_jacobian": m.min_jacobian}
@@ -141,8 +132,7 @@ def _beltrami_metrics(res: MapResult, name: str) -> dict:
 def _lbs(name: str, n: int) -> MapResult:
     from .solvers import solve_lbs
 
-    mesh = grid_mesh(n, 2)
-    mu = BELTRAMI_MAPS[name].mu(mesh.points[mesh.elements].mean(1))
+    mu = sample_mu(name, n)
     solve_lbs(mu, n)  # warm-up
     return min((solve_lbs(mu, n) for _ in range(3)), key=lambda r: r.time)
 
@@ -165,7 +155,7 @@ def _beltrami_rows(sur, table: Table, cases: list[tuple[str, str, int]], paper: 
 _BEL_COLS = ["time", "speedup", "mean_dd", "mean_dmu", "mean_dmu_pl", "n_flipped", "min_jacobian"]
 
 
-def beltrami_table(sur, n: int = 51, maps=("T1", "T2", "T3", "T4"), refine: bool = False):
+def beltrami_table(sur, n: int = PAPER_N[2], maps=TEST_FIELDS["beltrami", 2], refine: bool = False):
     """tab:reconstruction_results_mu: our model, the Linear Beltrami Solver and the paper on T1–T4 at ``n``."""
     t = Table("tab:reconstruction_results_mu", f"Reconstruction from Beltrami coefficients (N = {n})", _BEL_COLS)
     return _beltrami_rows(sur, t, [(m, m, n) for m in maps], paper_table(t.label), refine)
@@ -223,9 +213,8 @@ def _density_rows(sur, table, cases, paper, refine, boundary, classical=True):
 def population_table(sur, fields=None, n: int | None = None, refine: bool = True, classical: bool = True):
     """tab:population_test(_fb) / tab:3d_population_test(_fb): the four population tests."""
     d, b = sur.spec.dim, sur.spec.boundary
-    fields = list(fields or (["sin-cos", "exp-log", "rect-peak", "ring"] if d == 2 else
-                             ["sin-cos-3d", "shell-3d", "octant-3d", "prism-peak-3d"]))
-    n = n or (51 if d == 2 else 48)
+    fields = list(fields or TEST_FIELDS["density", d])
+    n = n or PAPER_N[d]
     label = ("tab:population_test" if d == 2 else "tab:3d_population_test") + ("_fb" if b == "free" else "")
     cols = ["time", "speedup", "std_rho_orig", "std_rho_map", "min_jacobian", "n_flipped"]
     cols += ["max_mu", "mean_mu"] if d == 2 else []

@@ -3,10 +3,14 @@ from __future__ import annotations
 
 import os
 import tempfile
+import zipfile
+import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
+import torch
 
+from .geometry import beltrami_coefficient
 from .metrics import MapMetrics, compute_metrics
 
 __all__ = ["MapResult", "save_npz_atomic", "load_result"]
@@ -64,6 +68,12 @@ class MapResult:
     def displacement(self) -> np.ndarray:
         return self.mapped_points - self.ref_points
 
+    def mu(self) -> np.ndarray:
+        """Per-triangle Beltrami coefficient of the piecewise-linear map (2D), complex128 of shape (m,)."""
+        return beltrami_coefficient(torch.as_tensor(self.ref_points, dtype=torch.float64),
+                                    torch.as_tensor(self.mapped_points, dtype=torch.float64),
+                                    torch.as_tensor(self.elements)).numpy()
+
     def metrics(self, *, exact_points=None, mu_ref=None) -> MapMetrics:
         """Metrics in the paper's conventions (see :func:`rfmap.metrics.compute_metrics`)."""
         density = self.field.reshape(-1) if self.kind == "density" else None
@@ -86,16 +96,20 @@ class MapResult:
         return grid
 
 
+#: What reading a damaged or missing ``.npz`` raises: I/O errors, a bad or truncated zip archive, a corrupt member.
+_UNREADABLE = (OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error)
+
+
 def load_result(path) -> MapResult:
     """Read a result written by :meth:`MapResult.save` (or by ``rfmap solve`` / ``rfmap map``)."""
     try:
         z = np.load(os.fspath(path), allow_pickle=False)
+    except _UNREADABLE as e:
+        raise ValueError(f"cannot read {path}: {e}") from e
     except ValueError as e:
         # numpy takes any file that is neither .npy nor .npz for a pickle and suggests allow_pickle=True, which
         # would execute code from the file: name the file and say what is wrong instead
         raise ValueError(f"cannot read {path}: not an .npz result file") from e
-    except (OSError, EOFError) as e:
-        raise ValueError(f"cannot read {path}: {e}") from e
     if not isinstance(z, np.lib.npyio.NpzFile):
         raise ValueError(f"cannot read {path}: a single .npy array, not an .npz result file")
     try:
@@ -107,9 +121,5 @@ def load_result(path) -> MapResult:
                 "beltrami" if np.iscomplexobj(z["field"]) else "density")
             return MapResult(z["ref_points"], z["mapped_points"], z["elements"], z["field"], kind=kind,
                              time=float(z["time"]) if "time" in z.files else 0.0)
-    except (OSError, EOFError, KeyError) as e:  # zipfile.BadZipFile is an OSError subclass? no: handle below
-        raise ValueError(f"cannot read {path}: {e}") from e
-    except Exception as e:
-        if isinstance(e, ValueError):
-            raise
+    except _UNREADABLE as e:
         raise ValueError(f"cannot read {path}: {e}") from e

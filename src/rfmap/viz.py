@@ -113,13 +113,7 @@ def plot_density(ax, points, elements, values, *, title=None, vmin=None, vmax=No
 
 def plot_mu(ax, result, *, title=r"$|\mu|$ on the mapped mesh", vmax=None):
     """:math:`|\\mu|` per triangle of a 2D map, drawn on the mapped mesh."""
-    import torch
-
-    from .geometry import beltrami_coefficient
-
-    mu = beltrami_coefficient(torch.as_tensor(result.ref_points), torch.as_tensor(result.mapped_points),
-                              torch.as_tensor(result.elements)).abs().numpy()
-    return plot_density(ax, result.mapped_points, result.elements, mu, title=title, vmin=0, vmax=vmax,
+    return plot_density(ax, result.mapped_points, result.elements, np.abs(result.mu()), title=title, vmin=0, vmax=vmax,
                         cmap="magma")
 
 
@@ -277,17 +271,6 @@ def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", c
     return img
 
 
-def mu_of(result) -> np.ndarray:
-    """Per-triangle Beltrami coefficient of a 2D result's piecewise-linear map (complex, shape (m,))."""
-    import torch
-
-    from .geometry import beltrami_coefficient
-
-    return beltrami_coefficient(torch.as_tensor(result.ref_points, dtype=torch.float64),
-                                torch.as_tensor(result.mapped_points, dtype=torch.float64),
-                                torch.as_tensor(result.elements)).numpy()
-
-
 def plot_beltrami_row(axes, exact, lbs, ours, *, n: int, label: str = "", bins: int = 40):
     """The six panels of the paper's reconstruction figures: the domain coloured by :math:`|\\mu|`, the exact
     map, the Linear Beltrami Solver's map, the surrogate's map, and histograms of
@@ -299,7 +282,7 @@ def plot_beltrami_row(axes, exact, lbs, ours, *, n: int, label: str = "", bins: 
     plot_mesh(axes[1], exact.mapped_points, n=n, title="exact map")
     plot_mesh(axes[2], lbs.mapped_points, n=n, title="LBS")
     plot_mesh(axes[3], ours.mapped_points, n=n, title="surrogate")
-    errs = [np.abs(mu_t - mu_of(lbs)), np.abs(mu_t - mu_of(ours))]
+    errs = [np.abs(mu_t - lbs.mu()), np.abs(mu_t - ours.mu())]
     hi = max(float(e.max()) for e in errs) or 1.0
     for ax, e, name in zip(axes[4:6], errs, ["LBS", "surrogate"]):
         ax.hist(e, bins=bins, range=(0, hi), color="tab:blue" if name == "LBS" else "tab:orange")

@@ -28,7 +28,7 @@ Numerical method:
 3. **Velocity.**  :math:`\rho` and :math:`\nabla\rho` are evaluated on the fine grid by separable products with
    cosine / sine tables (dense matrix products, :math:`O(M^{d} K)` per evaluation with :math:`K \le M` the modes
    not yet decayed below 1e-17), :math:`v = -\nabla\rho/\rho` is formed there and interpolated multilinearly at the
-   current vertex positions (:func:`multilinear_interpolate`).
+   current vertex positions (:func:`rfmap.mesh.interpolate`).
 4. **Time integration.**  :math:`\dot x = v(x, t)` is integrated with the embedded Bogacki–Shampine 3(2) pair
    (FSAL, 3 evaluations per step) with the local error per step bounded by ``rtol`` times the grid spacing, until
    the remaining displacement, estimated as :math:`\max|v| / \lambda_1` with :math:`\lambda_1 = \pi^2` the decay
@@ -62,15 +62,14 @@ import numpy as np
 import torch
 from scipy.fft import dct, dctn
 
-from ..fields import check_density
-from ..mesh import check_n, grid_mesh
+from ..inputs import check_density
+from ..mesh import check_n, grid_mesh, interpolate
 from ..result import MapResult
 
 __all__ = [
     "solve_dem",
     "CosineDiffusion",
     "cosine_coefficients",
-    "multilinear_interpolate",
     "p1_upsample",
     "DEM_BOUNDARIES",
 ]
@@ -82,33 +81,6 @@ DEM_BOUNDARIES = ("square", "free")
 _BS_C = (0.5, 0.75)
 _BS_B = (2.0 / 9.0, 1.0 / 3.0, 4.0 / 9.0)
 _BS_E = (-5.0 / 72.0, 1.0 / 12.0, 1.0 / 9.0, -1.0 / 8.0)  # 3rd-order minus embedded 2nd-order solution
-
-
-def multilinear_interpolate(values: np.ndarray | torch.Tensor, points: np.ndarray) -> np.ndarray:
-    r"""Bi-/trilinear interpolation of a vector field given on a uniform grid of the unit box.
-
-    Uses ``torch.nn.functional.grid_sample`` (``align_corners=True``) on float64 data, which is several times
-    faster than a numpy gather for large point sets.
-
-    Parameters
-    ----------
-    values : ndarray or Tensor, shape (C,) + (M,)*d
-        Field components (channel first) at the grid nodes :math:`j / (M-1)`, grid axes ordered
-        :math:`x_1, \dots, x_d`.
-    points : ndarray, shape (P, d)
-        Query points; coordinates are clamped to :math:`[0, 1]`.
-
-    Returns
-    -------
-    ndarray, shape (P, C)
-    """
-    d = points.shape[1]
-    c = values.shape[0]
-    v = torch.as_tensor(values, dtype=torch.float64).contiguous()[None]
-    g = torch.from_numpy(np.ascontiguousarray(2.0 * points[:, ::-1] - 1.0))  # grid_sample wants (x_d, ..., x_1)
-    g = g.clamp_(-1.0, 1.0).reshape(1, *([1] * (d - 1)), points.shape[0], d)
-    out = torch.nn.functional.grid_sample(v, g, mode="bilinear", padding_mode="border", align_corners=True)
-    return out.reshape(c, -1).T.numpy()
 
 
 def p1_upsample(values: np.ndarray, refine: int) -> np.ndarray:
@@ -360,7 +332,7 @@ class CosineDiffusion:
         hi = np.clip(np.ceil(points.max(axis=0) * top).astype(int), lo + 1, top)
         window = tuple((int(a), int(b) + 1) for a, b in zip(lo, hi))
         local = (points * top - lo) / (hi - lo)
-        return multilinear_interpolate(self.velocity(t, window), local)
+        return interpolate(self.velocity(t, window)[None], local, check=False)[0].numpy()
 
 
 @contextlib.contextmanager

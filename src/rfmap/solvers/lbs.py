@@ -38,8 +38,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..fields import check_mu
-from ..mesh import Mesh, check_n, grid_mesh
+from ..inputs import check_mu
+from ..mesh import Mesh, check_n, element_centroids, grid_mesh
 from ..result import MapResult
 
 __all__ = ["solve_lbs", "beltrami_matrices", "p1_gradients", "assemble_stiffness", "LBS_BOUNDARIES"]
@@ -138,7 +138,7 @@ def _factorize(K: sp.spmatrix) -> spla.SuperLU:
 def _evaluate_mu(mu: MuLike, mesh: Mesh) -> np.ndarray:
     m = mesh.elements.shape[0]
     if callable(mu):
-        centroids = mesh.points[mesh.elements].mean(axis=1)
+        centroids = element_centroids(mesh.points, mesh.elements)
         values = mu(centroids)
         arr = np.asarray(values)
         if arr.shape != (m,):
