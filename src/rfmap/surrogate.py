@@ -23,10 +23,11 @@ import torch
 
 from ._version import __version__
 from .inputs import check_density, check_mu, preprocess_density, unit_mass
-from .mesh import check_n, element_centroids, grid_mesh, grid_points, interpolate, triangulate, vertex_weights
+from .mesh import check_n, element_centroids, element_measures, grid_mesh, grid_points, interpolate, triangulate, vertex_weights
 from .nn.model import MultiResUNet, apply_displacement
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
 from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
+from .repair import repair_map
 from .result import MapResult
 from .tasks import TaskSpec, encode
 
@@ -247,7 +248,8 @@ class Surrogate:
         return self.model(x)
 
     def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
-            alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None) -> MapResult:
+            alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None,
+            repair: bool = True) -> MapResult:
         """Map one field.
 
         Parameters
@@ -271,14 +273,19 @@ class Surrogate:
             ``False`` a positive density is only scaled to unit mass.
         refine_bounds : (float, float), optional
             Search interval of every component of :math:`\\alpha` (default :data:`rfmap.refine.REFINE`).
+        repair : bool
+            Make the returned map fold-free (:func:`rfmap.repair.repair_map`, after any refinement); with query
+            ``points`` the map of the working grid is repaired first and then interpolated.  ``False`` returns the
+            raw network map.
 
         Returns
         -------
         MapResult
-            ``info`` holds ``alpha``, ``work_n`` and, with refinement, the objective before/after.
+            ``info`` holds ``alpha``, ``work_n``, with refinement the objective before/after, and with ``repair``
+            the report ``info["repair"]`` (see :func:`rfmap.repair.repair_map`).
         """
         inp, n = self._resolve(field, n, preprocess)
-        return self._map_one(inp, n, points, refine, work_n, alpha, refine_bounds)
+        return self._map_one(inp, n, points, refine, work_n, alpha, refine_bounds, repair=repair)
 
     def map_batch(self, fields: Sequence, n: int | None = None, **kw) -> list[MapResult]:
         """Map several fields with one batched network evaluation (same ``n`` for all)."""
@@ -292,12 +299,14 @@ class Surrogate:
         psi = self.displacement(np.stack([self._work_grid(i, nw) for i, _ in inps]))
         dt = (time.perf_counter() - t0) / len(inps)
         return [self._map_one(i, nn_, kw.get("points"), kw.get("refine", False), nw, kw.get("alpha"),
-                              kw.get("refine_bounds"), psi=psi[k:k + 1], net_time=dt)
+                              kw.get("refine_bounds"), psi=psi[k:k + 1], net_time=dt,
+                              repair=kw.get("repair", True))
                 for k, (i, _) in enumerate(inps)]
 
-    def _map_one(self, inp: _Input, n: int, points, refine, work_n, alpha, bounds, psi=None, net_time=None):
+    def _map_one(self, inp: _Input, n: int, points, refine, work_n, alpha, bounds, psi=None, net_time=None,
+                 repair: bool = True):
         """Evaluate the network on the working grid (unless ``psi`` is given), resample its displacement and the
-        input field on the output mesh, and apply the stretching vector (refined or given)."""
+        input field on the output mesh, apply the stretching vector (refined or given), and repair folds."""
         nw = int(work_n or self.work_n(n))
         if nw < self.model.min_size:
             raise ValueError(f"working grid N={nw} is smaller than this model accepts ({self.model.min_size})")
@@ -325,8 +334,37 @@ class Surrogate:
         if refine or alpha is not None:
             mapped = apply_displacement(ref64, psi64, self.spec.boundary, torch.as_tensor(a))
         info["alpha"] = a.tolist()
-        return MapResult(ref_points=ref, mapped_points=mapped.numpy(), elements=elements, field=fvals,
+        mapped = mapped.numpy()
+        if repair:
+            t3 = time.perf_counter()
+            mapped, info["repair"] = self._repair(ref, mapped, elements, fvals, n if points is None else None,
+                                                  psi, a)
+            t_map += time.perf_counter() - t3
+        return MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals,
                          kind=self.spec.kind, time=t_map, info=info)
+
+    def _repair(self, ref, mapped, elements, fvals, grid_n, psi, alpha) -> tuple[np.ndarray, dict]:
+        """:func:`rfmap.repair.repair_map` of the output map; at query points, the working-grid map is repaired
+        first and its displacement interpolated, then any fold left on the query mesh is repaired there."""
+        kw = {"boundary": self.spec.boundary, "density": fvals if self.spec.kind == "density" else None,
+              "mu": fvals if self.spec.kind == "beltrami" else None}
+        if grid_n is not None:
+            return repair_map(ref, mapped, elements, grid_n=grid_n, **kw)
+        nw, d = psi.shape[-1], self.spec.dim
+        grid = torch.as_tensor(grid_points(nw, d))
+        u = apply_displacement(grid, self._displacement_at(psi, grid.numpy(), nw), self.spec.boundary,
+                               torch.as_tensor(alpha)).numpy()
+        u_rep, grid_report = repair_map(grid.numpy(), u, grid_mesh(nw, d).elements, boundary=self.spec.boundary,
+                                        grid_n=nw)
+        n_raw = int((element_measures(mapped, elements) <= 0).sum())
+        if grid_report["needed"]:
+            disp = torch.as_tensor((u_rep - grid.numpy()).T.reshape(1, d, *([nw] * d)))
+            mapped = ref + interpolate(disp, torch.as_tensor(ref))[0].numpy()
+        out, report = repair_map(ref, mapped, elements, **kw)
+        report.update(needed=report["needed"] or grid_report["needed"], n_flipped_before=n_raw, grid=grid_report)
+        if grid_report["needed"] and report["method"] == "none":
+            report["method"] = "grid " + grid_report["method"]
+        return out, report
 
     def _output_mesh(self, n: int, points) -> tuple[np.ndarray, np.ndarray]:
         """The output mesh: the ``N``-grid, or a Delaunay triangulation of the query points."""
