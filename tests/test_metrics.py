@@ -168,3 +168,11 @@ def test_load_result_rejects_bad_files(tmp_path):
         load_result(partial)
     with pytest.raises(ValueError):
         load_result(tmp_path / "does-not-exist.npz")
+    whole = tmp_path / "whole.npz"
+    MapResult(MESH.points, MESH.points, MESH.elements, np.ones(len(MESH.points))).save(whole)
+    raw = whole.read_bytes()
+    for cut in (len(raw) // 2, len(raw) - 30):  # truncated archives: a bad zip or a damaged member
+        damaged = tmp_path / f"cut{cut}.npz"
+        damaged.write_bytes(raw[:cut])
+        with pytest.raises(ValueError, match="cannot read"):
+            load_result(damaged)

@@ -318,8 +318,15 @@ def test_dem_random_densities_invariants(n, seed, dim):
 
 
 def test_dem_progress_bar(capsys):
+    """The bar is labelled with the problem, counts simulated time and reaches 100 %; without it nothing prints."""
     res = solve_dem(sample_density("ring", 9), progress=True)
-    assert res.info["iterations"] > 0
+    err = capsys.readouterr().err
+    frames = [f for f in err.replace("\r", "\n").splitlines() if f.strip()]
+    assert frames and all(f.startswith("DEM 2D N=9:") for f in frames)
+    last = frames[-1]
+    assert "100%" in last and f"t={res.info['t_end']:.4f}" in last
+    solve_dem(sample_density("ring", 9), progress=False)
+    assert capsys.readouterr().err == ""
 
 
 # --------------------------------------------------------------------------------------------------- DEM errors
