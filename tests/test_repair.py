@@ -216,3 +216,23 @@ def test_fast_path_is_cheap():
     res = sur.map("multi-freq-3d", 17)
     assert res.info["repair"]["needed"] is False
     assert res.info["repair"]["time"] < 0.1 * t_sur
+
+
+def test_cli_repair_line_and_bad_input(tmp_path, capsys):
+    from rfmap.cli import main, repair_summary
+
+    bad = tmp_path / "bad.npy"
+    np.save(bad, np.full((33, 33), np.nan))
+    assert main(["map", "--model", "deq2d-square", "--field-file", str(bad), "--out", str(tmp_path / "b.npz")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "NaN" in err and len(err.splitlines()) == 1 and not (tmp_path / "b.npz").exists()
+    out = tmp_path / "a.npz"
+    assert main(["map", "--model", "deq2d-square", "--field", "sin-cos", "--n", "33", "--out", str(out)]) == 0
+    assert "repair: not needed" in capsys.readouterr().out
+    assert main(["map", "--model", "deq2d-square", "--field", "sin-cos", "--n", "33", "--out", str(out),
+                 "--no-repair"]) == 0
+    assert "repair: off" in capsys.readouterr().out
+    mesh, p = pushed(9, 2, (0.2, 0.0))
+    _, rep = repair_map(mesh.points, p, mesh.elements, boundary="fixed", grid_n=9)
+    line = repair_summary(rep)
+    assert line.startswith("repair: lbs") and f"{rep['n_flipped_before']} folded -> 0" in line

@@ -97,12 +97,26 @@ def cmd_map(args) -> int:
             points = np.load(args.points, allow_pickle=False)
         except Exception as e:  # noqa: BLE001
             raise CLIError(f"cannot read {args.points}: {e}") from e
-    res = sur.map(field, args.n, points, refine=args.refine)
+    res = sur.map(field, args.n, points, refine=args.refine, repair=not args.no_repair)
     res.save(args.out)
     if args.vtk:
         res.to_vtk(args.vtk)
     print(f"wrote {args.out}: {res.metrics()}")
+    print(repair_summary(res.info.get("repair")))
     return 0
+
+
+def repair_summary(report: dict | None) -> str:
+    """One line saying what :func:`rfmap.repair.repair_map` did (or that it was skipped)."""
+    if report is None:
+        return "repair: off (raw network output)"
+    if not report["needed"]:
+        return f"repair: not needed, no folded element ({report['time'] * 1e3:.1f} ms check)"
+    b, a = report["metrics_before"], report["metrics_after"]
+    extra = "".join(f", {k} {b[k]:.4g} -> {a[k]:.4g}" for k in ("std_rho_map", "max_mu", "mean_dmu") if k in b)
+    return (f"repair: {report['method']}, {report['n_flipped_before']} folded -> {report['n_flipped_after']}, "
+            f"{report['affected']} affected, min Jacobian {b['min_jacobian']:.3g} -> {a['min_jacobian']:.3g}"
+            f"{extra}, {report['time']:.3f} s")
 
 
 def cmd_train(args) -> int:
@@ -150,6 +164,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--n", type=int, default=None, help="output grid side N")
     s.add_argument("--points", default=None, help=".npy array (P, d) of query points")
     s.add_argument("--refine", action="store_true", help="apply weight refinement")
+    s.add_argument("--no-repair", action="store_true",
+                   help="return the raw network map, without removing folded elements")
     s.add_argument("--out", required=True, help="output .npz")
     s.add_argument("--vtk", default=None, help="also write the mapped mesh as VTK (.vtu)")
     s.set_defaults(func=cmd_map)
