@@ -23,6 +23,8 @@ DENSITIES_3D = ["sin-cos-3d", "shell-3d", "octant-3d", "prism-peak-3d", "multi-f
 BELTRAMI = ["T1", "T2", "T3", "T4", "T1-res"]
 METRIC_KEYS = ["std_rho_orig", "std_rho_map", "min_jacobian", "n_flipped", "max_mu", "mean_mu", "mean_dd",
                "mean_dmu"]
+#: The surrogates' raw maps (no fold repair, which post-processes the map and is tested in test_repair.py).
+RAW = {"repair": False}
 SURROGATES = {"beltrami2d": ["T1", "T3"], "deq2d-square": ["sin-cos", "ring"], "deq2d-free": ["rect-peak"],
               "dem2d-square": ["exp-log"], "dem3d-cube": ["sin-cos-3d"], "dem3d-free": ["octant-3d"]}
 
@@ -94,8 +96,8 @@ def surrogate_outputs() -> dict[str, np.ndarray]:
         sur = Surrogate.pretrained(model)
         n = N2 if sur.spec.dim == 2 else N3
         for name in names:
-            plain = sur.map(name, n)
-            refined = sur.map(name, n, refine=True)
+            plain = sur.map(name, n, **RAW)
+            refined = sur.map(name, n, refine=True, **RAW)
             out[f"sur/{model}/{name}"] = plain.mapped_points
             out[f"sur-field/{model}/{name}"] = plain.field
             out[f"sur-refine/{model}/{name}"] = refined.mapped_points
@@ -108,11 +110,11 @@ def surrogate_outputs() -> dict[str, np.ndarray]:
             from rfmap.mesh import grid_points
 
             arr = F.BELTRAMI_MAPS[name].mu(grid_points(n + 2, 2)).reshape(n + 2, n + 2)
-        res = sur.map(arr, n)
+        res = sur.map(arr, n, **RAW)
         out[f"sur-array/{model}/{name}"] = res.mapped_points
         out[f"sur-array-field/{model}/{name}"] = res.field
         pts = np.concatenate([rng.random((40, sur.spec.dim)), np.eye(sur.spec.dim)])
-        res = sur.map(name, points=pts, refine=True)
+        res = sur.map(name, points=pts, refine=True, **RAW)
         out[f"sur-points/{model}/{name}"] = res.mapped_points
         out[f"sur-points-elements/{model}/{name}"] = res.elements
         out[f"sur-points-field/{model}/{name}"] = res.field

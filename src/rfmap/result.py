@@ -1,4 +1,4 @@
-"""The result of a map computation, shared by classical solvers and neural surrogates."""
+"""The result of a map computation, shared by classical solvers and neural surrogates, and its exports (.npz, VTK)."""
 from __future__ import annotations
 
 import os
@@ -10,10 +10,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from .geometry import beltrami_coefficient
-from .metrics import MapMetrics, compute_metrics
+from .geometry import beltrami_coefficient, signed_measures
+from .metrics import MapMetrics, compute_metrics, element_population
 
-__all__ = ["MapResult", "save_npz_atomic", "load_result"]
+__all__ = ["MapResult", "save_npz_atomic", "load_result", "to_pyvista", "setup_pyvista"]
 
 
 def save_npz_atomic(path, **arrays) -> None:
@@ -74,6 +74,16 @@ class MapResult:
                                     torch.as_tensor(self.mapped_points, dtype=torch.float64),
                                     torch.as_tensor(self.elements)).numpy()
 
+    def rho(self) -> np.ndarray:
+        r"""Per-element density :math:`\tilde\rho` on the mapped mesh (population / mapped measure, mean 1),
+        shape (m,); density results only."""
+        ref = torch.as_tensor(self.ref_points, dtype=torch.float64)
+        mapped = torch.as_tensor(self.mapped_points, dtype=torch.float64)
+        el = torch.as_tensor(self.elements)
+        pop = element_population(ref, el, self.field.reshape(-1))
+        rho = pop / signed_measures(mapped, el)
+        return (rho / rho.mean()).numpy()
+
     def metrics(self, *, exact_points=None, mu_ref=None) -> MapMetrics:
         """Metrics in the paper's conventions (see :func:`rfmap.metrics.compute_metrics`)."""
         density = self.field.reshape(-1) if self.kind == "density" else None
@@ -88,12 +98,48 @@ class MapResult:
 
     def to_vtk(self, path=None):
         """The mapped mesh as a PyVista ``UnstructuredGrid`` (written to ``path`` when given, e.g. ``.vtu``)."""
-        from .viz import to_pyvista
-
         grid = to_pyvista(self)
         if path is not None:
             grid.save(os.fspath(path))
         return grid
+
+
+def setup_pyvista():
+    """Configure PyVista for off-screen rendering (EGL) and static images in notebooks; returns the module."""
+    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+    import pyvista as pv
+
+    pv.OFF_SCREEN = True
+    try:
+        pv.set_jupyter_backend("static")
+    except (ImportError, ValueError):  # outside Jupyter, or without the IPython / trame extras
+        pass
+    return pv
+
+
+def to_pyvista(result, *, mapped: bool = True):
+    """A ``pyvista.UnstructuredGrid`` of the (mapped) mesh with point data ``displacement`` and ``density`` and
+    cell data ``rho`` (density on the mapped mesh)."""
+    pv = setup_pyvista()
+    import vtk  # noqa: F401
+
+    pts = np.asarray(result.mapped_points if mapped else result.ref_points, dtype=np.float64)
+    el = np.asarray(result.elements)
+    d = pts.shape[1]
+    if d == 2:
+        pts = np.column_stack([pts, np.zeros(len(pts))])
+        celltype = pv.CellType.TRIANGLE
+    else:
+        celltype = pv.CellType.TETRA
+    cells = np.column_stack([np.full(len(el), el.shape[1]), el]).ravel()
+    grid = pv.UnstructuredGrid(cells, np.full(len(el), celltype, dtype=np.uint8), pts)
+    disp = result.mapped_points - result.ref_points
+    grid.point_data["displacement"] = np.column_stack([disp, np.zeros(len(disp))]) if d == 2 else disp
+    if result.kind == "density":
+        grid.point_data["density"] = result.field.reshape(-1)
+        grid.cell_data["rho"] = result.rho() if mapped else result.field.reshape(-1)[el].mean(1) / \
+            result.field.reshape(-1)[el].mean(1).mean()
+    return grid
 
 
 #: What reading a damaged or missing ``.npz`` raises: I/O errors, a bad or truncated zip archive, a corrupt member.

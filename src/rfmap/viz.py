@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .result import setup_pyvista, to_pyvista
+
 __all__ = ["STYLE", "style", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu", "plot_map_row",
            "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram"]
 
@@ -52,17 +54,9 @@ def save_figure(fig, label: str) -> Path:
 
 
 def element_rho(result) -> np.ndarray:
-    """Per-element density :math:`\\tilde\\rho` on the mapped mesh (population / mapped measure, mean 1)."""
-    from .geometry import signed_measures
-    from .metrics import element_population
-    import torch
-
-    ref = torch.as_tensor(result.ref_points, dtype=torch.float64)
-    mapped = torch.as_tensor(result.mapped_points, dtype=torch.float64)
-    el = torch.as_tensor(result.elements)
-    pop = element_population(ref, el, result.field.reshape(-1))
-    rho = pop / signed_measures(mapped, el)
-    return (rho / rho.mean()).numpy()
+    """Per-element density :math:`\\tilde\\rho` on the mapped mesh (population / mapped measure, mean 1); the
+    same as :meth:`rfmap.result.MapResult.rho`."""
+    return result.rho()
 
 
 def _grid_lines(ax, pts, n, step, **kw):
@@ -214,44 +208,6 @@ def architecture_diagram(model, ax=None):
     ax.set_ylim(-(levels - 1) * dy - 0.45, 0.6)
     ax.set_axis_off()
     return ax
-
-
-def setup_pyvista():
-    """Configure PyVista for off-screen rendering (EGL) and static images in notebooks; returns the module."""
-    os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-    import pyvista as pv
-
-    pv.OFF_SCREEN = True
-    try:
-        pv.set_jupyter_backend("static")
-    except Exception:  # noqa: BLE001 - outside Jupyter
-        pass
-    return pv
-
-
-def to_pyvista(result, *, mapped: bool = True):
-    """A ``pyvista.UnstructuredGrid`` of the (mapped) mesh with point data ``displacement`` and ``density`` and
-    cell data ``rho`` (density on the mapped mesh)."""
-    pv = setup_pyvista()
-    import vtk  # noqa: F401
-
-    pts = np.asarray(result.mapped_points if mapped else result.ref_points, dtype=np.float64)
-    el = np.asarray(result.elements)
-    d = pts.shape[1]
-    if d == 2:
-        pts = np.column_stack([pts, np.zeros(len(pts))])
-        celltype = pv.CellType.TRIANGLE
-    else:
-        celltype = pv.CellType.TETRA
-    cells = np.column_stack([np.full(len(el), el.shape[1]), el]).ravel()
-    grid = pv.UnstructuredGrid(cells, np.full(len(el), celltype, dtype=np.uint8), pts)
-    disp = result.mapped_points - result.ref_points
-    grid.point_data["displacement"] = np.column_stack([disp, np.zeros(len(disp))]) if d == 2 else disp
-    if result.kind == "density":
-        grid.point_data["density"] = result.field.reshape(-1)
-        grid.cell_data["rho"] = element_rho(result) if mapped else result.field.reshape(-1)[el].mean(1) / \
-            result.field.reshape(-1)[el].mean(1).mean()
-    return grid
 
 
 def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", clip: bool = True,
