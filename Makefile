@@ -23,6 +23,8 @@ BOOK_FLAGS := -W -n --keep-going --all
 # the Jupyter kernel of .venv; it carries NB_ENV itself, so a chapter opened in any Jupyter front end runs as in the book
 KERNEL := rfmap
 LAB_FLAGS ?=
+# Jupyter refuses to run as root unless told to (containers often run as root)
+LAB_ROOT := $(shell [ "$$(id -u)" = 0 ] && echo --allow-root)
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
 .PHONY: install test book book-check lab clean distclean
@@ -47,7 +49,7 @@ book: install
 
 lab: install
 	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter lab --ServerApp.root_dir="$(CURDIR)" \
-		--MappingKernelManager.default_kernel_name=$(KERNEL) $(LAB_FLAGS)
+		--MappingKernelManager.default_kernel_name=$(KERNEL) $(LAB_ROOT) $(LAB_FLAGS)
 
 book-check: install
 	command -v chromium >/dev/null 2>&1 || { $(SUDO) apt-get update && $(SUDO) apt-get install -y chromium; }
