@@ -133,21 +133,34 @@ def grid_simplices(values: Tensor, n: int, dim: int) -> list[list[Tensor]]:
 def grid_signed_measures(points: Tensor, n: int) -> Tensor:
     r"""Signed measures of the elements of the ``N``-grid mesh at vertex positions ``points``.
 
-    Equal to ``signed_measures(points, grid_mesh(n, d).elements)`` (same element order), computed from strided
-    views (:func:`grid_simplices`); used by the training losses.
+    Equal to ``signed_measures(points, grid_mesh(n, d).elements)`` (same element order, up to rounding), computed
+    from strided views of the coordinates moved to a leading axis, so that every product runs over contiguous
+    rows: in 3D the triple product :math:`a \cdot (b \times c)` is written out component by component
+    (about four times faster, forward and backward, than ``linalg.cross`` on the trailing axis at N = 48).
+    Used by the training losses and weight refinement.
 
     Shapes: points (B, N**d, d) -> (B, d! (N-1)**d).
     """
-    B, _, d = points.shape
+    B, P, d = points.shape
+    if P != n**d:
+        raise ValueError(f"{P} points do not form an N={n} grid in {d}D")
+    g = points.reshape(B, *([n] * d), d).movedim(-1, 1).contiguous()  # (B, d, N, ..., N)
+
+    def corner(off):
+        return g[(slice(None), slice(None)) + tuple(slice(o, n - 1 + o) for o in off)]
+
     out = []
-    for corners in grid_simplices(points, n, d):
-        edges = [c - corners[0] for c in corners[1:]]
+    for simplex in _grid_simplex_offsets(d):
+        c0, *rest = [corner(off) for off in simplex]
+        e = [c - c0 for c in rest]
         if d == 2:
-            a, b = edges
-            m = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+            a, b = e
+            m = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
         else:
-            a, b, c = edges
-            m = (a * torch.linalg.cross(b, c, dim=-1)).sum(-1)
+            a, b, c = e
+            m = (a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1])
+                 + a[:, 1] * (b[:, 2] * c[:, 0] - b[:, 0] * c[:, 2])
+                 + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]))
         out.append(m.reshape(B, -1))
     return torch.cat(out, -1) / math.factorial(d)
 

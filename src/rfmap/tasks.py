@@ -24,7 +24,8 @@ from .fields import (RandomBeltramiConfig, RandomDensity, RandomDensityConfig, R
 from .mesh import grid_mesh, grid_points, interpolate
 from .nn.model import BOUNDARIES, apply_displacement
 
-__all__ = ["TaskSpec", "Batch", "encode", "grid_elements", "sample_batch", "task_loss", "KINDS"]
+__all__ = ["TaskSpec", "Batch", "encode", "grid_elements", "draw_samples", "make_batch", "sample_batch", "task_loss",
+           "KINDS"]
 
 KINDS = ("density", "beltrami")
 
@@ -60,6 +61,9 @@ class TaskSpec:
     @property
     def n_params(self) -> int:
         return 1 if self.kind == "density" else 2
+
+    def to_dict(self) -> dict:
+        return {"kind": self.kind, "dim": self.dim, "boundary": self.boundary}
 
 
 @lru_cache(maxsize=64)
@@ -115,6 +119,21 @@ class Batch:
     mu_target: Tensor | None = None
     extra: dict = field(default_factory=dict)
 
+    @property
+    def on_grid(self) -> bool:
+        """Whether ``elements`` is the element array of the ``N``-grid mesh (then the losses use strided views)."""
+        e = self.elements
+        return e is grid_elements(self.n, self.ref.shape[-1]) or bool(self.extra.get("grid_elements"))
+
+    def to(self, device) -> "Batch":
+        """The batch on ``device`` (the cached element array stays on the CPU; losses use strided views)."""
+        dev = torch.device(device)
+        if dev.type == "cpu":
+            return self
+        mv = lambda t: None if t is None else t.to(dev, non_blocking=True)  # noqa: E731
+        return Batch(mv(self.inputs), mv(self.ref), self.elements.to(dev), self.n, mv(self.density),
+                     mv(self.mu_target), {**self.extra, "grid_elements": self.on_grid})
+
 
 def _grad_magnitude(values: np.ndarray, n: int, dim: int) -> np.ndarray:
     g = np.gradient(values.reshape((n,) * dim))
@@ -149,16 +168,22 @@ def _beltrami_sample(rng, n, cfg: RandomBeltramiConfig, jitter: float, source: s
     return pts, mu
 
 
-def sample_batch(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
+def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
                  density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
-                 beltrami_source: str = "map") -> Batch:
-    """Draw the training samples ``indices`` of step ``step`` on an ``N``-grid.
+                 beltrami_source: str = "map") -> tuple[np.ndarray, np.ndarray]:
+    """The raw arrays of training samples ``indices`` of step ``step`` on an ``N``-grid (numpy only, so that a
+    worker process can draw them and send them to the training process).
 
     Sample ``i`` of step ``t`` is generated from ``np.random.default_rng([seed, t, i])`` only, so a batch split
-    across processes (data-parallel training) reproduces the single-process batch exactly.
+    across processes (data-parallel training) or drawn by worker processes reproduces the single-process batch
+    exactly.
+
+    Returns
+    -------
+    points : ndarray, shape (B, N**d, d), float64
+    params : ndarray, shape (B, N**d), the unit-mass density (float64) or the Beltrami coefficient (complex128)
     """
-    elements = grid_elements(n, spec.dim)
-    el_np = elements.numpy()
+    el_np = grid_elements(n, spec.dim).numpy() if spec.kind == "density" and jitter > 0 else None
     pts_l, par_l = [], []
     for i in indices:
         rng = np.random.default_rng([seed, step, int(i)])
@@ -169,13 +194,29 @@ def sample_batch(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitte
             pts, par = _beltrami_sample(rng, n, beltrami_cfg or RandomBeltramiConfig(), jitter, beltrami_source)
         pts_l.append(pts)
         par_l.append(par)
-    ref = torch.as_tensor(np.stack(pts_l), dtype=torch.float32)
-    par = torch.as_tensor(np.stack(par_l))
+    return np.stack(pts_l), np.stack(par_l)
+
+
+def make_batch(spec: TaskSpec, points: np.ndarray, params: np.ndarray, n: int) -> Batch:
+    """Tensors of a training batch from the arrays of :func:`draw_samples` (float32 / complex64)."""
+    elements = grid_elements(n, spec.dim)
+    ref = torch.as_tensor(points, dtype=torch.float32)
+    par = torch.as_tensor(params)
     par = par.to(torch.complex64) if par.is_complex() else par.float()
     inputs = encode(ref, par, spec, n)
     if spec.kind == "density":
         return Batch(inputs, ref, elements, n, density=par)
     return Batch(inputs, ref, elements, n, mu_target=par[:, elements].mean(-1))
+
+
+def sample_batch(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
+                 density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
+                 beltrami_source: str = "map") -> Batch:
+    """Draw the training samples ``indices`` of step ``step`` on an ``N``-grid (:func:`draw_samples` then
+    :func:`make_batch`)."""
+    pts, par = draw_samples(spec, seed=seed, step=step, indices=indices, n=n, jitter=jitter,
+                            density_cfg=density_cfg, beltrami_cfg=beltrami_cfg, beltrami_source=beltrami_source)
+    return make_batch(spec, pts, par, n)
 
 
 @dataclass(frozen=True)
@@ -204,7 +245,7 @@ def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights) -
     disp = psi.reshape(B, d, -1).transpose(1, 2)
     mapped = apply_displacement(batch.ref, disp, spec.boundary)
     dim = batch.ref.shape[-1]
-    if batch.elements is grid_elements(batch.n, dim):  # the (cached) grid mesh: strided fast path
+    if batch.on_grid:  # the elements are those of the N-grid mesh: strided fast path
         ref_meas = grid_signed_measures(batch.ref, batch.n)
         meas = grid_signed_measures(mapped, batch.n)
         elem_density = None if batch.density is None else grid_element_mean(batch.density, batch.n, dim)

@@ -1,43 +1,79 @@
-r"""Data-free training of a surrogate (paper Sec. 5), single-process or data-parallel.
+r"""Data-free training of a surrogate (paper Sec. 5), single-process or data-parallel, on the CPU or a GPU.
 
-``python -m rfmap.train --config NAME [--preset ci|full] [--out DIR] [--resume]`` (also ``rfmap train``) trains the
-named configuration of :mod:`rfmap.config`.  Every step draws a fresh batch of random fields (sample ``i`` of step
-``t`` is seeded by ``(seed, t, i)``) on a random grid size in ``n_range``, with Sobol-jittered vertices.
+``rfmap train --config NAME [--preset ci|full|paper] [--device auto|cpu|cuda] [--init MODEL|FILE] [--resume]``
+(also ``python -m rfmap.train``) trains the named configuration of :mod:`rfmap.config`.  Every step draws a fresh
+batch of random fields (sample ``i`` of step ``t`` is seeded by ``(seed, t, i)``) on a random grid size in
+``n_range``, with Sobol-jittered vertices.  With ``workers >= 1`` the batches are drawn ahead of the step by
+worker processes; the batches, hence the weights, are the same for any number of workers.
 
 Data-parallel: ``torchrun --nproc_per_node=K -m rfmap.train --config NAME ...`` runs K processes (gloo on CPU,
 NCCL on GPU); rank ``r`` draws samples ``r*B .. (r+1)*B - 1`` of each step, so K processes with batch ``B`` train
 the same model as one process with batch ``K*B``.
 
+Validation and the choice of the shipped checkpoint use the held-out random fields of :mod:`rfmap.validation`
+(seeds training never draws); the paper's test fields are evaluated once at the end as a report.
+
+``--init`` starts from shipped or saved weights with a fresh optimiser and schedule (a warm restart); the
+metadata keeps the lineage (parent name and SHA-256, cumulative steps and wall time).
+
 Outputs in ``--out`` (default ``runs/NAME``): ``log.jsonl`` (one JSON object per logged step and per
-validation), ``checkpoint.pt`` (model, optimiser, scheduler, step; loaded with ``weights_only=True``), and the final
-``NAME.safetensors`` + ``NAME.json`` (metadata: config, steps, wall time, final metrics).
+validation), ``checkpoint.pt`` (model, optimiser, scheduler, step; loaded with ``weights_only=True`` onto any
+device), and the final ``NAME.safetensors`` + ``NAME.json`` (metadata: config, command, steps, wall time,
+validation metrics, lineage, training history).
 """
 from __future__ import annotations
 
 import argparse
+import copy
+import hashlib
 import json
 import math
 import os
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 import torch
 
 from ._version import __version__
-from .config import TrainConfig, config_names, get_config
+from .config import PRESETS, TrainConfig, config_names, get_config
 from .nn.model import MultiResUNet
-from .surrogate import Surrogate
-from .tasks import sample_batch, task_loss
+from .surrogate import Surrogate, models
+from .tasks import TaskSpec, draw_samples, make_batch, task_loss
+from .validation import evaluate, score
 
-__all__ = ["train", "validate", "main", "VALIDATION_FIELDS"]
+__all__ = ["train", "validate", "report_paper_fields", "resolve_device", "load_init", "main", "PAPER_FIELDS",
+           "TrainState"]
 
-VALIDATION_FIELDS = {
+#: the paper's test fields per (kind, dim): evaluated as a report at the end of training, never for selection
+PAPER_FIELDS = {
     ("density", 2): ["sin-cos", "exp-log", "rect-peak", "ring"],
     ("density", 3): ["sin-cos-3d", "shell-3d", "octant-3d", "prism-peak-3d"],
     ("beltrami", 2): ["T1", "T2", "T3", "T4"],
 }
+
+
+# ---------------------------------------------------------------------------------------------------- devices
+def resolve_device(name: str | None = "auto") -> torch.device:
+    """``'auto'`` (CUDA when available, else CPU), ``'cpu'`` or ``'cuda'`` / ``'cuda:K'``.
+
+    Raises ``ValueError`` for an unknown name or for CUDA on a machine without it."""
+    name = (name or "auto").strip().lower()
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name == "cpu":
+        return torch.device("cpu")
+    if name == "cuda" or name.startswith("cuda:"):
+        if not torch.cuda.is_available():
+            raise ValueError(f"device {name!r} requested but no CUDA device is available (use --device cpu)")
+        dev = torch.device(name)
+        if dev.index is not None and dev.index >= torch.cuda.device_count():
+            raise ValueError(f"device {name!r} requested but only {torch.cuda.device_count()} CUDA device(s) exist")
+        return dev
+    raise ValueError(f"unknown device {name!r}; expected auto, cpu or cuda")
 
 
 def _dist_info() -> tuple[int, int]:
@@ -67,11 +103,22 @@ def step_size_n(cfg: TrainConfig, step: int) -> int:
     return int(np.random.default_rng([cfg.seed, step, 2**31]).integers(lo, hi + 1))
 
 
-class _Prefetcher:
+# ---------------------------------------------------------------------------------------------------- batches
+def draw_step(cfg: TrainConfig, step: int, rank: int = 0) -> tuple[int, np.ndarray, np.ndarray]:
+    """The raw arrays of rank ``rank``'s share of step ``step``: ``(n, points, params)`` (a pure function of the
+    configuration, the step and the rank)."""
+    n = step_size_n(cfg, step)
+    pts, par = draw_samples(cfg.task, seed=cfg.seed, step=step, indices=range(rank * cfg.batch, (rank + 1) * cfg.batch),
+                            n=n, jitter=cfg.jitter, density_cfg=cfg.density_field, beltrami_cfg=cfg.beltrami_field,
+                            beltrami_source=cfg.beltrami_source)
+    return n, pts, par
+
+
+class _ThreadLoader:
     """Draws the batches of the coming steps in a background thread (numpy releases the GIL in its array
     kernels), so that field synthesis overlaps with the network step."""
 
-    def __init__(self, fn, start: int, stop: int, depth: int = 2):
+    def __init__(self, cfg: TrainConfig, rank: int, start: int, stop: int, depth: int = 2):
         import queue
         import threading
 
@@ -83,7 +130,7 @@ class _Prefetcher:
                 if self._stop.is_set():
                     return
                 try:
-                    item = (step, fn(step), None)
+                    item = (step, draw_step(cfg, step, rank), None)
                 except BaseException as e:  # surface errors in the training loop
                     item = (step, None, e)
                 while not self._stop.is_set():
@@ -98,203 +145,434 @@ class _Prefetcher:
         self.thread = threading.Thread(target=work, daemon=True)
         self.thread.start()
 
-    def get(self):
-        step, batch, err = self.q.get()
+    def get(self, step: int):
+        got, arrays, err = self.q.get()
         if err is not None:
             raise err
-        return step, batch
+        assert got == step, (got, step)
+        return arrays
 
     def close(self):
         self._stop.set()
         self.thread.join(timeout=5)
 
 
-def validate(sur: Surrogate, n: int, fields: list[str] | None = None) -> dict:
-    """Metrics of a surrogate on the paper's test fields at grid side ``n`` (mean over fields, worst flips)."""
-    from .fields import BELTRAMI_MAPS, get_field
+def _worker_main(cfg: TrainConfig, rank: int, steps: range, q, stop) -> None:  # pragma: no cover - subprocess
+    torch.set_num_threads(1)
+    try:
+        for step in steps:
+            if stop.is_set():
+                return
+            q.put((step, draw_step(cfg, step, rank), None))
+    except BaseException as e:  # noqa: BLE001 - reported to the training process
+        q.put((None, None, f"{type(e).__name__}: {e}"))
 
-    fields = fields or VALIDATION_FIELDS[(sur.spec.kind, sur.spec.dim)]
+
+class _ProcessLoader:
+    """Draws the batches in ``workers`` separate processes (step ``t`` by worker ``t mod workers``), off the
+    training process's interpreter lock; the arrays arrive in step order."""
+
+    def __init__(self, cfg: TrainConfig, rank: int, start: int, stop: int, workers: int, depth: int = 2):
+        import multiprocessing as mp
+
+        ctx = mp.get_context("spawn")
+        self.workers = workers
+        self.start = start
+        self._stop = ctx.Event()
+        self.queues = [ctx.Queue(maxsize=depth) for _ in range(workers)]
+        self.procs = [ctx.Process(target=_worker_main, args=(cfg, rank, range(start + w, stop, workers), q,
+                                                             self._stop), daemon=True)
+                      for w, q in enumerate(self.queues)]
+        for p in self.procs:
+            p.start()
+
+    def get(self, step: int):
+        import queue
+
+        q = self.queues[(step - self.start) % self.workers]
+        while True:
+            try:
+                got, arrays, err = q.get(timeout=5.0)
+                break
+            except queue.Empty:
+                if not all(p.is_alive() for p in self.procs):
+                    raise RuntimeError("a batch worker process died; rerun with --workers 0 to see its error")
+        if err is not None:
+            raise RuntimeError(f"batch worker failed: {err}")
+        assert got == step, (got, step)
+        return arrays
+
+    def close(self):
+        self._stop.set()
+        for q in self.queues:  # unblock workers waiting on a full queue
+            try:
+                while not q.empty():
+                    q.get_nowait()
+            except Exception:  # noqa: BLE001 - best effort while shutting down
+                pass
+        for p in self.procs:
+            p.join(timeout=2)
+            if p.is_alive():
+                p.terminate()
+
+
+def _loader(cfg: TrainConfig, rank: int, start: int, stop: int):
+    if cfg.workers > 0 and stop - start > 2 * cfg.workers:
+        return _ProcessLoader(cfg, rank, start, stop, cfg.workers)
+    return _ThreadLoader(cfg, rank, start, stop)
+
+
+# ------------------------------------------------------------------------------------------------- validation
+def validate(sur: Surrogate, cfg: TrainConfig) -> dict:
+    """Metrics on the held-out random fields (:func:`rfmap.validation.evaluate`) at ``cfg.val_ns``."""
+    return evaluate(sur, cfg.val_ns, cfg.val_count)
+
+
+def report_paper_fields(sur: Surrogate, n: int, fields: list[str] | None = None) -> dict:
+    """Metrics on the paper's test fields at grid side ``n`` (a report; never used to select a model)."""
+    from .fields import BELTRAMI_MAPS
+
+    fields = fields or PAPER_FIELDS[(sur.spec.kind, sur.spec.dim)]
     out: dict = {}
     vals = []
     for name in fields:
-        r = sur.map(name, n)
+        r = sur.map(name, n, **({"repair": False} if _has_repair(sur) else {}))
         if sur.spec.kind == "beltrami":
-            f = BELTRAMI_MAPS[name]
-            m = r.metrics(exact_points=f(r.ref_points), mu_ref=r.field)
+            m = r.metrics(exact_points=BELTRAMI_MAPS[name](r.ref_points), mu_ref=r.field)
             vals.append({"mean_dd": m.mean_dd, "mean_dmu": m.mean_dmu, "n_flipped": m.n_flipped,
                          "min_jacobian": m.min_jacobian})
         else:
             m = r.metrics()
             vals.append({"std_rho_map": m.std_rho_map, "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian})
         out[name] = vals[-1]
-    keys = vals[0].keys()
     summary = {}
-    for k in keys:
+    for k in vals[0]:
         arr = [v[k] for v in vals]
         summary[k] = int(sum(arr)) if k == "n_flipped" else (min(arr) if k == "min_jacobian" else float(np.mean(arr)))
     out["mean"] = summary
     return out
 
 
-def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, progress: bool = True,
-          log_every: int = 10, command: str | None = None) -> Surrogate:
-    """Train ``cfg``; returns the trained :class:`Surrogate` (also written to ``out_dir``).  ``command`` (the
-    command line that started the run) is recorded in the metadata."""
+def _has_repair(sur) -> bool:
+    import inspect
+
+    return "repair" in inspect.signature(sur.map).parameters
+
+
+# ---------------------------------------------------------------------------------------------------- lineage
+def sha256(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def load_init(source: str, cfg: TrainConfig) -> tuple[Surrogate, dict]:
+    """The weights to start from (a shipped model's name or a ``.safetensors`` path) and their lineage record.
+
+    Raises ``ValueError`` when they were trained for another task, dimension or boundary, or with another
+    architecture than ``cfg.model``."""
+    if source in models():
+        from .surrogate import WEIGHTS_DIR
+
+        path = WEIGHTS_DIR / f"{source}.safetensors"
+    else:
+        path = Path(source)
+        if path.suffix != ".safetensors":
+            path = path.with_suffix(".safetensors")
+        if not path.exists():
+            raise ValueError(f"--init {source!r}: neither a shipped model ({', '.join(models())}) nor a weight file")
+    try:
+        parent = Surrogate.load(path)
+    except FileNotFoundError as e:
+        raise ValueError(f"--init {source!r}: {e}") from e
+    if parent.spec != cfg.task:
+        raise ValueError(f"--init {source!r} was trained for {parent.spec}, but config {cfg.name!r} is {cfg.task}")
+    want = {"dim": cfg.task.dim, "n_params": cfg.task.n_params, "base": cfg.model.base, "depth": cfg.model.depth,
+            "attention": cfg.model.attention}
+    if parent.model.kwargs() != want:
+        raise ValueError(f"--init {source!r} has architecture {parent.model.kwargs()}, config {cfg.name!r} "
+                         f"expects {want}")
+    meta = parent.meta
+    record = {"name": meta.get("name", path.stem), "file": path.name, "sha256": sha256(path),
+              "preset": meta.get("preset"), "command": meta.get("command"), "steps": int(meta.get("steps", 0)),
+              "wall_time": float(meta.get("wall_time", 0.0)),
+              "cumulative_steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
+              "cumulative_wall_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0)))}
+    return parent, record
+
+
+# ------------------------------------------------------------------------------------------------------ state
+@dataclass
+class TrainState:
+    """Everything the training loop reads and updates."""
+
+    cfg: TrainConfig
+    model: MultiResUNet
+    net: torch.nn.Module  # the model, or its DistributedDataParallel wrapper
+    opt: torch.optim.Optimizer
+    sched: object
+    out: Path
+    device: torch.device
+    rank: int = 0
+    world: int = 1
+    step: int = 0
+    elapsed0: float = 0.0  # training time of earlier sessions (--resume)
+    lineage: list = field(default_factory=list)
+    command: str | None = None
+    best: dict | None = None  # {"step", "score", "summary", "state"}
+    ema: float | None = None
+    t_start: float = 0.0
+
+    @property
+    def spec(self) -> TaskSpec:
+        return self.cfg.task
+
+    def elapsed(self) -> float:
+        return time.perf_counter() - self.t_start
+
+    def log(self, rec: dict) -> None:
+        if self.rank == 0:
+            with open(self.out / "log.jsonl", "a") as f:
+                f.write(json.dumps(rec) + "\n")
+
+    def checkpoint(self) -> None:
+        if self.rank != 0:
+            return
+        tmp = self.out / "checkpoint.pt.part"
+        torch.save({"model": self.model.state_dict(), "opt": self.opt.state_dict(), "sched": self.sched.state_dict(),
+                    "step": self.step, "elapsed": self.elapsed(), "lineage": json.dumps(self.lineage),
+                    "best": None if self.best is None else {k: json.dumps(v) for k, v in self.best.items()
+                                                            if k != "state"},
+                    "best_state": None if self.best is None else self.best["state"],
+                    "config": json.dumps(self.cfg.to_dict(), sort_keys=True)}, tmp)
+        os.replace(tmp, self.out / "checkpoint.pt")
+
+    def cpu_surrogate(self, final: dict | None = None) -> Surrogate:
+        """A CPU copy of the current model with its metadata (used for validation and for the shipped file)."""
+        cfg = self.cfg
+        model = copy.deepcopy(self.model).float().cpu().eval()
+        elapsed = self.elapsed()
+        parent = self.lineage[-1] if self.lineage else {"cumulative_steps": 0, "cumulative_wall_time": 0.0}
+        meta = {"name": cfg.name, "preset": cfg.preset, "n_range": list(cfg.n_range), "config": cfg.to_dict(),
+                "rfmap_version": __version__, "steps": self.step, "wall_time": round(elapsed, 1),
+                "cumulative_steps": int(parent["cumulative_steps"]) + self.step,
+                "cumulative_wall_time": round(float(parent["cumulative_wall_time"]) + elapsed, 1),
+                "lineage": self.lineage, "device": str(self.device), "threads": torch.get_num_threads(),
+                "world_size": self.world, "global_batch": cfg.batch * self.world, "description": cfg.description}
+        if self.command:
+            meta["command"] = self.command
+        if final is not None:
+            meta["final_metrics"] = final
+        return Surrogate(model, cfg.task, meta)
+
+
+def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool, init: str | None,
+                 command: str | None) -> TrainState:
     rank, world = _dist_info()
-    out = Path(out_dir or Path("runs") / cfg.name)
-    if rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
-    if cfg.threads:
+    if cfg.threads and device.type == "cpu":
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
     spec = cfg.task
+    lineage: list = []
     model = MultiResUNet(spec.dim, spec.n_params, cfg.model.base, cfg.model.depth, cfg.model.attention)
-    ddp = None
+    if init:
+        parent, record = load_init(init, cfg)
+        model.load_state_dict(parent.model.state_dict())
+        lineage = list(parent.meta.get("lineage", [])) + [record]
+    model = model.to(device)
+    net = model
     if world > 1:
-        ddp = torch.nn.parallel.DistributedDataParallel(model)
-    net = ddp or model
+        net = torch.nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda"
+                                                        else None)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, betas=cfg.betas)
     sched = _scheduler(opt, cfg)
-    start, elapsed0 = 0, 0.0
+    st = TrainState(cfg, model, net, opt, sched, out, device, rank, world, lineage=lineage, command=command)
     ckpt = out / "checkpoint.pt"
-    log_path = out / "log.jsonl"
     if resume and ckpt.exists():
-        state = torch.load(ckpt, weights_only=True)
+        state = torch.load(ckpt, weights_only=True, map_location=device)
         if state.get("config") != json.dumps(cfg.to_dict(), sort_keys=True):
             raise ValueError(f"checkpoint {ckpt} was written by a different configuration; remove it or use "
                              "another --out")
         model.load_state_dict(state["model"])
         opt.load_state_dict(state["opt"])
         sched.load_state_dict(state["sched"])
-        start, elapsed0 = int(state["step"]), float(state["elapsed"])
-    elif rank == 0 and log_path.exists():
-        log_path.unlink()
+        st.step, st.elapsed0 = int(state["step"]), float(state["elapsed"])
+        st.lineage = json.loads(state.get("lineage", "[]"))
+        if state.get("best"):
+            st.best = {k: json.loads(v) for k, v in state["best"].items()}
+            st.best["state"] = state["best_state"]
+    elif rank == 0 and (out / "log.jsonl").exists():
+        (out / "log.jsonl").unlink()
+    return st
 
-    def log(rec):
-        if rank == 0:
-            with open(log_path, "a") as f:
-                f.write(json.dumps(rec) + "\n")
 
-    def surrogate(step, elapsed, final=None):
-        meta = {"name": cfg.name, "preset": cfg.preset, "n_range": list(cfg.n_range), "config": cfg.to_dict(),
-                "rfmap_version": __version__, "steps": step, "wall_time": round(elapsed, 1),
-                "world_size": world, "global_batch": cfg.batch * world, "description": cfg.description}
-        if command:
-            meta["command"] = command
-        if final is not None:
-            meta["final_metrics"] = final
-        s = Surrogate(model, spec, meta)
-        return s
+def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | None = None,
+          device: str | torch.device | None = "cpu", progress: bool = True, log_every: int = 10,
+          command: str | None = None) -> Surrogate:
+    """Train ``cfg``; returns the trained :class:`Surrogate` (also written to ``out_dir``).
 
-    t_start = time.perf_counter() - elapsed0
+    Parameters
+    ----------
+    resume : bool
+        Continue from ``out_dir/checkpoint.pt`` (model, optimiser, schedule, step and elapsed time).
+    init : str, optional
+        Start from a shipped model's weights or a ``.safetensors`` file (fresh optimiser and schedule).
+    device : str or torch.device
+        ``'cpu'`` (default), ``'cuda'`` or ``'auto'``; on CUDA the network runs under bf16 autocast.
+    command : str, optional
+        The command line that started the run (recorded in the metadata).
+    """
+    dev = device if isinstance(device, torch.device) else resolve_device(device)
+    out = Path(out_dir or Path("runs") / cfg.name)
+    rank, _ = _dist_info()
+    if rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    st = _build_state(cfg, out, dev, resume, init, command)
+    st.t_start = time.perf_counter() - st.elapsed0
     bar = None
-    if progress and rank == 0:
+    if progress and st.rank == 0:
         from tqdm.auto import tqdm
 
-        bar = tqdm(total=cfg.steps, initial=start, desc=f"train {cfg.name}", unit="step", dynamic_ncols=True)
-    step = start
-    ema = None
-
-    def make_batch(t):
-        return sample_batch(spec, seed=cfg.seed, step=t, indices=range(rank * cfg.batch, (rank + 1) * cfg.batch),
-                            n=step_size_n(cfg, t), jitter=cfg.jitter, density_cfg=cfg.density_field,
-                            beltrami_cfg=cfg.beltrami_field, beltrami_source=cfg.beltrami_source)
-
-    loader = _Prefetcher(make_batch, start, cfg.steps)
+        bar = tqdm(total=cfg.steps, initial=st.step, desc=f"train {cfg.name}", unit="step", dynamic_ncols=True)
+    loader = _loader(cfg, st.rank, st.step, cfg.steps)
     try:
-        sur = _loop(cfg, spec, model, net, opt, sched, loader, bar, log, surrogate, ckpt, t_start, step, rank,
-                    world, ema, log_every, out)
+        _loop(st, loader, bar, log_every)
     finally:
         loader.close()
-    return sur
+        if bar is not None:
+            bar.close()
+    return _finish(st)
 
 
-def _loop(cfg, spec, model, net, opt, sched, loader, bar, log, surrogate, ckpt, t_start, step, rank, world, ema,
-          log_every, out):
-    while step < cfg.steps:
-        _, batch = loader.get()
-        n = batch.n
-        model.train()
-        psi = net(batch.inputs)
-        loss, parts = task_loss(spec, batch, psi, cfg.loss)
-        opt.zero_grad(set_to_none=True)
-        loss.backward()
-        gnorm = float(torch.nn.utils.clip_grad_norm_(model.parameters(), cfg.clip))
-        opt.step()
-        sched.step()
-        step += 1
-        lv = float(loss.detach())
-        ema = lv if ema is None else 0.95 * ema + 0.05 * lv
-        elapsed = time.perf_counter() - t_start
+def _train_step(st: TrainState, n: int, pts: np.ndarray, par: np.ndarray) -> tuple[float, dict, float]:
+    cfg = st.cfg
+    batch = make_batch(cfg.task, pts, par, n).to(st.device)
+    st.model.train()
+    if st.device.type == "cuda":
+        with torch.autocast("cuda", dtype=torch.bfloat16):
+            psi = st.net(batch.inputs)
+        psi = psi.float()
+    else:
+        psi = st.net(batch.inputs)
+    loss, parts = task_loss(cfg.task, batch, psi, cfg.loss)
+    st.opt.zero_grad(set_to_none=True)
+    loss.backward()
+    gnorm = float(torch.nn.utils.clip_grad_norm_(st.model.parameters(), cfg.clip))
+    st.opt.step()
+    st.sched.step()
+    return float(loss.detach()), parts, gnorm
+
+
+def _validate_and_keep(st: TrainState, bar) -> dict:
+    v = validate(st.cpu_surrogate(), st.cfg)
+    st.log({"step": st.step, "validation": v, "elapsed": round(st.elapsed(), 2)})
+    s = score(v["mean"])
+    if st.best is None or s < tuple(st.best["score"]):
+        st.best = {"step": st.step, "score": list(s), "summary": v["mean"],
+                   "state": {k: t.detach().cpu().clone() for k, t in st.model.state_dict().items()}}
+    if bar is not None:
+        bar.write(f"step {st.step}: validation {v['mean']}")
+    return v
+
+
+def _loop(st: TrainState, loader, bar, log_every: int) -> None:
+    cfg = st.cfg
+    while st.step < cfg.steps:
+        n, pts, par = loader.get(st.step)
+        lv, parts, gnorm = _train_step(st, n, pts, par)
+        st.step += 1
+        st.ema = lv if st.ema is None else 0.95 * st.ema + 0.05 * lv
+        elapsed = st.elapsed()
         if bar is not None:
             bar.update(1)
-            bar.set_postfix(loss=f"{ema:.3g}", n=n)
-        if step % log_every == 0 or step == cfg.steps:
-            log({"step": step, "n": n, "loss": lv, **parts, "grad_norm": gnorm, "lr": opt.param_groups[0]["lr"],
-                 "elapsed": round(elapsed, 2)})
+            bar.set_postfix(loss=f"{st.ema:.3g}", n=n)
+        if st.step % log_every == 0 or st.step == cfg.steps:
+            st.log({"step": st.step, "n": n, "loss": lv, **parts, "grad_norm": gnorm,
+                    "lr": st.opt.param_groups[0]["lr"], "elapsed": round(elapsed, 2)})
         stop = cfg.time_limit > 0 and elapsed > cfg.time_limit
-        if world > 1:
-            flag = torch.tensor([float(stop)])
+        if st.world > 1:
+            flag = torch.tensor([float(stop)], device=st.device if st.device.type == "cuda" else "cpu")
             torch.distributed.all_reduce(flag)
             stop = bool(flag.item() > 0)
-        if rank == 0 and (step % cfg.val_every == 0 and step < cfg.steps and not stop):
-            model.eval()
-            v = validate(surrogate(step, elapsed), cfg.val_n)
-            log({"step": step, "validation": v, "elapsed": round(elapsed, 2)})
-            if bar is not None:
-                bar.write(f"step {step}: validation {v['mean']}")
-        if rank == 0 and (step % cfg.ckpt_every == 0 or stop or step == cfg.steps):
-            torch.save({"model": model.state_dict(), "opt": opt.state_dict(), "sched": sched.state_dict(),
-                        "step": step, "elapsed": elapsed, "config": json.dumps(cfg.to_dict(), sort_keys=True)},
-                       ckpt)
+        if st.rank == 0 and st.step % cfg.val_every == 0 and st.step < cfg.steps and not stop:
+            _validate_and_keep(st, bar)
+        if st.step % cfg.ckpt_every == 0 or stop or st.step == cfg.steps:
+            st.checkpoint()
         if stop:
             if bar is not None:
-                bar.write(f"time limit of {cfg.time_limit:.0f} s reached at step {step}")
+                bar.write(f"time limit of {cfg.time_limit:.0f} s reached at step {st.step}")
             break
-    if bar is not None:
-        bar.close()
-    elapsed = time.perf_counter() - t_start
-    model.eval()
-    sur = surrogate(step, elapsed)
-    if rank == 0:
-        final = validate(sur, cfg.val_n)
-        log({"step": step, "validation": final, "elapsed": round(elapsed, 2), "final": True})
-        sur = surrogate(step, elapsed, final)
-        sur.meta["history"] = history(out / "log.jsonl")
-        sur.save(out / f"{cfg.name}.safetensors")
+
+
+def _finish(st: TrainState) -> Surrogate:
+    """Final validation, the choice of the shipped weights (the best validated state), the paper-field report,
+    and the weight file."""
+    cfg = st.cfg
+    if st.rank != 0:
+        return st.cpu_surrogate()
+    last = validate(st.cpu_surrogate(), cfg)
+    selected = st.step
+    if cfg.select_best and st.best is not None and tuple(st.best["score"]) < score(last["mean"]):
+        st.model.load_state_dict({k: v.to(st.device) for k, v in st.best["state"].items()})
+        selected = st.best["step"]
+        final = validate(st.cpu_surrogate(), cfg)
+    else:
+        final = last
+    st.log({"step": st.step, "validation": final, "elapsed": round(st.elapsed(), 2), "final": True,
+            "selected_step": selected})
+    sur = st.cpu_surrogate()
+    report = report_paper_fields(sur, cfg.val_n)
+    st.log({"step": st.step, "paper_fields_report": report})
+    sur = st.cpu_surrogate(final)
+    sur.meta["selected_step"] = selected
+    sur.meta["paper_fields_report"] = report
+    sur.meta["history"] = history(st.out / "log.jsonl")
+    sur.save(st.out / f"{cfg.name}.safetensors")
     return sur
 
 
 def history(log_path, points: int = 200) -> dict:
-    """A compact training history from ``log.jsonl``: up to ``points`` (step, loss) pairs of a running mean of the
-    loss, and the mean validation metrics over time (stored in the weight metadata for the book's plots)."""
-    steps, losses, val = [], [], []
+    """A compact training history from ``log.jsonl``: up to ``points`` (step, loss, elapsed) triples of a running
+    mean of the loss, and the mean validation metrics over steps and wall time (stored in the weight metadata for
+    the book's plots)."""
+    steps, losses, times, val = [], [], [], []
     with open(log_path) as f:
         for line in f:
             rec = json.loads(line)
             if "validation" in rec:
-                val.append({"step": rec["step"], **rec["validation"]["mean"]})
+                val.append({"step": rec["step"], "elapsed": rec.get("elapsed"), **rec["validation"]["mean"]})
             elif "loss" in rec:
                 steps.append(rec["step"])
                 losses.append(rec["loss"])
+                times.append(rec.get("elapsed"))
     if losses:
         w = max(1, len(losses) // points)
         sm = np.convolve(losses, np.ones(w) / w, mode="valid")[::w]
         steps = steps[w - 1::w][: len(sm)]
+        times = times[w - 1::w][: len(sm)]
         losses = [float(x) for x in sm]
-    return {"step": steps, "loss": losses, "validation": val}
+    return {"step": steps, "loss": losses, "elapsed": times, "validation": val}
 
 
+# -------------------------------------------------------------------------------------------------------- CLI
 def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
     p = parser or argparse.ArgumentParser(prog="rfmap train", description="Train a surrogate from a named config.")
     p.add_argument("--config", required=True, help=f"one of: {', '.join(config_names())}")
-    p.add_argument("--preset", choices=["ci", "full"], default=None, help="default: $RFMAP_SCALE or full")
+    p.add_argument("--preset", choices=list(PRESETS), default=None,
+                   help="ci (seconds), full (the shipped CPU runs) or paper (the paper's hyperparameters); "
+                        "default: $RFMAP_SCALE or full")
     p.add_argument("--out", default=None, help="output directory (default runs/CONFIG)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--init", default=None, metavar="MODEL|FILE",
+                   help="start from a shipped model or a .safetensors file (fresh optimiser and schedule)")
+    p.add_argument("--device", default="cpu", help="auto, cpu (default) or cuda; CUDA trains under bf16 autocast")
     p.add_argument("--steps", type=int, default=None, help="override the number of steps")
     p.add_argument("--batch", type=int, default=None, help="override the per-process batch size")
-    p.add_argument("--time-limit", type=float, default=None, help="override the wall-time limit (s)")
+    p.add_argument("--time-limit", type=float, default=None, help="override the wall-time limit (s; 0: none)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads per process")
+    p.add_argument("--workers", type=int, default=None, help="batch-drawing worker processes (0: a thread)")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--no-progress", action="store_true")
     return p
@@ -303,15 +581,29 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
 def run(args) -> Surrogate:
     cfg = get_config(args.config, args.preset)
     over = {k: v for k, v in {"steps": args.steps, "batch": args.batch, "time_limit": args.time_limit,
-                              "threads": args.threads, "seed": args.seed}.items() if v is not None}
+                              "threads": args.threads, "seed": args.seed, "workers": args.workers}.items()
+            if v is not None}
+    for k in ("steps", "batch"):
+        if k in over and over[k] < 1:
+            raise ValueError(f"--{k} must be at least 1, got {over[k]}")
+    if over.get("workers", 0) < 0 or over.get("threads", 0) < 0:
+        raise ValueError("--workers and --threads must not be negative")
     cfg = cfg.with_overrides(**over)
+    device = resolve_device(args.device)
+    if args.init and args.resume:
+        raise ValueError("--init and --resume exclude each other (a resumed run keeps its own lineage)")
+    if args.init:
+        load_init(args.init, cfg)  # validate before any output is written
     world = int(os.environ.get("WORLD_SIZE", "1"))
     if world > 1 and not torch.distributed.is_initialized():
-        backend = "nccl" if torch.cuda.is_available() else "gloo"
+        backend = "nccl" if device.type == "cuda" else "gloo"
+        if device.type == "cuda":
+            torch.cuda.set_device(int(os.environ.get("LOCAL_RANK", "0")))
+            device = torch.device("cuda", torch.cuda.current_device())
         torch.distributed.init_process_group(backend)
     try:
-        return train(cfg, args.out, resume=args.resume, progress=not args.no_progress,
-                     command=_command_line(args))
+        return train(cfg, args.out, resume=args.resume, init=args.init, device=device,
+                     progress=not args.no_progress, command=_command_line(args))
     finally:
         if world > 1 and torch.distributed.is_initialized():
             torch.distributed.destroy_process_group()
@@ -322,9 +614,12 @@ def _command_line(args) -> str:
     if args.preset:
         parts.append(f"--preset {args.preset}")
     for flag, val in [("--steps", args.steps), ("--batch", args.batch), ("--time-limit", args.time_limit),
-                      ("--threads", args.threads), ("--seed", args.seed)]:
+                      ("--threads", args.threads), ("--workers", args.workers), ("--seed", args.seed),
+                      ("--init", args.init)]:
         if val is not None:
             parts.append(f"{flag} {val:g}" if isinstance(val, float) else f"{flag} {val}")
+    if args.device and args.device != "cpu":
+        parts.append(f"--device {args.device}")
     if args.resume:
         parts.append("--resume")
     return " ".join(parts)
@@ -332,7 +627,11 @@ def _command_line(args) -> str:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
-    run(args)
+    try:
+        run(args)
+    except ValueError as e:
+        print(f"rfmap train: error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -1,0 +1,134 @@
+r"""A held-out validation set: seeded random fields that training never draws.
+
+Training sample ``i`` of step ``t`` is drawn from ``np.random.default_rng([seed, t, i])`` (a three-word seed);
+validation field ``j`` comes from ``np.random.default_rng([VALIDATION_SEED, j])`` (a two-word seed), a different
+random stream for every ``seed``, ``t`` and ``i``.  The paper's test fields are never used to select a model; they
+are reported beside the validation metric only.
+
+The set mixes kinds, sharp ones included, so that folds show up during training:
+
+* density tasks: ``smooth`` (a random training-style density without sharp parts), ``steps`` (box steps and
+  high-frequency patches), ``peak`` (a narrow Gaussian peak of height up to 50 over a smooth background) and
+  ``ramp`` (a steep tanh ramp across a random direction);
+* Beltrami tasks: random boundary-fixing maps (:class:`rfmap.fields.RandomMap`) with their exact image, at sup-norm
+  levels of :math:`|\mu|` spread over [0.1, 0.85]; the metric is the mean vertex distance to the exact map.
+
+The score of a model is the mean metric over the set (``std_rho_map`` for densities, ``mean_dd`` for Beltrami),
+with any flipped element ranking it below every fold-free model.
+"""
+from __future__ import annotations
+
+import inspect
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from .fields import RandomBeltramiConfig, RandomDensity, RandomDensityConfig, RandomMap
+
+__all__ = ["VALIDATION_SEED", "ValidationField", "validation_fields", "evaluate", "score", "DENSITY_KINDS"]
+
+#: first word of every validation seed (training seeds have three words, so the streams never coincide)
+VALIDATION_SEED = 20_250_917
+
+DENSITY_KINDS = ("smooth", "steps", "peak", "ramp")
+
+
+@dataclass(frozen=True)
+class ValidationField:
+    """One validation field: a label, the raw field on points (P, d), and for Beltrami fields the exact map."""
+
+    label: str
+    field: Callable[[np.ndarray], np.ndarray]
+    exact: Callable[[np.ndarray], np.ndarray] | None = None
+
+
+def _density_field(j: int, kind: str, dim: int) -> ValidationField:
+    rng = np.random.default_rng([VALIDATION_SEED, j])
+    base = RandomDensityConfig.for_dim(dim)
+    if kind == "smooth":
+        f = RandomDensity(rng, replace(base, p_step=0.0, p_patch=0.0, p_noise=0.0))
+    elif kind == "steps":
+        f = RandomDensity(rng, replace(base, p_step=1.0, p_patch=1.0, p_noise=0.0))
+    elif kind == "peak":
+        c = rng.uniform(0.2, 0.8, dim)
+        width = rng.uniform(0.03, 0.08)
+        height = float(np.exp(rng.uniform(np.log(5.0), np.log(50.0))))
+        tilt = rng.uniform(-0.5, 0.5, dim)
+
+        def f(x, c=c, w=width, h=height, tilt=tilt):
+            x = np.asarray(x, dtype=np.float64)
+            return 1.0 + (x - 0.5) @ tilt + h * np.exp(-((x - c) ** 2).sum(-1) / (2 * w**2))
+    elif kind == "ramp":
+        normal = rng.normal(size=dim)
+        normal /= np.linalg.norm(normal)
+        offset = float(normal @ rng.uniform(0.3, 0.7, dim))
+        width = rng.uniform(0.01, 0.05)
+        contrast = rng.uniform(2.0, 20.0)
+
+        def f(x, nrm=normal, o=offset, w=width, k=contrast):
+            x = np.asarray(x, dtype=np.float64)
+            return 1.0 + 0.5 * (k - 1.0) * (1.0 + np.tanh((x @ nrm - o) / w))
+    else:
+        raise ValueError(f"unknown validation kind {kind!r}; expected one of {DENSITY_KINDS}")
+    return ValidationField(f"{kind}-{j}", f)
+
+
+def _beltrami_field(j: int, count: int) -> ValidationField:
+    rng = np.random.default_rng([VALIDATION_SEED, j])
+    level = 0.1 + 0.75 * j / max(1, count - 1)
+    m = RandomMap(rng, RandomBeltramiConfig(sup=(level, level)))
+    return ValidationField(f"map-{j}", m.mu, exact=m)
+
+
+def validation_fields(kind: str, dim: int, count: int = 16) -> list[ValidationField]:
+    """The fixed validation set of a task: ``count`` fields (the density kinds in turn)."""
+    if count < 1:
+        raise ValueError(f"the validation set needs at least one field, got {count}")
+    if kind == "beltrami":
+        return [_beltrami_field(j, count) for j in range(count)]
+    return [_density_field(j, DENSITY_KINDS[j % len(DENSITY_KINDS)], dim) for j in range(count)]
+
+
+def _raw_map(sur, field, n: int):
+    kw = {"repair": False} if "repair" in inspect.signature(sur.map).parameters else {}
+    return sur.map(field, n, **kw)
+
+
+def evaluate(sur, ns, count: int = 16) -> dict:
+    """Metrics of surrogate ``sur`` (raw network output, no refinement or repair) on the validation set at every
+    grid side in ``ns``.
+
+    Returns
+    -------
+    dict
+        ``{label@N: {metric: value}}`` per field and size, and ``"mean"``: the mean metric (``std_rho_map`` or
+        ``mean_dd``), the total number of flipped elements and the smallest Jacobian determinant.
+    """
+    spec = sur.spec
+    fields = validation_fields(spec.kind, spec.dim, count)
+    out: dict = {}
+    primary, flips, min_j = [], 0, np.inf
+    for n in ns:
+        for vf in fields:
+            r = _raw_map(sur, vf.field, int(n))
+            if spec.kind == "beltrami":
+                m = r.metrics(exact_points=vf.exact(r.ref_points))
+                rec = {"mean_dd": m.mean_dd, "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian}
+                primary.append(m.mean_dd)
+            else:
+                m = r.metrics()
+                rec = {"std_rho_map": m.std_rho_map, "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian}
+                primary.append(m.std_rho_map)
+            flips += int(m.n_flipped)
+            min_j = min(min_j, float(m.min_jacobian))
+            out[f"{vf.label}@{n}"] = rec
+    key = "mean_dd" if spec.kind == "beltrami" else "std_rho_map"
+    out["mean"] = {key: float(np.mean(primary)), "n_flipped": flips, "min_jacobian": min_j}
+    return out
+
+
+def score(summary: dict) -> tuple[int, float]:
+    """Sort key of a validation summary (``evaluate(...)["mean"]``): fold-free first, then the mean metric."""
+    key = "mean_dd" if "mean_dd" in summary else "std_rho_map"
+    return (int(summary["n_flipped"] > 0), float(summary[key]))
