@@ -19,16 +19,26 @@ def test_every_weight_file_has_metadata():
 def test_metadata_records_provenance(name):
     meta = json.loads((WEIGHTS_DIR / f"{name}.json").read_text())
     cfg = get_config(name, "full")
-    # produced by `rfmap train --config NAME --preset full`: the stored configuration is the named preset
-    # (up to the documented command-line overrides of threads/time limit)
+    # produced by `rfmap train --config NAME --preset full`: the stored configuration is the named preset, up to
+    # settings of how the run was executed (threads, time limit, batch workers, which give the same batches) and
+    # of its validation (held-out fields, sizes, checkpoint choice), some of which postdate older weights
     stored = dict(meta["config"])
     expected = cfg.to_dict()
-    for key in ("threads", "time_limit"):
+    for key in ("threads", "time_limit", "workers", "val_sizes", "val_count", "select_best", "val_every",
+                "ckpt_every", "val_n"):
         stored.pop(key, None)
         expected.pop(key, None)
     assert stored == expected
     assert meta["preset"] == "full"
-    assert meta["steps"] > 0 and 0 < meta["wall_time"] <= 3600
+    assert meta["steps"] > 0 and 0 < meta["wall_time"] <= 9000  # one run of at most 150 minutes
+    assert meta["command"].startswith(f"rfmap train --config {name}")
+    # a warm restart (--init) records its parents: name, SHA-256 and cumulative budget
+    lineage = meta.get("lineage", [])
+    assert ("--init" in meta["command"]) == bool(lineage)
+    for rec in lineage:
+        assert len(rec["sha256"]) == 64 and rec["cumulative_steps"] >= rec["steps"] > 0
+    if lineage:
+        assert meta["cumulative_steps"] == lineage[-1]["cumulative_steps"] + meta["steps"]
     assert "mean" in meta["final_metrics"]
     assert meta["history"]["step"] and meta["history"]["loss"]
 

@@ -150,7 +150,7 @@ def grid_signed_measures(points: Tensor, n: int) -> Tensor:
         return g[(slice(None), slice(None)) + tuple(slice(o, n - 1 + o) for o in off)]
 
     out = []
-    for simplex in _grid_simplex_offsets(d):
+    for simplex in grid_cell_simplices(d):
         c0, *rest = [corner(off) for off in simplex]
         e = [c - c0 for c in rest]
         if d == 2:

@@ -41,6 +41,7 @@ import torch
 from ._version import __version__
 from .config import PRESETS, TrainConfig, config_names, get_config
 from .nn.model import MultiResUNet
+from .paper_fields import BELTRAMI_MAPS, TEST_FIELDS
 from .surrogate import Surrogate, models
 from .tasks import TaskSpec, draw_samples, make_batch, task_loss
 from .validation import evaluate, score
@@ -49,11 +50,7 @@ __all__ = ["train", "validate", "report_paper_fields", "resolve_device", "load_i
            "TrainState"]
 
 #: the paper's test fields per (kind, dim): evaluated as a report at the end of training, never for selection
-PAPER_FIELDS = {
-    ("density", 2): ["sin-cos", "exp-log", "rect-peak", "ring"],
-    ("density", 3): ["sin-cos-3d", "shell-3d", "octant-3d", "prism-peak-3d"],
-    ("beltrami", 2): ["T1", "T2", "T3", "T4"],
-}
+PAPER_FIELDS = TEST_FIELDS
 
 
 # ---------------------------------------------------------------------------------------------------- devices
@@ -230,8 +227,6 @@ def validate(sur: Surrogate, cfg: TrainConfig) -> dict:
 
 def report_paper_fields(sur: Surrogate, n: int, fields: list[str] | None = None) -> dict:
     """Metrics on the paper's test fields at grid side ``n`` (a report; never used to select a model)."""
-    from .fields import BELTRAMI_MAPS
-
     fields = fields or PAPER_FIELDS[(sur.spec.kind, sur.spec.dim)]
     out: dict = {}
     vals = []

@@ -24,7 +24,7 @@ from typing import Callable
 
 import numpy as np
 
-from .fields import RandomBeltramiConfig, RandomDensity, RandomDensityConfig, RandomMap
+from .random_fields import RandomBeltramiConfig, RandomDensity, RandomDensityConfig, RandomMap
 
 __all__ = ["VALIDATION_SEED", "ValidationField", "validation_fields", "evaluate", "score", "DENSITY_KINDS"]
 
