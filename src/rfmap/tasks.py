@@ -159,12 +159,13 @@ def _beltrami_sample(rng, n, cfg: RandomBeltramiConfig, jitter: float, source: s
     if jitter > 0:
         probe_n = 33
         probe = grid_mesh(probe_n, 2).points
-        g = _grad_magnitude(np.abs(gen.mu(probe) if source == "map" else gen(probe)), probe_n, 2)
+        g = _grad_magnitude(np.abs(gen.mu_grid(probe_n) if source == "map" else gen(probe)), probe_n, 2)
         g_n = interpolate(g.reshape(1, 1, probe_n, probe_n), grid_points(n, 2))[0, :, 0]
         pts = jittered_points(n, 2, rng, grad_magnitude=g_n, strength=jitter)
+        mu = gen.mu(pts) if source == "map" else gen(pts)
     else:
         pts = grid_points(n, 2)
-    mu = gen.mu(pts) if source == "map" else gen(pts)
+        mu = gen.mu_grid(n) if source == "map" else gen(pts)
     return pts, mu
 
 

@@ -1,0 +1,86 @@
+"""Milliseconds per training step of the ``full`` presets, batch drawing included (steady state, after warm-up).
+
+    python benchmarks/train_step.py [--json] [--device cpu|cuda|auto] [--steps 20] [--warmup 5]
+                                    [--configs beltrami2d deq2d-square dem3d-cube] [--threads T] [--workers W]
+
+Each configuration runs its ``full`` preset (threads and batch workers as the preset sets them unless overridden)
+at a fixed grid side: batch 4 at N = 80 in 2D, batch 2 at N = 48 in 3D.  A step is timed from asking the loader
+for its batch to the end of the optimiser step, so synthesis that is not hidden behind the network shows up.
+With ``--json`` the output is one object ``{config: {"ms_per_step", "batch", "n", "device", "threads",
+"workers"}}``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from rfmap.config import get_config
+from rfmap.train import _build_state, _loader, _train_step, resolve_device
+
+SIZES = {2: (4, 80), 3: (2, 48)}
+
+
+def measure(name: str, device: torch.device, steps: int, warmup: int, threads: int | None,
+            workers: int | None) -> dict:
+    cfg = get_config(name, "full")
+    batch, n = SIZES[cfg.task.dim]
+    over = {"batch": batch, "n_range": (n, n), "steps": warmup + steps, "time_limit": 0.0}
+    if threads is not None:
+        over["threads"] = threads
+    if workers is not None:
+        over["workers"] = workers
+    cfg = cfg.with_overrides(**over)
+    with tempfile.TemporaryDirectory() as tmp:
+        st = _build_state(cfg, Path(tmp), device, resume=False, init=None, command=None)
+        loader = _loader(cfg, 0, 0, cfg.steps)
+        times = []
+        try:
+            for step in range(cfg.steps):
+                t0 = time.perf_counter()
+                nn, pts, par = loader.get(step)
+                _train_step(st, nn, pts, par)
+                if device.type == "cuda":
+                    torch.cuda.synchronize()
+                times.append(time.perf_counter() - t0)
+        finally:
+            loader.close()
+    return {"ms_per_step": round(1e3 * float(np.median(times[warmup:])), 1), "batch": batch, "n": n,
+            "device": str(device), "threads": torch.get_num_threads(), "workers": cfg.workers}
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--json", action="store_true")
+    p.add_argument("--device", default="cpu")
+    p.add_argument("--steps", type=int, default=20)
+    p.add_argument("--warmup", type=int, default=5)
+    p.add_argument("--threads", type=int, default=None)
+    p.add_argument("--workers", type=int, default=None)
+    p.add_argument("--configs", nargs="+", default=["beltrami2d", "deq2d-square", "dem3d-cube"])
+    args = p.parse_args(argv)
+    try:
+        device = resolve_device(args.device)
+    except ValueError as e:
+        print(f"train_step: error: {e}", file=sys.stderr)
+        return 2
+    out = {}
+    for name in args.configs:
+        out[name] = measure(name, device, args.steps, args.warmup, args.threads, args.workers)
+        if not args.json:
+            r = out[name]
+            print(f"{name:14s} {r['ms_per_step']:8.1f} ms/step  batch {r['batch']}, N = {r['n']}, {r['device']}, "
+                  f"{r['threads']} thread(s), {r['workers']} batch worker(s)", flush=True)
+    if args.json:
+        print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
