@@ -20,7 +20,7 @@ import rfmap
 #: Layer of every module, lowest first.  A module may import from its own layer or a lower one.
 LAYERS: dict[str, int] = {
     # core
-    "rfmap._version": 0, "rfmap.geometry": 0, "rfmap.mesh": 0, "rfmap.inputs": 0, "rfmap.paper_fields": 0,
+    "rfmap._version": 0, "rfmap.device": 0, "rfmap.geometry": 0, "rfmap.mesh": 0, "rfmap.inputs": 0, "rfmap.paper_fields": 0,
     "rfmap.random_fields": 0, "rfmap.fields": 0, "rfmap.metrics": 0, "rfmap.result": 0,
     # classical solvers, the network, the losses
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1,

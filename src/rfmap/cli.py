@@ -79,8 +79,11 @@ def cmd_models(args) -> int:
 def cmd_map(args) -> int:
     from .surrogate import Surrogate, models
 
-    sur = Surrogate.pretrained(args.model) if args.model in models() else Surrogate.load(args.model) \
-        if os.path.exists(args.model) else None
+    from .device import resolve_device
+
+    device = resolve_device(args.device)  # before any work: an unavailable device is bad input
+    sur = Surrogate.pretrained(args.model, device=device) if args.model in models() else \
+        Surrogate.load(args.model, device=device) if os.path.exists(args.model) else None
     if sur is None:
         raise CLIError(f"unknown model {args.model!r}: not a shipped model ({', '.join(models()) or 'none'}) "
                        "nor a weight file")
@@ -168,6 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="return the raw network map, without removing folded elements")
     s.add_argument("--out", required=True, help="output .npz")
     s.add_argument("--vtk", default=None, help="also write the mapped mesh as VTK (.vtu)")
+    s.add_argument("--device", default="cpu", help="where the network runs: cpu (default), cuda or auto")
     s.set_defaults(func=cmd_map)
 
     s = sub.add_parser("train", help="train a surrogate from a named configuration")

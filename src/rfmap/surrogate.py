@@ -24,6 +24,7 @@ import torch
 from ._version import __version__
 from .inputs import check_density, check_mu, preprocess_density, unit_mass
 from .mesh import check_n, element_centroids, element_measures, grid_mesh, grid_points, interpolate, triangulate, vertex_weights
+from .device import resolve_device
 from .nn.model import MultiResUNet, apply_displacement
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
 from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
@@ -59,13 +60,21 @@ class Surrogate:
         Metadata (see module docstring); ``n_range`` gives the training resolutions.
     """
 
-    def __init__(self, model: MultiResUNet, spec: TaskSpec, meta: dict | None = None):
+    def __init__(self, model: MultiResUNet, spec: TaskSpec, meta: dict | None = None, *, device=None):
         if model.dim != spec.dim or model.n_params != spec.n_params:
             raise ValueError(f"model (dim={model.dim}, {model.n_params} parameter channels) does not fit task "
                              f"{spec}")
-        self.model = model.eval()
+        self.device = resolve_device(device or "cpu")
+        self.model = model.to(self.device).eval()
         self.spec = spec
         self.meta = dict(meta or {})
+
+    def to(self, device) -> "Surrogate":
+        """Move the network to ``device`` (``'cpu'``, ``'cuda'``, ``'auto'``); returns ``self``.  Inputs and
+        outputs of :meth:`map` stay numpy arrays on the host."""
+        self.device = resolve_device(device)
+        self.model.to(self.device)
+        return self
 
     # ------------------------------------------------------------------ io
     @classmethod
@@ -91,7 +100,7 @@ class Surrogate:
         meta = {**self.meta, "model": self.model.kwargs(), "task": {"kind": self.spec.kind, "dim": self.spec.dim,
                                                                     "boundary": self.spec.boundary},
                 "rfmap_version": self.meta.get("rfmap_version", __version__)}
-        state = {k: v.detach().contiguous() for k, v in self.model.state_dict().items()}
+        state = {k: v.detach().cpu().contiguous() for k, v in self.model.state_dict().items()}
         tmp = path.with_suffix(".safetensors.part")
         save_file(state, str(tmp), metadata={"format": "rfmap", "name": str(meta.get("name", ""))})
         os.replace(tmp, path)
@@ -101,8 +110,9 @@ class Surrogate:
         return path, jpath
 
     @classmethod
-    def load(cls, path) -> "Surrogate":
-        """Load weights ``path`` (``.safetensors``, metadata ``.json`` beside it). Clear errors on bad files."""
+    def load(cls, path, *, device=None) -> "Surrogate":
+        """Load weights ``path`` (``.safetensors``, metadata ``.json`` beside it) onto ``device`` (default the CPU).
+        Clear errors on bad files."""
         from safetensors import SafetensorError
         from safetensors.torch import load_file
 
@@ -138,14 +148,14 @@ class Surrogate:
         if bad:
             raise ValueError(f"weights {path} do not match the model: shape mismatch for {bad[:3]}")
         model.load_state_dict(state)
-        return cls(model, spec, meta)
+        return cls(model, spec, meta, device=device)
 
     @classmethod
-    def pretrained(cls, name: str) -> "Surrogate":
-        """Load a model shipped with the package (see :func:`models`)."""
+    def pretrained(cls, name: str, *, device=None) -> "Surrogate":
+        """Load a model shipped with the package (see :func:`models`) onto ``device`` (default the CPU)."""
         if name not in models():
             raise ValueError(f"no pretrained model {name!r}; available: {', '.join(models()) or 'none'}")
-        return cls.load(WEIGHTS_DIR / f"{name}.safetensors")
+        return cls.load(WEIGHTS_DIR / f"{name}.safetensors", device=device)
 
     def __repr__(self) -> str:
         return f"Surrogate({self.name!r}, {self.spec}, n_range={self.n_range})"
@@ -240,12 +250,12 @@ class Surrogate:
         pts = torch.as_tensor(grid_points(n, d), dtype=torch.float32).expand(B, -1, -1)
         par = torch.as_tensor(g.reshape(B, -1))
         par = par.to(torch.complex64) if par.is_complex() else par.float()
-        x = encode(pts, par, self.spec, n)
+        x = encode(pts, par, self.spec, n).to(self.device)
         if d == 3 and B == 1 and x.device.type == "cpu":
             # PyTorch's CPU heuristic sends batch-1 Conv3d layers with few channels to a slow native kernel; a batch
             # of two (the field and a copy; every layer acts per sample) takes the oneDNN path, about 2.5x faster
             return self.model(torch.cat([x, x]))[:1]
-        return self.model(x)
+        return self.model(x).float().cpu()
 
     def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
             alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None,

@@ -40,6 +40,7 @@ import torch
 
 from ._version import __version__
 from .config import PRESETS, TrainConfig, config_names, get_config
+from .device import resolve_device
 from .nn.model import MultiResUNet
 from .paper_fields import BELTRAMI_MAPS, TEST_FIELDS
 from .surrogate import Surrogate, models
@@ -54,25 +55,6 @@ PAPER_FIELDS = TEST_FIELDS
 
 
 # ---------------------------------------------------------------------------------------------------- devices
-def resolve_device(name: str | None = "auto") -> torch.device:
-    """``'auto'`` (CUDA when available, else CPU), ``'cpu'`` or ``'cuda'`` / ``'cuda:K'``.
-
-    Raises ``ValueError`` for an unknown name or for CUDA on a machine without it."""
-    name = (name or "auto").strip().lower()
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name == "cpu":
-        return torch.device("cpu")
-    if name == "cuda" or name.startswith("cuda:"):
-        if not torch.cuda.is_available():
-            raise ValueError(f"device {name!r} requested but no CUDA device is available (use --device cpu)")
-        dev = torch.device(name)
-        if dev.index is not None and dev.index >= torch.cuda.device_count():
-            raise ValueError(f"device {name!r} requested but only {torch.cuda.device_count()} CUDA device(s) exist")
-        return dev
-    raise ValueError(f"unknown device {name!r}; expected auto, cpu or cuda")
-
-
 def _dist_info() -> tuple[int, int]:
     if torch.distributed.is_available() and torch.distributed.is_initialized():
         return torch.distributed.get_rank(), torch.distributed.get_world_size()
