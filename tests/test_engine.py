@@ -1,0 +1,181 @@
+"""The training engine (:mod:`rfmap.train`, :mod:`rfmap.validation`, :mod:`rfmap.device`): reproducibility, batch
+workers, warm restarts with lineage, the held-out validation and checkpoint choice, devices, the paper presets, and
+bad input on the command line (one line, exit 2, nothing written)."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+import rfmap.train as T
+from rfmap.cli import main as cli_main
+from rfmap.config import CONFIGS, get_config
+from rfmap.device import resolve_device
+from rfmap.random_fields import RandomMap, RandomBeltramiConfig
+from rfmap.mesh import grid_points
+from rfmap.tasks import draw_samples
+from rfmap.validation import VALIDATION_SEED, evaluate, score, validation_fields
+
+CFG = get_config("deq2d-square", "ci").with_overrides(threads=1)
+
+
+def _weights(sur):
+    return {k: v.clone() for k, v in sur.model.state_dict().items()}
+
+
+def test_same_seed_and_threads_give_bit_identical_weights(tmp_path):
+    cfg = CFG.with_overrides(steps=6, val_every=3)
+    a = _weights(T.train(cfg, tmp_path / "a", progress=False))
+    b = _weights(T.train(cfg, tmp_path / "b", progress=False))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+    c = _weights(T.train(cfg.with_overrides(seed=1), tmp_path / "c", progress=False))
+    assert any(not torch.equal(a[k], c[k]) for k in a)  # the seed matters: the comparison is not trivial
+
+
+def test_worker_processes_draw_the_same_batches(tmp_path):
+    """Batches drawn by two worker processes equal those of the in-process thread, so the weights are identical."""
+    cfg = CFG.with_overrides(steps=6, val_every=1000)
+    a = _weights(T.train(cfg, tmp_path / "thread", progress=False))
+    b = _weights(T.train(cfg.with_overrides(workers=2), tmp_path / "procs", progress=False))
+    assert all(torch.equal(a[k], b[k]) for k in a)
+
+
+def test_draw_step_is_a_pure_function_of_step_and_rank():
+    n1, p1, q1 = T.draw_step(CFG, 7, rank=0)
+    n2, p2, q2 = T.draw_step(CFG, 7, rank=0)
+    assert n1 == n2 and np.array_equal(p1, p2) and np.array_equal(q1, q2)
+    _, p3, _ = T.draw_step(CFG, 7, rank=1)
+    assert not np.array_equal(p1, p3)
+
+
+def test_init_warm_restart_records_the_lineage(tmp_path):
+    parent = T.train(CFG.with_overrides(steps=4, val_every=1000), tmp_path / "p", progress=False)
+    ppath = tmp_path / "p" / "deq2d-square.safetensors"
+    child = T.train(CFG.with_overrides(steps=3, val_every=1000), tmp_path / "c", progress=False, init=str(ppath))
+    lin = child.meta["lineage"]
+    assert len(lin) == 1 and lin[0]["sha256"] == T.sha256(ppath) and lin[0]["steps"] == 4
+    assert child.meta["cumulative_steps"] == 7
+    assert child.meta["cumulative_wall_time"] >= child.meta["wall_time"]
+    # a second generation keeps the whole chain
+    cpath = tmp_path / "c" / "deq2d-square.safetensors"
+    grand = T.train(CFG.with_overrides(steps=2, val_every=1000), tmp_path / "g", progress=False, init=str(cpath))
+    assert [r["cumulative_steps"] for r in grand.meta["lineage"]] == [4, 7]
+    assert grand.meta["cumulative_steps"] == 9
+    # the run starts from the parent's weights (a fresh start would begin at the zero-initialised head)
+    assert float(parent.model.head.weight.detach().abs().max()) > 0
+    start = T._build_state(CFG, tmp_path / "s", torch.device("cpu"), False, str(ppath), None)
+    assert all(torch.equal(start.model.state_dict()[k], v) for k, v in parent.model.state_dict().items())
+
+
+def test_init_of_another_task_or_architecture_is_refused(tmp_path):
+    other = T.train(get_config("beltrami2d", "ci").with_overrides(steps=2, val_every=1000), tmp_path / "b",
+                    progress=False)
+    with pytest.raises(ValueError, match="trained for"):
+        T.load_init(str(tmp_path / "b" / "beltrami2d.safetensors"), CFG)
+    with pytest.raises(ValueError, match="architecture"):
+        T.load_init("deq2d-square", CFG)  # the shipped model is the full-size network, the ci config a tiny one
+    with pytest.raises(ValueError, match="neither a shipped model"):
+        T.load_init(str(tmp_path / "missing.safetensors"), CFG)
+    assert other.meta["steps"] == 2
+
+
+def test_validation_set_is_fixed_and_never_drawn_in_training():
+    a = validation_fields("density", 2, 8)
+    b = validation_fields("density", 2, 8)
+    x = np.random.default_rng(0).random((50, 2))
+    assert [v.label for v in a] == ["smooth-0", "steps-1", "peak-2", "ramp-3", "smooth-4", "steps-5", "peak-6",
+                                    "ramp-7"]
+    for u, v in zip(a, b):
+        assert np.array_equal(u.field(x), v.field(x))
+    # training streams are seeded by three words (seed, step, index), validation by two (VALIDATION_SEED, j):
+    # even the training sample with the same leading words differs from validation field 0
+    bel = validation_fields("beltrami", 2, 4)
+    m = bel[0].exact
+    rm = RandomMap(np.random.default_rng([VALIDATION_SEED, 0, 0]), RandomBeltramiConfig())
+    assert not np.allclose(m(grid_points(9, 2)), rm(grid_points(9, 2)))
+    pts, dens = draw_samples(CFG.task, seed=VALIDATION_SEED, step=0, indices=[0], n=17, jitter=0.0)
+    val = a[0].field(pts[0])
+    assert not np.allclose(dens[0] / dens[0].mean(), val / val.mean())
+
+
+def test_checkpoint_choice_ships_the_best_validated_state(tmp_path):
+    cfg = CFG.with_overrides(steps=12, val_every=3, lr=3e-2)
+    sur = T.train(cfg, tmp_path, progress=False)
+    recs = [json.loads(x) for x in (tmp_path / "log.jsonl").read_text().splitlines()]
+    vals = [r for r in recs if "validation" in r and not r.get("final")]
+    final = [r for r in recs if r.get("final")][0]
+    assert len(vals) == 3
+    best = min(score(r["validation"]["mean"]) for r in vals)
+    assert score(final["validation"]["mean"]) <= best
+    assert sur.meta["selected_step"] in [r["step"] for r in vals] + [12]
+    # the paper's fields are a report next to it, not the selection criterion
+    assert set(sur.meta["paper_fields_report"]) >= {"sin-cos", "mean"}
+
+
+def test_evaluate_scores_the_exact_map_of_a_beltrami_field():
+    from rfmap.surrogate import Surrogate
+
+    sur = Surrogate.untrained(get_config("beltrami2d", "ci").task, base=4, depth=2, n_range=[17, 25])
+    v = evaluate(sur, (17,), count=2)
+    assert set(v) == {"map-0@17", "map-1@17", "mean"}
+    assert v["mean"]["mean_dd"] > 0  # the identity is not the random map
+    assert score({"mean_dd": 0.1, "n_flipped": 1}) > score({"mean_dd": 0.5, "n_flipped": 0})
+
+
+def test_resolve_device():
+    assert resolve_device("cpu") == torch.device("cpu")
+    assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
+    with pytest.raises(ValueError, match="unknown device"):
+        resolve_device("tpu")
+    if not torch.cuda.is_available():
+        with pytest.raises(ValueError, match="no CUDA device"):
+            resolve_device("cuda")
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="no CUDA device on this machine")
+def test_training_on_cuda_and_checkpoint_back_to_cpu(tmp_path):  # pragma: no cover - needs a GPU
+    sur = T.train(CFG.with_overrides(steps=3, val_every=1000), tmp_path, progress=False, device="cuda")
+    assert sur.meta["device"].startswith("cuda")
+    ck = torch.load(tmp_path / "checkpoint.pt", weights_only=True, map_location="cpu")
+    assert ck["step"] == 3
+
+
+def test_paper_presets_carry_the_papers_hyperparameters():
+    for name in CONFIGS:
+        cfg = get_config(name, "paper")
+        assert cfg.preset == "paper" and cfg.clip == 1.0 and cfg.time_limit == 0 and "Paper preset" in cfg.description
+    d = get_config("deq2d-square", "paper")
+    assert (d.steps, d.lr, d.weight_decay, d.schedule, d.step_size, d.gamma, d.n_range, d.loss.beltrami) == \
+        (12000, 1e-5, 1e-5, "step", 200, 0.5, (64, 96), 0.1)
+    assert get_config("dem2d-square", "paper").loss.beltrami == 0.0
+    c = get_config("dem3d-cube", "paper")
+    assert (c.steps, c.lr, c.betas, c.weight_decay, c.schedule, c.T0, c.T_mult, c.lr_min, c.n_range) == \
+        (4000, 2e-4, (0.9, 0.995), 5e-5, "restarts", 600, 2, 2e-6, (32, 48))
+    b = get_config("beltrami2d", "paper")
+    assert (b.steps, b.schedule, b.n_range) == (250000, "step", (64, 96))
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--device", "tpu"], "unknown device"),
+    (["--init", "beltrami2d"], "trained for"),
+    (["--init", "nowhere/x.safetensors"], "neither a shipped model"),
+    (["--steps", "0"], "at least 1"),
+] + ([] if torch.cuda.is_available() else [(["--device", "cuda"], "no CUDA device")]))
+def test_train_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, extra, message):
+    out = tmp_path / "run"
+    code = cli_main(["train", "--config", "deq2d-square", "--preset", "ci", "--out", str(out), "--no-progress",
+                     *extra])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2
+    assert len(err) == 1 and message in err[0]
+    assert not out.exists()
+
+
+def test_map_cli_refuses_an_unavailable_device(tmp_path, capsys):
+    out = tmp_path / "m.npz"
+    code = cli_main(["map", "--model", "deq2d-square", "--field", "sin-cos", "--n", "17", "--out", str(out),
+                     "--device", "tpu"])
+    assert code == 2 and "unknown device" in capsys.readouterr().err
+    assert not out.exists()
