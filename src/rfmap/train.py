@@ -61,12 +61,21 @@ def _dist_info() -> tuple[int, int]:
     return 0, 1
 
 
-def _scheduler(opt, cfg: TrainConfig):
+def _scheduler(opt, cfg: TrainConfig, clock: Callable[[], float] | None = None):
+    """The learning-rate schedule of ``cfg``.
+
+    ``cosine``: linear warm-up, then a cosine from ``lr`` to ``lr_min``.  With a wall-time limit and a ``clock``
+    (seconds trained so far), the cosine follows whichever of the step count and the elapsed time is further
+    along, so that the learning rate reaches ``lr_min`` when the budget ends even if fewer steps fit than
+    ``steps``; such runs depend on the machine's speed and are not bit-reproducible (runs without a time limit
+    are).  Data-parallel runs follow the step count only, so that every rank uses the same rate."""
     if cfg.schedule == "cosine":
         def f(step):
             if step < cfg.warmup:
                 return (step + 1) / max(1, cfg.warmup)
             t = (step - cfg.warmup) / max(1, cfg.steps - cfg.warmup)
+            if clock is not None and cfg.time_limit > 0:
+                t = max(t, clock() / cfg.time_limit)
             return cfg.lr_min / cfg.lr + (1 - cfg.lr_min / cfg.lr) * 0.5 * (1 + math.cos(math.pi * min(t, 1.0)))
         return torch.optim.lr_scheduler.LambdaLR(opt, f)
     if cfg.schedule == "step":
@@ -364,8 +373,10 @@ def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool
         net = torch.nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda"
                                                         else None)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, betas=cfg.betas)
-    sched = _scheduler(opt, cfg)
-    st = TrainState(cfg, model, net, opt, sched, out, device, rank, world, lineage=lineage, command=command)
+    st = TrainState(cfg, model, net, opt, None, out, device, rank, world, lineage=lineage, command=command)
+    # time-aware cosine in a single process only (ranks must agree on the learning rate)
+    clock = (lambda: st.elapsed() if st.t_start else 0.0) if world == 1 else None
+    st.sched = sched = _scheduler(opt, cfg, clock=clock)
     ckpt = out / "checkpoint.pt"
     if resume and ckpt.exists():
         state = torch.load(ckpt, weights_only=True, map_location=device)
