@@ -20,7 +20,8 @@ from .paper_fields import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample
 from .result import MapResult
 
 __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table", "population_table",
-           "resolution_table", "reproduce", "exact_beltrami_result", "COLUMN_TITLES"]
+           "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
+           "COLUMN_TITLES"]
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -266,3 +267,56 @@ def reproduce(experiment: str, out_dir, *, refine: bool = True) -> list[Path]:
     else:
         raise ValueError(f"unknown experiment {experiment!r}; expected beltrami, dem2d or dem3d")
     return paths
+
+
+def population_summary(table: Table, fields) -> tuple[dict, str]:
+    r"""The numbers a chapter quotes from a population table, and the :math:`\mathrm{Std}(\tilde\rho_{\text{map}})`
+    comparison as Markdown.
+
+    Parameters
+    ----------
+    table : Table
+        From :func:`population_table` with ``refine=True`` and ``classical=True``.
+    fields : sequence of str
+
+    Returns
+    -------
+    values : dict
+        Per field ``f``: ``{f}_std`` (ours), ``{f}_std_ref`` (ours + refinement), ``{f}_std_dem`` (diffusion DEM),
+        ``{f}_std_paper`` and ``{f}_best`` (the better of ours and ours + refinement); over the fields: ``met`` (fields
+        where the best is at most the paper's), ``dem_better`` (fields where the DEM beats the best), ``flips`` and
+        ``flips_raw`` (flipped elements with and without refinement, and without only), ``speed`` and ``speed_min``
+        (median and smallest classical / ours time), ``ref_time`` and ``dem_time`` (median seconds).
+    markdown : str
+        One row per field: ours, ours + refinement, diffusion DEM, paper, best / paper.
+    """
+    def v(f, method, col="std_rho_map"):
+        return table.value(f, method, col)
+
+    values: dict = {}
+    rows = ["| field | ours | ours + refinement | diffusion DEM | paper | best / paper |", "|---|---|---|---|---|---|"]
+    for f in fields:
+        ours, ref, dem, paper = v(f, "ours"), v(f, "ours + refinement"), v(f, "diffusion DEM"), v(f, "paper")
+        best = min(ours, ref)
+        values.update({f"{f}_std": ours, f"{f}_std_ref": ref, f"{f}_std_dem": dem, f"{f}_std_paper": paper,
+                       f"{f}_best": best})
+        rows.append(f"| {f} | {ours:.4f} | {ref:.4f} | {dem:.4f} | {paper:.4f} | {best / paper:.2f} |")
+    values.update(
+        met=int(sum(values[f"{f}_best"] <= values[f"{f}_std_paper"] for f in fields)),
+        dem_better=int(sum(values[f"{f}_std_dem"] < values[f"{f}_best"] for f in fields)),
+        flips=int(sum(v(f, m, "n_flipped") for f in fields for m in ("ours", "ours + refinement"))),
+        flips_raw=int(sum(v(f, "ours", "n_flipped") for f in fields)),
+        speed=float(np.median([v(f, "ours", "speedup") for f in fields])),
+        speed_min=float(min(v(f, "ours", "speedup") for f in fields)),
+        ref_time=float(np.median([v(f, "ours + refinement", "time") for f in fields])),
+        dem_time=float(np.median([v(f, "diffusion DEM", "time") for f in fields])),
+    )
+    return values, "\n".join(rows)
+
+
+def glue_all(values: dict, prefix: str) -> None:
+    """Glue every entry of ``values`` for the book's text as ``{prefix}_{key}`` (``myst_nb.glue``, not displayed)."""
+    from myst_nb import glue
+
+    for key, value in values.items():
+        glue(f"{prefix}_{key}", value, display=False)

@@ -9,8 +9,9 @@ import numpy as np
 
 from .result import setup_pyvista, to_pyvista
 
-__all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu",
-           "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram"]
+__all__ = ["STYLE", "style", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu", "plot_map_row",
+           "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
+           "population_figure", "volume_rows"]
 
 STYLE = {
     "figure.dpi": 110,
@@ -33,37 +34,14 @@ def style():
         yield
 
 
-def _is_book_root(path: Path) -> bool:
-    return (path / "_config.yml").is_file() and (path / "book").is_dir()
-
-
-def repository_root(start: str | os.PathLike | None = None) -> Path | None:
-    """The source checkout that holds the book (the directory with ``_config.yml`` and ``book/``), or ``None``.
-
-    With ``start``, the nearest such directory at or above ``start``.  Without it, the checkout this module was
-    imported from (an editable install), else the nearest one at or above the working directory (a regular install
-    used inside a checkout, e.g. a notebook opened from ``notebooks/``).  The answer never depends on *which*
-    directory of the checkout the caller runs in.
-    """
-    if start is None:
-        here = Path(__file__).resolve().parents[2]
-        if _is_book_root(here):
-            return here
-        start = Path.cwd()
-    start = Path(start).resolve()
-    return next((p for p in (start, *start.parents) if _is_book_root(p)), None)
-
-
 def figures_dir() -> Path:
-    """Where figures go: ``$RFMAP_FIGURES``, else ``book/figures`` of the checkout found by :func:`repository_root`
-    (the place the book build writes to, from the repository root, from ``notebooks/`` or from anywhere else),
-    else ``./figures`` outside a checkout."""
+    """Where figures go: ``$RFMAP_FIGURES``, else ``book/figures`` of the source checkout, else ``./figures``."""
     env = os.environ.get("RFMAP_FIGURES")
     if env:
         p = Path(env)
     else:
-        root = repository_root()
-        p = root / "book" / "figures" if root is not None else Path.cwd() / "figures"
+        root = Path(__file__).resolve().parents[2]
+        p = root / "book" / "figures" if (root / "_config.yml").exists() else Path.cwd() / "figures"
     p.mkdir(parents=True, exist_ok=True)
     return p
 
@@ -267,3 +245,39 @@ def plot_beltrami_row(axes, exact, lbs, ours, *, n: int, label: str = "", bins: 
         ax.hist(e, bins=bins, range=(0, hi), color="tab:blue" if name == "LBS" else "tab:orange")
         ax.set_title(f"$|\\mu_{{truth}}-\\mu_{{pred}}|$ {name}")
         ax.set_yscale("log")
+
+
+def population_figure(maps: dict, fields, label: str, *, n: int, method: str = "ours+refine"):
+    """The paper's 2D population figure: one :func:`plot_map_row` per field of the maps of
+    :func:`rfmap.experiments.population_table`, saved under the paper's ``label``; returns the figure."""
+    import matplotlib.pyplot as plt
+
+    with style():
+        fig, axes = plt.subplots(len(fields), 5, figsize=(14, 2.8 * len(fields)))
+        for row, f in zip(axes, fields):
+            plot_map_row(row, maps[f][method], n=n, label=f)
+        fig.tight_layout()
+        save_figure(fig, label)
+    return fig
+
+
+def volume_rows(results: dict, labels, fig_label: str):
+    """The paper's 3D figures: per result (keyed by ``labels``) the original and mapped volume, plain and coloured
+    by :math:`\\tilde\\rho`, rendered off screen (:func:`render_volume`); saved under ``fig_label``; returns the
+    figure."""
+    import matplotlib.pyplot as plt
+
+    titles = ["original", "mapped", r"$\tilde\rho$ original", r"$\tilde\rho$ mapped"]
+    with style():
+        fig, axes = plt.subplots(len(labels), 4, figsize=(12, 3.1 * len(labels)))
+        for row, key in zip(axes, labels):
+            r = results[key]
+            imgs = [render_volume(r, mapped=False, scalars=None), render_volume(r, mapped=True, scalars=None),
+                    render_volume(r, mapped=False, scalars="rho"), render_volume(r, mapped=True, scalars="rho")]
+            for ax, img, t in zip(row, imgs, titles):
+                ax.imshow(img)
+                ax.set_title(f"{key}: {t}")
+                ax.axis("off")
+        fig.tight_layout()
+        save_figure(fig, fig_label)
+    return fig
