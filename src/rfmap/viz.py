@@ -9,8 +9,8 @@ import numpy as np
 
 from .result import setup_pyvista, to_pyvista
 
-__all__ = ["STYLE", "style", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu", "plot_map_row",
-           "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
+__all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu",
+           "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
            "population_figure", "volume_rows"]
 
 STYLE = {
@@ -34,14 +34,37 @@ def style():
         yield
 
 
+def _is_book_root(path: Path) -> bool:
+    return (path / "_config.yml").is_file() and (path / "book").is_dir()
+
+
+def repository_root(start: str | os.PathLike | None = None) -> Path | None:
+    """The source checkout that holds the book (the directory with ``_config.yml`` and ``book/``), or ``None``.
+
+    With ``start``, the nearest such directory at or above ``start``.  Without it, the checkout this module was
+    imported from (an editable install), else the nearest one at or above the working directory (a regular install
+    used inside a checkout, e.g. a notebook opened from ``notebooks/``).  The answer never depends on *which*
+    directory of the checkout the caller runs in.
+    """
+    if start is None:
+        here = Path(__file__).resolve().parents[2]
+        if _is_book_root(here):
+            return here
+        start = Path.cwd()
+    start = Path(start).resolve()
+    return next((p for p in (start, *start.parents) if _is_book_root(p)), None)
+
+
 def figures_dir() -> Path:
-    """Where figures go: ``$RFMAP_FIGURES``, else ``book/figures`` of the source checkout, else ``./figures``."""
+    """Where figures go: ``$RFMAP_FIGURES``, else ``book/figures`` of the checkout found by :func:`repository_root`
+    (the place the book build writes to, from the repository root, from ``notebooks/`` or from anywhere else),
+    else ``./figures`` outside a checkout."""
     env = os.environ.get("RFMAP_FIGURES")
     if env:
         p = Path(env)
     else:
-        root = Path(__file__).resolve().parents[2]
-        p = root / "book" / "figures" if (root / "_config.yml").exists() else Path.cwd() / "figures"
+        root = repository_root()
+        p = root / "book" / "figures" if root is not None else Path.cwd() / "figures"
     p.mkdir(parents=True, exist_ok=True)
     return p
 
