@@ -146,14 +146,26 @@ class _ThreadLoader:
 
 
 def _worker_main(cfg: TrainConfig, rank: int, steps: range, q, stop) -> None:  # pragma: no cover - subprocess
+    import queue
+
     torch.set_num_threads(1)
+    parent = os.getppid()
+
+    def put(item) -> bool:  # False once training has stopped or its process is gone (killed: no clean close)
+        while not stop.is_set() and os.getppid() == parent:
+            try:
+                q.put(item, timeout=1.0)
+                return True
+            except queue.Full:
+                continue
+        return False
+
     try:
         for step in steps:
-            if stop.is_set():
+            if stop.is_set() or not put((step, draw_step(cfg, step, rank), None)):
                 return
-            q.put((step, draw_step(cfg, step, rank), None))
     except BaseException as e:  # noqa: BLE001 - reported to the training process
-        q.put((None, None, f"{type(e).__name__}: {e}"))
+        put((None, None, f"{type(e).__name__}: {e}"))
 
 
 class _ProcessLoader:
