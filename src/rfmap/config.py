@@ -9,7 +9,6 @@ only switches between ``ci`` and ``full``.
 """
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 from dataclasses import asdict, dataclass, field, replace
@@ -17,8 +16,7 @@ from dataclasses import asdict, dataclass, field, replace
 from .fields import RandomBeltramiConfig, RandomDensityConfig
 from .tasks import LossWeights, TaskSpec
 
-__all__ = ["TrainConfig", "ModelConfig", "CONFIGS", "PRESETS", "get_config", "config_names", "scale",
-           "config_from_dict"]
+__all__ = ["TrainConfig", "ModelConfig", "CONFIGS", "PRESETS", "get_config", "config_names", "scale"]
 
 PRESETS = ("ci", "full", "paper")
 #: the presets ``RFMAP_SCALE`` may name
@@ -97,28 +95,6 @@ class TrainConfig:
 
     def with_overrides(self, **kw) -> "TrainConfig":
         return replace(self, **kw)
-
-
-def _build(cls, data):
-    if data is None or not dataclasses.is_dataclass(cls):
-        return data
-    kw = {}
-    for f in dataclasses.fields(cls):
-        if f.name not in data:
-            continue
-        v = data[f.name]
-        t = f.type if not isinstance(f.type, str) else eval(f.type.split("|")[0].strip(), globals())
-        if dataclasses.is_dataclass(t) and isinstance(v, dict):
-            v = _build(t, v)
-        elif isinstance(v, list):
-            v = tuple(v)
-        kw[f.name] = v
-    return cls(**kw)
-
-
-def config_from_dict(d: dict) -> TrainConfig:
-    """Rebuild a :class:`TrainConfig` from :meth:`TrainConfig.to_dict` output (e.g. stored weight metadata)."""
-    return _build(TrainConfig, d)
 
 
 def _presets(name, task, description, ci: dict, full: dict, paper: dict, paper_note: str,

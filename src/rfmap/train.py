@@ -257,6 +257,16 @@ def _has_repair(sur) -> bool:
     return "repair" in inspect.signature(sur.map).parameters
 
 
+def machine(device: torch.device) -> dict:
+    """What the run was trained on (recorded in the metadata, so the book can say it)."""
+    import platform
+
+    info = {"cpu_count": os.cpu_count(), "platform": platform.platform(terse=True), "torch": torch.__version__}
+    if device.type == "cuda":
+        info["gpu"] = torch.cuda.get_device_name(device)
+    return info
+
+
 # ---------------------------------------------------------------------------------------------------- lineage
 def sha256(path) -> str:
     h = hashlib.sha256()
@@ -358,6 +368,7 @@ class TrainState:
                 "cumulative_steps": int(parent["cumulative_steps"]) + self.step,
                 "cumulative_wall_time": round(float(parent["cumulative_wall_time"]) + elapsed, 1),
                 "lineage": self.lineage, "device": str(self.device), "threads": torch.get_num_threads(),
+                "machine": machine(self.device),
                 "world_size": self.world, "global_batch": cfg.batch * self.world, "description": cfg.description}
         if self.command:
             meta["command"] = self.command
