@@ -540,6 +540,8 @@ def _finish(st: TrainState) -> Surrogate:
     sur.meta["selected_step"] = selected
     sur.meta["paper_fields_report"] = report
     sur.meta["history"] = history(st.out / "log.jsonl")
+    sur.meta["history"]["validation_set"] = (f"{cfg.val_count} held-out random fields at N = "
+                                             f"{', '.join(str(n) for n in cfg.val_ns)}")
     sur.save(st.out / f"{cfg.name}.safetensors")
     return sur
 
