@@ -48,6 +48,9 @@ class RandomDensityConfig:
         ``[0.1, 0.1 + contrast]``; the test fields span about 2).
     p_step, p_patch, p_noise : float
         Probabilities of adding a step (box indicator), a compact high-frequency patch, and vertex noise.
+    p_peak, p_ramp : float
+        Probabilities of adding a narrow Gaussian peak (width 0.02–0.08) and a steep tanh ramp across a random
+        direction (width 0.01–0.05); both are 0 by default (the distribution of the first shipped models).
     """
 
     dim: int = 2
@@ -58,6 +61,8 @@ class RandomDensityConfig:
     p_patch: float = 0.2
     p_noise: float = 0.1
     noise: float = 0.02
+    p_peak: float = 0.0
+    p_ramp: float = 0.0
 
     @classmethod
     def for_dim(cls, dim: int, **kw) -> "RandomDensityConfig":
@@ -96,6 +101,16 @@ class RandomDensity:
         self.noise = cfg.noise if rng.random() < cfg.p_noise else 0.0
         self.contrast = float(_log_uniform(rng, *cfg.contrast, ()))
         self._rng = np.random.default_rng(rng.integers(2**63))
+        # sharp features drawn last, so that configurations without them keep their earlier random streams
+        self.peaks, self.ramps = [], []
+        big = max(1.0, math.sqrt(k))
+        if cfg.p_peak and rng.random() < cfg.p_peak:
+            self.peaks.append((rng.uniform(0.1, 0.9, size=d), rng.uniform(0.02, 0.08), rng.uniform(1.0, 3.0) * big))
+        if cfg.p_ramp and rng.random() < cfg.p_ramp:
+            nrm = rng.normal(size=d)
+            nrm /= np.linalg.norm(nrm)
+            self.ramps.append((nrm, float(nrm @ rng.uniform(0.2, 0.8, size=d)), rng.uniform(0.01, 0.05),
+                               rng.uniform(-1.0, 1.0) * big))
         self.scale, noise, self.noise = 1.0, self.noise, 0.0
         probe = self.on_grid(33)
         self.noise = noise
@@ -116,6 +131,10 @@ class RandomDensity:
         for c, width, f, ph, a in self.patches:
             w = np.exp(-((x - c) ** 2).sum(-1) / (2 * width**2))
             out = out + a * w * np.sin(TWO_PI * (x * f).sum(-1) + ph[0])
+        for c, width, h in getattr(self, "peaks", ()):
+            out = out + h * np.exp(-((x - c) ** 2).sum(-1) / (2 * width**2))
+        for nrm, off, width, h in getattr(self, "ramps", ()):
+            out = out + h * np.tanh((x @ nrm - off) / width)
         return out
 
     def on_grid(self, n: int) -> np.ndarray:

@@ -8,8 +8,9 @@ are reported beside the validation metric only.
 The set mixes kinds, sharp ones included, so that folds show up during training:
 
 * density tasks: ``smooth`` (a random training-style density without sharp parts), ``steps`` (box steps and
-  high-frequency patches), ``peak`` (a narrow Gaussian peak of height up to 50 over a smooth background) and
-  ``ramp`` (a steep tanh ramp across a random direction);
+  high-frequency patches), ``peak`` (a narrow Gaussian peak of height 1–8 over a gently tilted background) and
+  ``ramp`` (a steep tanh ramp of height 1–4 across a random direction); after the paper's preprocessing (minimum
+  shifted to 0.1) their largest-to-smallest density ratios lie within those of the training fields (up to ~80);
 * Beltrami tasks: random boundary-fixing maps (:class:`rfmap.fields.RandomMap`) with their exact image, at sup-norm
   levels of :math:`|\mu|` spread over [0.1, 0.85]; the metric is the mean vertex distance to the exact map.
 
@@ -53,8 +54,8 @@ def _density_field(j: int, kind: str, dim: int) -> ValidationField:
     elif kind == "peak":
         c = rng.uniform(0.2, 0.8, dim)
         width = rng.uniform(0.03, 0.08)
-        height = float(np.exp(rng.uniform(np.log(5.0), np.log(50.0))))
-        tilt = rng.uniform(-0.5, 0.5, dim)
+        height = float(np.exp(rng.uniform(np.log(1.0), np.log(8.0))))
+        tilt = rng.uniform(-0.3, 0.3, dim)
 
         def f(x, c=c, w=width, h=height, tilt=tilt):
             x = np.asarray(x, dtype=np.float64)
@@ -64,7 +65,7 @@ def _density_field(j: int, kind: str, dim: int) -> ValidationField:
         normal /= np.linalg.norm(normal)
         offset = float(normal @ rng.uniform(0.3, 0.7, dim))
         width = rng.uniform(0.01, 0.05)
-        contrast = rng.uniform(2.0, 20.0)
+        contrast = rng.uniform(2.0, 5.0)
 
         def f(x, nrm=normal, o=offset, w=width, k=contrast):
             x = np.asarray(x, dtype=np.float64)
