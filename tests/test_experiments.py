@@ -5,7 +5,7 @@ import io
 import numpy as np
 import pytest
 
-from rfmap.experiments import Table, beltrami_table, paper_table, population_table, resolution_table
+from rfmap.experiments import Table, beltrami_table, format_value, paper_table, population_table, resolution_table
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
 
@@ -28,14 +28,45 @@ def test_table_markdown_and_csv_roundtrip(tmp_path):
     t.add("a", "ours", {"time": 0.5, "n_flipped": 0, "alpha": [1.0, 1.2]})
     t.add("a", "paper", {"time": 1.0})
     md = t.to_markdown().splitlines()
-    assert md[0].startswith("| case | method | Time (s)")
-    assert md[3].endswith("| 1.000000 | — | — |")
+    assert md[0].startswith("| case | method | time")
+    assert md[2] == "| a | ours | 500 ms | 0 | (1, 1.2) |"
+    assert md[3].endswith("| 1 s | — | — |")
     rows = list(csv.reader(io.StringIO(t.to_csv())))
     assert rows[0] == ["case", "method", "time", "n_flipped", "alpha"]
     assert float(rows[1][2]) == 0.5 and rows[2][3] == ""
     assert t.value("a", "ours", "n_flipped") == 0
     paths = t.save(tmp_path)
     assert [p.name for p in paths] == ["tab-x-y.md", "tab-x-y.csv"]
+
+
+@pytest.mark.parametrize("value, column, text", [
+    (0.0198912, "std_rho_map", "0.01989"), (2.432098, "mean_dd", "2.432"), (-0.0123456, "min_jacobian", "-0.01235"),
+    (0.0123456, "time", "12.3 ms"), (2.432098, "time", "2.43 s"), (123.456, "time", "123 s"),
+    (41.237, "speedup", "41.2×"), (3, "n_flipped", "3"), (np.int64(7), "n_flipped", "7"), (None, "time", "—"),
+])
+def test_cells_have_four_significant_digits_and_times_their_unit(value, column, text):
+    assert format_value(value, column) == text
+
+
+def test_csv_rounds_as_the_markdown_and_keeps_seconds():
+    t = Table("tab:x", "title", ["time", "std_rho_map"])
+    t.add("a", "ours", {"time": 0.0123456, "std_rho_map": 0.019895123})
+    rows = list(csv.reader(io.StringIO(t.to_csv())))
+    assert rows[1][2:] == ["0.01235", "0.0199"]
+
+
+def test_wide_tables_wrap_into_narrow_ones():
+    cols = ["time", "speedup", "std_rho_orig", "std_rho_map", "min_jacobian", "n_flipped", "max_mu", "mean_mu",
+            "alpha"]
+    t = Table("tab:x", "title", cols)
+    t.add("sin-cos", "ours", {c: 0.123456 for c in cols})
+    parts = t.to_markdown().split("\n\n")
+    assert len(parts) == 2
+    widths = [len(part.splitlines()[0].split(" | ")) for part in parts]
+    assert widths == [2 + 5, 2 + 4]  # case, method and at most six data columns each
+    for part in parts:
+        assert part.splitlines()[2].startswith("| sin-cos | ours |")
+    assert t.to_markdown(max_columns=None).count("\n\n") == 0
 
 
 def test_beltrami_table_on_untrained_model():

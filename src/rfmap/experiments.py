@@ -21,16 +21,44 @@ from .result import MapResult
 
 __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table", "population_table",
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
-           "COLUMN_TITLES"]
+           "COLUMN_TITLES", "format_value", "DIGITS"]
 
 DATA = Path(__file__).resolve().parent / "data"
 
 COLUMN_TITLES = {
-    "time": "Time (s)", "speedup": "classical / ours time", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
-    "mean_dmu_pl": "mean |Δμ| vs PL", "std_rho_orig": "Std(ρ̃_orig)", "std_rho_map": "Std(ρ̃_map)",
-    "min_jacobian": "Min Jacobian", "n_flipped": "flipped", "max_mu": "Max |μ|", "mean_mu": "Mean |μ|",
+    "time": "time", "speedup": "speed-up", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
+    "mean_dmu_pl": "mean |Δμ| vs PL", "std_rho_orig": "Std ρ̃ orig", "std_rho_map": "Std ρ̃ map",
+    "min_jacobian": "min det J", "n_flipped": "flips", "max_mu": "max |μ|", "mean_mu": "mean |μ|",
     "alpha": "α",
 }
+#: significant digits of every number in a table (times: one fewer, with their unit)
+DIGITS = 4
+#: data columns per Markdown table; wider tables continue in a second table below, so they fit the page
+MAX_COLUMNS = 6
+
+
+def format_value(v, column: str = "", *, unit: bool = True) -> str:
+    """One table cell: :data:`DIGITS` significant digits; times (column ``time``, seconds) as ``12.3 ms`` or
+    ``2.43 s`` (without ``unit``: seconds, as a plain number); speed-ups as ``41.2×``; integers exactly; a missing
+    value as an em dash (empty without ``unit``)."""
+    if v is None:
+        return "—" if unit else ""
+    if isinstance(v, (bool, np.bool_)):
+        return str(bool(v))
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (list, tuple)):
+        return "(" + ", ".join(f"{float(x):.{DIGITS - 1}g}" for x in v) + ")"
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        if not unit:
+            return f"{v:.{DIGITS}g}"
+        if column == "time":
+            return f"{v * 1e3:.{DIGITS - 1}g} ms" if abs(v) < 1 else f"{v:.{DIGITS - 1}g} s"
+        if column == "speedup":
+            return f"{v:.{DIGITS - 1}g}×"
+        return f"{v:.{DIGITS}g}"
+    return str(v)
 
 
 @lru_cache(maxsize=1)
@@ -64,31 +92,31 @@ class Table:
                 return v.get(column)
         raise KeyError((case, method, column))
 
-    @staticmethod
-    def _fmt(v) -> str:
-        if v is None:
-            return "—"
-        if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
-            return str(int(v))
-        if isinstance(v, (list, tuple)):
-            return "(" + ", ".join(f"{x:.3g}" for x in v) + ")"
-        if isinstance(v, float):
-            return f"{v:.3g}" if abs(v) >= 100 else f"{v:.6f}" if abs(v) >= 1e-3 or v == 0 else f"{v:.3e}"
-        return str(v)
-
-    def to_markdown(self) -> str:
-        head = ["case", "method"] + [COLUMN_TITLES.get(c, c).replace("|", "\\|") for c in self.columns]
-        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        for case, method, vals in self.rows:
-            lines.append("| " + " | ".join([case, method] + [self._fmt(vals.get(c)) for c in self.columns]) + " |")
-        return "\n".join(lines)
+    def to_markdown(self, max_columns: int | None = MAX_COLUMNS) -> str:
+        """The table as Markdown (cells by :func:`format_value`).  With more than ``max_columns`` data columns
+        it is wrapped: the further columns follow in another table with the same ``case`` and ``method``
+        columns."""
+        cols = list(self.columns)
+        parts_n = -(-len(cols) // max_columns) if max_columns and cols else 1
+        step = max(1, -(-len(cols) // parts_n))  # balanced: 9 columns at most 6 per table give 5 + 4
+        parts = []
+        for i in range(0, max(len(cols), 1), step):
+            chunk = cols[i:i + step]
+            head = ["case", "method"] + [COLUMN_TITLES.get(c, c).replace("|", "\\|") for c in chunk]
+            lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+            for case, method, vals in self.rows:
+                lines.append("| " + " | ".join([case, method] + [format_value(vals.get(c), c) for c in chunk]) + " |")
+            parts.append("\n".join(lines))
+        return "\n\n".join(parts)
 
     def to_csv(self) -> str:
+        """The table as CSV: one header row of column keys, numbers to :data:`DIGITS` significant digits (times in
+        seconds), empty cells for missing values."""
         buf = io.StringIO()
         w = csv.writer(buf)
         w.writerow(["case", "method"] + self.columns)
         for case, method, vals in self.rows:
-            w.writerow([case, method] + ["" if vals.get(c) is None else vals.get(c) for c in self.columns])
+            w.writerow([case, method] + [format_value(vals.get(c), c, unit=False) for c in self.columns])
         return buf.getvalue()
 
     def _repr_markdown_(self) -> str:
@@ -300,7 +328,8 @@ def population_summary(table: Table, fields) -> tuple[dict, str]:
         best = min(ours, ref)
         values.update({f"{f}_std": ours, f"{f}_std_ref": ref, f"{f}_std_dem": dem, f"{f}_std_paper": paper,
                        f"{f}_best": best})
-        rows.append(f"| {f} | {ours:.4f} | {ref:.4f} | {dem:.4f} | {paper:.4f} | {best / paper:.2f} |")
+        cells = [format_value(x) for x in (ours, ref, dem, paper)] + [format_value(best / paper, "speedup")]
+        rows.append(f"| {f} | " + " | ".join(cells) + " |")
     values.update(
         met=int(sum(values[f"{f}_best"] <= values[f"{f}_std_paper"] for f in fields)),
         dem_better=int(sum(values[f"{f}_std_dem"] < values[f"{f}_best"] for f in fields)),
