@@ -1,7 +1,7 @@
 r"""The paper's test fields: densities (paper Sec. 5.2) and analytic Beltrami test maps (paper Sec. 5.1).
 
 Densities are functions :math:`p: [0,1]^d \to \mathbb{R}`; before use they are evaluated at the mesh vertices,
-shifted to minimum 0.1 and scaled to unit mass (:func:`rfmap.inputs.preprocess_density`).  Beltrami test maps
+shifted to minimum 0.1 and scaled to unit mass (:func:`rfmap.fields.preprocess_density`).  Beltrami test maps
 (Eqs. T1–T4) are analytic maps of the unit square; their exact Beltrami coefficient :math:`\mu = f_{\bar z}/f_z` is
 computed by automatic differentiation in float64 (exact to round-off).
 

@@ -145,7 +145,7 @@ def density_objective(ref, psi, elements, density, boundary, flip_weight: float 
     density : array, shape (n,)
         Vertex densities (unit mass).
     boundary : str
-        The boundary condition of :func:`rfmap.nn.model.apply_displacement`.
+        The boundary condition of :func:`rfmap.nn.apply_displacement`.
     flip_weight : float
         :math:`\lambda`.
     grid_n : int, optional

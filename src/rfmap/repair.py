@@ -15,7 +15,7 @@ truncated,
 
 .. math:: \mu \leftarrow \mu \, \min\Bigl(1, \frac{1 - \delta}{|\mu|}\Bigr), \qquad \delta = 0.1,
 
-and the map is rebuilt from the truncated :math:`\mu` by :func:`rfmap.solvers.lbs.solve_lbs` with the model's boundary
+and the map is rebuilt from the truncated :math:`\mu` by :func:`rfmap.solvers.solve_lbs` with the model's boundary
 condition: the identity on the boundary (``fixed``), vertices sliding on their walls (``square``), or the boundary
 vertices where the network put them (``free``), after moving crossing boundary vertices back towards the square until
 the boundary polygon is simple (:func:`untangle_boundary`).  Where the map was not folded and :math:`|\mu| \le 1 - \delta`
@@ -257,7 +257,7 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
     mapped : ndarray, shape (N**2, 2)
         The map on :func:`rfmap.mesh.grid_mesh` ``(N, 2)``.
     boundary : {"fixed", "square", "free"}
-        ``fixed``: identity on the boundary; ``square``: :func:`rfmap.solvers.lbs.solve_lbs` with sliding walls;
+        ``fixed``: identity on the boundary; ``square``: :func:`rfmap.solvers.solve_lbs` with sliding walls;
         ``free``: Dirichlet values at the (untangled) boundary positions of ``mapped``.
 
     Returns

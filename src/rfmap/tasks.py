@@ -2,7 +2,7 @@ r"""Tasks: what a surrogate maps from, how its inputs are encoded, and how train
 
 A task couples the input field (a density, or a Beltrami coefficient), the boundary condition and the losses.
 The input encoding (paper Sec. 4.1) stacks the vertex coordinates and the parameter channels,
-:math:`\mathcal{U} = [x_1, \dots, x_d, p_1, \dots, p_m]`, as a (B, d+m, *S) tensor in grid order:
+:math:`\mathcal{U} = [x_1, \dots, x_d, p_1, \dots, p_m]`, as a ``(B, d+m, *S)`` tensor in grid order:
 
 * density tasks (m = 1): the channel is :math:`\log p` of the unit-mass density, a discretisation-consistent
   normalisation (mass :math:`\int p = 1` on every grid);
@@ -104,7 +104,7 @@ class Batch:
 
     Attributes
     ----------
-    inputs : Tensor, shape (B, d+m, *S)
+    inputs : Tensor, shape ``(B, d+m, *S)``
     ref : Tensor, shape (B, n, d)
     elements : LongTensor, shape (m, d+1)
     density : Tensor, shape (B, n) — density tasks
@@ -241,7 +241,7 @@ class LossWeights:
 
 
 def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights) -> tuple[Tensor, dict]:
-    """Total loss and its parts for network output ``psi`` of shape (B, d, *S)."""
+    """Total loss and its parts for network output ``psi`` of shape ``(B, d, *S)``."""
     B, d = psi.shape[:2]
     disp = psi.reshape(B, d, -1).transpose(1, 2)
     mapped = apply_displacement(batch.ref, disp, spec.boundary)

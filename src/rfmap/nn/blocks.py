@@ -29,7 +29,7 @@ def conv_transpose_cls(dim: int) -> type[nn.Module]:
 
 
 def resize(x: Tensor, size: tuple[int, ...]) -> Tensor:
-    """(Bi/tri)linear interpolation of a (B, C, *S) tensor to spatial size ``size`` (identity if equal)."""
+    """(Bi/tri)linear interpolation of a ``(B, C, *S)`` tensor to spatial size ``size`` (identity if equal)."""
     if tuple(x.shape[2:]) == tuple(size):
         return x
     mode = "bilinear" if x.dim() == 4 else "trilinear"
@@ -51,7 +51,7 @@ class EdgeAwareConv(nn.Module):
     :math:`\mathcal{E}(f) = P\,|\mathcal{C}_{edge}(f) - \mathcal{C}_{loc}(f)|` with a learned 1x1 projection
     :math:`P`: the two stencils disagree where the features vary on the grid scale, i.e. at edges (paper Sec. 4.2).
 
-    Shapes: (B, C_in, *S) -> (B, C_out, *S) for any spatial size S.
+    Shapes: ``(B, C_in, *S) -> (B, C_out, *S)`` for any spatial size S.
     """
 
     def __init__(self, cin: int, cout: int, dim: int):
@@ -72,7 +72,7 @@ class SpatialAttention(nn.Module):
 
     :math:`m = \mathrm{mean}_c f` and :math:`M = \max_c f` are channel statistics, :math:`\bar m, \bar M` their
     local means (average over ``kernel``-point blocks, interpolated back), and :math:`W` a learned 1x1 projection.
-    Shapes: (B, C, *S) -> (B, C, *S).
+    Shapes: ``(B, C, *S) -> (B, C, *S)``.
     """
 
     def __init__(self, dim: int, kernel: int = 4):
@@ -93,7 +93,7 @@ class SpatialAttention(nn.Module):
 class EnhancedDoubleConv(nn.Module):
     """Enhanced double convolution (EDC): an edge-aware convolution and a 3-point convolution, each followed by
     GroupNorm (and SiLU), then spatial attention and a residual 1x1 projection.
-    Shapes: (B, C_in, *S) -> (B, C_out, *S)."""
+    Shapes: ``(B, C_in, *S) -> (B, C_out, *S)``."""
 
     def __init__(self, cin: int, cout: int, dim: int, attention: bool = True):
         super().__init__()
@@ -114,7 +114,7 @@ class MultiResolutionLift(nn.Module):
 
     :math:`x^{(1)}, x^{(1/2)}, x^{(1/4)}` (interpolated copies of the input) are lifted by 1x1 convolutions
     :math:`\mathcal{P}_1, \mathcal{P}_{1/2}, \mathcal{P}_{1/4}`, interpolated back to full size, concatenated and
-    mixed by a 1x1 convolution :math:`\mathcal{F}`.  Shapes: (B, C_in, *S) -> (B, C_out, *S).
+    mixed by a 1x1 convolution :math:`\mathcal{F}`.  Shapes: ``(B, C_in, *S) -> (B, C_out, *S)``.
     """
 
     def __init__(self, cin: int, cout: int, dim: int, scales: tuple[int, ...] = (1, 2, 4)):
