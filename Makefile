@@ -1,5 +1,5 @@
 # rfmap: set-up, tests and the Jupyter Book.
-#   make install     create .venv, install torch (CPU, pinned) and the package with its dev and lab extras, and
+#   make install     create .venv, install torch (CPU, pinned) and the package with its dev, lab and geo extras, and
 #                    register the project's Jupyter kernel (rfmap) in .venv
 #   make test        unit tests (every notebook through the rfmap kernel from notebooks/, as JupyterLab runs it) and
 #                    the book build (every notebook again, from a temporary directory), all at RFMAP_SCALE=ci
@@ -34,7 +34,7 @@ install: $(STAMP)
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install $(TORCH)
-	$(BIN)/python -m pip install -e ".[dev,lab]"
+	$(BIN)/python -m pip install -e ".[dev,lab,geo]"
 	$(BIN)/python -m ipykernel install --sys-prefix --name $(KERNEL) --display-name "Python (rfmap)" \
 		--env VTK_DEFAULT_OPENGL_WINDOW vtkEGLRenderWindow --env PATH '$(CURDIR)/$(BIN):$${PATH}'
 	touch $@

@@ -117,4 +117,4 @@ def test_package_data_declared():
 def test_makefile_pins_torch_before_the_package():
     text = (ROOT / "Makefile").read_text(encoding="utf-8")
     assert "torch==2.13.0" in text
-    assert text.index("$(TORCH)\n") < text.index('-e ".[dev,lab]"')
+    assert text.index("$(TORCH)\n") < text.index('-e ".[dev,lab,geo]"')

@@ -1,8 +1,8 @@
 """The ``rfmap`` command line.
 
 Subcommands: ``solve`` (classical solvers), ``metrics``, ``map`` (neural surrogates), ``train``, ``models``,
-``reproduce`` (the paper's tables).  Errors in the input print one line and exit with status 2; no partial output
-file is left behind.
+``reproduce`` (the paper's tables), ``cartogram`` (GeoJSON regions resized by a value).  Errors in the input print
+one line and exit with status 2; no partial output file is left behind.
 """
 from __future__ import annotations
 
@@ -130,6 +130,28 @@ def cmd_train(args) -> int:
     return 0
 
 
+def cmd_cartogram(args) -> int:
+    from .cartogram import cartogram
+
+    if args.png and not args.png.lower().endswith(".png"):
+        raise CLIError(f"--png must name a .png file, got {args.png!r}")
+    carto = cartogram(args.input, args.value, method=args.method, n=args.n, tol=args.tol, model=args.model)
+    carto.save(args.out)
+    if args.png:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        from .viz import cartogram_figure
+
+        cartogram_figure(carto, title=args.value, path=args.png)
+    names = [carto.features[i].get("id", f"#{i}") for i in carto.floored]
+    print(f"wrote {args.out}: {len(carto.features)} regions by {args.value!r}, {carto.method}, N = {carto.n}, "
+          f"{carto.info['iterations']} pass(es), {carto.time:.2f} s; {carto.metrics()}")
+    if names:
+        print(f"zero values floored in {len(names)} region(s): {', '.join(map(str, names))}")
+    return 0
+
+
 def cmd_reproduce(args) -> int:
     from .experiments import reproduce
 
@@ -181,6 +203,19 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("models", help="list the shipped pretrained models")
     s.set_defaults(func=cmd_models)
 
+    s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion cartogram)")
+    s.add_argument("input", help="GeoJSON FeatureCollection of Polygon / MultiPolygon features")
+    s.add_argument("--value", required=True, help="the feature property holding each region's value")
+    s.add_argument("--method", choices=["dem", "surrogate", "hybrid"], default="dem",
+                   help="classical diffusion (default), neural surrogate, or the surrogate polished by the flow")
+    s.add_argument("--n", type=int, default=256, help="grid side N of the density raster (default 256)")
+    s.add_argument("--tol", type=float, default=0.01,
+                   help="repeat passes until the largest relative area error is at most this (default 0.01)")
+    s.add_argument("--model", default=None, help="surrogate for --method surrogate/hybrid (default deq2d-square)")
+    s.add_argument("--out", required=True, help="output GeoJSON")
+    s.add_argument("--png", default=None, help="also draw the input and the cartogram side by side (.png)")
+    s.set_defaults(func=cmd_cartogram)
+
     s = sub.add_parser("reproduce", help="write the paper's tables (Markdown and CSV)")
     s.add_argument("experiment", choices=["beltrami", "dem2d", "dem3d"])
     s.add_argument("--out", default="reproduction", help="output directory")
@@ -196,7 +231,7 @@ def main(argv=None) -> int:
     try:
         return args.func(args)
     except (CLIError, ValueError, FileNotFoundError) as e:
-        if out and not existed and os.path.isfile(out) and args.cmd in ("solve", "map"):
+        if out and not existed and os.path.isfile(out) and args.cmd in ("solve", "map", "cartogram"):
             os.remove(out)
         print(f"rfmap {args.cmd}: error: {e}", file=sys.stderr)
         return 2

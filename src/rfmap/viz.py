@@ -11,7 +11,7 @@ from .result import setup_pyvista, to_pyvista
 
 __all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu",
            "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
-           "population_figure", "volume_rows"]
+           "population_figure", "volume_rows", "plot_regions", "cartogram_figure"]
 
 STYLE = {
     "figure.dpi": 110,
@@ -303,4 +303,73 @@ def volume_rows(results: dict, labels, fig_label: str):
                 ax.axis("off")
         fig.tight_layout()
         save_figure(fig, fig_label)
+    return fig
+
+
+def plot_regions(ax, geoms, values=None, *, title: str | None = None, cmap="viridis", vmin=None, vmax=None,
+                 edgecolor="white", lw=0.4, colorbar: bool = False, label: str | None = None):
+    """Draw shapely Polygons / MultiPolygons (holes included), filled by ``values`` (one per geometry) or grey."""
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PatchCollection
+    from matplotlib.patches import PathPatch
+    from matplotlib.path import Path as MplPath
+
+    patches = []
+    for g in geoms:
+        parts = getattr(g, "geoms", [g])
+        verts, codes = [], []
+        for poly in parts:
+            for ring in (poly.exterior, *poly.interiors):
+                xy = np.asarray(ring.coords)
+                verts.append(xy)
+                codes += [MplPath.MOVETO] + [MplPath.LINETO] * (len(xy) - 2) + [MplPath.CLOSEPOLY]
+        patches.append(PathPatch(MplPath(np.concatenate(verts), codes)))
+    coll = PatchCollection(patches, cmap=cmap, edgecolor=edgecolor, linewidth=lw)
+    if values is not None:
+        coll.set_array(np.asarray(values, dtype=float))
+        coll.set_clim(vmin, vmax)
+    else:
+        coll.set_facecolor("0.7")
+    ax.add_collection(coll)
+    ax.autoscale_view()
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    if title:
+        ax.set_title(title)
+    if colorbar and values is not None:
+        plt.colorbar(coll, ax=ax, fraction=0.046, pad=0.03, label=label)
+    return coll
+
+
+def cartogram_figure(carto, *, title: str = "", label: str | None = None, path=None):
+    """A cartogram (:class:`rfmap.cartogram.Cartogram`) beside its input map, both in the input's coordinates, every
+    region in the colour of its input density (value per unit area over the mean), so that each can be followed from
+    one map to the other.  Saved under the figure ``label`` (:func:`save_figure`) and/or to ``path``; returns the
+    figure."""
+    import matplotlib.pyplot as plt
+
+    before, after = carto.input_geometries(), carto.output_geometries()
+    density = carto.values / np.array([g.area for g in carto.regions])
+    density /= carto.values.sum() / sum(g.area for g in carto.regions)
+    m = carto.metrics()
+    with style():
+        fig, axes = plt.subplots(1, 2, figsize=(11, 5))
+        vmax = float(density.max())
+        plot_regions(axes[0], before, density, title=f"{title} input".strip(), vmin=0.0, vmax=vmax)
+        plot_regions(axes[1], after, density, vmin=0.0, vmax=vmax, colorbar=True, label="input density / mean",
+                     title=f"{title} cartogram ({carto.method}, N = {carto.n}): area error mean {m.mean_error:.3f}, "
+                           f"max {m.max_error:.3f}".strip())
+        b = np.array([g.bounds for g in (*before, *after)])
+        lo, hi = b[:, :2].min(0), b[:, 2:].max(0)
+        pad = 0.02 * (hi - lo)
+        for ax in axes:  # one extent and the planar frame's aspect, so that sizes and shapes compare
+            ax.set(xlim=(lo[0] - pad[0], hi[0] + pad[0]), ylim=(lo[1] - pad[1], hi[1] + pad[1]))
+            ax.set_aspect(1.0 / carto.frame.cos_lat)
+            ax.axis("off")
+        fig.tight_layout()
+        if label:
+            save_figure(fig, label)
+        if path:
+            fig.savefig(path)
     return fig

@@ -1,0 +1,270 @@
+"""Tests of :mod:`rfmap.cartogram`: exact answers on synthetic maps (equal densities give the identity, the big
+region takes its share), GeoJSON in and out, zero values, bad input, the ``rfmap cartogram`` command line, and the
+Montreal election (when plotly is installed)."""
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+import shapely
+
+from rfmap.cartogram import (PlanarFrame, cartogram, cartogram_metrics, density_grid, montreal_election,
+                             read_regions)
+from rfmap.cli import main
+
+SIDE = 1000.0  # metres: planar coordinates, no projection
+
+
+def square(x, y, side=SIDE):
+    return [[[x, y], [x + side, y], [x + side, y + side], [x, y + side], [x, y]]]
+
+
+def grid_2x2(values, *, key="pop"):
+    """Four squares of side ``SIDE`` in a 2 x 2 block, with ids a..d and ``values`` under ``key``."""
+    corners = [(0, 0), (SIDE, 0), (0, SIDE), (SIDE, SIDE)]
+    return {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "id": name, "properties": {key: v, "name": name},
+         "geometry": {"type": "Polygon", "coordinates": square(x, y)}}
+        for name, v, (x, y) in zip("abcd", values, corners)]}
+
+
+@pytest.fixture(scope="module")
+def big_d():
+    return cartogram(grid_2x2([1, 1, 1, 5]), "pop", n=64)
+
+
+# ----------------------------------------------------------------------------------------------- exact answers
+def test_equal_densities_give_the_identity():
+    c = cartogram(grid_2x2([2, 2, 2, 2]), "pop", n=48, iterations=1)
+    before = shapely.get_coordinates(c.regions)
+    after = shapely.get_coordinates(c.mapped)
+    assert np.abs(after - before).max() < 1e-6
+    assert c.metrics().max_error < 1e-6
+
+
+def test_the_big_region_grows_to_its_share(big_d):
+    m = big_d.metrics()
+    assert m.max_error <= 0.01 and m.mean_error <= 0.01
+    assert m.topology_ok
+    a = big_d.areas
+    assert a[3] / a.sum() == pytest.approx(5 / 8, abs=0.01)
+    assert a[3] > 4 * a[:3].max()
+    # the passes stop at the tolerance, and each lowers the largest error
+    hist = big_d.info["max_error"]
+    assert hist[-1] <= 0.01 and all(b < a for a, b in zip(hist, hist[1:]))
+
+
+def test_a_multipolygon_region_keeps_its_parts():
+    fc = grid_2x2([1, 1, 1, 1])
+    fc["features"][0]["geometry"] = {"type": "MultiPolygon", "coordinates": [
+        square(0, 0, SIDE / 2), square(SIDE / 2, SIDE / 2, SIDE / 2)]}
+    c = cartogram(fc, "pop", n=64)
+    assert c.mapped[0].geom_type == "MultiPolygon" and len(c.mapped[0].geoms) == 2
+    assert c.metrics().max_error <= 0.01 and c.metrics().topology_ok
+
+
+def test_frame_round_trip_and_projection():
+    lonlat = np.array([[-73.9, 45.4], [-73.5, 45.7]])
+    f = PlanarFrame.fit(lonlat, margin=0.1)
+    assert f.cos_lat == pytest.approx(math.cos(math.radians(45.55)))
+    u = f.forward(lonlat)
+    assert u.min() >= 0.1 - 1e-12 and u.max() <= 0.9 + 1e-12
+    assert np.abs(u - 0.5).max() == pytest.approx(0.4)
+    np.testing.assert_allclose(f.inverse(u), lonlat, atol=1e-12)
+    planar = PlanarFrame.fit(np.array([[0.0, 0.0], [5000.0, 2000.0]]), margin=0.1)
+    assert planar.cos_lat == 1.0
+    assert PlanarFrame.fit(lonlat, margin=0.1, projection="none").cos_lat == 1.0
+
+
+def test_density_raster_carries_the_values():
+    _, geoms, values, _ = read_regions(grid_2x2([1, 1, 1, 5]), "pop")
+    frame = PlanarFrame.fit(shapely.get_coordinates(geoms), margin=0.25)
+    regions = shapely.transform(geoms, frame.forward)
+    dens, sea = density_grid(regions, values, 41)
+    assert sea == pytest.approx(values.sum() / shapely.area(regions).sum())
+    # cells entirely inside a region hold its density; the corners hold the sea
+    rho = values / shapely.area(regions)
+    assert dens[0, 0] == pytest.approx(sea) and dens[-1, -1] == pytest.approx(sea)
+    assert dens[14, 14] == pytest.approx(rho[0]) and dens[26, 26] == pytest.approx(rho[3])
+    # the trapezoidal integral of the raster is the mass of the regions plus the sea's
+    w = np.full(41, 1 / 40)
+    w[[0, -1]] /= 2
+    total = w @ dens @ w
+    assert total == pytest.approx(values.sum() + sea * (1 - shapely.area(regions).sum()), rel=1e-3)
+
+
+# ----------------------------------------------------------------------------------------------- GeoJSON
+def test_geojson_round_trip(big_d, tmp_path):
+    out = big_d.to_geojson()
+    assert json.loads(json.dumps(out)) == out
+    path = tmp_path / "c.geojson"
+    big_d.save(path)
+    back = json.loads(path.read_text())
+    assert back == out
+    assert [f["id"] for f in back["features"]] == list("abcd")
+    assert [f["properties"] for f in back["features"]] == [{"pop": v, "name": k} for k, v in zip("abcd", [1, 1, 1, 5])]
+    # the output is in the input's coordinates and reads back as valid regions of the same total area
+    _, geoms, _, _ = read_regions(back, "pop")
+    assert shapely.is_valid(geoms).all()
+    assert shapely.area(geoms).sum() == pytest.approx(4 * SIDE**2, rel=0.02)
+    np.testing.assert_allclose(shapely.get_coordinates(big_d.output_geometries()), shapely.get_coordinates(geoms))
+
+
+def test_shared_borders_stay_shared(big_d):
+    m = big_d.metrics(overlap_tol=1e-12)
+    assert m.n_overlapping == 0
+    union = shapely.union_all(big_d.mapped)
+    assert union.geom_type == "Polygon" and len(union.interiors) == 0
+
+
+def test_zero_values_are_floored_and_reported():
+    c = cartogram(grid_2x2([0, 1, 1, 5]), "pop", n=48)
+    assert c.floored == [0]
+    assert c.values[0] == pytest.approx(0.1 * 1.0)  # a tenth of the smallest positive density times the area
+    assert c.metrics().topology_ok
+    assert c.areas[0] < 0.05 * c.areas[3]
+
+
+# ----------------------------------------------------------------------------------------------- metrics
+def test_metrics_find_overlaps_and_invalid_polygons():
+    a, b = shapely.box(0, 0, 1, 1), shapely.box(0.5, 0, 1.5, 1)
+    m = cartogram_metrics(np.array([a, b]), np.array([1.0, 1.0]))
+    assert m.n_overlapping == 1 and m.max_overlap == pytest.approx(0.25) and not m.topology_ok
+    bowtie = shapely.Polygon([(2, 0), (3, 1), (3, 0), (2, 1)])
+    m = cartogram_metrics(np.array([a, bowtie]), np.array([1.0, 1.0]))
+    assert m.n_invalid == 1 and not m.topology_ok
+    m = cartogram_metrics(np.array([a, shapely.box(1, 0, 3, 1)]), np.array([1.0, 1.0]))
+    # areas 1 and 2 for equal values: targets 1.5, errors 1/3 each
+    assert m.topology_ok and m.max_error == pytest.approx(1 / 3) and m.mean_error == pytest.approx(1 / 3)
+
+
+# ----------------------------------------------------------------------------------------------- bad input
+def _with(fc, k, **props):
+    fc["features"][k]["properties"].update(props)
+    return fc
+
+
+BAD = [
+    ({"type": "Feature"}, "not a GeoJSON FeatureCollection"),
+    ({"type": "FeatureCollection", "features": []}, "no features"),
+    ("{not json", "not valid GeoJSON"),
+    ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"pop": 1},
+                                                 "geometry": {"type": "Point", "coordinates": [0, 0]}}]},
+     "Polygon or MultiPolygon, got Point"),
+    ({"type": "FeatureCollection", "features": [{"type": "Feature", "properties": {"pop": 1},
+                                                 "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [1]]]}}]},
+     "malformed Polygon"),
+    (_with(grid_2x2([1, 1, 1, 5], key="votes"), 0), "has no property 'pop'"),
+    (_with(grid_2x2([1, 1, 1, 5]), 1, pop="many"), "is not a number"),
+    (_with(grid_2x2([1, 1, 1, 5]), 1, pop=None), "is not a number"),
+    (_with(grid_2x2([1, 1, 1, 5]), 2, pop=-3), "negative"),
+    (_with(grid_2x2([1, 1, 1, 5]), 2, pop=float("nan")), "NaN"),
+    (grid_2x2([0, 0, 0, 0]), "every value"),
+]
+
+
+@pytest.mark.parametrize("fc,match", BAD)
+def test_bad_input_is_one_clear_value_error(fc, match):
+    with pytest.raises(ValueError, match=match) as e:
+        cartogram(fc, "pop", n=16)
+    assert "\n" not in str(e.value)
+
+
+def test_bad_options():
+    fc = grid_2x2([1, 1, 1, 5])
+    with pytest.raises(ValueError, match="unknown cartogram method"):
+        cartogram(fc, "pop", method="rubber-sheet")
+    with pytest.raises(ValueError, match="2D density model of the square"):
+        cartogram(fc, "pop", method="surrogate", model="deq2d-free", n=16)
+    with pytest.raises(ValueError, match="iterations"):
+        cartogram(fc, "pop", iterations=0)
+
+
+def test_hybrid_needs_polish_support():
+    from rfmap import Surrogate
+
+    sur = Surrogate.pretrained("deq2d-square")
+    if "polish" in __import__("inspect").signature(sur.map).parameters:
+        c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="hybrid", surrogate=sur, n=64)
+        assert c.metrics().topology_ok
+    else:
+        with pytest.raises(ValueError, match="polish"):
+            cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="hybrid", surrogate=sur, n=64)
+
+
+def test_surrogate_cartogram():
+    c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="surrogate", n=64, iterations=2)
+    assert c.info["iterations"] == 2
+    assert c.areas[3] > 2 * c.areas[:3].max()
+    assert c.metrics().topology_ok
+
+
+# ----------------------------------------------------------------------------------------------- command line
+def run_cli(capsys, *args):
+    rc = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_cli_writes_geojson_and_png(tmp_path, capsys):
+    src = tmp_path / "in.geojson"
+    src.write_text(json.dumps(grid_2x2([0, 1, 1, 5])))
+    out, png = tmp_path / "out.geojson", tmp_path / "out.png"
+    rc, stdout, err = run_cli(capsys, "cartogram", src, "--value", "pop", "--n", 48, "--out", out, "--png", png)
+    assert rc == 0, err
+    assert "4 regions by 'pop'" in stdout and "valid, no overlaps" in stdout
+    assert "zero values floored in 1 region(s): a" in stdout
+    back = json.loads(out.read_text())
+    assert len(back["features"]) == 4
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("content,args,match", [
+    ("{oops", [], "not valid GeoJSON"),
+    (json.dumps(grid_2x2([1, 1, 1, 5])), ["--value", "votes"], "no property 'votes'"),
+    (json.dumps(_with(grid_2x2([1, 1, 1, 5]), 0, pop=-1)), [], "negative"),
+    (json.dumps(grid_2x2([1, 1, 1, 5])), ["--n", 2], "N"),
+    (json.dumps(grid_2x2([1, 1, 1, 5])), ["--png", "x.jpg"], "--png"),
+])
+def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, content, args, match):
+    src = tmp_path / "in.geojson"
+    src.write_text(content)
+    out = tmp_path / "out.geojson"
+    if "--value" not in args:
+        args = ["--value", "pop", *args]
+    rc, stdout, err = run_cli(capsys, "cartogram", src, *args, "--out", out)
+    assert rc == 2
+    assert len(err.strip().splitlines()) == 1 and err.startswith("rfmap cartogram: error:") and match in err
+    assert not out.exists() and not list(tmp_path.glob("out*"))
+
+
+def test_cli_missing_file(tmp_path, capsys):
+    rc, _, err = run_cli(capsys, "cartogram", tmp_path / "nope.geojson", "--value", "pop",
+                         "--out", tmp_path / "o.geojson")
+    assert rc == 2 and "cannot read" in err and not (tmp_path / "o.geojson").exists()
+
+
+# ----------------------------------------------------------------------------------------------- real data
+@pytest.fixture(scope="module")
+def montreal():
+    pytest.importorskip("plotly")
+    pytest.importorskip("pandas")
+    return montreal_election()
+
+
+def test_montreal_data(montreal):
+    feats = montreal["features"]
+    assert len(feats) == 58
+    for f in feats:
+        p = f["properties"]
+        assert p["total"] >= p["Coderre"] + p["Bergeron"] + p["Joly"] - 1 and p["total"] > 0
+
+
+def test_montreal_total_votes_meets_the_targets(montreal):
+    c = cartogram(montreal, "total", n=256)
+    m = c.metrics()
+    assert m.max_error <= 0.05 and m.mean_error <= 0.02
+    assert m.topology_ok
+    assert c.floored == []
