@@ -11,7 +11,7 @@ PAGE = ROOT / "book" / "api.md"
 MODULES = ["rfmap", "rfmap.surrogate", "rfmap.pretrained", "rfmap.result", "rfmap.solvers", "rfmap.fields",
            "rfmap.paper_fields", "rfmap.random_fields", "rfmap.metrics", "rfmap.repair", "rfmap.refine",
            "rfmap.config", "rfmap.train", "rfmap.tasks", "rfmap.losses", "rfmap.validation", "rfmap.device",
-           "rfmap.nn", "rfmap.mesh", "rfmap.geometry", "rfmap.experiments", "rfmap.viz"]
+           "rfmap.nn", "rfmap.mesh", "rfmap.geometry", "rfmap.experiments", "rfmap.viz", "rfmap.cartogram"]
 DIRECTIVE = re.compile(r"^\.\. (auto\w+):: (\S+)\n((?:[ \t]+:[^\n]*\n)*)", re.M)
 
 

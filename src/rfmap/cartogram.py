@@ -57,8 +57,13 @@ __all__ = [
     "density_grid",
     "cartogram",
     "cartogram_metrics",
+    "available_methods",
+    "compare_cartograms",
+    "cartogram_table",
     "montreal_election",
     "MONTREAL_CANDIDATES",
+    "DEM_SETTINGS",
+    "ZERO_FLOOR",
 ]
 
 #: Methods of :func:`cartogram`.
@@ -308,6 +313,12 @@ def _supports_polish(surrogate) -> bool:
     import inspect
 
     return "polish" in inspect.signature(surrogate.map).parameters
+
+
+def available_methods(surrogate) -> tuple[str, ...]:
+    """The methods of :func:`cartogram` that ``surrogate`` (an :class:`rfmap.Surrogate`) supports: ``"hybrid"``
+    needs ``Surrogate.map(polish=...)``."""
+    return CARTOGRAM_METHODS if _supports_polish(surrogate) else CARTOGRAM_METHODS[:2]
 
 
 # ----------------------------------------------------------------------------------------------- result
@@ -567,6 +578,49 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
     return Cartogram(features=out, regions=regions, mapped=mapped, values=values, floored=floored, frame=frame,
                      method=method, n=n, time=elapsed, map_time=map_time,
                      info={"iterations": len(results), "max_error": history, "results": results, "sea": sea})
+
+
+def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogate=None) -> dict:
+    """Cartograms of one map by several values and several runs of :func:`cartogram`.
+
+    Parameters
+    ----------
+    collection : dict, str or path
+    values : sequence of str
+        Property names.
+    runs : dict
+        ``{label: keyword arguments of cartogram}``, e.g. ``{"dem": {}, "surrogate, 1 pass": {"method":
+        "surrogate", "iterations": 1}}``.
+    n : int
+    surrogate : rfmap.Surrogate, optional
+        Shared by the surrogate runs (loaded once).
+
+    Returns
+    -------
+    dict
+        ``{(value, label): Cartogram}``.
+
+    Notes
+    -----
+    A given ``surrogate`` first maps a uniform density once, untimed: the first call pays PyTorch's one-time set-up,
+    which would otherwise be charged to whichever run comes first.
+    """
+    if surrogate is not None:
+        surrogate.map(np.ones((surrogate.n_range[0],) * 2), preprocess=False)
+    return {(v, label): cartogram(collection, v, n=n, surrogate=surrogate, **kw)
+            for v in values for label, kw in runs.items()}
+
+
+def cartogram_table(cartos: dict) -> str:
+    """A Markdown table of :func:`compare_cartograms`' results: area errors, topology, passes and seconds."""
+    lines = ["| value | method | N | passes | mean error | max error | topology | time (s) | map time (s) |",
+             "|---|---|---:|---:|---:|---:|---|---:|---:|"]
+    for (v, label), c in cartos.items():
+        m = c.metrics()
+        topo = "valid" if m.topology_ok else f"{m.n_invalid} invalid, {m.n_overlapping} overlaps"
+        lines.append(f"| {v} | {label} | {c.n} | {c.info['iterations']} | {m.mean_error:.4f} | {m.max_error:.4f} | "
+                     f"{topo} | {c.time:.2f} | {c.map_time:.2f} |")
+    return "\n".join(lines)
 
 
 def _listify(obj):

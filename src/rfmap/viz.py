@@ -11,7 +11,8 @@ from .result import setup_pyvista, to_pyvista
 
 __all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu",
            "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
-           "population_figure", "volume_rows", "plot_regions", "cartogram_figure"]
+           "population_figure", "volume_rows", "plot_regions", "cartogram_figure",
+           "cartogram_panels", "area_error_histograms"]
 
 STYLE = {
     "figure.dpi": 110,
@@ -372,4 +373,55 @@ def cartogram_figure(carto, *, title: str = "", label: str | None = None, path=N
             save_figure(fig, label)
         if path:
             fig.savefig(path)
+    return fig
+
+
+def cartogram_panels(cartos: dict, keys, *, label: str | None = None, cols: int = 4):
+    """Cartograms side by side, one panel per key of ``cartos`` (``{key: Cartogram}``, keys as in
+    :func:`rfmap.cartogram.compare_cartograms`), regions coloured by their input density over the mean, with the
+    input map first; saved under ``label``; returns the figure."""
+    import matplotlib.pyplot as plt
+
+    keys = list(keys)
+    first = cartos[keys[0]]
+    rows = -(-(len(keys) + 1) // cols)
+    with style():
+        fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.6 * rows), squeeze=False)
+        panels = [(first.input_geometries(), first, "input map")]
+        panels += [(cartos[k].output_geometries(), cartos[k], " / ".join(map(str, k))) for k in keys]
+        for ax, (geoms, c, title) in zip(axes.flat, panels):
+            area = np.array([g.area for g in c.regions])
+            density = c.values / area / (c.values.sum() / area.sum())
+            plot_regions(ax, geoms, density, title=title, vmin=0.0, vmax=float(np.quantile(density, 0.98)), lw=0.2)
+            ax.set_aspect(1.0 / first.frame.cos_lat)
+            ax.axis("off")
+        for ax in axes.flat[len(panels):]:
+            ax.axis("off")
+        fig.tight_layout()
+        if label:
+            save_figure(fig, label)
+    return fig
+
+
+def area_error_histograms(cartos: dict, labels, values, *, label: str | None = None, bins: int = 30):
+    """Histograms of the relative area errors :math:`|A_i/T_i - 1|` (log scale), one panel per value and one colour
+    per method label; ``cartos`` as returned by :func:`rfmap.cartogram.compare_cartograms`; saved under ``label``;
+    returns the figure."""
+    import matplotlib.pyplot as plt
+
+    values, labels = list(values), list(labels)
+    errs = {k: np.maximum(c.area_errors, 1e-6) for k, c in cartos.items()}
+    edges = np.logspace(-6, np.log10(max(e.max() for e in errs.values())) + 0.05, bins + 1)
+    with style():
+        fig, axes = plt.subplots(1, len(values), figsize=(3.6 * len(values), 3.0), squeeze=False, sharey=True)
+        for ax, v in zip(axes.flat, values):
+            for lab in labels:
+                ax.hist(errs[v, lab], bins=edges, histtype="step", lw=1.4, label=lab)
+            ax.axvline(0.01, color="0.5", ls=":", lw=0.8)
+            ax.set(xscale="log", xlabel=r"$|A_i/T_i - 1|$", title=v)
+        axes.flat[0].set_ylabel("regions")
+        axes.flat[0].legend(loc="upper left", fontsize=7)
+        fig.tight_layout()
+        if label:
+            save_figure(fig, label)
     return fig
