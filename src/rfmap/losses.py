@@ -14,7 +14,7 @@ from torch.nn import functional as F
 from .geometry import beltrami_coefficient, signed_measures
 
 __all__ = ["weighted_mean", "beltrami_loss", "density_loss", "beltrami_energy", "fold_penalty", "area_penalty",
-           "element_density"]
+           "element_density", "loss_integrands"]
 
 
 def weighted_mean(values: Tensor, weights: Tensor) -> Tensor:
@@ -103,3 +103,35 @@ def area_penalty(ref: Tensor, mapped: Tensor, elements: Tensor, *, ref_meas: Ten
     meas = signed_measures(mapped, elements) if meas is None else meas
     ratio = meas.sum(-1) / ref_meas.sum(-1)
     return ((ratio - 1) ** 2).mean()
+
+
+def loss_integrands(ref: Tensor, mapped: Tensor, elements: Tensor, *, density: Tensor | None = None,
+                    mu_target: Tensor | None = None, fold_threshold: float = 0.02, beta: float = 1.0) -> dict:
+    r"""The loss terms element by element, for drawing them on the mesh.
+
+    Each entry ``e`` of shape (B, m) is the integrand of one loss, so that
+    ``weighted_mean(e, weight)`` equals that loss:
+
+    * ``density`` (with ``density``): :math:`L(\tilde\rho_i - 1)`, :func:`density_loss`;
+    * ``mu2``: :math:`|\mu_i|^2`, :func:`beltrami_energy`;
+    * ``beltrami`` (with ``mu_target``): :math:`|\mu_i - \mu_{\text{in},i}|^2`, :func:`beltrami_loss` (2D);
+    * ``fold``: :math:`\mathrm{relu}(\tau - \det J_i)`, :func:`fold_penalty`;
+    * ``weight``: the reference measures.
+
+    ``area`` (shape (B,)) is the free-boundary constraint :math:`(|u(\Omega)|/|\Omega| - 1)^2` of
+    :func:`area_penalty`, a number per map rather than an integrand.
+    """
+    ref_meas = signed_measures(ref, elements)
+    meas = signed_measures(mapped, elements)
+    out = {"weight": ref_meas}
+    if density is not None:
+        rho, _ = element_density(ref, mapped, elements, density, ref_meas=ref_meas, meas=meas)
+        out["density"] = F.smooth_l1_loss(rho, torch.ones_like(rho), reduction="none", beta=beta)
+    if ref.shape[-1] == 2:
+        mu = beltrami_coefficient(ref, mapped, elements)
+        out["mu2"] = mu.abs() ** 2
+        if mu_target is not None:
+            out["beltrami"] = (mu - mu_target).abs() ** 2
+    out["fold"] = torch.relu(fold_threshold - meas / ref_meas)
+    out["area"] = (meas.sum(-1) / ref_meas.sum(-1) - 1) ** 2
+    return out

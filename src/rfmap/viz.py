@@ -11,7 +11,7 @@ from .result import setup_pyvista, to_pyvista
 
 __all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu",
            "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
-           "population_figure", "volume_rows", "plot_regions", "cartogram_figure",
+           "population_figure", "volume_rows", "render_lattice", "plot_batch", "plot_loss_terms", "training_curves", "learning_curves", "CAMERA_3D", "LOSS_TERMS", "plot_regions", "cartogram_figure",
            "cartogram_panels", "area_error_histograms"]
 
 STYLE = {
@@ -236,16 +236,17 @@ def architecture_diagram(model, ax=None):
 
 
 def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", clip: bool = True,
-                  window_size=(420, 420), clim=(0.0, 2.5), cmap="viridis", show_edges: bool = False):
+                  window_size=(420, 420), clim=(0.0, 2.5), cmap="viridis", show_edges: bool = False, camera="iso"):
     """Render a 3D result off screen and return the image (H, W, 3).  With ``clip`` an octant is cut away so the
-    interior is visible."""
+    interior is visible; ``camera`` is a PyVista camera position (``'iso'`` fits the view to the mesh, a fixed
+    one such as :data:`CAMERA_3D` makes several renderings comparable)."""
     pv = setup_pyvista()
     grid = to_pyvista(result, mapped=mapped)
     if clip:
         grid = grid.clip_box([0.5, 1.1, -0.1, 0.5, 0.5, 1.1], invert=True, crinkle=True)
     pl = pv.Plotter(off_screen=True, window_size=list(window_size))
     pl.add_mesh(grid, scalars=scalars, clim=clim, cmap=cmap, show_edges=show_edges, show_scalar_bar=False)
-    pl.camera_position = "iso"
+    pl.camera_position = camera
     pl.background_color = "white"
     img = pl.screenshot(return_img=True)
     pl.close()
@@ -285,25 +286,194 @@ def population_figure(maps: dict, fields, label: str, *, n: int, method: str = "
     return fig
 
 
-def volume_rows(results: dict, labels, fig_label: str):
-    """The paper's 3D figures: per result (keyed by ``labels``) the original and mapped volume, plain and coloured
-    by :math:`\\tilde\\rho`, rendered off screen (:func:`render_volume`); saved under ``fig_label``; returns the
-    figure."""
+def volume_rows(results: dict, labels, fig_label: str, *, clim=(0.0, 2.5)):
+    """The paper's 3D figures: per result (keyed by ``labels``) the original lattice and the mapped one on three
+    slices (:func:`render_lattice`) and the mapped volume cut open (:func:`render_volume`), all coloured by
+    :math:`\\tilde\\rho` and seen by one camera (:data:`CAMERA_3D`); saved under ``fig_label``; returns the figure."""
     import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
 
-    titles = ["original", "mapped", r"$\tilde\rho$ original", r"$\tilde\rho$ mapped"]
+    titles = [r"original lattice, $\tilde\rho$", r"mapped lattice, $\tilde\rho$ on the mapped mesh",
+              r"mapped volume, cut open"]
     with style():
-        fig, axes = plt.subplots(len(labels), 4, figsize=(12, 3.1 * len(labels)))
+        fig, axes = plt.subplots(len(labels), 3, figsize=(10.5, 3.3 * len(labels)), layout="constrained",
+                                 squeeze=False)
         for row, key in zip(axes, labels):
             r = results[key]
-            imgs = [render_volume(r, mapped=False, scalars=None), render_volume(r, mapped=True, scalars=None),
-                    render_volume(r, mapped=False, scalars="rho"), render_volume(r, mapped=True, scalars="rho")]
+            imgs = [render_lattice(r, mapped=False, clim=clim), render_lattice(r, mapped=True, clim=clim),
+                    render_volume(r, mapped=True, scalars="rho", clim=clim, camera=CAMERA_3D)]
             for ax, img, t in zip(row, imgs, titles):
                 ax.imshow(img)
                 ax.set_title(f"{key}: {t}")
                 ax.axis("off")
-        fig.tight_layout()
+        fig.colorbar(ScalarMappable(Normalize(*clim), "viridis"), ax=axes, shrink=0.5, label=r"$\tilde\rho$")
         save_figure(fig, fig_label)
+    return fig
+
+
+#: one camera for every 3D panel (position, focal point, view-up), so that panels can be compared
+CAMERA_3D = [(2.55, -1.45, 1.95), (0.5, 0.5, 0.42), (0.0, 0.0, 1.0)]
+#: the loss terms of training (keys of :func:`rfmap.tasks.task_loss` and :func:`rfmap.losses.loss_integrands`)
+LOSS_TERMS = {"density": r"density mismatch $L(\tilde\rho - 1)$", "mu2": r"Beltrami energy $|\mu|^2$",
+              "beltrami": r"$\mu$ mismatch $|\mu(u) - \mu_{in}|^2$", "fold": r"fold penalty relu$(\tau - \det J)$",
+              "area": "area constraint"}
+
+
+def _vertex_rho(result, mapped: bool) -> np.ndarray:
+    """:math:`\\tilde\\rho` at the vertices: the mean over the elements around each vertex of the density on the
+    mapped mesh (``mapped``) or of the normalised input density (the original mesh)."""
+    el = np.asarray(result.elements)
+    if mapped:
+        rho_e = result.rho()
+    else:
+        f = np.asarray(result.field, dtype=np.float64).reshape(-1)[el].mean(1)
+        rho_e = f / f.mean()
+    n_pts = len(result.ref_points)
+    total = np.bincount(el.ravel(), weights=np.repeat(rho_e, el.shape[1]), minlength=n_pts)
+    return total / np.maximum(np.bincount(el.ravel(), minlength=n_pts), 1)
+
+
+def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines: int = 13, clim=(0.0, 2.5),
+                   cmap="viridis", window_size=(420, 420), camera=CAMERA_3D, line_width: float = 2.0):
+    """Render the grid lines of a 3D grid result on a few horizontal slices (:math:`x_3` = ``slices`` in the
+    reference cube) off screen, coloured by :math:`\\tilde\\rho` at the vertices, inside the outline of the unit
+    cube; returns the image (H, W, 3).  The original lattice (``mapped=False``) is drawn flat; the mapped one shows
+    where the map moves each slice."""
+    pv = setup_pyvista()
+    n = round(len(result.ref_points) ** (1 / 3))
+    if n**3 != len(result.ref_points):
+        raise ValueError("render_lattice needs a result on an N x N x N grid")
+    pts = np.asarray(result.mapped_points if mapped else result.ref_points, dtype=np.float64).reshape(n, n, n, 3)
+    rho = _vertex_rho(result, mapped).reshape(n, n, n)
+    idx = sorted({int(round(s * (n - 1))) for s in slices})
+    keep = sorted({int(round(t)) for t in np.linspace(0, n - 1, min(lines, n))})
+    polys, scal = [], []
+    for k in idx:
+        layer, layer_rho = pts[:, :, k], rho[:, :, k]
+        for i in keep:
+            polys += [layer[i, :], layer[:, i]]
+            scal += [layer_rho[i, :], layer_rho[:, i]]
+    points = np.concatenate(polys)
+    offsets = np.cumsum([0] + [len(p) for p in polys])
+    cells = np.concatenate([np.r_[len(p), np.arange(o, o + len(p))] for p, o in zip(polys, offsets)])
+    mesh = pv.PolyData(points, lines=cells)
+    mesh.point_data["rho"] = np.concatenate(scal)
+    pl = pv.Plotter(off_screen=True, window_size=list(window_size))
+    pl.add_mesh(pv.Box(bounds=(0, 1, 0, 1, 0, 1)).outline(), color="gray", line_width=1)
+    pl.add_mesh(mesh, scalars="rho", clim=clim, cmap=cmap, line_width=line_width, show_scalar_bar=False)
+    pl.camera_position = camera
+    pl.background_color = "white"
+    img = pl.screenshot(return_img=True)
+    pl.close()
+    return img
+
+
+def plot_batch(axes, batch, *, title: str = "sample"):
+    """The random fields of a training batch (:class:`rfmap.tasks.Batch`, 2D), one per axes, on their jittered
+    mesh: the unit-mass density at the vertices, or :math:`|\\mu|` per triangle for a Beltrami batch."""
+    el = batch.elements.numpy()
+    for i, ax in enumerate(axes):
+        ref = batch.ref[i].numpy()
+        if batch.density is not None:
+            plot_density(ax, ref, el, batch.density[i].numpy(), title=f"{title} {i}: density, N = {batch.n}")
+        else:
+            plot_density(ax, ref, el, batch.mu_target[i].abs().numpy(), cmap="magma", vmin=0,
+                         title=f"{title} {i}: $|\\mu|$, N = {batch.n}")
+        ax.set_xticks([])
+        ax.set_yticks([])
+
+
+def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: int | None = None,
+                    keys=None):
+    """One sample's map and its loss terms element by element (:func:`rfmap.losses.loss_integrands`) on the
+    mapped mesh: ``axes[0]`` the mapped grid, then one panel per key of ``keys`` (default: every element-wise term
+    present), titled with the term's value (its weighted mean, as in training)."""
+    import torch
+
+    keys = [k for k in (keys or LOSS_TERMS) if k in terms and k != "area"]
+    pts = np.asarray(mapped[sample])
+    el = np.asarray(elements)
+    plot_mesh(axes[0], pts, el, n=n, title="the map $u$")
+    w = terms["weight"][sample]
+    for ax, key in zip(axes[1:], keys):
+        vals = terms[key][sample]
+        value = float((vals * w).sum() / w.sum()) if isinstance(vals, torch.Tensor) else float(
+            np.sum(vals * w) / np.sum(w))
+        vals = np.asarray(vals)
+        plot_density(ax, pts, el, vals, cmap="magma", vmin=0, vmax=float(vals.max()) or 1.0,
+                     title=f"{LOSS_TERMS[key]}\n= {value:.3g}")
+        ax.set_xticks([])
+        ax.set_yticks([])
+
+
+def _read_log(log_path) -> tuple[list[dict], list[dict]]:
+    import json
+
+    steps, vals = [], []
+    with open(log_path) as f:
+        for line in f:
+            rec = json.loads(line)
+            if "loss" in rec:
+                steps.append(rec)
+            elif "validation" in rec and not rec.get("final"):
+                vals.append(rec)
+    return steps, vals
+
+
+def training_curves(log_path, ax=None):
+    """The loss of a training run and each of its terms against the step, from the run's ``log.jsonl``
+    (:func:`rfmap.train.train`); returns the axes."""
+    import matplotlib.pyplot as plt
+
+    recs, _ = _read_log(log_path)
+    if ax is None:
+        _, ax = plt.subplots(figsize=(6, 3.4), layout="constrained")
+    steps = [r["step"] for r in recs]
+    ax.semilogy(steps, [r["loss"] for r in recs], "k-", lw=1.6, label="total loss")
+    for key, label in LOSS_TERMS.items():
+        if recs and key in recs[0]:
+            ax.semilogy(steps, [max(r[key], 1e-12) for r in recs], lw=1, label=label)
+    ax.set(xlabel="step", ylabel="loss (batch)")
+    ax.legend(fontsize=7)
+    return ax
+
+
+def _val_key(val: list[dict]) -> str | None:
+    return next((k for k in ("std_rho_map", "mean_dd") if val and all(k in v for v in val)), None)
+
+
+def learning_curves(metas: dict, budgets: dict, *, ncols: int = 3):
+    """The learning curves of trained models from their metadata (``Surrogate.meta``): the running mean of the
+    loss against the step (log axes) and the mean validation metric (right axis), with the paper's budget of
+    steps (``budgets[name]``) marked; returns the figure."""
+    import matplotlib.pyplot as plt
+
+    names = list(metas)
+    nrows = -(-len(names) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.1 * ncols, 3.0 * nrows), layout="constrained", squeeze=False)
+    for ax, name in zip(axes.flat, names):
+        meta, budget = metas[name], budgets[name]
+        hist = meta.get("history", {})
+        steps = [max(s, 1) for s in hist.get("step", [])]
+        ax.loglog(steps, hist.get("loss", []), color="tab:blue", lw=1.2)
+        ax.axvline(budget, color="tab:red", ls="--", lw=1)
+        ax.text(budget, 0.97, f" paper\n {budget:,}", color="tab:red", fontsize=7, va="top", ha="right",
+                transform=ax.get_xaxis_transform())
+        done = int(meta.get("steps", steps[-1] if steps else 0))
+        ax.set_title(f"{name}\n{done:,} steps, {100 * done / budget:.2g} % of the paper's")
+        ax.set_xlabel("step")
+        ax.set_ylabel("loss (running mean)", color="tab:blue")
+        ax.set_xlim(left=max(1, min(steps) if steps else 1), right=budget * 1.6)
+        val = hist.get("validation", [])
+        key = _val_key(val)
+        if key:
+            ax2 = ax.twinx()
+            ax2.plot([v["step"] for v in val], [v[key] for v in val], "o-", color="tab:orange", ms=3, lw=1)
+            ax2.set_ylabel(f"validation, mean {key}", color="tab:orange")
+            ax2.spines["right"].set_visible(True)
+    for ax in list(axes.flat)[len(names):]:
+        ax.set_axis_off()
     return fig
 
 
