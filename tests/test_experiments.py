@@ -118,3 +118,22 @@ def test_reproduce_dem3d_writes_every_table(tmp_path, monkeypatch):
     assert "ours + refinement" in text and "diffusion DEM" in text
     with pytest.raises(ValueError, match="unknown experiment"):
         E.reproduce("dem4d", tmp_path)
+
+
+def test_generalization_table_compares_with_the_classical_solver_on_unseen_fields():
+    """Rows per kind of field and for all of them; the classical solver equalizes the unseen densities far below
+    their input variation, and the report set is not the validation set that chooses checkpoints."""
+    from rfmap import load_or_train
+    from rfmap.experiments import generalization_table
+    from rfmap.validation import validation_fields
+
+    sur = load_or_train("deq2d-square", "ci")
+    t = generalization_table(sur, count=4, n=17, refine=False)
+    assert {c for c, _, _ in t.rows} == {"smooth", "steps", "peak", "ramp", "all"}
+    assert {m for _, m, _ in t.rows} == {"ours", "classical (diffusion DEM)"}
+    assert t.value("all", "classical (diffusion DEM)", "mean") < 0.2
+    assert t.value("all", "ours", "worst") >= t.value("all", "ours", "mean") > 0
+    x = np.random.default_rng(0).random((20, 2))
+    rep = validation_fields("density", 2, 4, stream="report")
+    val = validation_fields("density", 2, 4)
+    assert not np.allclose(rep[0].field(x), val[0].field(x))

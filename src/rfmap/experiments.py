@@ -29,7 +29,7 @@ COLUMN_TITLES = {
     "time": "time", "speedup": "speed-up", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
     "mean_dmu_pl": "mean |Δμ| vs PL", "std_rho_orig": "Std ρ̃ orig", "std_rho_map": "Std ρ̃ map",
     "min_jacobian": "min det J", "n_flipped": "flips", "max_mu": "max |μ|", "mean_mu": "mean |μ|",
-    "alpha": "α",
+    "alpha": "α", "mean": "mean", "worst": "worst",
 }
 #: significant digits of every number in a table (times: one fewer, with their unit)
 DIGITS = 4
@@ -349,3 +349,65 @@ def glue_all(values: dict, prefix: str) -> None:
 
     for key, value in values.items():
         glue(f"{prefix}_{key}", value, display=False)
+
+
+# ------------------------------------------------------------------------------------------- generalization
+def generalization_table(sur, count: int = 50, n: int | None = None, refine: bool = True) -> Table:
+    """Surrogate against the classical solver on ``count`` seeded random fields that training never drew (the
+    ``report`` stream of :mod:`rfmap.validation`, used for nothing else), on the same ``N``-grid.
+
+    Density models: Std(rho~_map) of the raw network map, of the map with weight refinement (and the default
+    fold repair), and of the classical diffusion DEM with the model's boundary; Beltrami models: mean vertex
+    distance |Δd| to the exact random map, ours against the Linear Beltrami Solver.  Rows: each kind of field
+    and ``all``; columns: mean and worst metric, flipped elements of the raw network map, and mean time.
+    """
+    from .inputs import preprocess_density
+    from .mesh import grid_points
+    from .solvers import solve_dem, solve_lbs
+    from .validation import validation_fields
+
+    spec = sur.spec
+    n = int(n or PAPER_N[spec.dim])
+    fields = validation_fields(spec.kind, spec.dim, count, stream="report")
+    key = "mean_dd" if spec.kind == "beltrami" else "std_rho_map"
+    rows: dict[tuple[str, str], list[tuple[float, int, float]]] = {}
+
+    def add(kind, method, value, flips, t):
+        for k in (kind, "all"):
+            rows.setdefault((k, method), []).append((float(value), int(flips), float(t)))
+
+    pts = grid_points(n, spec.dim)
+    for vf in fields:
+        kind = vf.label.rsplit("-", 1)[0]
+        raw = sur.map(vf.field, n, repair=False)
+        variants = [("ours", raw)]
+        if refine:
+            variants.append(("ours + refinement", sur.map(vf.field, n, refine=True)))
+        if spec.kind == "beltrami":
+            classical = solve_lbs(vf.field, n)
+            variants.append(("classical (LBS)", classical))
+            for method, r in variants:
+                m = r.metrics(exact_points=vf.exact(r.ref_points))
+                add(kind, method, m.mean_dd, m.n_flipped, r.time)
+        else:
+            dens = preprocess_density(vf.field(pts).reshape((n,) * spec.dim))
+            classical = solve_dem(dens, boundary="free" if spec.boundary == "free" else "square")
+            variants.append(("classical (diffusion DEM)", classical))
+            for method, r in variants:
+                m = r.metrics()
+                add(kind, method, m.std_rho_map, m.n_flipped, r.time)
+    table = Table(f"tab:generalization-{sur.name}",
+                  f"{sur.name}: {count} unseen random fields at N = {n} ({key})",
+                  ["mean", "worst", "n_flipped", "time"])
+    kinds = sorted({k for k, _ in rows if k != "all"})
+    kinds = kinds + ["all"] if len(kinds) > 1 else ["all"]
+    methods = list(dict.fromkeys(m for _, m in rows))
+    for k in kinds:
+        for method in methods:
+            vals = rows.get((k, method))
+            if vals:
+                v = np.array([x[0] for x in vals])
+                table.add(k, method, {"mean": float(v.mean()), "worst": float(v.max()),
+                                      "n_flipped": int(sum(x[1] for x in vals)),
+                                      "time": float(np.mean([x[2] for x in vals]))})
+    return table

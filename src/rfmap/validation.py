@@ -27,7 +27,7 @@ import numpy as np
 
 from .random_fields import RandomBeltramiConfig, RandomDensity, RandomDensityConfig, RandomMap
 
-__all__ = ["VALIDATION_SEED", "ValidationField", "validation_fields", "evaluate", "score", "DENSITY_KINDS"]
+__all__ = ["VALIDATION_SEED", "STREAMS", "ValidationField", "validation_fields", "evaluate", "score", "DENSITY_KINDS"]
 
 #: first word of every validation seed (training seeds have three words, so the streams never coincide)
 VALIDATION_SEED = 20_250_917
@@ -44,8 +44,19 @@ class ValidationField:
     exact: Callable[[np.ndarray], np.ndarray] | None = None
 
 
-def _density_field(j: int, kind: str, dim: int) -> ValidationField:
-    rng = np.random.default_rng([VALIDATION_SEED, j])
+#: the streams of held-out fields: 0 validates (and chooses checkpoints) during training, 1 is the report set of the
+#: book's generalization tables, used for nothing else
+STREAMS = {"validation": 0, "report": 1}
+
+
+def _rng(j: int, stream: str) -> np.random.Generator:
+    if stream not in STREAMS:
+        raise ValueError(f"unknown stream {stream!r}; expected one of {tuple(STREAMS)}")
+    return np.random.default_rng([VALIDATION_SEED + STREAMS[stream], j])
+
+
+def _density_field(j: int, kind: str, dim: int, stream: str = "validation") -> ValidationField:
+    rng = _rng(j, stream)
     base = RandomDensityConfig.for_dim(dim)
     if kind == "smooth":
         f = RandomDensity(rng, replace(base, p_step=0.0, p_patch=0.0, p_noise=0.0))
@@ -75,20 +86,22 @@ def _density_field(j: int, kind: str, dim: int) -> ValidationField:
     return ValidationField(f"{kind}-{j}", f)
 
 
-def _beltrami_field(j: int, count: int) -> ValidationField:
-    rng = np.random.default_rng([VALIDATION_SEED, j])
+def _beltrami_field(j: int, count: int, stream: str = "validation") -> ValidationField:
+    rng = _rng(j, stream)
     level = 0.1 + 0.75 * j / max(1, count - 1)
     m = RandomMap(rng, RandomBeltramiConfig(sup=(level, level)))
     return ValidationField(f"map-{j}", m.mu, exact=m)
 
 
-def validation_fields(kind: str, dim: int, count: int = 16) -> list[ValidationField]:
-    """The fixed validation set of a task: ``count`` fields (the density kinds in turn)."""
+def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "validation") -> list[ValidationField]:
+    """The fixed held-out set of a task: ``count`` fields (the density kinds in turn).  ``stream='validation'``
+    is the set used during training; ``stream='report'`` another set of the same kinds, used only to report
+    generalization."""
     if count < 1:
         raise ValueError(f"the validation set needs at least one field, got {count}")
     if kind == "beltrami":
-        return [_beltrami_field(j, count) for j in range(count)]
-    return [_density_field(j, DENSITY_KINDS[j % len(DENSITY_KINDS)], dim) for j in range(count)]
+        return [_beltrami_field(j, count, stream) for j in range(count)]
+    return [_density_field(j, DENSITY_KINDS[j % len(DENSITY_KINDS)], dim, stream) for j in range(count)]
 
 
 def _raw_map(sur, field, n: int):
