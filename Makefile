@@ -4,7 +4,7 @@
 #   make test        unit tests (every notebook through the rfmap kernel from notebooks/, as JupyterLab runs it) and
 #                    the book build (every notebook again, from a temporary directory), all at RFMAP_SCALE=ci
 #   make book        execute the notebooks at full scale and build the HTML book into _build/html
-#   make book-check  screenshot every page of the built book and fail on error output
+#   make book-check  screenshot every whole page of the built book; fail on error output or a missing or blank figure
 #   make lab         start JupyterLab in the repository root with the book's environment (RFMAP_SCALE, default full)
 #   make clean       remove build outputs (make distclean also removes .venv)
 

@@ -177,6 +177,7 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
 
 
 def config_names() -> list[str]:
+    """Names of the training configurations (each with ``ci``, ``full`` and ``paper`` presets)."""
     return list(CONFIGS)
 
 

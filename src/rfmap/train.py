@@ -639,6 +639,7 @@ def _command_line(args) -> str:
 
 
 def main(argv=None) -> int:
+    """``python -m rfmap.train`` (same options as ``rfmap train``); returns the exit status (2 on bad input)."""
     args = build_parser().parse_args(argv)
     try:
         run(args)
