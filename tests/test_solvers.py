@@ -45,7 +45,7 @@ def wall_checks(res: MapResult) -> None:
 
 # --------------------------------------------------------------------------------------------------- registry
 def test_registry():
-    assert set(SOLVERS) == {"lbs", "dem"}
+    assert set(SOLVERS) == {"lbs", "dem", "flow"}
     assert get_solver("lbs") is solve_lbs and get_solver("dem") is solve_dem
 
 

@@ -38,8 +38,9 @@ def cmd_solve(args) -> int:
         res = solve_lbs(mu, args.n, boundary="fixed" if args.boundary in (None, "fixed") else args.boundary)
     else:
         if f.kind != "density":
-            raise CLIError(f"method dem needs a density ({', '.join(DENSITIES)}), got {args.field!r}")
-        res = solve_dem(f.sample(args.n), boundary=args.boundary or "square", progress=not args.quiet)
+            raise CLIError(f"method {args.method} needs a density ({', '.join(DENSITIES)}), got {args.field!r}")
+        res = solve_dem(f.sample(args.n), method="flow" if args.method == "flow" else "diffusion",
+                        boundary=args.boundary or "square", progress=not args.quiet)
     res.save(args.out)
     if not args.quiet:
         print(f"wrote {args.out}: {res.metrics()}")
@@ -100,12 +101,19 @@ def cmd_map(args) -> int:
             points = np.load(args.points, allow_pickle=False)
         except Exception as e:  # noqa: BLE001
             raise CLIError(f"cannot read {args.points}: {e}") from e
-    res = sur.map(field, args.n, points, refine=args.refine, repair=not args.no_repair)
+    polish = False if args.polish is None else (True if args.polish == "default" else args.polish)
+    res = sur.map(field, args.n, points, refine=args.refine, repair=not args.no_repair, polish=polish)
     res.save(args.out)
     if args.vtk:
         res.to_vtk(args.vtk)
     print(f"wrote {args.out}: {res.metrics()}")
     print(repair_summary(res.info.get("repair")))
+    if "polish" in res.info:
+        p = res.info["polish"]
+        st = p["stages"]
+        print(f"polish: {p['start']} start{' (' + p['reason'] + ')' if p['reason'] else ''}, Std(rho~_map) "
+              f"{st['surrogate']['std_rho_map']:.4g} -> {st['polish']['std_rho_map']:.4g}, network "
+              f"{st['surrogate']['time']:.3f} s + flow {p['time']:.3f} s")
     return 0
 
 
@@ -160,14 +168,28 @@ def cmd_reproduce(args) -> int:
     return 0
 
 
+def _polish_arg(text: str):
+    """``--polish [TOL]``: a positive tolerance (``argparse`` passes the constant ``"default"`` through as is)."""
+    if text == "default":
+        return text
+    try:
+        tol = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"TOL must be a positive number, got {text!r}") from None
+    if not 0 < tol < float("inf"):
+        raise argparse.ArgumentTypeError(f"TOL must be a positive number, got {text!r}")
+    return tol
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .train import build_parser as train_parser
 
     p = argparse.ArgumentParser(prog="rfmap", description="Resolution-free neural surrogates for geometric mapping.")
     sub = p.add_subparsers(dest="cmd", required=True)
 
-    s = sub.add_parser("solve", help="run a classical solver (Linear Beltrami Solver or diffusion DEM)")
-    s.add_argument("--method", choices=["lbs", "dem"], required=True)
+    s = sub.add_parser("solve", help="run a classical solver (Linear Beltrami Solver, diffusion or flow DEM)")
+    s.add_argument("--method", choices=["lbs", "dem", "flow"], required=True,
+                   help="lbs (Beltrami), dem (diffusion DEM) or flow (flow-based DEM, faster)")
     s.add_argument("--field", required=True, help="a built-in field name")
     s.add_argument("--n", type=int, required=True, help="grid side N")
     s.add_argument("--boundary", choices=["square", "free", "fixed"], default=None,
@@ -191,6 +213,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--refine", action="store_true", help="apply weight refinement")
     s.add_argument("--no-repair", action="store_true",
                    help="return the raw network map, without removing folded elements")
+    s.add_argument("--polish", nargs="?", const="default", default=None, type=_polish_arg, metavar="TOL",
+                   help="finish the density map with the flow-based solver (optionally to Std(rho~_map) <= TOL)")
     s.add_argument("--out", required=True, help="output .npz")
     s.add_argument("--vtk", default=None, help="also write the mapped mesh as VTK (.vtu)")
     s.add_argument("--device", default="cpu", help="where the network runs: cpu (default), cuda or auto")

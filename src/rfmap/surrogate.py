@@ -259,7 +259,7 @@ class Surrogate:
 
     def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
             alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None,
-            repair: bool = True) -> MapResult:
+            repair: bool = True, polish: bool | float = False) -> MapResult:
         """Map one field.
 
         Parameters
@@ -287,15 +287,20 @@ class Surrogate:
             Make the returned map fold-free (:func:`rfmap.repair.repair_map`, after any refinement); with query
             ``points`` the map of the working grid is repaired first and then interpolated.  ``False`` returns the
             raw network map.
+        polish : bool or float
+            Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
+            (:func:`rfmap.hybrid.polish_map`); a number is the tolerance on Std(rho~_map).  ``time`` then covers
+            both stages.
 
         Returns
         -------
         MapResult
-            ``info`` holds ``alpha``, ``work_n``, with refinement the objective before/after, and with ``repair``
-            the report ``info["repair"]`` (see :func:`rfmap.repair.repair_map`).
+            ``info`` holds ``alpha``, ``work_n``, with refinement the objective before/after, with ``repair``
+            the report ``info["repair"]`` (see :func:`rfmap.repair.repair_map`), and with ``polish`` the report
+            ``info["polish"]`` (warm or cold start and both stages' times and metrics).
         """
         inp, n = self._resolve(field, n, preprocess)
-        return self._map_one(inp, n, points, refine, work_n, alpha, refine_bounds, repair=repair)
+        return self._map_one(inp, n, points, refine, work_n, alpha, refine_bounds, repair=repair, polish=polish)
 
     def map_batch(self, fields: Sequence, n: int | None = None, **kw) -> list[MapResult]:
         """Map several fields with one batched network evaluation (same ``n`` for all)."""
@@ -310,13 +315,20 @@ class Surrogate:
         dt = (time.perf_counter() - t0) / len(inps)
         return [self._map_one(i, nn_, kw.get("points"), kw.get("refine", False), nw, kw.get("alpha"),
                               kw.get("refine_bounds"), psi=psi[k:k + 1], net_time=dt,
-                              repair=kw.get("repair", True))
+                              repair=kw.get("repair", True), polish=kw.get("polish", False))
                 for k, (i, _) in enumerate(inps)]
 
     def _map_one(self, inp: _Input, n: int, points, refine, work_n, alpha, bounds, psi=None, net_time=None,
-                 repair: bool = True):
+                 repair: bool = True, polish: bool | float = False):
         """Evaluate the network on the working grid (unless ``psi`` is given), resample its displacement and the
-        input field on the output mesh, apply the stretching vector (refined or given), and repair folds."""
+        input field on the output mesh, apply the stretching vector (refined or given), repair folds, and polish."""
+        if polish is not False:
+            from .hybrid import polish_tolerance
+
+            tol = polish_tolerance(polish)
+            if self.spec.kind != "density" or points is not None:
+                raise ValueError("polish finishes density maps on the output grid; it does not apply to "
+                                 f"{self.spec.kind} maps or to query points")
         nw = int(work_n or self.work_n(n))
         if nw < self.model.min_size:
             raise ValueError(f"working grid N={nw} is smaller than this model accepts ({self.model.min_size})")
@@ -350,6 +362,12 @@ class Surrogate:
             mapped, info["repair"] = self._repair(ref, mapped, elements, fvals, n if points is None else None,
                                                   psi, a)
             t_map += time.perf_counter() - t3
+        if polish is not False:
+            from .hybrid import polish_map
+
+            mapped, info["polish"] = polish_map(ref, mapped, elements, fvals, n=n, boundary=self.spec.boundary,
+                                                tol=tol, stage_time=t_map)
+            t_map += info["polish"]["time"]
         return MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals,
                          kind=self.spec.kind, time=t_map, info=info)
 

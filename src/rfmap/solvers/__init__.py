@@ -2,26 +2,56 @@
 
 * :func:`solve_lbs` -- Linear Beltrami Solver (Lui et al. 2013): the quasi-conformal map of the unit square with a
   prescribed Beltrami coefficient.
-* :func:`solve_dem` -- diffusion density-equalizing map (Gastner & Newman 2004) of the unit square or cube.
+* :func:`solve_dem` -- density-equalizing map of the unit square or cube: the diffusion method (Gastner & Newman
+  2004, :mod:`rfmap.solvers.diffusion`) or, with ``method="flow"``, the flow-based method (Gastner, Seguy & More
+  2018, :func:`solve_flow`).
 
-Both return a :class:`rfmap.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name.
+All return a :class:`rfmap.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name.
 """
 from __future__ import annotations
 
 from typing import Callable
 
 from ..result import MapResult
-from .diffusion import solve_dem
+from .diffusion import solve_dem as _solve_diffusion
+from .flow import solve_flow
 from .lbs import solve_lbs
 
-__all__ = ["SOLVERS", "get_solver", "solve_lbs", "solve_dem"]
+__all__ = ["SOLVERS", "DEM_METHODS", "get_solver", "solve_lbs", "solve_dem", "solve_flow"]
+
+#: Density-equalizing methods of :func:`solve_dem`.
+DEM_METHODS = ("diffusion", "flow")
+
+
+def solve_dem(density, *, method: str = "diffusion", **kwargs) -> MapResult:
+    """Density-equalizing map of the unit square or cube by the diffusion or the flow-based method.
+
+    Parameters
+    ----------
+    density : ndarray, shape (N, N) or (N, N, N)
+    method : {"diffusion", "flow"}
+        ``"diffusion"``: :func:`rfmap.solvers.diffusion.solve_dem` (Gastner & Newman 2004); ``"flow"``:
+        :func:`rfmap.solvers.flow.solve_flow` (Gastner, Seguy & More 2018), usually several times faster.
+    **kwargs
+        Options of the chosen solver (``boundary``, ``progress``, ...).
+
+    Returns
+    -------
+    MapResult
+    """
+    if method == "diffusion":
+        return _solve_diffusion(density, **kwargs)
+    if method == "flow":
+        return solve_flow(density, **kwargs)
+    raise ValueError(f"unknown density-equalizing method {method!r}; choose one of {DEM_METHODS}")
+
 
 #: Registry of the classical solvers by name.
-SOLVERS: dict[str, Callable[..., MapResult]] = {"lbs": solve_lbs, "dem": solve_dem}
+SOLVERS: dict[str, Callable[..., MapResult]] = {"lbs": solve_lbs, "dem": solve_dem, "flow": solve_flow}
 
 
 def get_solver(name: str) -> Callable[..., MapResult]:
-    """Look up a solver by name (``"lbs"`` or ``"dem"``); ``ValueError`` naming the known solvers otherwise."""
+    """Look up a solver by name (``"lbs"``, ``"dem"`` or ``"flow"``); ``ValueError`` naming the known solvers otherwise."""
     if not isinstance(name, str) or name not in SOLVERS:
         raise ValueError(f"unknown solver {name!r}; known solvers: {', '.join(sorted(SOLVERS))}")
     return SOLVERS[name]

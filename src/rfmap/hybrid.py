@@ -1,0 +1,113 @@
+r"""Neural warm starts: a surrogate's density-equalizing map finished by the flow-based solver.
+
+The network gives a map :math:`u_0` of the ``N``-grid in milliseconds, but leaves a residual density
+:math:`\tilde\rho_e = \text{population}_e / |u_0(e)|` whose variation (typically 0.05–0.25) is well above what the
+classical solvers reach.  :func:`polish_map` removes it with :func:`rfmap.solvers.flow.solve_flow` started from
+:math:`u_0`:
+
+1. The residual density is evaluated *exactly* on the flow's raster: every raster node is located in the mapped
+   mesh (:func:`rfmap.solvers.flow.rasterize_elements`) and takes the value :math:`\tilde\rho_e` of its element.
+   Binning element centroids on a coarse raster instead blurs :math:`\tilde\rho` at the scale of the error it should
+   remove, and the finishing flow then stalls near the network's own error.
+2. The finishing flow moves :math:`u_0`'s points: a vertex at :math:`u_0(x)` is carried by the flow that equalizes
+   the residual density, so the result is the composition :math:`F \circ u_0`.  This needs nothing but the mapped
+   positions and the raster, the element populations stay those of the reference mesh (so the metrics are the
+   usual ones), and since :math:`F` keeps every element positively oriented (its steps are rejected otherwise) and
+   :math:`u_0` is fold-free, so is the result.  Running the flow on the deformed mesh instead (solving in the
+   reference frame for a map :math:`G` with :math:`u_0 \circ G` equalizing) would ask for a transport to the
+   non-uniform target :math:`J_{u_0}`, which the density-equalizing flow does not solve.
+3. A poor network map is not worth finishing: when :math:`u_0` has folded elements, leaves the sea box, or removes
+   less than half of the input's density variation (:data:`POOR`), the flow starts cold from the identity instead,
+   and the report says so.
+"""
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+
+from .metrics import compute_metrics
+
+__all__ = ["POOR", "polish_map", "polish_tolerance"]
+
+#: A network map is *poor* when its Std(rho~_map) is above this fraction of the input's Std(rho~_orig).
+POOR = 0.5
+
+
+def polish_tolerance(polish) -> float | None:
+    """The flow's stopping tolerance for ``Surrogate.map(polish=...)``: ``True`` gives the solver's default
+    (``None``), a positive number is the tolerance on Std(rho~_map); ``ValueError`` otherwise."""
+    if polish is True:
+        return None
+    if isinstance(polish, bool) or not isinstance(polish, (int, float, np.floating)) or not 0 < polish < np.inf:
+        raise ValueError(f"polish must be True, False or a positive tolerance on Std(rho~_map), got {polish!r}")
+    return float(polish)
+
+
+def _summary(ref, mapped, elements, density, seconds: float) -> dict[str, Any]:
+    m = compute_metrics(ref, mapped, elements, density=density)
+    return {"time": seconds, "std_rho_map": m.std_rho_map, "std_rho_orig": m.std_rho_orig,
+            "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian}
+
+
+def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, density: np.ndarray, *, n: int,
+               boundary: str, tol: float | None = None, poor: float = POOR, stage_time: float = 0.0,
+               progress: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
+    r"""Finish the map ``ref -> mapped`` of the ``N``-grid with the flow-based solver.
+
+    Parameters
+    ----------
+    ref, mapped : ndarray, shape (N**d, d)
+        The grid's vertices and the network's map :math:`u_0` of them.
+    elements : ndarray, shape (m, d+1)
+        The elements of :func:`rfmap.mesh.grid_mesh` ``(N, d)``.
+    density : ndarray, shape (N**d,)
+        Vertex densities (unit mass).
+    n : int
+        Grid side ``N``.
+    boundary : {"square", "free"}
+    tol : float, optional
+        Stopping tolerance on :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` (default: the solver's).
+    poor : float
+        Start cold when Std(rho~_map) of :math:`u_0` exceeds ``poor`` times Std(rho~_orig).
+    stage_time : float
+        Seconds already spent computing :math:`u_0` (recorded in the report).
+    progress : bool
+        Progress bar of the flow.
+
+    Returns
+    -------
+    (points, report)
+        The polished positions (N**d, d) and ``report`` with ``start`` (``"warm"`` or ``"cold"``), ``reason`` (why
+        cold, else ``None``), ``tol``, ``passes``, ``steps``, ``time`` (s, the polish only) and ``stages``:
+        ``{"surrogate": ..., "polish": ...}``, each with its ``time``, ``std_rho_map``, ``n_flipped`` and
+        ``min_jacobian``.
+    """
+    from .solvers.flow import solve_flow
+
+    t0 = time.perf_counter()
+    d = ref.shape[1]
+    if boundary not in ("square", "free"):
+        raise ValueError(f"polishing needs a density map with boundary 'square' or 'free', got {boundary!r}")
+    before = _summary(ref, mapped, elements, density, stage_time)
+    reason = None
+    if before["n_flipped"]:
+        reason = f"the network's map has {before['n_flipped']} folded element(s)"
+    elif not before["std_rho_map"] <= poor * before["std_rho_orig"]:
+        reason = (f"the network's map is poor: Std(rho~_map) {before['std_rho_map']:.3g} > {poor:g} x "
+                  f"Std(rho~_orig) {before['std_rho_orig']:.3g}")
+    elif boundary == "free":
+        # the flow's sea box is [-L, 1 + L]^d with L half the square (solve_flow's default margin)
+        pad = max(1, round(0.5 * (n - 1))) / (n - 1)
+        if mapped.min() < -pad or mapped.max() > 1 + pad:
+            reason = "the network's map leaves the sea box"
+    kw = {} if tol is None else {"tol": tol}
+    grid = np.asarray(density, dtype=np.float64).reshape((n,) * d)
+    res = solve_flow(grid, boundary=boundary, start=None if reason else mapped, progress=progress, **kw)
+    seconds = time.perf_counter() - t0
+    after = _summary(ref, res.mapped_points, elements, density, seconds)
+    report = {"start": "cold" if reason else "warm", "reason": reason, "tol": kw.get("tol"),
+              "passes": res.info["passes"], "steps": res.info["steps"], "time": seconds,
+              "stages": {"surrogate": before, "polish": after}}
+    return res.mapped_points, report

@@ -1,0 +1,481 @@
+r"""Flow-based density-equalizing maps (Gastner, Seguy & More 2018) on the unit square and cube.
+
+Instead of letting the density diffuse, the flow-based method prescribes its history: the density is interpolated
+linearly in time between the input :math:`\rho_0` and its mean :math:`\bar\rho`,
+
+.. math:: \rho_t(x) = (1 - t)\,\rho_0(x) + t\,\bar\rho, \qquad 0 \le t \le 1 .
+
+The continuity equation :math:`\partial_t\rho_t + \nabla\cdot(\rho_t v) = 0` then asks for a flux
+:math:`\rho_t v = -\nabla\phi` with
+
+.. math:: \Delta\phi = \bar\rho - \rho_0, \qquad \partial_n\phi = 0 \text{ on the walls},
+
+which does not depend on :math:`t`: one Poisson solve gives the velocity :math:`v(x, t) = -\nabla\phi(x)/\rho_t(x)`
+at every time.  Every vertex is carried by :math:`\dot x = v(x, t)` from :math:`t = 0` to :math:`t = 1`; at
+:math:`t = 1` the density is uniform and the vertex positions define the map.  The flow ends at a finite time
+(the diffusion flow only approaches its end as :math:`t \to \infty`), which is why the method is fast.
+
+Numerical method:
+
+1. **Density raster.**  As in :mod:`rfmap.solvers.diffusion`: the piecewise-linear (P1) interpolant of the vertex
+   densities sampled on a grid ``refine`` times finer (:func:`rfmap.solvers.diffusion.p1_upsample`), ``M`` points
+   per side of the box.
+2. **Poisson solve.**  With the cosine coefficients :math:`a_k` of the raster (type-I DCT,
+   :func:`rfmap.solvers.diffusion.cosine_coefficients`), :math:`\phi_k = a_k / (\pi^2 |k|^2)` for
+   :math:`k \ne 0`; the flux :math:`-\nabla\phi` is evaluated on the raster by inverse type-I DCTs along the cosine
+   axes and a type-I DST along the differentiated axis (:func:`poisson_flux`), :math:`O(M^d \log M)`.  Its normal
+   component vanishes exactly on the walls (no-flux).
+3. **Velocity at a point.**  The flux and :math:`\rho_0` are interpolated multilinearly at the vertex and
+   :math:`v = -\nabla\phi / ((1-t)\rho_0 + t\bar\rho)` is formed there.
+4. **Time steps.**  Predictor–corrector (Heun) steps, :math:`x^* = x + \Delta t\, v(x, t)`,
+   :math:`x' = x + \tfrac{\Delta t}{2}\,(v(x, t) + v(x^*, t + \Delta t))`.  A step is accepted when the
+   predictor–corrector difference :math:`\max|x' - x^*|` is at most ``rtol`` grid spacings *and* no element of the
+   mesh has turned over (all signed measures stay positive); otherwise it is retried with a smaller
+   :math:`\Delta t`.  The step then grows or shrinks with the usual rule for an embedded first/second-order pair.
+5. **Passes.**  Interpolation and time-stepping leave a residual.  After a pass the density that remains on the
+   mapped mesh, :math:`\tilde\rho_e = \text{population}_e / |T(e)|` (population of the element over its mapped
+   measure), is rasterized exactly by locating every raster node in the mapped mesh (:func:`rasterize_elements`),
+   and the next pass moves the mapped vertices by the flow of that density, composing the maps.  Passes stop when
+   :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is below ``tol`` or stops improving (by less than ``stall``).
+
+Boundary conditions follow :func:`rfmap.solvers.diffusion.solve_dem`: ``"square"`` keeps the walls (boundary
+vertices slide, corners stay); ``"free"`` embeds the square in :math:`[-L, 1+L]^d` filled with a sea of the
+balanced mean density (``_balanced_sea``), and later passes fill the sea with the domain's mean residual density.
+
+The same passes finish any fold-free starting map (``start``): the first pass then flows the residual density of
+the starting map.  :mod:`rfmap.hybrid` uses this to polish a neural surrogate's map.
+
+References
+----------
+M. T. Gastner, V. Seguy, P. More, "Fast flow-based algorithm for creating density-equalizing map projections",
+Proc. Natl. Acad. Sci. USA 115(10), E2156–E2164 (2018).
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import time
+
+import numpy as np
+import torch
+from scipy.fft import dct, dctn, dst
+
+from ..geometry import grid_signed_measures
+from ..mesh import grid_mesh
+from ..result import MapResult
+from .diffusion import DEM_BOUNDARIES, _balanced_sea, _check_grid_density, _torch_threads, cosine_coefficients, \
+    p1_upsample
+
+__all__ = ["solve_flow", "poisson_flux", "rasterize_elements", "residual_density"]
+
+
+def _cos_synthesis(coef: np.ndarray, axis: int) -> np.ndarray:
+    r""":math:`\sum_k c_k \cos(\pi k j/(M-1))` along ``axis`` at the nodes ``j`` (inverse of the type-I DCT)."""
+    b = np.moveaxis(coef, axis, -1).copy()
+    b[..., 1:-1] *= 0.5
+    return np.moveaxis(dct(b, type=1, axis=-1), -1, axis)
+
+
+def _sin_synthesis(coef: np.ndarray, axis: int) -> np.ndarray:
+    r""":math:`\sum_k c_k \sin(\pi k j/(M-1))` along ``axis`` at the nodes ``j`` (zero at both ends)."""
+    b = np.moveaxis(coef, axis, -1)
+    out = np.zeros_like(b)
+    out[..., 1:-1] = 0.5 * dst(b[..., 1:-1], type=1, axis=-1)
+    return np.moveaxis(out, -1, axis)
+
+
+def gaussian_blur(values: np.ndarray, sigma: float) -> np.ndarray:
+    r"""Gaussian blur of width ``sigma`` (box units) with mirror walls: the cosine coefficients are multiplied by
+    :math:`e^{-\pi^2|k|^2\sigma^2/2}` (the heat kernel at time :math:`\sigma^2/2`); the mean is kept.
+
+    Parameters
+    ----------
+    values : ndarray, shape (M,)*d
+    sigma : float
+
+    Returns
+    -------
+    ndarray, shape (M,)*d
+    """
+    d, m = values.ndim, values.shape[0]
+    y = dctn(values, type=1)
+    g = np.exp(-0.5 * (math.pi * sigma * np.arange(m)) ** 2)
+    for ax in range(d):
+        shape = [1] * d
+        shape[ax] = m
+        y = y * g.reshape(shape)
+    return dctn(y, type=1) / (2.0 * (m - 1)) ** d
+
+
+def poisson_flux(values: np.ndarray) -> np.ndarray:
+    r"""The flux :math:`-\nabla\phi` of :math:`\Delta\phi = \bar\rho - \rho_0` with no-flux walls on :math:`[0,1]^d`.
+
+    :math:`\rho_0` is the cosine interpolant of the grid values (coefficients :math:`a_k`); then
+    :math:`\phi = \sum_{k \ne 0} \frac{a_k}{\pi^2|k|^2} \prod_i \cos(\pi k_i x_i)` and
+    :math:`-\partial_i\phi = \sum_k \frac{a_k\,\pi k_i}{\pi^2 |k|^2} \sin(\pi k_i x_i) \prod_{j\ne i}\cos(\pi k_j x_j)`.
+
+    Parameters
+    ----------
+    values : ndarray, shape (M,)*d
+        Density at the grid nodes :math:`j/(M-1)` of :math:`[0,1]^d`.
+
+    Returns
+    -------
+    ndarray, shape (d, M, ..., M)
+        The flux components on the grid; the normal component is exactly zero on the walls.
+    """
+    d, m = values.ndim, values.shape[0]
+    a = cosine_coefficients(values)
+    k = math.pi * np.arange(m)
+    k2 = np.zeros((m,) * d)
+    for ax in range(d):
+        shape = [1] * d
+        shape[ax] = m
+        k2 = k2 + (k ** 2).reshape(shape)
+    k2.flat[0] = 1.0
+    phi = a / k2
+    phi.flat[0] = 0.0
+    out = np.empty((d,) + (m,) * d)
+    for i in range(d):
+        shape = [1] * d
+        shape[i] = m
+        g = phi * k.reshape(shape)
+        g = _sin_synthesis(g, i)
+        for j in range(d):
+            if j != i:
+                g = _cos_synthesis(g, j)
+        out[i] = g
+    return out
+
+
+def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndarray, m: int,
+                       fill: float, *, chunk: int = 1 << 20) -> np.ndarray:
+    r"""Sample a piecewise-constant field of a simplicial mesh at the nodes of the ``M``-grid of :math:`[0,1]^d`.
+
+    Every element's bounding box is scanned for grid nodes and each node is tested with the element's barycentric
+    coordinates :math:`\lambda = E^{-1}(y - p_0)` (inside when all :math:`\lambda_i \ge 0` and
+    :math:`\sum\lambda_i \le 1`, up to round-off); the work is the total node count of the bounding boxes,
+    vectorized in chunks of ``chunk`` (element, node) pairs.  A node on a shared face takes the value of one of
+    its elements.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, d)
+        Vertex positions in :math:`[0,1]^d` (a fold-free mesh).
+    elements : ndarray, shape (e, d+1)
+    values : ndarray, shape (e,)
+    m : int
+        Grid nodes per side.
+    fill : float
+        Value of the nodes that no element covers.
+
+    Returns
+    -------
+    ndarray, shape (M,)*d
+    """
+    d = points.shape[1]
+    s = m - 1
+    P = points[elements]  # (e, d+1, d)
+    eps = 1e-9
+    lo = np.clip(np.ceil(P.min(1) * s - eps).astype(np.int64), 0, s)
+    hi = np.clip(np.floor(P.max(1) * s + eps).astype(np.int64), 0, s)
+    ext = np.maximum(hi - lo + 1, 0)
+    count = ext.prod(1)
+    keep = np.nonzero(count)[0]
+    out = np.full((m,) * d, float(fill))
+    flat_out = out.reshape(-1)
+    strides = np.array([m ** (d - 1 - a) for a in range(d)], dtype=np.int64)
+    ends = np.cumsum(count[keep])
+    start = 0
+    while start < keep.size:  # chunks of whole elements with about `chunk` pairs each
+        stop = max(start + 1, int(np.searchsorted(ends, (ends[start - 1] if start else 0) + chunk)))
+        sel = keep[start:stop]
+        E = np.swapaxes(P[sel, 1:] - P[sel, :1], 1, 2)  # columns are the edge vectors
+        Einv = np.linalg.inv(E)
+        c = count[sel]
+        owner = np.repeat(np.arange(sel.size), c)
+        r = np.arange(owner.size) - np.repeat(np.cumsum(c) - c, c)
+        ext_o = ext[sel][owner]
+        lo_o = lo[sel][owner]
+        rel = np.empty((owner.size, d))
+        flat = np.zeros(owner.size, dtype=np.int64)
+        for ax in range(d - 1, -1, -1):  # mixed-radix digits of the local index
+            node = r % ext_o[:, ax] + lo_o[:, ax]
+            r //= ext_o[:, ax]
+            flat += node * strides[ax]
+            rel[:, ax] = node / s - P[sel, 0, ax][owner]
+        lam = np.einsum("pij,pj->pi", Einv[owner], rel)
+        inside = (lam >= -1e-10).all(1) & (lam.sum(1) <= 1 + 1e-10)
+        flat_out[flat[inside]] = values[sel][owner[inside]]
+        start = stop
+    return out
+
+
+def _measures(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """Signed element measures times d! (numpy; enough for ratios and sign tests)."""
+    P = points[elements]
+    E = P[:, 1:] - P[:, :1]
+    if E.shape[-1] == 2:
+        return E[:, 0, 0] * E[:, 1, 1] - E[:, 0, 1] * E[:, 1, 0]
+    return np.einsum("ei,ei->e", E[:, 0], np.cross(E[:, 1], E[:, 2]))
+
+
+def residual_density(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, density: np.ndarray) -> np.ndarray:
+    r"""Density that a map leaves on its image: :math:`\tilde\rho_e = \text{population}_e / |T(e)|`, shape (e,).
+
+    The population is the exact integral of the P1 vertex density over the reference element (mean vertex value
+    times measure, as in :mod:`rfmap.metrics`); :math:`|T(e)|` is the signed measure of the mapped element.
+    """
+    return density[elements].mean(1) * _measures(ref, elements) / _measures(mapped, elements)
+
+
+class _FlowPass:
+    """One pass of the flow: the flux of one density raster and the time integration from t = 0 to 1."""
+
+    def __init__(self, raster: np.ndarray, sigma: float = 0.0):
+        self.dim = raster.ndim
+        self.m = raster.shape[0]
+        if sigma > 0:
+            raster = gaussian_blur(raster, sigma)
+        self.mean = float(cosine_coefficients(raster).flat[0])  # the box mean of the cosine interpolant
+        flux = poisson_flux(raster)
+        # channels first, grid axes reversed: grid_sample takes the last point coordinate along the last grid axis
+        self.grid = torch.from_numpy(np.concatenate([flux, raster[None]]))[None]  # (1, d+1, M, ..., M)
+        self.evaluations = 0
+
+    def velocity(self, t: float, y: np.ndarray) -> np.ndarray:
+        r""":math:`v(y, t) = -\nabla\phi(y) / ((1-t)\rho_0(y) + t\bar\rho)` at points (P, d) of the box."""
+        self.evaluations += 1
+        q = torch.from_numpy(2.0 * y[:, ::-1] - 1.0).reshape(1, *([1] * (self.dim - 1)), -1, self.dim)
+        f = torch.nn.functional.grid_sample(self.grid, q, mode="bilinear", padding_mode="border",
+                                            align_corners=True).reshape(self.dim + 1, -1).T.numpy()
+        rho = (1.0 - t) * f[:, -1] + t * self.mean
+        return f[:, :-1] / rho[:, None]
+
+    def run(self, y: np.ndarray, measures, project, *, h: float, rtol: float, max_steps: int,
+            bar) -> tuple[np.ndarray, dict]:
+        t, dt = 0.0, 1e-2
+        accepted = rejected = folds = 0
+        k1 = self.velocity(0.0, y)
+        while t < 1.0:
+            if accepted + rejected >= max_steps:
+                raise RuntimeError(f"flow map did not reach t = 1 in {max_steps} steps (t={t:.4g}); "
+                                   "increase max_steps or rtol")
+            dt = min(dt, 1.0 - t)
+            y_pred = project(y + dt * k1)
+            k2 = self.velocity(t + dt, y_pred)
+            y_new = project(y + (0.5 * dt) * (k1 + k2))
+            diff = y_new - y_pred
+            err = math.sqrt(float(np.einsum("ij,ij->i", diff, diff).max())) / (rtol * h)
+            folded = err <= 1.0 and measures(y_new).min() <= 0.0
+            if err <= 1.0 and not folded:
+                t = 1.0 if 1.0 - (t + dt) < 1e-12 else t + dt
+                y = y_new
+                accepted += 1
+                if t < 1.0:
+                    k1 = self.velocity(t, y)
+                if bar is not None:
+                    bar.n = round(t, 4)
+                    bar.refresh()
+                dt *= min(2.0, max(0.3, 0.9 / math.sqrt(max(err, 1e-12))))
+            else:
+                rejected += 1
+                folds += int(folded)
+                dt *= 0.5 if folded else max(0.2, 0.9 / math.sqrt(err))
+        return y, {"steps": accepted, "rejected": rejected, "fold_rejections": folds}
+
+
+def solve_flow(
+    density,
+    *,
+    boundary: str = "square",
+    progress: bool = False,
+    tol: float = 1e-3,
+    rtol: float = 0.2,
+    refine: int = 2,
+    margin: float = 0.5,
+    max_passes: int = 1,
+    stall: float = 0.8,
+    blur: float = 0.0,
+    max_steps: int = 10_000,
+    start=None,
+    num_threads: int | None = None,
+) -> MapResult:
+    r"""Flow-based density-equalizing map (Gastner, Seguy & More 2018) of the unit square or cube.
+
+    Every vertex follows :math:`\dot x = -\nabla\phi(x) / ((1-t)\rho_0(x) + t\bar\rho)` for :math:`0 \le t \le 1`,
+    :math:`\Delta\phi = \bar\rho - \rho_0` with no-flux walls, in passes until the density left on the mapped mesh
+    is uniform to ``tol`` (see the module docstring for the numerical method).
+
+    Parameters
+    ----------
+    density : ndarray, shape (N, N) or (N, N, N)
+        Vertex densities on the ``N``-grid (strictly positive, finite; any positive scale).  ``N >= 3``.
+    boundary : {"square", "free"}
+        As in :func:`rfmap.solvers.diffusion.solve_dem`: fixed walls of the unit square/cube, or a sea of the mean
+        density around it in :math:`[-L, 1+L]^d`.
+    progress : bool
+        Show a ``tqdm`` progress bar over the time of each pass.
+    tol : float
+        Stop after the pass whose :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is at most ``tol``.
+    rtol : float
+        Largest predictor–corrector difference of an accepted step, in grid spacings of the raster's box.
+    refine : int
+        The density raster is ``refine`` times finer than the vertex grid (``M = refine (N_box - 1) + 1``).
+    margin : float
+        Sea width :math:`L` for ``boundary="free"``, rounded to whole grid cells (at least one).
+    max_passes : int
+        Most passes; the passes also stop when one lowers :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` by less than
+        the factor ``stall`` (the map with the lowest value is returned).
+    stall : float
+        See ``max_passes``; in (0, 1].
+    blur : float
+        Width (in vertex grid spacings) of a Gaussian blur of the first pass's density (:func:`gaussian_blur`),
+        halved at every further pass, as cartogram programs do to soften sharp edges; 0 turns it off.
+    max_steps : int
+        Most (accepted + rejected) steps of one pass; ``RuntimeError`` if exceeded.
+    start : ndarray, shape (N**d, d), optional
+        A fold-free map of the grid's vertices to start from (for ``"square"`` inside the unit square/cube with
+        boundary vertices on their walls; for ``"free"`` inside the sea box).  The first pass then flows the density
+        that this map leaves on its image.
+    num_threads : int, optional
+        Torch threads for the interpolation and the element measures (restored afterwards); as in
+        :func:`rfmap.solvers.diffusion.solve_dem`, default 1 in 2D and torch's setting in 3D.
+
+    Returns
+    -------
+    MapResult
+        ``kind="density"``, ``field`` the vertex densities (N**d,), ``time`` the wall-clock seconds; ``info`` holds
+        ``method="flow"``, ``passes``, ``steps`` / ``rejected`` / ``fold_rejections`` / ``evaluations`` summed over
+        the passes, ``std_history`` (:math:`\mathrm{Std}(\tilde\rho_{\text{map}})` after each pass, preceded by the
+        starting map's), ``eval_grid`` (``M``), ``box_grid`` and, for ``"free"``, ``sea_density``.
+
+    Raises
+    ------
+    ValueError
+        For a bad density (as :func:`rfmap.solvers.diffusion.solve_dem`), an unknown ``boundary``, non-positive
+        ``tol``/``rtol``/``margin``/``refine``/``max_passes``, ``stall`` outside (0, 1], or a ``start`` of the wrong
+        shape, with non-finite values, outside the box, or folded.
+    """
+    t_start = time.perf_counter()
+    if boundary not in DEM_BOUNDARIES:
+        raise ValueError(f"unknown boundary {boundary!r} for the flow solver; choose one of {DEM_BOUNDARIES}")
+    dens = _check_grid_density(density)
+    for name, val in (("tol", tol), ("rtol", rtol), ("margin", margin), ("stall", stall)):
+        if isinstance(val, bool) or not isinstance(val, numbers.Real) or not math.isfinite(val) or val <= 0:
+            raise ValueError(f"{name} must be a positive finite number, got {val!r}")
+    if stall > 1:
+        raise ValueError(f"stall must lie in (0, 1], got {stall!r}")
+    for name, val in (("refine", refine), ("max_passes", max_passes)):
+        if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
+            raise ValueError(f"{name} must be a positive integer, got {val!r}")
+    d, n = dens.ndim, dens.shape[0]
+    mesh = grid_mesh(n, d)
+    ref, elements = mesh.points, mesh.elements
+    field = dens.reshape(-1)
+
+    if boundary == "square":
+        pad, scale, sea = 0, 1.0, None
+    else:
+        pad = max(1, int(round(margin * (n - 1))))
+        scale = (n - 1 + 2 * pad) / (n - 1)
+    shift = pad / (n - 1)
+    nb = n + 2 * pad
+    m = int(refine) * (nb - 1) + 1
+
+    if boundary == "square":
+        wall_idx = np.nonzero((ref == 0.0) | (ref == 1.0))
+        wall_val = ref[wall_idx]
+
+        def project(p: np.ndarray) -> np.ndarray:
+            np.clip(p, 0.0, 1.0, out=p)
+            p[wall_idx] = wall_val
+            return p
+    else:
+
+        def project(p: np.ndarray) -> np.ndarray:
+            return np.clip(p, 0.0, 1.0, out=p)
+
+    def measures(x: np.ndarray) -> np.ndarray:
+        return grid_signed_measures(torch.from_numpy(x)[None], n)[0].numpy()
+
+    pop = field[elements].mean(1) * measures(ref)
+
+    def std_of(x: np.ndarray) -> float:
+        rho = pop / measures(x)
+        rho = rho / rho.mean()
+        return float(rho.std(ddof=1))
+
+    if start is None:
+        mapped = ref.copy()
+        if boundary == "square":
+            raster = p1_upsample(dens, int(refine))
+        else:
+            raster, sea = _balanced_sea(dens, pad, int(refine))
+            if not sea > 0:
+                raise RuntimeError(f"could not balance the sea density (got {sea:.4g})")
+    else:
+        mapped = np.array(start, dtype=np.float64)
+        if mapped.shape != ref.shape:
+            raise ValueError(f"start must have shape {ref.shape}, got {mapped.shape}")
+        if not np.isfinite(mapped).all():
+            raise ValueError("start contains NaN or infinite values")
+        y_chk = (mapped + shift) / scale
+        if y_chk.min() < -1e-9 or y_chk.max() > 1 + 1e-9:
+            raise ValueError(f"start leaves the box of the {boundary!r} boundary")
+        if measures(mapped).min() <= 0:
+            raise ValueError("start has folded (non-positively oriented) elements")
+        raster = None
+    history = [std_of(mapped)]
+    best, best_std = mapped, history[0]
+
+    totals = {"steps": 0, "rejected": 0, "fold_rejections": 0, "evaluations": 0}
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=1.0, desc=f"flow {d}D N={n}", leave=False,
+                   bar_format="{l_bar}{bar}| t={n:.4f}/1 [{elapsed}<{remaining}]")
+    passes = 0
+    threads = num_threads if num_threads is not None else (1 if d == 2 else None)
+    try:
+        with _torch_threads(threads):
+            while passes < max_passes and best_std > tol:
+                y = project((mapped + shift) / scale)
+                if raster is None:  # the residual density of the current map, located exactly on the raster
+                    meas = measures(mapped)
+                    rho = pop / meas
+                    fill = 1.0
+                    if boundary == "free":  # the sea: the domain's mean residual density
+                        fill = float((rho * meas).sum() / meas.sum())
+                    raster = rasterize_elements(y, elements, rho / rho.mean(), m, fill / rho.mean())
+                if bar is not None:
+                    bar.set_description(f"flow {d}D N={n} pass {passes + 1}")
+                    bar.n = 0
+                    bar.refresh()
+                fp = _FlowPass(raster, blur * 0.5 ** passes / (n - 1) / scale)
+                y, info = fp.run(y, measures, project, h=1.0 / (nb - 1), rtol=float(rtol),
+                                 max_steps=int(max_steps), bar=bar)
+                for k in ("steps", "rejected", "fold_rejections"):
+                    totals[k] += info[k]
+                totals["evaluations"] += fp.evaluations
+                passes += 1
+                raster = None
+                mapped = y * scale - shift
+                if boundary == "square":
+                    mapped = project(mapped)
+                history.append(std_of(mapped))
+                if history[-1] < best_std:
+                    best, best_std = mapped, history[-1]
+                if not history[-1] < stall * history[-2]:
+                    break
+    finally:
+        if bar is not None:
+            bar.close()
+    elapsed = time.perf_counter() - t_start
+    info = {"method": "flow", "boundary": boundary, "n": n, "dim": d, "passes": passes, **totals,
+            "std_history": history, "warm_start": start is not None, "eval_grid": m, "box_grid": nb}
+    if sea is not None:
+        info["sea_density"] = sea
+    return MapResult(ref_points=ref, mapped_points=best, elements=elements, field=field, kind="density",
+                     time=elapsed, info=info)

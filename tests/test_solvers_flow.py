@@ -1,0 +1,205 @@
+"""Tests of the flow-based density-equalizing map (rfmap.solvers.flow) and of the neural warm start (rfmap.hybrid).
+
+Exact answers: the Poisson flux against direct cosine sums, uniform density -> identity, exact rasterization of a
+mesh; agreement with the diffusion solver (its fixed point); no folded element on the hard fields of rfmap.stress;
+input validation.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from rfmap.fields import sample_density
+from rfmap.mesh import grid_mesh
+from rfmap.solvers import SOLVERS, get_solver, solve_dem, solve_flow
+from rfmap.solvers.diffusion import cosine_coefficients
+from rfmap.solvers.flow import gaussian_blur, poisson_flux, rasterize_elements
+from rfmap.stress import hard_density
+
+
+def wall_checks(res) -> None:
+    ref, out = res.ref_points, res.mapped_points
+    on_wall = (ref == 0.0) | (ref == 1.0)
+    assert np.array_equal(out[on_wall], ref[on_wall])
+    assert out.min() >= 0.0 and out.max() <= 1.0
+
+
+def test_registry_and_dispatch():
+    assert get_solver("flow") is solve_flow and "flow" in SOLVERS
+    with pytest.raises(ValueError, match="unknown density-equalizing method"):
+        solve_dem(np.ones((5, 5)), method="fast")
+
+
+@pytest.mark.parametrize("d,m", [(2, 9), (3, 6)])
+def test_poisson_flux_matches_cosine_sums(d, m):
+    """-grad(phi) with Laplace(phi) = mean - rho, evaluated by direct sums over the cosine modes."""
+    rng = np.random.default_rng(1)
+    v = 1.0 + rng.random((m,) * d)
+    a = cosine_coefficients(v)
+    x = np.linspace(0, 1, m)
+    k = np.arange(m)
+    C, S = np.cos(math.pi * np.outer(x, k)), -math.pi * k * np.sin(math.pi * np.outer(x, k))
+    K2 = sum(np.meshgrid(*([(math.pi * k) ** 2] * d), indexing="ij"))
+    K2.flat[0] = 1.0
+    phi = a / K2
+    phi.flat[0] = 0.0
+    for i in range(d):
+        mats = [S if j == i else C for j in range(d)]
+        direct = phi
+        for ax, M in enumerate(mats):  # contract mode axis ax with the table
+            direct = np.moveaxis(np.tensordot(M, direct, axes=([1], [ax])), 0, ax)
+        np.testing.assert_allclose(poisson_flux(v)[i], -direct, atol=1e-13)
+    walls = poisson_flux(v)[0]
+    assert np.abs(walls[0]).max() == 0 and np.abs(walls[-1]).max() == 0  # no flux through the walls
+
+
+def test_gaussian_blur_keeps_mean_and_constants():
+    v = np.random.default_rng(2).random((17, 17))
+    b = gaussian_blur(v, 0.05)
+    assert abs(cosine_coefficients(b)[0, 0] - cosine_coefficients(v)[0, 0]) < 1e-14
+    assert b.std() < v.std()
+    np.testing.assert_allclose(gaussian_blur(np.full((9, 9, 9), 3.0), 0.1), 3.0, atol=1e-13)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_rasterize_identity_mesh(d):
+    """Every node of a 2x finer grid lies in an element of the grid mesh; values are the element's."""
+    mesh = grid_mesh(5, d)
+    vals = np.arange(len(mesh.elements), dtype=float)
+    out = rasterize_elements(mesh.points, mesh.elements, vals, 9, fill=-1.0)
+    assert (out >= 0).all()
+    # an interior node at a cell centre (odd indices) lies inside one of the cell's elements
+    cen = mesh.points[mesh.elements].mean(1)
+    node = np.full(d, 1) / 8
+    inside = [e for e in range(len(cen)) if np.all(np.abs(cen[e] - node) < 1 / 4)]
+    assert out[(1,) * d] in vals[inside]
+
+
+@pytest.mark.parametrize("d,boundary", [(2, "square"), (2, "free"), (3, "square"), (3, "free")])
+def test_uniform_density_is_identity(d, boundary):
+    n = 9 if d == 2 else 6
+    res = solve_flow(np.full((n,) * d, 2.5), boundary=boundary)
+    np.testing.assert_allclose(res.mapped_points, res.ref_points, atol=1e-12)
+    assert res.info["passes"] == 0  # nothing to equalize
+
+
+@pytest.mark.parametrize("name,n,boundary", [("sin-cos", 51, "square"), ("exp-log", 51, "free"),
+                                             ("ring", 33, "square"), ("sin-cos-3d", 17, "square"),
+                                             ("sin-cos-3d", 17, "free")])
+def test_same_fixed_point_as_diffusion(name, n, boundary):
+    """Both methods reach the same final Std(rho~_map) (within 10 %) and, on smooth fields, nearly the same map."""
+    dens = sample_density(name, n)
+    flow = solve_dem(dens, method="flow", boundary=boundary)
+    diff = solve_dem(dens, boundary=boundary)
+    s_flow, s_diff = flow.metrics().std_rho_map, diff.metrics().std_rho_map
+    assert s_flow <= 1.1 * s_diff + 1e-3, (s_flow, s_diff)
+    assert flow.metrics().n_flipped == 0
+    assert np.abs(flow.mapped_points - diff.mapped_points).max() < 1.0 / (n - 1)  # within one grid cell
+    if boundary == "square":
+        wall_checks(flow)
+    assert flow.info["method"] == "flow" and flow.time > 0
+
+
+@pytest.mark.parametrize("d,n,seed", [(2, 33, 0), (2, 33, 1), (2, 33, 2), (3, 13, 0)])
+def test_no_fold_on_hard_fields(d, n, seed):
+    dens = hard_density(np.random.default_rng(seed), n, d)
+    for boundary in ("square", "free"):
+        res = solve_flow(dens, boundary=boundary)
+        m = res.metrics()
+        assert m.n_flipped == 0 and m.std_rho_map < 0.5 * m.std_rho_orig
+
+
+def test_warm_start_continues_a_map():
+    """Starting from a partial map (half the flow's displacement) finishes it; a folded start is rejected."""
+    dens = sample_density("sin-cos", 33)
+    cold = solve_flow(dens)
+    half = cold.ref_points + 0.5 * (cold.mapped_points - cold.ref_points)
+    warm = solve_flow(dens, start=half)
+    assert warm.info["warm_start"] and warm.info["std_history"][0] > 2 * warm.metrics().std_rho_map
+    assert warm.metrics().std_rho_map < 1.5 * cold.metrics().std_rho_map
+    assert warm.metrics().n_flipped == 0
+    folded = half.copy()
+    folded[[34, 35]] = folded[[35, 34]]
+    with pytest.raises(ValueError, match="folded"):
+        solve_flow(dens, start=folded)
+
+
+@pytest.mark.parametrize("bad,kw,match", [
+    (np.ones(5), {}, "grid field"),
+    (np.ones((4, 5)), {}, "same number"),
+    (np.ones((2, 2)), {}, None),
+    (-np.ones((5, 5)), {}, None),
+    (np.full((5, 5), np.nan), {}, None),
+    (np.ones((5, 5)), {"boundary": "fixed"}, "unknown boundary"),
+    (np.ones((5, 5)), {"tol": 0}, "tol"),
+    (np.ones((5, 5)), {"rtol": -1.0}, "rtol"),
+    (np.ones((5, 5)), {"refine": 0}, "refine"),
+    (np.ones((5, 5)), {"stall": 2.0}, "stall"),
+    (np.ones((5, 5)), {"max_passes": 0}, "max_passes"),
+    (np.ones((5, 5)), {"start": np.zeros((3, 2))}, "start must have shape"),
+])
+def test_bad_input(bad, kw, match):
+    with pytest.raises(ValueError, match=match):
+        solve_flow(bad, **kw)
+
+
+# --------------------------------------------------------------------------------------------------- hybrid
+def test_polish_warm_start_finishes_the_network_map():
+    from rfmap.surrogate import Surrogate
+
+    sur = Surrogate.pretrained("dem2d-square")
+    raw = sur.map("sin-cos", 51)
+    res = sur.map("sin-cos", 51, polish=True)
+    p = res.info["polish"]
+    assert p["start"] == "warm" and p["reason"] is None
+    st = p["stages"]
+    assert st["surrogate"]["std_rho_map"] == pytest.approx(raw.metrics().std_rho_map)
+    m = res.metrics()
+    assert m.n_flipped == 0 and m.std_rho_map == pytest.approx(st["polish"]["std_rho_map"])
+    assert m.std_rho_map < 0.5 * st["surrogate"]["std_rho_map"]
+    assert res.time == pytest.approx(st["surrogate"]["time"] + p["time"])
+    wall_checks(res)
+
+
+def test_polish_cold_start_when_the_network_map_is_poor():
+    from rfmap.surrogate import Surrogate
+    from rfmap.tasks import TaskSpec
+
+    sur = Surrogate.untrained(TaskSpec(kind="density", dim=2, boundary="square"))
+    with torch_zero(sur):
+        res = sur.map("ring", 33, polish=True)
+    assert res.info["polish"]["start"] == "cold" and "poor" in res.info["polish"]["reason"]
+    assert res.metrics().n_flipped == 0
+
+
+def torch_zero(sur):
+    """Context: the network outputs zero displacement (the identity map, which removes no density variation)."""
+    import contextlib
+
+    import torch
+
+    @contextlib.contextmanager
+    def ctx():
+        with torch.no_grad():
+            for p in sur.model.parameters():
+                p.zero_()
+        yield
+    return ctx()
+
+
+@pytest.mark.parametrize("polish", [0, -1.0, "yes", float("nan")])
+def test_polish_bad_tolerance(polish):
+    from rfmap.surrogate import Surrogate
+
+    with pytest.raises(ValueError, match="polish"):
+        Surrogate.pretrained("dem2d-square").map("sin-cos", 33, polish=polish)
+
+
+def test_polish_needs_grid_density_maps():
+    from rfmap.surrogate import Surrogate
+
+    with pytest.raises(ValueError, match="polish"):
+        Surrogate.pretrained("dem2d-square").map("sin-cos", 33, points=np.random.default_rng(0).random((50, 2)),
+                                                 polish=True)
