@@ -595,3 +595,28 @@ def area_error_histograms(cartos: dict, labels, values, *, label: str | None = N
         if label:
             save_figure(fig, label)
     return fig
+
+
+def time_accuracy_figure(rows: list[dict], *, title: str | None = None):
+    """Std(rho~_map) against wall time, one panel per (dimension, N, boundary), one marker per field and method
+    (rows of :func:`rfmap.hybrid.time_to_accuracy`); log-log axes."""
+    import matplotlib.pyplot as plt
+
+    cases = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    markers = dict(zip(methods, "osD^v*"))
+    fig, axes = plt.subplots(1, len(cases), figsize=(4.2 * len(cases), 3.8), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        for k, method in enumerate(methods):
+            rs = [r for r in rows if (r["dim"], r["n"], r["boundary"]) == case and r["method"] == method]
+            if rs:
+                ax.loglog([r["time"] for r in rs], [r["std_rho_map"] for r in rs], markers[method], color=f"C{k}",
+                          label=method, alpha=0.8, mfc="none")
+        ax.set_title(f"{case[0]}D, N = {case[1]}, {case[2]}")
+        ax.set_xlabel("wall time (s)")
+    axes[0, 0].set_ylabel(r"Std($\tilde\rho_{map}$)")
+    axes[0, -1].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig

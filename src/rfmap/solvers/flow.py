@@ -374,8 +374,9 @@ def solve_flow(
     ref, elements = mesh.points, mesh.elements
     field = dens.reshape(-1)
 
+    sea = None
     if boundary == "square":
-        pad, scale, sea = 0, 1.0, None
+        pad, scale = 0, 1.0
     else:
         pad = max(1, int(round(margin * (n - 1))))
         scale = (n - 1 + 2 * pad) / (n - 1)
