@@ -18,7 +18,8 @@ classical solvers reach.  :func:`polish_map` removes it with :func:`rfmap.solver
    non-uniform target :math:`J_{u_0}`, which the density-equalizing flow does not solve.
 3. A poor network map is not worth finishing: when :math:`u_0` has folded elements, leaves the sea box, or removes
    less than half of the input's density variation (:data:`POOR`), the flow starts cold from the identity instead,
-   and the report says so.
+   and the report says so.  So it does when the warm flow stalls (more than :data:`WARM_STEPS` steps: a
+   near-degenerate element of :math:`u_0` keeps cutting the fold-free step).
 """
 from __future__ import annotations
 
@@ -31,6 +32,9 @@ from .metrics import compute_metrics
 
 __all__ = ["POOR", "METHODS", "WARM_MODELS", "benchmark_fields", "compare_methods", "polish_map", "polish_tolerance",
            "summarize", "time_to_accuracy"]
+
+#: Most time steps of a warm flow before it is abandoned for a cold start.
+WARM_STEPS = 500
 
 #: A network map is *poor* when its Std(rho~_map) is above this fraction of the input's Std(rho~_orig).
 POOR = 0.5
@@ -105,7 +109,14 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
             reason = "the network's map leaves the sea box"
     kw = {} if tol is None else {"tol": tol}
     grid = np.asarray(density, dtype=np.float64).reshape((n,) * d)
-    res = solve_flow(grid, boundary=boundary, start=None if reason else mapped, progress=progress, **kw)
+    res = None
+    if reason is None:
+        try:  # a warm flow whose steps keep being cut (near-degenerate elements of u0) is abandoned early
+            res = solve_flow(grid, boundary=boundary, start=mapped, progress=progress, max_steps=WARM_STEPS, **kw)
+        except RuntimeError as e:
+            reason = f"the warm flow stalled ({e})"
+    if res is None:
+        res = solve_flow(grid, boundary=boundary, progress=progress, **kw)
     seconds = time.perf_counter() - t0
     after = _summary(ref, res.mapped_points, elements, density, seconds)
     report = {"start": "cold" if reason else "warm", "reason": reason, "tol": kw.get("tol"),
