@@ -23,8 +23,10 @@ CFG = get_config("deq2d-square", "ci")
 
 
 def _held_out_loss(model, cfg, n=21):
-    """Loss of a fixed batch of 8 samples that training never draws (another seed)."""
-    batch = sample_batch(cfg.task, seed=12345, step=0, indices=range(8), n=n, jitter=0.0)
+    """Loss of a fixed batch of 8 samples from the training distribution that training never draws (another
+    seed)."""
+    batch = sample_batch(cfg.task, seed=12345, step=0, indices=range(8), n=n, jitter=0.0,
+                         density_cfg=cfg.density_field)  # the training distribution, another seed
     with torch.no_grad():
         return float(task_loss(cfg.task, batch, model(batch.inputs), cfg.loss)[0])
 
@@ -33,7 +35,9 @@ def _held_out_loss(model, cfg, n=21):
 def trained(tmp_path_factory):
     """A 40-step ci run with a raised learning rate (the ci preset's 5e-4 barely moves in 40 steps)."""
     out = tmp_path_factory.mktemp("train")
-    cfg = CFG.with_overrides(steps=40, lr=1e-2, val_every=1000, ckpt_every=1000)
+    # the random fields without the narrow peaks and ramps of the full preset: on those, 40 steps of this
+    # 4-channel network lower the held-out loss by only ~4 % (measured), too little to test against noise
+    cfg = CFG.with_overrides(steps=40, lr=1e-2, val_every=1000, ckpt_every=1000, density_field=None)
     sur = T.train(cfg, out, progress=False, log_every=1)
     return cfg, out, sur
 

@@ -28,6 +28,12 @@ def test_metadata_records_provenance(name):
                 "ckpt_every", "val_n"):
         stored.pop(key, None)
         expected.pop(key, None)
+    # overrides given on the recorded command line (e.g. --steps for a warm restart) are what it says they are
+    words = meta.get("command", "").split()
+    for flag, key in (("--steps", "steps"), ("--batch", "batch"), ("--seed", "seed")):
+        if flag in words:
+            assert stored[key] == int(words[words.index(flag) + 1])
+            expected[key] = stored[key]
     assert stored == expected
     assert meta["preset"] == "full"
     assert meta["steps"] > 0 and 0 < meta["wall_time"] <= 9000  # one run of at most 150 minutes
