@@ -16,7 +16,8 @@ from __future__ import annotations
 import argparse
 
 from rfmap.experiments import format_value
-from rfmap.hybrid import METHODS, summarize, time_to_accuracy
+from rfmap.experiments import summarize, time_to_accuracy
+from rfmap.hybrid import METHODS
 
 
 def main(argv=None) -> None:

@@ -30,8 +30,7 @@ import numpy as np
 
 from .metrics import compute_metrics
 
-__all__ = ["POOR", "METHODS", "WARM_MODELS", "benchmark_fields", "compare_methods", "polish_map", "polish_tolerance",
-           "summarize", "time_to_accuracy"]
+__all__ = ["POOR", "METHODS", "compare_methods", "polish_map", "polish_tolerance"]
 
 #: Most time steps of a warm flow before it is abandoned for a cold start.
 WARM_STEPS = 500
@@ -169,63 +168,3 @@ def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "squ
             row["start"] = res.info["polish"]["start"]
         rows.append(row)
     return rows
-
-
-#: The shipped surrogate that warm-starts each (dimension, boundary).
-WARM_MODELS = {(2, "square"): "dem2d-square", (2, "free"): "deq2d-free", (3, "square"): "dem3d-cube",
-               (3, "free"): "dem3d-free"}
-
-
-def benchmark_fields(dim: int, n: int, *, paper: bool = True, random: int = 0) -> list[tuple[str, np.ndarray]]:
-    """Labelled densities on the ``N``-grid: the paper's test fields and ``random`` unseen random fields (the
-    ``report`` stream of :func:`rfmap.validation.validation_fields`), preprocessed as the paper does."""
-    from .inputs import preprocess_density
-    from .mesh import grid_points
-    from .paper_fields import TEST_FIELDS, sample_density
-    from .validation import validation_fields
-
-    out = [(name, sample_density(name, n)) for name in TEST_FIELDS[("density", dim)]] if paper else []
-    if random:
-        pts = grid_points(n, dim)
-        for j, f in enumerate(validation_fields("density", dim, random, stream="report")):
-            out.append((f"random-{j}", preprocess_density(np.asarray(f.field(pts)).reshape((n,) * dim))))
-    return out
-
-
-def time_to_accuracy(dim: int, n: int, boundary: str = "square", *, paper: bool = True, random: int = 0,
-                     methods=METHODS, surrogate=None) -> list[dict[str, Any]]:
-    """:func:`compare_methods` on every field of :func:`benchmark_fields`; rows carry ``field``, ``dim``, ``n`` and
-    ``boundary`` as well.  The surrogate defaults to the shipped model of :data:`WARM_MODELS`."""
-    if surrogate is None and set(methods) - {"diffusion", "flow"}:
-        from .surrogate import Surrogate
-
-        surrogate = Surrogate.pretrained(WARM_MODELS[(dim, boundary)])
-    rows = []
-    for label, dens in benchmark_fields(dim, n, paper=paper, random=random):
-        for row in compare_methods(dens, surrogate, boundary=boundary, methods=methods):
-            rows.append({"field": label, "dim": dim, "n": n, "boundary": boundary, **row})
-    return rows
-
-
-def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per (dim, n, boundary, method): mean Std(rho~_map), mean time, total folds, and the ratios to the best
-    classical solver of the same case (the one with the lower mean Std; time ratio < 1 means faster)."""
-    keys = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
-    out = []
-    for key in keys:
-        case = [r for r in rows if (r["dim"], r["n"], r["boundary"]) == key]
-        agg = {}
-        for method in [m for m in METHODS if any(r["method"] == m for r in case)]:
-            rs = [r for r in case if r["method"] == method]
-            agg[method] = {"std_rho_map": float(np.mean([r["std_rho_map"] for r in rs])),
-                           "time": float(np.mean([r["time"] for r in rs])),
-                           "n_flipped": int(sum(r["n_flipped"] for r in rs)), "fields": len(rs)}
-        classical = [m for m in ("diffusion", "flow") if m in agg]
-        best = min(classical, key=lambda m: agg[m]["std_rho_map"]) if classical else None
-        for method, a in agg.items():
-            row = {"dim": key[0], "n": key[1], "boundary": key[2], "method": method, **a, "best_classical": best}
-            if best:
-                row["std_ratio"] = a["std_rho_map"] / agg[best]["std_rho_map"]
-                row["time_ratio"] = a["time"] / agg[best]["time"]
-            out.append(row)
-    return out

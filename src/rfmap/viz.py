@@ -599,7 +599,7 @@ def area_error_histograms(cartos: dict, labels, values, *, label: str | None = N
 
 def time_accuracy_figure(rows: list[dict], *, title: str | None = None):
     """Std(rho~_map) against wall time, one panel per (dimension, N, boundary), one marker per field and method
-    (rows of :func:`rfmap.hybrid.time_to_accuracy`); log-log axes."""
+    (rows of :func:`rfmap.experiments.time_to_accuracy`); log-log axes."""
     import matplotlib.pyplot as plt
 
     cases = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
