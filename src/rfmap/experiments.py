@@ -361,7 +361,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
 
     Density models: Std(rho~_map) of the raw network map, of the map with weight refinement (and the default
     fold repair), and of the classical diffusion DEM with the model's boundary; Beltrami models: mean vertex
-    distance |Δd| to the exact random map, ours against the Linear Beltrami Solver.  Rows: each kind of field
+    distance (``mean_dd``) to the exact random map, ours against the Linear Beltrami Solver.  Rows: each kind of field
     and ``all``; columns: mean and worst metric, flipped elements of the raw network map, and mean time.
     """
     from .inputs import preprocess_density

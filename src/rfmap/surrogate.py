@@ -289,7 +289,7 @@ class Surrogate:
             raw network map.
         polish : bool or float
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
-            (:func:`rfmap.hybrid.polish_map`); a number is the tolerance on Std(rho~_map).  ``time`` then covers
+            (``rfmap.hybrid.polish_map``); a number is the tolerance on Std(rho~_map).  ``time`` then covers
             both stages.
 
         Returns

@@ -3,7 +3,7 @@
 * :func:`solve_lbs` -- Linear Beltrami Solver (Lui et al. 2013): the quasi-conformal map of the unit square with a
   prescribed Beltrami coefficient.
 * :func:`solve_dem` -- density-equalizing map of the unit square or cube: the diffusion method (Gastner & Newman
-  2004, :mod:`rfmap.solvers.diffusion`) or, with ``method="flow"``, the flow-based method (Gastner, Seguy & More
+  2004, ``rfmap.solvers.diffusion``) or, with ``method="flow"``, the flow-based method (Gastner, Seguy & More
   2018, :func:`solve_flow`).
 
 All return a :class:`rfmap.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name.
@@ -30,8 +30,8 @@ def solve_dem(density, *, method: str = "diffusion", **kwargs) -> MapResult:
     ----------
     density : ndarray, shape (N, N) or (N, N, N)
     method : {"diffusion", "flow"}
-        ``"diffusion"``: :func:`rfmap.solvers.diffusion.solve_dem` (Gastner & Newman 2004); ``"flow"``:
-        :func:`rfmap.solvers.flow.solve_flow` (Gastner, Seguy & More 2018), usually several times faster.
+        ``"diffusion"``: ``rfmap.solvers.diffusion.solve_dem`` (Gastner & Newman 2004); ``"flow"``:
+        ``rfmap.solvers.flow.solve_flow`` (Gastner, Seguy & More 2018), usually several times faster.
     **kwargs
         Options of the chosen solver (``boundary``, ``progress``, ...).
 

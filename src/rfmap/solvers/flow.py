@@ -17,11 +17,11 @@ at every time.  Every vertex is carried by :math:`\dot x = v(x, t)` from :math:`
 
 Numerical method:
 
-1. **Density raster.**  As in :mod:`rfmap.solvers.diffusion`: the piecewise-linear (P1) interpolant of the vertex
-   densities sampled on a grid ``refine`` times finer (:func:`rfmap.solvers.diffusion.p1_upsample`), ``M`` points
+1. **Density raster.**  As in ``rfmap.solvers.diffusion``: the piecewise-linear (P1) interpolant of the vertex
+   densities sampled on a grid ``refine`` times finer (``rfmap.solvers.diffusion.p1_upsample``), ``M`` points
    per side of the box.
 2. **Poisson solve.**  With the cosine coefficients :math:`a_k` of the raster (type-I DCT,
-   :func:`rfmap.solvers.diffusion.cosine_coefficients`), :math:`\phi_k = a_k / (\pi^2 |k|^2)` for
+   ``rfmap.solvers.diffusion.cosine_coefficients``), :math:`\phi_k = a_k / (\pi^2 |k|^2)` for
    :math:`k \ne 0`; the flux :math:`-\nabla\phi` is evaluated on the raster by inverse type-I DCTs along the cosine
    axes and a type-I DST along the differentiated axis (:func:`poisson_flux`), :math:`O(M^d \log M)`.  Its normal
    component vanishes exactly on the walls (no-flux).
@@ -38,7 +38,7 @@ Numerical method:
    and the next pass moves the mapped vertices by the flow of that density, composing the maps.  Passes stop when
    :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is below ``tol`` or stops improving (by less than ``stall``).
 
-Boundary conditions follow :func:`rfmap.solvers.diffusion.solve_dem`: ``"square"`` keeps the walls (boundary
+Boundary conditions follow ``rfmap.solvers.diffusion.solve_dem``: ``"square"`` keeps the walls (boundary
 vertices slide, corners stay); ``"free"`` embeds the square in :math:`[-L, 1+L]^d` filled with a sea of the
 balanced mean density (``_balanced_sea``), and later passes fill the sea with the domain's mean residual density.
 
@@ -312,7 +312,7 @@ def solve_flow(
     density : ndarray, shape (N, N) or (N, N, N)
         Vertex densities on the ``N``-grid (strictly positive, finite; any positive scale).  ``N >= 3``.
     boundary : {"square", "free"}
-        As in :func:`rfmap.solvers.diffusion.solve_dem`: fixed walls of the unit square/cube, or a sea of the mean
+        As in ``rfmap.solvers.diffusion.solve_dem``: fixed walls of the unit square/cube, or a sea of the mean
         density around it in :math:`[-L, 1+L]^d`.
     progress : bool
         Show a ``tqdm`` progress bar over the time of each pass.
@@ -340,7 +340,7 @@ def solve_flow(
         that this map leaves on its image.
     num_threads : int, optional
         Torch threads for the interpolation and the element measures (restored afterwards); as in
-        :func:`rfmap.solvers.diffusion.solve_dem`, default 1 in 2D and torch's setting in 3D.
+        ``rfmap.solvers.diffusion.solve_dem``, default 1 in 2D and torch's setting in 3D.
 
     Returns
     -------
@@ -353,7 +353,7 @@ def solve_flow(
     Raises
     ------
     ValueError
-        For a bad density (as :func:`rfmap.solvers.diffusion.solve_dem`), an unknown ``boundary``, non-positive
+        For a bad density (as ``rfmap.solvers.diffusion.solve_dem``), an unknown ``boundary``, non-positive
         ``tol``/``rtol``/``margin``/``refine``/``max_passes``, ``stall`` outside (0, 1], or a ``start`` of the wrong
         shape, with non-finite values, outside the box, or folded.
     """
