@@ -25,10 +25,12 @@ from rfmap.config import get_config
 from rfmap.train import _build_state, _loader, _train_step, resolve_device
 
 SIZES = {2: (4, 80), 3: (2, 48)}
+DEFAULT_THREADS = torch.get_num_threads()
 
 
 def measure(name: str, device: torch.device, steps: int, warmup: int, threads: int | None,
             workers: int | None) -> dict:
+    torch.set_num_threads(DEFAULT_THREADS)  # a preset without a thread count gets torch's default
     cfg = get_config(name, "full")
     batch, n = SIZES[cfg.task.dim]
     over = {"batch": batch, "n_range": (n, n), "steps": warmup + steps, "time_limit": 0.0}

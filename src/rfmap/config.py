@@ -141,7 +141,7 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
     **{
         name: _presets(
             name, TaskSpec("density", 2, boundary), desc, _CI,
-            dict(steps=steps, batch=4, time_limit=limit, val_every=500, threads=1, workers=1, **_VAL2),
+            dict(steps=steps, batch=4, time_limit=limit, val_every=500, threads=2, workers=1, **_VAL2),
             _PAPER_2D, _NOTE_2D,
             loss=LossWeights(beltrami=lam), lr=5e-4, warmup=300, density_field=fields,
         )
@@ -157,7 +157,8 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
     **{
         name: _presets(
             name, TaskSpec("density", 3, boundary), desc, _CI3,
-            dict(steps=3000, batch=2, time_limit=3300.0, val_every=500, ckpt_every=100, workers=1, **_VAL3),
+            dict(steps=3000, batch=2, time_limit=3300.0, val_every=500, ckpt_every=100, threads=2, workers=1,
+                 **_VAL3),
             dict(steps=4000, batch=2, lr=2e-4, schedule="restarts", T0=600, T_mult=2, lr_min=2e-6, clip=1.0),
             "4,000 epochs, AdamW lr 2e-4, betas (0.9, 0.995), weight decay 5e-5, cosine warm restarts T0 = 600, "
             "T_mult = 2, min lr 2e-6, N in [32, 48], clip 1.0, as printed; an epoch is one step on a freshly drawn "

@@ -118,11 +118,15 @@ class RandomDensity:
         self.scale = self.contrast / span if span > 1e-12 else 1.0
 
     def _raw(self, x: np.ndarray) -> np.ndarray:
-        arg = TWO_PI * x[:, None, :] * self.freq[None] + self.phase[None]  # (P, K, d)
-        t = np.sin(arg)
+        # float64 sin/cos through torch (vectorised, about 4x numpy's on this kind of CPU); one (P, K) factor per axis
+        arg = torch.addcmul(torch.from_numpy(self.phase)[None], torch.from_numpy(x)[:, None, :],
+                            torch.from_numpy(TWO_PI * self.freq)[None])  # (P, K, d)
+        t = torch.sin(arg[..., 0])
         if self.dim >= 2:
-            t[..., 1] = np.cos(arg[..., 1])
-        return (self.amp[None] * t.prod(-1)).sum(-1) + self._nonsmooth(x)
+            t = t * torch.cos(arg[..., 1])
+        if self.dim >= 3:
+            t = t * torch.sin(arg[..., 2])
+        return (t @ torch.from_numpy(self.amp)).numpy() + self._nonsmooth(x)
 
     def _nonsmooth(self, x: np.ndarray) -> np.ndarray:
         out = np.zeros(x.shape[0])
