@@ -24,12 +24,13 @@ LAYERS: dict[str, int] = {
     "rfmap.random_fields": 0, "rfmap.fields": 0, "rfmap.metrics": 0, "rfmap.result": 0,
     # classical solvers, the network, the losses
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1, "rfmap.solvers.flow": 1,
-    "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.losses": 1,
+    "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.nn.fno": 1, "rfmap.nn.registry": 1,
+    "rfmap.losses": 1,
     # tasks, training, refinement, inference, post-processing, plotting
     "rfmap.tasks": 2, "rfmap.config": 2, "rfmap.train": 2, "rfmap.refine": 2, "rfmap.surrogate": 2,
     "rfmap.pretrained": 2, "rfmap.repair": 2, "rfmap.validation": 2, "rfmap.hybrid": 2, "rfmap.stress": 2, "rfmap.viz": 2,
     # the paper's experiments and applications, then the command line and the package's front door
-    "rfmap.experiments": 3, "rfmap.cartogram": 3,
+    "rfmap.experiments": 3, "rfmap.cartogram": 3, "rfmap.compare": 3,
     "rfmap.cli": 4, "rfmap": 4,
 }
 

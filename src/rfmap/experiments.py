@@ -33,6 +33,8 @@ COLUMN_TITLES = {
     "mean_dmu_pl": "mean |Δμ| vs PL", "std_rho_orig": "Std ρ̃ orig", "std_rho_map": "Std ρ̃ map",
     "min_jacobian": "min det J", "n_flipped": "flips", "max_mu": "max |μ|", "mean_mu": "mean |μ|",
     "alpha": "α", "mean": "mean", "worst": "worst",
+    "raw_std": "raw Std ρ̃ map", "flips_repaired": "flips after repair", "parameters": "parameters",
+    "train_time": "training (min)", "validation": "held-out Std ρ̃ map", "work_n": "network grid", "arch": "arch",
 }
 #: significant digits of every number in a table (times: one fewer, with their unit)
 DIGITS = 4

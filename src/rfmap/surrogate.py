@@ -26,6 +26,7 @@ from .inputs import check_density, check_mu, preprocess_density, unit_mass
 from .mesh import check_n, element_centroids, element_measures, grid_mesh, grid_points, interpolate, triangulate, vertex_weights
 from .device import resolve_device
 from .nn.model import MultiResUNet, apply_displacement
+from .nn.registry import build_model, from_tensor_state, tensor_state
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
 from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
 from .repair import repair_map
@@ -54,13 +55,13 @@ class Surrogate:
 
     Parameters
     ----------
-    model : MultiResUNet
+    model : MultiResUNet or FNONet
     spec : TaskSpec
     meta : dict, optional
         Metadata (see module docstring); ``n_range`` gives the training resolutions.
     """
 
-    def __init__(self, model: MultiResUNet, spec: TaskSpec, meta: dict | None = None, *, device=None):
+    def __init__(self, model: torch.nn.Module, spec: TaskSpec, meta: dict | None = None, *, device=None):
         if model.dim != spec.dim or model.n_params != spec.n_params:
             raise ValueError(f"model (dim={model.dim}, {model.n_params} parameter channels) does not fit task "
                              f"{spec}")
@@ -100,7 +101,7 @@ class Surrogate:
         meta = {**self.meta, "model": self.model.kwargs(), "task": {"kind": self.spec.kind, "dim": self.spec.dim,
                                                                     "boundary": self.spec.boundary},
                 "rfmap_version": self.meta.get("rfmap_version", __version__)}
-        state = {k: v.detach().cpu().contiguous() for k, v in self.model.state_dict().items()}
+        state = tensor_state(self.model)
         tmp = path.with_suffix(".safetensors.part")
         save_file(state, str(tmp), metadata={"format": "rfmap", "name": str(meta.get("name", ""))})
         os.replace(tmp, path)
@@ -131,15 +132,15 @@ class Surrogate:
         try:
             spec = TaskSpec(**meta["task"])
             kw = meta["model"]
-            model = MultiResUNet(int(kw["dim"]), int(kw["n_params"]), int(kw["base"]), int(kw["depth"]),
-                                 bool(kw.get("attention", True)))
+            model = build_model(kw)
         except (KeyError, TypeError) as e:
             raise ValueError(f"metadata {jpath} lacks the model/task description: {e}") from e
         try:
             state = load_file(str(path))
         except (SafetensorError, OSError, ValueError) as e:
             raise ValueError(f"corrupt or truncated weight file {path}: {e}") from e
-        own = model.state_dict()
+        own = {k: v for k, v in model.state_dict().items() if isinstance(v, torch.Tensor)}
+        state = from_tensor_state(model, state)
         missing, extra = set(own) - set(state), set(state) - set(own)
         if missing or extra:
             raise ValueError(f"weights {path} do not match the model in {jpath.name}: missing "

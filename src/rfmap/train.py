@@ -41,7 +41,7 @@ import torch
 from ._version import __version__
 from .config import PRESETS, TrainConfig, config_names, get_config
 from .device import resolve_device
-from .nn.model import MultiResUNet
+from .nn.registry import build_model
 from .paper_fields import BELTRAMI_MAPS, TEST_FIELDS
 from .surrogate import Surrogate, models
 from .tasks import TaskSpec, draw_samples, make_batch, task_loss
@@ -297,8 +297,7 @@ def load_init(source: str, cfg: TrainConfig) -> tuple[Surrogate, dict]:
         raise ValueError(f"--init {source!r}: {e}") from e
     if parent.spec != cfg.task:
         raise ValueError(f"--init {source!r} was trained for {parent.spec}, but config {cfg.name!r} is {cfg.task}")
-    want = {"dim": cfg.task.dim, "n_params": cfg.task.n_params, "base": cfg.model.base, "depth": cfg.model.depth,
-            "attention": cfg.model.attention}
+    want = cfg.model.kwargs(cfg.task.dim, cfg.task.n_params)
     if parent.model.kwargs() != want:
         raise ValueError(f"--init {source!r} has architecture {parent.model.kwargs()}, config {cfg.name!r} "
                          f"expects {want}")
@@ -317,7 +316,7 @@ class TrainState:
     """Everything the training loop reads and updates."""
 
     cfg: TrainConfig
-    model: MultiResUNet
+    model: torch.nn.Module
     net: torch.nn.Module  # the model, or its DistributedDataParallel wrapper
     opt: torch.optim.Optimizer
     sched: object
@@ -385,7 +384,7 @@ def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool
     torch.manual_seed(cfg.seed)
     spec = cfg.task
     lineage: list = []
-    model = MultiResUNet(spec.dim, spec.n_params, cfg.model.base, cfg.model.depth, cfg.model.attention)
+    model = build_model(cfg.model.kwargs(spec.dim, spec.n_params))
     if init:
         parent, record = load_init(init, cfg)
         model.load_state_dict(parent.model.state_dict())
@@ -482,7 +481,8 @@ def _validate_and_keep(st: TrainState, bar) -> dict:
     s = score(v["mean"])
     if st.best is None or s < tuple(st.best["score"]):
         st.best = {"step": st.step, "score": list(s), "summary": v["mean"],
-                   "state": {k: t.detach().cpu().clone() for k, t in st.model.state_dict().items()}}
+                   "state": {k: t.detach().cpu().clone() for k, t in st.model.state_dict().items()
+                             if isinstance(t, torch.Tensor)}}
     if bar is not None:
         bar.write(f"step {st.step}: validation {v['mean']}")
     return v

@@ -12,7 +12,8 @@ from .result import setup_pyvista, to_pyvista
 __all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu",
            "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
            "population_figure", "volume_rows", "render_lattice", "plot_batch", "plot_loss_terms", "training_curves", "learning_curves", "CAMERA_3D", "LOSS_TERMS", "plot_regions", "cartogram_figure",
-           "cartogram_panels", "area_error_histograms"]
+           "cartogram_panels", "area_error_histograms", "time_accuracy_figure", "validation_vs_time",
+           "table_lines"]
 
 STYLE = {
     "figure.dpi": 110,
@@ -620,3 +621,49 @@ def time_accuracy_figure(rows: list[dict], *, title: str | None = None):
         fig.suptitle(title)
     fig.tight_layout()
     return fig
+
+
+def validation_vs_time(metas: dict, ax=None, *, key: str = "std_rho_map"):
+    """The mean held-out validation metric of each model against its training wall time (minutes, cumulative
+    over ``--init`` chains), from the metadata histories (``Surrogate.meta``); log y axis; returns the axes."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(5.2, 3.4), layout="constrained")
+    for k, (name, meta) in enumerate(metas.items()):
+        val = [v for v in meta.get("history", {}).get("validation", []) if v.get("elapsed") is not None and key in v]
+        if not val:
+            continue
+        offset = float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) - float(meta.get("wall_time", 0.0))
+        t = [(offset + v["elapsed"]) / 60 for v in val]
+        ax.semilogy(t, [v[key] for v in val], "o-", color=f"C{k}", ms=3, lw=1.2, label=name)
+        if offset > 0:
+            ax.axvline(offset / 60, color=f"C{k}", ls=":", lw=0.8)
+    ys = [y for line in ax.get_lines() for y in line.get_ydata()]
+    if ys and max(ys) < 3 * min(ys):  # a narrow range reads better on a linear axis
+        ax.set_yscale("linear")
+    ax.set(xlabel="training wall time (min)", ylabel=f"held-out mean {key}")
+    ax.legend(fontsize=8)
+    return ax
+
+
+def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = True):
+    """One line per ``method`` of an :class:`rfmap.experiments.Table` whose cases are numbers (e.g. grid sides):
+    ``column`` against the case; returns the axes."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(5.2, 3.4), layout="constrained")
+    methods = list(dict.fromkeys(m for _, m, _ in table.rows))
+    for k, method in enumerate(methods):
+        pts = sorted((float(c), v[column]) for c, m, v in table.rows if m == method and v.get(column) is not None)
+        if pts:
+            ls = "--" if "native" in method else "-"
+            ax.plot(*zip(*pts), ls, marker="o", ms=3, lw=1.2, color=f"C{k // 2 if len(methods) > 2 else k}",
+                    label=method)
+    if logx:
+        ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ax.set(xlabel="N", ylabel=column)
+    ax.legend(fontsize=8)
+    return ax

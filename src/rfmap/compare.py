@@ -1,0 +1,185 @@
+r"""Two surrogates of one task side by side: the paper's multi-resolution U-Net against a Fourier neural operator.
+
+Every function takes ``surs``, a mapping from a display name to a :class:`rfmap.Surrogate` of the same task, and
+returns an :class:`rfmap.experiments.Table` whose ``method`` column names the model (and the variant).  The metric
+is :math:`\operatorname{Std}(\tilde\rho_{map})` (``std_rho_map``, lower is better); ``n_flipped`` counts flipped
+triangles of the *raw* network map (``repair=False``) and ``flips_repaired`` those of the map a user gets (with the
+default bijectivity repair), which must be 0.
+
+The two architectures meet the grid differently.  The U-Net's receptive field is counted in grid cells, so the
+surrogate normally runs it on a fixed *working grid* near its training sizes and resamples (``work``); the FNO's
+spectral weights act on frequencies and can be run on the requested grid itself (``native``).
+:func:`resolution_table` measures both ways for both models.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .experiments import Table, generalization_table
+from .mesh import jittered_points
+from .paper_fields import PAPER_N, TEST_FIELDS
+
+__all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
+           "generalization_tables", "inference_table", "race", "wins"]
+
+
+def parameter_count(model) -> int:
+    """Real parameters of a network (a complex weight counts twice)."""
+    return int(sum(p.numel() * (2 if p.is_complex() else 1) for p in model.parameters()))
+
+
+def _check(surs: dict) -> tuple:
+    if not surs:
+        raise ValueError("give at least one surrogate to compare")
+    specs = {s.spec for s in surs.values()}
+    if len(specs) != 1:
+        raise ValueError(f"the surrogates solve different tasks: {sorted(map(str, specs))}")
+    spec = specs.pop()
+    if spec.kind != "density" or spec.dim != 2:
+        raise ValueError(f"the comparison covers 2D density models; got {spec}")
+    return spec
+
+
+def model_table(surs: dict) -> Table:
+    """Architecture, parameters, training steps and wall time (cumulative over ``--init`` chains) and the final
+    held-out validation metric of each model, from its metadata."""
+    _check(surs)
+    t = Table("tab:models", "The models", ["parameters", "steps", "train_time", "validation"])
+    for name, s in surs.items():
+        meta = s.meta
+        val = ((meta.get("final_metrics") or {}).get("mean") or {}).get("std_rho_map")
+        t.add(name, s.model.kwargs().get("arch", "unet"),
+              {"parameters": parameter_count(s.model),
+               "steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
+               "train_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 60.0,
+               "validation": None if val is None else float(val)})
+    return t
+
+
+def _row(res, raw) -> dict:
+    m, mr = res.metrics(), raw.metrics()
+    return {"std_rho_map": m.std_rho_map, "raw_std": mr.std_rho_map, "n_flipped": mr.n_flipped,
+            "flips_repaired": m.n_flipped, "time": res.time}
+
+
+def paper_fields_table(surs: dict, n: int | None = None, fields=None, refine: bool = True) -> Table:
+    """The paper's four 2D population tests at ``N``: raw and refined Std, raw and repaired flips, per model."""
+    _check(surs)
+    n = int(n or PAPER_N[2])
+    fields = list(fields or TEST_FIELDS["density", 2])
+    t = Table("tab:fno-paper-fields", f"The paper's 2D tests (N = {n})",
+              ["raw_std", "std_rho_map", "n_flipped", "flips_repaired", "time"])
+    for f in fields:
+        for name, s in surs.items():
+            raw = s.map(f, n, repair=False)
+            t.add(f, name, _row(s.map(f, n), raw))
+            if refine:
+                t.add(f, f"{name} + refinement", _row(s.map(f, n, refine=True), raw))
+    return t
+
+
+def resolution_table(surs: dict, ns=(32, 51, 64, 128, 256), field: str = "multi-freq") -> Table:
+    """One field across grid sides: each model on its default working grid (``work``) and on the requested grid
+    itself (``native``, ``work_n = N``)."""
+    _check(surs)
+    t = Table("tab:fno-resolution", f"{field} across resolutions",
+              ["raw_std", "std_rho_map", "n_flipped", "flips_repaired", "time"])
+    for n in ns:
+        for name, s in surs.items():
+            for how, work in (("work", None), ("native", int(n))):
+                if work is not None and work < s.model.min_size:
+                    continue
+                raw = s.map(field, n, work_n=work, repair=False)
+                row = _row(s.map(field, n, work_n=work), raw)
+                row["work_n"] = int(raw.info.get("work_n", work or n))
+                t.add(str(n), f"{name} ({how})", row)
+    t.columns.insert(0, "work_n")
+    return t
+
+
+def points_table(surs: dict, field: str = "sin-cos", n: int = 51, seed: int = 0) -> Table:
+    """The map at query points instead of the grid: ``n``² points jittered off the grid (Sobol jitter of
+    strength 0.2) and as many points scattered uniformly (plus the square's corners); the metrics are taken on the
+    Delaunay triangulation of the points."""
+    _check(surs)
+    rng = np.random.default_rng(seed)
+    jit = jittered_points(n, 2, rng, strength=0.2)
+    sc = np.concatenate([rng.random((n * n - 4, 2)), [[0, 0], [1, 0], [0, 1], [1, 1]]])
+    t = Table("tab:fno-points", f"{field} at {n * n} query points", ["raw_std", "std_rho_map", "n_flipped",
+                                                                      "flips_repaired", "time"])
+    for label, pts in (("jittered", jit), ("scattered", sc)):
+        for name, s in surs.items():
+            raw = s.map(field, points=pts, repair=False)
+            t.add(label, name, _row(s.map(field, points=pts), raw))
+    return t
+
+
+def generalization_tables(surs: dict, count: int = 50, n: int | None = None) -> Table:
+    """:func:`rfmap.experiments.generalization_table` of every model on the same unseen random fields, merged
+    (the classical solver's rows once)."""
+    _check(surs)
+    merged = None
+    for name, s in surs.items():
+        g = generalization_table(s, count=count, n=n, refine=True)
+        if merged is None:
+            merged = Table("tab:fno-generalization", g.title.split(":", 1)[1].strip(), g.columns)
+        for case, method, vals in g.rows:
+            if method.startswith("classical"):
+                if not any(c == case and m == method for c, m, _ in merged.rows):
+                    merged.add(case, method, vals)
+            else:
+                merged.add(case, method.replace("ours", name), vals)
+    order = list(dict.fromkeys(c for c, _, _ in merged.rows if c != "all")) + ["all"]
+    merged.rows.sort(key=lambda r: order.index(r[0]))  # stable: within a kind, the insertion order
+    return merged
+
+
+def inference_table(surs: dict, ns=(51, 128, 256), field: str = "multi-freq", repeats: int = 5) -> Table:
+    """Median time of one raw network map (encoding, network, resampling; no refinement, no repair) per model and
+    grid side, on the default working grid and natively."""
+    _check(surs)
+    t = Table("tab:fno-inference", f"Inference time of one raw map ({field})", ["work_n", "time"])
+    for n in ns:
+        for name, s in surs.items():
+            for how, work in (("work", None), ("native", int(n))):
+                s.map(field, n, work_n=work, repair=False)  # warm-up
+                ts = []
+                for _ in range(repeats):
+                    t0 = time.perf_counter()
+                    r = s.map(field, n, work_n=work, repair=False)
+                    ts.append(time.perf_counter() - t0)
+                t.add(str(n), f"{name} ({how})", {"work_n": int(r.info.get("work_n", n)),
+                                                   "time": float(np.median(ts))})
+    return t
+
+
+def race(configs: dict, seconds: float, out_dir, *, progress: bool = False) -> dict:
+    """Train each configuration from scratch for the same wall-clock budget (``time_limit = seconds``), one after
+    the other on this machine; returns ``{name: Surrogate}`` (their metadata holds the learning curves)."""
+    from .train import train
+
+    out = Path(out_dir)
+    result = {}
+    for name, cfg in configs.items():
+        cfg = cfg.with_overrides(time_limit=float(seconds), steps=max(cfg.steps, 10**6))
+        result[name] = train(cfg, out / cfg.name, progress=progress)
+    return result
+
+
+def wins(table: Table, column: str = "std_rho_map", *, lower: bool = True) -> dict[str, int]:
+    """How many cases of ``table`` each method wins on ``column`` (ties go to both); methods are the table's
+    distinct ``method`` labels, compared case by case."""
+    cases: dict[str, dict[str, float]] = {}
+    for case, method, vals in table.rows:
+        v = vals.get(column)
+        if v is not None:
+            cases.setdefault(case, {})[method] = float(v)
+    count: dict[str, int] = {}
+    for vals in cases.values():
+        best = min(vals.values()) if lower else max(vals.values())
+        for m, v in vals.items():
+            count[m] = count.get(m, 0) + int(v == best)
+    return count

@@ -1,0 +1,56 @@
+"""Building a displacement network from its stored constructor arguments, and its tensors for a weight file.
+
+Two architectures share one interface (input ``(B, d + m, *S)``, output ``(B, d, *S)``, ``kwargs()``,
+``min_size``): the multi-resolution U-Net of the paper (``arch='unet'``, the default, also for metadata written
+before the choice existed) and ``neuraloperator``'s FNO (``arch='fno'``).
+"""
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from .fno import FNONet
+from .model import MultiResUNet
+
+__all__ = ["ARCHS", "build_model", "tensor_state", "from_tensor_state"]
+
+#: architectures a model description may name
+ARCHS = ("unet", "fno")
+
+
+def build_model(kwargs: dict) -> nn.Module:
+    """The network described by ``kwargs`` (what its ``kwargs()`` returned); a clear ``ValueError`` otherwise."""
+    kw = dict(kwargs)
+    arch = kw.pop("arch", "unet")
+    try:
+        if arch == "unet":
+            return MultiResUNet(int(kw["dim"]), int(kw["n_params"]), int(kw["base"]), int(kw["depth"]),
+                                bool(kw.get("attention", True)))
+        if arch == "fno":
+            return FNONet(int(kw["dim"]), int(kw["n_params"]), int(kw["modes"]), int(kw["width"]),
+                          int(kw["layers"]), float(kw.get("padding", 0.25)))
+    except KeyError as e:
+        raise ValueError(f"model description {kwargs} lacks {e}") from e
+    raise ValueError(f"unknown model architecture {arch!r}; expected one of {ARCHS}")
+
+
+def tensor_state(model: nn.Module) -> dict[str, Tensor]:
+    """The model's tensors for a safetensors file: non-tensor entries dropped, complex tensors (the FNO's spectral
+    weights) stored as their real view of shape ``(*S, 2)``."""
+    out = {}
+    for k, v in model.state_dict().items():
+        if isinstance(v, Tensor):
+            v = v.detach().cpu()
+            out[k] = (torch.view_as_real(v) if v.is_complex() else v).contiguous()
+    return out
+
+
+def from_tensor_state(model: nn.Module, state: dict[str, Tensor]) -> dict[str, Tensor]:
+    """Undo :func:`tensor_state` for ``model``: real views of its complex entries become complex again."""
+    own = {k: v for k, v in model.state_dict().items() if isinstance(v, Tensor)}
+    out = {}
+    for k, v in state.items():
+        if k in own and own[k].is_complex() and not v.is_complex() and v.shape[-1:] == (2,):
+            v = torch.view_as_complex(v.contiguous())
+        out[k] = v
+    return out
