@@ -179,3 +179,30 @@ def test_map_cli_refuses_an_unavailable_device(tmp_path, capsys):
                      "--device", "tpu"])
     assert code == 2 and "unknown device" in capsys.readouterr().err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("device, message", [("tpu", "unknown device")]
+                         + ([] if torch.cuda.is_available() else [("cuda", "no CUDA device")]))
+def test_reproduce_cli_refuses_an_unavailable_device_before_any_work(tmp_path, capsys, device, message):
+    out = tmp_path / "tables"
+    code = cli_main(["reproduce", "beltrami", "--out", str(out), "--device", device])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and message in err[0]
+    assert not out.exists()
+
+
+def test_reproduce_runs_the_networks_on_the_requested_device(tmp_path, monkeypatch):
+    """The experiment loads its models onto the device it is given (checked on the CPU, with the table builders
+    replaced by a probe so that nothing heavy runs)."""
+    import rfmap.experiments as E
+
+    seen = []
+
+    class Probe:
+        def save(self, out):
+            return []
+
+    monkeypatch.setattr(E, "beltrami_table", lambda sur: (seen.append(sur.device) or Probe(), None))
+    monkeypatch.setattr(E, "beltrami_resolution_table", lambda sur: (Probe(), None))
+    E.reproduce("beltrami", tmp_path, device=torch.device("cpu"))
+    assert seen == [torch.device("cpu")]

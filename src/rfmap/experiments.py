@@ -271,15 +271,16 @@ def resolution_table(sur, ns=None, refine: bool = False, classical: bool = True,
     return _density_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(label), refine, "square", classical)
 
 
-def reproduce(experiment: str, out_dir, *, refine: bool = True) -> list[Path]:
-    """Write the tables of one experiment (``beltrami``, ``dem2d``, ``dem3d``) as Markdown and CSV."""
+def reproduce(experiment: str, out_dir, *, refine: bool = True, device="cpu") -> list[Path]:
+    """Write the tables of one experiment (``beltrami``, ``dem2d``, ``dem3d``) as Markdown and CSV; the networks
+    run on ``device`` (``'cpu'``, ``'cuda'`` or ``'auto'``), the classical solvers on the CPU."""
     from .surrogate import Surrogate, models
 
     def need(name):
         if name not in models():
             raise ValueError(f"the pretrained model {name!r} is not shipped with this version; train it with "
                              f"`rfmap train --config {name} --preset full`")
-        return Surrogate.pretrained(name)
+        return Surrogate.pretrained(name, device=device)
 
     paths: list[Path] = []
     if experiment == "beltrami":
