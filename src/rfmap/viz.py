@@ -623,11 +623,15 @@ def time_accuracy_figure(rows: list[dict], *, title: str | None = None):
     return fig
 
 
-def validation_vs_time(metas: dict, ax=None, *, key: str = "std_rho_map"):
+def validation_vs_time(metas: dict, ax=None, *, key: str | None = None):
     """The mean held-out validation metric of each model against its training wall time (minutes, cumulative
-    over ``--init`` chains), from the metadata histories (``Surrogate.meta``); log y axis; returns the axes."""
+    over ``--init`` chains), from the metadata histories (``Surrogate.meta``); ``key`` defaults to the metric the
+    histories share (``std_rho_map`` for densities, ``mean_dd`` for Beltrami maps); log y axis; returns the axes."""
     import matplotlib.pyplot as plt
 
+    if key is None:
+        keys = [_val_key(m.get("history", {}).get("validation", [])) for m in metas.values()]
+        key = next((k for k in keys if k), "std_rho_map")
     if ax is None:
         _, ax = plt.subplots(figsize=(5.2, 3.4), layout="constrained")
     for k, (name, meta) in enumerate(metas.items()):
