@@ -24,6 +24,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
+from .model import check_input
+
 __all__ = ["FNONet", "fno_available"]
 
 
@@ -99,13 +101,6 @@ class FNONet(nn.Module):
         return 4
 
     def forward(self, x: Tensor) -> Tensor:
-        if x.dim() != self.dim + 2:
-            raise ValueError(f"a {self.dim}D model expects input of shape (B, C, {', '.join(['N'] * self.dim)}), "
-                             f"got {tuple(x.shape)}")
-        if x.shape[1] != self.in_channels:
-            raise ValueError(f"model expects {self.in_channels} channels ({self.dim} coordinates + {self.n_params} "
-                             f"parameters), got {x.shape[1]}")
-        if min(x.shape[2:]) < self.min_size:
-            raise ValueError(f"grid too small for this model: sides {tuple(x.shape[2:])}, need >= {self.min_size}")
+        check_input(self, x)
         return self.net(x)
 

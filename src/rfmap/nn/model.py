@@ -7,11 +7,24 @@ from torch.nn import functional as F
 
 from .blocks import EnhancedDoubleConv, MultiResolutionLift, conv_cls, conv_transpose_cls, resize
 
-__all__ = ["MultiResUNet", "boundary_mask", "apply_displacement", "BOUNDARIES"]
+__all__ = ["MultiResUNet", "boundary_mask", "apply_displacement", "check_input", "BOUNDARIES"]
 
 #: boundary conditions: ``fixed`` (identity on the boundary), ``square`` (vertices slide along their wall,
 #: the cube in 3D), ``free`` (no constraint)
 BOUNDARIES = ("fixed", "square", "free")
+
+
+def check_input(net: nn.Module, x: Tensor) -> None:
+    """Raise a clear ``ValueError`` unless ``x`` fits the displacement network ``net`` (attributes ``dim``,
+    ``n_params``, ``in_channels``, ``min_size``): shape (B, d + m, *S) with d spatial sides >= ``min_size``."""
+    if x.dim() != net.dim + 2:
+        raise ValueError(f"a {net.dim}D model expects input of shape (B, C, {', '.join(['N'] * net.dim)}), "
+                         f"got {tuple(x.shape)}")
+    if x.shape[1] != net.in_channels:
+        raise ValueError(f"model expects {net.in_channels} channels ({net.dim} coordinates + {net.n_params} "
+                         f"parameters), got {x.shape[1]}")
+    if min(x.shape[2:]) < net.min_size:
+        raise ValueError(f"grid too small for this model: sides {tuple(x.shape[2:])}, need >= {net.min_size}")
 
 
 class MultiResUNet(nn.Module):
@@ -66,14 +79,7 @@ class MultiResUNet(nn.Module):
         return 2 ** self.depth + 1
 
     def forward(self, x: Tensor) -> Tensor:
-        if x.dim() != self.dim + 2:
-            raise ValueError(f"a {self.dim}D model expects input of shape (B, C, {', '.join(['N'] * self.dim)}), "
-                             f"got {tuple(x.shape)}")
-        if x.shape[1] != self.in_channels:
-            raise ValueError(f"model expects {self.in_channels} channels ({self.dim} coordinates + {self.n_params} "
-                             f"parameters), got {x.shape[1]}")
-        if min(x.shape[2:]) < self.min_size:
-            raise ValueError(f"grid too small for this model: sides {tuple(x.shape[2:])}, need >= {self.min_size}")
+        check_input(self, x)
         pool = F.avg_pool2d if self.dim == 2 else F.avg_pool3d
         h = self.lift(x)
         skips = []
