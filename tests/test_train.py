@@ -15,6 +15,7 @@ from safetensors.torch import load_file
 
 import rfmap.train as T
 from rfmap.config import get_config
+from rfmap.nn import build_model
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import sample_batch, task_loss
 from rfmap.validation import validation_fields
@@ -48,7 +49,7 @@ def test_training_lowers_the_loss(trained):
     its loss by at least 5% (measured: 12% for seed 0, 27% for seed 1)."""
     cfg, out, sur = trained
     torch.manual_seed(cfg.seed)
-    untrained = T.MultiResUNet(cfg.task.dim, cfg.task.n_params, cfg.model.base, cfg.model.depth).eval()
+    untrained = build_model(cfg.model.kwargs(cfg.task.dim, cfg.task.n_params)).eval()
     before = _held_out_loss(untrained, cfg)
     after = _held_out_loss(sur.model, cfg)
     assert before > 0.01
