@@ -2,11 +2,11 @@ r"""Neural warm starts: a surrogate's density-equalizing map finished by the flo
 
 The network gives a map :math:`u_0` of the ``N``-grid in milliseconds, but leaves a residual density
 :math:`\tilde\rho_e = \text{population}_e / |u_0(e)|` whose variation (typically 0.05–0.25) is well above what the
-classical solvers reach.  :func:`polish_map` removes it with :func:`rfmap.solvers.flow.solve_flow` started from
+classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flow.solve_flow`` started from
 :math:`u_0`:
 
 1. The residual density is evaluated *exactly* on the flow's raster: every raster node is located in the mapped
-   mesh (:func:`rfmap.solvers.flow.rasterize_elements`) and takes the value :math:`\tilde\rho_e` of its element.
+   mesh (``rfmap.solvers.flow.rasterize_elements``) and takes the value :math:`\tilde\rho_e` of its element.
    Binning element centroids on a coarse raster instead blurs :math:`\tilde\rho` at the scale of the error it should
    remove, and the finishing flow then stalls near the network's own error.
 2. The finishing flow moves :math:`u_0`'s points: a vertex at :math:`u_0(x)` is carried by the flow that equalizes

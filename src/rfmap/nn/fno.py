@@ -56,7 +56,7 @@ class FNONet(nn.Module):
     padding : float
         Zero padding on each side before the Fourier layers, as a fraction of the side (non-periodic domain).
 
-    Shapes: (B, d + m, *S) -> (B, d, *S), any uniform grid with every side >= :attr:`min_size`.
+    Shapes: ``(B, d + m, *S) -> (B, d, *S)``, any uniform grid with every side >= :attr:`min_size`.
     """
 
     arch = "fno"
