@@ -19,7 +19,7 @@ from rfmap.mesh import element_measures, grid_mesh
 from rfmap.result import MapResult
 from rfmap.solvers import SOLVERS, get_solver, solve_dem, solve_lbs
 from rfmap.solvers.diffusion import CosineDiffusion, cosine_coefficients, p1_upsample
-from rfmap.solvers.lbs import beltrami_matrices
+from rfmap.solvers.lbs import _Factor, assemble_stiffness, beltrami_matrices, grid_dissection_order
 
 
 def centroid_mu(name: str, n: int) -> np.ndarray:
@@ -150,6 +150,38 @@ def test_lbs_second_order_convergence(name):
     order = -np.polyfit(np.log(ns - 1.0), np.log(errs), 1)[0]
     assert 1.75 < order < 2.25, (name, errs, order)
     assert errs[-1] < 3e-5
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (7, 5), (40, 33)])
+def test_grid_dissection_order_is_a_nested_dissection(shape):
+    """A permutation in which each separator line comes after both halves it separates (checked at the top level:
+    the vertices of the middle line of the longer side are last, after every vertex on either side)."""
+    i, j = np.meshgrid(np.arange(shape[0]), np.arange(shape[1]), indexing="ij")
+    ij = np.stack([i.ravel(), j.ravel()], 1)
+    order = grid_dissection_order(ij, leaf=4)
+    assert np.array_equal(np.sort(order), np.arange(ij.shape[0]))
+    if ij.shape[0] > 4:
+        axis = 0 if shape[0] >= shape[1] else 1
+        mid = (shape[axis] - 1) // 2
+        sep = np.flatnonzero(ij[order, axis] == mid)
+        assert np.array_equal(sep, np.arange(ij.shape[0] - len(sep), ij.shape[0]))
+
+
+@pytest.mark.parametrize("n", [9, 33])
+def test_lbs_nested_dissection_factor_matches_minimum_degree(n):
+    """The nested-dissection LU solves the reduced LBS system as the minimum-degree LU does (to 1e-10)."""
+    mesh = grid_mesh(n, 2)
+    c = mesh.points[mesh.elements].mean(1)
+    mu = 0.8 * np.exp(-((c[:, 0] - 0.5) ** 2 + (c[:, 1] - 0.4) ** 2) / 0.02) * np.exp(6j * c[:, 0])
+    K = assemble_stiffness(mesh.points, mesh.elements, beltrami_matrices(mu)).tocsc()
+    free = np.flatnonzero(~mesh.boundary_mask())
+    A = K[free][:, free]
+    b = np.random.default_rng(0).normal(size=(free.size, 2))
+    ij = np.rint(mesh.points[free] * (n - 1)).astype(int)
+    x_nd = _Factor(A, grid_dissection_order(ij)).solve(b)
+    x_md = _Factor(A).solve(b)
+    assert np.abs(A @ x_nd - b).max() < 1e-10 * np.abs(b).max()
+    np.testing.assert_allclose(x_nd, x_md, atol=1e-10)
 
 
 def test_lbs_square_boundary_slides():
