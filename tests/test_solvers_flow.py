@@ -111,6 +111,21 @@ def test_no_fold_on_hard_fields(d, n, seed):
         assert m.n_flipped == 0 and m.std_rho_map < 0.5 * m.std_rho_orig
 
 
+def test_stalled_pass_is_redone_with_a_blurred_density():
+    """A ramp sharper than the mesh (an unseen validation field, free boundary, N = 51) squeezes one element to zero
+    measure at t ~ 0.09 of the unblurred flow, so no step is accepted: the pass must be redone with a blurred
+    density (recorded in ``stall_blurs``) and end fold-free and more equal than it started, quickly."""
+    from rfmap.experiments import benchmark_fields
+
+    dens = dict(benchmark_fields(2, 51, paper=False, random=4))["random-3"]
+    res = solve_flow(dens, boundary="free")
+    m = res.metrics()
+    assert res.info["stall_blurs"], "the unblurred pass no longer stalls on this field: pick another"
+    assert m.n_flipped == 0 and m.std_rho_map < 0.2 * m.std_rho_orig
+    assert res.info["steps"] + res.info["rejected"] < 2000
+    assert not solve_flow(dens, boundary="square").info["stall_blurs"]
+
+
 def test_warm_start_continues_a_map():
     """Starting from a partial map (half the flow's displacement) finishes it; a folded start is rejected."""
     dens = sample_density("sin-cos", 33)

@@ -32,6 +32,10 @@ Numerical method:
    predictor–corrector difference :math:`\max|x' - x^*|` is at most ``rtol`` grid spacings *and* no element of the
    mesh has turned over (all signed measures stay positive); otherwise it is retried with a smaller
    :math:`\Delta t`.  The step then grows or shrinks with the usual rule for an embedded first/second-order pair.
+   A density jump sharper than the mesh can make the sampled velocity squeeze one element to zero measure in finite
+   time, so that no step, however short, is accepted; when the step falls below ``STALL_DT`` the pass is redone
+   with the density blurred over 1, 2, then 4 vertex spacings (``STALL_BLURS``; recorded in ``info["stall_blurs"]``)
+   and later passes correct the residual the blur leaves.
 5. **Passes.**  Interpolation and time-stepping leave a residual.  After a pass the density that remains on the
    mapped mesh, :math:`\tilde\rho_e = \text{population}_e / |T(e)|` (population of the element over its mapped
    measure), is rasterized exactly by locating every raster node in the mapped mesh (:func:`rasterize_elements`),
@@ -229,6 +233,16 @@ def residual_density(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, 
     return density[elements].mean(1) * _measures(ref, elements) / _measures(mapped, elements)
 
 
+class _Stalled(RuntimeError):
+    """A pass cannot advance: every step, however short, turns an element over (a collapsing element)."""
+
+
+#: a pass stalls when the step falls below this (in units of the unit time interval)
+STALL_DT = 1e-9
+#: blur widths (vertex grid spacings) of the retries of a stalled pass
+STALL_BLURS = (1.0, 2.0, 4.0)
+
+
 class _FlowPass:
     """One pass of the flow: the flux of one density raster and the time integration from t = 0 to 1."""
 
@@ -262,6 +276,8 @@ class _FlowPass:
                 raise RuntimeError(f"flow map did not reach t = 1 in {max_steps} steps (t={t:.4g}); "
                                    "increase max_steps or rtol")
             dt = min(dt, 1.0 - t)
+            if dt < STALL_DT:
+                raise _Stalled(f"flow step fell below {STALL_DT:g} at t = {t:.4g} (a collapsing element)")
             y_pred = project(y + dt * k1)
             k2 = self.velocity(t + dt, y_pred)
             y_new = project(y + (0.5 * dt) * (k1 + k2))
@@ -333,7 +349,8 @@ def solve_flow(
         Width (in vertex grid spacings) of a Gaussian blur of the first pass's density (:func:`gaussian_blur`),
         halved at every further pass, as cartogram programs do to soften sharp edges; 0 turns it off.
     max_steps : int
-        Most (accepted + rejected) steps of one pass; ``RuntimeError`` if exceeded.
+        Most (accepted + rejected) steps of one pass; ``RuntimeError`` if exceeded, or if a pass still stalls
+        with the density blurred over ``STALL_BLURS[-1]`` vertex spacings.
     start : ndarray, shape (N**d, d), optional
         A fold-free map of the grid's vertices to start from (for ``"square"`` inside the unit square/cube with
         boundary vertices on their walls; for ``"free"`` inside the sea box).  The first pass then flows the density
@@ -348,7 +365,8 @@ def solve_flow(
         ``kind="density"``, ``field`` the vertex densities (N**d,), ``time`` the wall-clock seconds; ``info`` holds
         ``method="flow"``, ``passes``, ``steps`` / ``rejected`` / ``fold_rejections`` / ``evaluations`` summed over
         the passes, ``std_history`` (:math:`\mathrm{Std}(\tilde\rho_{\text{map}})` after each pass, preceded by the
-        starting map's), ``eval_grid`` (``M``), ``box_grid`` and, for ``"free"``, ``sea_density``.
+        starting map's), ``eval_grid`` (``M``), ``box_grid``, ``stall_blurs`` (the blur widths, in vertex spacings,
+        of passes redone after a stall; usually empty) and, for ``"free"``, ``sea_density``.
 
     Raises
     ------
@@ -431,6 +449,7 @@ def solve_flow(
     best, best_std = mapped, history[0]
 
     totals = {"steps": 0, "rejected": 0, "fold_rejections": 0, "evaluations": 0}
+    stall_retries: list[float] = []
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -454,9 +473,23 @@ def solve_flow(
                     bar.set_description(f"flow {d}D N={n} pass {passes + 1}")
                     bar.n = 0
                     bar.refresh()
-                fp = _FlowPass(raster, blur * 0.5 ** passes / (n - 1) / scale)
-                y, info = fp.run(y, measures, project, h=1.0 / (nb - 1), rtol=float(rtol),
-                                 max_steps=int(max_steps), bar=bar)
+                width = blur * 0.5 ** passes
+                for retry in range(len(STALL_BLURS) + 1):
+                    fp = _FlowPass(raster, width / (n - 1) / scale)
+                    try:
+                        y_next, info = fp.run(y, measures, project, h=1.0 / (nb - 1), rtol=float(rtol),
+                                              max_steps=int(max_steps), bar=bar)
+                    except _Stalled as exc:
+                        totals["evaluations"] += fp.evaluations
+                        if retry == len(STALL_BLURS):
+                            raise RuntimeError(f"flow map stalled even with the density blurred over {width:g} "
+                                               f"grid spacings: {exc}") from None
+                        # a density jump sharper than the mesh: blur it (as cartogram programs do) and redo the pass
+                        width = max(width, STALL_BLURS[retry])
+                        stall_retries.append(width)
+                        continue
+                    break
+                y = y_next
                 for k in ("steps", "rejected", "fold_rejections"):
                     totals[k] += info[k]
                 totals["evaluations"] += fp.evaluations
@@ -475,7 +508,8 @@ def solve_flow(
             bar.close()
     elapsed = time.perf_counter() - t_start
     info = {"method": "flow", "boundary": boundary, "n": n, "dim": d, "passes": passes, **totals,
-            "std_history": history, "warm_start": start is not None, "eval_grid": m, "box_grid": nb}
+            "std_history": history, "warm_start": start is not None, "eval_grid": m, "box_grid": nb,
+            "stall_blurs": stall_retries}
     if sea is not None:
         info["sea_density"] = sea
     return MapResult(ref_points=ref, mapped_points=best, elements=elements, field=field, kind="density",
