@@ -93,6 +93,49 @@ def test_boundary_loop_and_crossings():
     assert len(boundary_crossings(bow)) == 1
 
 
+def _crossings_brute_force(poly):
+    """Every pair of non-adjacent edges, the same orientation test: O(k^2) reference."""
+    k = len(poly)
+    a, b = poly, np.roll(poly, -1, axis=0)
+
+    def orient(p, q, r):
+        return (q[0] - p[0]) * (r[1] - p[1]) - (q[1] - p[1]) * (r[0] - p[0])
+
+    out = []
+    for i in range(k):
+        for j in range(i + 2, k):
+            if j - i == k - 1:
+                continue
+            box = (np.minimum(a[i], b[i]) <= np.maximum(a[j], b[j])).all() and \
+                  (np.minimum(a[j], b[j]) <= np.maximum(a[i], b[i])).all()
+            if box and orient(a[i], b[i], a[j]) * orient(a[i], b[i], b[j]) <= 0 and \
+                    orient(a[j], b[j], a[i]) * orient(a[j], b[j], b[i]) <= 0:
+                out.append((i, j))
+    return np.array(out, dtype=np.int64).reshape(-1, 2)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_boundary_crossings_match_brute_force(seed):
+    """Bucketed candidates find exactly the crossings of the O(k^2) test, also when a few edges are stretched far
+    beyond the others (the case that made every bucket hold every edge) or have zero length."""
+    rng = np.random.default_rng(seed)
+    n = 21
+    poly = grid_mesh(n, 2).points[boundary_loop(n)] + rng.normal(scale=0.03, size=(4 * (n - 1), 2))
+    if seed % 2:
+        poly[rng.integers(len(poly), size=2)] = rng.uniform(-0.5, 1.5, size=(2, 2))  # long edges
+    if seed == 4:
+        poly[10] = poly[11]  # a zero-length edge
+    got = boundary_crossings(poly)
+    want = _crossings_brute_force(poly)
+    assert len(want) > 0 or seed == 0
+    np.testing.assert_array_equal(got[np.lexsort(got.T[::-1])], want)
+    # only the crossings of some edges (the local check after moving a few vertices; -1 is the last edge)
+    edges = np.array([-1, 3, 17, 40, 41])
+    local = boundary_crossings(poly, edges)
+    mine = want[np.isin(want, edges % len(poly)).any(1)]
+    np.testing.assert_array_equal(local[np.lexsort(local.T[::-1])], mine)
+
+
 @pytest.mark.parametrize("boundary", ["square", "free"])
 def test_3d_inverted_region_repaired(boundary):
     n = 11

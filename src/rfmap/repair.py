@@ -49,6 +49,7 @@ G. P. T. Choi, C. H. Rycroft, "Density-equalizing maps for simply connected open
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
@@ -114,17 +115,23 @@ def boundary_loop(n: int) -> np.ndarray:
     return np.concatenate([bottom, right, top, left])
 
 
-def boundary_crossings(poly: np.ndarray) -> np.ndarray:
+def boundary_crossings(poly: np.ndarray, edges: np.ndarray | None = None) -> np.ndarray:
     r"""Pairs of properly crossing edges of a closed polygon (edge ``k`` joins vertices ``k`` and ``k+1``).
 
-    Candidate pairs come from a uniform bucket grid whose cell is the largest edge extent, so the cost is about
-    linear in the number of edges for the near-square boundaries met here.  Edges sharing a vertex are not
+    Candidate pairs come from a uniform bucket grid whose cell is twice the median edge extent (an edge is entered
+    in every cell its bounding box meets), so the cost is about linear in the number of edges plus the total
+    length of the long ones, even when a few edges are stretched far beyond the others.  Edges sharing a vertex are not
     compared; two edges cross when each one's endpoints lie strictly on opposite sides of the other (orientation
     test), or when they touch (a zero orientation with overlapping extents counts as a crossing).
+
+    With ``edges``, only the crossings that involve one of these edges are returned: each is tested against
+    every edge directly (the check after moving a few vertices, as in :func:`scale_repair`).
 
     Parameters
     ----------
     poly : ndarray, shape (k, 2)
+    edges : int ndarray, optional
+        Edge indices in ``[0, k)``.
 
     Returns
     -------
@@ -134,19 +141,29 @@ def boundary_crossings(poly: np.ndarray) -> np.ndarray:
     k = P.shape[0]
     a, b = P, np.roll(P, -1, axis=0)
     lo, hi = np.minimum(a, b), np.maximum(a, b)
-    cell = max(float((hi - lo).max()), 1e-12)
+    if edges is not None and len(edges) * k <= 1 << 18:
+        e = np.unique(np.asarray(edges, np.int64) % k)
+        near = (lo[e, None] <= hi[None]).all(2) & (lo[None] <= hi[e, None]).all(2)  # (len(e), k) boxes meet
+        ii, jj = np.nonzero(near)
+        i, j = np.minimum(e[ii], jj), np.maximum(e[ii], jj)
+        return _crossing_pairs(a, b, i, j, k)
+    ext = (hi - lo).max(1)
+    # the cell is twice the median edge extent: a typical edge meets at most 2 x 2 cells, and a long edge (a
+    # stretched boundary) is entered in every cell its bounding box meets instead of inflating every cell
+    # (and no finer than 1/(4 sqrt k) of the whole polygon's extent, so that degenerate edges cannot explode it)
+    whole = float((P.max(0) - P.min(0)).max())
+    cell = max(2.0 * float(np.median(ext)), whole / (4.0 * math.sqrt(k)), 1e-12)
     c0 = np.floor(lo / cell).astype(np.int64)
-    c1 = np.floor(hi / cell).astype(np.int64)  # c1 - c0 in {0, 1} per axis
-    ids, keys = [], []
-    for dx in (0, 1):
-        for dy in (0, 1):
-            ok = (c0[:, 0] + dx <= c1[:, 0]) & (c0[:, 1] + dy <= c1[:, 1])
-            e = np.flatnonzero(ok)
-            ids.append(e)
-            keys.append((c0[e, 0] + dx) * 1_000_003 + (c0[e, 1] + dy))
-    ids, keys = np.concatenate(ids), np.concatenate(keys)
+    c1 = np.floor(hi / cell).astype(np.int64)
+    span = c1 - c0 + 1  # (k, 2) cells per axis
+    count = span.prod(1)
+    edge = np.repeat(np.arange(k), count)
+    r = np.arange(edge.size) - np.repeat(np.cumsum(count) - count, count)
+    cx = c0[edge, 0] + r % span[edge, 0]
+    cy = c0[edge, 1] + r // span[edge, 0]
+    keys = (cx - cx.min()) * (int(cy.max() - cy.min()) + 1) + (cy - cy.min())
     order = np.argsort(keys, kind="stable")
-    ids, keys = ids[order], keys[order]
+    ids, keys = edge[order], keys[order]
     pi, pj = [], []
     off = 1
     while off < len(keys):
@@ -160,14 +177,19 @@ def boundary_crossings(poly: np.ndarray) -> np.ndarray:
         return np.zeros((0, 2), dtype=np.int64)
     i, j = np.concatenate(pi), np.concatenate(pj)
     i, j = np.minimum(i, j), np.maximum(i, j)
+    box = (lo[i] <= hi[j]).all(1) & (lo[j] <= hi[i]).all(1)
+    pairs = _crossing_pairs(a, b, i[box], j[box], k)
+    if edges is not None:
+        pairs = pairs[np.isin(pairs, np.asarray(edges, np.int64) % k).any(1)]
+    return pairs
+
+
+def _crossing_pairs(a: np.ndarray, b: np.ndarray, i: np.ndarray, j: np.ndarray, k: int) -> np.ndarray:
+    """The candidate pairs ``i < j`` (boxes meeting) of non-adjacent edges that cross, unique and sorted."""
     gap = j - i
     keep = (gap > 1) & (gap < k - 1)
-    pairs = np.unique(np.stack([i[keep], j[keep]], 1), axis=0)
-    if pairs.size == 0:
-        return pairs.reshape(0, 2)
-    i, j = pairs[:, 0], pairs[:, 1]
-    box = (lo[i] <= hi[j]).all(1) & (lo[j] <= hi[i]).all(1)
-    i, j = i[box], j[box]
+    code = np.unique(i[keep] * k + j[keep])
+    i, j = code // k, code % k
 
     def orient(p, q, r):
         return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
@@ -387,14 +409,23 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
         if side * side == n_pts and np.allclose(ref, grid_points(side, 2)):
             loop = boundary_loop(side)
 
-    def failing(u, els):
-        """Vertices to revert: those of elements below threshold (and of crossing free-boundary edges)."""
+    on_loop = np.zeros(n_pts, bool)
+    loop_pos = np.full(n_pts, -1)
+    if loop is not None:
+        on_loop[loop] = True
+        loop_pos[loop] = np.arange(len(loop))
+
+    def failing(u, els, moved=None):
+        """Vertices to revert: those of elements below threshold (and of crossing free-boundary edges; the
+        boundary is only re-checked when a vertex in ``moved`` lies on it, since nothing else can change it)."""
         E = (u[el[els, 1:]] - u[el[els, :1]]).transpose(0, 2, 1)
         det = np.linalg.det(E) if d == 3 else E[:, 0, 0] * E[:, 1, 1] - E[:, 0, 1] * E[:, 1, 0]
         bad = els[~(det >= tau[els])]
         v = el[bad].ravel()
-        if loop is not None:
-            c = boundary_crossings(u[loop])
+        if loop is not None and (moved is None or on_loop[moved].any()):
+            # a crossing needs a moved boundary vertex: the edges on either side of each one
+            pos = None if moved is None else loop_pos[moved[on_loop[moved]]]
+            c = boundary_crossings(u[loop], None if pos is None else np.concatenate([pos, pos - 1]))
             if len(c):
                 v = np.concatenate([v, loop[c.ravel()], loop[(c.ravel() + 1) % len(loop)]])
         return np.unique(v)
@@ -428,14 +459,15 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
         prop = s.copy()
         prop[active] = np.where(hi[active] >= 1.0, 1.0, 0.5 * (s[active] + hi[active]))
         changed = active
+        u = ref + prop[:, None] * disp
         while len(changed):
-            u = ref + prop[:, None] * disp
-            bad = failing(u, touching(changed))
+            bad = failing(u, touching(changed), changed)
             bad = bad[prop[bad] != s[bad]]
             if len(bad) == 0:
                 break
             hi[bad] = np.minimum(hi[bad], prop[bad])
             prop[bad] = s[bad]
+            u[bad] = ref[bad] + prop[bad, None] * disp[bad]  # only the reverted vertices move
             changed = bad
         s = prop
         hi = np.maximum(hi, s)
