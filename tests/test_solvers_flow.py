@@ -124,6 +124,8 @@ def test_stalled_pass_is_redone_with_a_blurred_density():
     assert m.n_flipped == 0 and m.std_rho_map < 0.2 * m.std_rho_orig
     assert res.info["steps"] + res.info["rejected"] < 2000
     assert not solve_flow(dens, boundary="square").info["stall_blurs"]
+    with pytest.raises(RuntimeError, match="stalled"):  # no retries: the stall is an error at once
+        solve_flow(dens, boundary="free", stall_blurs=())
 
 
 def test_warm_start_continues_a_map():

@@ -18,8 +18,9 @@ classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flo
    non-uniform target :math:`J_{u_0}`, which the density-equalizing flow does not solve.
 3. A poor network map is not worth finishing: when :math:`u_0` has folded elements, leaves the sea box, or removes
    less than half of the input's density variation (:data:`POOR`), the flow starts cold from the identity instead,
-   and the report says so.  So it does when the warm flow stalls (more than :data:`WARM_STEPS` steps: a
-   near-degenerate element of :math:`u_0` keeps cutting the fold-free step).
+   and the report says so.  So it does when the warm flow stalls (more than :data:`WARM_STEPS` steps, or a step
+   below ``rfmap.solvers.flow.STALL_DT``: a near-degenerate element of :math:`u_0` keeps cutting the fold-free
+   step; the warm flow is not retried with a blurred density).
 """
 from __future__ import annotations
 
@@ -111,7 +112,8 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
     res = None
     if reason is None:
         try:  # a warm flow whose steps keep being cut (near-degenerate elements of u0) is abandoned early
-            res = solve_flow(grid, boundary=boundary, start=mapped, progress=progress, max_steps=WARM_STEPS, **kw)
+            res = solve_flow(grid, boundary=boundary, start=mapped, progress=progress, max_steps=WARM_STEPS,
+                             stall_blurs=(), **kw)
         except RuntimeError as e:
             reason = f"the warm flow stalled ({e})"
     if res is None:

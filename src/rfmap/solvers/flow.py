@@ -316,6 +316,7 @@ def solve_flow(
     max_steps: int = 10_000,
     start=None,
     num_threads: int | None = None,
+    stall_blurs: tuple[float, ...] = STALL_BLURS,
 ) -> MapResult:
     r"""Flow-based density-equalizing map (Gastner, Seguy & More 2018) of the unit square or cube.
 
@@ -350,11 +351,14 @@ def solve_flow(
         halved at every further pass, as cartogram programs do to soften sharp edges; 0 turns it off.
     max_steps : int
         Most (accepted + rejected) steps of one pass; ``RuntimeError`` if exceeded, or if a pass still stalls
-        with the density blurred over ``STALL_BLURS[-1]`` vertex spacings.
+        with the density blurred over the last of ``stall_blurs``.
     start : ndarray, shape (N**d, d), optional
         A fold-free map of the grid's vertices to start from (for ``"square"`` inside the unit square/cube with
         boundary vertices on their walls; for ``"free"`` inside the sea box).  The first pass then flows the density
         that this map leaves on its image.
+    stall_blurs : tuple of float
+        Blur widths (vertex spacings) of the retries of a stalled pass (see the module docstring); ``()`` makes a
+        stall a ``RuntimeError`` at once (the hybrid then starts cold rather than blur a warm start).
     num_threads : int, optional
         Torch threads for the interpolation and the element measures (restored afterwards); as in
         ``rfmap.solvers.diffusion.solve_dem``, default 1 in 2D and torch's setting in 3D.
@@ -474,18 +478,18 @@ def solve_flow(
                     bar.n = 0
                     bar.refresh()
                 width = blur * 0.5 ** passes
-                for retry in range(len(STALL_BLURS) + 1):
+                for retry in range(len(stall_blurs) + 1):
                     fp = _FlowPass(raster, width / (n - 1) / scale)
                     try:
                         y_next, info = fp.run(y, measures, project, h=1.0 / (nb - 1), rtol=float(rtol),
                                               max_steps=int(max_steps), bar=bar)
                     except _Stalled as exc:
                         totals["evaluations"] += fp.evaluations
-                        if retry == len(STALL_BLURS):
-                            raise RuntimeError(f"flow map stalled even with the density blurred over {width:g} "
-                                               f"grid spacings: {exc}") from None
+                        if retry == len(stall_blurs):
+                            raise RuntimeError(f"flow map stalled with the density blurred over {width:g} grid "
+                                               f"spacings: {exc}") from None
                         # a density jump sharper than the mesh: blur it (as cartogram programs do) and redo the pass
-                        width = max(width, STALL_BLURS[retry])
+                        width = max(width, stall_blurs[retry])
                         stall_retries.append(width)
                         continue
                     break
