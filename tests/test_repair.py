@@ -11,7 +11,8 @@ import torch
 from rfmap.geometry import beltrami_coefficient
 from rfmap.mesh import element_measures, grid_mesh
 from rfmap.nn import MultiResUNet
-from rfmap.repair import (DELTA, boundary_crossings, boundary_loop, cap_mu, grid_min_measure, lbs_repair,
+from rfmap.repair import (DELTA, LOCAL_RINGS, boundary_crossings, boundary_loop, cap_mu, grid_min_measure,
+                          lbs_repair, local_lbs_repair,
                           repair_map, scale_repair)
 from rfmap.stress import hard_beltrami, hard_density
 from rfmap.surrogate import Surrogate
@@ -31,14 +32,21 @@ def pushed(n, dim, shift):
     return mesh, p
 
 
+@pytest.mark.parametrize("method", ["auto", "lbs"])
 @pytest.mark.parametrize("boundary", ["fixed", "square", "free"])
 @pytest.mark.parametrize("shift", [(0.12, 0.07), (0.2, 0.0), (-0.06, 0.1)])
-def test_2d_folded_grid_repaired(boundary, shift):
+def test_2d_folded_grid_repaired(boundary, shift, method):
     mesh, p = pushed(17, 2, shift)
     assert flipped(p, mesh) > 0
-    out, rep = repair_map(mesh.points, p, mesh.elements, boundary=boundary, grid_n=17)
+    out, rep = repair_map(mesh.points, p, mesh.elements, boundary=boundary, grid_n=17, method=method)
     assert rep["needed"] and rep["n_flipped_before"] == flipped(p, mesh) and rep["n_flipped_after"] == 0
-    assert flipped(out, mesh) == 0 and rep["method"].startswith("lbs")
+    assert flipped(out, mesh) == 0
+    # auto: a patch around the pushed vertex; lbs: the global rebuild; the scaling after either if still folded
+    # (the LBS itself folds a triangle for the third shift, with any patch)
+    if method == "lbs":
+        assert rep["method"] in ("lbs", "lbs+scale")
+    else:
+        assert rep["method"] == ("local" if shift != (-0.06, 0.1) else "lbs+scale")
     bmask = mesh.boundary_mask()
     if boundary == "fixed":
         assert np.abs(out[bmask] - mesh.points[bmask]).max() < 1e-12
@@ -48,9 +56,39 @@ def test_2d_folded_grid_repaired(boundary, shift):
             wall = (x[:, c] == 0) | (x[:, c] == 1)
             assert np.abs(out[wall, c] - x[wall, c]).max() < 1e-12
         assert ((out >= -1e-12) & (out <= 1 + 1e-12)).all()
-    # far from the fold the map is (nearly) the input
+    # far from the fold the map is (nearly) the input; the local repair leaves it exactly as it was
     far = np.linalg.norm(mesh.points - 0.5, axis=1) > 0.35
-    assert np.abs(out[far] - p[far]).max() < 0.02
+    assert np.abs(out[far] - p[far]).max() < (0 if rep["method"] == "local" else 0.02) + 1e-15
+
+
+def test_local_repair_keeps_the_map_outside_its_patch():
+    """Only vertices within the largest patch around the fold move, and by less than the input's own fold."""
+    n = 33
+    mesh, p = pushed(n, 2, (0.14, 0.09))
+    out, capped = local_lbs_repair(p, n, "square")
+    assert flipped(out, mesh) == 0 and capped.any()
+    moved = np.flatnonzero(np.abs(out - p).max(1) > 0)
+    ij = np.rint(mesh.points[moved] * (n - 1)).astype(int)
+    assert np.abs(ij - n // 2).max() <= max(LOCAL_RINGS) + 1
+    assert local_lbs_repair(mesh.points, n, "square") is None  # nothing to repair
+
+
+def test_local_repair_gives_way_to_the_global_one_for_a_crossing_free_boundary():
+    n = 17
+    mesh = grid_mesh(n, 2)
+    loop = boundary_loop(n)
+    p = mesh.points.copy()
+    p[loop[3]] = (0.55, -0.03)
+    p[loop[8]] = (0.5, -0.1)
+    assert local_lbs_repair(p, n, "free") is None
+    out, rep = repair_map(mesh.points, p, mesh.elements, boundary="free", grid_n=n)
+    assert rep["method"].startswith("lbs") and flipped(out, mesh) == 0
+
+
+def test_unknown_repair_method():
+    mesh, p = pushed(9, 2, (0.2, 0.0))
+    with pytest.raises(ValueError, match="unknown repair method"):
+        repair_map(mesh.points, p, mesh.elements, boundary="fixed", grid_n=9, method="magic")
 
 
 def test_2d_capped_triangles_within_disk():
@@ -286,4 +324,4 @@ def test_cli_repair_line_and_bad_input(tmp_path, capsys):
     mesh, p = pushed(9, 2, (0.2, 0.0))
     _, rep = repair_map(mesh.points, p, mesh.elements, boundary="fixed", grid_n=9)
     line = repair_summary(rep)
-    assert line.startswith("repair: lbs") and f"{rep['n_flipped_before']} folded -> 0" in line
+    assert line.startswith("repair: local") and f"{rep['n_flipped_before']} folded -> 0" in line

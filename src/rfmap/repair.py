@@ -23,6 +23,12 @@ the coefficient is unchanged (flipped triangles get :math:`\mu = 0`, see :func:`
 map stays close to the input.  The discrete LBS has no bijectivity theorem (its stiffness weights may be negative),
 so its output is checked and, if still folded, handed to the displacement scaling below.
 
+The rebuild is first tried on a patch (:func:`local_lbs_repair`): the truncated triangles grown by 2, 4, 8, then 16
+vertex rings, the patch's rim and the domain boundary held where the map put them.  Folds of a network map are
+usually a few small clusters, so a patch solve costs a fraction of the global one and leaves the rest of the map
+exactly as the network made it.  Widespread folds (over 1 % of the triangles), a free boundary that crosses itself,
+or a patch that stays folded go to the global rebuild.
+
 **3D (and any mesh where the above does not apply): fold-free displacement scaling.**  Write the map as
 :math:`u = x + d(x)` with the displacement :math:`d` (for a surrogate :math:`d = \mathcal{B} \odot \psi`).  The
 identity (:math:`s = 0` in :math:`u_s = x + s\,d`) has every element positive, and every :math:`u_s` satisfies the
@@ -51,9 +57,11 @@ from __future__ import annotations
 
 import math
 import time
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 import torch
 
 from .geometry import beltrami_coefficient, grid_signed_measures, grid_simplices, signed_measures
@@ -63,6 +71,8 @@ __all__ = ["repair_map", "fold_free", "cap_mu", "boundary_loop", "boundary_cross
            "scale_repair", "lbs_repair", "DELTA"]
 
 #: Margin of the μ-truncation: :math:`|\mu| \le 1 - \delta` after repair.
+#: the ``method`` values of :func:`repair_map`
+REPAIR_METHODS = ("auto", "local", "lbs", "scale")
 DELTA = 0.1
 #: Fraction of the reference measure that a formerly folded element must reach in the displacement scaling.
 ETA = 0.05
@@ -311,6 +321,92 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
     return out, capped
 
 
+#: ring counts of the successive patches of :func:`local_lbs_repair`
+LOCAL_RINGS = (2, 4, 8, 16)
+#: a patch larger than this fraction of the vertices (and than ``LOCAL_MIN_GIVE_UP`` vertices) is given up for the
+#: global :func:`lbs_repair`
+LOCAL_MAX_FRACTION = 0.25
+LOCAL_MIN_GIVE_UP = 2000
+#: more truncated triangles than this fraction of all (and than 100) go straight to the global :func:`lbs_repair`
+LOCAL_MAX_CAPPED = 0.01
+
+
+def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA, *,
+                     rings: Sequence[int] = LOCAL_RINGS, max_fraction: float = LOCAL_MAX_FRACTION,
+                     passes: int = 3) -> tuple[np.ndarray, np.ndarray] | None:
+    r"""Rebuild a 2D grid map from its truncated Beltrami coefficient on a patch around the folds only.
+
+    The triangles whose :math:`\mu` :func:`cap_mu` changes (flipped, :math:`|\mu| > 1 - \delta`, non-finite) are
+    grown by ``r`` vertex rings.  On the patch of triangles touching the grown vertices, the LBS system
+    :math:`\nabla\cdot(A\nabla u) = 0` with the truncated :math:`\mu` is solved for the grown vertices off the
+    domain boundary; every other vertex of the patch keeps its position (Dirichlet values).  As in
+    :func:`lbs_repair`, up to ``passes`` times the :math:`\mu` of the rebuilt patch is truncated again and the
+    patch solved again while a triangle is flipped (the discrete LBS has no bijectivity theorem).  Patches of
+    ``rings[0]``, ``rings[1]``, ... rings are tried until one ends fold-free (or folds remain that touch no vertex
+    of the patch's rim, which a larger patch would not undo).  Outside the patch the map is not touched, and the
+    cost is that of sparse solves the size of the patch.
+
+    Returns
+    -------
+    (points, capped) as :func:`lbs_repair`, or ``None`` when more than ``LOCAL_MAX_CAPPED`` of the triangles (and
+    more than 100) are truncated, when no patch of at most ``rings[-1]`` rings and
+    ``max_fraction`` of the vertices (or ``LOCAL_MIN_GIVE_UP`` vertices on small grids) ends fold-free, or when a free boundary crosses itself (boundary vertices keep
+    their positions in a local solve, so only :func:`lbs_repair` can untangle it).
+    """
+    from .mesh import grid_mesh
+    from .solvers.lbs import assemble_stiffness, beltrami_matrices
+
+    mesh = grid_mesh(n, 2)
+    el = mesh.elements
+    n_pts = mesh.points.shape[0]
+    out = np.where(np.isfinite(mapped), mapped, mesh.points).astype(np.float64)
+    if boundary == "free" and len(boundary_crossings(out[boundary_loop(n)])):
+        return None
+    ref_t = torch.as_tensor(mesh.points)
+    mu = beltrami_coefficient(ref_t, torch.as_tensor(out), torch.as_tensor(el)).numpy()
+    mu_c, capped = cap_mu(mu, delta)
+    capped |= _measures(out, el, None) <= 0
+    if not capped.any() or capped.sum() > max(LOCAL_MAX_CAPPED * len(el), 100):
+        return None  # nothing to do, or folds so widespread that the global rebuild costs no more than a patch
+    on_edge = mesh.boundary_mask()
+    grown = np.zeros(n_pts, bool)
+    grown[el[capped]] = True
+    done = 0
+    for r in sorted(rings):
+        for _ in range(r - done):  # one more ring: every vertex of a triangle touching the set
+            grown[el[grown[el].any(1)]] = True
+        done = r
+        free = np.flatnonzero(grown & ~on_edge)
+        if free.size > max(max_fraction * n_pts, LOCAL_MIN_GIVE_UP):
+            return None
+        patch = np.flatnonzero(grown[el].any(1))
+        el_p = el[patch]
+        fixed = np.setdiff1d(np.unique(el_p), free)
+        is_fixed = np.zeros(n_pts, bool)
+        is_fixed[fixed] = True
+        mu_p = mu_c[patch]
+        for _ in range(passes):
+            K = assemble_stiffness(mesh.points, el_p, beltrami_matrices(mu_p)).tocsc()
+            rhs = -(K[free][:, fixed] @ out[fixed])
+            lu = spla.splu(sp.csc_matrix(K[free][:, free]), permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=0.0,
+                           options={"SymmetricMode": True})
+            trial = out.copy()
+            trial[free] = lu.solve(np.ascontiguousarray(rhs))
+            if not np.isfinite(trial).all():
+                break
+            meas = _measures(trial, el_p, None)
+            if meas.min() > 0:
+                hit = np.zeros(len(el), bool)
+                hit[patch] = True
+                return trial, capped & hit
+            mu_p, more = cap_mu(beltrami_coefficient(ref_t, torch.as_tensor(trial), torch.as_tensor(el_p)).numpy(),
+                                delta)
+            capped[patch] |= more
+        if np.isfinite(trial).all() and not is_fixed[el_p[meas <= 0]].any():
+            return None  # folds left inside the patch, away from its rim: a larger patch would not help
+    return None
+
+
 # ----------------------------------------------------------------------------------------------- any dim: scaling
 def _det_coefficients(E_ref: np.ndarray, E_d: np.ndarray) -> np.ndarray:
     r"""Coefficients :math:`c_k` of :math:`\det(E_x + s E_d) = \sum_k c_k s^k`, shape (m, d+1)."""
@@ -504,8 +600,11 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         Target Beltrami coefficient, for ``mean_dmu`` in the report.
     delta : float
         Truncation margin, :math:`|\mu| \le 1 - \delta`.
-    method : {"auto", "lbs", "scale"}
-        ``auto``: LBS for 2D grid meshes, displacement scaling otherwise.
+    method : {"auto", "local", "lbs", "scale"}
+        ``local``: :func:`local_lbs_repair`, falling back to ``lbs`` when no patch ends fold-free; ``lbs``:
+        :func:`lbs_repair` on the whole grid; ``scale``: :func:`scale_repair`.  Any of them ends with
+        :func:`scale_repair` if its result is still folded.  ``auto``: ``local`` for 2D grid meshes, ``scale``
+        otherwise.
 
     Returns
     -------
@@ -516,6 +615,8 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         ``metrics_after``.
     """
     t0 = time.perf_counter()
+    if method not in REPAIR_METHODS:
+        raise ValueError(f"unknown repair method {method!r}; choose one of {REPAIR_METHODS}")
     ref = np.asarray(ref, np.float64)
     d = ref.shape[1]
     el = np.asarray(elements)
@@ -538,10 +639,19 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     mapped = np.asarray(mapped, np.float64)
     before = _metrics(ref, np.where(np.isfinite(mapped), mapped, ref), el, density, mu)
     if method == "auto":
-        method = "lbs" if d == 2 and grid_n else "scale"
+        method = "local" if d == 2 and grid_n else "scale"
     affected = 0
     out = mapped
     used = method
+    if method == "local":
+        if not (d == 2 and grid_n):
+            raise ValueError("the local LBS repair needs a 2D grid mesh (grid_n)")
+        local = local_lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, delta)
+        if local is not None:
+            out, capped = local
+            affected = int(capped.sum())
+        else:  # no patch ended fold-free: the global rebuild
+            method = used = "lbs"
     if method == "lbs":
         if not (d == 2 and grid_n):
             raise ValueError("the LBS repair needs a 2D grid mesh (grid_n)")
