@@ -7,7 +7,7 @@ mapped without the paper's shift; Beltrami coefficients with |mu| up to 0.95), s
 from the model's smallest training side to 256 (2D) or 64 (3D).  For every model and N the table gives: fields,
 fields with any folded element in the raw output and their total of folded elements, folded elements after repair
 (must be 0), the mean repair time on folded fields next to the classical solver's mean time on the first
-``CLASSICAL_SAMPLES`` of those same fields (on the first field of that N when none folds), the ratio of the two
+``--classical`` (default 3) of those same fields (on the first field of that N when none folds), the ratio of the two
 over those fields, and on unfolded fields the check's time as a fraction of the surrogate's own time.
 """
 from __future__ import annotations
@@ -26,8 +26,8 @@ from rfmap.surrogate import Surrogate
 
 MODELS_2D = ["deq2d-square", "deq2d-free", "beltrami2d"]
 MODELS_3D = ["dem3d-cube", "dem3d-free"]
-#: folded fields per N on which the classical solver is timed as well
-CLASSICAL_SAMPLES = 5
+#: folded fields per N on which the classical solver is timed as well (``--classical``)
+CLASSICAL_SAMPLES = 3
 
 
 def sides(sur: Surrogate) -> list[int]:
@@ -53,7 +53,7 @@ def classical_time(sur: Surrogate, field, n) -> float:
     return time.perf_counter() - t
 
 
-def run(name: str, count: int, seed: int) -> None:
+def run(name: str, count: int, seed: int, samples: int = CLASSICAL_SAMPLES) -> None:
     sur = Surrogate.pretrained(name)
     ns = sides(sur)
     rng = np.random.default_rng(seed)
@@ -78,7 +78,7 @@ def run(name: str, count: int, seed: int) -> None:
             r["raw_elements"] += rep["n_flipped_before"]
             r["t_rep"].append(rep["time"])
             r["after"] += int((np.asarray(rep["metrics_after"]["n_flipped"])))
-            if len(r["t_cl"]) < CLASSICAL_SAMPLES:  # the classical solver on the same folded field
+            if len(r["t_cl"]) < samples:  # the classical solver on the same folded field
                 r["t_cl"].append(classical_time(sur, f, n))
         else:
             r["fast"].append(rep["time"] / t_sur)
@@ -106,13 +106,15 @@ def main() -> None:
     p.add_argument("--models", nargs="*", default=MODELS_2D + MODELS_3D)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--classical", type=int, default=CLASSICAL_SAMPLES,
+                   help="folded fields per N on which the classical solver is timed too (at least 1)")
     args = p.parse_args()
     torch.set_num_threads(args.threads)
     m2 = [m for m in args.models if m in MODELS_2D]
     m3 = [m for m in args.models if m not in MODELS_2D]
     for i, name in enumerate(args.models):
         group, total = (m2, args.fields) if name in m2 else (m3, args.fields_3d)
-        run(name, max(1, total // len(group)), args.seed + i)
+        run(name, max(1, total // len(group)), args.seed + i, max(1, args.classical))
 
 
 if __name__ == "__main__":
