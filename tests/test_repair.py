@@ -194,6 +194,24 @@ def test_3d_inverted_region_repaired(boundary):
     assert 0 < rep["affected"] < len(x) // 4
 
 
+def test_scale_repair_starts_locally_on_a_small_fold():
+    """A small fold in a large smooth map: the local start (uniform scale near the fold only) verifies, so only a
+    neighbourhood of the fold is shortened and every other vertex keeps the input map bit for bit."""
+    n = 25
+    mesh = grid_mesh(n, 3)
+    x = mesh.points
+    p = x + 0.04 * np.sin(np.pi * x) * np.array([1.0, -0.5, 0.3])  # a smooth, fold-free deformation ...
+    c = np.ravel_multi_index((n // 2,) * 3, (n,) * 3)
+    p[c] += (0.07, 0.05, 0.0)  # ... with one vertex thrown across its neighbours
+    assert flipped(p, mesh) > 0
+    out, info = scale_repair(x, p, mesh.elements, boundary="square")
+    assert flipped(out, mesh) == 0
+    moved = np.flatnonzero(np.abs(out - p).max(1) > 0)
+    ij = np.rint(x[moved] * (n - 1)).astype(int)
+    assert np.abs(ij - n // 2).max() <= 24 and len(moved) == info["affected"] < 0.1 * len(x)
+    assert info["affected"] > 0 and info["start"].startswith("local")
+
+
 def test_scale_repair_on_any_mesh():
     """The scaling repair needs no grid: a Delaunay mesh of scattered points with one inverted triangle."""
     from scipy.spatial import Delaunay

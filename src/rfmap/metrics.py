@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 import torch
 
-from .geometry import beltrami_coefficient, jacobian_determinants, signed_measures
+from .geometry import beltrami_coefficient, signed_measures
 
 __all__ = ["MapMetrics", "compute_metrics", "density_std", "element_population"]
 
@@ -126,16 +126,17 @@ def compute_metrics(
     el = torch.as_tensor(np.asarray(elements)).long()
     d = ref_t.shape[1]
     out = MapMetrics(time=time)
-    det = jacobian_determinants(ref_t, map_t, el)
+    ref_meas, map_meas = signed_measures(ref_t, el), signed_measures(map_t, el)  # once each (large 3D meshes)
+    det = map_meas / ref_meas  # as rfmap.geometry.jacobian_determinants
     out.min_jacobian = float(det.min())
     out.n_flipped = int((det <= 0).sum())
     if density is not None:
         dens = _t(density).reshape(-1)
         if dens.shape[0] != ref_t.shape[0]:
             raise ValueError(f"density has {dens.shape[0]} values for {ref_t.shape[0]} vertices")
-        pop = element_population(ref_t, el, dens)
-        out.std_rho_orig = density_std(pop, signed_measures(ref_t, el))
-        out.std_rho_map = density_std(pop, signed_measures(map_t, el))
+        pop = dens[..., el].mean(-1) * ref_meas  # element_population
+        out.std_rho_orig = density_std(pop, ref_meas)
+        out.std_rho_map = density_std(pop, map_meas)
     if d == 2:
         m = beltrami_coefficient(ref_t, map_t, el) if mu is None else torch.as_tensor(np.asarray(mu))
         a = m.abs()

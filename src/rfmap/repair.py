@@ -40,7 +40,10 @@ from zero on :math:`[0, 1]` are skipped).  The largest fold-free uniform scale i
 locally towards 1 by bisection: a proposed raise is kept unless an element touching the vertex would drop below its
 threshold, in which case the vertices of every such element go back to their accepted values (repeating until no
 element fails, which ends because the accepted state passes).  Vertices far from the folds thus recover the input map
-exactly and only a neighbourhood of the folds keeps a shortened displacement.
+exactly and only a neighbourhood of the folds keeps a shortened displacement.  When the folds are local, the start
+itself is local: :math:`s^\*` on the elements the polynomial test cannot clear, rising linearly to :math:`s = 1`
+over 6, 12 or 24 vertex rings around them, if one of these states verifies (else the uniform start), so the rounds touch only that
+region.
 
 Why the result is fold-free: every accepted state is *verified* by direct evaluation of all element measures that
 changed, the starting state :math:`u_{s^\*}` is verified the same way (halving :math:`s` until it passes, the identity
@@ -464,12 +467,37 @@ def _thresholds(ref_meas: np.ndarray, target_meas: np.ndarray, eta: float) -> np
     return np.where(folded, eta * ref_meas, np.minimum(eta * ref_meas, 0.5 * np.maximum(target_meas, 0)))
 
 
+#: vertex rings over which the local start of :func:`scale_repair` rises from the uniform fold-free scale to 1
+#: (each tried in turn until one verifies)
+LOCAL_START_RINGS = (6, 12, 24)
+
+
+def _det_rows(E: np.ndarray) -> np.ndarray:
+    """Determinants of the matrices whose *rows* are the edge vectors, shape (m, d, d) -> (m,), d = 2 or 3
+    (closed form; the transpose has the same determinant)."""
+    if E.shape[-1] == 2:
+        return E[:, 0, 0] * E[:, 1, 1] - E[:, 0, 1] * E[:, 1, 0]
+    a, b, c = E[:, 0], E[:, 1], E[:, 2]
+    return (a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1]) - a[:, 1] * (b[:, 0] * c[:, 2] - b[:, 2] * c[:, 0])
+            + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]))
+
+
+def _unique_ids(idx: np.ndarray, size: int) -> np.ndarray:
+    """Sorted distinct entries of ``idx`` (integers in ``[0, size)``): a mask for large inputs, a sort for small."""
+    if len(idx) * 32 < size:
+        return np.unique(idx)
+    mark = np.zeros(size, bool)
+    mark[idx] = True
+    return np.flatnonzero(mark)
+
+
 def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, boundary: str = "fixed",
                  eta: float = ETA, rounds: int = 16) -> tuple[np.ndarray, dict]:
     r"""Fold-free map closest to ``target`` among :math:`u_v = x_v + s_v (t_v - x_v)`, :math:`s_v \in [0, 1]`.
 
     See the module docstring: a verified fold-free uniform scale :math:`s^\*` (first root of the per-element
-    determinant polynomials), then ``rounds`` rounds of per-vertex bisection of :math:`s_v` towards 1 that keep
+    determinant polynomials; applied only on the unsafe elements and rising linearly to 1 over 6, 12 or 24
+    vertex rings around them (``LOCAL_START_RINGS``), when such a start verifies), then ``rounds`` rounds of per-vertex bisection of :math:`s_v` towards 1 that keep
     every element above its threshold.  Works on any simplicial mesh in 2D or 3D and keeps the boundary condition
     of ``target`` (the displacement is only shortened).
 
@@ -482,7 +510,8 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
 
     Returns
     -------
-    (points, info) : the repaired map (n, d) and ``{"s_uniform", "affected"}`` (vertices with :math:`s_v < 1`).
+    (points, info) : the repaired map (n, d) and ``{"s_uniform", "start", "affected"}``: the scale
+    :math:`s^\*`, ``"local (R rings)"`` or ``"uniform"``, and the vertices left with :math:`s_v < 1`.
     """
     ref = np.asarray(ref, np.float64)
     target = np.asarray(target, np.float64)
@@ -514,8 +543,7 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
     def failing(u, els, moved=None):
         """Vertices to revert: those of elements below threshold (and of crossing free-boundary edges; the
         boundary is only re-checked when a vertex in ``moved`` lies on it, since nothing else can change it)."""
-        E = (u[el[els, 1:]] - u[el[els, :1]]).transpose(0, 2, 1)
-        det = np.linalg.det(E) if d == 3 else E[:, 0, 0] * E[:, 1, 1] - E[:, 0, 1] * E[:, 1, 0]
+        det = _det_rows(u[el[els, 1:]] - u[el[els, :1]])
         bad = els[~(det >= tau[els])]
         v = el[bad].ravel()
         if loop is not None and (moved is None or on_loop[moved].any()):
@@ -524,17 +552,36 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
             c = boundary_crossings(u[loop], None if pos is None else np.concatenate([pos, pos - 1]))
             if len(c):
                 v = np.concatenate([v, loop[c.ravel()], loop[(c.ravel() + 1) % len(loop)]])
-        return np.unique(v)
+        return _unique_ids(v, n_pts)
 
     all_el = np.arange(len(el))
     s0 = 0.999 * s_star
-    while True:  # verify the uniform start; the identity (s = 0) always passes
+    s, start = None, "uniform"
+    if len(sus):
+        # a local start: the uniform scale only on the unsafe elements grown by LOCAL_START_RINGS vertex rings, the
+        # target elsewhere; used when it verifies (most folds are small clusters), the uniform start otherwise
+        top = max(LOCAL_START_RINGS)
+        ring = np.full(n_pts, float(top))  # vertex rings away from the unsafe elements (capped at the largest)
+        near = np.zeros(n_pts, bool)
+        near[el[sus]] = True
+        ring[near] = 0
+        for r in range(1, top):
+            near[el[near[el].any(1)]] = True
+            ring[near & (ring > r)] = r
+            if near.sum() > 0.5 * n_pts:
+                break
+        for rings in LOCAL_START_RINGS:  # s* on them, rising linearly to 1 over `rings` rings
+            cand = s0 + (1.0 - s0) * np.minimum(ring / rings, 1.0)
+            if (cand < 1).sum() > 0.5 * n_pts:
+                break
+            if len(failing(ref + cand[:, None] * disp, all_el)) == 0:
+                s, start = cand, f"local ({rings} rings)"
+                break
+    while s is None:  # verify the uniform start; the identity (s = 0) always passes
         s = np.full(n_pts, s0)
         if s0 == 0 or len(failing(ref + s[:, None] * disp, all_el)) == 0:
             break
-        s0 = 0.0 if s0 < 1e-6 else 0.5 * s0
-    if s0 == 0:
-        s[:] = 0
+        s, s0 = None, (0.0 if s0 < 1e-6 else 0.5 * s0)
     # vertex -> elements incidence, for evaluating only the elements touched by a change
     order = np.argsort(el.ravel(), kind="stable")
     el_of = order // (d + 1)
@@ -543,9 +590,9 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
     def touching(verts):
         if len(verts) == 0:
             return np.zeros(0, np.int64)
-        idx = np.concatenate([el_of[starts[v]:starts[v + 1]] for v in verts]) if len(verts) < 2000 else \
-            np.flatnonzero(np.isin(el, verts).any(1))
-        return np.unique(idx)
+        first, count = starts[verts], starts[verts + 1] - starts[verts]
+        pos = np.repeat(first - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
+        return _unique_ids(el_of[pos], len(el))
 
     hi = np.ones(n_pts)
     for _ in range(rounds):
@@ -568,7 +615,7 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
         s = prop
         hi = np.maximum(hi, s)
     u = ref + s[:, None] * disp
-    return u, {"s_uniform": float(s0), "affected": int((s < 1.0).sum())}
+    return u, {"s_uniform": float(s0), "start": start, "affected": int((s < 1.0).sum())}
 
 
 # ----------------------------------------------------------------------------------------------- entry point
