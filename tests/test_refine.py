@@ -173,3 +173,58 @@ def test_density_objective_matches_metrics():
     for alpha in ([1.0, 1.0], [0.3, 2.5], [3.0, 3.0]):
         res = sur.map("ring", 17, alpha=alpha, repair=False)
         assert J(np.array(alpha)) == pytest.approx(_J_of_result(res), rel=1e-9)
+
+
+# ------------------------------------------------------------------- precomputed objectives = direct evaluation
+
+
+@pytest.mark.parametrize("dim,boundary,grid", [(2, "square", True), (2, "free", False), (3, "square", True),
+                                               (3, "free", False)])
+def test_density_objective_equals_direct_evaluation(dim, boundary, grid):
+    """The objective evaluates the measures as a polynomial in alpha; they must equal the measures of the mapped
+    mesh to 1e-13 of the largest for any alpha, including ones that fold elements, and the objective must follow (to
+    1e-9 relative: Std(rho) divides by measures near zero on folding maps, which amplifies rounding)."""
+    from rfmap.refine import _measure_coefficients, _measures_at
+    from rfmap.geometry import signed_measures
+    from rfmap.mesh import grid_mesh
+    from rfmap.metrics import density_std, element_population
+    from rfmap.nn.model import apply_displacement
+
+    n = 9 if dim == 2 else 6
+    mesh = grid_mesh(n, dim)
+    ref = torch.as_tensor(mesh.points, dtype=torch.float64)
+    g = torch.Generator().manual_seed(dim)
+    psi = 0.3 * torch.randn(ref.shape, generator=g, dtype=torch.float64)
+    dens = np.random.default_rng(1).uniform(0.5, 2.0, len(ref))
+    dens /= dens.mean()
+    J = density_objective(ref, psi, mesh.elements, dens, boundary, flip_weight=10.0, grid_n=n if grid else None)
+    pop = element_population(ref, mesh.elements, dens)
+    for alpha in ([1.0] * dim, [0.3, 2.7, 1.1][:dim], [3.0] * dim):
+        a = np.asarray(alpha)
+        meas = signed_measures(apply_displacement(ref, psi, boundary, torch.as_tensor(a)), mesh.elements)
+        disp = apply_displacement(ref, psi, boundary) - ref
+        poly = _measures_at(_measure_coefficients(ref, disp, mesh.elements, n if grid else None), a)
+        assert float((poly - meas).abs().max()) <= 1e-13 * float(meas.abs().max())
+        direct = density_std(pop, meas) + 10.0 * float((meas <= 0).double().mean())
+        assert J(a) == pytest.approx(direct, rel=1e-9)
+
+
+def test_beltrami_objective_equals_direct_evaluation():
+    from rfmap.geometry import beltrami_coefficient
+    from rfmap.mesh import grid_mesh
+    from rfmap.nn.model import apply_displacement
+    from rfmap.refine import beltrami_objective
+
+    n = 11
+    mesh = grid_mesh(n, 2)
+    ref = torch.as_tensor(mesh.points, dtype=torch.float64)
+    psi = 0.4 * torch.randn(ref.shape, generator=torch.Generator().manual_seed(3), dtype=torch.float64)
+    mu_in = 0.3 * np.exp(1j * np.linspace(0, 6, len(mesh.elements)))
+    J = beltrami_objective(ref, psi, mesh.elements, mu_in, "square", flip_weight=10.0)
+    for alpha in ([1.0, 1.0], [0.2, 2.5], [3.0, 3.0]):
+        a = np.asarray(alpha)
+        mapped = apply_displacement(ref, psi, "square", torch.as_tensor(a))
+        det = jacobian_determinants(ref, mapped, mesh.elements)
+        mu = beltrami_coefficient(ref, mapped, mesh.elements)
+        direct = float((mu - torch.as_tensor(mu_in)).abs().mean()) + 10.0 * float((det <= 0).double().mean())
+        assert J(a) == pytest.approx(direct, rel=1e-12)
