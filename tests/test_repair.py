@@ -85,6 +85,29 @@ def test_local_repair_gives_way_to_the_global_one_for_a_crossing_free_boundary()
     assert rep["method"].startswith("lbs") and flipped(out, mesh) == 0
 
 
+@pytest.mark.parametrize("passed", [False, True])
+def test_global_repair_on_the_square_keeps_or_slides_the_walls(passed):
+    """``lbs_repair`` on the square keeps the map's own wall positions (one factorisation); when a wall vertex has
+    passed its neighbour it lets the walls slide instead. Either way: fold-free, every wall vertex on its wall."""
+    n = 17
+    mesh, p = pushed(n, 2, (0.12, 0.07))
+    bottom = np.flatnonzero((mesh.points[:, 1] == 0) & (mesh.points[:, 0] > 0) & (mesh.points[:, 0] < 1))
+    bottom = bottom[np.argsort(mesh.points[bottom, 0])]
+    p[bottom[4], 0] += 0.02  # slides along the wall, order kept
+    if passed:
+        p[bottom[6], 0] = p[bottom[7], 0] + 0.01  # passes its right neighbour along y = 0
+    out, capped = lbs_repair(p, n, "square")
+    assert flipped(out, mesh) == 0 and capped.any()
+    x = mesh.points
+    for c in range(2):
+        wall = (x[:, c] == 0) | (x[:, c] == 1)
+        assert np.abs(out[wall, c] - x[wall, c]).max() < 1e-12
+    if passed:  # the walls slid: the passing vertex is back in order
+        assert np.all(np.diff(out[bottom, 0]) > 0)
+    else:  # the map's own wall positions are kept
+        assert np.abs(out[bottom, 0] - p[bottom, 0]).max() < 1e-12
+
+
 def test_unknown_repair_method():
     mesh, p = pushed(9, 2, (0.2, 0.0))
     with pytest.raises(ValueError, match="unknown repair method"):

@@ -292,8 +292,13 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
     mapped : ndarray, shape (N**2, 2)
         The map on :func:`rfmap.mesh.grid_mesh` ``(N, 2)``.
     boundary : {"fixed", "square", "free"}
-        ``fixed``: identity on the boundary; ``square``: :func:`rfmap.solvers.solve_lbs` with sliding walls;
-        ``free``: Dirichlet values at the (untangled) boundary positions of ``mapped``.
+        ``fixed``: identity on the boundary; ``square`` and ``free``: Dirichlet values at the boundary positions of
+        ``mapped``, untangled by :func:`untangle_boundary`.  On the square the vertices stay on their walls, as
+        ``mapped`` keeps them there and the untangling only shortens displacements; if a vertex has passed its
+        neighbour along a wall, the walls slide instead (:func:`rfmap.solvers.solve_lbs`, ``boundary="square"``).
+        Keeping the map's own boundary needs one factorisation for both components, where sliding walls need one
+        per component: at N = 160 on folded ``deq2d-square`` outputs, half the time and a 2 % lower
+        Std(rho~_map) than sliding walls.
 
     Returns
     -------
@@ -305,20 +310,26 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
     mesh = grid_mesh(n, 2)
     ref_t, el_t = torch.as_tensor(mesh.points), torch.as_tensor(mesh.elements)
     bv = None
-    if boundary == "free":
+    if boundary in ("free", "square"):
         loop = boundary_loop(n)
         bv = mesh.points.copy()
         bv[loop] = untangle_boundary(mesh.points[loop], mapped[loop])
+        if boundary == "square":
+            # on the walls, every boundary edge must keep its direction (a vertex that passed its neighbour along a
+            # wall folds back on a straight line, which no crossing test sees); otherwise the walls slide
+            q, x = bv[loop], mesh.points[loop]
+            if (((np.roll(q, -1, 0) - q) * (np.roll(x, -1, 0) - x)).sum(1) <= 0).any():
+                bv = None
     capped = np.zeros(len(mesh.elements), bool)
     out = np.asarray(mapped, np.float64)
     for _ in range(passes):
         mu = beltrami_coefficient(ref_t, torch.as_tensor(out), el_t).numpy()
         mu_c, mask = cap_mu(mu, delta)
         capped |= mask
-        if boundary == "free":
-            out = solve_lbs(mu_c, n, boundary="fixed", boundary_values=bv).mapped_points
-        else:
+        if bv is None:
             out = solve_lbs(mu_c, n, boundary=boundary).mapped_points
+        else:
+            out = solve_lbs(mu_c, n, boundary="fixed", boundary_values=bv).mapped_points
         if _measures(out, mesh.elements, n).min() > 0:
             break
     return out, capped
