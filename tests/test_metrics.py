@@ -176,3 +176,27 @@ def test_load_result_rejects_bad_files(tmp_path):
         damaged.write_bytes(raw[:cut])
         with pytest.raises(ValueError, match="cannot read"):
             load_result(damaged)
+
+
+@pytest.mark.parametrize("dim,n", [(2, 13), (3, 7)])
+def test_grid_fast_path_equals_the_general_path(dim, n):
+    """On the grid mesh the measures come from strided kernels; permuting the elements (not a grid mesh any more)
+    takes the gather path. Every metric is order-free, so both must agree to 1e-12, also for a folding map."""
+    from rfmap.mesh import grid_size
+
+    mesh = grid_mesh(n, dim)
+    rng = np.random.default_rng(dim)
+    mapped = mesh.points + 0.08 * rng.standard_normal(mesh.points.shape)  # folds some elements
+    dens = rng.uniform(0.5, 2.0, len(mesh.points))
+    perm = rng.permutation(len(mesh.elements))
+    assert grid_size(mesh.points, mesh.elements) == n
+    assert grid_size(mesh.points, mesh.elements[perm]) is None
+    assert grid_size(mesh.points[::-1], mesh.elements) is None
+    fast = compute_metrics(mesh.points, mapped, mesh.elements, density=dens).to_dict()
+    slow = compute_metrics(mesh.points, mapped, mesh.elements[perm], density=dens).to_dict()
+    assert fast["n_flipped"] > 0
+    for k, v in fast.items():
+        if isinstance(v, float) and math.isfinite(v):
+            assert v == pytest.approx(slow[k], rel=1e-12, abs=1e-15), k
+        else:
+            assert v == slow[k] or (v != v and slow[k] != slow[k]), k

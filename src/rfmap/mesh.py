@@ -30,6 +30,7 @@ __all__ = [
     "Mesh",
     "grid_points",
     "grid_mesh",
+    "grid_size",
     "square_triangles",
     "cube_tetrahedra",
     "element_measures",
@@ -146,6 +147,30 @@ def grid_mesh(n: int, dim: int = 2) -> Mesh:
     dim = check_dim(dim)
     elements = square_triangles(n) if dim == 2 else cube_tetrahedra(n)
     return Mesh(n=n, dim=dim, points=grid_points(n, dim), elements=elements)
+
+
+@lru_cache(maxsize=4)
+def _grid_arrays(n: int, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    mesh = grid_mesh(n, dim)
+    for a in (mesh.points, mesh.elements):
+        a.setflags(write=False)
+    return mesh.points, mesh.elements
+
+
+def grid_size(points, elements) -> int | None:
+    """``N`` when ``(points, elements)`` is exactly :func:`grid_mesh` ``(N, d)`` (same vertices, same elements in the
+    same order), else ``None``: lets whole-mesh measurements use the strided grid kernels
+    (:func:`rfmap.geometry.grid_signed_measures`), an order of magnitude cheaper than gathers on 3D meshes."""
+    pts = points.detach().cpu().numpy() if isinstance(points, torch.Tensor) else np.asarray(points)
+    el = elements.detach().cpu().numpy() if isinstance(elements, torch.Tensor) else np.asarray(elements)
+    if pts.ndim != 2 or pts.shape[1] not in (2, 3) or el.ndim != 2 or el.shape[1] != pts.shape[1] + 1:
+        return None
+    d = pts.shape[1]
+    n = int(round(pts.shape[0] ** (1.0 / d)))
+    if n < 2 or n**d != pts.shape[0] or el.shape[0] != math.factorial(d) * (n - 1) ** d:
+        return None
+    gp, ge = _grid_arrays(n, d)
+    return n if np.array_equal(pts, gp) and np.array_equal(el, ge) else None
 
 
 def element_measures(points, elements):
