@@ -122,8 +122,8 @@ def generalization_tables(surs: dict, count: int = 50, n: int | None = None) -> 
     (the classical solver's rows once)."""
     _check(surs)
     merged = None
-    for name, s in surs.items():
-        g = generalization_table(s, count=count, n=n, refine=True)
+    for name, s in surs.items():  # the classical solver once: every model sees the same fields and boundary
+        g = generalization_table(s, count=count, n=n, refine=True, classical=merged is None)
         if merged is None:
             merged = Table("tab:fno-generalization", g.title.split(":", 1)[1].strip(), g.columns)
         for case, method, vals in g.rows:

@@ -358,7 +358,8 @@ def glue_all(values: dict, prefix: str) -> None:
 
 
 # ------------------------------------------------------------------------------------------- generalization
-def generalization_table(sur, count: int = 50, n: int | None = None, refine: bool = True) -> Table:
+def generalization_table(sur, count: int = 50, n: int | None = None, refine: bool = True,
+                         classical: bool = True) -> Table:
     """Surrogate against the classical solver on ``count`` seeded random fields that training never drew (the
     ``report`` stream of :mod:`rfmap.validation`, used for nothing else), on the same ``N``-grid.
 
@@ -366,6 +367,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     fold repair), and of the classical diffusion DEM with the model's boundary; Beltrami models: mean vertex
     distance (``mean_dd``) to the exact random map, ours against the Linear Beltrami Solver.  Rows: each kind of field
     and ``all``; columns: mean and worst metric, flipped elements of the raw network map, and mean time.
+    ``classical=False`` leaves the classical solver's rows out (when another table already has them).
     """
     from .inputs import preprocess_density
     from .mesh import grid_points
@@ -390,15 +392,16 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
         if refine:
             variants.append(("ours + refinement", sur.map(vf.field, n, refine=True)))
         if spec.kind == "beltrami":
-            classical = solve_lbs(vf.field, n)
-            variants.append(("classical (LBS)", classical))
+            if classical:
+                variants.append(("classical (LBS)", solve_lbs(vf.field, n)))
             for method, r in variants:
                 m = r.metrics(exact_points=vf.exact(r.ref_points))
                 add(kind, method, m.mean_dd, m.n_flipped, r.time)
         else:
-            dens = preprocess_density(vf.field(pts).reshape((n,) * spec.dim))
-            classical = solve_dem(dens, boundary="free" if spec.boundary == "free" else "square")
-            variants.append(("classical (diffusion DEM)", classical))
+            if classical:
+                dens = preprocess_density(vf.field(pts).reshape((n,) * spec.dim))
+                variants.append(("classical (diffusion DEM)",
+                                 solve_dem(dens, boundary="free" if spec.boundary == "free" else "square")))
             for method, r in variants:
                 m = r.metrics()
                 add(kind, method, m.std_rho_map, m.n_flipped, r.time)
