@@ -167,8 +167,9 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
              "2D density-equalizing quasi-conformal map (DEQ: density loss + 0.1 Beltrami energy), square boundary; "
              "the random training densities include narrow peaks and steep ramps (15 % of fields each)."),
             ("deq2d-free", "free", 0.1, 2500, 2700.0, None, "2D DEQ map, free boundary."),
-            ("dem2d-square", "square", 0.0, 2500, 2700.0, None, "2D density-equalizing map (density loss only), square "
-             "boundary."),
+            ("dem2d-square", "square", 0.0, 2500, 2700.0, _SHARP2, "2D density-equalizing map (density loss only), "
+             "square boundary; the random training densities include narrow peaks and steep ramps (15 % of fields "
+             "each)."),
         ]
     },
     **{
