@@ -162,6 +162,8 @@ def test_paper_presets_carry_the_papers_hyperparameters():
     (["--init", "beltrami2d"], "trained for"),
     (["--init", "nowhere/x.safetensors"], "neither a shipped model"),
     (["--steps", "0"], "at least 1"),
+    (["--lr=-1e-4"], "--lr must be a positive number"),
+    (["--lr", "nan"], "--lr must be a positive number"),
 ] + ([] if torch.cuda.is_available() else [(["--device", "cuda"], "no CUDA device")]))
 def test_train_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, extra, message):
     out = tmp_path / "run"
@@ -206,3 +208,16 @@ def test_reproduce_runs_the_networks_on_the_requested_device(tmp_path, monkeypat
     monkeypatch.setattr(E, "beltrami_resolution_table", lambda sur: (Probe(), None))
     E.reproduce("beltrami", tmp_path, device=torch.device("cpu"))
     assert seen == [torch.device("cpu")]
+
+
+def test_train_cli_lr_override_is_used_and_recorded(tmp_path):
+    from rfmap.surrogate import Surrogate
+
+    out = tmp_path / "run"
+    code = cli_main(["train", "--config", "deq2d-square", "--preset", "ci", "--out", str(out), "--no-progress",
+                     "--steps", "2", "--lr", "3e-4"])
+    assert code == 0
+    sur = Surrogate.load(out / "deq2d-square.safetensors")
+    assert sur.meta["config"]["lr"] == 3e-4 and "--lr 0.0003" in sur.meta["command"]
+    first = json.loads((out / "log.jsonl").read_text().splitlines()[0])
+    assert 0 < first["lr"] <= 3e-4

@@ -584,6 +584,8 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--steps", type=int, default=None, help="override the number of steps")
     p.add_argument("--batch", type=int, default=None, help="override the per-process batch size")
     p.add_argument("--time-limit", type=float, default=None, help="override the wall-time limit (s; 0: none)")
+    p.add_argument("--lr", type=float, default=None,
+                   help="override the peak learning rate (e.g. lower for a gentle warm restart with --init)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads per process")
     p.add_argument("--workers", type=int, default=None, help="batch-drawing worker processes (0: a thread)")
     p.add_argument("--seed", type=int, default=None)
@@ -594,13 +596,16 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
 def run(args) -> Surrogate:
     cfg = get_config(args.config, args.preset)
     over = {k: v for k, v in {"steps": args.steps, "batch": args.batch, "time_limit": args.time_limit,
-                              "threads": args.threads, "seed": args.seed, "workers": args.workers}.items()
+                              "threads": args.threads, "seed": args.seed, "workers": args.workers,
+                              "lr": args.lr}.items()
             if v is not None}
     for k in ("steps", "batch"):
         if k in over and over[k] < 1:
             raise ValueError(f"--{k} must be at least 1, got {over[k]}")
     if over.get("workers", 0) < 0 or over.get("threads", 0) < 0:
         raise ValueError("--workers and --threads must not be negative")
+    if "lr" in over and not (math.isfinite(over["lr"]) and over["lr"] > 0):
+        raise ValueError(f"--lr must be a positive number, got {over['lr']}")
     cfg = cfg.with_overrides(**over)
     device = resolve_device(args.device)
     if args.init and args.resume:
@@ -628,7 +633,7 @@ def _command_line(args) -> str:
         parts.append(f"--preset {args.preset}")
     for flag, val in [("--steps", args.steps), ("--batch", args.batch), ("--time-limit", args.time_limit),
                       ("--threads", args.threads), ("--workers", args.workers), ("--seed", args.seed),
-                      ("--init", args.init)]:
+                      ("--lr", args.lr), ("--init", args.init)]:
         if val is not None:
             parts.append(f"{flag} {val:g}" if isinstance(val, float) else f"{flag} {val}")
     if args.device and args.device != "cpu":
