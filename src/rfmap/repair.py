@@ -3,7 +3,9 @@ r"""Making a computed map bijective: detect folded elements and repair them, in 
 A piecewise-linear map of a simplicial mesh is *folded* when an element has a non-positive signed measure
 (:math:`\det J \le 0`).  With every element positively oriented, a map that keeps the boundary of the unit square or
 cube on itself (``fixed`` or ``square`` boundary conditions) is a bijection of the domain onto itself (degree
-argument); with a ``free`` boundary in 2D the image of the boundary must also be a simple polygon.
+argument); with a ``free`` boundary in 2D the image of the boundary must also be a simple polygon.  With a free
+boundary in 3D the repair guarantees positive volumes only: the image of the boundary surface is not tested for
+self-intersection (two far-apart parts of the surface pushed through each other would go unnoticed).
 
 :func:`repair_map` is the entry point.  It first runs a cheap check (strided grid measures,
 :func:`rfmap.geometry.grid_signed_measures`, and on a free 2D boundary a bucketed segment-crossing test) and returns
