@@ -11,7 +11,9 @@ from rfmap.mesh import (
     element_measures,
     grid_mesh,
     grid_points,
+    grid_vertex_weights,
     interpolate,
+    vertex_weights,
     square_triangles,
 )
 
@@ -125,6 +127,25 @@ def test_mesh_properties():
     assert bm.sum() == 125 - 27
     on_boundary = ((m.points == 0) | (m.points == 1)).any(-1)
     np.testing.assert_array_equal(bm, on_boundary)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_grid_mesh_is_cached_but_returns_writable_copies(dim):
+    a, b = grid_mesh(6, dim), grid_mesh(6, dim)
+    np.testing.assert_array_equal(a.elements, b.elements)
+    assert a.elements is not b.elements and a.points is not b.points
+    a.points[0] = 0.5  # the caller owns its arrays: changing them leaves the cache alone
+    a.elements[0] = 0
+    c = grid_mesh(6, dim)
+    np.testing.assert_array_equal(c.points, grid_points(6, dim))
+    np.testing.assert_array_equal(c.elements[0], b.elements[0])
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_cached_grid_vertex_weights_equal_the_generic_ones(dim):
+    m = grid_mesh(7, dim)
+    np.testing.assert_allclose(grid_vertex_weights(7, dim), vertex_weights(m.points, m.elements), rtol=0, atol=1e-15)
+    assert grid_vertex_weights(7, dim).sum() == pytest.approx(1.0, abs=1e-13)
 
 
 # ----------------------------------------------------------------------------------------------- validation

@@ -23,7 +23,8 @@ import torch
 
 from ._version import __version__
 from .inputs import check_density, check_mu, preprocess_density, unit_mass
-from .mesh import check_n, element_centroids, element_measures, grid_mesh, grid_points, interpolate, triangulate, vertex_weights
+from .mesh import check_n, element_centroids, element_measures, grid_mesh, grid_points, grid_vertex_weights, interpolate, \
+    triangulate, vertex_weights
 from .device import resolve_device
 from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
@@ -343,7 +344,7 @@ class Surrogate:
         psi64 = self._displacement_at(psi, ref, n if points is None and n == nw else None)
         mapped = apply_displacement(ref64, psi64, self.spec.boundary)
         t_map = t_net + time.perf_counter() - t1
-        fvals = self._field_on(inp, ref, elements)
+        fvals = self._field_on(inp, ref, elements, n if points is None else None)
         info: dict[str, Any] = {"work_n": nw, "network_time": t_net}
         a = np.ones(self.spec.dim) if alpha is None else np.asarray(alpha, dtype=np.float64)
         if refine:
@@ -416,11 +417,12 @@ class Surrogate:
             psi_q = interpolate(psi, torch.as_tensor(ref, dtype=torch.float32))[0]
         return psi_q.double()
 
-    def _field_on(self, inp: _Input, ref: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    def _field_on(self, inp: _Input, ref: np.ndarray, elements: np.ndarray, grid_n: int | None = None) -> np.ndarray:
         r"""The input field on the output mesh: unit-mass vertex densities (n,), or :math:`\mu` per element (m,)
-        at the centroids; from the exact evaluator when there is one, else interpolated from the input grid."""
+        at the centroids; from the exact evaluator when there is one, else interpolated from the input grid.
+        ``grid_n``: the output mesh is the ``N``-grid (its quadrature weights are cached)."""
         if self.spec.kind == "density":
-            w = vertex_weights(ref, elements)
+            w = grid_vertex_weights(grid_n, self.spec.dim) if grid_n else vertex_weights(ref, elements)
             if inp.fn is not None:
                 return preprocess_density(np.asarray(inp.fn(ref), dtype=np.float64), weights=w)
             src = torch.as_tensor(inp.grid)[None, None]
