@@ -200,3 +200,29 @@ def test_grid_fast_path_equals_the_general_path(dim, n):
             assert v == pytest.approx(slow[k], rel=1e-12, abs=1e-15), k
         else:
             assert v == slow[k] or (v != v and slow[k] != slow[k]), k
+
+
+# ----------------------------------------------------------------------------------------------- residual scales
+def test_residual_scales_split_a_smooth_residual_from_element_noise():
+    from rfmap.metrics import residual_scales
+    from rfmap.mesh import grid_mesh
+
+    m = grid_mesh(41, 2)
+    x = m.points
+    uniform = np.ones(len(x))
+    exact = residual_scales(x, x, m.elements, uniform)
+    assert exact["std"] < 1e-12 and exact["smooth"] < 1e-12
+    # identity map of a smooth density: the residual is the density itself, smooth at the cell scale
+    smooth = 1.0 + 0.3 * np.sin(np.pi * x[:, 0]) * np.cos(np.pi * x[:, 1])
+    s = residual_scales(x, x, m.elements, smooth)
+    assert s["std"] == pytest.approx(compute_metrics(x, x, m.elements, density=smooth).std_rho_map, rel=1e-12)
+    assert s["element_fraction"] < 0.02
+    # vertices jittered by a tenth of a cell under a uniform density: the residual alternates between elements
+    rng = np.random.default_rng(0)
+    inner = ~m.boundary_mask()
+    y = x.copy()
+    y[inner] += 0.1 / 40 * rng.uniform(-1, 1, size=(inner.sum(), 2))
+    s = residual_scales(x, y, m.elements, uniform)
+    assert s["std"] > 0.05 and s["element_fraction"] > 0.7
+    with pytest.raises(ValueError, match="folded"):
+        residual_scales(x, np.stack([1 - x[:, 0], x[:, 1]], 1), m.elements, uniform)  # a mirror image

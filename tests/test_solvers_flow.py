@@ -143,6 +143,32 @@ def test_warm_start_continues_a_map():
         solve_flow(dens, start=folded)
 
 
+def test_keep_best_false_returns_the_last_pass():
+    """A second pass from the flow's own map cannot remove the element-scale residual (it does not lower the Std);
+    ``keep_best=False`` returns that pass's map all the same, and the default keeps the better start."""
+    dens = sample_density("sin-cos", 33)
+    cold = solve_flow(dens)
+    last = solve_flow(dens, start=cold.mapped_points, keep_best=False)
+    best = solve_flow(dens, start=cold.mapped_points)
+    h = last.info["std_history"]
+    assert len(h) == 2 and last.metrics().std_rho_map == pytest.approx(h[-1], rel=1e-9)
+    assert best.metrics().std_rho_map == pytest.approx(min(h), rel=1e-9)
+    assert last.metrics().n_flipped == 0
+
+
+def test_residual_floor_rows():
+    from rfmap.experiments import residual_floor
+
+    rows = residual_floor(ns=(17, 33))
+    assert [(r["n"], r["method"]) for r in rows] == [(n, m) for n in (17, 33)
+                                                     for m in ("diffusion", "flow", "flow + second pass")]
+    for r in rows:
+        assert r["n_flipped"] == 0 and 0.0 <= r["element_fraction"] <= 1.0 and r["smooth"] < r["std"]
+    # the classical floor shrinks with the grid spacing
+    by = {(r["n"], r["method"]): r["std"] for r in rows}
+    assert by[33, "diffusion"] < 0.75 * by[17, "diffusion"] and by[33, "flow"] < 0.75 * by[17, "flow"]
+
+
 @pytest.mark.parametrize("bad,kw,match", [
     (np.ones(5), {}, "grid field"),
     (np.ones((4, 5)), {}, "same number"),

@@ -24,7 +24,7 @@ from .result import MapResult
 __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table", "population_table",
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
            "COLUMN_TITLES", "format_value", "DIGITS", "generalization_table", "WARM_MODELS", "benchmark_fields",
-           "time_to_accuracy", "summarize"]
+           "time_to_accuracy", "summarize", "residual_floor"]
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -491,3 +491,37 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 row["time_ratio"] = a["time"] / agg[best]["time"]
             out.append(row)
     return out
+
+
+def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: str = "square") -> list[dict[str, Any]]:
+    r"""Where the classical solvers' final :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` comes from, per grid side.
+
+    For every ``N`` the paper's test density ``density_name`` is mapped by the diffusion solver, by the flow-based
+    solver, and by one more flow pass started from the flow's map (``solve_flow(start=...)``, the residual density
+    located exactly on the raster).  Each result is split by :func:`rfmap.metrics.residual_scales` into the
+    residual's smooth part (what a further flow can act on) and its element-scale part.
+
+    Returns
+    -------
+    list of dict
+        One row per ``N`` and method (``"diffusion"``, ``"flow"``, ``"flow + second pass"``): ``n``, ``method``,
+        ``std`` (= Std(rho~_map)), ``smooth``, ``element_fraction``, ``time`` (s; the second pass alone) and
+        ``n_flipped``.  The second pass's own map is reported, even where it is worse than its start.
+    """
+    from .metrics import residual_scales
+    from .paper_fields import sample_density
+    from .solvers import solve_dem
+    from .solvers.flow import solve_flow
+
+    rows = []
+    for n in ns:
+        dens = sample_density(density_name, int(n))
+        diff = solve_dem(dens, boundary=boundary)
+        flow = solve_flow(dens, boundary=boundary)
+        again = solve_flow(dens, boundary=boundary, start=flow.mapped_points, keep_best=False)
+        for method, res in (("diffusion", diff), ("flow", flow), ("flow + second pass", again)):
+            sc = residual_scales(res.ref_points, res.mapped_points, res.elements, res.field)
+            rows.append({"n": int(n), "method": method, "std": sc["std"], "smooth": sc["smooth"],
+                         "element_fraction": sc["element_fraction"], "time": res.time,
+                         "n_flipped": res.metrics().n_flipped})
+    return rows

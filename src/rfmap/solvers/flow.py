@@ -317,6 +317,7 @@ def solve_flow(
     start=None,
     num_threads: int | None = None,
     stall_blurs: tuple[float, ...] = STALL_BLURS,
+    keep_best: bool = True,
 ) -> MapResult:
     r"""Flow-based density-equalizing map (Gastner, Seguy & More 2018) of the unit square or cube.
 
@@ -362,6 +363,9 @@ def solve_flow(
     num_threads : int, optional
         Torch threads for the interpolation and the element measures (restored afterwards); as in
         ``rfmap.solvers.diffusion.solve_dem``, default 1 in 2D and torch's setting in 3D.
+    keep_best : bool
+        Return the map with the lowest :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` among the start and the passes
+        (default), or ``False``: the map of the last pass, even where it is worse (to study what a pass does).
 
     Returns
     -------
@@ -516,5 +520,5 @@ def solve_flow(
             "stall_blurs": stall_retries}
     if sea is not None:
         info["sea_density"] = sea
-    return MapResult(ref_points=ref, mapped_points=best, elements=elements, field=field, kind="density",
-                     time=elapsed, info=info)
+    return MapResult(ref_points=ref, mapped_points=best if keep_best else mapped, elements=elements, field=field,
+                     kind="density", time=elapsed, info=info)
