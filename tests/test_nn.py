@@ -251,3 +251,23 @@ def test_native_resolutions_agree_loosely():
     # a transposed displacement (axes swapped) would not pass the same bound
     dt = sur.map(smooth_density, 17, work_n=35).displacement.reshape(17, 17, 2).transpose(1, 0, 2)[..., ::-1]
     assert np.linalg.norm(da - dt.ravel()) / np.linalg.norm(da) > rel
+
+
+@pytest.mark.parametrize("cin,cout,k,dil", [(8, 8, 3, 1), (8, 8, 3, 2), (8, 1, 1, 1), (3, 8, 1, 1)])
+def test_conv3d_inference_path_matches_torch(cin, cout, k, dil):
+    """The oneDNN inference path of blocks.Conv3d gives nn.Conv3d's output (batch 1, the shapes PyTorch would send
+    to its slow kernel), keeps nn.Conv3d's state dict, and with gradients enabled is nn.Conv3d itself."""
+    from rfmap.nn.blocks import Conv3d
+
+    torch.manual_seed(0)
+    ours = Conv3d(cin, cout, k, padding=dil * (k // 2), dilation=dil)
+    ref = torch.nn.Conv3d(cin, cout, k, padding=dil * (k // 2), dilation=dil)
+    ref.load_state_dict(ours.state_dict())
+    assert list(ours.state_dict()) == list(ref.state_dict())
+    x = torch.randn(1, cin, 12, 11, 10)
+    with torch.no_grad():
+        torch.testing.assert_close(ours(x), ref(x), rtol=1e-5, atol=1e-5)
+    y = ours(x.requires_grad_())
+    y.square().sum().backward()
+    assert x.grad is not None and ours.weight.grad is not None
+    torch.testing.assert_close(y, ref(x), rtol=0, atol=0)

@@ -336,8 +336,8 @@ def test_alpha_scales_the_displacement():
 
 
 def test_3d_single_field_matches_its_row_in_a_batch():
-    """A single 3D field (evaluated as a batch of two to avoid a slow batch-1 Conv3d kernel) gives exactly its row
-    of a batched evaluation: the network acts on every sample independently."""
+    """A single 3D field (whose no-grad Conv3d layers take the oneDNN kernel at batch 1) gives its row of a batched
+    evaluation to float32 round-off: the network acts on every sample independently."""
     sur = tiny(TaskSpec("density", 3, "square"), head_seed=1)
     rng = np.random.default_rng(0)
     g = rng.uniform(0.5, 1.5, size=(2, 9, 9, 9))
