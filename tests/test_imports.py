@@ -22,6 +22,7 @@ LAYERS: dict[str, int] = {
     # core
     "rfmap._version": 0, "rfmap.device": 0, "rfmap.geometry": 0, "rfmap.mesh": 0, "rfmap.inputs": 0, "rfmap.paper_fields": 0,
     "rfmap.random_fields": 0, "rfmap.fields": 0, "rfmap.metrics": 0, "rfmap.result": 0,
+    "rfmap.surface": 0,
     # classical solvers, the network, the losses
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1, "rfmap.solvers.flow": 1,
     "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.nn.fno": 1, "rfmap.nn.registry": 1,

@@ -3,9 +3,10 @@ r"""Making a computed map bijective: detect folded elements and repair them, in 
 A piecewise-linear map of a simplicial mesh is *folded* when an element has a non-positive signed measure
 (:math:`\det J \le 0`).  With every element positively oriented, a map that keeps the boundary of the unit square or
 cube on itself (``fixed`` or ``square`` boundary conditions) is a bijection of the domain onto itself (degree
-argument); with a ``free`` boundary in 2D the image of the boundary must also be a simple polygon.  With a free
-boundary in 3D the repair guarantees positive volumes only: the image of the boundary surface is not tested for
-self-intersection (two far-apart parts of the surface pushed through each other would go unnoticed).
+argument); with a ``free`` boundary the image of the boundary must also be embedded: a simple polygon in 2D, a
+surface without self-intersection in 3D (:func:`rfmap.surface.surface_intersections` on the mesh's boundary
+triangles, which costs a fraction of a 3D map: two far-apart parts of the surface pushed through each other leave
+every tetrahedron positive).
 
 :func:`repair_map` is the entry point.  It first runs a cheap check (strided grid measures,
 :func:`rfmap.geometry.grid_signed_measures`, and on a free 2D boundary a bucketed segment-crossing test) and returns
@@ -30,6 +31,12 @@ vertex rings, the patch's rim and the domain boundary held where the map put the
 usually a few small clusters, so a patch solve costs a fraction of the global one and leaves the rest of the map
 exactly as the network made it.  Widespread folds (over 1 % of the triangles), a free boundary that crosses itself,
 or a patch that stays folded go to the global rebuild.
+
+**3D free boundary: an embedded surface.**  When the boundary surface of a fold-free 3D map crosses itself,
+:func:`surface_repair` shortens the whole displacement, :math:`u_s = x + s\,(u - x)`, to the largest ``s`` found by
+halving and bisection at which the map is fold-free and its surface embedded (``s = 0``, the identity, always is).
+This is blunt (the whole map moves back, not only the crossing region), and it is rare: a network or solver map
+would have to push one side of the cube through another.
 
 **3D (and any mesh where the above does not apply): fold-free displacement scaling.**  Write the map as
 :math:`u = x + d(x)` with the displacement :math:`d` (for a surrogate :math:`d = \mathcal{B} \odot \psi`).  The
@@ -71,9 +78,10 @@ import torch
 
 from .geometry import beltrami_coefficient, grid_signed_measures, grid_simplices, signed_measures
 from .mesh import grid_points
+from .surface import boundary_faces, grid_boundary_faces, surface_intersections
 
 __all__ = ["repair_map", "fold_free", "cap_mu", "boundary_loop", "boundary_crossings", "untangle_boundary",
-           "scale_repair", "lbs_repair", "DELTA"]
+           "scale_repair", "surface_repair", "lbs_repair", "DELTA"]
 
 #: Margin of the μ-truncation: :math:`|\mu| \le 1 - \delta` after repair.
 #: the ``method`` values of :func:`repair_map`
@@ -227,7 +235,49 @@ def fold_free(points: np.ndarray, elements: np.ndarray, *, grid_n: int | None = 
         return False
     if boundary == "free" and points.shape[1] == 2 and grid_n is not None:
         return len(boundary_crossings(points[boundary_loop(grid_n)])) == 0
+    if boundary == "free" and points.shape[1] == 3:
+        return _surface_crossings(points, elements, grid_n) == 0
     return True
+
+
+def _surface_crossings(points: np.ndarray, elements: np.ndarray, grid_n: int | None) -> int:
+    """Number of intersecting pairs of boundary triangles of a 3D map (:func:`rfmap.surface.surface_intersections`)."""
+    faces = grid_boundary_faces(grid_n) if grid_n else boundary_faces(np.asarray(elements))
+    return len(surface_intersections(points, faces))
+
+
+def surface_repair(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, grid_n: int | None = None,
+                   rounds: int = 8) -> tuple[np.ndarray, float]:
+    r"""Shorten the displacement of a fold-free 3D free-boundary map until its boundary surface is embedded.
+
+    :math:`u_s = x + s\,(u - x)`: ``s = 1`` is the input, ``s = 0`` the identity (embedded).  ``s`` is halved until
+    :math:`u_s` is fold-free with an embedded boundary, then raised by bisection (``rounds`` steps) between the
+    last passing and the first failing value; every returned state is verified by :func:`fold_free`.
+
+    Returns
+    -------
+    (points, s)
+    """
+    ref = np.asarray(ref, np.float64)
+    disp = np.asarray(mapped, np.float64) - ref
+
+    def ok(s: float) -> bool:
+        return fold_free(ref + s * disp, elements, grid_n=grid_n, boundary="free")
+
+    hi, lo = 1.0, 0.0
+    s = 0.5
+    while s > 1e-3:
+        if ok(s):
+            lo = s
+            break
+        hi, s = s, s / 2
+    for _ in range(rounds if lo > 0 else 0):
+        mid = 0.5 * (lo + hi)
+        if ok(mid):
+            lo = mid
+        else:
+            hi = mid
+    return ref + lo * disp, lo
 
 
 # ----------------------------------------------------------------------------------------------- 2D: μ and LBS
@@ -672,7 +722,8 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         ``points`` is ``mapped`` itself (the same object) when nothing was folded.  ``report`` holds ``needed``,
         ``method``, ``n_flipped_before``, ``n_flipped_after``, ``affected`` (triangles with truncated :math:`\mu`
         for the LBS, vertices with a shortened displacement for the scaling), ``time`` (s), ``metrics_before`` and
-        ``metrics_after``.
+        ``metrics_after``; for a 3D free boundary also ``surface_crossings_before``/``_after`` (intersecting pairs
+        of boundary triangles) and, when :func:`surface_repair` ran, ``surface_scale``.
     """
     t0 = time.perf_counter()
     if method not in REPAIR_METHODS:
@@ -691,6 +742,10 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     ok = finite and m > 0
     if ok and boundary == "free" and d == 2 and grid_n:
         ok = len(boundary_crossings(mapped[boundary_loop(grid_n)])) == 0
+    crossings = 0
+    if ok and boundary == "free" and d == 3:
+        crossings = _surface_crossings(mapped, el, grid_n)
+        ok = crossings == 0
     if ok:
         cheap = {"n_flipped": 0, "min_jacobian": float(min_jac)}
         return mapped, {"needed": False, "method": "none", "n_flipped_before": 0, "n_flipped_after": 0,
@@ -721,7 +776,17 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         out, info = scale_repair(ref, out, el, boundary=boundary)
         affected = max(affected, info["affected"])
         used = "scale" if method == "scale" else method + "+scale"
+    report: dict[str, Any] = {}
+    if boundary == "free" and d == 3:
+        report["surface_crossings_before"] = crossings if crossings else _surface_crossings(
+            np.where(np.isfinite(mapped), mapped, ref), el, grid_n)
+        if _surface_crossings(out, el, grid_n):
+            out, s = surface_repair(ref, out, el, grid_n=grid_n)
+            used += "+surface"
+            affected = len(out)
+            report["surface_scale"] = s
+        report["surface_crossings_after"] = _surface_crossings(out, el, grid_n)
     after = _metrics(ref, out, el, density, mu)
     return out, {"needed": True, "method": used, "n_flipped_before": int(before["n_flipped"]),
                  "n_flipped_after": int(after["n_flipped"]), "affected": affected,
-                 "time": time.perf_counter() - t0, "metrics_before": before, "metrics_after": after}
+                 "time": time.perf_counter() - t0, "metrics_before": before, "metrics_after": after, **report}
