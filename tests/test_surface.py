@@ -5,18 +5,8 @@ import pytest
 
 from rfmap.mesh import grid_mesh
 from rfmap.repair import fold_free, repair_map
+from rfmap.stress import first_folding, self_crossing_map
 from rfmap.surface import boundary_faces, grid_boundary_faces, surface_intersections
-
-
-def _wrapped_map(n: int, turns: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The cube bent around the z axis through ``turns`` full turns: every tetrahedron positive, and for
-    ``turns > 1`` the two ends of the bent bar pass through each other."""
-    m = grid_mesh(n, 3)
-    x, y, z = m.points.T
-    theta = 2 * np.pi * turns * x
-    r = 1.5 - 0.5 * y
-    u = np.stack([r * np.cos(theta), r * np.sin(theta), z], 1)
-    return m.points, u, m.elements
 
 
 @pytest.mark.parametrize("n", [2, 5, 9])
@@ -108,7 +98,7 @@ def test_bad_input():
 
 
 def test_wrapped_cube_is_fold_free_but_not_embedded_and_gets_repaired():
-    ref, u, el = _wrapped_map(9, 1.3)
+    ref, u, el = self_crossing_map(9, 1.3)
     n = 9
     assert fold_free(u, el, grid_n=n, boundary="square")  # every tetrahedron is positive
     assert not fold_free(u, el, grid_n=n, boundary="free")  # but the surface crosses itself
@@ -118,6 +108,21 @@ def test_wrapped_cube_is_fold_free_but_not_embedded_and_gets_repaired():
     assert 0 < rep["surface_scale"] < 1
     assert fold_free(out, el, grid_n=n, boundary="free")
     # below one full turn the bent cube is embedded and left alone
-    ref, u, el = _wrapped_map(9, 0.8)
+    ref, u, el = self_crossing_map(9, 0.8)
     out, rep = repair_map(ref, u, el, boundary="free", grid_n=n)
     assert not rep["needed"] and out is u
+
+
+def test_first_folding_returns_the_first_seed_whose_raw_map_folds():
+    from rfmap import Surrogate
+    from rfmap.stress import hard_density
+
+    sur = Surrogate.pretrained("deq2d-square")
+    seed, field = first_folding(sur, 48, seed=0, tries=40)
+    assert sur.map(field, 48, preprocess=False, repair=False).metrics().n_flipped > 0
+    np.testing.assert_array_equal(field, hard_density(np.random.default_rng(seed), 48, 2))
+    for s in range(seed):
+        earlier = hard_density(np.random.default_rng(s), 48, 2)
+        assert sur.map(earlier, 48, preprocess=False, repair=False).metrics().n_flipped == 0
+    with pytest.raises(RuntimeError, match="folded on none"):
+        first_folding(sur, 48, seed=seed + 1, tries=0)

@@ -11,6 +11,10 @@ drawn log-uniformly in :math:`[10^{-3}, 0.3]`.
 
 Beltrami coefficients have a smooth random part plus one to three localized bulges (Gaussian, width 0.03–0.12),
 are tapered to 0 at the boundary, and are scaled so that :math:`\|\mu\|_\infty` is drawn in :math:`[0.5, 0.95]`.
+
+:func:`first_folding` finds, among these seeded draws, one on which a given surrogate's raw map folds (the
+bijectivity chapter's examples), and :func:`self_crossing_map` is a 3D map that no element check can catch: every
+tetrahedron positive, the boundary surface passing through itself.
 """
 from __future__ import annotations
 
@@ -20,7 +24,7 @@ import numpy as np
 
 from .mesh import grid_points
 
-__all__ = ["hard_density", "hard_beltrami"]
+__all__ = ["hard_density", "hard_beltrami", "first_folding", "self_crossing_map"]
 
 
 def _log_uniform(rng, lo, hi):
@@ -65,3 +69,44 @@ def hard_beltrami(rng: np.random.Generator, n: int, *, sup: tuple[float, float] 
     peak = np.abs(mu).max()
     mu *= rng.uniform(*sup) / peak if peak > 0 else 0.0
     return mu.reshape(n, n)
+
+
+def first_folding(sur, n: int, *, seed: int = 0, tries: int = 50) -> tuple[int, np.ndarray]:
+    """The first seed from ``seed`` on whose hard field the raw map of surrogate ``sur`` on the ``N``-grid folds.
+
+    Densities come from :func:`hard_density` (mapped with ``preprocess=False``), Beltrami coefficients from
+    :func:`hard_beltrami`.  Returns ``(seed, field)``; ``RuntimeError`` when none of ``tries`` seeds folds.
+    """
+    dim = sur.spec.dim
+    for s in range(seed, seed + tries):
+        rng = np.random.default_rng(s)
+        if sur.spec.kind == "density":
+            field = hard_density(rng, n, dim)
+            raw = sur.map(field, n, preprocess=False, repair=False)
+        else:
+            field = hard_beltrami(rng, n)
+            raw = sur.map(field, n, repair=False)
+        if raw.metrics().n_flipped > 0:
+            return s, field
+    raise RuntimeError(f"the raw map folded on none of the hard fields with seeds {seed}..{seed + tries - 1}")
+
+
+def self_crossing_map(n: int, turns: float = 1.3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""The unit cube bent around the :math:`z` axis through ``turns`` full turns, on the 3D ``N``-grid.
+
+    :math:`u(x, y, z) = (r\cos\theta, r\sin\theta, z)` with :math:`\theta = 2\pi\,\text{turns}\,x` and
+    :math:`r = 1.5 - y/2`: :math:`\det Du = \pi\,\text{turns}\,r > 0`, so every tetrahedron of a fine enough grid
+    is positive, but for ``turns > 1`` the two ends of the bent bar pass through each other.
+
+    Returns
+    -------
+    (ref, mapped, elements)
+        Grid vertices (N^3, 3), their images (N^3, 3) and the tetrahedra of :func:`rfmap.mesh.grid_mesh`.
+    """
+    from .mesh import grid_mesh
+
+    m = grid_mesh(n, 3)
+    x, y, z = m.points.T
+    theta = 2 * np.pi * turns * x
+    r = 1.5 - 0.5 * y
+    return m.points, np.stack([r * np.cos(theta), r * np.sin(theta), z], 1), m.elements

@@ -13,7 +13,7 @@ __all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "p
            "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
            "population_figure", "volume_rows", "render_lattice", "plot_batch", "plot_loss_terms", "training_curves", "learning_curves", "CAMERA_3D", "LOSS_TERMS", "plot_regions", "cartogram_figure",
            "cartogram_panels", "area_error_histograms", "time_accuracy_figure", "validation_vs_time",
-           "table_lines"]
+           "table_lines", "plot_slice_outline"]
 
 STYLE = {
     "figure.dpi": 110,
@@ -104,6 +104,24 @@ def plot_mesh(ax, points, elements=None, *, n: int | None = None, max_lines: int
         _grid_lines(ax, points, n, max(1, (n - 1) // max_lines), color=color, lw=lw)
     else:
         ax.triplot(points[:, 0], points[:, 1], elements, color=color, lw=lw * 0.6)
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    if title:
+        ax.set_title(title)
+
+
+def plot_slice_outline(ax, points, n: int, k: int | None = None, *, title: str | None = None, max_lines: int = 20,
+                       color="0.2", lw=0.5):
+    """Draw the image of the slice ``z = k / (N - 1)`` of a map of the 3D ``N``-grid, projected on the xy-plane:
+    its grid lines (at most ``max_lines`` per direction) and, thicker, its outline.  ``k`` defaults to the middle.
+
+    ``points``: mapped vertices (N^3, 3) in the grid's order (:func:`rfmap.mesh.grid_points`).
+    """
+    P = np.asarray(points).reshape(n, n, n, 3)[:, :, (n - 1) // 2 if k is None else int(k), :2]
+    _grid_lines(ax, P.reshape(-1, 2), n, max(1, (n - 1) // max_lines), color=color, lw=lw)
+    loop = np.concatenate([P[:, 0], P[-1, 1:], P[-2::-1, -1], P[0, -2::-1]])
+    ax.plot(loop[:, 0], loop[:, 1], color="C3", lw=2 * lw + 0.5)
     ax.set_aspect("equal")
     ax.set_xticks([])
     ax.set_yticks([])
