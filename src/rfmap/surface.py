@@ -9,7 +9,7 @@ crossings:
 
 * :func:`boundary_faces`: the triangles that belong to exactly one tetrahedron, oriented outwards.
 * :func:`surface_intersections`: pairs of triangles of a triangulated surface that intersect, leaving out pairs
-  that share a vertex (they meet by construction).  A uniform-grid broad phase (cell side twice the median
+  that share a vertex (they meet by construction).  A uniform-grid broad phase (cell side the median
   bounding-box extent) pairs triangles whose boxes overlap; the narrow phase is the interval test of Möller (1997):
   two non-coplanar triangles intersect when each straddles the other's plane and the two intervals they cut from
   the planes' common line overlap; (nearly) coplanar pairs are projected onto the plane and tested for properly
@@ -87,10 +87,11 @@ def grid_boundary_faces(n: int) -> np.ndarray:
 
 
 def _broad_phase(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Pairs ``i < j`` of boxes ``[lo, hi]`` that overlap, via a uniform grid of cells."""
+    """Pairs ``i < j`` of boxes ``[lo, hi]`` that share a cell of a uniform grid (cell side: the median box
+    extent), a superset of the pairs of overlapping boxes."""
     f = len(lo)
     ext = np.median((hi - lo).max(1))
-    cell = 2.0 * max(float(ext), 1e-12)
+    cell = max(float(ext), 1e-12)
     c0 = np.floor(lo / cell).astype(np.int64)
     c1 = np.floor(hi / cell).astype(np.int64)
     span = c1 - c0 + 1
@@ -122,9 +123,11 @@ def _broad_phase(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray
     i, j = np.minimum(i, j), np.maximum(i, j)
     pair = np.sort(i * f + j)
     pair = pair[np.r_[True, pair[1:] != pair[:-1]]]
-    i, j = pair // f, pair % f
-    keep = np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
-    return i[keep], j[keep]
+    return pair // f, pair % f
+
+
+def _boxes_overlap(lo: np.ndarray, hi: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    return np.all((lo[i] <= hi[j]) & (lo[j] <= hi[i]), axis=1)
 
 
 def _coplanar_overlap(A: np.ndarray, B: np.ndarray, normal: np.ndarray, eps: float) -> np.ndarray:
@@ -231,9 +234,12 @@ def surface_intersections(points: np.ndarray, faces: np.ndarray, *, tol: float =
     if len(fc) < 2:
         return np.zeros((0, 2), np.int64)
     T = p[fc]
-    i, j = _broad_phase(T.min(1), T.max(1))
+    lo, hi = T.min(1), T.max(1)
+    i, j = _broad_phase(lo, hi)
     share = (fc[i][:, :, None] == fc[j][:, None, :]).any((1, 2))
     i, j = i[~share], j[~share]
+    near = _boxes_overlap(lo, hi, i, j)
+    i, j = i[near], j[near]
     scale = float(np.linalg.norm(p.max(0) - p.min(0)))
     hit = np.zeros(len(i), bool)
     for s in range(0, len(i), 200_000):  # bounded memory
