@@ -160,6 +160,27 @@ def test_models(capsys):
         assert "no pretrained models" in stdout
 
 
+def test_models_lineage_lists_every_run(capsys):
+    """--lineage prints each shipped model's runs, parents first, with the commands and step counts of the
+    metadata, and cumulative steps that add up."""
+    import json
+
+    from rfmap.surrogate import WEIGHTS_DIR, models
+
+    rc, stdout, err = run_main(capsys, "models", "--lineage")
+    assert rc == 0 and err == ""
+    for name in models():
+        meta = json.loads((WEIGHTS_DIR / f"{name}.json").read_text())
+        runs = meta.get("lineage", []) + [meta]
+        head = f"{name}: {len(runs)} run(s), {meta.get('cumulative_steps', meta['steps'])} steps"
+        assert head in stdout
+        block = stdout.split(head, 1)[1]
+        lines = [ln.strip() for ln in block.splitlines()[1:len(runs) + 1]]
+        for k, (line, run) in enumerate(zip(lines, runs), 1):
+            assert line.startswith(f"{k}. {run['command']}   # {run['steps']} steps")
+        assert sum(int(r["steps"]) for r in runs) == meta.get("cumulative_steps", meta["steps"])
+
+
 def test_map_grid(tmp_path, capsys, tiny_model):
     out = tmp_path / "y.npz"
     rc, stdout, _ = run_main(capsys, "map", "--model", tiny_model, "--field", "sin-cos", "--n", 17, "--out", out)

@@ -72,8 +72,23 @@ def cmd_models(args) -> int:
     for name in names:
         meta = Surrogate.pretrained(name).meta
         t = meta.get("task", {})
-        print(f"{name:16s} {t.get('kind', '?'):9s} {t.get('dim', '?')}D {t.get('boundary', '?'):7s} "
-              f"steps={meta.get('steps')} wall={meta.get('wall_time')}s  {meta.get('description', '')}")
+        if not args.lineage:
+            print(f"{name:16s} {t.get('kind', '?'):9s} {t.get('dim', '?')}D {t.get('boundary', '?'):7s} "
+                  f"steps={meta.get('steps')} wall={meta.get('wall_time')}s  {meta.get('description', '')}")
+            continue
+        runs = list(meta.get("lineage", [])) + [meta]
+        total_steps = meta.get("cumulative_steps", meta.get("steps"))
+        total_wall = float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0)))
+        print(f"{name}: {len(runs)} run(s), {total_steps} steps, {total_wall / 60:.0f} min")
+        for k, run in enumerate(runs, 1):
+            sha = run.get("sha256")
+            print(f"  {k}. {run.get('command', '?')}   # {run.get('steps')} steps, "
+                  f"{float(run.get('wall_time', 0.0)) / 60:.0f} min" + (f", sha256 {sha[:12]}" if sha else ""))
+    if args.lineage and names:
+        print("In a chain, '--init NAME' continues from the weights the run before it wrote: pass that run's "
+              "runs/NAME/NAME.safetensors to --init to repeat the chain. A run with a --time-limit stops on the clock "
+              "and its schedule follows the elapsed time, so a repeat on another machine trains as long, not for the "
+              "same steps.")
     return 0
 
 
@@ -228,6 +243,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=cmd_train)
 
     s = sub.add_parser("models", help="list the shipped pretrained models")
+    s.add_argument("--lineage", action="store_true",
+                   help="print, per model, the rfmap train commands of every run behind its weights")
     s.set_defaults(func=cmd_models)
 
     s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion cartogram)")
