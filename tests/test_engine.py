@@ -124,6 +124,37 @@ def test_evaluate_scores_the_exact_map_of_a_beltrami_field():
     assert score({"mean_dd": 0.1, "n_flipped": 1}) > score({"mean_dd": 0.5, "n_flipped": 0})
 
 
+def test_score_counts_folded_maps_first_and_caps_their_metric(monkeypatch):
+    """One folded map with a huge Std(rho~_map) must not decide the checkpoint: the summary counts folded maps,
+    and the capped mean takes the field's Std(rho~_orig) for a folded map."""
+    from types import SimpleNamespace
+
+    import rfmap.validation as V
+    from rfmap.surrogate import Surrogate
+
+    sur = Surrogate.untrained(get_config("deq2d-square", "ci").task, base=4, depth=2, n_range=[17, 25])
+    fake = {0: (50.0, 0.4, 3), 1: (0.2, 0.5, 0), 2: (0.1, 0.3, 0), 3: (0.3, 0.6, 0)}
+    calls = iter(range(4))
+
+    def raw_map(s, field, n):
+        std_map, std_orig, flips = fake[next(calls)]
+        return SimpleNamespace(metrics=lambda: SimpleNamespace(std_rho_map=std_map, std_rho_orig=std_orig,
+                                                               n_flipped=flips, min_jacobian=-0.1 if flips else 0.2))
+
+    monkeypatch.setattr(V, "_raw_map", raw_map)
+    m = V.evaluate(sur, (17,), count=4)["mean"]
+    assert m["folded_fields"] == 1 and m["n_flipped"] == 3
+    np.testing.assert_allclose(m["std_rho_map"], (50.0 + 0.2 + 0.1 + 0.3) / 4)
+    np.testing.assert_allclose(m["capped"], (0.4 + 0.2 + 0.1 + 0.3) / 4)
+    better_but_folded = {"std_rho_map": 0.1, "n_flipped": 1, "folded_fields": 1, "capped": 0.1}
+    worse_fold_free = {"std_rho_map": 0.5, "n_flipped": 0, "folded_fields": 0, "capped": 0.5}
+    two_folded = {"std_rho_map": 0.2, "n_flipped": 2, "folded_fields": 2, "capped": 0.05}
+    assert score(worse_fold_free) < score(better_but_folded) < score(two_folded)
+    # among equally folded summaries the capped mean decides, not the raw mean an outlier blows up
+    outlier = {"std_rho_map": 99.0, "n_flipped": 5, "folded_fields": 1, "capped": 0.2}
+    assert score(outlier) < score({"std_rho_map": 0.3, "n_flipped": 1, "folded_fields": 1, "capped": 0.3})
+
+
 def test_resolve_device():
     assert resolve_device("cpu") == torch.device("cpu")
     assert resolve_device("auto").type == ("cuda" if torch.cuda.is_available() else "cpu")
