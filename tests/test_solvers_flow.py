@@ -169,6 +169,27 @@ def test_residual_floor_rows():
     assert by[33, "diffusion"] < 0.75 * by[17, "diffusion"] and by[33, "flow"] < 0.75 * by[17, "flow"]
 
 
+def test_warm_start_residuals_rows():
+    """Four maps per N; the two flows from the identity start from the same map and differ only by the route of the
+    density to the raster, so both are fold-free and far below the input's variation; a Beltrami model is refused."""
+    from rfmap import Surrogate
+    from rfmap.experiments import warm_start_residuals
+    from rfmap.paper_fields import sample_density
+
+    rows = warm_start_residuals(Surrogate.pretrained("deq2d-square"), "sin-cos", (17, 33))
+    methods = ("cold flow", "flow from the identity, exact raster", "network", "flow from the network")
+    assert [(r["n"], r["method"]) for r in rows] == [(n, m) for n in (17, 33) for m in methods]
+    by = {(r["n"], r["method"]): r for r in rows}
+    for n in (17, 33):
+        dens = sample_density("sin-cos", n)
+        orig = float((dens / dens.mean()).std())
+        for m in ("cold flow", "flow from the identity, exact raster", "flow from the network"):
+            assert by[n, m]["std"] < 0.3 * orig
+        assert by[n, "flow from the network"]["std"] < by[n, "network"]["std"]
+    with pytest.raises(ValueError, match="density surrogate"):
+        warm_start_residuals(Surrogate.pretrained("beltrami2d"), "sin-cos", (17,))
+
+
 @pytest.mark.parametrize("bad,kw,match", [
     (np.ones(5), {}, "grid field"),
     (np.ones((4, 5)), {}, "same number"),

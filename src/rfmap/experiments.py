@@ -24,7 +24,7 @@ from .result import MapResult
 __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table", "population_table",
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
            "COLUMN_TITLES", "format_value", "DIGITS", "generalization_table", "WARM_MODELS", "benchmark_fields",
-           "time_to_accuracy", "summarize", "residual_floor"]
+           "time_to_accuracy", "summarize", "residual_floor", "warm_start_residuals"]
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -524,4 +524,55 @@ def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: s
             rows.append({"n": int(n), "method": method, "std": sc["std"], "smooth": sc["smooth"],
                          "element_fraction": sc["element_fraction"], "time": res.time,
                          "n_flipped": res.metrics().n_flipped})
+    return rows
+
+
+def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) -> list[dict[str, Any]]:
+    r"""Why a flow started from a given map ends where it does: four maps of the test density per grid side.
+
+    * ``"cold flow"``: ``solve_flow`` from the identity, the density sampled as its P1 interpolant;
+    * ``"flow from the identity, exact raster"``: the same start, but through the warm-start route, which locates
+      the residual density of the starting map (here the input density, element by element) on the raster;
+    * ``"network"``: the surrogate's map ``sur.map(density_name, N)``;
+    * ``"flow from the network"``: one flow pass from the network's map (what ``Surrogate.map(polish=True)``
+      runs when the map is good enough), ``NaN`` where it stalls.
+
+    The two identity rows differ only in how the density reaches the raster, so their ratio is the cost of the
+    warm-start route itself; the network row's element-scale share (:func:`rfmap.metrics.residual_scales`) is the
+    part of its residual that no flow can act on.  ``sur`` must be a 2D or 3D density surrogate with a square
+    boundary.
+
+    Returns
+    -------
+    list of dict
+        One row per ``N`` and map: ``n``, ``method``, ``std``, ``smooth``, ``element_fraction``, ``time`` (s).
+    """
+    from .mesh import grid_mesh
+    from .metrics import residual_scales
+    from .paper_fields import sample_density
+    from .solvers.flow import solve_flow
+
+    if sur.spec.kind != "density" or sur.spec.boundary != "square":
+        raise ValueError(f"warm_start_residuals needs a density surrogate with a square boundary, got {sur.spec}")
+    rows = []
+    for n in ns:
+        n = int(n)
+        dens = sample_density(density_name, n)
+        ref = grid_mesh(n, sur.spec.dim).points
+        cold = solve_flow(dens)
+        ident = solve_flow(dens, start=ref, stall_blurs=())
+        net = sur.map(density_name, n)
+        try:
+            warm = solve_flow(dens, start=net.mapped_points, stall_blurs=())
+        except RuntimeError:
+            warm = None
+        for method, res in (("cold flow", cold), ("flow from the identity, exact raster", ident), ("network", net),
+                            ("flow from the network", warm)):
+            if res is None:
+                rows.append({"n": n, "method": method, "std": float("nan"), "smooth": float("nan"),
+                             "element_fraction": float("nan"), "time": float("nan")})
+                continue
+            sc = residual_scales(res.ref_points, res.mapped_points, res.elements, res.field)
+            rows.append({"n": n, "method": method, "std": sc["std"], "smooth": sc["smooth"],
+                         "element_fraction": sc["element_fraction"], "time": float(res.time)})
     return rows
