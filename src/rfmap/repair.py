@@ -76,7 +76,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import torch
 
-from .geometry import beltrami_coefficient, grid_signed_measures, grid_simplices, signed_measures
+from .geometry import beltrami_coefficient, grid_min_measure, grid_signed_measures, grid_simplices, signed_measures
 from .mesh import grid_points
 from .surface import boundary_faces, grid_boundary_faces, surface_intersections
 
@@ -97,35 +97,6 @@ def _measures(points: np.ndarray, elements: np.ndarray, grid_n: int | None) -> n
     if grid_n is not None:
         return grid_signed_measures(p[None], grid_n)[0].numpy()
     return signed_measures(p, torch.as_tensor(np.asarray(elements))).numpy()
-
-
-def _grid_min_det(points: torch.Tensor, n: int) -> float:
-    r"""Smallest :math:`\det E` over the grid-mesh elements (explicit formula on strided views, no gather)."""
-    d = points.shape[-1]
-    out = np.inf
-    for corners in grid_simplices(points[None], n, d):
-        e = [(c - corners[0]).unbind(-1) for c in corners[1:]]
-        if d == 2:
-            det = e[0][0] * e[1][1] - e[0][1] * e[1][0]
-        else:
-            (ax, ay, az), (bx, by, bz), (cx, cy, cz) = e
-            det = ax * (by * cz - bz * cy) + ay * (bz * cx - bx * cz) + az * (bx * cy - by * cx)
-        out = min(out, float(det.min()))
-    return out
-
-
-def grid_min_measure(points: np.ndarray, n: int) -> float:
-    r"""Smallest signed element measure of a map of the ``N``-grid mesh, cheaply.
-
-    A float32 pass decides whenever the minimum exceeds :math:`10^{-3}` of the reference measure (float32 rounding
-    of :math:`\det E` is far below that); otherwise the minimum is recomputed in float64.
-    """
-    d = points.shape[1]
-    ref = (1.0 / (n - 1)) ** d
-    m = _grid_min_det(torch.as_tensor(points, dtype=torch.float32), n)
-    if not m > 1e-3 * ref:
-        m = _grid_min_det(torch.as_tensor(np.asarray(points, np.float64)), n)
-    return m / (2 if d == 2 else 6)
 
 
 def boundary_loop(n: int) -> np.ndarray:

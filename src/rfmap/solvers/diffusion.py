@@ -33,6 +33,13 @@ Numerical method:
    (FSAL, 3 evaluations per step) with the local error per step bounded by ``rtol`` times the grid spacing, until
    the remaining displacement, estimated as :math:`\max|v| / \lambda_1` with :math:`\lambda_1 = \pi^2` the decay
    rate of the slowest mode, falls below ``tol_end`` times the grid spacing.
+5. **Fold guard.**  A step after which an element of the mesh would be turned over is rejected and retried with half
+   the step.  The exact flow is a diffeomorphism, but its image of a straight-sided element is not straight, and
+   where the density varies faster than the mesh resolves (a sharp peak beside a near-empty region) the vertex
+   trajectories cross however short the step.  After ``FOLD_STOP`` such rejections the flow is redone with the
+   vertices starting to move at :math:`t_0 = (\sigma h)^2/2`, when diffusion has blurred the density over
+   :math:`\sigma` = 1, 2, then 4 vertex spacings (``FOLD_BLURS``; recorded in ``info["fold_blurs"]``), as cartogram
+   programs blur sharp inputs.
 
 Boundary conditions:
 
@@ -62,6 +69,7 @@ import numpy as np
 import torch
 from scipy.fft import dct, dctn
 
+from ..geometry import grid_min_measure
 from ..inputs import check_density
 from ..mesh import check_n, grid_mesh, interpolate
 from ..result import MapResult
@@ -360,9 +368,20 @@ def _check_grid_density(density) -> np.ndarray:
     return check_density(arr)
 
 
+#: fold rejections after which the diffusion flow is stopped at its last fold-free state
+FOLD_STOP = 60
+#: blur widths (vertex spacings) of the retries of a flow that keeps folding (``solve_dem(fold_guard=True)``)
+FOLD_BLURS = (1.0, 2.0, 4.0)
+
+
 def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol: float, tol_end: float,
-               max_steps: int, progress: bool, label: str) -> tuple[np.ndarray, dict]:
-    r"""Integrate :math:`\dot y = v(y, t)` with the Bogacki–Shampine 3(2) pair until the flow has settled."""
+               max_steps: int, progress: bool, label: str, positive=None, t0: float = 0.0) -> tuple[np.ndarray, dict]:
+    r"""Integrate :math:`\dot y = v(y, t)` with the Bogacki–Shampine 3(2) pair until the flow has settled.
+
+    ``positive(y) -> bool``: whether every element of the mesh at positions ``y`` is positively oriented; a step
+    that passes the error test but fails this one is rejected and retried with half the step, and after
+    :data:`FOLD_STOP` such rejections the integration stops at the last accepted (fold-free) state.
+    """
     n_eval = 0
 
     def rhs(t: float, p: np.ndarray) -> np.ndarray:
@@ -380,9 +399,9 @@ def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol
         """Estimated end time: the slowest mode decays as exp(-lam1 t)."""
         return t + max(math.log(max(v, end_scale) / end_scale), 0.0) / lam1
 
-    k1 = rhs(0.0, y)
+    k1 = rhs(t0, y)
     vmax = max_norm(k1)
-    t = 0.0
+    t = t0
     dt = 1.0 / (lam1 * (field.m - 1) ** 2)  # the decay time of the fastest mode; the controller grows it
     bar = None
     if progress:
@@ -390,7 +409,8 @@ def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol
 
         bar = tqdm(total=round(t_remaining(0.0, vmax), 4), desc=label, leave=False,
                    bar_format="{l_bar}{bar}| t={n:.4f}/{total:.4f} [{elapsed}<{remaining}]")
-    accepted = rejected = 0
+    accepted = rejected = folds = 0
+    fold_stop = None
     try:
         while vmax > end_scale:
             if accepted + rejected >= max_steps:
@@ -401,6 +421,14 @@ def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol
             y_new = project(y + dt * (_BS_B[0] * k1 + _BS_B[1] * k2 + _BS_B[2] * k3))
             k4 = rhs(t + dt, y_new)  # FSAL: the first stage of the next step
             err = max_norm(dt * (_BS_E[0] * k1 + _BS_E[1] * k2 + _BS_E[2] * k3 + _BS_E[3] * k4)) / err_scale
+            if err <= 1.0 and positive is not None and not positive(y_new):
+                rejected += 1
+                folds += 1
+                if folds >= FOLD_STOP:  # the flow turns an element over however short the step: stop here
+                    fold_stop = t
+                    break
+                dt *= 0.5
+                continue
             if err <= 1.0:
                 t += dt
                 y, k1 = y_new, k4
@@ -420,7 +448,7 @@ def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol
         if bar is not None:
             bar.close()
     info = {"iterations": accepted, "rejected": rejected, "evaluations": n_eval, "t_end": t,
-            "residual_velocity": vmax}
+            "residual_velocity": vmax, "fold_rejections": folds, "fold_stop": fold_stop}
     return y, info
 
 
@@ -435,6 +463,7 @@ def solve_dem(
     margin: float = 0.5,
     max_steps: int = 10_000,
     num_threads: int | None = None,
+    fold_guard: bool = True,
 ) -> MapResult:
     r"""Diffusion density-equalizing map (Gastner & Newman 2004) of the unit square or cube.
 
@@ -471,6 +500,13 @@ def solve_dem(
     num_threads : int, optional
         Torch threads for the dense transforms during the solve (restored afterwards).  Default: 1 in 2D (the
         products are too small to gain from threads, which only add synchronisation cost), torch's setting in 3D.
+    fold_guard : bool
+        Keep the mesh fold-free (default): a time step that would turn an element over is rejected and retried
+        shorter.  The exact flow never folds, but its piecewise-linear image on the mesh can, where the density
+        changes faster than the mesh resolves (near-zero regions beside sharp peaks); if the flow keeps folding
+        (``FOLD_STOP`` rejections) it is redone from a blurred start (``FOLD_BLURS``, see the module docstring), and
+        if it still folds with the widest blur the integration stops at its last fold-free state
+        (``info["fold_stop"]`` gives that time).  ``False`` integrates the vertex trajectories regardless.
 
     Returns
     -------
@@ -478,8 +514,10 @@ def solve_dem(
         ``kind="density"``, ``field`` the vertex densities (shape (N**d,)), ``elements`` from
         :func:`rfmap.mesh.grid_mesh`, ``time`` the wall-clock seconds; ``info`` holds ``iterations`` (accepted
         steps), ``rejected``, ``evaluations`` (velocity-field evaluations), ``t_end`` (simulated time, box units),
-        ``residual_velocity``, ``eval_grid`` (``M``), ``box_grid`` (``N_box``) and, for ``"free"``,
-        ``sea_density``.
+        ``residual_velocity``, ``fold_rejections``, ``fold_blurs`` (blur widths of the redone flows, in vertex
+        spacings; usually empty), ``fold_stop`` (the simulated time at which the flow was stopped to stay
+        fold-free, else ``None``), ``eval_grid`` (``M``), ``box_grid`` (``N_box``) and, for
+        ``"free"``, ``sea_density``.
 
     Raises
     ------
@@ -527,11 +565,24 @@ def solve_dem(
         def project(p: np.ndarray) -> np.ndarray:
             return np.clip(p, 0.0, 1.0, out=p)
 
+    def positive(p: np.ndarray) -> bool:
+        return grid_min_measure(p, n) > 0.0
+
     threads = num_threads if num_threads is not None else (1 if d == 2 else None)
     with _torch_threads(threads):
         field = CosineDiffusion(fine)
-        y, info = _integrate(field, y0, project, h=1.0 / (nb - 1), rtol=float(rtol), tol_end=float(tol_end),
-                             max_steps=int(max_steps), progress=progress, label=f"DEM {d}D N={n}")
+        blurs: list[float] = []
+        for retry in range(len(FOLD_BLURS) + 1):
+            # a retry starts the vertices moving at t0 = (sigma h)^2 / 2, when diffusion has blurred the density
+            # with a Gaussian of width sigma vertex spacings (as cartogram programs blur sharp inputs)
+            t0 = 0.0 if retry == 0 else 0.5 * (FOLD_BLURS[retry - 1] / (nb - 1)) ** 2
+            y, info = _integrate(field, y0.copy(), project, h=1.0 / (nb - 1), rtol=float(rtol),
+                                 tol_end=float(tol_end), max_steps=int(max_steps), progress=progress,
+                                 label=f"DEM {d}D N={n}", positive=positive if fold_guard else None, t0=t0)
+            if info["fold_stop"] is None or retry == len(FOLD_BLURS):
+                break
+            blurs.append(FOLD_BLURS[retry])
+        info["fold_blurs"] = blurs
     mapped = y * scale - shift
     if boundary == "square":
         mapped = project(mapped)
