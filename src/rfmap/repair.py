@@ -5,7 +5,7 @@ A piecewise-linear map of a simplicial mesh is *folded* when an element has a no
 cube on itself (``fixed`` or ``square`` boundary conditions) is a bijection of the domain onto itself (degree
 argument); with a ``free`` boundary the image of the boundary must also be embedded: a simple polygon in 2D, a
 surface without self-intersection in 3D (:func:`rfmap.surface.surface_intersections` on the mesh's boundary
-triangles, which costs a fraction of a 3D map: two far-apart parts of the surface pushed through each other leave
+triangles, an extra pass on every free 3D map: two far-apart parts of the surface pushed through each other leave
 every tetrahedron positive).
 
 :func:`repair_map` is the entry point.  It first runs a cheap check (strided grid measures,
