@@ -6,7 +6,7 @@ import pytest
 from rfmap.mesh import grid_mesh
 from rfmap.repair import fold_free, repair_map
 from rfmap.stress import first_folding, self_crossing_map
-from rfmap.surface import boundary_faces, grid_boundary_faces, surface_intersections
+from rfmap.surface import boundary_faces, grid_boundary_faces, grid_surface_intersections, surface_intersections
 
 
 @pytest.mark.parametrize("n", [2, 5, 9])
@@ -126,3 +126,40 @@ def test_first_folding_returns_the_first_seed_whose_raw_map_folds():
         assert sur.map(earlier, 48, preprocess=False, repair=False).metrics().n_flipped == 0
     with pytest.raises(RuntimeError, match="folded on none"):
         first_folding(sur, 48, seed=seed + 1, tries=0)
+
+
+def _pushed(x, axis, side_value, to, half=0.3):
+    """Move the middle of one face of the cube (coordinate ``axis`` = ``side_value``) to ``to`` along that axis."""
+    y = x.copy()
+    others = [a for a in range(3) if a != axis]
+    sel = (x[:, axis] == side_value) & np.all(np.abs(x[:, others] - 0.5) < half, axis=1)
+    y[sel, axis] = to
+    return y
+
+
+@pytest.mark.parametrize("case", ["identity", "smooth", "noisy", "top-through-bottom", "side-through-side",
+                                  "bent"])
+def test_grid_fast_path_finds_exactly_the_generic_pairs(case):
+    """The per-face fast path (faces certified by their projection, then only pairs across faces) returns the
+    same pairs as the generic search, both where it applies (a face pushed through the opposite one keeps its
+    projection) and where it falls back (the bent cube)."""
+    n = 12
+    x = grid_mesh(n, 3).points
+    rng = np.random.default_rng(0)
+    y = {"identity": x, "smooth": x + 0.05 * np.sin(5 * x[:, [1, 2, 0]] + 1),
+         "noisy": x + 0.02 * rng.standard_normal(x.shape),
+         "top-through-bottom": _pushed(x, 2, 1.0, -0.2), "side-through-side": _pushed(x, 0, 1.0, -0.3),
+         "bent": None}[case]
+    if y is None:
+        y = self_crossing_map(n, 1.3)[1]
+    want = surface_intersections(y, grid_boundary_faces(n))
+    got = grid_surface_intersections(y, n)
+    np.testing.assert_array_equal(got, want)
+    assert (len(want) > 0) == (case in ("top-through-bottom", "side-through-side", "bent"))
+
+
+def test_grid_fast_path_bad_input():
+    with pytest.raises(ValueError, match="shape"):
+        grid_surface_intersections(np.zeros((10, 3)), 3)
+    with pytest.raises(ValueError, match="NaN"):
+        grid_surface_intersections(np.full((27, 3), np.nan), 3)

@@ -67,7 +67,6 @@ G. P. T. Choi, C. H. Rycroft, "Density-equalizing maps for simply connected open
 """
 from __future__ import annotations
 
-import math
 import time
 from typing import Any, Sequence
 
@@ -78,10 +77,11 @@ import torch
 
 from .geometry import beltrami_coefficient, grid_min_measure, grid_signed_measures, grid_simplices, signed_measures
 from .mesh import grid_points
-from .surface import boundary_faces, grid_boundary_faces, surface_intersections
+from .surface import boundary_crossings, boundary_faces, boundary_loop, grid_surface_intersections, \
+    surface_intersections
 
-__all__ = ["repair_map", "fold_free", "cap_mu", "boundary_loop", "boundary_crossings", "untangle_boundary",
-           "scale_repair", "surface_repair", "lbs_repair", "DELTA"]
+__all__ = ["repair_map", "fold_free", "cap_mu", "untangle_boundary", "scale_repair", "surface_repair", "lbs_repair",
+           "DELTA"]
 
 #: Margin of the μ-truncation: :math:`|\mu| \le 1 - \delta` after repair.
 #: the ``method`` values of :func:`repair_map`
@@ -97,101 +97,6 @@ def _measures(points: np.ndarray, elements: np.ndarray, grid_n: int | None) -> n
     if grid_n is not None:
         return grid_signed_measures(p[None], grid_n)[0].numpy()
     return signed_measures(p, torch.as_tensor(np.asarray(elements))).numpy()
-
-
-def boundary_loop(n: int) -> np.ndarray:
-    """Indices of the boundary vertices of the 2D ``N``-grid, counter-clockwise from the origin, shape (4 (N-1),)."""
-    i = np.arange(n)
-    bottom = i[:-1] * n  # (i, 0)
-    right = (n - 1) * n + i[:-1]  # (N-1, j)
-    top = i[::-1][:-1] * n + n - 1  # (i, N-1), i descending
-    left = i[::-1][:-1]  # (0, j), j descending
-    return np.concatenate([bottom, right, top, left])
-
-
-def boundary_crossings(poly: np.ndarray, edges: np.ndarray | None = None) -> np.ndarray:
-    r"""Pairs of properly crossing edges of a closed polygon (edge ``k`` joins vertices ``k`` and ``k+1``).
-
-    Candidate pairs come from a uniform bucket grid whose cell is twice the median edge extent (an edge is entered
-    in every cell its bounding box meets), so the cost is about linear in the number of edges plus the total
-    length of the long ones, even when a few edges are stretched far beyond the others.  Edges sharing a vertex are not
-    compared; two edges cross when each one's endpoints lie strictly on opposite sides of the other (orientation
-    test), or when they touch (a zero orientation with overlapping extents counts as a crossing).
-
-    With ``edges``, only the crossings that involve one of these edges are returned: each is tested against
-    every edge directly (the check after moving a few vertices, as in :func:`scale_repair`).
-
-    Parameters
-    ----------
-    poly : ndarray, shape (k, 2)
-    edges : int ndarray, optional
-        Edge indices in ``[0, k)``.
-
-    Returns
-    -------
-    ndarray of int, shape (c, 2): edge index pairs ``(i, j)`` with ``i < j``.
-    """
-    P = np.asarray(poly, dtype=np.float64)
-    k = P.shape[0]
-    a, b = P, np.roll(P, -1, axis=0)
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    if edges is not None and len(edges) * k <= 1 << 18:
-        e = np.unique(np.asarray(edges, np.int64) % k)
-        near = (lo[e, None] <= hi[None]).all(2) & (lo[None] <= hi[e, None]).all(2)  # (len(e), k) boxes meet
-        ii, jj = np.nonzero(near)
-        i, j = np.minimum(e[ii], jj), np.maximum(e[ii], jj)
-        return _crossing_pairs(a, b, i, j, k)
-    ext = (hi - lo).max(1)
-    # the cell is twice the median edge extent: a typical edge meets at most 2 x 2 cells, and a long edge (a
-    # stretched boundary) is entered in every cell its bounding box meets instead of inflating every cell
-    # (and no finer than 1/(4 sqrt k) of the whole polygon's extent, so that degenerate edges cannot explode it)
-    whole = float((P.max(0) - P.min(0)).max())
-    cell = max(2.0 * float(np.median(ext)), whole / (4.0 * math.sqrt(k)), 1e-12)
-    c0 = np.floor(lo / cell).astype(np.int64)
-    c1 = np.floor(hi / cell).astype(np.int64)
-    span = c1 - c0 + 1  # (k, 2) cells per axis
-    count = span.prod(1)
-    edge = np.repeat(np.arange(k), count)
-    r = np.arange(edge.size) - np.repeat(np.cumsum(count) - count, count)
-    cx = c0[edge, 0] + r % span[edge, 0]
-    cy = c0[edge, 1] + r // span[edge, 0]
-    keys = (cx - cx.min()) * (int(cy.max() - cy.min()) + 1) + (cy - cy.min())
-    order = np.argsort(keys, kind="stable")
-    ids, keys = edge[order], keys[order]
-    pi, pj = [], []
-    off = 1
-    while off < len(keys):
-        same = keys[off:] == keys[:-off]
-        if not same.any():
-            break
-        pi.append(ids[:-off][same])
-        pj.append(ids[off:][same])
-        off += 1
-    if not pi:
-        return np.zeros((0, 2), dtype=np.int64)
-    i, j = np.concatenate(pi), np.concatenate(pj)
-    i, j = np.minimum(i, j), np.maximum(i, j)
-    box = (lo[i] <= hi[j]).all(1) & (lo[j] <= hi[i]).all(1)
-    pairs = _crossing_pairs(a, b, i[box], j[box], k)
-    if edges is not None:
-        pairs = pairs[np.isin(pairs, np.asarray(edges, np.int64) % k).any(1)]
-    return pairs
-
-
-def _crossing_pairs(a: np.ndarray, b: np.ndarray, i: np.ndarray, j: np.ndarray, k: int) -> np.ndarray:
-    """The candidate pairs ``i < j`` (boxes meeting) of non-adjacent edges that cross, unique and sorted."""
-    gap = j - i
-    keep = (gap > 1) & (gap < k - 1)
-    code = np.unique(i[keep] * k + j[keep])
-    i, j = code // k, code % k
-
-    def orient(p, q, r):
-        return (q[:, 0] - p[:, 0]) * (r[:, 1] - p[:, 1]) - (q[:, 1] - p[:, 1]) * (r[:, 0] - p[:, 0])
-
-    o1, o2 = orient(a[i], b[i], a[j]), orient(a[i], b[i], b[j])
-    o3, o4 = orient(a[j], b[j], a[i]), orient(a[j], b[j], b[i])
-    cross = (o1 * o2 <= 0) & (o3 * o4 <= 0)
-    return np.stack([i[cross], j[cross]], 1)
 
 
 def fold_free(points: np.ndarray, elements: np.ndarray, *, grid_n: int | None = None,
@@ -212,9 +117,11 @@ def fold_free(points: np.ndarray, elements: np.ndarray, *, grid_n: int | None = 
 
 
 def _surface_crossings(points: np.ndarray, elements: np.ndarray, grid_n: int | None) -> int:
-    """Number of intersecting pairs of boundary triangles of a 3D map (:func:`rfmap.surface.surface_intersections`)."""
-    faces = grid_boundary_faces(grid_n) if grid_n else boundary_faces(np.asarray(elements))
-    return len(surface_intersections(points, faces))
+    """Number of intersecting pairs of boundary triangles of a 3D map (:func:`rfmap.surface.surface_intersections`,
+    on a grid mesh :func:`rfmap.surface.grid_surface_intersections`)."""
+    if grid_n:
+        return len(grid_surface_intersections(points, grid_n))
+    return len(surface_intersections(points, boundary_faces(np.asarray(elements))))
 
 
 def surface_repair(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, grid_n: int | None = None,
