@@ -163,3 +163,12 @@ def test_grid_fast_path_bad_input():
         grid_surface_intersections(np.zeros((10, 3)), 3)
     with pytest.raises(ValueError, match="NaN"):
         grid_surface_intersections(np.full((27, 3), np.nan), 3)
+
+
+def test_cli_repair_line_reports_surface_crossings():
+    from rfmap.cli import repair_summary
+
+    ref, u, el = self_crossing_map(9, 1.3)
+    line = repair_summary(repair_map(ref, u, el, boundary="free", grid_n=9)[1])
+    assert "+surface" in line and "crossing boundary triangle pairs" in line and line.count("\n") == 0
+    assert line.split("crossing boundary triangle pairs ")[1].split(",")[0].endswith("-> 0")

@@ -137,9 +137,12 @@ def repair_summary(report: dict | None) -> str:
     if report is None:
         return "repair: off (raw network output)"
     if not report["needed"]:
-        return f"repair: not needed, no folded element ({report['time'] * 1e3:.1f} ms check)"
+        return f"repair: not needed, nothing folded ({report['time'] * 1e3:.1f} ms check)"
     b, a = report["metrics_before"], report["metrics_after"]
     extra = "".join(f", {k} {b[k]:.4g} -> {a[k]:.4g}" for k in ("std_rho_map", "max_mu", "mean_dmu") if k in b)
+    if "surface_crossings_before" in report:
+        extra += (f", crossing boundary triangle pairs {report['surface_crossings_before']} -> "
+                  f"{report['surface_crossings_after']}")
     return (f"repair: {report['method']}, {report['n_flipped_before']} folded -> {report['n_flipped_after']}, "
             f"{report['affected']} affected, min Jacobian {b['min_jacobian']:.3g} -> {a['min_jacobian']:.3g}"
             f"{extra}, {report['time']:.3f} s")
