@@ -33,9 +33,10 @@ def test_metadata_records_provenance(name):
     stored["model"] = {**asdict(ModelConfig()), **stored["model"]}
     # overrides given on the recorded command line (e.g. --steps for a warm restart) are what it says they are
     words = meta.get("command", "").split()
-    for flag, key in (("--steps", "steps"), ("--batch", "batch"), ("--seed", "seed")):
+    for flag, key, kind in (("--steps", "steps", int), ("--batch", "batch", int), ("--seed", "seed", int),
+                            ("--lr", "lr", float)):
         if flag in words:
-            assert stored[key] == int(words[words.index(flag) + 1])
+            assert stored[key] == kind(words[words.index(flag) + 1])
             expected[key] = stored[key]
     assert stored == expected
     assert meta["preset"] == "full"
