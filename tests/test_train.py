@@ -115,15 +115,19 @@ def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch):
             raise _Crash
 
     monkeypatch.setattr(T.TrainState, "checkpoint", checkpoint_then_crash)
+    start = f"rfmap train --config {cfg.name} --preset ci --steps 20"
     with pytest.raises(_Crash):
-        T.train(cfg, tmp_path / "b", progress=False)
+        T.train(cfg, tmp_path / "b", progress=False, command=start)
     monkeypatch.setattr(T.TrainState, "checkpoint", real_checkpoint)
     assert not (tmp_path / "b" / f"{cfg.name}.safetensors").exists()
     ck = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=True)
     assert ck["step"] == 10
 
-    resumed = T.train(cfg, tmp_path / "b", progress=False, resume=True)
+    resumed = T.train(cfg, tmp_path / "b", progress=False, resume=True, command=start + " --resume")
     assert resumed.meta["steps"] == 20
+    # the metadata keeps the command that repeats the run and lists the resumption
+    assert resumed.meta["command"] == start
+    assert resumed.meta["resumed"] == [start + " --resume"]
     sa, sb = straight.model.state_dict(), resumed.model.state_dict()
     assert set(sa) == set(sb)
     for k in sa:
@@ -136,6 +140,25 @@ def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch):
     loss_a = {r["step"]: r["loss"] for r in la if "loss" in r}
     loss_b = {r["step"]: r["loss"] for r in lb if "loss" in r}
     assert loss_a == loss_b
+
+
+def test_started_as_rebuilds_the_starting_command_of_an_old_checkpoint():
+    assert T._started_as("rfmap train --config x --lr 0.0002 --resume", []) == "rfmap train --config x --lr 0.0002"
+    parent = [{"name": "x", "sha256": "0" * 64}]
+    assert T._started_as("rfmap train --config x --resume", parent) == "rfmap train --config x --init x"
+    assert T._started_as("rfmap train --config x --init y --resume", parent) == "rfmap train --config x --init y"
+    assert T._started_as(None, parent) is None
+
+
+def test_resume_after_the_time_limit_trains_nothing(tmp_path):
+    cfg = CFG.with_overrides(steps=10**6, val_every=10**6, ckpt_every=10**6, time_limit=0.5)
+    T.train(cfg, tmp_path, progress=False)
+    before = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
+    assert 1 <= before["step"] < 10**6  # stopped on the clock
+    again = T.train(cfg, tmp_path, progress=False, resume=True)
+    assert again.meta["steps"] == before["step"]
+    for k, v in before["model"].items():
+        assert torch.equal(v, again.model.state_dict()[k]), k
 
 
 def test_resume_with_another_config_is_refused(tmp_path):

@@ -327,7 +327,8 @@ class TrainState:
     step: int = 0
     elapsed0: float = 0.0  # training time of earlier sessions (--resume)
     lineage: list = field(default_factory=list)
-    command: str | None = None
+    command: str | None = None  # the command line that started the run (kept across --resume)
+    resumed: list = field(default_factory=list)  # the command lines that continued it after interruptions
     best: dict | None = None  # {"step", "score", "summary", "state"}
     ema: float | None = None
     t_start: float = 0.0
@@ -350,6 +351,7 @@ class TrainState:
         tmp = self.out / "checkpoint.pt.part"
         torch.save({"model": self.model.state_dict(), "opt": self.opt.state_dict(), "sched": self.sched.state_dict(),
                     "step": self.step, "elapsed": self.elapsed(), "lineage": json.dumps(self.lineage),
+                    "command": self.command or "", "resumed": json.dumps(self.resumed),
                     "best": None if self.best is None else {k: json.dumps(v) for k, v in self.best.items()
                                                             if k != "state"},
                     "best_state": None if self.best is None else self.best["state"],
@@ -371,6 +373,8 @@ class TrainState:
                 "world_size": self.world, "global_batch": cfg.batch * self.world, "description": cfg.description}
         if self.command:
             meta["command"] = self.command
+        if self.resumed:
+            meta["resumed"] = list(self.resumed)
         if final is not None:
             meta["final_metrics"] = final
         return Surrogate(model, cfg.task, meta)
@@ -410,12 +414,29 @@ def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool
         sched.load_state_dict(state["sched"])
         st.step, st.elapsed0 = int(state["step"]), float(state["elapsed"])
         st.lineage = json.loads(state.get("lineage", "[]"))
+        # the metadata keeps the command that started the run (the one to repeat it) and lists the resumptions
+        st.resumed = json.loads(state.get("resumed", "[]")) + ([command] if command else [])
+        st.command = state.get("command") or _started_as(command, st.lineage)
         if state.get("best"):
             st.best = {k: json.loads(v) for k, v in state["best"].items()}
             st.best["state"] = state["best_state"]
     elif rank == 0 and (out / "log.jsonl").exists():
         (out / "log.jsonl").unlink()
     return st
+
+
+def _started_as(command: str | None, lineage: list) -> str | None:
+    """The starting command of a run resumed from a checkpoint that predates stored commands.
+
+    A resumed run repeats its starting options (the configuration must match), so the starting command is the
+    resuming one without ``--resume``, with ``--init PARENT`` where the run had a parent (its lineage record).
+    """
+    if not command:
+        return command
+    words = [w for w in command.split() if w != "--resume"]
+    if lineage and "--init" not in words:
+        words += ["--init", str(lineage[-1]["name"])]
+    return " ".join(words)
 
 
 def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | None = None,
@@ -491,6 +512,8 @@ def _validate_and_keep(st: TrainState, bar) -> dict:
 def _loop(st: TrainState, loader, bar, log_every: int) -> None:
     cfg = st.cfg
     while st.step < cfg.steps:
+        if cfg.time_limit > 0 and st.elapsed() > cfg.time_limit:
+            break  # resumed after its time limit: nothing left to train
         n, pts, par = loader.get(st.step)
         lv, parts, gnorm = _train_step(st, n, pts, par)
         st.step += 1
