@@ -140,6 +140,39 @@ def test_density_loss_is_lowered_by_equalising():
     assert after < 5e-3 * before
 
 
+def test_density_tangent_agrees_above_the_floor_and_pulls_collapsed_elements_open():
+    """The tangent continuation equals the clamp wherever every element keeps 1 % of its measure; on a map that
+    collapses one triangle (and flips it), the clamp gives that vertex no density gradient, the tangent does, and
+    the gradient points to where the triangle opens."""
+    ref, el = mesh_t(9)
+    rho = density_on(ref, bump)
+    mapped = smooth_map(ref, 0.08)
+    a = L.density_loss(ref, mapped, el, rho)
+    b = L.density_loss(ref, mapped, el, rho, tangent=True)
+    assert float(b) == pytest.approx(float(a), rel=1e-12)
+    # push an interior vertex through the opposite edge of one of its triangles
+    meas = signed_measures(ref, el)[0]
+    k = 40  # an interior triangle
+    i, j, m = (int(v) for v in el[k])
+    bad = ref.clone()
+    bad[0, i] = ref[0, j] + ref[0, m] - ref[0, i]  # reflected through the midpoint of edge j-m: area -|T|
+    assert float(signed_measures(bad, el)[0, k]) < -0.5 * float(meas[k])
+    grads = {}
+    for tangent in (False, True):
+        x = bad.clone().requires_grad_(True)
+        L.density_loss(ref, x, el, rho, tangent=tangent).backward()
+        # the part of the vertex's gradient that comes from the flipped triangle: total minus the others
+        grads[tangent] = x.grad[0, i].clone()
+    x = bad.clone().requires_grad_(True)
+    area = signed_measures(x, el)[0, k]
+    area.backward()
+    opens = x.grad[0, i]  # moving the vertex along +opens increases the flipped triangle's area
+    # descending the tangent loss moves the vertex to open the triangle (the clamp's gradient there is only what
+    # the neighbouring triangles contribute)
+    assert float(-(grads[True] - grads[False]) @ opens) > 0
+    assert torch.isfinite(grads[True]).all()
+
+
 def test_density_loss_resolution_independent():
     """Losses are quadratures of integrals over the domain, so they converge as the grid is refined.
 

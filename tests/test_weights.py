@@ -7,6 +7,7 @@ import pytest
 
 from rfmap.config import ModelConfig, get_config
 from rfmap.surrogate import WEIGHTS_DIR, Surrogate, models
+from rfmap.tasks import LossWeights
 
 SHIPPED = models()
 
@@ -31,6 +32,8 @@ def test_metadata_records_provenance(name):
         expected.pop(key, None)
     # model fields added after the weights were made (the FNO's) take their defaults, which leave a U-Net unchanged
     stored["model"] = {**asdict(ModelConfig()), **stored["model"]}
+    # likewise loss switches added later (density_tangent) default to what older runs did
+    stored["loss"] = {**asdict(LossWeights()), **stored["loss"]}
     # overrides given on the recorded command line (e.g. --steps for a warm restart) are what it says they are
     words = meta.get("command", "").split()
     for flag, key, kind in (("--steps", "steps", int), ("--batch", "batch", int), ("--seed", "seed", int),

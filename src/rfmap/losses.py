@@ -37,7 +37,7 @@ def beltrami_loss(ref: Tensor, mapped: Tensor, elements: Tensor, mu_target: Tens
 
 def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, *,
                     ref_meas: Tensor | None = None, meas: Tensor | None = None,
-                    elem_density: Tensor | None = None) -> tuple[Tensor, Tensor]:
+                    elem_density: Tensor | None = None, tangent: bool = False) -> tuple[Tensor, Tensor]:
     r"""Relative density :math:`\tilde\rho_i = (p_i / A_i) / (P / A)` on the mapped mesh, and reference measures.
 
     :math:`p_i` is the population of element :math:`i` (mean vertex density times reference measure),
@@ -46,6 +46,11 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
 
     ``ref_meas``, ``meas`` (B, m) and ``elem_density`` (B, m, the mean vertex density of each element) may be
     passed precomputed (e.g. by :func:`rfmap.geometry.grid_signed_measures` on a grid mesh).
+
+    With ``tangent=True`` the density below the floor :math:`a_0 = 0.01\,|T_i|` continues along its tangent,
+    :math:`p_i/a_0\,(2 - A_i/a_0)`, instead of staying at :math:`p_i/a_0`: a collapsed or flipped element then
+    still feels the density term pulling it open (with the clamp its gradient is zero there and only the fold
+    penalty acts). The two agree, value and slope, at the floor and above it.
 
     Returns
     -------
@@ -57,14 +62,17 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
     pop = elem_density * ref_meas
     # guard: an element shrunk below 1% of its reference measure (or flipped) counts as 1% (the fold penalty
     # handles it); this keeps the density and its gradient bounded
-    rho = pop / torch.maximum(meas, 0.01 * ref_meas)
+    floor = 0.01 * ref_meas
+    rho = pop / torch.maximum(meas, floor)
+    if tangent:
+        rho = torch.where(meas >= floor, rho, pop / floor * (2 - meas / floor))
     mean_rho = pop.sum(-1, keepdim=True) / meas.sum(-1, keepdim=True)
     return rho / mean_rho, ref_meas
 
 
 def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, beta: float = 1.0, *,
                  ref_meas: Tensor | None = None, meas: Tensor | None = None,
-                 elem_density: Tensor | None = None) -> Tensor:
+                 elem_density: Tensor | None = None, tangent: bool = False) -> Tensor:
     r"""Density-equalizing loss :math:`\int_\Omega L(p_i/A_i - P/A)` with smooth-L1 :math:`L` (paper Sec. 5.2).
 
     The difference is taken relative to the mean density :math:`P/A`, i.e. :math:`L(\tilde\rho_i - 1)`; this
@@ -75,9 +83,11 @@ def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor,
     ----------
     density : Tensor, shape (B, n)
         Vertex densities.
+    tangent : bool
+        Continue the density below its floor along the tangent (see :func:`element_density`).
     """
     rho, w = element_density(ref, mapped, elements, density, ref_meas=ref_meas, meas=meas,
-                             elem_density=elem_density)
+                             elem_density=elem_density, tangent=tangent)
     err = F.smooth_l1_loss(rho, torch.ones_like(rho), reduction="none", beta=beta)
     return weighted_mean(err, w)
 

@@ -232,12 +232,17 @@ class LossWeights:
         Weight of the fold penalty; ``fold_threshold`` is its :math:`\\tau`.
     area : float
         Free boundary: weight of the area constraint.
+    density_tangent : bool
+        Below the 1 % floor of an element's mapped measure, continue its density along the tangent instead of
+        clamping it (:func:`rfmap.losses.element_density`), so that collapsed and flipped elements keep a
+        restoring gradient from the density term. ``False`` (the clamp) is what the shipped models used.
     """
 
     beltrami: float = 0.0
     fold: float = 10.0
     fold_threshold: float = 0.02
     area: float = 1.0
+    density_tangent: bool = False
 
 
 def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights) -> tuple[Tensor, dict]:
@@ -261,7 +266,7 @@ def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights) -
         total = parts["beltrami"]
     else:
         parts["density"] = L.density_loss(batch.ref, mapped, batch.elements, batch.density, elem_density=elem_density,
-                                          **mk)
+                                          tangent=weights.density_tangent, **mk)
         total = parts["density"]
         if weights.beltrami and d == 2:
             parts["mu2"] = L.beltrami_energy(batch.ref, mapped, batch.elements)
