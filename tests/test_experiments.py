@@ -137,3 +137,22 @@ def test_generalization_table_compares_with_the_classical_solver_on_unseen_field
     rep = validation_fields("density", 2, 4, stream="report")
     val = validation_fields("density", 2, 4)
     assert not np.allclose(rep[0].field(x), val[0].field(x))
+
+
+def test_displacement_demand_of_an_identity_network():
+    """An untrained network (zero head) is the identity map: it reaches nowhere and leaves all the non-uniformity,
+    while the classical map moves points and leaves little; the ramps ask for larger moves than the training draws."""
+    from rfmap.experiments import displacement_demand
+    from rfmap.tasks import TaskSpec
+
+    sur = Surrogate.untrained(TaskSpec("density", 2, "square"), base=4, depth=2, name="deq2d-square", n_range=[9, 17])
+    t, recs = displacement_demand(sur, count=4, train_count=3, n=17)
+    assert [c for c, _, _ in t.rows] == ["training", "smooth", "steps", "peak", "ramp", "paper"]
+    assert len(recs) == 3 + 4 + 4
+    for r in recs:
+        assert r["demand"] > 1e-3 and r["reach"] == 0.0
+        assert r["left_net"] == pytest.approx(1.0, abs=1e-12) and r["left_classical"] < 0.5
+    assert t.value("training", "training draws", "reach_ratio") == 0.0
+    assert t.value("ramp", "ours", "demand_median") > t.value("training", "training draws", "demand_p90")
+    with pytest.raises(ValueError, match="density model"):
+        displacement_demand(Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, name="beltrami2d"))

@@ -24,7 +24,8 @@ from .result import MapResult
 __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table", "population_table",
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
            "COLUMN_TITLES", "format_value", "DIGITS", "generalization_table", "WARM_MODELS", "benchmark_fields",
-           "time_to_accuracy", "summarize", "residual_floor", "warm_start_residuals"]
+           "time_to_accuracy", "summarize", "residual_floor", "warm_start_residuals",
+           "displacement_demand"]
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -35,6 +36,8 @@ COLUMN_TITLES = {
     "alpha": "α", "mean": "mean", "worst": "worst",
     "raw_std": "raw Std ρ̃ map", "flips_repaired": "flips after repair", "parameters": "parameters",
     "train_time": "training (min)", "validation": "held-out Std ρ̃ map", "work_n": "network grid", "arch": "arch",
+    "count": "fields", "demand_median": "demand (median)", "demand_p90": "demand (90 %)",
+    "reach_ratio": "reach / demand", "left_net": "left, ours", "left_classical": "left, classical",
 }
 #: significant digits of every number in a table (times: one fewer, with their unit)
 DIGITS = 4
@@ -425,6 +428,74 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
                                       "n_flipped": int(sum(x[1] for x in vals)),
                                       "time": float(np.mean([x[2] for x in vals]))})
     return table
+
+
+def displacement_demand(sur, count: int = 16, train_count: int = 60, n: int | None = None) -> tuple[Table, list]:
+    r"""How far each field asks the map to move its points, and how far the network moves them.
+
+    For a 2D or 3D density model: the *demand* of a field is the largest vertex displacement
+    :math:`\max_i |u(x_i) - x_i|` of the classical diffusion DEM's map (the model's boundary), its *reach* that of
+    the raw network map, on the same ``N``-grid.  Three groups of fields: ``train_count`` draws of the model's
+    own training distribution (its ``full`` configuration, samples 0 of steps 0, 1, ..., on the grid without
+    jitter), the ``count`` unseen fields of each kind of the ``report`` stream (smooth, steps, peak, ramp), and the
+    paper's test fields.
+
+    Returns
+    -------
+    (table, records)
+        The table has one row per group and kind: the median and 90th percentile of the demand, the median reach
+        over demand, the median fraction of the non-uniformity left (Std(rho~_map) / Std(rho~_orig)) by the
+        network and by the classical map.  ``records`` holds one dict per field (``group``, ``label``,
+        ``demand``, ``reach``, ``left_net``, ``left_classical``, ``n_flipped``) for
+        :func:`rfmap.viz.displacement_demand_figure`.
+    """
+    from .config import get_config
+    from .inputs import preprocess_density
+    from .mesh import grid_points
+    from .paper_fields import sample_density
+    from .solvers import solve_dem
+    from .tasks import draw_samples
+    from .validation import validation_fields
+
+    spec = sur.spec
+    if spec.kind != "density":
+        raise ValueError(f"displacement_demand needs a density model, got a {spec.kind} model")
+    n = int(n or PAPER_N[spec.dim])
+    shape = (n,) * spec.dim
+    pts = grid_points(n, spec.dim)
+    boundary = "free" if spec.boundary == "free" else "square"
+    cfg = get_config(sur.name, "full")
+    fields: list[tuple[str, str, np.ndarray]] = []
+    for t in range(int(train_count)):
+        _, par = draw_samples(cfg.task, seed=cfg.seed, step=t, indices=[0], n=n, jitter=0.0,
+                              density_cfg=cfg.density_field)
+        fields.append(("training", f"train-{t}", par[0].reshape(shape)))
+    for vf in validation_fields("density", spec.dim, int(count), stream="report"):
+        fields.append((vf.label.rsplit("-", 1)[0], vf.label, preprocess_density(vf.field(pts).reshape(shape))))
+    for name in TEST_FIELDS["density", spec.dim]:
+        fields.append(("paper", name, sample_density(name, n)))
+    records = []
+    for group, label, dens in fields:
+        net = sur.map(dens, n, repair=False)
+        cl = solve_dem(dens, boundary=boundary, progress=False)
+        mn, mc = net.metrics(), cl.metrics()
+        records.append({"group": group, "label": label,
+                        "demand": float(np.linalg.norm(cl.mapped_points - cl.ref_points, axis=1).max()),
+                        "reach": float(np.linalg.norm(net.mapped_points - net.ref_points, axis=1).max()),
+                        "left_net": mn.std_rho_map / mn.std_rho_orig, "left_classical": mc.std_rho_map / mc.std_rho_orig,
+                        "n_flipped": int(mn.n_flipped)})
+    table = Table(f"tab:displacement-demand-{sur.name}",
+                  f"{sur.name}: displacement the classical map needs (demand) and the network's (reach), N = {n}",
+                  ["count", "demand_median", "demand_p90", "reach_ratio", "left_net", "left_classical"])
+    for group in dict.fromkeys(r["group"] for r in records):
+        rs = [r for r in records if r["group"] == group]
+        d = np.array([r["demand"] for r in rs])
+        table.add(group, "ours" if group != "training" else "training draws",
+                  {"count": len(rs), "demand_median": float(np.median(d)), "demand_p90": float(np.quantile(d, 0.9)),
+                   "reach_ratio": float(np.median([r["reach"] / r["demand"] for r in rs])),
+                   "left_net": float(np.median([r["left_net"] for r in rs])),
+                   "left_classical": float(np.median([r["left_classical"] for r in rs]))})
+    return table, records
 
 
 # ------------------------------------------------------------------------ classical, neural and hybrid maps

@@ -13,7 +13,7 @@ __all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "p
            "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
            "population_figure", "volume_rows", "render_lattice", "plot_batch", "plot_loss_terms", "training_curves", "learning_curves", "CAMERA_3D", "LOSS_TERMS", "plot_regions", "cartogram_figure",
            "cartogram_panels", "area_error_histograms", "time_accuracy_figure", "validation_vs_time",
-           "table_lines", "plot_slice_outline"]
+           "table_lines", "plot_slice_outline", "displacement_demand_figure"]
 
 STYLE = {
     "figure.dpi": 110,
@@ -635,6 +635,45 @@ def time_accuracy_figure(rows: list[dict], *, title: str | None = None):
         ax.set_xlabel("wall time (s)")
     axes[0, 0].set_ylabel(r"Std($\tilde\rho_{map}$)")
     axes[0, -1].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def displacement_demand_figure(records: list[dict], *, title: str | None = None):
+    """Left: the network map's largest displacement (reach) against the classical map's (demand), one marker per
+    field, with the line reach = demand; right: the fraction of the non-uniformity each map leaves,
+    Std(rho~_map) / Std(rho~_orig), against the demand.  The band marks the demand of 90 % of the training draws
+    (records of :func:`rfmap.experiments.displacement_demand`)."""
+    import matplotlib.pyplot as plt
+
+    groups = list(dict.fromkeys(r["group"] for r in records))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10.5, 4.2))
+    train = [r["demand"] for r in records if r["group"] == "training"]
+    if train:
+        p90 = float(np.quantile(train, 0.9))
+        for ax in (a, b):
+            ax.axvspan(0, p90, color="0.9", zorder=0, label="90 % of training draws")
+    for k, g in enumerate(groups):
+        rs = [r for r in records if r["group"] == g]
+        d = [r["demand"] for r in rs]
+        kw = dict(color=f"C{k}", alpha=0.35 if g == "training" else 0.9, ms=4 if g == "training" else 7)
+        a.plot(d, [r["reach"] for r in rs], "o", label=g, **kw)
+        b.plot(d, [r["left_net"] for r in rs], "o", label=f"{g}: ours", **kw)
+        if g != "training":
+            b.plot(d, [r["left_classical"] for r in rs], "x", color=f"C{k}", ms=6)
+    top = max(max(r["demand"] for r in records), max(r["reach"] for r in records)) * 1.05
+    a.plot([0, top], [0, top], "k--", lw=1, label="reach = demand")
+    a.set_xlim(0, top)
+    a.set_ylim(0, top)
+    a.set_xlabel("demand: classical map's largest displacement")
+    a.set_ylabel("reach: network map's largest displacement")
+    a.legend(fontsize=8)
+    b.set_xlim(0, top)
+    b.set_yscale("log")
+    b.set_xlabel("demand: classical map's largest displacement")
+    b.set_ylabel(r"Std($\tilde\rho_{map}$) / Std($\tilde\rho_{orig}$)  (o: ours, x: classical)")
     if title:
         fig.suptitle(title)
     fig.tight_layout()
