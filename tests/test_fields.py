@@ -1,5 +1,6 @@
 """Test densities, test maps, preprocessing and random training fields (rfmap.fields)."""
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -374,3 +375,18 @@ def test_bad_input_raises_value_error():
     with pytest.raises(ValueError):
         jittered_points(2, 2, np.random.default_rng(0))
     assert math.isfinite(_std_orig("sin-cos", 3))
+
+
+def test_ramp_scale_and_width_change_only_the_ramps():
+    """ramp_scale multiplies every ramp's height and ramp_width sets its width range; the random stream, and so
+    every other part of the field, is the same for every setting."""
+    base = RandomDensityConfig(p_ramp=1.0, p_peak=1.0, p_noise=0.0)
+    a = RandomDensity(np.random.default_rng(5), base)
+    b = RandomDensity(np.random.default_rng(5), replace(base, ramp_scale=3.0))
+    c = RandomDensity(np.random.default_rng(5), replace(base, ramp_width=(0.2, 0.2)))
+    (na, oa, wa, ha), = a.ramps
+    (nb, ob, wb, hb), = b.ramps
+    (_, _, wc, _), = c.ramps
+    assert hb == pytest.approx(3.0 * ha, rel=1e-12) and wb == wa and ob == oa and np.array_equal(na, nb)
+    assert wc == pytest.approx(0.2) and 0.01 <= wa <= 0.05
+    assert a.peaks[0][2] == b.peaks[0][2] and np.array_equal(a.amp, b.amp)

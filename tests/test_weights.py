@@ -7,6 +7,7 @@ import pytest
 
 from rfmap.config import ModelConfig, get_config
 from rfmap.surrogate import WEIGHTS_DIR, Surrogate, models
+from rfmap.random_fields import RandomDensityConfig
 from rfmap.tasks import LossWeights
 
 SHIPPED = models()
@@ -34,6 +35,10 @@ def test_metadata_records_provenance(name):
     stored["model"] = {**asdict(ModelConfig()), **stored["model"]}
     # likewise loss switches added later (density_tangent) default to what older runs did
     stored["loss"] = {**asdict(LossWeights()), **stored["loss"]}
+    if stored.get("density_field"):  # and random-field settings added later (ramp_width, ramp_scale)
+        defaults = json.loads(json.dumps(asdict(RandomDensityConfig())))
+        stored["density_field"] = {**{k: v for k, v in defaults.items() if k in ("ramp_width", "ramp_scale")},
+                                   **stored["density_field"]}
     # overrides given on the recorded command line (e.g. --steps for a warm restart) are what it says they are
     words = meta.get("command", "").split()
     for flag, key, kind in (("--steps", "steps", int), ("--batch", "batch", int), ("--seed", "seed", int),

@@ -51,6 +51,12 @@ class RandomDensityConfig:
     p_peak, p_ramp : float
         Probabilities of adding a narrow Gaussian peak (width 0.02–0.08) and a steep tanh ramp across a random
         direction (width 0.01–0.05); both are 0 by default (the distribution of the first shipped models).
+    ramp_width : (float, float)
+        Uniform range of a ramp's width.
+    ramp_scale : float
+        A ramp's height is uniform in :math:`[-1, 1]` times this factor (and the modes' typical amplitude): larger
+        values give ramp-dominated fields whose equalizing maps must move points far (the same random stream for
+        every value).
     """
 
     dim: int = 2
@@ -63,6 +69,8 @@ class RandomDensityConfig:
     noise: float = 0.02
     p_peak: float = 0.0
     p_ramp: float = 0.0
+    ramp_width: tuple[float, float] = (0.01, 0.05)
+    ramp_scale: float = 1.0
 
     @classmethod
     def for_dim(cls, dim: int, **kw) -> "RandomDensityConfig":
@@ -109,8 +117,8 @@ class RandomDensity:
         if cfg.p_ramp and rng.random() < cfg.p_ramp:
             nrm = rng.normal(size=d)
             nrm /= np.linalg.norm(nrm)
-            self.ramps.append((nrm, float(nrm @ rng.uniform(0.2, 0.8, size=d)), rng.uniform(0.01, 0.05),
-                               rng.uniform(-1.0, 1.0) * big))
+            self.ramps.append((nrm, float(nrm @ rng.uniform(0.2, 0.8, size=d)), rng.uniform(*cfg.ramp_width),
+                               rng.uniform(-1.0, 1.0) * big * cfg.ramp_scale))
         self.scale, noise, self.noise = 1.0, self.noise, 0.0
         probe = self.on_grid(33)
         self.noise = noise
