@@ -511,9 +511,10 @@ def _validate_and_keep(st: TrainState, bar) -> dict:
 
 def _loop(st: TrainState, loader, bar, log_every: int) -> None:
     cfg = st.cfg
+    if cfg.time_limit > 0 and st.elapsed0 > cfg.time_limit:
+        return  # resumed after its time limit: nothing left to train (elapsed0 comes from the checkpoint, so every
+        # rank of a data-parallel run decides alike; the clock inside the loop is agreed on by all_reduce)
     while st.step < cfg.steps:
-        if cfg.time_limit > 0 and st.elapsed() > cfg.time_limit:
-            break  # resumed after its time limit: nothing left to train
         n, pts, par = loader.get(st.step)
         lv, parts, gnorm = _train_step(st, n, pts, par)
         st.step += 1
