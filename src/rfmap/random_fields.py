@@ -155,10 +155,13 @@ class RandomDensity:
         arg = TWO_PI * self.freq[:, :, None] * t[None, None, :] + self.phase[:, :, None]  # (K, d, N)
         tab = np.sin(arg)
         tab[:, 1] = np.cos(arg[:, 1])
+        # sum_k A_k s_k(x) c_k(y) [s_k(z)] as matrix products (BLAS) rather than an unoptimised einsum loop
+        a = self.amp[:, None] * tab[:, 0]  # (K, N)
         if self.dim == 2:
-            smooth = np.einsum("k,ki,kj->ij", self.amp, tab[:, 0], tab[:, 1])
+            smooth = a.T @ tab[:, 1]
         else:
-            smooth = np.einsum("k,ki,kj,kl->ijl", self.amp, tab[:, 0], tab[:, 1], tab[:, 2])
+            k = len(self.amp)
+            smooth = ((a[:, :, None] * tab[:, 1, None, :]).reshape(k, n * n).T @ tab[:, 2]).reshape(n, n, n)
         out = smooth.reshape(-1) + self._nonsmooth(grid_points(n, self.dim))
         out = self.scale * out
         if self.noise:

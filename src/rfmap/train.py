@@ -13,6 +13,11 @@ the same model as one process with batch ``K*B``.
 Validation and the choice of the shipped checkpoint use the held-out random fields of :mod:`rfmap.validation`
 (seeds training never draws); the paper's test fields are evaluated once at the end as a report.
 
+3D networks train in the ``channels_last_3d`` memory format (:func:`memory_format`): the same model and the same
+arithmetic up to float rounding, but oneDNN's 3D convolutions, their backward passes above all, run about 1.5x faster
+(measured: one ``dem3d-cube`` step at batch 2, N = 48, 626 -> 430 ms on two threads).  2D networks keep the
+contiguous format, which is as fast there.
+
 ``--init`` starts from shipped or saved weights with a fresh optimiser and schedule (a warm restart); the
 metadata keeps the lineage (parent name and SHA-256, cumulative steps and wall time).
 
@@ -48,13 +53,18 @@ from .tasks import TaskSpec, draw_samples, make_batch, task_loss
 from .validation import evaluate, score
 
 __all__ = ["train", "validate", "report_paper_fields", "resolve_device", "load_init", "main", "PAPER_FIELDS",
-           "TrainState"]
+           "TrainState", "memory_format"]
 
 #: the paper's test fields per (kind, dim): evaluated as a report at the end of training, never for selection
 PAPER_FIELDS = TEST_FIELDS
 
 
 # ---------------------------------------------------------------------------------------------------- devices
+def memory_format(dim: int) -> torch.memory_format:
+    """Memory format of a ``dim``-dimensional network and its inputs during training: ``channels_last_3d`` in 3D
+    (oneDNN's Conv3d forward and backward are faster there), ``contiguous_format`` in 2D."""
+    return torch.channels_last_3d if dim == 3 else torch.contiguous_format
+
 def _dist_info() -> tuple[int, int]:
     if torch.distributed.is_available() and torch.distributed.is_initialized():
         return torch.distributed.get_rank(), torch.distributed.get_world_size()
@@ -361,7 +371,7 @@ class TrainState:
     def cpu_surrogate(self, final: dict | None = None) -> Surrogate:
         """A CPU copy of the current model with its metadata (used for validation and for the shipped file)."""
         cfg = self.cfg
-        model = copy.deepcopy(self.model).float().cpu().eval()
+        model = copy.deepcopy(self.model).float().cpu().to(memory_format=torch.contiguous_format).eval()
         elapsed = self.elapsed()
         parent = self.lineage[-1] if self.lineage else {"cumulative_steps": 0, "cumulative_wall_time": 0.0}
         meta = {"name": cfg.name, "preset": cfg.preset, "n_range": list(cfg.n_range), "config": cfg.to_dict(),
@@ -393,7 +403,7 @@ def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool
         parent, record = load_init(init, cfg)
         model.load_state_dict(parent.model.state_dict())
         lineage = list(parent.meta.get("lineage", [])) + [record]
-    model = model.to(device)
+    model = model.to(device, memory_format=memory_format(spec.dim))
     net = model
     if world > 1:
         net = torch.nn.parallel.DistributedDataParallel(model, device_ids=[device.index] if device.type == "cuda"
@@ -480,6 +490,7 @@ def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | N
 def _train_step(st: TrainState, n: int, pts: np.ndarray, par: np.ndarray) -> tuple[float, dict, float]:
     cfg = st.cfg
     batch = make_batch(cfg.task, pts, par, n).to(st.device)
+    batch.inputs = batch.inputs.contiguous(memory_format=memory_format(cfg.task.dim))
     st.model.train()
     if st.device.type == "cuda":
         with torch.autocast("cuda", dtype=torch.bfloat16):
