@@ -241,6 +241,9 @@ def test_random_density_ranges_and_grid_evaluation():
         assert p.min() > 0
     cfg3 = RandomDensityConfig.for_dim(3)
     assert cfg3.modes == (4, 40) and cfg3.freq == (0.1, 5.0)
+    for seed in range(3):  # the 3D separable grid evaluation (matrix products) against the pointwise one
+        d = RandomDensity(np.random.default_rng(seed), replace(cfg3, p_noise=0.0, p_peak=0.5, p_ramp=0.5))
+        np.testing.assert_allclose(d.on_grid(9), d(grid_points(9, 3)), rtol=1e-10, atol=1e-10)
     with pytest.raises(ValueError):
         RandomDensity(np.random.default_rng(0))(np.zeros((4, 3)))
 
@@ -291,6 +294,19 @@ def test_random_map_jacobian_matches_finite_differences():
     eps = 1e-6
     fd = np.stack([(m(x + eps * e) - m(x - eps * e)) / (2 * eps) for e in np.eye(2)], -1)
     np.testing.assert_allclose(m.jacobian(x), fd, rtol=0, atol=1e-6)
+
+
+def test_random_map_separable_patches_equal_pointwise_evaluation():
+    """The tensor-product evaluation (grid and clipped patches, used to fit the scale) equals the point-by-point
+    one at the same points, in the same order, to double round-off."""
+    m = random_boundary_map(np.random.default_rng(5))
+    rng = np.random.default_rng(7)
+    xs = np.clip(rng.uniform(-0.1, 1.1, (4, 1)) + np.linspace(-0.05, 0.05, 9), 0, 1)
+    ys = np.clip(rng.uniform(-0.1, 1.1, (4, 1)) + np.linspace(-0.05, 0.05, 7), 0, 1)
+    pts = np.stack([np.repeat(xs, 7, axis=1), np.tile(ys, (1, 9))], -1).reshape(-1, 2)
+    for a, b in zip(m._parts_tensor(xs, ys), m._parts(pts)):
+        np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(m.jacobian_grid(17), m.jacobian(grid_points(17, 2)), rtol=1e-12, atol=1e-12)
 
 
 def test_random_map_mu_agrees_with_its_pl_interpolant():

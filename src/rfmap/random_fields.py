@@ -282,10 +282,12 @@ class RandomMap:
             a0, b0 = self._wirtinger0(J0)
             top = pts[np.argsort(b0 / np.abs(1 + self.scale * a0))[-16:]]
             t = np.linspace(-spacing, spacing, 9)
-            patch = np.stack(np.meshgrid(t, t, indexing="ij"), -1).reshape(1, -1, 2)
-            local = np.clip(top[:, None, :] + patch, 0.0, 1.0).reshape(-1, 2)
+            # 9 x 9 patches around the top points, clipped to the square (clipping acts per axis, so every patch
+            # stays a tensor product and its Jacobian is evaluated separably)
+            xs, ys = np.clip(top[:, 0, None] + t, 0.0, 1.0), np.clip(top[:, 1, None] + t, 0.0, 1.0)
+            local = np.stack([np.repeat(xs, 9, axis=1), np.tile(ys, (1, 9))], -1).reshape(-1, 2)
             scale, self.scale = self.scale, 1.0
-            J0 = np.concatenate([J0, self.jacobian(local) - np.eye(2)])
+            J0 = np.concatenate([J0, self._jacobian_from(self._parts_tensor(xs, ys)) - np.eye(2)])
             self.scale = scale
             pts = np.concatenate([pts, local])
             spacing /= 4
@@ -319,18 +321,34 @@ class RandomMap:
         return lo
 
     def _parts_grid(self, n: int):
-        """:meth:`_parts` on the regular ``N``-grid (:func:`rfmap.mesh.grid_points` order), by separable tables:
-        every mode factorises into a function of :math:`x` times one of :math:`y`, so the sums are matrix
-        products of (2, K, N) tables instead of (N**2, 2, K) transcendental evaluations."""
+        """:meth:`_parts` on the regular ``N``-grid (:func:`rfmap.mesh.grid_points` order), by separable tables
+        (:meth:`_parts_tensor` with one patch)."""
         t = np.linspace(0.0, 1.0, n)
-        ax = self.freq[..., 0, None] * t + self.phase[..., 0, None]  # (2, K, N) over x
-        ay = self.freq[..., 1, None] * t + self.phase[..., 1, None]  # (2, K, N) over y
+        return self._parts_tensor(t[None], t[None])
+
+    def _parts_tensor(self, xs: np.ndarray, ys: np.ndarray):
+        """:meth:`_parts` at the points of tensor-product patches: patch ``p`` holds the points
+        :math:`(x_{p,a}, y_{p,b})`, listed patch by patch with ``a`` major (``meshgrid(..., indexing='ij')``).
+        Every mode factorises into a function of :math:`x` times one of :math:`y`, so the sums are contractions of
+        (2, K, P, A) and (2, K, P, B) tables instead of (P * A * B, 2, K) transcendental evaluations.
+
+        Parameters
+        ----------
+        xs : ndarray, shape (P, A)
+        ys : ndarray, shape (P, B)
+        """
+        xs, ys = np.asarray(xs, dtype=np.float64), np.asarray(ys, dtype=np.float64)
+        f, ph = self.freq[..., None, None], self.phase[..., None, None]  # (2, K, 2, 1, 1)
+        ax = f[:, :, 0] * xs + ph[:, :, 0]  # (2, K, P, A) over x
+        ay = f[:, :, 1] * ys + ph[:, :, 1]  # (2, K, P, B) over y
         sx, cx, sy, cy = np.sin(ax), np.cos(ax), np.sin(ay), np.cos(ay)
-        a = self.amp[..., None]  # (2, K, 1)
-        M = np.einsum("cki,ckj->ijc", a * sx, cy).reshape(-1, 2)
-        Mx = np.einsum("cki,ckj->ijc", a * self.freq[..., 0, None] * cx, cy).reshape(-1, 2)
-        My = np.einsum("cki,ckj->ijc", -a * self.freq[..., 1, None] * sx, sy).reshape(-1, 2)
-        X, Y = (g.reshape(-1) for g in np.meshgrid(t, t, indexing="ij"))
+        a = self.amp[..., None, None]  # (2, K, 1, 1)
+        fx, fy = self.freq[..., 0, None, None], self.freq[..., 1, None, None]
+        M = np.einsum("ckpa,ckpb->pabc", a * sx, cy).reshape(-1, 2)
+        Mx = np.einsum("ckpa,ckpb->pabc", a * fx * cx, cy).reshape(-1, 2)
+        My = np.einsum("ckpa,ckpb->pabc", -a * fy * sx, sy).reshape(-1, 2)
+        X = np.broadcast_to(xs[:, :, None], (xs.shape[0], xs.shape[1], ys.shape[1])).reshape(-1)
+        Y = np.broadcast_to(ys[:, None, :], (xs.shape[0], xs.shape[1], ys.shape[1])).reshape(-1)
         b = 16 * X * (1 - X) * Y * (1 - Y)
         bx = 16 * (1 - 2 * X) * Y * (1 - Y)
         by = 16 * X * (1 - X) * (1 - 2 * Y)
