@@ -107,6 +107,9 @@ def test_metrics_of_a_beltrami_result_with_exact_map(tmp_path, capsys):
     (["--method", "dem", "--field", "sin-cos", "--n", "2"], "N must be >= 3"),
     (["--method", "lbs", "--field", "sin-cos", "--n", "17"], "lbs needs a Beltrami"),
     (["--method", "dem", "--field", "T1", "--n", "17"], "dem needs a density"),
+    (["--method", "lbs", "--field", "T1", "--n", "200000"], "too large for this machine's memory"),
+    (["--method", "dem", "--field", "sin-cos-3d", "--n", "20000"], "too large for this machine's memory"),
+    (["--method", "flow", "--field", "sin-cos", "--n", "200000"], "too large for this machine's memory"),
 ])
 def test_solve_bad_input(tmp_path, capsys, args, match):
     out = tmp_path / "bad.npz"
@@ -235,6 +238,9 @@ def test_map_bad_input(tmp_path, capsys, tiny_model):
     rc, _, err = run_main(capsys, "map", "--model", tiny_model, "--field", "sin-cos", "--points", junk,
                           "--out", out)
     assert_one_line_error(rc, err, match="cannot read")
+    rc, _, err = run_main(capsys, "map", "--model", tiny_model, "--field", "sin-cos", "--n", "300000",
+                          "--out", out)
+    assert_one_line_error(rc, err, match="too large for this machine's memory")
     assert not out.exists()
 
 

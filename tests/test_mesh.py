@@ -237,3 +237,20 @@ def test_interpolation_rejects_bad_shapes():
         interpolate(np.zeros((1, 4, 4)), np.full((5, 2), 0.5))  # no channel axis
     with pytest.raises(ValueError):
         interpolate(np.zeros((2, 1, 4, 4)), np.full((3, 5, 2), 0.5))  # batch mismatch
+
+
+def test_grid_too_large_for_memory_is_refused_before_allocation():
+    """A grid whose maps cannot fit in the available memory is a ValueError naming N and the memory, raised before
+    anything is allocated (N = 10**6 in 2D would need about 4 TB)."""
+    from rfmap.mesh import BYTES_PER_VERTEX, check_grid_memory
+
+    with pytest.raises(ValueError, match=r"N=1000000 is too large for this machine's memory"):
+        grid_points(10**6, 2)
+    with pytest.raises(ValueError, match="too large"):
+        grid_mesh(10**5, 3)
+    # the rule itself: refused exactly when N^d bytes-per-vertex exceed what is available
+    need = 1000**2 * BYTES_PER_VERTEX[2]
+    assert check_grid_memory(1000, 2, available=need) == need
+    with pytest.raises(ValueError, match="GiB available"):
+        check_grid_memory(1000, 2, available=need - 1)
+    assert check_grid_memory(32, 3, available=0) == 32**3 * BYTES_PER_VERTEX[3]  # small grids are never refused

@@ -46,7 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from .mesh import check_n, grid_points, interpolate
+from .mesh import check_grid_memory, check_n, grid_points, interpolate
 
 __all__ = [
     "CARTOGRAM_METHODS",
@@ -528,6 +528,7 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
     if method not in CARTOGRAM_METHODS:
         raise ValueError(f"unknown cartogram method {method!r}; choose one of {', '.join(CARTOGRAM_METHODS)}")
     n = check_n(n)
+    check_grid_memory(n, 2)
     fixed = iterations is not None
     passes = iterations if fixed else max_iterations
     if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 1:
