@@ -73,6 +73,36 @@ def test_worker_processes_draw_the_same_batches(tmp_path):
     assert all(torch.equal(a[k], b[k]) for k in a)
 
 
+def test_batch_workers_exit_when_the_training_process_is_killed(tmp_path):
+    """A training run killed outright (SIGKILL: no clean close) leaves no batch worker behind: each worker notices
+    that its parent is gone and exits without flushing the batches nobody will read."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    psutil = pytest.importorskip("psutil")
+    out = tmp_path / "run"
+    # batches of 64 fields: larger than a pipe buffer, so a batch left in a worker's queue cannot be flushed
+    cmd = [sys.executable, "-m", "rfmap.train", "--config", "deq2d-square", "--preset", "ci", "--steps", "100000",
+           "--batch", "64", "--workers", "2", "--threads", "1", "--out", str(out), "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.time() + 120
+        while time.time() < deadline and not (out / "log.jsonl").exists():
+            time.sleep(0.5)
+        assert (out / "log.jsonl").exists(), "the training run did not start"
+        workers = psutil.Process(proc.pid).children(recursive=True)
+        assert len([w for w in workers if "spawn_main" in " ".join(w.cmdline())]) == 2
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    gone, alive = psutil.wait_procs(workers, timeout=30)
+    for w in alive:
+        w.kill()
+    assert not alive, f"{len(alive)} batch worker(s) outlived the killed training process"
+
+
 def test_draw_step_is_a_pure_function_of_step_and_rank():
     n1, p1, q1 = T.draw_step(CFG, 7, rank=0)
     n2, p2, q2 = T.draw_step(CFG, 7, rank=0)

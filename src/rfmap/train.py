@@ -170,12 +170,19 @@ def _worker_main(cfg: TrainConfig, rank: int, steps: range, q, stop) -> None:  #
                 continue
         return False
 
+    delivered = True
     try:
         for step in steps:
             if stop.is_set() or not put((step, draw_step(cfg, step, rank), None)):
-                return
+                delivered = False
+                break
     except BaseException as e:  # noqa: BLE001 - reported to the training process
-        put((None, None, f"{type(e).__name__}: {e}"))
+        delivered = put((None, None, f"{type(e).__name__}: {e}"))
+    if not delivered:
+        # training stopped or its process is gone: batches still buffered must not hold the exit (a multiprocessing
+        # queue waits at exit until its feeder thread has written them to the pipe, i.e. forever once nobody reads;
+        # a killed training run left its workers running as orphans)
+        q.cancel_join_thread()
 
 
 class _ProcessLoader:
