@@ -156,3 +156,29 @@ def test_displacement_demand_of_an_identity_network():
     assert t.value("ramp", "ours", "demand_median") > t.value("training", "training draws", "demand_p90")
     with pytest.raises(ValueError, match="density model"):
         displacement_demand(Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, name="beltrami2d"))
+
+
+def test_recipe_table_reads_the_training_recipe_from_the_metadata():
+    """The recipe table states each model's training fields, fold penalty, learning rate, budget and recorded
+    validation exactly as its metadata holds them."""
+    from rfmap.config import get_config
+    from rfmap.experiments import recipe_table, training_fields_text
+
+    cfg = get_config("deq2d-square", "full").with_overrides(lr=2e-4).to_dict()
+    cfg["density_field"]["ramp_scale"] = 2.5
+    cfg["loss"]["fold"], cfg["loss"]["fold_threshold"] = 100.0, 0.05
+    meta = {"config": cfg, "steps": 300, "cumulative_steps": 1300, "wall_time": 60.0, "cumulative_wall_time": 600.0,
+            "final_metrics": {"mean": {"std_rho_map": 0.125, "n_flipped": 7}}}
+    sur = Surrogate.untrained(TaskSpec("density", 2, "square"), base=4, depth=2, **meta)
+    old = Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, steps=5, wall_time=30.0)
+    t = recipe_table({"new": sur, "old": old})
+    assert t.value("new", "unet", "fields") == "modes, steps, peaks 15 %, ramps 15 % (height ×2.5)"
+    assert t.value("new", "unet", "fold") == "100 from 0.05"
+    assert t.value("new", "unet", "lr") == 2e-4
+    assert t.value("new", "unet", "steps") == 1300 and t.value("new", "unet", "train_time") == 10.0
+    assert t.value("new", "unet", "val_n") == "51/128"
+    assert t.value("new", "unet", "held_out") == 0.125 and t.value("new", "unet", "n_flipped") == 7
+    assert t.value("old", "unet", "fields") is None and t.value("old", "unet", "steps") == 5
+    assert "| new | unet | modes, steps" in t.to_markdown()
+    assert training_fields_text(get_config("beltrami2d", "full").to_dict()) == "random boundary-fixing maps"
+    assert training_fields_text(get_config("dem3d-free", "full").to_dict()) == "modes, steps"

@@ -25,7 +25,7 @@ __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table"
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
            "COLUMN_TITLES", "format_value", "DIGITS", "generalization_table", "WARM_MODELS", "benchmark_fields",
            "time_to_accuracy", "summarize", "residual_floor", "warm_start_residuals",
-           "displacement_demand"]
+           "displacement_demand", "recipe_table", "training_fields_text"]
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -38,6 +38,8 @@ COLUMN_TITLES = {
     "train_time": "training (min)", "validation": "held-out Std ρ̃ map", "work_n": "network grid", "arch": "arch",
     "count": "fields", "demand_median": "demand (median)", "demand_p90": "demand (90 %)",
     "reach_ratio": "reach / demand", "left_net": "left, ours", "left_classical": "left, classical",
+    "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "held_out": "held-out mean",
+    "val_n": "held-out N",
 }
 #: significant digits of every number in a table (times: one fewer, with their unit)
 DIGITS = 4
@@ -647,3 +649,45 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
             rows.append({"n": n, "method": method, "std": sc["std"], "smooth": sc["smooth"],
                          "element_fraction": sc["element_fraction"], "time": float(res.time)})
     return rows
+
+
+def training_fields_text(config: dict) -> str:
+    """The random training fields of a stored training configuration (``meta["config"]``) in words: the paper's
+    smooth modes with steps and patches, plus the sharp features (narrow peaks, steep ramps) where drawn."""
+    if config["task"]["kind"] == "beltrami":
+        return "random boundary-fixing maps"
+    dens = config.get("density_field") or {}
+    extra = []
+    if dens.get("p_peak"):
+        extra.append(f"peaks {100 * dens['p_peak']:.0f} %")
+    if dens.get("p_ramp"):
+        scale = dens.get("ramp_scale", 1.0)
+        extra.append(f"ramps {100 * dens['p_ramp']:.0f} %" + (f" (height ×{scale:g})" if scale != 1.0 else ""))
+    return "modes, steps" + ("".join(f", {e}" for e in extra))
+
+
+def recipe_table(surs: dict) -> Table:
+    r"""How each model was trained, from its metadata: the training fields (:func:`training_fields_text`), the fold
+    penalty (weight, from :math:`\det J < \tau`), the peak learning rate of the last run, the cumulative steps
+    and minutes over its ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end
+    of training (grid sides, mean metric, flipped elements over all held-out maps;
+    :func:`rfmap.validation.evaluate`).  Older weights were validated on fewer sides, so their numbers are not
+    comparable with those of later runs."""
+    t = Table("tab:recipes", "How the models were trained",
+              ["fields", "fold", "lr", "steps", "train_time", "val_n", "held_out", "n_flipped"])
+    for name, s in surs.items():
+        meta = s.meta
+        cfg = meta.get("config") or {}
+        loss = cfg.get("loss") or {}
+        val = (meta.get("final_metrics") or {}).get("mean") or {}
+        metric = val.get("mean_dd", val.get("std_rho_map"))
+        t.add(name, s.model.kwargs().get("arch", "unet"), {
+            "fields": training_fields_text(cfg) if cfg else None,
+            "fold": f"{loss.get('fold', 10.0):g} from {loss.get('fold_threshold', 0.02):g}" if cfg else None,
+            "lr": float(cfg["lr"]) if "lr" in cfg else None,
+            "steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
+            "train_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 60.0,
+            "val_n": "/".join(str(n) for n in (cfg.get("val_sizes") or [cfg.get("val_n", "?")])) if cfg else None,
+            "held_out": None if metric is None else float(metric),
+            "n_flipped": int(val["n_flipped"]) if "n_flipped" in val else None})
+    return t
