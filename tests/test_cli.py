@@ -268,3 +268,18 @@ def test_train(tmp_path, capsys):
     assert sur.meta["steps"] == 3 and sur.meta["preset"] == "ci"
     rc, _, err = run_main(capsys, "train", "--config", "no-such-config", "--preset", "ci", "--out", out)
     assert_one_line_error(rc, err, match="unknown config")
+
+
+def test_an_allocation_that_fails_is_one_line_and_exit_2(tmp_path, capsys, monkeypatch):
+    """Memory that runs out past the grid-size guard (another process took it, a huge point cloud) ends the command
+    with one line and status 2, and leaves no output file."""
+    import rfmap.solvers as S
+
+    def exhausted(*args, **kwargs):
+        raise MemoryError("Unable to allocate 9.3 GiB for an array")
+
+    monkeypatch.setattr(S, "solve_dem", exhausted)
+    out = tmp_path / "m.npz"
+    rc, _, err = run_main(capsys, "solve", "--method", "dem", "--field", "sin-cos", "--n", "17", "--out", out)
+    assert_one_line_error(rc, err, match="out of memory (Unable to allocate 9.3 GiB")
+    assert list(tmp_path.iterdir()) == []

@@ -278,9 +278,11 @@ def main(argv=None) -> int:
     existed = bool(out) and os.path.isfile(out)
     try:
         return args.func(args)
-    except (CLIError, ValueError, FileNotFoundError) as e:
+    except (CLIError, ValueError, FileNotFoundError, MemoryError) as e:
         if out and not existed and os.path.isfile(out) and args.cmd in ("solve", "map", "cartogram"):
             os.remove(out)
+        if isinstance(e, MemoryError):  # past the grid-size guard (rfmap.mesh.check_grid_memory): say so in one line
+            e = f"out of memory ({e or 'allocation failed'}); use a smaller N or fewer points"
         print(f"rfmap {args.cmd}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
