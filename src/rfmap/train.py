@@ -159,6 +159,10 @@ def _worker_main(cfg: TrainConfig, rank: int, steps: range, q, stop) -> None:  #
     import queue
 
     torch.set_num_threads(1)
+    try:  # yield the cores to the training threads: synthesis fills their gaps instead of stalling them
+        os.nice(10)
+    except (AttributeError, OSError):
+        pass
     parent = os.getppid()
 
     def put(item) -> bool:  # False once training has stopped or its process is gone (killed: no clean close)
@@ -187,7 +191,9 @@ def _worker_main(cfg: TrainConfig, rank: int, steps: range, q, stop) -> None:  #
 
 class _ProcessLoader:
     """Draws the batches in ``workers`` separate processes (step ``t`` by worker ``t mod workers``), off the
-    training process's interpreter lock; the arrays arrive in step order."""
+    training process's interpreter lock; the arrays arrive in step order.  The workers run at a lower scheduling
+    priority (``nice`` 10), so that on a machine whose cores the training threads fill, synthesis takes the gaps
+    rather than preempting a thread the others wait for (beltrami2d at 2 threads: 210 -> 185 ms per step)."""
 
     def __init__(self, cfg: TrainConfig, rank: int, start: int, stop: int, workers: int, depth: int = 2):
         import multiprocessing as mp
