@@ -65,6 +65,7 @@ def memory_format(dim: int) -> torch.memory_format:
     (oneDNN's Conv3d forward and backward are faster there), ``contiguous_format`` in 2D."""
     return torch.channels_last_3d if dim == 3 else torch.contiguous_format
 
+
 def _dist_info() -> tuple[int, int]:
     if torch.distributed.is_available() and torch.distributed.is_initialized():
         return torch.distributed.get_rank(), torch.distributed.get_world_size()
