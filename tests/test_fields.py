@@ -406,3 +406,30 @@ def test_ramp_scale_and_width_change_only_the_ramps():
     assert hb == pytest.approx(3.0 * ha, rel=1e-12) and wb == wa and ob == oa and np.array_equal(na, nb)
     assert wc == pytest.approx(0.2) and 0.01 <= wa <= 0.05
     assert a.peaks[0][2] == b.peaks[0][2] and np.array_equal(a.amp, b.amp)
+
+
+def test_hard_fields_are_single_ramps_or_peaks_and_leave_other_streams_alone():
+    """p_hard = 0 draws exactly the fields of before; a hard field is a single steep ramp or narrow peak over faint
+    modes, evaluated alike on the grid and at points, and as unequal as the held-out ramps and peaks (Std of the
+    preprocessed density up to about 1.3, against at most about 0.45 for the other training fields)."""
+    n = 17
+    base = RandomDensityConfig.for_dim(3, p_peak=0.15, p_ramp=0.15)
+    for seed in range(4):
+        a = RandomDensity(np.random.default_rng(seed), base)
+        b = RandomDensity(np.random.default_rng(seed), replace(base, p_hard=0.0, hard_contrast=(2.0, 3.0)))
+        np.testing.assert_array_equal(a.on_grid(n), b.on_grid(n))
+        assert a.hard is None
+    hard = replace(base, p_hard=1.0, p_noise=0.0)
+    stds, kinds = [], set()
+    for seed in range(40):
+        d = RandomDensity(np.random.default_rng(seed), hard)
+        kinds.add(d.hard[0])
+        np.testing.assert_allclose(d.on_grid(9), d(grid_points(9, 3)), rtol=1e-10, atol=1e-10)
+        v = preprocess_density(d.on_grid(n).reshape(n, n, n)).ravel()
+        stds.append((v / v.mean()).std())
+        if d.hard[0] == "ramp":  # raw values from about 1 to k, the faint modes at most 0.3 peak to peak
+            k = d.hard[4]
+            assert 1.5 <= k <= 6.0
+            assert np.ptp(d.on_grid(n)) == pytest.approx(k - 1.0, abs=0.35)
+    assert kinds == {"ramp", "peak"}
+    assert max(stds) > 1.0 and np.median(stds) > 0.45

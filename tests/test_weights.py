@@ -35,9 +35,10 @@ def test_metadata_records_provenance(name):
     stored["model"] = {**asdict(ModelConfig()), **stored["model"]}
     # likewise loss switches added later (density_tangent) default to what older runs did
     stored["loss"] = {**asdict(LossWeights()), **stored["loss"]}
-    if stored.get("density_field"):  # and random-field settings added later (ramp_width, ramp_scale)
+    if stored.get("density_field"):  # and random-field settings added later (ramp_width, ramp_scale, hard fields)
         defaults = json.loads(json.dumps(asdict(RandomDensityConfig())))
-        stored["density_field"] = {**{k: v for k, v in defaults.items() if k in ("ramp_width", "ramp_scale")},
+        later = ("ramp_width", "ramp_scale", "p_hard", "hard_contrast", "hard_background")
+        stored["density_field"] = {**{k: v for k, v in defaults.items() if k in later},
                                    **stored["density_field"]}
     # overrides given on the recorded command line (e.g. --steps for a warm restart) are what it says they are
     words = meta.get("command", "").split()

@@ -57,6 +57,18 @@ class RandomDensityConfig:
         A ramp's height is uniform in :math:`[-1, 1]` times this factor (and the modes' typical amplitude): larger
         values give ramp-dominated fields whose equalizing maps must move points far (the same random stream for
         every value).
+    p_hard : float
+        Probability that the field is a *hard* one instead: a single steep ramp
+        :math:`1 + \tfrac{k-1}{2}(1 + \tanh((x\cdot n - o)/w))` or a single narrow peak
+        :math:`1 + t\cdot(x - \tfrac12) + h\,e^{-|x-c|^2/2w^2}` (equal chances) over a faint copy of the
+        random modes. After the paper's preprocessing (minimum shifted to 0.1) half of the domain of a ramp
+        carries 1/(10k - 9) of the density of the other half, so the equalizing map must shrink that half to a
+        few per cent of its measure: the kind of field where an untrained map folds.  0 by default.
+    hard_contrast : (float, float)
+        Uniform range of a hard ramp's height ratio :math:`k` (raw values from 1 to k); a hard peak's height
+        :math:`h` is log-uniform in [1, 2(k_max - 1)].
+    hard_background : float
+        The faint modes' peak-to-peak value is uniform in [0, this] (the hard feature's is 1 to 10).
     """
 
     dim: int = 2
@@ -71,6 +83,9 @@ class RandomDensityConfig:
     p_ramp: float = 0.0
     ramp_width: tuple[float, float] = (0.01, 0.05)
     ramp_scale: float = 1.0
+    p_hard: float = 0.0
+    hard_contrast: tuple[float, float] = (1.5, 6.0)
+    hard_background: float = 0.3
 
     @classmethod
     def for_dim(cls, dim: int, **kw) -> "RandomDensityConfig":
@@ -120,10 +135,24 @@ class RandomDensity:
             self.ramps.append((nrm, float(nrm @ rng.uniform(0.2, 0.8, size=d)), rng.uniform(*cfg.ramp_width),
                                rng.uniform(-1.0, 1.0) * big * cfg.ramp_scale))
         self.scale, noise, self.noise = 1.0, self.noise, 0.0
+        self.hard = None
         probe = self.on_grid(33)
         self.noise = noise
         span = float(probe.max() - probe.min())
         self.scale = self.contrast / span if span > 1e-12 else 1.0
+        # a hard field (drawn last, after the probe, so the fields of p_hard = 0 keep their random streams)
+        if cfg.p_hard and rng.random() < cfg.p_hard:
+            k = rng.uniform(*cfg.hard_contrast)
+            if rng.random() < 0.5:
+                nrm = rng.normal(size=d)
+                nrm /= np.linalg.norm(nrm)
+                self.hard = ("ramp", nrm, float(nrm @ rng.uniform(0.3, 0.7, size=d)), rng.uniform(*cfg.ramp_width), k)
+            else:
+                h = float(np.exp(rng.uniform(0.0, math.log(2.0 * (cfg.hard_contrast[1] - 1.0)))))
+                self.hard = ("peak", rng.uniform(0.2, 0.8, size=d), rng.uniform(0.03, 0.08), h,
+                             rng.uniform(-0.3, 0.3, size=d))
+            self.scale *= rng.uniform(0.0, cfg.hard_background) / self.contrast
+            self.noise = 0.0
 
     def _raw(self, x: np.ndarray) -> np.ndarray:
         # float64 sin/cos through torch (vectorised, about 4x numpy's on this kind of CPU); one (P, K) factor per axis
@@ -149,6 +178,17 @@ class RandomDensity:
             out = out + h * np.tanh((x @ nrm - off) / width)
         return out
 
+    def _hard(self, x: np.ndarray) -> np.ndarray | float:
+        """The hard feature (unscaled, added after the modes' scale) at points (P, d), or 0."""
+        hard = getattr(self, "hard", None)
+        if hard is None:
+            return 0.0
+        if hard[0] == "ramp":
+            _, nrm, off, width, k = hard
+            return 1.0 + 0.5 * (k - 1.0) * (1.0 + np.tanh((x @ nrm - off) / width))
+        _, c, width, h, tilt = hard
+        return 1.0 + (x - 0.5) @ tilt + h * np.exp(-((x - c) ** 2).sum(-1) / (2 * width**2))
+
     def on_grid(self, n: int) -> np.ndarray:
         """Raw values on the regular ``N``-grid, flat shape (N**d,), by separable evaluation of the modes."""
         t = np.linspace(0.0, 1.0, n)
@@ -162,8 +202,8 @@ class RandomDensity:
         else:
             k = len(self.amp)
             smooth = ((a[:, :, None] * tab[:, 1, None, :]).reshape(k, n * n).T @ tab[:, 2]).reshape(n, n, n)
-        out = smooth.reshape(-1) + self._nonsmooth(grid_points(n, self.dim))
-        out = self.scale * out
+        pts = grid_points(n, self.dim)
+        out = self.scale * (smooth.reshape(-1) + self._nonsmooth(pts)) + self._hard(pts)
         if self.noise:
             out = out + self.noise * self.contrast * self._rng.standard_normal(out.shape)
         return out
@@ -172,7 +212,7 @@ class RandomDensity:
         x = np.asarray(x, dtype=np.float64)
         if x.ndim != 2 or x.shape[1] != self.dim:
             raise ValueError(f"points must have shape (P, {self.dim}), got {x.shape}")
-        out = self.scale * self._raw(x)
+        out = self.scale * self._raw(x) + self._hard(x)
         if self.noise:
             out = out + self.noise * self.contrast * self._rng.standard_normal(out.shape)
         return out
