@@ -34,7 +34,7 @@ def _log_uniform(rng: np.random.Generator, lo: float, hi: float, size) -> np.nda
 
 @dataclass(frozen=True)
 class RandomDensityConfig:
-    """Ranges of the random training densities (paper Sec. 5.2; 3D: modes [4, 40], frequencies [0.1, 5]).
+    r"""Ranges of the random training densities (paper Sec. 5.2; 3D: modes [4, 40], frequencies [0.1, 5]).
 
     Attributes
     ----------
