@@ -53,6 +53,11 @@ def test_poisson_flux_matches_cosine_sums(d, m):
         np.testing.assert_allclose(poisson_flux(v)[i], -direct, atol=1e-13)
     walls = poisson_flux(v)[0]
     assert np.abs(walls[0]).max() == 0 and np.abs(walls[-1]).max() == 0  # no flux through the walls
+    # the flow's single-precision solve: float32 throughout, equal to the double one to float32 round-off
+    f32 = poisson_flux(v, dtype=np.float32)
+    assert f32.dtype == np.float32 and cosine_coefficients(v.astype(np.float32)).dtype == np.float32
+    np.testing.assert_allclose(f32, poisson_flux(v), atol=2e-6 * np.abs(poisson_flux(v)).max())
+    assert np.abs(f32[0][0]).max() == 0 and np.abs(f32[0][-1]).max() == 0
 
 
 def test_gaussian_blur_keeps_mean_and_constants():

@@ -166,10 +166,10 @@ def cosine_coefficients(values: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (M,)*d
+    ndarray, shape (M,)*d, float32 for float32 values, else float64
     """
     d, m = values.ndim, values.shape[0]
-    c = np.full(m, 2.0)
+    c = np.full(m, 2.0, dtype=np.result_type(values.dtype, np.float32))
     c[0] = c[-1] = 1.0
     coef = dctn(values, type=1) / (2.0 * (m - 1)) ** d
     for ax in range(d):
