@@ -184,19 +184,23 @@ def test_evaluate_scores_the_exact_map_of_a_beltrami_field():
     v = evaluate(sur, (17,), count=2)
     assert set(v) == {"map-0@17", "map-1@17", "mean"}
     assert v["mean"]["mean_dd"] > 0  # the identity is not the random map
-    assert score({"mean_dd": 0.1, "n_flipped": 1}) > score({"mean_dd": 0.5, "n_flipped": 0})
+    assert score({"mean_dd": 0.1, "n_flipped": 1}) > score({"mean_dd": 0.5, "n_flipped": 0})  # old summaries
+    assert v["mean"]["penalized"] == pytest.approx(v["mean"]["mean_dd"]) or v["mean"]["folded_fields"]
 
 
-def test_score_counts_folded_maps_first_and_caps_their_metric(monkeypatch):
-    """One folded map with a huge Std(rho~_map) must not decide the checkpoint: the summary counts folded maps,
-    and the capped mean takes the field's Std(rho~_orig) for a folded map."""
+def test_score_counts_a_folded_map_as_the_identity(monkeypatch):
+    """One folded map with a huge Std(rho~_map) must not decide the checkpoint: the capped mean takes the field's
+    Std(rho~_orig) for a folded map where that is lower, and the score (the penalized mean) takes it always, so a
+    fold costs a model exactly what it gained on that field, and a model that hardly moves cannot win by folding
+    nothing."""
     from types import SimpleNamespace
 
     import rfmap.validation as V
     from rfmap.surrogate import Surrogate
 
     sur = Surrogate.untrained(get_config("deq2d-square", "ci").task, base=4, depth=2, n_range=[17, 25])
-    fake = {0: (50.0, 0.4, 3), 1: (0.2, 0.5, 0), 2: (0.1, 0.3, 0), 3: (0.3, 0.6, 0)}
+    # (Std map, Std orig, flips): a folded map far worse than no map, a folded map better than no map, two clean ones
+    fake = {0: (50.0, 0.4, 3), 1: (0.2, 0.5, 2), 2: (0.1, 0.3, 0), 3: (0.3, 0.6, 0)}
     calls = iter(range(4))
 
     def raw_map(s, field, n):
@@ -206,16 +210,19 @@ def test_score_counts_folded_maps_first_and_caps_their_metric(monkeypatch):
 
     monkeypatch.setattr(V, "_raw_map", raw_map)
     m = V.evaluate(sur, (17,), count=4)["mean"]
-    assert m["folded_fields"] == 1 and m["n_flipped"] == 3
+    assert m["folded_fields"] == 2 and m["n_flipped"] == 5
     np.testing.assert_allclose(m["std_rho_map"], (50.0 + 0.2 + 0.1 + 0.3) / 4)
     np.testing.assert_allclose(m["capped"], (0.4 + 0.2 + 0.1 + 0.3) / 4)
-    better_but_folded = {"std_rho_map": 0.1, "n_flipped": 1, "folded_fields": 1, "capped": 0.1}
-    worse_fold_free = {"std_rho_map": 0.5, "n_flipped": 0, "folded_fields": 0, "capped": 0.5}
-    two_folded = {"std_rho_map": 0.2, "n_flipped": 2, "folded_fields": 2, "capped": 0.05}
-    assert score(worse_fold_free) < score(better_but_folded) < score(two_folded)
-    # among equally folded summaries the capped mean decides, not the raw mean an outlier blows up
-    outlier = {"std_rho_map": 99.0, "n_flipped": 5, "folded_fields": 1, "capped": 0.2}
-    assert score(outlier) < score({"std_rho_map": 0.3, "n_flipped": 1, "folded_fields": 1, "capped": 0.3})
+    np.testing.assert_allclose(m["penalized"], (0.4 + 0.5 + 0.1 + 0.3) / 4)
+    assert score(m) == (0, m["penalized"])
+    # a fold-free model that hardly moves (penalized 0.5) ranks below a much better one with one folded map
+    good_but_folded = {"std_rho_map": 9.0, "n_flipped": 4, "folded_fields": 1, "capped": 0.15, "penalized": 0.2}
+    hardly_moves = {"std_rho_map": 0.5, "n_flipped": 0, "folded_fields": 0, "capped": 0.5, "penalized": 0.5}
+    assert score(good_but_folded) < score(hardly_moves)
+    # summaries written before the penalized mean existed: fold-free ones by their mean, folded ones after all others
+    old_clean, old_folded = {"std_rho_map": 0.3, "n_flipped": 0}, {"std_rho_map": 0.1, "n_flipped": 1,
+                                                                    "folded_fields": 1, "capped": 0.1}
+    assert score(old_clean) == (0, 0.3) and score(hardly_moves) < score(old_folded)
 
 
 def test_resolve_device():

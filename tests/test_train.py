@@ -161,6 +161,21 @@ def test_resume_after_the_time_limit_trains_nothing(tmp_path):
         assert torch.equal(v, again.model.state_dict()[k]), k
 
 
+def test_resume_rescores_the_kept_best_state_by_the_current_rule(tmp_path):
+    """A checkpoint keeps its best validated state with the score of the rule it was written under; a resumed run
+    recomputes that score from the stored summary, so later checkpoints are compared by one rule."""
+    from rfmap.validation import score
+
+    cfg = CFG.with_overrides(steps=4, val_every=2, ckpt_every=2)
+    T.train(cfg, tmp_path, progress=False)
+    ck = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
+    best = {k: json.loads(v) for k, v in ck["best"].items()}
+    ck["best"]["score"] = json.dumps([7, 99.0])  # as if written under another rule
+    torch.save(ck, tmp_path / "checkpoint.pt")
+    st = T._build_state(cfg, tmp_path, torch.device("cpu"), resume=True, init=None, command=None)
+    assert st.best["score"] == list(score(best["summary"])) and st.best["score"][0] == 0
+
+
 def test_resume_with_another_config_is_refused(tmp_path):
     cfg = CFG.with_overrides(steps=2, val_every=1000)
     T.train(cfg, tmp_path, progress=False)

@@ -444,6 +444,8 @@ def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool
         if state.get("best"):
             st.best = {k: json.loads(v) for k, v in state["best"].items()}
             st.best["state"] = state["best_state"]
+            # the best state is compared with later ones by the current rule (rfmap.validation.score)
+            st.best["score"] = list(score(st.best["summary"]))
     elif rank == 0 and (out / "log.jsonl").exists():
         (out / "log.jsonl").unlink()
     return st
