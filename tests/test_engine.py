@@ -95,7 +95,8 @@ def test_batch_workers_exit_when_the_training_process_is_killed(tmp_path):
         workers = psutil.Process(proc.pid).children(recursive=True)
         drawing = [w for w in workers if "spawn_main" in " ".join(w.cmdline())]
         assert len(drawing) == 2
-        assert all(w.nice() >= psutil.Process(proc.pid).nice() + 10 for w in drawing)  # they yield the cores
+        # they yield the cores: ten steps nicer than the trainer, capped at the lowest priority (19)
+        assert all(w.nice() >= min(psutil.Process(proc.pid).nice() + 10, 19) for w in drawing)
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
