@@ -179,6 +179,11 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     assert t.value("new", "unet", "val_n") == "51/128"
     assert t.value("new", "unet", "held_out") == 0.125 and t.value("new", "unet", "n_flipped") == 7
     assert t.value("old", "unet", "fields") is None and t.value("old", "unet", "steps") == 5
+    # the selection score where the metadata records it: a folded map counted as the identity, not its huge Std
+    sur.meta["final_metrics"]["mean"].update({"std_rho_map": 40.0, "capped": 0.2, "penalized": 0.25})
+    assert recipe_table({"new": sur}).value("new", "unet", "held_out") == 0.25
     assert "| new | unet | modes, steps" in t.to_markdown()
     assert training_fields_text(get_config("beltrami2d", "full").to_dict()) == "random boundary-fixing maps"
     assert training_fields_text(get_config("dem3d-free", "full").to_dict()) == "modes, steps"
+    assert training_fields_text(get_config("deq2d-free", "full").to_dict()) == \
+        "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 30 %"

@@ -663,6 +663,8 @@ def training_fields_text(config: dict) -> str:
     if dens.get("p_ramp"):
         scale = dens.get("ramp_scale", 1.0)
         extra.append(f"ramps {100 * dens['p_ramp']:.0f} %" + (f" (height ×{scale:g})" if scale != 1.0 else ""))
+    if dens.get("p_hard"):
+        extra.append(f"single hard ramps or peaks {100 * dens['p_hard']:.0f} %")
     return "modes, steps" + ("".join(f", {e}" for e in extra))
 
 
@@ -670,7 +672,8 @@ def recipe_table(surs: dict) -> Table:
     r"""How each model was trained, from its metadata: the training fields (:func:`training_fields_text`), the fold
     penalty (weight, from :math:`\det J < \tau`), the peak learning rate of the last run, the cumulative steps
     and minutes over its ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end
-    of training (grid sides, mean metric, flipped elements over all held-out maps;
+    of training (grid sides; the selection score, i.e. the mean metric with every folded map counted as the identity
+    map, where recorded, else the capped or the plain mean; flipped elements over all held-out maps;
     :func:`rfmap.validation.evaluate`).  Older weights were validated on fewer sides, so their numbers are not
     comparable with those of later runs."""
     t = Table("tab:recipes", "How the models were trained",
@@ -680,7 +683,7 @@ def recipe_table(surs: dict) -> Table:
         cfg = meta.get("config") or {}
         loss = cfg.get("loss") or {}
         val = (meta.get("final_metrics") or {}).get("mean") or {}
-        metric = val.get("mean_dd", val.get("std_rho_map"))
+        metric = val.get("penalized", val.get("capped", val.get("mean_dd", val.get("std_rho_map"))))
         t.add(name, s.model.kwargs().get("arch", "unet"), {
             "fields": training_fields_text(cfg) if cfg else None,
             "fold": f"{loss.get('fold', 10.0):g} from {loss.get('fold_threshold', 0.02):g}" if cfg else None,
