@@ -185,5 +185,6 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     assert "| new | unet | modes, steps" in t.to_markdown()
     assert training_fields_text(get_config("beltrami2d", "full").to_dict()) == "random boundary-fixing maps"
     assert training_fields_text(get_config("dem3d-free", "full").to_dict()) == "modes, steps"
-    assert training_fields_text(get_config("deq2d-free", "full").to_dict()) == \
-        "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 30 %"
+    for name in ("deq2d-free", "dem3d-cube"):
+        assert training_fields_text(get_config(name, "full").to_dict()) == \
+            "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 30 %"
