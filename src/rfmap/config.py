@@ -137,14 +137,17 @@ _SHARP2 = RandomDensityConfig(dim=2, p_peak=0.15, p_ramp=0.15)
 #: and the density term keeps a restoring gradient on collapsed elements (LossWeights.density_tangent)
 _FOLD_STRONG = dict(fold=100.0, fold_threshold=0.05, density_tangent=True)
 _FOLD_NOTE = "; fold penalty of weight 100 from det J < 0.05."
-#: 3D: a third of the training fields as hard as the held-out ramps and peaks (a single steep ramp of height ratio up
-#: to 51 after preprocessing, or a narrow peak, over faint modes; RandomDensityConfig.p_hard), besides the sharp
-#: features of the 2D recipe.  The shipped 3D models left the held-out ramps as unequal as they came (Std 1.0-1.5)
+#: a third of the training fields as hard as the held-out ramps and peaks (a single steep ramp of height ratio up to
+#: 51 after preprocessing, or a narrow peak, over faint modes; RandomDensityConfig.p_hard), besides the sharp
+#: features of _SHARP2 (used by deq2d-free and dem3d-cube).  The shipped 3D models left the held-out ramps as unequal as they came (Std 1.0-1.5)
 #: because no training field was like them (99th percentile of the training fields' Std 0.42 against the ramps'
 #: 1.0-1.34).  The fold penalty starts at det J < 0.02, below the 0.04 that the exact map of the steepest ramp needs
 _HARD3 = RandomDensityConfig.for_dim(3, p_peak=0.15, p_ramp=0.15, p_hard=0.3)
 _HARD2 = RandomDensityConfig(dim=2, p_peak=0.15, p_ramp=0.15, p_hard=0.3)
 _FOLD_HARD = dict(fold=100.0, fold_threshold=0.02, density_tangent=True)
+_HARD_NOTE = ("the random training densities include narrow peaks and steep ramps (15 % of fields each) and, in 30 % "
+              "of fields, a single steep ramp (height ratio up to 51 after preprocessing) or narrow peak over faint "
+              "modes; fold penalty of weight 100 from det J < 0.02.")
 #: validation of the 2D and 3D full presets: 16 held-out random fields at these grid sides
 _VAL2 = dict(val_sizes=(51, 128), val_count=16)
 _VAL3 = dict(val_sizes=(32, 48), val_count=16)
@@ -180,10 +183,7 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
             ("deq2d-square", "square", 0.1, 6000, 3000.0, _SHARP2, _FOLD_STRONG,
              "2D density-equalizing quasi-conformal map (DEQ: density loss + 0.1 Beltrami energy), square boundary; "
              "the random training densities include narrow peaks and steep ramps (15 % of fields each)" + _FOLD_NOTE),
-            ("deq2d-free", "free", 0.1, 2500, 2700.0, _HARD2, _FOLD_HARD,
-             "2D DEQ map, free boundary; the random training densities include narrow peaks and steep ramps (15 % of "
-             "fields each) and, in 30 % of fields, a single steep ramp (height ratio up to 51 after preprocessing) "
-             "or narrow peak over faint modes; fold penalty of weight 100 from det J < 0.02."),
+            ("deq2d-free", "free", 0.1, 2500, 2700.0, _HARD2, _FOLD_HARD, "2D DEQ map, free boundary; " + _HARD_NOTE),
             ("dem2d-square", "square", 0.0, 2500, 2700.0, _SHARP2, {}, "2D density-equalizing map (density loss only), "
              "square boundary; the random training densities include narrow peaks and steep ramps (15 % of fields "
              "each)."),
@@ -206,9 +206,7 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
             ("dem3d-cube", "square", _HARD3, _FOLD_HARD,
              "3D density-equalizing map, cube boundary (density loss on tetrahedra, fold penalty). The paper trains "
              "4000 epochs with cosine warm restarts at lr 2e-4 on a GPU; on a CPU budget of under an hour a single "
-             "cosine cycle at lr 5e-4 gets further. The random training densities include narrow peaks and steep "
-             "ramps (15 % of fields each) and, in 30 % of fields, a single steep ramp (height ratio up to 51 after "
-             "preprocessing) or narrow peak over faint modes; fold penalty of weight 100 from det J < 0.02."),
+             "cosine cycle at lr 5e-4 gets further. " + _HARD_NOTE[0].upper() + _HARD_NOTE[1:]),
             ("dem3d-free", "free", None, {}, "3D density-equalizing map, free boundary (density loss, volume "
              "constraint, fold penalty); same schedule as dem3d-cube."),
         ]
