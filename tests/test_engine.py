@@ -4,6 +4,7 @@ bad input on the command line (one line, exit 2, nothing written)."""
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -86,7 +87,10 @@ def test_batch_workers_exit_when_the_training_process_is_killed(tmp_path):
     # batches of 64 fields: larger than a pipe buffer, so a batch left in a worker's queue cannot be flushed
     cmd = [sys.executable, "-m", "rfmap.train", "--config", "deq2d-square", "--preset", "ci", "--steps", "100000",
            "--batch", "64", "--workers", "2", "--threads", "1", "--out", str(out), "--no-progress"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    # without the test session's thread pins (conftest), as a user's shell would start it
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
+                                                            "MKL_NUM_THREADS")}
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
     try:
         deadline = time.time() + 120
         while time.time() < deadline and not (out / "log.jsonl").exists():
@@ -97,6 +101,9 @@ def test_batch_workers_exit_when_the_training_process_is_killed(tmp_path):
         assert len(drawing) == 2
         # they yield the cores: ten steps nicer than the trainer, capped at the lowest priority (19)
         assert all(w.nice() >= min(psutil.Process(proc.pid).nice() + 10, 19) for w in drawing)
+        # and run one BLAS thread each (busy-waiting OpenBLAS threads slowed the 3D step by 15 %)
+        assert all(w.environ().get("OPENBLAS_NUM_THREADS") == "1" for w in drawing)
+        assert psutil.Process(proc.pid).environ().get("OPENBLAS_NUM_THREADS") != "1"
     finally:
         proc.send_signal(signal.SIGKILL)
         proc.wait()
@@ -104,6 +111,14 @@ def test_batch_workers_exit_when_the_training_process_is_killed(tmp_path):
     for w in alive:
         w.kill()
     assert not alive, f"{len(alive)} batch worker(s) outlived the killed training process"
+
+
+def test_single_blas_thread_env_sets_and_restores_the_variables(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "7")
+    monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    with T.single_blas_thread_env():
+        assert all(os.environ[k] == "1" for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"))
+    assert os.environ["OMP_NUM_THREADS"] == "7" and "OPENBLAS_NUM_THREADS" not in os.environ
 
 
 def test_draw_step_is_a_pure_function_of_step_and_rank():
