@@ -271,3 +271,27 @@ def test_conv3d_inference_path_matches_torch(cin, cout, k, dil):
     y.square().sum().backward()
     assert x.grad is not None and ours.weight.grad is not None
     torch.testing.assert_close(y, ref(x), rtol=0, atol=0)
+
+
+@pytest.mark.parametrize("cin,cout,k,dil,batch,bias", [(8, 8, 3, 2, 1, True), (8, 1, 1, 1, 1, True),
+                                                       (3, 8, 1, 1, 2, False), (16, 8, 3, 1, 1, True)])
+def test_conv2d_inference_path_matches_torch(cin, cout, k, dil, batch, bias):
+    """blocks.Conv2d's inference paths (1x1 as a matrix product, dilated through oneDNN) give nn.Conv2d's output,
+    keep its state dict, and with gradients enabled the layer is nn.Conv2d itself (bit for bit)."""
+    from rfmap.nn.blocks import Conv2d
+
+    torch.manual_seed(0)
+    ours = Conv2d(cin, cout, k, padding=dil * (k // 2), dilation=dil, bias=bias)
+    ref = torch.nn.Conv2d(cin, cout, k, padding=dil * (k // 2), dilation=dil, bias=bias)
+    ref.load_state_dict(ours.state_dict())
+    assert list(ours.state_dict()) == list(ref.state_dict())
+    x = torch.randn(batch, cin, 13, 11)
+    with torch.no_grad():
+        torch.testing.assert_close(ours(x), ref(x), rtol=1e-5, atol=1e-5)
+        # a non-contiguous input takes the standard path
+        xt = x.transpose(2, 3)
+        torch.testing.assert_close(ours(xt), ref(xt), rtol=1e-5, atol=1e-5)
+    y = ours(x.requires_grad_())
+    y.square().sum().backward()
+    assert x.grad is not None and ours.weight.grad is not None
+    torch.testing.assert_close(y, ref(x), rtol=0, atol=0)

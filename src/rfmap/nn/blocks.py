@@ -10,6 +10,7 @@ from torch import Tensor, nn
 from torch.nn import functional as F
 
 __all__ = [
+    "Conv2d",
     "Conv3d",
     "conv_cls",
     "conv_transpose_cls",
@@ -39,8 +40,35 @@ class Conv3d(nn.Conv3d):
         return super()._conv_forward(input, weight, bias)
 
 
+class Conv2d(nn.Conv2d):
+    """``nn.Conv2d`` (same parameters and state dict) with faster CPU inference kernels for two of its shapes.
+
+    Without gradients, on CPU in float32: a 1x1 convolution of a contiguous input is one matrix product
+    ``W (C_out, C_in) @ x (C_in, H W)`` per sample, and a dilated convolution takes the oneDNN kernel; PyTorch sends
+    both to slow native kernels at batch 1.  Same results to float32 round-off (tested); at the 51-point grid the
+    2D surrogate's network takes about 10 % less time.  With gradients enabled (training) the layer is exactly
+    ``nn.Conv2d``.
+    """
+
+    def _conv_forward(self, input: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
+        if not torch.is_grad_enabled() and input.device.type == "cpu" and input.dtype == torch.float32 \
+                and self.padding_mode == "zeros" and self.groups == 1:
+            if self.kernel_size == (1, 1) and self.stride == (1, 1) and self.padding == (0, 0) \
+                    and input.is_contiguous():
+                b, c = input.shape[:2]
+                y = torch.matmul(weight.view(weight.shape[0], c), input.view(b, c, -1))
+                if bias is not None:
+                    y = y + bias[:, None]
+                return y.view(b, -1, *input.shape[2:])
+            if self.dilation != (1, 1) and isinstance(self.padding, tuple) and torch.backends.mkldnn.is_available() \
+                    and torch.backends.mkldnn.enabled:
+                return torch.mkldnn_convolution(input.contiguous(), weight.contiguous(), bias, self.padding,
+                                                self.stride, self.dilation, self.groups)
+        return super()._conv_forward(input, weight, bias)
+
+
 def conv_cls(dim: int) -> type[nn.Module]:
-    return {2: nn.Conv2d, 3: Conv3d}[dim]
+    return {2: Conv2d, 3: Conv3d}[dim]
 
 
 def conv_transpose_cls(dim: int) -> type[nn.Module]:
