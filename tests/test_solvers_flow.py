@@ -272,3 +272,20 @@ def test_polish_needs_grid_density_maps():
     with pytest.raises(ValueError, match="polish"):
         Surrogate.pretrained("dem2d-square").map("sin-cos", 33, points=np.random.default_rng(0).random((50, 2)),
                                                  polish=True)
+
+
+def test_box_mean_is_the_zero_cosine_coefficient_and_rtol_defaults_per_dimension():
+    """box_mean (trapezoidal mean) equals the cosine interpolant's a_0 without the transform; the step tolerance
+    defaults to RTOL of the density's dimension and is recorded."""
+    from rfmap.solvers.diffusion import cosine_coefficients
+    from rfmap.solvers.flow import RTOL, box_mean
+
+    rng = np.random.default_rng(0)
+    for shape in [(9,), (8, 8), (7, 7, 7)]:
+        v = rng.uniform(0.5, 2.0, size=shape)
+        assert abs(box_mean(v) - float(cosine_coefficients(v).flat[0])) < 1e-13
+    d2 = 1.0 + 0.5 * np.outer(np.linspace(0, 1, 9), np.ones(9))
+    assert solve_flow(d2).info["rtol"] == RTOL[2] == 0.2
+    assert solve_flow(d2, rtol=0.1).info["rtol"] == 0.1
+    d3 = 1.0 + 0.5 * np.linspace(0, 1, 7)[:, None, None] * np.ones((7, 7, 7))
+    assert solve_flow(d3).info["rtol"] == RTOL[3] == 0.4

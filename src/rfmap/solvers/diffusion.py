@@ -153,7 +153,7 @@ def _p1_corner_weights(loc: np.ndarray) -> list[float]:
     return [w.get(c, 0.0) for c in itertools.product((0, 1), repeat=d)]
 
 
-def cosine_coefficients(values: np.ndarray) -> np.ndarray:
+def cosine_coefficients(values: np.ndarray, workers: int | None = None) -> np.ndarray:
     r"""Coefficients :math:`a_k` of the cosine interpolant :math:`\sum_k a_k \prod_i \cos(\pi k_i x_i)` of grid values.
 
     With the unnormalised type-I DCT :math:`y = \mathrm{DCT\text{-}I}(p)` (``scipy.fft.dctn(p, type=1)``),
@@ -163,6 +163,8 @@ def cosine_coefficients(values: np.ndarray) -> np.ndarray:
     ----------
     values : ndarray, shape (M,)*d
         Values at the grid nodes :math:`j/(M-1)` of :math:`[0,1]^d`.
+    workers : int, optional
+        Threads of the transform (``scipy.fft``'s ``workers``; default one).
 
     Returns
     -------
@@ -171,7 +173,7 @@ def cosine_coefficients(values: np.ndarray) -> np.ndarray:
     d, m = values.ndim, values.shape[0]
     c = np.full(m, 2.0, dtype=np.result_type(values.dtype, np.float32))
     c[0] = c[-1] = 1.0
-    coef = dctn(values, type=1) / (2.0 * (m - 1)) ** d
+    coef = dctn(values, type=1, workers=workers) / (2.0 * (m - 1)) ** d
     for ax in range(d):
         shape = [1] * d
         shape[ax] = m
@@ -256,7 +258,7 @@ class CosineDiffusion:
     def __init__(self, values: np.ndarray):
         self.dim = values.ndim
         self.m = m = values.shape[0]
-        self.coef = torch.from_numpy(cosine_coefficients(values))
+        self.coef = torch.from_numpy(cosine_coefficients(values, workers=max(1, torch.get_num_threads())))
         k = np.arange(m)
         x = np.linspace(0.0, 1.0, m)
         arg = math.pi * np.outer(x, k)
