@@ -91,9 +91,11 @@ def test_batch_workers_exit_when_the_training_process_is_killed(tmp_path):
     env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
                                                             "MKL_NUM_THREADS")}
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env)
+    workers = []
     try:
         deadline = time.time() + 120
         while time.time() < deadline and not (out / "log.jsonl").exists():
+            workers = psutil.Process(proc.pid).children(recursive=True)  # known early, for the clean-up below
             time.sleep(0.5)
         assert (out / "log.jsonl").exists(), "the training run did not start"
         workers = psutil.Process(proc.pid).children(recursive=True)
@@ -104,12 +106,12 @@ def test_batch_workers_exit_when_the_training_process_is_killed(tmp_path):
         # and run one BLAS thread each (busy-waiting OpenBLAS threads slowed the 3D step by 15 %)
         assert all(w.environ().get("OPENBLAS_NUM_THREADS") == "1" for w in drawing)
         assert psutil.Process(proc.pid).environ().get("OPENBLAS_NUM_THREADS") != "1"
-    finally:
+    finally:  # the workers are killed in any case, so that a failed test leaves none behind
         proc.send_signal(signal.SIGKILL)
         proc.wait()
-    gone, alive = psutil.wait_procs(workers, timeout=30)
-    for w in alive:
-        w.kill()
+        gone, alive = psutil.wait_procs(workers, timeout=30)
+        for w in alive:
+            w.kill()
     assert not alive, f"{len(alive)} batch worker(s) outlived the killed training process"
 
 
