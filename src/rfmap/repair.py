@@ -425,8 +425,9 @@ def _det_rows(E: np.ndarray) -> np.ndarray:
 
 def _unique_ids(idx: np.ndarray, size: int) -> np.ndarray:
     """Sorted distinct entries of ``idx`` (integers in ``[0, size)``): a mask for large inputs, a sort for small."""
-    if len(idx) * 32 < size:
-        return np.unique(idx)
+    if len(idx) * 32 < size:  # sort and drop repeats (numpy's hashing np.unique is slower at these sizes)
+        out = np.sort(idx)
+        return out[np.concatenate(([True], out[1:] != out[:-1]))] if len(out) else out
     mark = np.zeros(size, bool)
     mark[idx] = True
     return np.flatnonzero(mark)
