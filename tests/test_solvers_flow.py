@@ -243,6 +243,32 @@ def test_polish_cold_start_when_the_network_map_is_poor():
     assert res.metrics().n_flipped == 0
 
 
+def test_polish_of_a_folded_network_map_skips_the_repair_and_starts_cold():
+    """A folded network map is not repaired before the polish (which starts cold from the identity anyway); without
+    polish the same map is repaired."""
+    import torch
+
+    from rfmap.cli import repair_summary
+    from rfmap.surrogate import Surrogate
+    from rfmap.tasks import TaskSpec
+
+    sur = Surrogate.untrained(TaskSpec(kind="density", dim=2, boundary="square"))
+    with torch.no_grad():  # psi = (3, 0) everywhere: u_x = x + 12 x (1 - x) turns back for x > 0.54
+        for p in sur.model.parameters():
+            p.zero_()
+        sur.model.head.bias.copy_(torch.tensor([3.0, 0.0]))
+    raw = sur.map("sin-cos", 33, repair=False)
+    assert raw.metrics().n_flipped > 0
+    res = sur.map("sin-cos", 33, polish=True)
+    rep, pol = res.info["repair"], res.info["polish"]
+    assert rep["skipped"] and rep["n_flipped_before"] == raw.metrics().n_flipped
+    assert pol["start"] == "cold" and "folded" in pol["reason"]
+    assert res.metrics().n_flipped == 0
+    assert "skipped" in repair_summary(rep)
+    plain = sur.map("sin-cos", 33)
+    assert not plain.info["repair"].get("skipped") and plain.metrics().n_flipped == 0
+
+
 def torch_zero(sur):
     """Context: the network outputs zero displacement (the identity map, which removes no density variation)."""
     import contextlib

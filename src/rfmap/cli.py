@@ -138,6 +138,9 @@ def repair_summary(report: dict | None) -> str:
         return "repair: off (raw network output)"
     if not report["needed"]:
         return f"repair: not needed, nothing folded ({report['time'] * 1e3:.1f} ms check)"
+    if report.get("skipped"):
+        return (f"repair: skipped, {report['n_flipped_before']} folded element(s); the polish starts cold from the "
+                "identity")
     b, a = report["metrics_before"], report["metrics_after"]
     extra = "".join(f", {k} {b[k]:.4g} -> {a[k]:.4g}" for k in ("std_rho_map", "max_mu", "mean_dmu") if k in b)
     if "surface_crossings_before" in report:

@@ -26,6 +26,7 @@ from .inputs import check_density, check_mu, preprocess_density, unit_mass
 from .mesh import check_n, element_centroids, element_measures, grid_mesh, grid_points, grid_vertex_weights, interpolate, \
     triangulate, vertex_weights
 from .device import resolve_device
+from .geometry import grid_signed_measures
 from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
@@ -288,7 +289,8 @@ class Surrogate:
         polish : bool or float
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
             (``rfmap.hybrid.polish_map``); a number is the tolerance on Std(rho~_map).  ``time`` then covers
-            both stages.
+            both stages.  A folded network map is not repaired first (``info["repair"]["skipped"]``): the polish
+            then starts cold from the identity, and the repair would be thrown away.
 
         Returns
         -------
@@ -357,8 +359,18 @@ class Surrogate:
         mapped = mapped.numpy()
         if repair:
             t3 = time.perf_counter()
-            mapped, info["repair"] = self._repair(ref, mapped, elements, fvals, n if points is None else None,
-                                                  psi, a)
+            folded = self._flipped(mapped, n) if polish is not False else 0
+            if folded:
+                # the polish starts cold from the identity on a folded network map (rfmap.hybrid.polish_map), so
+                # a repair, which can cost more than the whole flow, would be thrown away
+                cheap = {"n_flipped": folded}
+                info["repair"] = {"needed": True, "skipped": True, "method": "skipped (the polish starts cold)",
+                                  "n_flipped_before": folded, "n_flipped_after": folded, "affected": 0,
+                                  "time": time.perf_counter() - t3, "metrics_before": cheap,
+                                  "metrics_after": dict(cheap)}
+            else:
+                mapped, info["repair"] = self._repair(ref, mapped, elements, fvals, n if points is None else None,
+                                                      psi, a)
             t_map += time.perf_counter() - t3
         if polish is not False:
             from .hybrid import polish_map
@@ -368,6 +380,13 @@ class Surrogate:
             t_map += info["polish"]["time"]
         return MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals,
                          kind=self.spec.kind, time=t_map, info=info)
+
+    def _flipped(self, mapped: np.ndarray, n: int) -> int:
+        """Number of elements of the output ``N``-grid map with non-positive measure (NaN counts as folded)."""
+        if not np.isfinite(mapped).all():
+            return int(mapped.shape[0])
+        meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(mapped))[None], n)[0]
+        return int((meas <= 0).sum())
 
     def _repair(self, ref, mapped, elements, fvals, grid_n, psi, alpha) -> tuple[np.ndarray, dict]:
         """:func:`rfmap.repair.repair_map` of the output map; at query points, the working-grid map is repaired
