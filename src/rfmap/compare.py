@@ -45,12 +45,15 @@ def _check(surs: dict) -> tuple:
 
 def model_table(surs: dict) -> Table:
     """Architecture, parameters, training steps and wall time (cumulative over ``--init`` chains) and the final
-    held-out validation metric of each model, from its metadata."""
+    held-out validation metric of each model (its selection score where recorded), from its metadata."""
     _check(surs)
     t = Table("tab:models", "The models", ["parameters", "steps", "train_time", "validation"])
     for name, s in surs.items():
         meta = s.meta
-        val = ((meta.get("final_metrics") or {}).get("mean") or {}).get("std_rho_map")
+        mean = (meta.get("final_metrics") or {}).get("mean") or {}
+        # the selection score (a folded map counted as the identity; rfmap.validation.score) where recorded: a
+        # plain mean over fields with a folded map is meaningless
+        val = mean.get("penalized", mean.get("std_rho_map"))
         t.add(name, s.model.kwargs().get("arch", "unet"),
               {"parameters": parameter_count(s.model),
                "steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
