@@ -2,8 +2,10 @@
 
     python benchmarks/inference.py [--model NAME ...] [--threads T] [--quick]
 
-Prints Markdown tables. The surrogate's time covers encoding, the network and building the map on the output
-grid; the classical time is one solve of the same field on the same grid; ``ratio`` = classical / surrogate.
+Prints Markdown tables. The surrogate's time (the result's own ``time``) covers encoding, the network, building the
+map on the output grid and the fold check (and repair, where needed); the classical time is one solve of the same
+field on the same grid; both are medians over the repeats (one classical solve in 3D); ``ratio`` = classical /
+surrogate.
 Models that are not shipped are replaced by an untrained network of the ``full`` preset's size (same cost).
 """
 from __future__ import annotations
@@ -31,34 +33,31 @@ def surrogate(name: str) -> Surrogate:
     return sur
 
 
-def best_of(fn, repeats=3):
+def median_of(fn, repeats: int):
+    """The results of ``repeats`` calls of ``fn`` after one warm-up call, and the median of their own ``time``."""
     fn()
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        ts.append(time.perf_counter() - t)
-    return min(ts), out
+    results = [fn() for _ in range(repeats)]
+    return results, float(np.median([r.time for r in results]))
 
 
 def inference_rows(name: str, ns, repeats: int):
     sur = surrogate(name)
     kind, dim = sur.spec.kind, sur.spec.dim
     field = "T1" if kind == "beltrami" else ("multi-freq" if dim == 2 else "multi-freq-3d")
-    print(f"\n### {sur.name}: {kind}, {dim}D, field {field}\n")
+    print(f"\n### {sur.name}: {kind}, {dim}D, field {field} (medians of {repeats} runs)\n")
     print("| N | working grid | surrogate (s) | network only (s) | classical (s) | ratio |")
     print("|---|---|---|---|---|---|")
     for n in ns:
-        t_sur, r = best_of(lambda: sur.map(field, n), repeats)
+        rs, t_sur = median_of(lambda: sur.map(field, n), repeats)
+        t_net = float(np.median([r.info["network_time"] for r in rs]))
         if kind == "beltrami":
             mesh = grid_mesh(n, 2)
             mu = BELTRAMI_MAPS[field].mu(mesh.points[mesh.elements].mean(1))
-            t_cl, _ = best_of(lambda: solve_lbs(mu, n), repeats)
+            _, t_cl = median_of(lambda: solve_lbs(mu, n), repeats)
         else:
             dens = DENSITIES[field].sample(n)
-            t_cl, _ = best_of(lambda: solve_dem(dens, boundary="square"), 1 if dim == 3 else repeats)
-        print(f"| {n} | {r.info['work_n']} | {r.time:.4f} | {r.info['network_time']:.4f} | {t_cl:.4f} | "
-              f"{t_cl / r.time:.1f} |")
+            _, t_cl = median_of(lambda: solve_dem(dens, boundary="square"), 1 if dim == 3 else repeats)
+        print(f"| {n} | {rs[0].info['work_n']} | {t_sur:.4f} | {t_net:.4f} | {t_cl:.4f} | {t_cl / t_sur:.1f} |")
 
 
 def train_step_rows(names, repeats: int):
@@ -98,7 +97,7 @@ def main():
     if a.threads:
         torch.set_num_threads(a.threads)
     print(f"torch threads: {torch.get_num_threads()}")
-    reps = 1 if a.quick else 3
+    reps = 3 if a.quick else 7
     for name in a.model:
         dim = get_config(name, "full").task.dim
         ns = ((32, 51, 64, 128, 256) if not a.quick else (51, 128)) if dim == 2 else \
