@@ -131,20 +131,20 @@ _CI3 = dict(model=ModelConfig(base=4, depth=2), steps=10, batch=1, n_range=(9, 1
             ckpt_every=5, val_n=9, val_count=2)
 #: training densities with sharp features (narrow peaks, steep ramps) besides the paper's smooth and step fields
 _SHARP2 = RandomDensityConfig(dim=2, p_peak=0.15, p_ramp=0.15)
-#: a fold penalty that a local fold cannot hide in: the penalty is a mean over all elements, so with the default
-#: weight 10 from det J < 0.02 a fold of a few hundred elements adds about 1e-7 to a density loss of about 2e-3
-#: (measured in training logs); weight 100 from det J < 0.05 makes such a fold cost about ten times the density loss,
-#: and the density term keeps a restoring gradient on collapsed elements (LossWeights.density_tangent)
-_FOLD_STRONG = dict(fold=100.0, fold_threshold=0.05, density_tangent=True)
-_FOLD_NOTE = "; fold penalty of weight 100 from det J < 0.05."
 #: a third of the training fields as hard as the held-out ramps and peaks (a single steep ramp of height ratio up to
 #: 51 after preprocessing, or a narrow peak, over faint modes; RandomDensityConfig.p_hard), besides the sharp
-#: features of _SHARP2 (used by deq2d-free and dem3d-cube).  The 3D models trained without them left the held-out
+#: features of _SHARP2 (used by deq2d-square, deq2d-free and dem3d-cube).  The 3D models trained without them left the held-out
 #: ramps as unequal as they came (Std 1.0-1.5) because no training field was like them (99th percentile of the
 #: training fields' Std 0.42 against the ramps' 1.0-1.34).  The fold penalty starts at det J < 0.02, below the 0.04
 #: that the exact map of the steepest ramp needs
 _HARD3 = RandomDensityConfig.for_dim(3, p_peak=0.15, p_ramp=0.15, p_hard=0.3)
 _HARD2 = RandomDensityConfig(dim=2, p_peak=0.15, p_ramp=0.15, p_hard=0.3)
+#: dem3d-free: half the hard share (dem3d-cube at 0.3 gained on peaks and ramps but lost on smooth fields)
+_HARD3_FREE = RandomDensityConfig.for_dim(3, p_peak=0.15, p_ramp=0.15, p_hard=0.15)
+#: a fold penalty that a local fold cannot hide in: the penalty is a mean over all elements, so with the default
+#: weight 10 a fold of a few hundred elements adds about 1e-7 to a density loss of about 2e-3 (measured in training
+#: logs); weight 100 makes it count, and the density term keeps a restoring gradient on collapsed elements
+#: (LossWeights.density_tangent)
 _FOLD_HARD = dict(fold=100.0, fold_threshold=0.02, density_tangent=True)
 _HARD_NOTE = ("the random training densities include narrow peaks and steep ramps (15 % of fields each) and, in 30 % "
               "of fields, a single steep ramp (height ratio up to 51 after preprocessing) or narrow peak over faint "
@@ -181,9 +181,9 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
             loss=LossWeights(beltrami=lam, **fold), lr=5e-4, warmup=300, density_field=fields,
         )
         for name, boundary, lam, steps, limit, fields, fold, desc in [
-            ("deq2d-square", "square", 0.1, 6000, 3000.0, _SHARP2, _FOLD_STRONG,
+            ("deq2d-square", "square", 0.1, 6000, 3000.0, _HARD2, _FOLD_HARD,
              "2D density-equalizing quasi-conformal map (DEQ: density loss + 0.1 Beltrami energy), square boundary; "
-             "the random training densities include narrow peaks and steep ramps (15 % of fields each)" + _FOLD_NOTE),
+             + _HARD_NOTE + " Trained at N in [48, 96], so that the paper's 51-point grid runs at its own size."),
             ("deq2d-free", "free", 0.1, 2500, 2700.0, _HARD2, _FOLD_HARD, "2D DEQ map, free boundary; " + _HARD_NOTE),
             ("dem2d-square", "square", 0.0, 2500, 2700.0, _SHARP2, {}, "2D density-equalizing map (density loss only), "
              "square boundary; the random training densities include narrow peaks and steep ramps (15 % of fields "
@@ -208,25 +208,36 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
              "3D density-equalizing map, cube boundary (density loss on tetrahedra, fold penalty). The paper trains "
              "4000 epochs with cosine warm restarts at lr 2e-4 on a GPU; on a CPU budget of under an hour a single "
              "cosine cycle at lr 5e-4 gets further. " + _HARD_NOTE[0].upper() + _HARD_NOTE[1:]),
-            ("dem3d-free", "free", None, {}, "3D density-equalizing map, free boundary (density loss, volume "
-             "constraint, fold penalty); same schedule as dem3d-cube."),
+            ("dem3d-free", "free", _HARD3_FREE, _FOLD_HARD, "3D density-equalizing map, free boundary (density loss, "
+             "volume constraint, fold penalty); same schedule as dem3d-cube. The random training densities include "
+             "narrow peaks and steep ramps (15 % of fields each) and, in 15 % of fields, a single steep ramp or "
+             "narrow peak over faint modes (half the cube model's share, which cost it accuracy on smooth fields); "
+             "fold penalty of weight 100 from det J < 0.02."),
         ]
     },
 }
 
-#: the FNO comparison: deq2d-square's task, losses, fields, schedule and wall-time budget with neuraloperator's
+CONFIGS["deq2d-square"]["full"] = replace(CONFIGS["deq2d-square"]["full"], n_range=(48, 96))
+
+#: deq2d-square's task and fields as they were when the FNO was trained
+_FNO_FIELDS_NOTE = ("2D density-equalizing quasi-conformal map (DEQ: density loss + 0.1 Beltrami energy), square "
+                    "boundary; the random training densities include narrow peaks and steep ramps (15 % of fields "
+                    "each).")
+#: the FNO comparison: deq2d-square's task, losses, fields, schedule and wall-time budget as they were when the FNO
+#: was trained (the U-Net has since moved on to _HARD2 fields and N from 48), with neuraloperator's
 #: FNO in place of the U-Net (16 modes, width 24, 4 layers, 12.5 % padding: 0.67 M real parameters, the U-Net's 0.70 M;
 #: measured 203 ms per forward and backward pass at batch 4, N = 80, against the U-Net's 254 ms)
 CONFIGS["fno-deq2d-square"] = {
     preset: replace(
         # the loss of deq2d-square when the FNO was trained (fold penalty of weight 10 from det J < 0.02)
-        cfg, name="fno-deq2d-square", lr=1e-3, loss=LossWeights(beltrami=0.1),
+        cfg, name="fno-deq2d-square", lr=1e-3, loss=LossWeights(beltrami=0.1), density_field=_SHARP2,
+        n_range=(64, 96) if preset == "full" else cfg.n_range,
         model=ModelConfig(arch="fno", modes=4, width=8, layers=2) if preset == "ci" else
         ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125),
         description="Fourier neural operator (neuraloperator's FNO, 16 modes per axis, width 24, 4 Fourier layers, "
                     "12.5 % zero padding) trained exactly as deq2d-square (same fields, DEQ loss, square boundary "
                     "mask, schedule and wall-time budget) except for the learning rate, 1e-3 instead of 5e-4, the "
-                    "usual FNO rate. " + cfg.description.replace(_FOLD_NOTE, "."))
+                    "usual FNO rate. " + _FNO_FIELDS_NOTE)
     for preset, cfg in CONFIGS["deq2d-square"].items()
 }
 
