@@ -172,7 +172,8 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     sur = Surrogate.untrained(TaskSpec("density", 2, "square"), base=4, depth=2, **meta)
     old = Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, steps=5, wall_time=30.0)
     t = recipe_table({"new": sur, "old": old})
-    assert t.value("new", "unet", "fields") == "modes, steps, peaks 15 %, ramps 15 % (height ×2.5)"
+    assert t.value("new", "unet", "fields") == \
+        "modes, steps, peaks 15 %, ramps 15 % (height ×2.5), single hard ramps or peaks 30 %"
     assert t.value("new", "unet", "fold") == "100 from 0.05"
     assert t.value("new", "unet", "lr") == 2e-4
     assert t.value("new", "unet", "steps") == 1300 and t.value("new", "unet", "train_time") == 10.0
@@ -184,7 +185,9 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     assert recipe_table({"new": sur}).value("new", "unet", "held_out") == 0.25
     assert "| new | unet | modes, steps" in t.to_markdown()
     assert training_fields_text(get_config("beltrami2d", "full").to_dict()) == "random boundary-fixing maps"
-    assert training_fields_text(get_config("dem3d-free", "full").to_dict()) == "modes, steps"
-    for name in ("deq2d-free", "dem3d-cube"):
+    assert training_fields_text(get_config("dem3d-free", "full").to_dict()) == \
+        "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 15 %"
+    assert training_fields_text(get_config("dem2d-square", "full").to_dict()) == "modes, steps, peaks 15 %, ramps 15 %"
+    for name in ("deq2d-square", "deq2d-free", "dem3d-cube"):
         assert training_fields_text(get_config(name, "full").to_dict()) == \
             "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 30 %"

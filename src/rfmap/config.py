@@ -237,7 +237,7 @@ CONFIGS["fno-deq2d-square"] = {
         description="Fourier neural operator (neuraloperator's FNO, 16 modes per axis, width 24, 4 Fourier layers, "
                     "12.5 % zero padding) trained exactly as deq2d-square (same fields, DEQ loss, square boundary "
                     "mask, schedule and wall-time budget) except for the learning rate, 1e-3 instead of 5e-4, the "
-                    "usual FNO rate. " + _FNO_FIELDS_NOTE)
+                    "usual FNO rate. " + _FNO_FIELDS_NOTE + (f" Paper preset: {_NOTE_2D}" if preset == "paper" else ""))
     for preset, cfg in CONFIGS["deq2d-square"].items()
 }
 
