@@ -133,9 +133,9 @@ _CI3 = dict(model=ModelConfig(base=4, depth=2), steps=10, batch=1, n_range=(9, 1
 _SHARP2 = RandomDensityConfig(dim=2, p_peak=0.15, p_ramp=0.15)
 #: a third of the training fields as hard as the held-out ramps and peaks (a single steep ramp of height ratio up to
 #: 51 after preprocessing, or a narrow peak, over faint modes; RandomDensityConfig.p_hard), besides the sharp
-#: features of _SHARP2 (used by deq2d-square, deq2d-free and dem3d-cube).  The 3D models trained without them left the held-out
-#: ramps as unequal as they came (Std 1.0-1.5) because no training field was like them (99th percentile of the
-#: training fields' Std 0.42 against the ramps' 1.0-1.34).  The fold penalty starts at det J < 0.02, below the 0.04
+#: features of _SHARP2 (used by deq2d-square, deq2d-free and dem3d-cube).  The 3D models trained without them left
+#: the held-out ramps as unequal as they came (Std 1.0-1.5) because no training field was like them (99th
+#: percentile of the training fields' Std 0.42 against the ramps' 1.0-1.34).  The fold penalty starts at det J < 0.02, below the 0.04
 #: that the exact map of the steepest ramp needs
 _HARD3 = RandomDensityConfig.for_dim(3, p_peak=0.15, p_ramp=0.15, p_hard=0.3)
 _HARD2 = RandomDensityConfig(dim=2, p_peak=0.15, p_ramp=0.15, p_hard=0.3)

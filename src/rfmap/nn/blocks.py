@@ -44,10 +44,10 @@ class Conv2d(nn.Conv2d):
     """``nn.Conv2d`` (same parameters and state dict) with faster CPU inference kernels for two of its shapes.
 
     Without gradients, on CPU in float32: a 1x1 convolution of a contiguous input is one matrix product
-    ``W (C_out, C_in) @ x (C_in, H W)`` per sample (so a sample's output is the same in any batch), and a dilated convolution takes the oneDNN kernel; PyTorch sends
-    both to slow native kernels at batch 1.  Same results to float32 round-off (tested); at the 51-point grid the
-    2D surrogate's network takes about 10 % less time.  With gradients enabled (training) the layer is exactly
-    ``nn.Conv2d``.
+    ``W (C_out, C_in) @ x (C_in, H W)`` per sample (so a sample's output is the same in any batch), and a dilated
+    convolution takes the oneDNN kernel; PyTorch sends both to slow native kernels at batch 1.  Same results to
+    float32 round-off (tested); at the 51-point grid the 2D surrogate's network takes about 10 % less time.  With
+    gradients enabled (training) the layer is exactly ``nn.Conv2d``.
     """
 
     def _conv_forward(self, input: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
@@ -57,7 +57,6 @@ class Conv2d(nn.Conv2d):
                     and input.is_contiguous():
                 b, c = input.shape[:2]
                 w = weight.view(weight.shape[0], c)
-                # one product per sample, so that a sample's output does not depend on the batch it came in
                 y = torch.stack([torch.mm(w, xi) for xi in input.view(b, c, -1)])
                 if bias is not None:
                     y = y + bias[:, None]

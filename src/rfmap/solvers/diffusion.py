@@ -153,6 +153,11 @@ def _p1_corner_weights(loc: np.ndarray) -> list[float]:
     return [w.get(c, 0.0) for c in itertools.product((0, 1), repeat=d)]
 
 
+def fft_workers() -> int:
+    """Threads for scipy's transforms: the torch thread count the solver runs with."""
+    return max(1, torch.get_num_threads())
+
+
 def cosine_coefficients(values: np.ndarray, workers: int | None = None) -> np.ndarray:
     r"""Coefficients :math:`a_k` of the cosine interpolant :math:`\sum_k a_k \prod_i \cos(\pi k_i x_i)` of grid values.
 
@@ -258,7 +263,7 @@ class CosineDiffusion:
     def __init__(self, values: np.ndarray):
         self.dim = values.ndim
         self.m = m = values.shape[0]
-        self.coef = torch.from_numpy(cosine_coefficients(values, workers=max(1, torch.get_num_threads())))
+        self.coef = torch.from_numpy(cosine_coefficients(values, workers=fft_workers()))
         k = np.arange(m)
         x = np.linspace(0.0, 1.0, m)
         arg = math.pi * np.outer(x, k)

@@ -70,7 +70,7 @@ from ..geometry import grid_signed_measures
 from ..mesh import grid_mesh
 from ..result import MapResult
 from .diffusion import DEM_BOUNDARIES, _balanced_sea, _check_grid_density, _torch_threads, cosine_coefficients, \
-    p1_upsample
+    fft_workers, p1_upsample
 
 __all__ = ["solve_flow", "poisson_flux", "box_mean", "rasterize_elements", "residual_density"]
 
@@ -79,14 +79,14 @@ def _cos_synthesis(coef: np.ndarray, axis: int) -> np.ndarray:
     r""":math:`\sum_k c_k \cos(\pi k j/(M-1))` along ``axis`` at the nodes ``j`` (inverse of the type-I DCT)."""
     b = np.moveaxis(coef, axis, -1).copy()
     b[..., 1:-1] *= 0.5
-    return np.moveaxis(dct(b, type=1, axis=-1, workers=_fft_workers()), -1, axis)
+    return np.moveaxis(dct(b, type=1, axis=-1, workers=fft_workers()), -1, axis)
 
 
 def _sin_synthesis(coef: np.ndarray, axis: int) -> np.ndarray:
     r""":math:`\sum_k c_k \sin(\pi k j/(M-1))` along ``axis`` at the nodes ``j`` (zero at both ends)."""
     b = np.moveaxis(coef, axis, -1)
     out = np.zeros_like(b)
-    out[..., 1:-1] = 0.5 * dst(b[..., 1:-1], type=1, axis=-1, workers=_fft_workers())
+    out[..., 1:-1] = 0.5 * dst(b[..., 1:-1], type=1, axis=-1, workers=fft_workers())
     return np.moveaxis(out, -1, axis)
 
 
@@ -104,13 +104,13 @@ def gaussian_blur(values: np.ndarray, sigma: float) -> np.ndarray:
     ndarray, shape (M,)*d
     """
     d, m = values.ndim, values.shape[0]
-    y = dctn(values, type=1, workers=_fft_workers())
+    y = dctn(values, type=1, workers=fft_workers())
     g = np.exp(-0.5 * (math.pi * sigma * np.arange(m)) ** 2)
     for ax in range(d):
         shape = [1] * d
         shape[ax] = m
         y = y * g.reshape(shape)
-    return dctn(y, type=1, workers=_fft_workers()) / (2.0 * (m - 1)) ** d
+    return dctn(y, type=1, workers=fft_workers()) / (2.0 * (m - 1)) ** d
 
 
 def box_mean(values: np.ndarray) -> float:
@@ -129,11 +129,6 @@ def box_mean(values: np.ndarray) -> float:
     for _ in range(v.ndim):  # reduce the leading axis each time
         v = (v.sum(0) - 0.5 * (v[0] + v[-1])) / (v.shape[0] - 1)
     return float(v)
-
-
-def _fft_workers() -> int:
-    """Threads for scipy's transforms: the torch thread count the solver runs with."""
-    return max(1, torch.get_num_threads())
 
 
 def poisson_flux(values: np.ndarray, dtype=np.float64) -> np.ndarray:
@@ -156,7 +151,7 @@ def poisson_flux(values: np.ndarray, dtype=np.float64) -> np.ndarray:
         The flux components on the grid; the normal component is exactly zero on the walls.
     """
     d, m = values.ndim, values.shape[0]
-    a = cosine_coefficients(np.asarray(values, dtype=dtype), workers=_fft_workers())
+    a = cosine_coefficients(np.asarray(values, dtype=dtype), workers=fft_workers())
     k = (math.pi * np.arange(m)).astype(dtype)
     k2 = np.zeros((m,) * d, dtype=dtype)
     for ax in range(d):
@@ -556,8 +551,8 @@ def solve_flow(
             bar.close()
     elapsed = time.perf_counter() - t_start
     info = {"method": "flow", "boundary": boundary, "n": n, "dim": d, "passes": passes, **totals,
-            "std_history": history, "warm_start": start is not None, "eval_grid": m, "box_grid": nb, "rtol": float(rtol),
-            "stall_blurs": stall_retries}
+            "std_history": history, "warm_start": start is not None, "eval_grid": m, "box_grid": nb,
+            "rtol": float(rtol), "stall_blurs": stall_retries}
     if sea is not None:
         info["sea_density"] = sea
     return MapResult(ref_points=ref, mapped_points=best if keep_best else mapped, elements=elements, field=field,
