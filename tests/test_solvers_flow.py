@@ -15,7 +15,7 @@ from rfmap.fields import sample_density
 from rfmap.mesh import grid_mesh
 from rfmap.solvers import SOLVERS, get_solver, solve_dem, solve_flow
 from rfmap.solvers.diffusion import cosine_coefficients
-from rfmap.solvers.flow import gaussian_blur, poisson_flux, rasterize_elements
+from rfmap.solvers.flow import F32_MARGIN, _turned_over, gaussian_blur, poisson_flux, rasterize_elements
 from rfmap.stress import hard_density
 
 
@@ -315,3 +315,25 @@ def test_box_mean_is_the_zero_cosine_coefficient_and_rtol_defaults_per_dimension
     assert solve_flow(d2, rtol=0.1).info["rtol"] == 0.1
     d3 = 1.0 + 0.5 * np.linspace(0, 1, 7)[:, None, None] * np.ones((7, 7, 7))
     assert solve_flow(d3).info["rtol"] == RTOL[3] == 0.4
+
+
+@pytest.mark.parametrize("d,n", [(2, 9), (3, 6)])
+def test_fold_check_in_single_precision_agrees_with_double(d, n):
+    """The step's fold check: float32 decides clear cases, float64 the ones within F32_MARGIN of zero."""
+    import torch
+
+    from rfmap.geometry import grid_signed_measures
+
+    ref = grid_mesh(n, d).points
+    h = 1.0 / (n - 1)
+    rng = np.random.default_rng(0)
+    assert not _turned_over(ref + 0.1 * h * rng.standard_normal(ref.shape), n)
+    # move one interior vertex to within 1e-12 h of its left neighbour, onto it, and 1e-12 h past it: the
+    # elements between them get measures of about 1e-12 of the mean, which float32 cannot resolve
+    centre = int(np.argmin(((ref - 0.5) ** 2).sum(1)))
+    for shift, folded in ((1e-12, False), (0.0, True), (-1e-12, True)):
+        x = ref.copy()
+        x[centre, 0] = ref[centre, 0] - h + shift * h
+        m64 = grid_signed_measures(torch.from_numpy(x)[None], n)[0].numpy()
+        assert abs(m64.min()) < F32_MARGIN * m64.mean()  # inside the margin: decided in double precision
+        assert _turned_over(x, n) == (m64.min() <= 0.0) == folded
