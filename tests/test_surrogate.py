@@ -320,6 +320,42 @@ def test_map_batch_equals_individual_maps():
         sur.map_batch([np.ones((17, 17)), np.ones((21, 21))])
 
 
+def test_traced_network_gives_the_eager_maps():
+    """Surrogate.trace: one TorchScript trace per input shape, sharing the parameters, so the maps are the eager
+    ones bit for bit, also after the parameters change in place; moving the network drops the traces."""
+    sur = tiny(head_seed=6)
+    eager = [sur.map(f, n) for f, n in (("sin-cos", 17), ("ring", 21))]
+    assert sur.trace() is sur
+    for _ in range(2):
+        traced = [sur.map(f, n) for f, n in (("sin-cos", 17), ("ring", 21))]
+        for a, b in zip(eager, traced):
+            np.testing.assert_array_equal(a.mapped_points, b.mapped_points)
+    assert len(sur._traces) == 2 and all(isinstance(t, torch.jit.ScriptModule) for t in sur._traces.values())
+    batch = sur.map_batch(["sin-cos", "ring"], 17)  # a batch of two is another shape
+    assert len(sur._traces) == 3
+    np.testing.assert_allclose(batch[0].mapped_points, eager[0].mapped_points, atol=1e-6, rtol=0)
+    with torch.no_grad():
+        next(sur.model.parameters()).mul_(1.5)
+    traced = sur.map("sin-cos", 17).mapped_points
+    np.testing.assert_array_equal(traced, sur.trace(False).map("sin-cos", 17).mapped_points)
+    assert not np.array_equal(traced, eager[0].mapped_points)
+    sur.trace().map("sin-cos", 17)
+    sur.to("cpu")
+    assert sur._traces == {}
+
+
+def test_untraceable_network_runs_eagerly(monkeypatch):
+    sur = tiny(head_seed=6)
+    want = sur.map("sin-cos", 17).mapped_points
+
+    def refuse(*a, **k):
+        raise RuntimeError("cannot trace this network")
+
+    monkeypatch.setattr(torch.jit, "trace", refuse)
+    np.testing.assert_array_equal(sur.trace().map("sin-cos", 17).mapped_points, want)
+    assert list(sur._traces.values()) == [sur.model]
+
+
 def test_work_n_is_clipped_to_the_training_range():
     sur = tiny(n_range=[17, 25])
     assert (sur.work_n(9), sur.work_n(21), sur.work_n(65)) == (17, 21, 25)

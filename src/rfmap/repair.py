@@ -86,7 +86,7 @@ from .surface import boundary_crossings, boundary_faces, boundary_loop, grid_sur
     surface_intersections
 
 __all__ = ["repair_map", "fold_free", "cap_mu", "untangle_boundary", "scale_repair", "surface_repair", "lbs_repair",
-           "DELTA"]
+           "vertex_classes", "DELTA"]
 
 #: Margin of the μ-truncation: :math:`|\mu| \le 1 - \delta` after repair.
 #: the ``method`` values of :func:`repair_map`
