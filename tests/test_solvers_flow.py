@@ -337,3 +337,27 @@ def test_fold_check_in_single_precision_agrees_with_double(d, n):
         m64 = grid_signed_measures(torch.from_numpy(x)[None], n)[0].numpy()
         assert abs(m64.min()) < F32_MARGIN * m64.mean()  # inside the margin: decided in double precision
         assert _turned_over(x, n) == (m64.min() <= 0.0) == folded
+
+
+@pytest.mark.parametrize("d,n", [(2, 9), (3, 7)])
+def test_velocity_is_the_same_on_any_number_of_threads(d, n):
+    """The points are split into one grid_sample batch entry per thread (padded to a multiple): same values."""
+    import torch
+
+    from rfmap.solvers.diffusion import p1_upsample
+    from rfmap.solvers.flow import _FlowPass
+
+    rng = np.random.default_rng(3)
+    fp = _FlowPass(p1_upsample(1.0 + rng.random((n,) * d), 2))
+    y = rng.random((n ** d, d))  # 81 or 343 points: not a multiple of 2 or 4 threads
+    before = torch.get_num_threads()
+    try:
+        out = {}
+        for k in (1, 2, 4):
+            torch.set_num_threads(k)
+            out[k] = fp.velocity(0.3, y)
+    finally:
+        torch.set_num_threads(before)
+    assert out[1].shape == (n ** d, d)
+    np.testing.assert_array_equal(out[2], out[1])
+    np.testing.assert_array_equal(out[4], out[1])

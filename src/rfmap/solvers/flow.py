@@ -309,10 +309,18 @@ class _FlowPass:
     def velocity(self, t: float, y: np.ndarray) -> np.ndarray:
         r""":math:`v(y, t) = -\nabla\phi(y) / ((1-t)\rho_0(y) + t\bar\rho)` at points (P, d) of the box."""
         self.evaluations += 1
-        q = torch.from_numpy((2.0 * y[:, ::-1] - 1.0).astype(np.float32)).reshape(1, *([1] * (self.dim - 1)), -1,
-                                                                                 self.dim)
-        f = torch.nn.functional.grid_sample(self.grid, q, mode="bilinear", padding_mode="border",
-                                            align_corners=True).reshape(self.dim + 1, -1).T.numpy().astype(np.float64)
+        q = torch.from_numpy((2.0 * y[:, ::-1] - 1.0).astype(np.float32))
+        # grid_sample runs its batch in parallel but one batch entry on one thread: split the points into one
+        # batch entry per thread over the same (expanded, not copied) table; 3D N = 48 on 2 threads: 5.3 -> 2.7 ms
+        k, p = max(1, torch.get_num_threads()), len(y)
+        rows = -(-p // k)
+        if rows * k != p:
+            q = torch.cat([q, q.new_zeros(rows * k - p, self.dim)])
+        q = q.reshape(k, *([1] * (self.dim - 1)), rows, self.dim)
+        f = torch.nn.functional.grid_sample(self.grid.expand(k, *self.grid.shape[1:]), q, mode="bilinear",
+                                            padding_mode="border", align_corners=True)
+        f = f.reshape(k, self.dim + 1, rows).permute(0, 2, 1).reshape(k * rows, self.dim + 1)[:p]
+        f = f.numpy().astype(np.float64)
         rho = (1.0 - t) * f[:, -1] + t * self.mean
         return f[:, :-1] / rho[:, None]
 
