@@ -402,3 +402,14 @@ def test_cli_repair_line_and_bad_input(tmp_path, capsys):
     _, rep = repair_map(mesh.points, p, mesh.elements, boundary="fixed", grid_n=9)
     line = repair_summary(rep)
     assert line.startswith("repair: local") and f"{rep['n_flipped_before']} folded -> 0" in line
+
+
+def test_colored_sweeps_recover_a_fold_free_target():
+    """A fold-free target whose straight path from the identity dips below the thresholds (the bent cube of
+    rfmap.stress): every round first tries all raises at once, so the target comes back whole."""
+    from rfmap.stress import self_crossing_map
+
+    ref, u, el = self_crossing_map(9, 1.3)
+    out, info = scale_repair(ref, u, el, boundary="square")
+    assert info["classes"] == 8 and info["affected"] == 0
+    np.testing.assert_array_equal(out, ref + 1.0 * (u - ref))
