@@ -55,7 +55,8 @@ vertices at once would also send back the element's other vertices, whose raises
 the raise of all active vertices at once and keeps it when no element fails (a fold-free target is then recovered
 in one step, where a class-by-class sweep could stall in a failing intermediate state).  On the 3D surrogates'
 folded maps (prism-peak-3d on the cube, octant-3d on the free boundary, N = 48) this leaves about a tenth of the
-vertices shortened and a clearly more equal map (Std 0.76 → 0.63 and 0.25 → 0.14) in about the same time.  Vertices far from the folds thus recover the input map
+vertices shortened and a clearly more equal map (Std 0.76 → 0.63 and 0.25 → 0.14) in about the same time.
+Vertices far from the folds thus recover the input map
 exactly and only a neighbourhood of the folds keeps a shortened displacement.  When the folds are local, the start
 itself is local: :math:`s^\*` on the elements the polynomial test cannot clear, rising linearly to :math:`s = 1`
 over 6, 12 or 24 vertex rings around them, if one of these states verifies (else the uniform start), so the rounds touch only that
@@ -548,14 +549,20 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
     classes = [np.arange(n_pts)] if color is None else [np.flatnonzero(color == c) for c in range(color.max() + 1)]
     hi = np.ones(n_pts)
     u = ref + s[:, None] * disp
+
+    def raised(s, active):
+        """The scales with those of ``active`` raised by bisection towards their bound ``hi`` (to 1 if unbounded)."""
+        prop = s.copy()
+        prop[active] = np.where(hi[active] >= 1.0, 1.0, 0.5 * (s[active] + hi[active]))
+        return prop
+
     for _ in range(rounds):
         active_all = s < 1.0
         if not active_all.any():
             break
         if len(classes) > 1:  # first the raise of every active vertex at once: kept when no element fails
             active = np.flatnonzero(active_all)
-            prop = s.copy()
-            prop[active] = np.where(hi[active] >= 1.0, 1.0, 0.5 * (s[active] + hi[active]))
+            prop = raised(s, active)
             u_all = u.copy()
             u_all[active] = ref[active] + prop[active, None] * disp[active]
             if len(failing(u_all, touching(active), active)) == 0:
@@ -566,8 +573,7 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
             active = members[active_all[members]]
             if len(active) == 0:
                 continue
-            prop = s.copy()
-            prop[active] = np.where(hi[active] >= 1.0, 1.0, 0.5 * (s[active] + hi[active]))
+            prop = raised(s, active)
             changed = active
             u[active] = ref[active] + prop[active, None] * disp[active]
             while len(changed):
@@ -590,10 +596,10 @@ def vertex_classes(ref: np.ndarray, elements: np.ndarray) -> np.ndarray | None:
     r"""Classes of vertices no two of which share an element, from the parity of grid coordinates, or ``None``.
 
     On a mesh whose elements lie in the cells of a regular grid (every mesh of :func:`rfmap.mesh.grid_mesh`), two
-    vertices of one cell with the same parity :math:`(i_1 mod 2, \dots, i_d mod 2)` coincide, so the
+    vertices of one cell with the same parity :math:`(i_1 \bmod 2, \dots, i_d \bmod 2)` coincide, so the
     :math:`2^d` parity classes separate the vertices of every element.  The classes are computed from the
-    vertex positions (spacing: the smallest nonzero coordinate difference) and checked on every element;
-    ``None`` when the mesh is not of that kind.
+    vertex positions (an ``N^d`` grid spanning their bounding box) and checked on every element; ``None`` when
+    the mesh is not of that kind.
 
     Shapes: ref (n, d), elements (m, d+1) -> (n,) ints in ``[0, 2^d)``.
     """
