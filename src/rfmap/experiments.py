@@ -604,16 +604,18 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
     r"""Why a flow started from a given map ends where it does: four maps of the test density per grid side.
 
     * ``"cold flow"``: ``solve_flow`` from the identity, the density sampled as its P1 interpolant;
-    * ``"flow from the identity, exact raster"``: the same start, but through the warm-start route, which locates
-      the residual density of the starting map (here the input density, element by element) on the raster;
+    * ``"flow from the identity, warm-start route"``: the same start, but through the warm-start route, which
+      rasterizes the residual density of the starting map (here the input density's element means;
+      ``rfmap.solvers.flow.vertex_residual``);
     * ``"network"``: the surrogate's map ``sur.map(density_name, N)``;
-    * ``"flow from the network"``: one flow pass from the network's map (what ``Surrogate.map(polish=True)``
-      runs when the map is good enough), ``NaN`` where it stalls.
+    * ``"flow from the network"``: one flow pass from the network's map, ``NaN`` where it stalls;
+    * ``"polish"``: ``sur.map(density_name, N, polish=True)``, whose flow starts from the map of the network's
+      smoothed displacement (``rfmap.hybrid.smooth_displacement``), ``NaN`` where it starts cold.
 
     The two identity rows differ only in how the density reaches the raster, so their ratio is the cost of the
     warm-start route itself; the network row's element-scale share (:func:`rfmap.metrics.residual_scales`) is the
-    part of its residual that no flow can act on.  ``sur`` must be a 2D or 3D density surrogate with a square
-    boundary.
+    part of its residual that no flow can act on, and the last row shows how much of it the smoothing removes.
+    ``sur`` must be a 2D or 3D density surrogate with a square boundary.
 
     Returns
     -------
@@ -639,8 +641,11 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
             warm = solve_flow(dens, start=net.mapped_points, stall_blurs=())
         except RuntimeError:
             warm = None
-        for method, res in (("cold flow", cold), ("flow from the identity, exact raster", ident), ("network", net),
-                            ("flow from the network", warm)):
+        pol = sur.map(density_name, n, polish=True)
+        if pol.info["polish"]["start"] != "warm":
+            pol = None
+        for method, res in (("cold flow", cold), ("flow from the identity, warm-start route", ident),
+                            ("network", net), ("flow from the network", warm), ("polish", pol)):
             if res is None:
                 rows.append({"n": n, "method": method, "std": float("nan"), "smooth": float("nan"),
                              "element_fraction": float("nan"), "time": float("nan")})

@@ -5,10 +5,12 @@ The network gives a map :math:`u_0` of the ``N``-grid in milliseconds, but leave
 classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flow.solve_flow`` started from
 :math:`u_0`:
 
-1. The residual density is evaluated *exactly* on the flow's raster: every raster node is located in the mapped
-   mesh (``rfmap.solvers.flow.rasterize_elements``) and takes the value :math:`\tilde\rho_e` of its element.
+1. The residual density is evaluated *exactly* on the flow's raster: it is turned into the P1 vertex field whose
+   element means are :math:`\tilde\rho_e` (``rfmap.solvers.flow.vertex_residual``), and every raster node is
+   located in the mapped mesh and interpolated in its element (``rfmap.solvers.flow.rasterize_elements``).
    Binning element centroids on a coarse raster instead blurs :math:`\tilde\rho` at the scale of the error it should
-   remove, and the finishing flow then stalls near the network's own error.
+   remove, and reading :math:`\tilde\rho_e` itself at the nodes shifts it by up to half an element; the finishing
+   flow transports either error faithfully.
 2. The finishing flow moves :math:`u_0`'s points: a vertex at :math:`u_0(x)` is carried by the flow that equalizes
    the residual density, so the result is the composition :math:`F \circ u_0`.  This needs nothing but the mapped
    positions and the raster, the element populations stay those of the reference mesh (so the metrics are the
@@ -16,7 +18,13 @@ classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flo
    :math:`u_0` is fold-free, so is the result.  Running the flow on the deformed mesh instead (solving in the
    reference frame for a map :math:`G` with :math:`u_0 \circ G` equalizing) would ask for a transport to the
    non-uniform target :math:`J_{u_0}`, which the density-equalizing flow does not solve.
-3. A poor network map is not worth finishing: when :math:`u_0` has folded elements, leaves the sea box, or removes
+3. No flow removes a residual that alternates from element to element (``rfmap.metrics.residual_scales``), and the
+   network's map has such a part: its displacement carries pixel-scale ripples of the working grid, which the
+   bilinear resampling onto a finer output grid turns into kinks.  ``Surrogate.map(polish=...)`` therefore starts
+   the flow from the map of the displacement smoothed on the working grid (:func:`smooth_displacement`, two
+   passes of the binomial filter), when that map is fold-free; the report's ``"surrogate"`` stage is still the
+   network's own map.
+4. A poor network map is not worth finishing: when :math:`u_0` has folded elements, leaves the sea box, or removes
    less than half of the input's density variation (:data:`POOR`), the flow starts cold from the identity instead,
    and the report says so.  ``Surrogate.map(polish=...)`` then skips its bijectivity repair of a folded map, which
    the cold start would throw away (on a 3D map with hundreds of folded tetrahedra the repair can cost more than the
@@ -33,13 +41,39 @@ import numpy as np
 
 from .metrics import compute_metrics
 
-__all__ = ["POOR", "METHODS", "compare_methods", "polish_map", "polish_tolerance"]
+__all__ = ["POOR", "METHODS", "SMOOTH_PASSES", "compare_methods", "polish_map", "polish_tolerance",
+           "smooth_displacement"]
 
 #: Most time steps of a warm flow before it is abandoned for a cold start.
 WARM_STEPS = 500
 
 #: A network map is *poor* when its Std(rho~_map) is above this fraction of the input's Std(rho~_orig).
 POOR = 0.5
+
+
+#: Binomial-filter passes of :func:`smooth_displacement` before a polish.
+SMOOTH_PASSES = 2
+
+
+def smooth_displacement(psi, passes: int = SMOOTH_PASSES):
+    r"""The displacement :math:`\psi` on its working grid smoothed by ``passes`` of the binomial filter
+    :math:`(1, 2, 1)/4` along every axis (replicated edges), shape (B, d, N, ..., N) -> same.
+
+    Each pass damps the grid-scale (Nyquist) mode to zero and a mode of wavelength :math:`\lambda` grid spacings
+    by :math:`\cos^2(\pi/\lambda)` per axis, so smooth parts of the map are kept (a wavelength of 16 spacings
+    loses 4 % per pass) while the network's pixel-scale ripples, which no flow can remove, are gone.
+    """
+    import torch
+    import torch.nn.functional as F
+
+    out = torch.as_tensor(psi)
+    for _ in range(int(passes)):
+        for ax in range(2, out.dim()):
+            x = out.movedim(ax, -1)
+            shape = x.shape
+            x = F.pad(x.reshape(-1, 1, shape[-1]), (1, 1), mode="replicate").reshape(*shape[:-1], shape[-1] + 2)
+            out = (0.25 * x[..., :-2] + 0.5 * x[..., 1:-1] + 0.25 * x[..., 2:]).movedim(-1, ax)
+    return out.contiguous()
 
 
 def polish_tolerance(polish) -> float | None:
@@ -58,9 +92,19 @@ def _summary(ref, mapped, elements, density, seconds: float) -> dict[str, Any]:
             "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian}
 
 
+def _fits(points: np.ndarray, elements: np.ndarray, boundary: str, n: int) -> bool:
+    """Whether ``points`` can start a warm flow: finite, fold-free, and inside the solver's box (the unit
+    square/cube, or the sea box of a free boundary)."""
+    from .mesh import element_measures
+
+    pad = 0.0 if boundary == "square" else max(1, round(0.5 * (n - 1))) / (n - 1)
+    return bool(np.isfinite(points).all() and points.min() >= -pad and points.max() <= 1 + pad
+                and (element_measures(points, elements) > 0).all())
+
+
 def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, density: np.ndarray, *, n: int,
                boundary: str, tol: float | None = None, poor: float = POOR, stage_time: float = 0.0,
-               progress: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
+               start: np.ndarray | None = None, progress: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
     r"""Finish the map ``ref -> mapped`` of the ``N``-grid with the flow-based solver.
 
     Parameters
@@ -80,6 +124,10 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
         Start cold when Std(rho~_map) of :math:`u_0` exceeds ``poor`` times Std(rho~_orig).
     stage_time : float
         Seconds already spent computing :math:`u_0` (recorded in the report).
+    start : ndarray, shape (N**d, d), optional
+        The map the warm flow starts from instead of ``mapped`` when it is fold-free and stays in the box (a
+        smoothed :math:`u_0`, see the module docstring); whether and why ``mapped`` is good enough to start warm is
+        still judged on ``mapped``.
     progress : bool
         Progress bar of the flow.
 
@@ -87,7 +135,8 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
     -------
     (points, report)
         The polished positions (N**d, d) and ``report`` with ``start`` (``"warm"`` or ``"cold"``), ``reason`` (why
-        cold, else ``None``), ``tol``, ``passes``, ``steps``, ``time`` (s, the polish only) and ``stages``:
+        cold, else ``None``), ``smoothed`` (whether the warm flow started from ``start``), ``tol``, ``passes``,
+        ``steps``, ``time`` (s, the polish only) and ``stages``:
         ``{"surrogate": ..., "polish": ...}``, each with its ``time``, ``std_rho_map``, ``n_flipped`` and
         ``min_jacobian``.
     """
@@ -112,17 +161,22 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
     kw = {} if tol is None else {"tol": tol}
     grid = np.asarray(density, dtype=np.float64).reshape((n,) * d)
     res = None
+    smoothed = False
     if reason is None:
+        first = mapped
+        if start is not None and _fits(start, elements, boundary, n):
+            first, smoothed = start, True
         try:  # a warm flow whose steps keep being cut (near-degenerate elements of u0) is abandoned early
-            res = solve_flow(grid, boundary=boundary, start=mapped, progress=progress, max_steps=WARM_STEPS,
+            res = solve_flow(grid, boundary=boundary, start=first, progress=progress, max_steps=WARM_STEPS,
                              stall_blurs=(), **kw)
         except RuntimeError as e:
             reason = f"the warm flow stalled ({e})"
+            smoothed = False
     if res is None:
         res = solve_flow(grid, boundary=boundary, progress=progress, **kw)
     seconds = time.perf_counter() - t0
     after = _summary(ref, res.mapped_points, elements, density, seconds)
-    report = {"start": "cold" if reason else "warm", "reason": reason, "tol": kw.get("tol"),
+    report = {"start": "cold" if reason else "warm", "reason": reason, "smoothed": smoothed, "tol": kw.get("tol"),
               "passes": res.info["passes"], "steps": res.info["steps"], "time": seconds,
               "stages": {"surrogate": before, "polish": after}}
     return res.mapped_points, report

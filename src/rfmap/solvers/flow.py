@@ -41,9 +41,11 @@ Numerical method:
    and later passes correct the residual the blur leaves.
 5. **Passes.**  Interpolation and time-stepping leave a residual.  After a pass the density that remains on the
    mapped mesh, :math:`\tilde\rho_e = \text{population}_e / |T(e)|` (population of the element over its mapped
-   measure), is rasterized exactly by locating every raster node in the mapped mesh (:func:`rasterize_elements`),
-   and the next pass moves the mapped vertices by the flow of that density, composing the maps.  Passes stop when
-   :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is below ``tol`` or stops improving (by less than ``stall``).
+   measure), is turned into the P1 vertex field whose element means match it (:func:`vertex_residual`) and
+   rasterized by locating every raster node in the mapped mesh and interpolating linearly in its element
+   (:func:`rasterize_elements`); the next pass moves the mapped vertices by the flow of that density, composing the
+   maps.  Passes stop when :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is below ``tol`` or stops improving (by
+   less than ``stall``).
 
 Boundary conditions follow ``rfmap.solvers.diffusion.solve_dem``: ``"square"`` keeps the walls (boundary
 vertices slide, corners stay); ``"free"`` embeds the square in :math:`[-L, 1+L]^d` filled with a sea of the
@@ -73,7 +75,8 @@ from ..result import MapResult
 from .diffusion import DEM_BOUNDARIES, _balanced_sea, _check_grid_density, _torch_threads, cosine_coefficients, \
     fft_workers, p1_upsample
 
-__all__ = ["solve_flow", "poisson_flux", "box_mean", "rasterize_elements", "residual_density"]
+__all__ = ["solve_flow", "poisson_flux", "box_mean", "rasterize_elements", "residual_density",
+           "lumped_residual", "vertex_residual"]
 
 
 def _cos_synthesis(coef: np.ndarray, axis: int) -> np.ndarray:
@@ -175,31 +178,10 @@ def poisson_flux(values: np.ndarray, dtype=np.float64) -> np.ndarray:
     return out
 
 
-def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndarray, m: int,
-                       fill: float, *, chunk: int = 1 << 20) -> np.ndarray:
-    r"""Sample a piecewise-constant field of a simplicial mesh at the nodes of the ``M``-grid of :math:`[0,1]^d`.
-
-    Every element's bounding box is scanned for grid nodes and each node is tested with the element's barycentric
-    coordinates :math:`\lambda = E^{-1}(y - p_0)` (inside when all :math:`\lambda_i \ge 0` and
-    :math:`\sum\lambda_i \le 1`, up to round-off); the work is the total node count of the bounding boxes,
-    vectorized in chunks of ``chunk`` (element, node) pairs.  A node on a shared face takes the value of one of
-    its elements.
-
-    Parameters
-    ----------
-    points : ndarray, shape (n, d)
-        Vertex positions in :math:`[0,1]^d` (a fold-free mesh).
-    elements : ndarray, shape (e, d+1)
-    values : ndarray, shape (e,)
-    m : int
-        Grid nodes per side.
-    fill : float
-        Value of the nodes that no element covers.
-
-    Returns
-    -------
-    ndarray, shape (M,)*d
-    """
+def _locate(points: np.ndarray, elements: np.ndarray, m: int, chunk: int):
+    r"""Yield ``(node, element, lam)`` chunks: flat indices of the ``M``-grid nodes of :math:`[0,1]^d` inside an
+    element, that element, and the node's barycentric coordinates :math:`\lambda_1..\lambda_d` in it (shape (k, d)).
+    A node on a shared face appears once per element that contains it."""
     d = points.shape[1]
     s = m - 1
     P = points[elements]  # (e, d+1, d)
@@ -209,8 +191,6 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
     ext = np.maximum(hi - lo + 1, 0)
     count = ext.prod(1)
     keep = np.nonzero(count)[0]
-    out = np.full((m,) * d, float(fill))
-    flat_out = out.reshape(-1)
     strides = np.array([m ** (d - 1 - a) for a in range(d)], dtype=np.int64)
     ends = np.cumsum(count[keep])
     start = 0
@@ -233,9 +213,149 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
             rel[:, ax] = node / s - P[sel, 0, ax][owner]
         lam = np.einsum("pij,pj->pi", Einv[owner], rel)
         inside = (lam >= -1e-10).all(1) & (lam.sum(1) <= 1 + 1e-10)
-        flat_out[flat[inside]] = values[sel][owner[inside]]
+        yield flat[inside], sel[owner[inside]], lam[inside]
         start = stop
+
+
+def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndarray, m: int,
+                       fill: float, *, at: str = "elements", chunk: int = 1 << 20) -> np.ndarray:
+    r"""Sample a field of a simplicial mesh at the nodes of the ``M``-grid of :math:`[0,1]^d`.
+
+    Every element's bounding box is scanned for grid nodes and each node is tested with the element's barycentric
+    coordinates :math:`\lambda = E^{-1}(y - p_0)` (inside when all :math:`\lambda_i \ge 0` and
+    :math:`\sum\lambda_i \le 1`, up to round-off); the work is the total node count of the bounding boxes,
+    vectorized in chunks of ``chunk`` (element, node) pairs.
+
+    * ``at="elements"``: ``values`` is piecewise constant, one value per element; a node on a shared face takes
+      the value of one of its elements (which one depends on the element order, so a raster whose nodes sit on
+      the mesh's faces is biased by up to half an element).
+    * ``at="vertices"``: ``values`` is piecewise linear (P1), one value per vertex, and a node takes
+      :math:`\sum_i \lambda_i v_i` of its element: continuous, so a node on a shared face gets the same value from
+      every element.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, d)
+        Vertex positions in :math:`[0,1]^d` (a fold-free mesh).
+    elements : ndarray, shape (e, d+1)
+    values : ndarray, shape (e,) or (n,)
+        One value per element or per vertex (``at``).
+    m : int
+        Grid nodes per side.
+    fill : float
+        Value of the nodes that no element covers.
+    at : {"elements", "vertices"}
+
+    Returns
+    -------
+    ndarray, shape (M,)*d
+    """
+    if at not in ("elements", "vertices"):
+        raise ValueError(f"at must be 'elements' or 'vertices', got {at!r}")
+    want = elements.shape[0] if at == "elements" else points.shape[0]
+    values = np.asarray(values, dtype=np.float64)
+    if values.shape != (want,):
+        raise ValueError(f"values at the {at} must have shape ({want},), got {values.shape}")
+    d = points.shape[1]
+    out = np.full((m,) * d, float(fill))
+    flat_out = out.reshape(-1)
+    for node, el, lam in _locate(points, elements, m, chunk):
+        if at == "elements":
+            flat_out[node] = values[el]
+        else:
+            v = values[elements[el]]  # (k, d+1)
+            flat_out[node] = (1.0 - lam.sum(1)) * v[:, 0] + np.einsum("ki,ki->k", lam, v[:, 1:])
     return out
+
+
+def lumped_residual(elements: np.ndarray, population: np.ndarray, measure: np.ndarray, n: int) -> np.ndarray:
+    r"""The residual density lumped onto the vertices: :math:`\sum_{e \ni v} \text{population}_e \,/\,
+    \sum_{e \ni v} |T(e)|`, shape (n,): the measure-weighted mean of the element residuals
+    :math:`\tilde\rho_e = \text{population}_e/|T(e)|` around each vertex.
+
+    Parameters
+    ----------
+    elements : ndarray, shape (e, d+1)
+    population : ndarray, shape (e,)
+        Mass of each element (as in :func:`residual_density`).
+    measure : ndarray, shape (e,)
+        Measure of each mapped element :math:`|T(e)|` (positive; any common scale as ``population``'s).
+    n : int
+        Number of vertices.
+    """
+    mass = np.zeros(n)
+    vol = np.zeros(n)
+    for k in range(elements.shape[1]):
+        mass += np.bincount(elements[:, k], weights=population, minlength=n)
+        vol += np.bincount(elements[:, k], weights=measure, minlength=n)
+    return mass / vol
+
+
+#: conjugate-gradient iterations of :func:`vertex_residual` (from the lumped residual); with 10, a flow started at
+#: the identity ends within 0.1 % of the cold flow's Std(rho~_map) (measured on smooth and sharp densities, N 17-65)
+RESIDUAL_ITERATIONS = 10
+
+
+def vertex_residual(elements: np.ndarray, population: np.ndarray, measure: np.ndarray, n: int, *,
+                    iterations: int = RESIDUAL_ITERATIONS) -> np.ndarray:
+    r"""The residual density of a map as a P1 vertex field whose element means match :math:`\tilde\rho_e`.
+
+    The flow needs the density that a map leaves on its image, :math:`\tilde\rho_e = \text{population}_e /
+    |T(e)|`, as a field on its raster.  Read element by element at the raster nodes (which sit on the faces of a
+    nearly undeformed mesh, so that each takes the value of an arbitrary neighbouring element) it is shifted by up
+    to half an element; lumped onto the vertices (:func:`lumped_residual`) it is blurred over one.  Both errors are
+    smooth, and the flow transports them faithfully.  Instead, this returns the vertex values :math:`r` whose P1
+    interpolant has, element by element, the mean :math:`\tilde\rho_e` in the weighted least-squares sense,
+
+    .. math:: \min_r \sum_e |T(e)| \Big(\frac{1}{d+1}\sum_{v \in e} r_v - \tilde\rho_e\Big)^2 ,
+
+    by ``iterations`` steps of Jacobi-preconditioned conjugate gradients on the normal equations, started from the
+    lumped residual.  For the identity map of a P1 vertex density :math:`\rho` the element means are those of
+    :math:`\rho` itself, so :math:`r = \rho` and a warm start from the identity is the cold flow.  Vertex patterns
+    whose element means all vanish lie in the null space; conjugate gradients leave the lumped start's component
+    there.
+
+    Parameters
+    ----------
+    elements, population, measure, n
+        As in :func:`lumped_residual`.
+    iterations : int
+        Conjugate-gradient steps (0 returns the lumped residual).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    import scipy.sparse as sp
+
+    x = lumped_residual(elements, population, measure, n)
+    if iterations <= 0:
+        return x
+    e, k = elements.shape
+    A = sp.csr_matrix((np.full(e * k, 1.0 / k), elements.reshape(-1), np.arange(0, e * k + 1, k)), shape=(e, n))
+    At = A.T.tocsr()
+    w = np.asarray(measure, dtype=np.float64)
+
+    def normal(v: np.ndarray) -> np.ndarray:
+        return At @ (w * (A @ v))
+
+    diag = At @ (w / k)  # the diagonal of A^T W A: sum over the elements at v of |T(e)| / (d+1)^2
+    r = At @ np.asarray(population, dtype=np.float64) - normal(x)
+    z = r / diag
+    p = z.copy()
+    rz = float(r @ z)
+    for _ in range(int(iterations)):
+        if rz <= 0.0:
+            break
+        Ap = normal(p)
+        alpha = rz / float(p @ Ap)
+        x += alpha * p
+        r -= alpha * Ap
+        z = r / diag
+        rz_next = float(r @ z)
+        p = z + (rz_next / rz) * p
+        rz = rz_next
+    return x
 
 
 def _measures(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
@@ -538,7 +658,9 @@ def solve_flow(
                     fill = 1.0
                     if boundary == "free":  # the sea: the domain's mean residual density
                         fill = float((rho * meas).sum() / meas.sum())
-                    raster = rasterize_elements(y, elements, rho / rho.mean(), m, fill / rho.mean())
+                    vert = vertex_residual(elements, pop, meas, len(mapped))
+                    raster = rasterize_elements(y, elements, vert / rho.mean(), m, fill / rho.mean(),
+                                                at="vertices")
                 if bar is not None:
                     bar.set_description(f"flow {d}D N={n} pass {passes + 1}")
                     bar.n = 0
