@@ -108,6 +108,30 @@ def test_rasterize_vertex_values_is_exact_for_affine_fields(d):
     np.testing.assert_allclose(out[covered], nodes[covered] @ a + 0.4, atol=1e-12)
 
 
+@pytest.mark.parametrize("d,shrink", [(2, 1.0), (2, 0.6), (3, 1.0), (3, 0.6)])
+def test_rasterize_grid_walk_matches_the_element_scan(d, shrink):
+    """On a map of the grid mesh the Newton walk (with the element scan for the nodes it leaves) gives the same
+    raster as scanning every element; with the image shrunk into the box (a free boundary's sea) the uncovered
+    nodes keep the fill."""
+    from rfmap.solvers.flow import _grid_side, _locate, _walk_grid
+
+    n = 9 if d == 2 else 6
+    mesh, y = _bent_mesh(n, d)
+    y = 0.5 + shrink * (y - 0.5)
+    m = 3 * (n - 1) + 1
+    vals = np.random.default_rng(3).random(len(y))
+    assert _grid_side(y, mesh.elements) == n and _grid_side(y, mesh.elements[::-1]) is None
+    fast = rasterize_elements(y, mesh.elements, vals, m, fill=-1.0, at="vertices")
+    slow = np.full(m**d, -1.0)
+    for node, el, lam in _locate(y, mesh.elements, m, 1 << 20):
+        v = vals[mesh.elements[el]]
+        slow[node] = (1 - lam.sum(1)) * v[:, 0] + np.einsum("ki,ki->k", lam, v[:, 1:])
+    np.testing.assert_allclose(fast.reshape(-1), slow, atol=1e-12)
+    (node, _, _), left = _walk_grid(y, n, m)
+    assert node.size > 0.5 * (slow != -1).sum()
+    assert (slow == -1).any() == (shrink < 1)
+
+
 def test_rasterize_bad_arguments():
     mesh = grid_mesh(5, 2)
     with pytest.raises(ValueError, match="at must be"):

@@ -61,6 +61,7 @@ Proc. Natl. Acad. Sci. USA 115(10), E2156–E2164 (2018).
 """
 from __future__ import annotations
 
+import itertools
 import math
 import numbers
 import time
@@ -69,7 +70,7 @@ import numpy as np
 import torch
 from scipy.fft import dct, dctn, dst
 
-from ..geometry import grid_signed_measures
+from ..geometry import grid_cell_simplices, grid_signed_measures
 from ..mesh import grid_mesh
 from ..result import MapResult
 from .diffusion import DEM_BOUNDARIES, _balanced_sea, _check_grid_density, _torch_threads, cosine_coefficients, \
@@ -178,18 +179,28 @@ def poisson_flux(values: np.ndarray, dtype=np.float64) -> np.ndarray:
     return out
 
 
-def _locate(points: np.ndarray, elements: np.ndarray, m: int, chunk: int):
-    r"""Yield ``(node, element, lam)`` chunks: flat indices of the ``M``-grid nodes of :math:`[0,1]^d` inside an
-    element, that element, and the node's barycentric coordinates :math:`\lambda_1..\lambda_d` in it (shape (k, d)).
-    A node on a shared face appears once per element that contains it."""
-    d = points.shape[1]
+def _node_boxes(P: np.ndarray, m: int) -> tuple[np.ndarray, np.ndarray]:
+    """Lowest and highest ``M``-grid node index per axis inside each element's bounding box, (e, d) each."""
     s = m - 1
-    P = points[elements]  # (e, d+1, d)
     eps = 1e-9
     lo = np.clip(np.ceil(P.min(1) * s - eps).astype(np.int64), 0, s)
     hi = np.clip(np.floor(P.max(1) * s + eps).astype(np.int64), 0, s)
+    return lo, hi
+
+
+def _locate(points: np.ndarray, elements: np.ndarray, m: int, chunk: int, subset: np.ndarray | None = None):
+    r"""Yield ``(node, element, lam)`` chunks: flat indices of the ``M``-grid nodes of :math:`[0,1]^d` inside an
+    element, that element, and the node's barycentric coordinates :math:`\lambda_1..\lambda_d` in it (shape (k, d)).
+    A node on a shared face appears once per element that contains it.  ``subset``: element indices to scan
+    (default all)."""
+    d = points.shape[1]
+    s = m - 1
+    P = points[elements]  # (e, d+1, d)
+    lo, hi = _node_boxes(P, m)
     ext = np.maximum(hi - lo + 1, 0)
     count = ext.prod(1)
+    if subset is not None:
+        count = np.where(np.isin(np.arange(len(count)), subset), count, 0)
     keep = np.nonzero(count)[0]
     strides = np.array([m ** (d - 1 - a) for a in range(d)], dtype=np.int64)
     ends = np.cumsum(count[keep])
@@ -217,6 +228,138 @@ def _locate(points: np.ndarray, elements: np.ndarray, m: int, chunk: int):
         start = stop
 
 
+def _barycentric(P: np.ndarray, y: np.ndarray) -> np.ndarray:
+    r""":math:`\lambda_1..\lambda_d` of the points ``y`` (k, d) in the simplices ``P`` (k, d+1, d), by Cramer's rule."""
+    if y.shape[1] == 2:
+        ax, ay = P[:, 1, 0] - P[:, 0, 0], P[:, 1, 1] - P[:, 0, 1]
+        bx, by = P[:, 2, 0] - P[:, 0, 0], P[:, 2, 1] - P[:, 0, 1]
+        rx, ry = y[:, 0] - P[:, 0, 0], y[:, 1] - P[:, 0, 1]
+        det = ax * by - ay * bx
+        return np.stack([(rx * by - ry * bx) / det, (ax * ry - ay * rx) / det], 1)
+    p0 = P[:, 0]
+    e1, e2, e3 = ([P[:, i, a] - p0[:, a] for a in range(3)] for i in (1, 2, 3))
+    r = [y[:, a] - p0[:, a] for a in range(3)]
+
+    def cross(a, b):
+        return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
+
+    def dot(a, b):
+        return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+    c23 = cross(e2, e3)
+    det = dot(e1, c23)
+    lam = np.empty((len(y), 3))
+    lam[:, 0] = dot(r, c23) / det
+    lam[:, 1] = dot(r, cross(e3, e1)) / det
+    lam[:, 2] = dot(r, cross(e1, e2)) / det
+    return lam
+
+
+def _kuhn_lookup() -> np.ndarray:
+    """Simplex type (index into ``grid_cell_simplices(3)``) of a point of the unit cube from the three comparisons
+    ``(f0 >= f1, f0 >= f2, f1 >= f2)`` of its coordinates, packed as a 3-bit code; the Kuhn tetrahedron of the
+    permutation sigma holds the points with ``f[sigma_1] >= f[sigma_2] >= f[sigma_3]``."""
+    lut = np.zeros(8, dtype=np.int64)
+    for i, perm in enumerate(itertools.permutations(range(3))):
+        rank = {ax: r for r, ax in enumerate(perm)}
+        code = 4 * (rank[0] < rank[1]) + 2 * (rank[0] < rank[2]) + (rank[1] < rank[2])
+        lut[code] = i
+    return lut
+
+
+_KUHN = _kuhn_lookup()
+
+#: Newton steps of the grid walk of :func:`rasterize_elements` before a node is handed to the element scan
+WALK_STEPS = 6
+#: :func:`rasterize_elements` walks when the mesh's measure is at least this fraction of its bounding box's
+WALK_FILL = 0.9
+
+
+def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS):
+    r"""Locate the ``M``-grid nodes in a fold-free map ``points`` (N**d, d) of the ``N``-grid mesh (elements in
+    :func:`rfmap.mesh.grid_mesh` order) by Newton's method on the piecewise-linear map.
+
+    A node :math:`y` starts at the reference point :math:`x` that the affine map of the mesh's bounding box onto
+    the unit box gives; the grid cell and simplex type holding :math:`x`
+    give a mapped simplex, and the barycentric coordinates :math:`\lambda` of :math:`y` in it either lie in the
+    simplex (found) or define the next reference point :math:`x = X_0 + \sum_i \lambda_i (X_i - X_0)`, the affine
+    inverse of that simplex (a Newton step; clipped to the unit box).  Nodes outside the bounding box of the mapped
+    mesh are not tried, and a node whose step leaves the unit box by more than a cell is given up (it is most
+    likely outside the mesh, in a free boundary's sea).
+
+    Returns
+    -------
+    (node, element, lam), left
+        Flat node indices, their elements and barycentric coordinates (k, d); ``left``: the flat indices of the
+        nodes inside the mesh's bounding box that were not found (given up, or not found in ``steps`` steps).
+    """
+    d = points.shape[1]
+    s = n - 1
+    types = np.array(grid_cell_simplices(d))  # (S, d+1, d) corner offsets
+    edges = np.swapaxes(types[:, 1:] - types[:, :1], 1, 2).astype(np.float64)  # (S, d, d), columns the edges
+    offsets = (types * n ** np.arange(d - 1, -1, -1)).sum(-1)  # (S, d+1): vertex index offsets in a cell
+
+    def flat(ix: np.ndarray, side: int) -> np.ndarray:  # C-order flat index of integer coordinates (k, d)
+        out = ix[:, 0].copy()
+        for a in range(1, d):
+            out *= side
+            out += ix[:, a]
+        return out
+
+    lo, hi = _node_boxes(points[None], m)
+    axes = [np.arange(lo[0, a], hi[0, a] + 1) for a in range(d)]
+    idx = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, d)
+    todo = flat(idx, m)
+    y = idx / (m - 1)
+    low, high = points.min(0), points.max(0)
+    x = np.clip((y - low) / (high - low), 0.0, 1.0)  # the mesh's bounding box taken back to the unit box
+    found: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    gave_up: list[np.ndarray] = []
+    for _ in range(int(steps)):
+        if todo.size == 0:
+            break
+        xs = x * s
+        cell = np.minimum(xs.astype(np.int64), s - 1)
+        f = xs - cell
+        if d == 2:
+            t = (f[:, 0] + f[:, 1] > 1).astype(np.int64)
+        else:
+            t = _KUHN[4 * (f[:, 0] >= f[:, 1]) + 2 * (f[:, 0] >= f[:, 2]) + (f[:, 1] >= f[:, 2])]
+        vid = flat(cell, n)[:, None] + offsets[t]  # (k, d+1)
+        lam = _barycentric(points[vid], y)
+        inside = (lam >= -1e-10).all(1) & (lam.sum(1) <= 1 + 1e-10)
+        if inside.any():
+            found.append((todo[inside], t[inside] * s**d + flat(cell[inside], s), lam[inside]))
+        out = ~inside
+        t, lam = t[out], lam[out]
+        x = (cell[out] + types[t, 0] + np.einsum("kij,kj->ki", edges[t], lam)) / s
+        todo, y = todo[out], y[out]
+        # a step that leaves the unit box by more than a cell points outside the mesh (a free boundary's sea)
+        away = ((x < -1.0 / s) | (x > 1.0 + 1.0 / s)).any(1)
+        if away.any():
+            gave_up.append(todo[away])
+            x, todo, y = x[~away], todo[~away], y[~away]
+        np.clip(x, 0.0, 1.0, out=x)
+    left = np.concatenate(gave_up + [todo])
+    if not found:
+        return (np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, d))), left
+    return tuple(np.concatenate(a) for a in zip(*found)), left
+
+
+def _boxes_holding(mask: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Whether each box ``[lo, hi]`` (e, d) of ``M``-grid node indices holds a ``True`` node of ``mask`` (summed-area
+    table; inclusion-exclusion over the 2^d corners)."""
+    d = mask.ndim
+    sat = np.pad(mask.astype(np.int64), [(1, 0)] * d)
+    for a in range(d):
+        sat = np.cumsum(sat, axis=a)
+    total = np.zeros(len(lo), dtype=np.int64)
+    for corner in itertools.product((0, 1), repeat=d):
+        ix = tuple(np.where(c, hi[:, a] + 1, lo[:, a]) for a, c in enumerate(corner))
+        total += (-1) ** (d - sum(corner)) * sat[ix]
+    return total > 0
+
+
 def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndarray, m: int,
                        fill: float, *, at: str = "elements", chunk: int = 1 << 20) -> np.ndarray:
     r"""Sample a field of a simplicial mesh at the nodes of the ``M``-grid of :math:`[0,1]^d`.
@@ -224,7 +367,11 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
     Every element's bounding box is scanned for grid nodes and each node is tested with the element's barycentric
     coordinates :math:`\lambda = E^{-1}(y - p_0)` (inside when all :math:`\lambda_i \ge 0` and
     :math:`\sum\lambda_i \le 1`, up to round-off); the work is the total node count of the bounding boxes,
-    vectorized in chunks of ``chunk`` (element, node) pairs.
+    vectorized in chunks of ``chunk`` (element, node) pairs.  When the mesh is a map of the ``N``-grid mesh
+    (:func:`rfmap.mesh.grid_mesh`'s elements) that fills its bounding box (:data:`WALK_FILL`; the square and cube
+    boundaries) the nodes are first located by a Newton walk on the grid (:func:`_walk_grid`, a few vectorized
+    steps over the nodes instead of a scan over the elements, about 2.5x faster at 3D N = 48), and only the
+    elements whose boxes hold a node it did not find are scanned.
 
     * ``at="elements"``: ``values`` is piecewise constant, one value per element; a node on a shared face takes
       the value of one of its elements (which one depends on the element order, so a raster whose nodes sit on
@@ -259,13 +406,41 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
     d = points.shape[1]
     out = np.full((m,) * d, float(fill))
     flat_out = out.reshape(-1)
-    for node, el, lam in _locate(points, elements, m, chunk):
+    chunks = []
+    n = _grid_side(points, elements)
+    subset = None
+    if n is not None:  # the walk pays where the mesh fills its bounding box (not around a free boundary's sea)
+        span = points.max(0) - points.min(0)
+        fills = _measures(points, elements).sum() / math.factorial(d) >= WALK_FILL * float(np.prod(span))
+        n = n if fills else None
+    if n is not None:
+        hit, left = _walk_grid(points, n, m)
+        chunks.append(hit)
+        subset = left[:0]
+        if left.size:  # scan only the elements whose boxes hold a node the walk did not find
+            mask = np.zeros(m**d, dtype=bool)
+            mask[left] = True
+            lo, hi = _node_boxes(points[elements], m)
+            subset = np.nonzero(_boxes_holding(mask.reshape((m,) * d), lo, hi))[0]
+    if subset is None or subset.size:
+        chunks = itertools.chain(chunks, _locate(points, elements, m, chunk, subset))
+    for node, el, lam in chunks:
         if at == "elements":
             flat_out[node] = values[el]
         else:
             v = values[elements[el]]  # (k, d+1)
             flat_out[node] = (1.0 - lam.sum(1)) * v[:, 0] + np.einsum("ki,ki->k", lam, v[:, 1:])
     return out
+
+
+def _grid_side(points: np.ndarray, elements: np.ndarray) -> int | None:
+    """``N`` when ``elements`` are those of :func:`rfmap.mesh.grid_mesh` ``(N, d)`` over ``N**d`` points, else
+    ``None`` (the vertices may be anywhere: a map of the grid mesh)."""
+    d = points.shape[1]
+    n = int(round(points.shape[0] ** (1.0 / d)))
+    if n < 2 or n**d != points.shape[0] or elements.shape != (math.factorial(d) * (n - 1) ** d, d + 1):
+        return None
+    return n if np.array_equal(elements, grid_mesh(n, d).elements) else None
 
 
 def lumped_residual(elements: np.ndarray, population: np.ndarray, measure: np.ndarray, n: int) -> np.ndarray:
