@@ -335,11 +335,18 @@ def test_polish_starts_from_the_smoothed_network_map():
     dens = sample_density("sin-cos", 51)
     res = sur.map("sin-cos", 51, polish=True)
     p = res.info["polish"]
-    assert p["start"] == "warm" and p["smoothed"]
+    assert p["start"] == "warm" and p["smoothed"] and p["smooth_passes"] == 2
     assert p["stages"]["surrogate"]["std_rho_map"] == pytest.approx(sur.map("sin-cos", 51).metrics().std_rho_map)
     cold = solve_flow(dens).metrics().std_rho_map
     assert res.metrics().std_rho_map < 1.05 * cold and res.metrics().n_flipped == 0
     wall_checks(res)
+
+
+def test_smooth_passes_per_dimension_and_above_the_working_grid():
+    from rfmap.hybrid import SMOOTH_PASSES, SMOOTH_PASSES_FINER, smooth_passes
+
+    assert smooth_passes(2, 51, 51) == SMOOTH_PASSES[2] and smooth_passes(3, 48, 48) == SMOOTH_PASSES[3]
+    assert smooth_passes(2, 256, 96) == smooth_passes(3, 64, 48) == SMOOTH_PASSES_FINER
 
 
 @pytest.mark.parametrize("d", [2, 3])
