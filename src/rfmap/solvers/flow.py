@@ -280,10 +280,10 @@ def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS):
     :func:`rfmap.mesh.grid_mesh` order) by Newton's method on the piecewise-linear map.
 
     A node :math:`y` starts at the reference point :math:`x` that the affine map of the mesh's bounding box onto
-    the unit box gives; the grid cell and simplex type holding :math:`x`
-    give a mapped simplex, and the barycentric coordinates :math:`\lambda` of :math:`y` in it either lie in the
-    simplex (found) or define the next reference point :math:`x = X_0 + \sum_i \lambda_i (X_i - X_0)`, the affine
-    inverse of that simplex (a Newton step; clipped to the unit box).  Nodes outside the bounding box of the mapped
+    the unit box gives; the grid cell and simplex type holding :math:`x` give a mapped simplex, and the barycentric
+    coordinates :math:`\lambda` of :math:`y` in it either lie in the simplex (found) or define the next reference
+    point :math:`x = X_0 + \sum_i \lambda_i (X_i - X_0)`, the affine inverse of that simplex (a Newton step;
+    clipped to the unit box).  Nodes outside the bounding box of the mapped
     mesh are not tried, and a node whose step leaves the unit box by more than a cell is given up (it is most
     likely outside the mesh, in a free boundary's sea).
 
