@@ -185,8 +185,9 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     assert recipe_table({"new": sur}).value("new", "unet", "held_out") == 0.25
     assert "| new | unet | modes, steps" in t.to_markdown()
     assert training_fields_text(get_config("beltrami2d", "full").to_dict()) == "random boundary-fixing maps"
-    assert training_fields_text(get_config("dem3d-free", "full").to_dict()) == \
-        "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 15 %"
-    for name in ("deq2d-square", "deq2d-free", "dem2d-square", "dem3d-cube"):
+    for name in ("dem3d-free", "dem3d-cube"):
+        assert training_fields_text(get_config(name, "full").to_dict()) == \
+            "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 15 %"
+    for name in ("deq2d-square", "deq2d-free", "dem2d-square"):
         assert training_fields_text(get_config(name, "full").to_dict()) == \
             "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 30 %"
