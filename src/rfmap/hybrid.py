@@ -104,13 +104,18 @@ def _summary(ref, mapped, elements, density, seconds: float) -> dict[str, Any]:
             "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian}
 
 
+def _in_box(points: np.ndarray, boundary: str, n: int) -> bool:
+    """Whether ``points`` lie in the flow's box: the unit square/cube, or for a free boundary the sea box
+    :math:`[-L, 1 + L]^d` with :math:`L` half the square (``solve_flow``'s default margin, whole cells)."""
+    pad = 0.0 if boundary == "square" else max(1, round(0.5 * (n - 1))) / (n - 1)
+    return bool(points.min() >= -pad and points.max() <= 1 + pad)
+
+
 def _fits(points: np.ndarray, elements: np.ndarray, boundary: str, n: int) -> bool:
-    """Whether ``points`` can start a warm flow: finite, fold-free, and inside the solver's box (the unit
-    square/cube, or the sea box of a free boundary)."""
+    """Whether ``points`` can start a warm flow: finite, fold-free, and inside the flow's box (:func:`_in_box`)."""
     from .mesh import element_measures
 
-    pad = 0.0 if boundary == "square" else max(1, round(0.5 * (n - 1))) / (n - 1)
-    return bool(np.isfinite(points).all() and points.min() >= -pad and points.max() <= 1 + pad
+    return bool(np.isfinite(points).all() and _in_box(points, boundary, n)
                 and (element_measures(points, elements) > 0).all())
 
 
@@ -165,11 +170,8 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
     elif not before["std_rho_map"] <= poor * before["std_rho_orig"]:
         reason = (f"the network's map is poor: Std(rho~_map) {before['std_rho_map']:.3g} > {poor:g} x "
                   f"Std(rho~_orig) {before['std_rho_orig']:.3g}")
-    elif boundary == "free":
-        # the flow's sea box is [-L, 1 + L]^d with L half the square (solve_flow's default margin)
-        pad = max(1, round(0.5 * (n - 1))) / (n - 1)
-        if mapped.min() < -pad or mapped.max() > 1 + pad:
-            reason = "the network's map leaves the sea box"
+    elif boundary == "free" and not _in_box(mapped, boundary, n):
+        reason = "the network's map leaves the sea box"
     kw = {} if tol is None else {"tol": tol}
     grid = np.asarray(density, dtype=np.float64).reshape((n,) * d)
     res = None

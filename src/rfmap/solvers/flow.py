@@ -200,7 +200,9 @@ def _locate(points: np.ndarray, elements: np.ndarray, m: int, chunk: int, subset
     ext = np.maximum(hi - lo + 1, 0)
     count = ext.prod(1)
     if subset is not None:
-        count = np.where(np.isin(np.arange(len(count)), subset), count, 0)
+        chosen = np.zeros(len(count), dtype=bool)
+        chosen[subset] = True
+        count = np.where(chosen, count, 0)
     keep = np.nonzero(count)[0]
     strides = np.array([m ** (d - 1 - a) for a in range(d)], dtype=np.int64)
     ends = np.cumsum(count[keep])
