@@ -108,17 +108,19 @@ def test_rasterize_vertex_values_is_exact_for_affine_fields(d):
     np.testing.assert_allclose(out[covered], nodes[covered] @ a + 0.4, atol=1e-12)
 
 
-@pytest.mark.parametrize("d,shrink", [(2, 1.0), (2, 0.6), (3, 1.0), (3, 0.6)])
-def test_rasterize_grid_walk_matches_the_element_scan(d, shrink):
+@pytest.mark.parametrize("d,shrink,refine", [(2, 1.0, 3), (2, 0.6, 3), (3, 1.0, 3), (3, 0.6, 3), (2, 1.0, 5),
+                                             (3, 1.0, 8)])
+def test_rasterize_grid_walk_matches_the_element_scan(d, shrink, refine):
     """On a map of the grid mesh the Newton walk (with the element scan for the nodes it leaves) gives the same
     raster as scanning every element; with the image shrunk into the box (a free boundary's sea) the uncovered
-    nodes keep the fill."""
-    from rfmap.solvers.flow import _grid_side, _locate, _walk_grid
+    nodes keep the fill.  The finer rasters (41 nodes per side) start the walk from a coarse walk's inverse."""
+    from rfmap.solvers.flow import WALK_COARSE, WALK_COARSE_MIN, _grid_side, _locate, _walk_grid
 
     n = 9 if d == 2 else 6
     mesh, y = _bent_mesh(n, d)
     y = 0.5 + shrink * (y - 0.5)
-    m = 3 * (n - 1) + 1
+    m = refine * (n - 1) + 1
+    assert ((m - 1) // WALK_COARSE + 1 >= WALK_COARSE_MIN) == (refine > 3)
     vals = np.random.default_rng(3).random(len(y))
     assert _grid_side(y, mesh.elements) == n and _grid_side(y, mesh.elements[::-1]) is None
     fast = rasterize_elements(y, mesh.elements, vals, m, fill=-1.0, at="vertices")
@@ -130,6 +132,28 @@ def test_rasterize_grid_walk_matches_the_element_scan(d, shrink):
     (node, _, _), left = _walk_grid(y, n, m)
     assert node.size > 0.5 * (slow != -1).sum()
     assert (slow == -1).any() == (shrink < 1)
+
+
+@pytest.mark.parametrize("d,n", [(2, 33), (3, 17)])
+def test_coarse_walk_inverse_is_a_good_start(d, n):
+    """The walk's starting points from a 4x coarser raster (``_inverse_guess``) lie within 0.05 grid cells of the
+    exact preimages of the raster nodes under a smooth map (the bounding-box guess: more than a cell off), and the
+    walk from them finds the same nodes as from the bounding-box guess."""
+    from rfmap.solvers.flow import WALK_STEPS, _inverse_guess, _walk_grid
+
+    mesh, y = _bent_mesh(n, d)
+    m = 2 * (n - 1) + 1
+    nodes = np.stack(np.meshgrid(*[np.linspace(0, 1, m)] * d, indexing="ij"), -1).reshape(-1, d)
+
+    def bend(x):  # the smooth map that _bent_mesh interpolates
+        return np.stack([x[:, i] + 0.08 * np.sin(np.pi * x[:, i]) * x[:, (i + 1) % d] for i in range(d)], 1)
+
+    guess = _inverse_guess(y, n, (m - 1) // 4 + 1, WALK_STEPS, nodes)
+    box = np.clip((nodes - y.min(0)) / (y.max(0) - y.min(0)), 0.0, 1.0)
+    err = [np.abs(bend(x) - nodes).max() * (n - 1) for x in (guess, box)]
+    assert err[0] < 0.05 and err[1] > 1.0, err
+    found = [np.sort(_walk_grid(y, n, m, coarse=c)[0][0]) for c in (4, 1)]
+    np.testing.assert_array_equal(*found)
 
 
 def test_rasterize_bad_arguments():
@@ -340,6 +364,27 @@ def test_polish_starts_from_the_smoothed_network_map():
     cold = solve_flow(dens).metrics().std_rho_map
     assert res.metrics().std_rho_map < 1.05 * cold and res.metrics().n_flipped == 0
     wall_checks(res)
+
+
+@pytest.mark.parametrize("d,n", [(2, 9), (3, 6)])
+def test_polish_summary_equals_compute_metrics(d, n):
+    """The polish report's metrics (grid kernels, no Beltrami coefficient) are those of compute_metrics, on a
+    curved map and on a folded one."""
+    from rfmap.hybrid import _Summary
+    from rfmap.metrics import compute_metrics
+
+    mesh, y = _bent_mesh(n, d)
+    dens = np.random.default_rng(1).uniform(0.5, 2.0, len(y))
+    folded = y.copy()
+    folded[len(y) // 2, 0] += 1.5 / (n - 1)  # past its neighbour: folds the elements around it
+    summary = _Summary(mesh.points, dens, n)
+    for pts in (y, folded):
+        got = summary(pts, 0.5)
+        want = compute_metrics(mesh.points, pts, mesh.elements, density=dens)
+        assert got["time"] == 0.5 and got["n_flipped"] == want.n_flipped
+        for k in ("std_rho_map", "std_rho_orig", "min_jacobian"):
+            assert got[k] == pytest.approx(getattr(want, k), rel=1e-12), k
+    assert summary(folded, 0.0)["n_flipped"] > 0 == summary(y, 0.0)["n_flipped"]
 
 
 def test_smooth_passes_per_dimension_and_above_the_working_grid():

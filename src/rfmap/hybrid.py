@@ -34,12 +34,15 @@ classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flo
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Any
 
 import numpy as np
+import torch
 
-from .metrics import compute_metrics
+from .geometry import grid_element_mean, grid_signed_measures
+from .metrics import density_std
 
 __all__ = ["POOR", "METHODS", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER", "compare_methods", "polish_map",
            "polish_tolerance", "smooth_displacement", "smooth_passes"]
@@ -98,10 +101,28 @@ def polish_tolerance(polish) -> float | None:
     return float(polish)
 
 
-def _summary(ref, mapped, elements, density, seconds: float) -> dict[str, Any]:
-    m = compute_metrics(ref, mapped, elements, density=density)
-    return {"time": seconds, "std_rho_map": m.std_rho_map, "std_rho_orig": m.std_rho_orig,
-            "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian}
+class _Summary:
+    """The density metrics of maps of the ``N``-grid mesh, as :func:`rfmap.metrics.compute_metrics` gives them
+    (same kernels), without the 2D Beltrami coefficient that it also computes; the reference measures and
+    element populations are computed once."""
+
+    def __init__(self, ref: np.ndarray, density: np.ndarray, n: int):
+        self.n, d = n, ref.shape[1]
+        self.ref_meas = self._measures(ref)
+        dens = torch.as_tensor(np.asarray(density, dtype=np.float64).reshape(-1))
+        self.pop = grid_element_mean(dens[None], n, d)[0] * self.ref_meas
+        self.std_orig = density_std(self.pop, self.ref_meas)
+
+    def _measures(self, points: np.ndarray):
+        return grid_signed_measures(torch.from_numpy(np.ascontiguousarray(points, dtype=np.float64))[None],
+                                    self.n)[0]
+
+    def __call__(self, mapped: np.ndarray, seconds: float) -> dict[str, Any]:
+        meas = self._measures(mapped)
+        det = meas / self.ref_meas
+        out = {"time": seconds, "std_rho_map": density_std(self.pop, meas), "std_rho_orig": self.std_orig,
+               "n_flipped": int((det <= 0).sum()), "min_jacobian": float(det.min())}
+        return {k: (float("nan") if isinstance(v, float) and not math.isfinite(v) else v) for k, v in out.items()}
 
 
 def _in_box(points: np.ndarray, boundary: str, n: int) -> bool:
@@ -112,11 +133,10 @@ def _in_box(points: np.ndarray, boundary: str, n: int) -> bool:
 
 
 def _fits(points: np.ndarray, elements: np.ndarray, boundary: str, n: int) -> bool:
-    """Whether ``points`` can start a warm flow: finite, fold-free, and inside the flow's box (:func:`_in_box`)."""
-    from .mesh import element_measures
-
+    """Whether ``points`` (a map of the ``N``-grid mesh) can start a warm flow: finite, fold-free, and inside the
+    flow's box (:func:`_in_box`)."""
     return bool(np.isfinite(points).all() and _in_box(points, boundary, n)
-                and (element_measures(points, elements) > 0).all())
+                and (grid_signed_measures(torch.from_numpy(np.ascontiguousarray(points))[None], n) > 0).all())
 
 
 def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, density: np.ndarray, *, n: int,
@@ -163,7 +183,8 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
     d = ref.shape[1]
     if boundary not in ("square", "free"):
         raise ValueError(f"polishing needs a density map with boundary 'square' or 'free', got {boundary!r}")
-    before = _summary(ref, mapped, elements, density, stage_time)
+    summary = _Summary(ref, density, n)
+    before = summary(mapped, stage_time)
     reason = None
     if before["n_flipped"]:
         reason = f"the network's map has {before['n_flipped']} folded element(s)"
@@ -189,7 +210,7 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
     if res is None:
         res = solve_flow(grid, boundary=boundary, progress=progress, **kw)
     seconds = time.perf_counter() - t0
-    after = _summary(ref, res.mapped_points, elements, density, seconds)
+    after = summary(res.mapped_points, seconds)
     report = {"start": "cold" if reason else "warm", "reason": reason, "smoothed": smoothed, "tol": kw.get("tol"),
               "passes": res.info["passes"], "steps": res.info["steps"], "time": seconds,
               "stages": {"surrogate": before, "polish": after}}

@@ -230,17 +230,20 @@ def _locate(points: np.ndarray, elements: np.ndarray, m: int, chunk: int, subset
         start = stop
 
 
-def _barycentric(P: np.ndarray, y: np.ndarray) -> np.ndarray:
-    r""":math:`\lambda_1..\lambda_d` of the points ``y`` (k, d) in the simplices ``P`` (k, d+1, d), by Cramer's rule."""
-    if y.shape[1] == 2:
-        ax, ay = P[:, 1, 0] - P[:, 0, 0], P[:, 1, 1] - P[:, 0, 1]
-        bx, by = P[:, 2, 0] - P[:, 0, 0], P[:, 2, 1] - P[:, 0, 1]
-        rx, ry = y[:, 0] - P[:, 0, 0], y[:, 1] - P[:, 0, 1]
+def _barycentric(coords: list[np.ndarray], vid: np.ndarray, y: list[np.ndarray]) -> list[np.ndarray]:
+    r""":math:`\lambda_1..\lambda_d` (d arrays, (k,) each) of the points ``y`` in the simplices of vertices ``vid``
+    (k, d+1), by Cramer's rule.  ``coords``: the d vertex coordinate arrays (each contiguous, (n,)); ``y``: the d point coordinate arrays
+    (each (k,)).  Gathering one coordinate at a time keeps every operand contiguous (about 4x faster than
+    gathering (k, d+1, d) vertex blocks)."""
+    d = len(coords)
+    p0 = [c[vid[:, 0]] for c in coords]
+    e = [[c[vid[:, i]] - q for c, q in zip(coords, p0)] for i in range(1, d + 1)]
+    r = [ya - q for ya, q in zip(y, p0)]
+    if d == 2:
+        (ax, ay), (bx, by) = e
         det = ax * by - ay * bx
-        return np.stack([(rx * by - ry * bx) / det, (ax * ry - ay * rx) / det], 1)
-    p0 = P[:, 0]
-    e1, e2, e3 = ([P[:, i, a] - p0[:, a] for a in range(3)] for i in (1, 2, 3))
-    r = [y[:, a] - p0[:, a] for a in range(3)]
+        return [(r[0] * by - r[1] * bx) / det, (ax * r[1] - ay * r[0]) / det]
+    e1, e2, e3 = e
 
     def cross(a, b):
         return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
@@ -250,11 +253,7 @@ def _barycentric(P: np.ndarray, y: np.ndarray) -> np.ndarray:
 
     c23 = cross(e2, e3)
     det = dot(e1, c23)
-    lam = np.empty((len(y), 3))
-    lam[:, 0] = dot(r, c23) / det
-    lam[:, 1] = dot(r, cross(e3, e1)) / det
-    lam[:, 2] = dot(r, cross(e1, e2)) / det
-    return lam
+    return [dot(r, c23) / det, dot(r, cross(e3, e1)) / det, dot(r, cross(e1, e2)) / det]
 
 
 def _kuhn_lookup() -> np.ndarray:
@@ -273,16 +272,46 @@ _KUHN = _kuhn_lookup()
 
 #: Newton steps of the grid walk of :func:`rasterize_elements` before a node is handed to the element scan
 WALK_STEPS = 6
+#: The walk of an ``M``-grid starts from the inverse map found on a grid about this many times coarser ...
+WALK_COARSE = 4
+#: ... when that grid has at least this many nodes per side
+WALK_COARSE_MIN = 9
 #: :func:`rasterize_elements` walks when the mesh's measure is at least this fraction of its bounding box's
 WALK_FILL = 0.9
 
 
-def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS):
+def _inverse_guess(points: np.ndarray, n: int, mc: int, steps: int, y: np.ndarray) -> np.ndarray:
+    r"""Reference points :math:`x \approx u^{-1}(y)` of the nodes ``y`` (k, d) of a fold-free map ``points`` of the
+    ``N``-grid mesh: the walk of :func:`_walk_grid` on the ``mc``-grid, its inverse map (the bounding-box guess
+    at the nodes it did not find) interpolated multilinearly at ``y``, clipped to the unit box."""
+    import torch
+
+    d = points.shape[1]
+    s = n - 1
+    (node, el, lam), _ = _walk_grid(points, n, mc, steps, coarse=1)
+    yc = np.stack(np.meshgrid(*([np.linspace(0.0, 1.0, mc)] * d), indexing="ij"), -1).reshape(-1, d)
+    low, high = points.min(0), points.max(0)
+    xc = np.clip((yc - low) / (high - low), 0.0, 1.0)
+    types = np.array(grid_cell_simplices(d))
+    t, cell = np.divmod(el, s**d)
+    corner = np.stack(np.unravel_index(cell, (s,) * d), -1) + types[t, 0]
+    edges = np.swapaxes(types[:, 1:] - types[:, :1], 1, 2).astype(np.float64)
+    xc[node] = (corner + np.einsum("kij,kj->ki", edges[t], lam)) / s
+    table = torch.from_numpy(np.ascontiguousarray(xc.T.reshape(1, d, *(mc,) * d)))
+    # grid_sample takes the last point coordinate along the last grid axis: reverse the axes
+    q = torch.from_numpy(2.0 * y[:, ::-1] - 1.0).reshape(1, *([1] * (d - 1)), -1, d)
+    x = torch.nn.functional.grid_sample(table, q, mode="bilinear", align_corners=True)
+    return np.clip(x.reshape(d, -1).T.numpy(), 0.0, 1.0)
+
+
+def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS, coarse: int = WALK_COARSE):
     r"""Locate the ``M``-grid nodes in a fold-free map ``points`` (N**d, d) of the ``N``-grid mesh (elements in
     :func:`rfmap.mesh.grid_mesh` order) by Newton's method on the piecewise-linear map.
 
-    A node :math:`y` starts at the reference point :math:`x` that the affine map of the mesh's bounding box onto
-    the unit box gives; the grid cell and simplex type holding :math:`x` give a mapped simplex, and the barycentric
+    A node :math:`y` starts at the reference point :math:`x` of the inverse map found by the same walk on a grid
+    ``coarse`` times coarser (:func:`_inverse_guess`; it leaves a few percent of the nodes to a second step instead
+    of all of them to four or five), or on a coarse grid at the point that the affine map of the mesh's bounding
+    box onto the unit box gives; the grid cell and simplex type holding :math:`x` give a mapped simplex, and the barycentric
     coordinates :math:`\lambda` of :math:`y` in it either lie in the simplex (found) or define the next reference
     point :math:`x = X_0 + \sum_i \lambda_i (X_i - X_0)`, the affine inverse of that simplex (a Newton step;
     clipped to the unit box).  Nodes outside the bounding box of the mapped
@@ -314,7 +343,13 @@ def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS):
     todo = flat(idx, m)
     y = idx / (m - 1)
     low, high = points.min(0), points.max(0)
-    x = np.clip((y - low) / (high - low), 0.0, 1.0)  # the mesh's bounding box taken back to the unit box
+    mc = (m - 1) // int(coarse) + 1
+    if coarse > 1 and mc >= WALK_COARSE_MIN:  # start from the inverse map found on a coarser raster
+        x = _inverse_guess(points, n, mc, steps, y)
+    else:
+        x = np.clip((y - low) / (high - low), 0.0, 1.0)  # the mesh's bounding box taken back to the unit box
+    coords = [np.ascontiguousarray(points[:, a]) for a in range(d)]
+    y = [np.ascontiguousarray(y[:, a]) for a in range(d)]
     found: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     gave_up: list[np.ndarray] = []
     for _ in range(int(steps)):
@@ -328,19 +363,22 @@ def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS):
         else:
             t = _KUHN[4 * (f[:, 0] >= f[:, 1]) + 2 * (f[:, 0] >= f[:, 2]) + (f[:, 1] >= f[:, 2])]
         vid = flat(cell, n)[:, None] + offsets[t]  # (k, d+1)
-        lam = _barycentric(points[vid], y)
-        inside = (lam >= -1e-10).all(1) & (lam.sum(1) <= 1 + 1e-10)
+        cols = _barycentric(coords, vid, y)
+        inside = sum(cols) <= 1 + 1e-10
+        for c in cols:
+            inside &= c >= -1e-10
         if inside.any():
-            found.append((todo[inside], t[inside] * s**d + flat(cell[inside], s), lam[inside]))
+            found.append((todo[inside], t[inside] * s**d + flat(cell[inside], s),
+                          np.stack([c[inside] for c in cols], 1)))
         out = ~inside
-        t, lam = t[out], lam[out]
+        t, lam = t[out], np.stack([c[out] for c in cols], 1)
         x = (cell[out] + types[t, 0] + np.einsum("kij,kj->ki", edges[t], lam)) / s
-        todo, y = todo[out], y[out]
+        todo, y = todo[out], [ya[out] for ya in y]
         # a step that leaves the unit box by more than a cell points outside the mesh (a free boundary's sea)
         away = ((x < -1.0 / s) | (x > 1.0 + 1.0 / s)).any(1)
         if away.any():
             gave_up.append(todo[away])
-            x, todo, y = x[~away], todo[~away], y[~away]
+            x, todo, y = x[~away], todo[~away], [ya[~away] for ya in y]
         np.clip(x, 0.0, 1.0, out=x)
     left = np.concatenate(gave_up + [todo])
     if not found:
@@ -372,8 +410,8 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
     vectorized in chunks of ``chunk`` (element, node) pairs.  When the mesh is a map of the ``N``-grid mesh
     (:func:`rfmap.mesh.grid_mesh`'s elements) that fills its bounding box (:data:`WALK_FILL`; the square and cube
     boundaries) the nodes are first located by a Newton walk on the grid (:func:`_walk_grid`, a few vectorized
-    steps over the nodes instead of a scan over the elements, about 2.5x faster at 3D N = 48), and only the
-    elements whose boxes hold a node it did not find are scanned.
+    steps over the nodes instead of a scan over the elements; 0.4 s against 1.6 s at 3D N = 48, ``M`` = 95), and
+    only the elements whose boxes hold a node it did not find are scanned.
 
     * ``at="elements"``: ``values`` is piecewise constant, one value per element; a node on a shared face takes
       the value of one of its elements (which one depends on the element order, so a raster whose nodes sit on
@@ -413,7 +451,8 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
     subset = None
     if n is not None:  # the walk pays where the mesh fills its bounding box (not around a free boundary's sea)
         span = points.max(0) - points.min(0)
-        fills = _measures(points, elements).sum() / math.factorial(d) >= WALK_FILL * float(np.prod(span))
+        volume = float(grid_signed_measures(torch.from_numpy(np.ascontiguousarray(points))[None], n).sum())
+        fills = volume >= WALK_FILL * float(np.prod(span))
         n = n if fills else None
     if n is not None:
         hit, left = _walk_grid(points, n, m)
