@@ -387,11 +387,29 @@ def test_polish_summary_equals_compute_metrics(d, n):
     assert summary(folded, 0.0)["n_flipped"] > 0 == summary(y, 0.0)["n_flipped"]
 
 
+def test_polish_of_a_free_boundary_map_smooths_with_linear_edges():
+    """A free-boundary polish starts warm from the displacement smoothed with linear edges and ends fold-free, with
+    less than a third of the network's Std(rho~_map) and within 1.5x of the cold flow's (ring, N = 51)."""
+    from rfmap.surrogate import Surrogate
+
+    sur = Surrogate.pretrained("deq2d-free")
+    res = sur.map("ring", 51, polish=True)
+    p = res.info["polish"]
+    assert p["start"] == "warm" and p["smoothed"] and (p["smooth_edges"], p["smooth_passes"]) == ("linear", 2)
+    cold = solve_flow(sample_density("ring", 51), boundary="free").metrics().std_rho_map
+    m = res.metrics()
+    assert m.n_flipped == 0 and m.std_rho_map < p["stages"]["surrogate"]["std_rho_map"] / 3
+    assert m.std_rho_map < 1.5 * cold and np.isfinite(res.mapped_points).all()
+
+
 def test_smooth_passes_per_dimension_and_above_the_working_grid():
     from rfmap.hybrid import SMOOTH_PASSES, SMOOTH_PASSES_FINER, smooth_passes
 
-    assert smooth_passes(2, 51, 51) == SMOOTH_PASSES[2] and smooth_passes(3, 48, 48) == SMOOTH_PASSES[3]
+    assert smooth_passes(2, 51, 51) == SMOOTH_PASSES[2, "square"] and smooth_passes(3, 48, 48) == 8
+    assert smooth_passes(3, 32, 32, "free") == SMOOTH_PASSES[3, "free"] == 2
     assert smooth_passes(2, 256, 96) == smooth_passes(3, 64, 48) == SMOOTH_PASSES_FINER
+    with pytest.raises(ValueError, match="boundary 'fixed'"):
+        smooth_passes(2, 51, 51, "fixed")
 
 
 @pytest.mark.parametrize("d", [2, 3])
@@ -412,6 +430,11 @@ def test_smooth_displacement_keeps_constants_and_removes_the_grid_mode(d):
     alt = torch.stack([(-1.0) ** sum(axes)] * d)[None]
     out = smooth_displacement(alt, passes=1)
     assert out.shape == alt.shape and out[inner].abs().max() < 1e-12
+    # linear edges keep a linear displacement up to the edge; replicated ones bend it there
+    torch.testing.assert_close(smooth_displacement(lin, 3, edges="linear"), lin)
+    assert (smooth_displacement(lin, 3) - lin).abs().max() > 1e-3
+    with pytest.raises(ValueError, match="edges must be"):
+        smooth_displacement(lin, edges="reflect")
 
 
 def test_polish_cold_start_when_the_network_map_is_poor():
