@@ -22,8 +22,8 @@ classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flo
    network's map has such a part: its displacement carries pixel-scale ripples of the working grid, which the
    bilinear resampling onto a finer output grid turns into kinks.  ``Surrogate.map(polish=...)`` therefore starts
    the flow from the map of the displacement smoothed on the working grid (:func:`smooth_displacement`, with
-   :func:`smooth_passes` passes of the binomial filter), when that map is fold-free; the report's
-   ``"surrogate"`` stage is still the network's own map.
+   :func:`smooth_passes` passes of the binomial filter, edges continued as :data:`SMOOTH_EDGES` says), when that
+   map is fold-free; the report's ``"surrogate"`` stage is still the network's own map.
 4. A poor network map is not worth finishing: when :math:`u_0` has folded elements, leaves the sea box, or removes
    less than half of the input's density variation (:data:`POOR`), the flow starts cold from the identity instead,
    and the report says so.  ``Surrogate.map(polish=...)`` then skips its bijectivity repair of a folded map, which
