@@ -407,7 +407,8 @@ def test_smooth_passes_per_dimension_and_above_the_working_grid():
 
     assert smooth_passes(2, 51, 51) == SMOOTH_PASSES[2, "square"] and smooth_passes(3, 48, 48) == 8
     assert smooth_passes(3, 32, 32, "free") == SMOOTH_PASSES[3, "free"] == 2
-    assert smooth_passes(2, 256, 96) == smooth_passes(3, 64, 48) == SMOOTH_PASSES_FINER
+    assert smooth_passes(2, 256, 96) == smooth_passes(3, 64, 48) == SMOOTH_PASSES_FINER["square"] == 16
+    assert smooth_passes(2, 128, 96, "free") == SMOOTH_PASSES_FINER["free"] == 4
     with pytest.raises(ValueError, match="boundary 'fixed'"):
         smooth_passes(2, 51, 51, "fixed")
 

@@ -60,9 +60,9 @@ POOR = 0.5
 #: -> 1.30 (4); 3D N = 48: 1.94 (raw) -> 1.43 (2) -> 1.12 (8) -> 1.12 (16).  Free boundary (linear edges,
 #: :data:`SMOOTH_EDGES`): 2D N = 51: 0.98 (raw) -> 0.92 (2) -> 0.92 (4); 3D N = 32: 1.23 (raw) -> 1.05 (2) -> 1.14 (8).
 SMOOTH_PASSES = {(2, "square"): 2, (3, "square"): 8, (2, "free"): 2, (3, "free"): 2}
-#: Passes when the map is resampled onto a finer output grid: square, 2D N = 256 from a 96-grid: 1.61 (raw) -> 1.29
-#: (2) -> 1.19 (8) -> 1.14 (16).
-SMOOTH_PASSES_FINER = 16
+#: Passes per boundary when the map is resampled onto a finer output grid: square, 2D N = 256 from a 96-grid: 1.61
+#: (raw) -> 1.29 (2) -> 1.21 (4) -> 1.19 (8) -> 1.11-1.14 (16); free, 2D N = 128 from a 96-grid: 0.82 (4) -> 0.97 (16).
+SMOOTH_PASSES_FINER = {"square": 16, "free": 4}
 #: How :func:`smooth_displacement` continues the displacement past the grid's edges, per boundary.  On the square and
 #: cube the boundary mask pins the walls, and replicating the edge values works best (3D N = 48: 1.03 against 1.21
 #: with linear edges at 16 passes); a free boundary moves with the edge values themselves, and the replicated edge
@@ -77,7 +77,7 @@ def smooth_passes(dim: int, n: int, work_n: int, boundary: str = "square") -> in
     ``work_n``-grid (:data:`SMOOTH_PASSES`, :data:`SMOOTH_PASSES_FINER`)."""
     if (dim, boundary) not in SMOOTH_PASSES:
         raise ValueError(f"no smoothing passes for a {dim}D map with boundary {boundary!r}")
-    return SMOOTH_PASSES_FINER if n > work_n else SMOOTH_PASSES[dim, boundary]
+    return SMOOTH_PASSES_FINER[boundary] if n > work_n else SMOOTH_PASSES[dim, boundary]
 
 
 def smooth_displacement(psi, passes: int = 2, edges: str = "replicate"):
