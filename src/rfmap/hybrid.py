@@ -67,8 +67,8 @@ SMOOTH_PASSES_FINER = {"square": 16, "free": 4}
 #: cube the boundary mask pins the walls, and replicating the edge values works best (3D N = 48, 8 passes: 1.01
 #: against 1.12 with linear edges, over 8 fields of which 4 start cold); a free boundary moves with the edge values
 #: themselves, and the replicated edge flattens the displacement there into a one-cell layer of wrong element sizes
-#: that no flow removes, so the displacement is continued linearly (2D N = 51 free, 2 passes: 0.92 against 1.01 replicated; 3D N = 32: 1.05
-#: against 1.12).
+#: that no flow removes, so the displacement is continued linearly (2D N = 51 free, 2 passes: 0.92 against 1.01
+#: replicated; 3D N = 32: 1.05 against 1.12).
 SMOOTH_EDGES = {"square": "replicate", "free": "linear"}
 
 
