@@ -324,7 +324,8 @@ class Surrogate:
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
             (``rfmap.hybrid.polish_map``), started from the map of the network's displacement smoothed on the
             working grid (``rfmap.hybrid.smooth_displacement``, ``rfmap.hybrid.smooth_passes`` passes, edges per
-            ``rfmap.hybrid.SMOOTH_EDGES``; both recorded in ``info["polish"]``) where that is fold-free; a number is the tolerance on Std(rho~_map).  ``time`` then covers both stages.  A folded
+            ``rfmap.hybrid.SMOOTH_EDGES``; both recorded in ``info["polish"]``) where that is fold-free; a number is
+            the tolerance on Std(rho~_map).  ``time`` then covers both stages.  A folded
             network map is not repaired first (``info["repair"]["skipped"]``): the polish then starts cold from the
             identity, and the repair would be thrown away.
 

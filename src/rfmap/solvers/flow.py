@@ -280,23 +280,37 @@ WALK_COARSE_MIN = 9
 WALK_FILL = 0.9
 
 
+def _simplex_frames(d: int) -> tuple[np.ndarray, np.ndarray]:
+    """Corner offsets (S, d+1, d) of the simplex types of a grid cell and their edge matrices (S, d, d), columns
+    the edges from the first corner."""
+    types = np.array(grid_cell_simplices(d))
+    return types, np.swapaxes(types[:, 1:] - types[:, :1], 1, 2).astype(np.float64)
+
+
+def _reference_points(cell: np.ndarray, t: np.ndarray, lam: np.ndarray, s: int) -> np.ndarray:
+    r"""Points :math:`x = X_0 + \sum_i \lambda_i (X_i - X_0)` (k, d) of the unit box: barycentric coordinates
+    ``lam`` (k, d) in the simplex of type ``t`` (k,) of the grid cells ``cell`` (k, d) of an ``s``-cell grid."""
+    types, edges = _simplex_frames(cell.shape[1])
+    return (cell + types[t, 0] + np.einsum("kij,kj->ki", edges[t], lam)) / s
+
+
+def _box_guess(points: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The points ``y`` (k, d) taken back to the unit box by the affine map of the mesh's bounding box."""
+    low, high = points.min(0), points.max(0)
+    return np.clip((y - low) / (high - low), 0.0, 1.0)
+
+
 def _inverse_guess(points: np.ndarray, n: int, mc: int, steps: int, y: np.ndarray) -> np.ndarray:
     r"""Reference points :math:`x \approx u^{-1}(y)` of the nodes ``y`` (k, d) of a fold-free map ``points`` of the
     ``N``-grid mesh: the walk of :func:`_walk_grid` on the ``mc``-grid, its inverse map (the bounding-box guess
     at the nodes it did not find) interpolated multilinearly at ``y``, clipped to the unit box."""
-    import torch
-
     d = points.shape[1]
     s = n - 1
     (node, el, lam), _ = _walk_grid(points, n, mc, steps, coarse=1)
     yc = np.stack(np.meshgrid(*([np.linspace(0.0, 1.0, mc)] * d), indexing="ij"), -1).reshape(-1, d)
-    low, high = points.min(0), points.max(0)
-    xc = np.clip((yc - low) / (high - low), 0.0, 1.0)
-    types = np.array(grid_cell_simplices(d))
+    xc = _box_guess(points, yc)
     t, cell = np.divmod(el, s**d)
-    corner = np.stack(np.unravel_index(cell, (s,) * d), -1) + types[t, 0]
-    edges = np.swapaxes(types[:, 1:] - types[:, :1], 1, 2).astype(np.float64)
-    xc[node] = (corner + np.einsum("kij,kj->ki", edges[t], lam)) / s
+    xc[node] = _reference_points(np.stack(np.unravel_index(cell, (s,) * d), -1), t, lam, s)
     table = torch.from_numpy(np.ascontiguousarray(xc.T.reshape(1, d, *(mc,) * d)))
     # grid_sample takes the last point coordinate along the last grid axis: reverse the axes
     q = torch.from_numpy(2.0 * y[:, ::-1] - 1.0).reshape(1, *([1] * (d - 1)), -1, d)
@@ -326,8 +340,7 @@ def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS, coar
     """
     d = points.shape[1]
     s = n - 1
-    types = np.array(grid_cell_simplices(d))  # (S, d+1, d) corner offsets
-    edges = np.swapaxes(types[:, 1:] - types[:, :1], 1, 2).astype(np.float64)  # (S, d, d), columns the edges
+    types, _ = _simplex_frames(d)
     offsets = (types * n ** np.arange(d - 1, -1, -1)).sum(-1)  # (S, d+1): vertex index offsets in a cell
 
     def flat(ix: np.ndarray, side: int) -> np.ndarray:  # C-order flat index of integer coordinates (k, d)
@@ -342,12 +355,11 @@ def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS, coar
     idx = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, d)
     todo = flat(idx, m)
     y = idx / (m - 1)
-    low, high = points.min(0), points.max(0)
     mc = (m - 1) // int(coarse) + 1
     if coarse > 1 and mc >= WALK_COARSE_MIN:  # start from the inverse map found on a coarser raster
         x = _inverse_guess(points, n, mc, steps, y)
     else:
-        x = np.clip((y - low) / (high - low), 0.0, 1.0)  # the mesh's bounding box taken back to the unit box
+        x = _box_guess(points, y)
     coords = [np.ascontiguousarray(points[:, a]) for a in range(d)]
     y = [np.ascontiguousarray(y[:, a]) for a in range(d)]
     found: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
@@ -372,7 +384,7 @@ def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS, coar
                           np.stack([c[inside] for c in cols], 1)))
         out = ~inside
         t, lam = t[out], np.stack([c[out] for c in cols], 1)
-        x = (cell[out] + types[t, 0] + np.einsum("kij,kj->ki", edges[t], lam)) / s
+        x = _reference_points(cell[out], t, lam, s)
         todo, y = todo[out], [ya[out] for ya in y]
         # a step that leaves the unit box by more than a cell points outside the mesh (a free boundary's sea)
         away = ((x < -1.0 / s) | (x > 1.0 + 1.0 / s)).any(1)
