@@ -1,5 +1,5 @@
 """Time to accuracy: Std(rho~_map) against wall time of the diffusion and flow-based solvers, the surrogate (raw,
-refined) and the hybrid (surrogate polished by the flow), on the paper's test fields and on unseen random fields.
+refined) and the hybrid (surrogate polished by the flow; with its guard, and its warm flow alone), on the paper's test fields and on unseen random fields.
 
 Every method runs on the same field one after another in one process, so the time ratios are side by side; the
 absolute times depend on the machine and its load.  The table gives, per case, the mean over the fields and the
@@ -38,9 +38,9 @@ def main(argv=None) -> None:
                                         methods=args.methods)
                 rows += case
                 for r in case:
-                    print(f"# {dim}D N={n} {boundary} {r['field']:14s} {r['method']:16s} "
+                    print(f"# {dim}D N={n} {boundary} {r['field']:14s} {r['method']:17s} "
                           f"std={r['std_rho_map']:.4g} t={r['time']:.3f}s flips={r['n_flipped']}"
-                          f"{' ' + r['start'] if 'start' in r else ''}", flush=True)
+                          f"{' ' + r['start'] + ' start, kept ' + r['kept'] if 'start' in r else ''}", flush=True)
     cols = ["std_rho_map", "time", "n_flipped", "std_ratio", "time_ratio"]
     print("\n| d | N | boundary | method | fields | " + " | ".join(cols) + " |")
     print("|" + "---|" * (5 + len(cols)))

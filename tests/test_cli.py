@@ -244,6 +244,28 @@ def test_map_bad_input(tmp_path, capsys, tiny_model):
     assert not out.exists()
 
 
+def test_map_polish_reports_the_guard(tmp_path, capsys):
+    """``--polish`` runs the warm flow and, with the guard, the cold one too, and says which map it kept;
+    ``--no-guard`` returns the warm flow's map; ``--no-guard`` without ``--polish`` is an error and writes nothing."""
+    out = tmp_path / "h.npz"
+    rc, stdout, _ = run_main(capsys, "map", "--model", "dem2d-square", "--field", "sin-cos", "--n", 33, "--polish",
+                             "--out", out)
+    assert rc == 0 and "polish: warm start" in stdout
+    guard = next(ln for ln in stdout.splitlines() if ln.startswith("guard: "))
+    kept = guard.rsplit("kept the ", 1)[1].split()[0]
+    assert kept in ("warm", "cold")
+    polished = load_result(out)
+    rc, stdout, _ = run_main(capsys, "map", "--model", "dem2d-square", "--field", "sin-cos", "--n", 33, "--polish",
+                             "--no-guard", "--out", out)
+    assert rc == 0 and "guard: " not in stdout
+    if kept == "warm":  # the same warm flow, without the cold one
+        np.testing.assert_allclose(load_result(out).mapped_points, polished.mapped_points, atol=1e-12)
+    bad = tmp_path / "bad.npz"
+    rc, _, err = run_main(capsys, "map", "--model", "dem2d-square", "--field", "sin-cos", "--no-guard", "--out", bad)
+    assert_one_line_error(rc, err, match="--no-guard only applies with --polish")
+    assert not bad.exists()
+
+
 def test_map_vtk(tmp_path, capsys, tiny_model):
     pv = pytest.importorskip("pyvista")
     out, vtk = tmp_path / "v.npz", tmp_path / "v.vtu"

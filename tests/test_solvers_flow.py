@@ -346,7 +346,62 @@ def test_polish_warm_start_finishes_the_network_map():
     assert m.n_flipped == 0 and m.std_rho_map == pytest.approx(st["polish"]["std_rho_map"])
     assert m.std_rho_map < 0.5 * st["surrogate"]["std_rho_map"]
     assert res.time == pytest.approx(st["surrogate"]["time"] + p["time"])
+    # the guard ran the cold flow too and kept the better of the two maps (rfmap.hybrid.GUARD)
+    assert p["guard"] and set(st) == {"surrogate", "warm", "cold", "polish"}
+    best = min(("warm", "cold"), key=lambda k: st[k]["std_rho_map"])
+    assert p["kept"] == best and st["polish"]["std_rho_map"] == st[best]["std_rho_map"]
+    assert m.std_rho_map <= solve_flow(sample_density("sin-cos", 51)).metrics().std_rho_map * (1 + 1e-12)
+    assert p["time"] >= st["warm"]["time"] + st["cold"]["time"]
     wall_checks(res)
+
+
+def test_compare_methods_rows_and_summary():
+    """The hybrid's run gives two rows, the guarded hybrid and its warm flow alone (timed without the cold flow);
+    the guarded hybrid is never worse than the flow, and the summary's ratios are against the best classical row."""
+    from rfmap.experiments import summarize
+    from rfmap.hybrid import UNGUARDED, compare_methods
+    from rfmap.surrogate import Surrogate
+
+    dens = sample_density("sin-cos", 33)
+    rows = compare_methods(dens, Surrogate.pretrained("dem2d-square"), methods=("flow", "hybrid"))
+    assert [r["method"] for r in rows] == ["flow", UNGUARDED, "hybrid"]
+    flow, alone, hyb = rows
+    assert hyb["start"] == "warm" and hyb["std_rho_map"] == min(alone["std_rho_map"], flow["std_rho_map"])
+    assert hyb["kept"] == ("warm" if alone["std_rho_map"] <= flow["std_rho_map"] else "cold")
+    assert 0 < alone["time"] < hyb["time"] and hyb["n_flipped"] == alone["n_flipped"] == 0
+    summary = summarize([dict(r, dim=2, n=33, boundary="square", field="sin-cos") for r in rows])
+    assert [r["method"] for r in summary] == ["flow", UNGUARDED, "hybrid"]
+    assert all(r["best_classical"] == "flow" for r in summary)
+    assert summary[2]["std_ratio"] <= 1.0 and summary[2]["time_ratio"] == pytest.approx(hyb["time"] / flow["time"])
+
+
+def test_polish_guard_keeps_the_cold_map_when_the_warm_flow_ends_worse(monkeypatch):
+    """Where the warm flow ends above the cold flow (here made so by returning the warm flow's starting map
+    unchanged), the guard returns the cold flow's map, identical to ``solve_flow``'s, and says so; without the
+    guard the warm flow's map is returned."""
+    import rfmap.solvers.flow as flow
+    from rfmap.surrogate import Surrogate
+
+    real = flow.solve_flow
+
+    def lazy_warm(density, *, start=None, **kw):
+        res = real(density, start=start, **kw)
+        if start is not None:  # a warm flow that did nothing
+            res = flow.MapResult(ref_points=res.ref_points, mapped_points=np.array(start), elements=res.elements,
+                                 field=res.field, kind="density", time=res.time, info=res.info)
+        return res
+
+    monkeypatch.setattr(flow, "solve_flow", lazy_warm)
+    sur = Surrogate.pretrained("dem2d-square")
+    res = sur.map("sin-cos", 33, polish=True)
+    p = res.info["polish"]
+    assert p["start"] == "warm" and p["kept"] == "cold"
+    assert p["stages"]["warm"]["std_rho_map"] > p["stages"]["cold"]["std_rho_map"]
+    np.testing.assert_array_equal(res.mapped_points, real(sample_density("sin-cos", 33)).mapped_points)
+    unguarded = sur.map("sin-cos", 33, polish=True, guard=False)
+    q = unguarded.info["polish"]
+    assert q["kept"] == "warm" and not q["guard"] and "cold" not in q["stages"]
+    assert unguarded.metrics().std_rho_map > res.metrics().std_rho_map
 
 
 def test_polish_starts_from_the_smoothed_network_map():
@@ -357,9 +412,9 @@ def test_polish_starts_from_the_smoothed_network_map():
 
     sur = Surrogate.pretrained("deq2d-square")
     dens = sample_density("sin-cos", 51)
-    res = sur.map("sin-cos", 51, polish=True)
+    res = sur.map("sin-cos", 51, polish=True, guard=False)
     p = res.info["polish"]
-    assert p["start"] == "warm" and p["smoothed"] and p["smooth_passes"] == 2
+    assert p["start"] == "warm" and p["smoothed"] and p["smooth_passes"] == 2 and p["kept"] == "warm"
     assert p["stages"]["surrogate"]["std_rho_map"] == pytest.approx(sur.map("sin-cos", 51).metrics().std_rho_map)
     cold = solve_flow(dens).metrics().std_rho_map
     assert res.metrics().std_rho_map < 1.05 * cold and res.metrics().n_flipped == 0
@@ -393,7 +448,7 @@ def test_polish_of_a_free_boundary_map_smooths_with_linear_edges():
     from rfmap.surrogate import Surrogate
 
     sur = Surrogate.pretrained("deq2d-free")
-    res = sur.map("ring", 51, polish=True)
+    res = sur.map("ring", 51, polish=True, guard=False)
     p = res.info["polish"]
     assert p["start"] == "warm" and p["smoothed"] and (p["smooth_edges"], p["smooth_passes"]) == ("linear", 2)
     cold = solve_flow(sample_density("ring", 51), boundary="free").metrics().std_rho_map

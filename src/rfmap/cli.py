@@ -117,7 +117,10 @@ def cmd_map(args) -> int:
         except Exception as e:  # noqa: BLE001
             raise CLIError(f"cannot read {args.points}: {e}") from e
     polish = False if args.polish is None else (True if args.polish == "default" else args.polish)
-    res = sur.map(field, args.n, points, refine=args.refine, repair=not args.no_repair, polish=polish)
+    if args.no_guard and polish is False:
+        raise CLIError("--no-guard only applies with --polish")
+    res = sur.map(field, args.n, points, refine=args.refine, repair=not args.no_repair, polish=polish,
+                  guard=not args.no_guard)
     res.save(args.out)
     if args.vtk:
         res.to_vtk(args.vtk)
@@ -129,6 +132,9 @@ def cmd_map(args) -> int:
         print(f"polish: {p['start']} start{' (' + p['reason'] + ')' if p['reason'] else ''}, Std(rho~_map) "
               f"{st['surrogate']['std_rho_map']:.4g} -> {st['polish']['std_rho_map']:.4g}, network "
               f"{st['surrogate']['time']:.3f} s + flow {p['time']:.3f} s")
+        if "cold" in st:
+            print(f"guard: warm flow {st['warm']['std_rho_map']:.4g} ({st['warm']['time']:.3f} s), cold flow "
+                  f"{st['cold']['std_rho_map']:.4g} ({st['cold']['time']:.3f} s); kept the {p['kept']} map")
     return 0
 
 
@@ -239,6 +245,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="return the raw network map, without removing folded elements")
     s.add_argument("--polish", nargs="?", const="default", default=None, type=_polish_arg, metavar="TOL",
                    help="finish the density map with the flow-based solver (optionally to Std(rho~_map) <= TOL)")
+    s.add_argument("--no-guard", action="store_true",
+                   help="with --polish: return the warm flow's map without also running the cold flow and keeping "
+                        "the better one")
     s.add_argument("--out", required=True, help="output .npz")
     s.add_argument("--vtk", default=None, help="also write the mapped mesh as VTK (.vtu)")
     s.add_argument("--device", default="cpu", help="where the network runs: cpu (default), cuda or auto")

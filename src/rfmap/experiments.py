@@ -543,14 +543,14 @@ def time_to_accuracy(dim: int, n: int, boundary: str = "square", *, paper: bool 
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (dim, n, boundary, method): mean Std(rho~_map), mean time, total folds, and the ratios to the best
     classical solver of the same case (the one with the lower mean Std; time ratio < 1 means faster)."""
-    from .hybrid import METHODS
+    from .hybrid import ROWS
 
     keys = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
     out = []
     for key in keys:
         case = [r for r in rows if (r["dim"], r["n"], r["boundary"]) == key]
         agg = {}
-        for method in [m for m in METHODS if any(r["method"] == m for r in case)]:
+        for method in [m for m in ROWS if any(r["method"] == m for r in case)]:
             rs = [r for r in case if r["method"] == method]
             agg[method] = {"std_rho_map": float(np.mean([r["std_rho_map"] for r in rs])),
                            "time": float(np.mean([r["time"] for r in rs])),

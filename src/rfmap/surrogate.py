@@ -292,7 +292,7 @@ class Surrogate:
 
     def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
             alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None,
-            repair: bool = True, polish: bool | float = False) -> MapResult:
+            repair: bool = True, polish: bool | float = False, guard: bool = True) -> MapResult:
         """Map one field.
 
         Parameters
@@ -328,6 +328,9 @@ class Surrogate:
             the tolerance on Std(rho~_map).  ``time`` then covers both stages.  A folded
             network map is not repaired first (``info["repair"]["skipped"]``): the polish then starts cold from the
             identity, and the repair would be thrown away.
+        guard : bool
+            With ``polish``: after a warm flow also run the cold flow and keep the better map
+            (``rfmap.hybrid.GUARD``), so that the result is never worse than the flow-based solver alone.
 
         Returns
         -------
@@ -337,7 +340,8 @@ class Surrogate:
             ``info["polish"]`` (warm or cold start and both stages' times and metrics).
         """
         inp, n = self._resolve(field, n, preprocess)
-        return self._map_one(inp, n, points, refine, work_n, alpha, refine_bounds, repair=repair, polish=polish)
+        return self._map_one(inp, n, points, refine, work_n, alpha, refine_bounds, repair=repair, polish=polish,
+                             guard=guard)
 
     def map_batch(self, fields: Sequence, n: int | None = None, **kw) -> list[MapResult]:
         """Map several fields with one batched network evaluation (same ``n`` for all)."""
@@ -352,11 +356,12 @@ class Surrogate:
         dt = (time.perf_counter() - t0) / len(inps)
         return [self._map_one(i, nn_, kw.get("points"), kw.get("refine", False), nw, kw.get("alpha"),
                               kw.get("refine_bounds"), psi=psi[k:k + 1], net_time=dt,
-                              repair=kw.get("repair", True), polish=kw.get("polish", False))
+                              repair=kw.get("repair", True), polish=kw.get("polish", False),
+                              guard=kw.get("guard", True))
                 for k, (i, _) in enumerate(inps)]
 
     def _map_one(self, inp: _Input, n: int, points, refine, work_n, alpha, bounds, psi=None, net_time=None,
-                 repair: bool = True, polish: bool | float = False):
+                 repair: bool = True, polish: bool | float = False, guard: bool = True):
         """Evaluate the network on the working grid (unless ``psi`` is given), resample its displacement and the
         input field on the output mesh, apply the stretching vector (refined or given), repair folds, and polish."""
         if polish is not False:
@@ -419,7 +424,7 @@ class Surrogate:
             start = apply_displacement(ref64, psi_s, self.spec.boundary, torch.as_tensor(a)).numpy()
             t_map += time.perf_counter() - t4
             mapped, info["polish"] = polish_map(ref, mapped, elements, fvals, n=n, boundary=self.spec.boundary,
-                                                tol=tol, stage_time=t_map, start=start)
+                                                tol=tol, stage_time=t_map, start=start, guard=guard)
             info["polish"]["smooth_passes"], info["polish"]["smooth_edges"] = passes, edges
             t_map += info["polish"]["time"]
         return MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals,
