@@ -609,8 +609,9 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
       ``rfmap.solvers.flow.vertex_residual``);
     * ``"network"``: the surrogate's map ``sur.map(density_name, N)``;
     * ``"flow from the network"``: one flow pass from the network's map, ``NaN`` where it stalls;
-    * ``"polish"``: ``sur.map(density_name, N, polish=True)``, whose flow starts from the map of the network's
-      smoothed displacement (``rfmap.hybrid.smooth_displacement``), ``NaN`` where it starts cold.
+    * ``"polish"``: ``sur.map(density_name, N, polish=True, guard=False)``, whose flow starts from the map of the
+      network's smoothed displacement (``rfmap.hybrid.smooth_displacement``, and above the working grid
+      ``rfmap.hybrid.smooth_grid_displacement`` on the output grid), ``NaN`` where it starts cold.
 
     The two identity rows differ only in how the density reaches the raster, so their ratio is the cost of the
     warm-start route itself; the network row's element-scale share (:func:`rfmap.metrics.residual_scales`) is the
@@ -641,7 +642,7 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
             warm = solve_flow(dens, start=net.mapped_points, stall_blurs=())
         except RuntimeError:
             warm = None
-        pol = sur.map(density_name, n, polish=True)
+        pol = sur.map(density_name, n, polish=True, guard=False)
         if pol.info["polish"]["start"] != "warm":
             pol = None
         for method, res in (("cold flow", cold), ("flow from the identity, warm-start route", ident),

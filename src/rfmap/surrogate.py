@@ -324,7 +324,8 @@ class Surrogate:
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
             (``rfmap.hybrid.polish_map``), started from the map of the network's displacement smoothed on the
             working grid (``rfmap.hybrid.smooth_displacement``, ``rfmap.hybrid.smooth_passes`` passes, edges per
-            ``rfmap.hybrid.SMOOTH_EDGES``; both recorded in ``info["polish"]``) where that is fold-free; a number is
+            ``rfmap.hybrid.SMOOTH_EDGES``, and on a finer output grid ``rfmap.hybrid.OUTPUT_PASSES`` more passes
+            there; all recorded in ``info["polish"]``) where that is fold-free; a number is
             the tolerance on Std(rho~_map).  ``time`` then covers both stages.  A folded
             network map is not repaired first (``info["repair"]["skipped"]``): the polish then starts cold from the
             identity, and the repair would be thrown away.
@@ -415,17 +416,21 @@ class Surrogate:
                                                       psi, a)
             t_map += time.perf_counter() - t3
         if polish is not False:
-            from .hybrid import SMOOTH_EDGES, polish_map, smooth_displacement, smooth_passes
+            from .hybrid import (OUTPUT_PASSES, SMOOTH_EDGES, polish_map, smooth_displacement,
+                                 smooth_grid_displacement, smooth_passes)
 
             t4 = time.perf_counter()  # the flow starts from the map of the smoothed displacement (rfmap.hybrid)
             passes = smooth_passes(self.spec.dim, n, nw, self.spec.boundary)
             edges = SMOOTH_EDGES[self.spec.boundary]
             psi_s = self._displacement_at(smooth_displacement(psi, passes, edges), ref, n if n == nw else None)
+            out_passes = 0 if n == nw else OUTPUT_PASSES  # the resampling's kinks, smoothed on the output grid
+            if out_passes:
+                psi_s = smooth_grid_displacement(psi_s, n, out_passes, edges)
             start = apply_displacement(ref64, psi_s, self.spec.boundary, torch.as_tensor(a)).numpy()
             t_map += time.perf_counter() - t4
             mapped, info["polish"] = polish_map(ref, mapped, elements, fvals, n=n, boundary=self.spec.boundary,
                                                 tol=tol, stage_time=t_map, start=start, guard=guard)
-            info["polish"]["smooth_passes"], info["polish"]["smooth_edges"] = passes, edges
+            info["polish"].update(smooth_passes=passes, smooth_edges=edges, output_passes=out_passes)
             t_map += info["polish"]["time"]
         return MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals,
                          kind=self.spec.kind, time=t_map, info=info)
