@@ -1,5 +1,6 @@
 """Time to accuracy: Std(rho~_map) against wall time of the diffusion and flow-based solvers, the surrogate (raw,
-refined) and the hybrid (surrogate polished by the flow; with its guard, and its warm flow alone), on the paper's test fields and on unseen random fields.
+refined) and the hybrid (surrogate polished by the flow; with its guard, and its warm flow alone), on the paper's
+test fields and on unseen random fields.
 
 Every method runs on the same field one after another in one process, so the time ratios are side by side; the
 absolute times depend on the machine and its load.  The table gives, per case, the mean over the fields and the

@@ -51,9 +51,9 @@ import torch
 from .geometry import grid_element_mean, grid_signed_measures
 from .metrics import density_std
 
-__all__ = ["GUARD", "POOR", "METHODS", "ROWS", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER", "compare_methods",
-           "OUTPUT_PASSES", "polish_map", "polish_tolerance", "smooth_displacement", "smooth_grid_displacement",
-           "smooth_passes"]
+__all__ = ["GUARD", "POOR", "METHODS", "ROWS", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER",
+           "OUTPUT_PASSES", "compare_methods", "polish_map", "polish_tolerance", "smooth_displacement",
+           "smooth_grid_displacement", "smooth_passes"]
 
 #: Most time steps of a warm flow before it is abandoned for a cold start.
 WARM_STEPS = 500
