@@ -28,6 +28,7 @@ from .mesh import check_n, element_centroids, element_measures, grid_mesh, grid_
     triangulate, vertex_weights
 from .device import resolve_device
 from .geometry import grid_signed_measures
+from .hybrid import GUARD
 from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
@@ -292,7 +293,7 @@ class Surrogate:
 
     def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
             alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None,
-            repair: bool = True, polish: bool | float = False, guard: bool = True) -> MapResult:
+            repair: bool = True, polish: bool | float = False, guard: bool = GUARD) -> MapResult:
         """Map one field.
 
         Parameters
@@ -358,11 +359,11 @@ class Surrogate:
         return [self._map_one(i, nn_, kw.get("points"), kw.get("refine", False), nw, kw.get("alpha"),
                               kw.get("refine_bounds"), psi=psi[k:k + 1], net_time=dt,
                               repair=kw.get("repair", True), polish=kw.get("polish", False),
-                              guard=kw.get("guard", True))
+                              guard=kw.get("guard", GUARD))
                 for k, (i, _) in enumerate(inps)]
 
     def _map_one(self, inp: _Input, n: int, points, refine, work_n, alpha, bounds, psi=None, net_time=None,
-                 repair: bool = True, polish: bool | float = False, guard: bool = True):
+                 repair: bool = True, polish: bool | float = False, guard: bool = GUARD):
         """Evaluate the network on the working grid (unless ``psi`` is given), resample its displacement and the
         input field on the output mesh, apply the stretching vector (refined or given), repair folds, and polish."""
         if polish is not False:
