@@ -43,8 +43,9 @@ would have to push one side of the cube through another.
 identity (:math:`s = 0` in :math:`u_s = x + s\,d`) has every element positive, and every :math:`u_s` satisfies the
 same boundary condition as :math:`u`.  For one element, :math:`\det E(s) = \det(E_x + s E_d)` is a polynomial of
 degree :math:`d` in :math:`s` with :math:`\det E(0) > 0`, so its first root :math:`s_T` in :math:`(0, 1]` is computed
-exactly (closed form in 2D, companion-matrix eigenvalues in 3D; elements whose coefficients bound the polynomial away
-from zero on :math:`[0, 1]` are skipped).  The largest fold-free uniform scale is
+exactly (closed form in 2D, companion-matrix eigenvalues in 3D) for the elements that a cheap test cannot clear: a
+polynomial is a convex combination of its Bernstein coefficients on :math:`[0, 1]`, so when they are all positive it
+has no root there.  The largest fold-free uniform scale is
 :math:`s^\* = \min_T s_T`, and the map :math:`u_{s^\*}` is fold-free.  Then the per-vertex scale :math:`s_v` is raised
 locally towards 1 by bisection: a proposed raise is kept unless an element touching the vertex would drop below its
 threshold, in which case the vertices of every such element go back to their accepted values (repeating until no
@@ -53,14 +54,15 @@ class (:func:`vertex_classes`: the :math:`2^d` parities of the grid coordinates,
 Gauss–Seidel fashion, so an element that fails has a single raised vertex and only that one goes back; raising all
 vertices at once would also send back the element's other vertices, whose raises were fine.  Each round first tries
 the raise of all active vertices at once and keeps it when no element fails (a fold-free target is then recovered
-in one step, where a class-by-class sweep could stall in a failing intermediate state).  On the 3D surrogates'
-folded maps (prism-peak-3d on the cube, octant-3d on the free boundary, N = 48) this leaves about a tenth of the
-vertices shortened and a clearly more equal map (Std 0.76 → 0.63 and 0.25 → 0.14) in about the same time.
+in one step, where a class-by-class sweep could stall in a failing intermediate state).
 Vertices far from the folds thus recover the input map
 exactly and only a neighbourhood of the folds keeps a shortened displacement.  When the folds are local, the start
-itself is local: :math:`s^\*` on the elements the polynomial test cannot clear, rising linearly to :math:`s = 1`
-over 6, 12 or 24 vertex rings around them, if one of these states verifies (else the uniform start), so the rounds touch only that
-region.
+itself is local: :math:`s^\*` on the elements whose polynomial has a root in :math:`(0, 1)`, rising linearly to
+:math:`s = 1` over 6, 12 or 24 vertex rings around them (grown only as far as the start being tried needs), if one of
+these states verifies (else the uniform start), so the rounds touch only that region.  Only the elements touching a
+vertex with :math:`s_v < 1` are evaluated to verify a local start: every other element keeps the target, which the
+root test cleared.  The cost thus follows the size of the folded region, not of the mesh, apart from one pass over
+all elements for the polynomial coefficients.
 
 Why the result is fold-free: every accepted state is *verified* by direct evaluation of all element measures that
 changed, the starting state :math:`u_{s^\*}` is verified the same way (halving :math:`s` until it passes, the identity
@@ -75,6 +77,7 @@ G. P. T. Choi, C. H. Rycroft, "Density-equalizing maps for simply connected open
 """
 from __future__ import annotations
 
+import math
 import time
 from typing import Any, Sequence
 
@@ -360,27 +363,49 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
 
 
 # ----------------------------------------------------------------------------------------------- any dim: scaling
-def _det_coefficients(E_ref: np.ndarray, E_d: np.ndarray) -> np.ndarray:
-    r"""Coefficients :math:`c_k` of :math:`\det(E_x + s E_d) = \sum_k c_k s^k`, shape (m, d+1)."""
-    d = E_ref.shape[-1]
-    if d == 2:
-        a0, a1 = E_ref[..., 0], E_ref[..., 1]
-        b0, b1 = E_d[..., 0], E_d[..., 1]
+def _edges(PT: np.ndarray, cols: Sequence[np.ndarray], els=None) -> list[list[np.ndarray]]:
+    """Edge vectors of elements as contiguous component arrays: ``E[i][j]`` is component ``j`` of the edge from
+    vertex 0 to vertex ``i + 1``, shape (k,), for the elements ``els`` (all when ``None``).
 
-        def c2(u, v):
-            return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
+    ``PT`` is the (d, n) transpose of the points and ``cols`` the d + 1 columns of the element array; gathering
+    per component is several times faster than gathering (k, d, d) blocks."""
+    idx = cols if els is None else [c[els] for c in cols]
+    x0 = [row[idx[0]] for row in PT]
+    return [[row[ik] - x0[j] for j, row in enumerate(PT)] for ik in idx[1:]]
 
-        return np.stack([c2(a0, a1), c2(b0, a1) + c2(a0, b1), c2(b0, b1)], -1)
-    a = [E_ref[..., i] for i in range(3)]
-    b = [E_d[..., i] for i in range(3)]
 
-    def t3(u, v, w):
-        return (u * np.cross(v, w)).sum(-1)
+def _det(E: list[list[np.ndarray]]) -> np.ndarray:
+    """Determinant of the matrix with rows ``E[0], E[1](, E[2])`` (component arrays from :func:`_edges`)."""
+    if len(E) == 2:
+        return E[0][0] * E[1][1] - E[0][1] * E[1][0]
+    a, b, c = E
+    return a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0]) + a[2] * (b[0] * c[1] - b[1] * c[0])
 
-    return np.stack([t3(a[0], a[1], a[2]),
-                     t3(b[0], a[1], a[2]) + t3(a[0], b[1], a[2]) + t3(a[0], a[1], b[2]),
-                     t3(a[0], b[1], b[2]) + t3(b[0], a[1], b[2]) + t3(b[0], b[1], a[2]),
-                     t3(b[0], b[1], b[2])], -1)
+
+def _det_coefficients(E_ref: list[list[np.ndarray]], E_d: list[list[np.ndarray]]) -> np.ndarray:
+    r"""Coefficients :math:`c_k` of :math:`\det(E_x + s E_d) = \sum_k c_k s^k`, shape (m, d+1).
+
+    The determinant is multilinear in the rows, so :math:`c_k` sums the determinants with ``k`` rows taken from
+    :math:`E_d` and the others from :math:`E_x` (rows: edge vectors from :func:`_edges`)."""
+    d = len(E_ref)
+    out = np.zeros((len(E_ref[0][0]), d + 1))
+    for mask in range(2 ** d):
+        rows = [E_d[i] if mask >> i & 1 else E_ref[i] for i in range(d)]
+        out[:, bin(mask).count("1")] += _det(rows)
+    return out
+
+
+def _bernstein(c: np.ndarray) -> np.ndarray:
+    r"""Bernstein coefficients on :math:`[0, 1]` of the polynomials ``sum_k c[:, k] s^k``, shape (m, deg+1).
+
+    :math:`b_i = \sum_{k \le i} \binom{i}{k} / \binom{n}{k}\, c_k`; the polynomial is a convex combination of
+    its Bernstein coefficients on :math:`[0, 1]`, so it is positive there when they all are."""
+    deg = c.shape[1] - 1
+    out = np.zeros_like(c)
+    for i in range(deg + 1):
+        for k in range(i + 1):
+            out[:, i] += math.comb(i, k) / math.comb(deg, k) * c[:, k]
+    return out
 
 
 def _first_root(c: np.ndarray) -> np.ndarray:
@@ -421,16 +446,6 @@ def _thresholds(ref_meas: np.ndarray, target_meas: np.ndarray, eta: float) -> np
 LOCAL_START_RINGS = (6, 12, 24)
 
 
-def _det_rows(E: np.ndarray) -> np.ndarray:
-    """Determinants of the matrices whose *rows* are the edge vectors, shape (m, d, d) -> (m,), d = 2 or 3
-    (closed form; the transpose has the same determinant)."""
-    if E.shape[-1] == 2:
-        return E[:, 0, 0] * E[:, 1, 1] - E[:, 0, 1] * E[:, 1, 0]
-    a, b, c = E[:, 0], E[:, 1], E[:, 2]
-    return (a[:, 0] * (b[:, 1] * c[:, 2] - b[:, 2] * c[:, 1]) - a[:, 1] * (b[:, 0] * c[:, 2] - b[:, 2] * c[:, 0])
-            + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]))
-
-
 def _unique_ids(idx: np.ndarray, size: int) -> np.ndarray:
     """Sorted distinct entries of ``idx`` (integers in ``[0, size)``): a mask for large inputs, a sort for small."""
     if len(idx) * 32 < size:  # sort and drop repeats (numpy's hashing np.unique is slower at these sizes)
@@ -469,16 +484,18 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
     el = np.asarray(elements, np.int64)
     n_pts, d = ref.shape
     disp = np.where(np.isfinite(target), target - ref, 0.0)
-    E_ref = (ref[el[:, 1:]] - ref[el[:, :1]]).transpose(0, 2, 1)
-    E_d = (disp[el[:, 1:]] - disp[el[:, :1]]).transpose(0, 2, 1)
-    coef = _det_coefficients(E_ref, E_d)
+    cols = [np.ascontiguousarray(el[:, k]) for k in range(d + 1)]
+    refT, dispT = np.ascontiguousarray(ref.T), np.ascontiguousarray(disp.T)
+    coef = _det_coefficients(_edges(refT, cols), _edges(dispT, cols))
     ref_meas = coef[:, 0]
     tau = _thresholds(ref_meas, coef.sum(1), eta)
     q = coef.copy()
     q[:, 0] -= tau
-    safe = q[:, 0] - np.maximum(-q[:, 1:], 0).sum(1) > 0  # q > 0 on [0, 1] by the triangle inequality
+    safe = (_bernstein(q) > 0).all(1)  # q > 0 on [0, 1] when its Bernstein coefficients are
     sus = np.flatnonzero(~safe)
-    s_star = float(_first_root(q[sus]).min()) if len(sus) else 1.0
+    roots = _first_root(q[sus])
+    s_star = float(roots.min()) if len(sus) else 1.0
+    sus = sus[(roots < 1.0) | (q[sus].sum(1) <= 0)]  # elements with no root in (0, 1) are safe too
     loop = None
     if boundary == "free" and d == 2:
         side = round(n_pts ** 0.5)
@@ -494,7 +511,11 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
     def failing(u, els, moved=None):
         """Vertices to revert: those of elements below threshold (and of crossing free-boundary edges; the
         boundary is only re-checked when a vertex in ``moved`` lies on it, since nothing else can change it)."""
-        det = _det_rows(u[el[els, 1:]] - u[el[els, :1]])
+        if len(els) * 8 < n_pts:  # few elements: gather their vertices' components directly
+            idx = [c[els] for c in cols]
+            det = _det([[u[ik, j] - u[idx[0], j] for j in range(d)] for ik in idx[1:]])
+        else:
+            det = _det(_edges(np.ascontiguousarray(u.T), cols, els))
         bad = els[~(det >= tau[els])]
         v = el[bad].ravel()
         if loop is not None and (moved is None or on_loop[moved].any()):
@@ -505,34 +526,6 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
                 v = np.concatenate([v, loop[c.ravel()], loop[(c.ravel() + 1) % len(loop)]])
         return _unique_ids(v, n_pts)
 
-    all_el = np.arange(len(el))
-    s0 = 0.999 * s_star
-    s, start = None, "uniform"
-    if len(sus):
-        # a local start: the uniform scale only on the unsafe elements grown by LOCAL_START_RINGS vertex rings, the
-        # target elsewhere; used when it verifies (most folds are small clusters), the uniform start otherwise
-        top = max(LOCAL_START_RINGS)
-        ring = np.full(n_pts, float(top))  # vertex rings away from the unsafe elements (capped at the largest)
-        near = np.zeros(n_pts, bool)
-        near[el[sus]] = True
-        ring[near] = 0
-        for r in range(1, top):
-            near[el[near[el].any(1)]] = True
-            ring[near & (ring > r)] = r
-            if near.sum() > 0.5 * n_pts:
-                break
-        for rings in LOCAL_START_RINGS:  # s* on them, rising linearly to 1 over `rings` rings
-            cand = s0 + (1.0 - s0) * np.minimum(ring / rings, 1.0)
-            if (cand < 1).sum() > 0.5 * n_pts:
-                break
-            if len(failing(ref + cand[:, None] * disp, all_el)) == 0:
-                s, start = cand, f"local ({rings} rings)"
-                break
-    while s is None:  # verify the uniform start; the identity (s = 0) always passes
-        s = np.full(n_pts, s0)
-        if s0 == 0 or len(failing(ref + s[:, None] * disp, all_el)) == 0:
-            break
-        s, s0 = None, (0.0 if s0 < 1e-6 else 0.5 * s0)
     # vertex -> elements incidence, for evaluating only the elements touched by a change
     order = np.argsort(el.ravel(), kind="stable")
     el_of = order // (d + 1)
@@ -545,6 +538,39 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
         pos = np.repeat(first - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
         return _unique_ids(el_of[pos], len(el))
 
+    all_el = np.arange(len(el))
+    s0 = 0.999 * s_star
+    s, start = None, "uniform"
+    if len(sus):
+        # a local start: the uniform scale only on the unsafe elements grown by LOCAL_START_RINGS vertex rings, the
+        # target elsewhere; used when it verifies (most folds are small clusters), the uniform start otherwise
+        top = max(LOCAL_START_RINGS)
+        ring = np.full(n_pts, float(top))  # vertex rings away from the unsafe elements (capped at the largest)
+        near = np.zeros(n_pts, bool)
+        near[el[sus]] = True
+        ring[near] = 0
+        front = np.flatnonzero(near)
+        grown, wide = 0, False  # rings computed so far (grown only as far as the start being tried needs)
+        for rings in LOCAL_START_RINGS:  # s* on them, rising linearly to 1 over `rings` rings
+            while grown < rings - 1 and not wide:
+                grown += 1
+                front = _unique_ids(el[touching(front)].ravel(), n_pts)
+                front = front[~near[front]]
+                near[front] = True
+                ring[front] = grown
+                wide = near.sum() > 0.5 * n_pts
+            cand = s0 + (1.0 - s0) * np.minimum(ring / rings, 1.0)
+            if (cand < 1).sum() > 0.5 * n_pts:
+                break
+            # elements with every vertex at s = 1 keep the target, where they are safe
+            if len(failing(ref + cand[:, None] * disp, touching(np.flatnonzero(cand < 1)))) == 0:
+                s, start = cand, f"local ({rings} rings)"
+                break
+    while s is None:  # verify the uniform start; the identity (s = 0) always passes
+        s = np.full(n_pts, s0)
+        if s0 == 0 or len(failing(ref + s[:, None] * disp, all_el)) == 0:
+            break
+        s, s0 = None, (0.0 if s0 < 1e-6 else 0.5 * s0)
     color = vertex_classes(ref, el)
     classes = [np.arange(n_pts)] if color is None else [np.flatnonzero(color == c) for c in range(color.max() + 1)]
     hi = np.ones(n_pts)
