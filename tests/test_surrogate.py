@@ -403,3 +403,83 @@ def test_density_objective_grid_path_equals_the_element_path(dim, n, boundary):
     for alpha in (np.ones(dim), np.full(dim, 0.3), np.linspace(0.5, 2.5, dim)):
         assert fast(alpha) == pytest.approx(slow(alpha), rel=1e-12, abs=1e-12)
     assert slow(np.full(dim, 3.0)) > slow(np.full(dim, 0.1))  # large stretch folds: the penalty shows
+
+
+# ----------------------------------------------------------------------------------------------- regrid (3D)
+
+
+def _folding_then_benign(sur, benign_below: int):
+    """A displacement that folds on working grids of side >= ``benign_below`` (neighbouring vertices along x pushed
+    through each other) and below it a constant shift towards x = 0, which enlarges the denser side of a density
+    rising in x (so the map is more equal than the input)."""
+
+    def fake(grids):
+        b, n = grids.shape[0], grids.shape[1]
+        psi = torch.zeros(b, 3, n, n, n)
+        if n >= benign_below:
+            sign = torch.tensor([(-1.0) ** i for i in range(n)])
+            psi[:, 0] = 0.9 / (n - 1) * sign[:, None, None]
+        else:
+            psi[:, 0] = -0.05
+        return psi
+
+    sur.displacement = fake
+    return sur
+
+
+def rising(x):
+    return 1.0 + 0.5 * x[..., 0]
+
+
+def test_regrid_sides_step_down_to_the_training_range():
+    sur = tiny(TaskSpec("density", 3, "square"), n_range=[32, 48])
+    assert sur._regrid_sides(48) == [44, 40, 36, 32]
+    assert sur._regrid_sides(46) == [42, 38, 34, 32]
+    assert sur._regrid_sides(32) == []
+
+
+def test_a_folded_3d_map_is_taken_from_a_coarser_working_grid():
+    """The default grid (17) and the next (13) fold; the 9-grid gives a fold-free map more equal than the input,
+    which is returned without a repair, exactly as an explicit work_n = 9 would give it."""
+    sur = _folding_then_benign(tiny(TaskSpec("density", 3, "square"), n_range=[9, 17]), benign_below=10)
+    r = sur.map(rising, 17)
+    assert r.info["regrid"]["from"] == 17 and r.info["regrid"]["tried"] == [13, 9]
+    assert r.info["regrid"]["work_n"] == 9 and r.info["work_n"] == 9
+    assert r.info["repair"]["needed"] is False
+    m = r.metrics()
+    assert m.n_flipped == 0 and m.std_rho_map < m.std_rho_orig
+    np.testing.assert_array_equal(r.mapped_points, sur.map(rising, 17, work_n=9).mapped_points)
+    assert r.time >= r.info["regrid"]["time"]
+
+
+def test_an_explicit_work_n_and_2d_maps_go_straight_to_the_repair():
+    sur = _folding_then_benign(tiny(TaskSpec("density", 3, "square"), n_range=[9, 17]), benign_below=10)
+    r = sur.map(rising, 17, work_n=17)
+    assert "regrid" not in r.info and r.info["repair"]["needed"] and r.metrics().n_flipped == 0
+    sur2 = tiny(n_range=[9, 17])
+
+    def fold2(grids):
+        b, n = grids.shape[:2]
+        psi = torch.zeros(b, 2, n, n)
+        psi[:, 0] = 0.9 / (n - 1) * torch.tensor([(-1.0) ** i for i in range(n)])[:, None]
+        return psi
+
+    sur2.displacement = fold2
+    r2 = sur2.map(rising, 17)
+    assert "regrid" not in r2.info and r2.info["repair"]["needed"] and r2.metrics().n_flipped == 0
+
+
+def test_when_every_working_grid_folds_the_default_map_is_repaired():
+    sur = _folding_then_benign(tiny(TaskSpec("density", 3, "square"), n_range=[9, 17]), benign_below=0)
+    r = sur.map(rising, 17)
+    assert r.info["regrid"]["tried"] == [13, 9] and r.info["regrid"]["work_n"] is None
+    assert r.info["work_n"] == 17 and r.info["repair"]["needed"] and r.metrics().n_flipped == 0
+
+
+def test_regrid_summary_lines():
+    from rfmap.cli import regrid_summary
+
+    took = regrid_summary({"from": 48, "tried": [44, 40], "work_n": 40, "time": 0.25})
+    assert took == "working grid: 48 folded; took 40 (tried 44, 40; 0.250 s)"
+    none = regrid_summary({"from": 48, "tried": [44, 40, 36, 32], "work_n": None, "time": 0.5})
+    assert none.startswith("working grid: 48 folded, and so did 44, 40, 36, 32; the 48-grid map is repaired")

@@ -125,6 +125,8 @@ def cmd_map(args) -> int:
     if args.vtk:
         res.to_vtk(args.vtk)
     print(f"wrote {args.out}: {res.metrics()}")
+    if "regrid" in res.info:
+        print(regrid_summary(res.info["regrid"]))
     print(repair_summary(res.info.get("repair")))
     if "polish" in res.info:
         p = res.info["polish"]
@@ -136,6 +138,16 @@ def cmd_map(args) -> int:
             print(f"guard: warm flow {st['warm']['std_rho_map']:.4g} ({st['warm']['time']:.3f} s), cold flow "
                   f"{st['cold']['std_rho_map']:.4g} ({st['cold']['time']:.3f} s); kept the {p['kept']} map")
     return 0
+
+
+def regrid_summary(report: dict) -> str:
+    """One line saying which coarser working grids a folded 3D map was tried on (``rfmap.surrogate.REGRID_DIMS``)."""
+    tried = ", ".join(str(w) for w in report["tried"])
+    if report["work_n"] is None:
+        return (f"working grid: {report['from']} folded, and so did {tried}; the {report['from']}-grid map is "
+                f"repaired ({report['time']:.3f} s)")
+    return (f"working grid: {report['from']} folded; took {report['work_n']} (tried {tried}; "
+            f"{report['time']:.3f} s)")
 
 
 def repair_summary(report: dict | None) -> str:
