@@ -373,8 +373,8 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     """Surrogate against the classical solver on ``count`` seeded random fields that training never drew (the
     ``report`` stream of :mod:`rfmap.validation`, used for nothing else), on the same ``N``-grid.
 
-    Density models: Std(rho~_map) of the raw network map, of the map with weight refinement (and the default
-    fold repair), and of the classical diffusion DEM with the model's boundary; Beltrami models: mean vertex
+    Density models: Std(rho~_map) of the raw network map, of the map with weight refinement (and what
+    ``Surrogate.map`` does by default about folds: coarser working grids in 3D, then the repair), and of the classical diffusion DEM with the model's boundary; Beltrami models: mean vertex
     distance (``mean_dd``) to the exact random map, ours against the Linear Beltrami Solver.  Rows: each kind of field
     and ``all``; columns: mean and worst metric, flipped elements of the raw network map, and mean time.
     ``classical=False`` leaves the classical solver's rows out (when another table already has them).
