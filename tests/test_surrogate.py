@@ -483,3 +483,9 @@ def test_regrid_summary_lines():
     assert took == "working grid: 48 folded; took 40 (tried 44, 40; 0.250 s)"
     none = regrid_summary({"from": 48, "tried": [44, 40, 36, 32], "work_n": None, "time": 0.5})
     assert none.startswith("working grid: 48 folded, and so did 44, 40, 36, 32; the 48-grid map is repaired")
+
+
+def test_with_polish_a_folded_3d_map_starts_cold_without_trying_coarser_grids():
+    sur = _folding_then_benign(tiny(TaskSpec("density", 3, "square"), n_range=[9, 17]), benign_below=10)
+    r = sur.map(rising, 17, polish=True)
+    assert "regrid" not in r.info and r.info["polish"]["start"] == "cold" and r.metrics().n_flipped == 0

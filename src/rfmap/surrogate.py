@@ -54,7 +54,8 @@ __all__ = ["Surrogate", "models", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
 #: rebuilds the map from its truncated Beltrami coefficient and does better: on 10 folded maps of hard densities
 #: (``rfmap.stress``) of deq2d-square and deq2d-free at N = 51 to 128, coarser grids helped once (0.242 -> 0.240),
 #: did much worse once (0.33 -> 1.42) and cost up to 0.7 s more, so 2D maps go straight to the repair.  An explicit
-#: ``work_n`` is used as given.
+#: ``work_n`` is used as given, and with ``polish`` a folded map starts the flow cold at once, as before (a warm start
+#: saves the 3D flow nothing: from the identity it needs only 7 or 8 steps at N = 48).
 REGRID_DIMS = (3,)
 REGRID_STEP = 4
 
@@ -328,8 +329,9 @@ class Surrogate:
         refine : bool
             Apply weight refinement (paper Sec. 4.3) before returning.
         work_n : int, optional
-            Working grid side of the network (default :meth:`work_n`; then, in 3D, a folded map is first tried on
-            coarser working grids, :data:`REGRID_DIMS`).  Given explicitly, it is used as given.
+            Working grid side of the network (default :meth:`work_n`; then, in 3D and without ``polish``, a folded
+            map is first tried on coarser working grids, :data:`REGRID_DIMS`).  Given explicitly, it is used as
+            given.
         alpha : sequence of d floats, optional
             A fixed stretching vector (ignored when ``refine``).
         preprocess : bool
@@ -424,7 +426,8 @@ class Surrogate:
 
         psi, psi64, mapped, a, extra, t_net, t_map = network_map(nw, psi)
         info: dict[str, Any] = {"work_n": nw, "network_time": t_net}
-        if repair and regrid and self.spec.dim in REGRID_DIMS and points is None and self._flipped(mapped, n):
+        if (repair and regrid and polish is False and self.spec.dim in REGRID_DIMS and points is None
+                and self._flipped(mapped, n)):
             # a folded map: try the network on coarser working grids before any repair (REGRID)
             tried, t5 = [], time.perf_counter()
             for w in self._regrid_sides(nw):
