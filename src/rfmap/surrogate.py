@@ -428,7 +428,7 @@ class Surrogate:
         info: dict[str, Any] = {"work_n": nw, "network_time": t_net}
         if (repair and regrid and polish is False and self.spec.dim in REGRID_DIMS and points is None
                 and self._flipped(mapped, n)):
-            # a folded map: try the network on coarser working grids before any repair (REGRID)
+            # a folded map: try the network on coarser working grids before any repair (REGRID_DIMS)
             tried, t5 = [], time.perf_counter()
             for w in self._regrid_sides(nw):
                 cand = network_map(w, None)
