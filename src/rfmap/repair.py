@@ -511,11 +511,8 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
     def failing(u, els, moved=None):
         """Vertices to revert: those of elements below threshold (and of crossing free-boundary edges; the
         boundary is only re-checked when a vertex in ``moved`` lies on it, since nothing else can change it)."""
-        if len(els) * 8 < n_pts:  # few elements: gather their vertices' components directly
-            idx = [c[els] for c in cols]
-            det = _det([[u[ik, j] - u[idx[0], j] for j in range(d)] for ik in idx[1:]])
-        else:
-            det = _det(_edges(np.ascontiguousarray(u.T), cols, els))
+        # a contiguous transpose pays for many elements; for a few, strided gathers from u.T are cheaper
+        det = _det(_edges(u.T if len(els) * 8 < n_pts else np.ascontiguousarray(u.T), cols, els))
         bad = els[~(det >= tau[els])]
         v = el[bad].ravel()
         if loop is not None and (moved is None or on_loop[moved].any()):

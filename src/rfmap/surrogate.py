@@ -422,9 +422,9 @@ class Surrogate:
                              refine_evaluations=rr.evaluations)
             mapped_w = apply_displacement(ref64, psi64_w, self.spec.boundary,
                                           torch.as_tensor(a_w) if (refine or alpha is not None) else None).numpy()
-            return psi_w, psi64_w, mapped_w, a_w, extra, t_net, t_net + time.perf_counter() - t1
+            return psi_w, mapped_w, a_w, extra, t_net, t_net + time.perf_counter() - t1
 
-        psi, psi64, mapped, a, extra, t_net, t_map = network_map(nw, psi)
+        psi, mapped, a, extra, t_net, t_map = network_map(nw, psi)
         info: dict[str, Any] = {"work_n": nw, "network_time": t_net}
         if (repair and regrid and polish is False and self.spec.dim in REGRID_DIMS and points is None
                 and self._flipped(mapped, n)):
@@ -433,9 +433,9 @@ class Surrogate:
             for w in self._regrid_sides(nw):
                 cand = network_map(w, None)
                 tried.append(w)
-                if not self._flipped(cand[2], n) and self._improves(ref, cand[2], elements, fvals):
-                    psi, psi64, mapped, a, extra = cand[:5]
-                    info.update(work_n=w, network_time=info["network_time"] + cand[5])
+                if not self._flipped(cand[1], n) and self._improves(ref, cand[1], elements, fvals):
+                    psi, mapped, a, extra = cand[:4]
+                    info.update(work_n=w, network_time=info["network_time"] + cand[4])
                     break
             t_map += time.perf_counter() - t5
             info["regrid"] = {"from": nw, "tried": tried, "work_n": info["work_n"] if info["work_n"] != nw else None,
