@@ -7,7 +7,7 @@ import pytest
 
 from rfmap.config import ModelConfig, get_config
 from rfmap.surrogate import WEIGHTS_DIR, Surrogate, models
-from rfmap.random_fields import RandomDensityConfig
+from rfmap.random_fields import RandomBeltramiConfig, RandomDensityConfig
 from rfmap.tasks import LossWeights
 
 SHIPPED = models()
@@ -40,6 +40,11 @@ def test_metadata_records_provenance(name):
         later = ("ramp_width", "ramp_scale", "p_hard", "hard_contrast", "hard_background")
         stored["density_field"] = {**{k: v for k, v in defaults.items() if k in later},
                                    **stored["density_field"]}
+    if stored.get("beltrami_field"):  # and the low-frequency share of the random maps, added later
+        defaults = json.loads(json.dumps(asdict(RandomBeltramiConfig())))
+        later = ("low", "low_modes", "low_freq")
+        stored["beltrami_field"] = {**{k: v for k, v in defaults.items() if k in later},
+                                    **stored["beltrami_field"]}
     # overrides given on the recorded command line (e.g. --steps for a warm restart) are what it says they are
     words = meta.get("command", "").split()
     for flag, key, kind in (("--steps", "steps", int), ("--batch", "batch", int), ("--seed", "seed", int),

@@ -237,12 +237,35 @@ class RandomBeltramiConfig:
         Bound :math:`\\|\\mu\\|_\\infty \\le k < 1`.
     sup : (float, float)
         Range of the drawn sup-norm level (uniform), capped by ``k``.
+    low : float
+        Share of low-frequency fields, whose number of modes and frequencies are drawn from ``low_modes`` and
+        ``low_freq`` instead (0 draws no extra random number, so the streams of older configurations are kept).
+        At equal :math:`\|\mu\|_\infty` a map with a few slow modes moves the mesh much further than one with
+        many fast modes, and a model trained on the default ranges reconstructs such maps with about three times
+        the vertex error (measured on held-out random maps).
+    low_modes : (int, int)
+        Number of modes of a low-frequency field, uniform.
+    low_freq : (float, float)
+        Log-uniform frequency range of a low-frequency field.
     """
 
     modes: tuple[int, int] = (1, 50)
     freq: tuple[float, float] = (0.1, 8.0)
     k: float = 0.9
     sup: tuple[float, float] = (0.05, 0.9)
+    low: float = 0.0
+    low_modes: tuple[int, int] = (1, 4)
+    low_freq: tuple[float, float] = (0.25, 2.0)
+
+    def __post_init__(self):
+        if not 0.0 <= self.low <= 1.0:
+            raise ValueError(f"the share of low-frequency fields must lie in [0, 1], got {self.low}")
+
+    def draw_ranges(self, rng: np.random.Generator) -> tuple[tuple[int, int], tuple[float, float]]:
+        """The mode-count and frequency ranges of one field: the low-frequency ones with probability ``low``."""
+        if self.low > 0 and rng.random() < self.low:
+            return self.low_modes, self.low_freq
+        return self.modes, self.freq
 
 
 class RandomBeltrami:
@@ -257,9 +280,10 @@ class RandomBeltrami:
     def __init__(self, rng: np.random.Generator, cfg: RandomBeltramiConfig = RandomBeltramiConfig()):
         if not 0 < cfg.k < 1:
             raise ValueError(f"the bound k must lie in (0, 1), got {cfg.k}")
-        n = int(rng.integers(cfg.modes[0], cfg.modes[1] + 1))
+        modes, freq = cfg.draw_ranges(rng)
+        n = int(rng.integers(modes[0], modes[1] + 1))
         self.amp = rng.uniform(0, 1, n) * np.exp(1j * rng.uniform(0, TWO_PI, n))
-        self.freq = _log_uniform(rng, cfg.freq[0], cfg.freq[1], (n, 2))
+        self.freq = _log_uniform(rng, freq[0], freq[1], (n, 2))
         self.phase = rng.uniform(0, TWO_PI, (n, 2))
         probe = self._raw(grid_points(65, 2))
         level = min(cfg.k, rng.uniform(*cfg.sup))
@@ -306,9 +330,10 @@ class RandomMap:
     def __init__(self, rng: np.random.Generator, cfg: RandomBeltramiConfig = RandomBeltramiConfig()):
         if not 0 < cfg.k < 1:
             raise ValueError(f"the bound k must lie in (0, 1), got {cfg.k}")
-        n = int(rng.integers(cfg.modes[0], cfg.modes[1] + 1))
+        modes, freq = cfg.draw_ranges(rng)
+        n = int(rng.integers(modes[0], modes[1] + 1))
         self.amp = rng.uniform(-1, 1, (2, n))
-        self.freq = TWO_PI * _log_uniform(rng, cfg.freq[0], cfg.freq[1], (2, n, 2))  # angular
+        self.freq = TWO_PI * _log_uniform(rng, freq[0], freq[1], (2, n, 2))  # angular
         self.phase = rng.uniform(0, TWO_PI, (2, n, 2))
         self.scale = 1.0
         level = min(cfg.k, rng.uniform(*cfg.sup))
