@@ -176,6 +176,14 @@ def test_validation_set_is_fixed_and_never_drawn_in_training():
     m = bel[0].exact
     rm = RandomMap(np.random.default_rng([VALIDATION_SEED, 0, 0]), RandomBeltramiConfig())
     assert not np.allclose(m(grid_points(9, 2)), rm(grid_points(9, 2)))
+    # the low-frequency maps of the reports are other maps, of 1-4 slow modes
+    low = validation_fields("beltrami", 2, 4, stream="report", low_frequency=True)
+    assert [v.label for v in low] == ["low-map-0", "low-map-1", "low-map-2", "low-map-3"]
+    assert all(v.exact.freq.shape[-2] <= 4 for v in low)
+    assert not np.allclose(low[0].exact(grid_points(9, 2)), validation_fields("beltrami", 2, 4, stream="report")[0]
+                           .exact(grid_points(9, 2)))
+    with pytest.raises(ValueError, match="Beltrami"):
+        validation_fields("density", 2, 4, low_frequency=True)
     pts, dens = draw_samples(CFG.task, seed=VALIDATION_SEED, step=0, indices=[0], n=17, jitter=0.0)
     val = a[0].field(pts[0])
     assert not np.allclose(dens[0] / dens[0].mean(), val / val.mean())

@@ -1,6 +1,7 @@
 """The reproduction helpers: published tables, table output, and the experiment runners on tiny models."""
 import csv
 import io
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -184,7 +185,10 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     sur.meta["final_metrics"]["mean"].update({"std_rho_map": 40.0, "capped": 0.2, "penalized": 0.25})
     assert recipe_table({"new": sur}).value("new", "unet", "held_out") == 0.25
     assert "| new | unet | modes, steps" in t.to_markdown()
-    assert training_fields_text(get_config("beltrami2d", "full").to_dict()) == "random boundary-fixing maps"
+    bel = get_config("beltrami2d", "full")
+    for low, text in ((0.0, "random boundary-fixing maps"), (0.3, "random boundary-fixing maps, low-frequency 30 %")):
+        cfg = bel.with_overrides(beltrami_field=replace(bel.beltrami_field, low=low))
+        assert training_fields_text(cfg.to_dict()) == text
     for name in ("dem3d-free", "dem3d-cube"):
         assert training_fields_text(get_config(name, "full").to_dict()) == \
             "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 15 %"

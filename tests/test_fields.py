@@ -433,3 +433,26 @@ def test_hard_fields_are_single_ramps_or_peaks_and_leave_other_streams_alone():
             assert np.ptp(d.on_grid(n)) == pytest.approx(k - 1.0, abs=0.35)
     assert kinds == {"ramp", "peak"}
     assert max(stds) > 1.0 and np.median(stds) > 0.45
+
+
+def test_low_frequency_share_of_random_maps():
+    """``low = 0`` draws no extra random number (older training streams are kept); ``low = 1`` draws every map
+    from the low-frequency ranges; the share must be a probability."""
+    cfg = RandomBeltramiConfig()
+    rng = np.random.default_rng(3)
+    assert cfg.draw_ranges(rng) == (cfg.modes, cfg.freq)
+    assert rng.random() == np.random.default_rng(3).random()
+    low = RandomBeltramiConfig(low=1.0)
+    for seed in range(5):
+        for cls in (RandomMap, RandomBeltrami):
+            m = cls(np.random.default_rng(seed), low)
+            n_modes = m.freq.shape[-2]
+            assert low.low_modes[0] <= n_modes <= low.low_modes[1]
+            f = m.freq / (2 * math.pi) if cls is RandomMap else m.freq
+            assert low.low_freq[0] <= f.min() and f.max() <= low.low_freq[1]
+    half = RandomBeltramiConfig(low=0.5)
+    drawn = [half.draw_ranges(np.random.default_rng(s))[0] for s in range(400)]
+    assert 0.4 < np.mean([d == half.low_modes for d in drawn]) < 0.6
+    for bad in (-0.1, 1.5):
+        with pytest.raises(ValueError, match="low-frequency"):
+            RandomBeltramiConfig(low=bad)

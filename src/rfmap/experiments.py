@@ -369,7 +369,7 @@ def glue_all(values: dict, prefix: str) -> None:
 
 # ------------------------------------------------------------------------------------------- generalization
 def generalization_table(sur, count: int = 50, n: int | None = None, refine: bool = True,
-                         classical: bool = True) -> Table:
+                         classical: bool = True, low_frequency: bool = False) -> Table:
     """Surrogate against the classical solver on ``count`` seeded random fields that training never drew (the
     ``report`` stream of :mod:`rfmap.validation`, used for nothing else), on the same ``N``-grid.
 
@@ -377,7 +377,9 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     ``Surrogate.map`` does by default about folds: coarser working grids in 3D, then the repair), and of the classical diffusion DEM with the model's boundary; Beltrami models: mean vertex
     distance (``mean_dd``) to the exact random map, ours against the Linear Beltrami Solver.  Rows: each kind of field
     and ``all``; columns: mean and worst metric, flipped elements of the raw network map, and mean time.
-    ``classical=False`` leaves the classical solver's rows out (when another table already has them).
+    ``classical=False`` leaves the classical solver's rows out (when another table already has them);
+    ``low_frequency`` (Beltrami models) draws random maps of 1-4 slow modes instead (table
+    ``tab:generalization-low-NAME``).
     """
     from .inputs import preprocess_density
     from .mesh import grid_points
@@ -386,7 +388,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
 
     spec = sur.spec
     n = int(n or PAPER_N[spec.dim])
-    fields = validation_fields(spec.kind, spec.dim, count, stream="report")
+    fields = validation_fields(spec.kind, spec.dim, count, stream="report", low_frequency=low_frequency)
     key = "mean_dd" if spec.kind == "beltrami" else "std_rho_map"
     rows: dict[tuple[str, str], list[tuple[float, int, float]]] = {}
 
@@ -415,8 +417,9 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
             for method, r in variants:
                 m = r.metrics()
                 add(kind, method, m.std_rho_map, m.n_flipped, r.time)
-    table = Table(f"tab:generalization-{sur.name}",
-                  f"{sur.name}: {count} unseen random fields at N = {n} ({key})",
+    low = "low-" if low_frequency else ""
+    table = Table(f"tab:generalization-{low}{sur.name}",
+                  f"{sur.name}: {count} unseen {'low-frequency ' if low else ''}random fields at N = {n} ({key})",
                   ["mean", "worst", "n_flipped", "time"])
     kinds = sorted({k for k, _ in rows if k != "all"})
     kinds = kinds + ["all"] if len(kinds) > 1 else ["all"]
@@ -659,9 +662,11 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
 
 def training_fields_text(config: dict) -> str:
     """The random training fields of a stored training configuration (``meta["config"]``) in words: the paper's
-    smooth modes with steps and patches, plus the sharp features (narrow peaks, steep ramps) where drawn."""
+    smooth modes with steps and patches, plus the sharp features (narrow peaks, steep ramps) where drawn; for Beltrami
+    models the share of low-frequency maps where drawn."""
     if config["task"]["kind"] == "beltrami":
-        return "random boundary-fixing maps"
+        low = (config.get("beltrami_field") or {}).get("low", 0.0)
+        return "random boundary-fixing maps" + (f", low-frequency {100 * low:.0f} %" if low else "")
     dens = config.get("density_field") or {}
     extra = []
     if dens.get("p_peak"):

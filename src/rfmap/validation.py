@@ -12,7 +12,8 @@ The set mixes kinds, sharp ones included, so that folds show up during training:
   ``ramp`` (a steep tanh ramp of height 1–4 across a random direction); after the paper's preprocessing (minimum
   shifted to 0.1) their largest-to-smallest density ratios lie within those of the training fields (up to ~80);
 * Beltrami tasks: random boundary-fixing maps (:class:`rfmap.fields.RandomMap`) with their exact image, at sup-norm
-  levels of :math:`|\mu|` spread over [0.1, 0.85]; the metric is the mean vertex distance to the exact map.
+  levels of :math:`|\mu|` spread over [0.1, 0.85]; the metric is the mean vertex distance to the exact map.  A
+  second set of low-frequency maps (1-4 slow modes) serves reports only.
 
 The score of a model is the mean metric over the set (``std_rho_map`` for densities, ``mean_dd`` for Beltrami)
 with every folded map counted as the identity map, i.e. as no map at all (``penalized``): a fold costs the model
@@ -90,21 +91,25 @@ def _density_field(j: int, kind: str, dim: int, stream: str = "validation") -> V
     return ValidationField(f"{kind}-{j}", f)
 
 
-def _beltrami_field(j: int, count: int, stream: str = "validation") -> ValidationField:
+def _beltrami_field(j: int, count: int, stream: str = "validation", low: bool = False) -> ValidationField:
     rng = _rng(j, stream)
     level = 0.1 + 0.75 * j / max(1, count - 1)
-    m = RandomMap(rng, RandomBeltramiConfig(sup=(level, level)))
-    return ValidationField(f"map-{j}", m.mu, exact=m)
+    m = RandomMap(rng, RandomBeltramiConfig(sup=(level, level), low=1.0 if low else 0.0))
+    return ValidationField(f"{'low-' if low else ''}map-{j}", m.mu, exact=m)
 
 
-def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "validation") -> list[ValidationField]:
+def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "validation",
+                      low_frequency: bool = False) -> list[ValidationField]:
     """The fixed held-out set of a task: ``count`` fields (the density kinds in turn).  ``stream='validation'``
     is the set used during training; ``stream='report'`` another set of the same kinds, used only to report
-    generalization."""
+    generalization.  ``low_frequency`` (Beltrami only): random maps of 1-4 slow modes instead
+    (``RandomBeltramiConfig.low_modes``, ``low_freq``; labels ``low-map-j``)."""
     if count < 1:
         raise ValueError(f"the validation set needs at least one field, got {count}")
+    if low_frequency and kind != "beltrami":
+        raise ValueError("low_frequency applies to Beltrami validation maps only")
     if kind == "beltrami":
-        return [_beltrami_field(j, count, stream) for j in range(count)]
+        return [_beltrami_field(j, count, stream, low_frequency) for j in range(count)]
     return [_density_field(j, DENSITY_KINDS[j % len(DENSITY_KINDS)], dim, stream) for j in range(count)]
 
 
