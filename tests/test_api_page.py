@@ -10,8 +10,8 @@ PAGE = ROOT / "book" / "api.md"
 #: the modules whose ``__all__`` the page must cover: the package and the modules a user imports from
 MODULES = ["rfmap", "rfmap.surrogate", "rfmap.pretrained", "rfmap.result", "rfmap.solvers", "rfmap.fields",
            "rfmap.paper_fields", "rfmap.random_fields", "rfmap.metrics", "rfmap.repair", "rfmap.surface", "rfmap.refine",
-           "rfmap.config", "rfmap.train", "rfmap.tasks", "rfmap.losses", "rfmap.validation", "rfmap.device",
-           "rfmap.nn", "rfmap.mesh", "rfmap.geometry", "rfmap.experiments", "rfmap.viz", "rfmap.cartogram"]
+           "rfmap.symmetry", "rfmap.config", "rfmap.train", "rfmap.tasks", "rfmap.losses", "rfmap.validation",
+           "rfmap.device", "rfmap.nn", "rfmap.mesh", "rfmap.geometry", "rfmap.experiments", "rfmap.viz", "rfmap.cartogram"]
 DIRECTIVE = re.compile(r"^\.\. (auto\w+):: (\S+)\n((?:[ \t]+:[^\n]*\n)*)", re.M)
 
 

@@ -92,6 +92,31 @@ def test_population_and_resolution_tables_on_untrained_model():
     assert [c for c, m, _ in rt.rows if m == "ours"] == ["9", "17"]
 
 
+def test_population_table_with_symmetrized_rows_and_summary():
+    """``symmetrize`` adds the symmetrized network's rows, their speed-up against the same classical run and the
+    summary's symmetrized entries; the best with symmetrization is never above the best without."""
+    from rfmap import load_or_train
+    from rfmap.experiments import SYM, SYM_REF, population_summary
+
+    sur = load_or_train("deq2d-square", "ci")
+    fields = ["sin-cos", "ring"]
+    table, maps = population_table(sur, fields, n=17, refine=True, symmetrize="flips")
+    assert {m for _, m, _ in table.rows} >= {"ours", "ours + refinement", SYM, SYM_REF, "diffusion DEM"}
+    assert maps["ring"]["ours+sym"].info["symmetrize"] == "flips"
+    for f in fields:
+        dem_time = table.value(f, "diffusion DEM", "time")
+        assert table.value(f, SYM, "speedup") == pytest.approx(dem_time / table.value(f, SYM, "time"))
+        assert table.value(f, SYM_REF, "std_rho_map") != table.value(f, "ours + refinement", "std_rho_map")
+    values, md = population_summary(table, fields)
+    for f in fields:
+        assert values[f"{f}_best_sym"] <= values[f"{f}_best"]
+        assert values[f"{f}_std_sym"] == table.value(f, SYM, "std_rho_map")
+    assert 0 <= values["met_sym"] <= 2 and values["speed_sym"] > 0
+    assert "best with symmetrization / paper" in md.splitlines()[0] and len(md.splitlines()) == 4
+    plain, md_plain = population_summary(population_table(sur, fields, n=17, refine=True)[0], fields)
+    assert "met_sym" not in plain and SYM not in md_plain
+
+
 def test_resolution_table_with_refinement_adds_refined_rows():
     sur = Surrogate.untrained(TaskSpec("density", 3, "square"), base=4, depth=2, name="tiny3d", n_range=[6, 8])
     rt, maps = resolution_table(sur, ns=(6, 8), refine=True, classical=False)

@@ -120,11 +120,16 @@ def cmd_map(args) -> int:
     if args.no_guard and polish is False:
         raise CLIError("--no-guard only applies with --polish")
     res = sur.map(field, args.n, points, refine=args.refine, repair=not args.no_repair, polish=polish,
-                  guard=not args.no_guard)
+                  guard=not args.no_guard, symmetrize=args.symmetrize)
     res.save(args.out)
     if args.vtk:
         res.to_vtk(args.vtk)
     print(f"wrote {args.out}: {res.metrics()}")
+    if res.info.get("symmetrize"):
+        from .symmetry import symmetries
+
+        group = res.info["symmetrize"]
+        print(f"symmetrized: the network's mean over {len(symmetries(sur.spec.dim, group))} symmetries ({group})")
     if "regrid" in res.info:
         print(regrid_summary(res.info["regrid"]))
     print(repair_summary(res.info.get("repair")))
@@ -223,6 +228,15 @@ def _polish_arg(text: str):
     return tol
 
 
+def _symmetry_arg(text: str):
+    """``--symmetrize [GROUP]``: a group name of :data:`rfmap.symmetry.SYMMETRY_GROUPS`."""
+    from .symmetry import SYMMETRY_GROUPS
+
+    if text not in SYMMETRY_GROUPS:
+        raise argparse.ArgumentTypeError(f"GROUP must be one of {', '.join(SYMMETRY_GROUPS)}, got {text!r}")
+    return text
+
+
 def build_parser() -> argparse.ArgumentParser:
     from .train import build_parser as train_parser
 
@@ -260,6 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-guard", action="store_true",
                    help="with --polish: return the warm flow's map without also running the cold flow and keeping "
                         "the better one")
+    s.add_argument("--symmetrize", nargs="?", const=True, default=False, type=_symmetry_arg, metavar="GROUP",
+                   help="density maps: average the network over symmetries of the square or cube (default set, or "
+                        "one of flips, permutations, cyclic, full); one network evaluation per symmetry")
     s.add_argument("--out", required=True, help="output .npz")
     s.add_argument("--vtk", default=None, help="also write the mapped mesh as VTK (.vtu)")
     s.add_argument("--device", default="cpu", help="where the network runs: cpu (default), cuda or auto")

@@ -25,7 +25,7 @@ __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table"
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
            "COLUMN_TITLES", "format_value", "DIGITS", "generalization_table", "WARM_MODELS", "benchmark_fields",
            "time_to_accuracy", "summarize", "residual_floor", "warm_start_residuals",
-           "displacement_demand", "recipe_table", "training_fields_text"]
+           "displacement_demand", "recipe_table", "training_fields_text", "SYM", "SYM_REF"]
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -142,16 +142,17 @@ class Table:
         return [md, cs]
 
 
-def _timed_map(sur, name, n, refine=False, repeats: int = 3, slow: float = 1.0):
+def _timed_map(sur, name, n, refine=False, repeats: int = 3, slow: float = 1.0, **kw):
     """The fastest of ``repeats`` timed maps after a warm-up; a single timed map when the warm-up took more than
-    ``slow`` seconds (3D maps with a repair: the spread of repeated timings is then far below the quoted digits)."""
+    ``slow`` seconds (3D maps with a repair: the spread of repeated timings is then far below the quoted digits).
+    ``kw`` goes to :meth:`rfmap.Surrogate.map`."""
     t0 = time.perf_counter()
-    sur.map(name, n)  # warm-up
+    sur.map(name, n, **kw)  # warm-up
     if time.perf_counter() - t0 > slow:
         repeats = 1
     best = None
     for _ in range(repeats):
-        r = sur.map(name, n, refine=refine)
+        r = sur.map(name, n, refine=refine, **kw)
         best = r if best is None or r.time < best.time else best
     return best
 
@@ -226,7 +227,11 @@ def _classical(name: str, n: int, boundary: str) -> MapResult:
     return solve_dem(DENSITIES[name].sample(n), boundary=boundary)
 
 
-def _density_rows(sur, table, cases, paper, refine, boundary, classical=True):
+#: row names of the symmetrized network (``symmetrize`` of the density tables; :mod:`rfmap.symmetry`)
+SYM, SYM_REF = "ours, symmetrized", "ours, symmetrized + refinement"
+
+
+def _density_rows(sur, table, cases, paper, refine, boundary, classical=True, symmetrize=False):
     results = {}
     with_mu = sur.spec.dim == 2
     for case, name, n in cases:
@@ -238,14 +243,27 @@ def _density_rows(sur, table, cases, paper, refine, boundary, classical=True):
             vr = _density_values(ref, with_mu)
             vr["alpha"] = ref.info["alpha"]
             entry["ours+refine"] = ref
+        sym_rows = []
+        if symmetrize:
+            sym = _timed_map(sur, name, n, symmetrize=symmetrize)
+            entry["ours+sym"] = sym
+            sym_rows.append((SYM, sym, _density_values(sym, with_mu)))
+            if refine:
+                sref = sur.map(name, n, refine=True, symmetrize=symmetrize)
+                entry["ours+sym+refine"] = sref
+                sym_rows.append((SYM_REF, sref, {**_density_values(sref, with_mu), "alpha": sref.info["alpha"]}))
         if classical:
             cl = _classical(name, n, boundary)
             vc = _density_values(cl, with_mu)
             vo["speedup"] = cl.time / ours.time
+            if symmetrize:
+                sym_rows[0][2]["speedup"] = cl.time / sym_rows[0][1].time
             entry["classical"] = cl
         table.add(case, "ours", vo)
         if refine:
             table.add(case, "ours + refinement", vr)
+        for method, _, values in sym_rows:
+            table.add(case, method, values)
         if classical:
             table.add(case, "diffusion DEM", vc)
         if case in paper["rows"]:
@@ -254,8 +272,11 @@ def _density_rows(sur, table, cases, paper, refine, boundary, classical=True):
     return table, results
 
 
-def population_table(sur, fields=None, n: int | None = None, refine: bool = True, classical: bool = True):
-    """tab:population_test(_fb) / tab:3d_population_test(_fb): the four population tests."""
+def population_table(sur, fields=None, n: int | None = None, refine: bool = True, classical: bool = True,
+                     symmetrize: bool | str = False):
+    """tab:population_test(_fb) / tab:3d_population_test(_fb): the four population tests.  ``symmetrize`` adds
+    the rows of the network averaged over symmetries of the domain (:data:`SYM`, with ``refine`` also
+    :data:`SYM_REF`; :mod:`rfmap.symmetry`)."""
     d, b = sur.spec.dim, sur.spec.boundary
     fields = list(fields or TEST_FIELDS["density", d])
     n = n or PAPER_N[d]
@@ -265,11 +286,13 @@ def population_table(sur, fields=None, n: int | None = None, refine: bool = True
     cols += ["alpha"] if refine else []
     t = Table(label, f"{d}D population tests, {b} boundary (N = {n}), model {sur.name}", cols)
     return _density_rows(sur, t, [(f, f, n) for f in fields], paper_table(label), refine,
-                         "free" if b == "free" else "square", classical)
+                         "free" if b == "free" else "square", classical, symmetrize)
 
 
-def resolution_table(sur, ns=None, refine: bool = False, classical: bool = True, work_n=None):
-    """tab:resolution_test / tab:3d_resolution_test: the multi-frequency field at several resolutions."""
+def resolution_table(sur, ns=None, refine: bool = False, classical: bool = True, work_n=None,
+                     symmetrize: bool | str = False):
+    """tab:resolution_test / tab:3d_resolution_test: the multi-frequency field at several resolutions
+    (``symmetrize`` as in :func:`population_table`)."""
     d = sur.spec.dim
     ns = list(ns or ((32, 64, 128, 256) if d == 2 else (32, 40, 56, 64)))
     name = "multi-freq" if d == 2 else "multi-freq-3d"
@@ -278,7 +301,8 @@ def resolution_table(sur, ns=None, refine: bool = False, classical: bool = True,
     cols += ["max_mu", "mean_mu"] if d == 2 else []
     cols += ["alpha"] if refine else []
     t = Table(label, f"{d}D resolution test on {name}, model {sur.name}", cols)
-    return _density_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(label), refine, "square", classical)
+    return _density_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(label), refine, "square", classical,
+                         symmetrize)
 
 
 def reproduce(experiment: str, out_dir, *, refine: bool = True, device="cpu") -> list[Path]:
@@ -330,21 +354,31 @@ def population_summary(table: Table, fields) -> tuple[dict, str]:
         ``{f}_std_paper`` and ``{f}_best`` (the better of ours and ours + refinement); over the fields: ``met`` (fields
         where the best is at most the paper's), ``dem_better`` (fields where the DEM beats the best), ``flips`` and
         ``flips_raw`` (flipped elements with and without refinement, and without only), ``speed`` and ``speed_min``
-        (median and smallest classical / ours time), ``ref_time`` and ``dem_time`` (median seconds).
+        (median and smallest classical / ours time), ``ref_time`` and ``dem_time`` (median seconds).  When the
+        table has the symmetrized rows (:data:`SYM`, :data:`SYM_REF`), also ``{f}_std_sym``, ``{f}_std_sym_ref``,
+        ``{f}_best_sym`` (the best of all four), ``met_sym``, ``flips_sym``, ``speed_sym`` and ``speed_sym_min``.
     markdown : str
-        One row per field: ours, ours + refinement, diffusion DEM, paper, best / paper.
+        One row per field: ours, ours + refinement, (the symmetrized rows,) diffusion DEM, paper, best / paper.
     """
     def v(f, method, col="std_rho_map"):
         return table.value(f, method, col)
 
     values: dict = {}
-    rows = ["| field | ours | ours + refinement | diffusion DEM | paper | best / paper |", "|---|---|---|---|---|---|"]
+    has_sym = any(m == SYM for _, m, _ in table.rows)
+    head = ["ours", "ours + refinement"] + ([SYM, SYM_REF] if has_sym else []) + ["diffusion DEM", "paper",
+                                                                                  "best / paper"]
+    head += ["best with symmetrization / paper"] if has_sym else []
+    rows = ["| field | " + " | ".join(head) + " |", "|---" * (len(head) + 1) + "|"]
     for f in fields:
         ours, ref, dem, paper = v(f, "ours"), v(f, "ours + refinement"), v(f, "diffusion DEM"), v(f, "paper")
         best = min(ours, ref)
         values.update({f"{f}_std": ours, f"{f}_std_ref": ref, f"{f}_std_dem": dem, f"{f}_std_paper": paper,
                        f"{f}_best": best})
-        cells = [format_value(x) for x in (ours, ref, dem, paper)] + [format_value(best / paper, "speedup")]
+        sym = (v(f, SYM), v(f, SYM_REF)) if has_sym else ()
+        if has_sym:
+            values.update({f"{f}_std_sym": sym[0], f"{f}_std_sym_ref": sym[1], f"{f}_best_sym": min(best, *sym)})
+        cells = [format_value(x) for x in (ours, ref, *sym, dem, paper)] + [format_value(best / paper, "speedup")]
+        cells += [format_value(values[f"{f}_best_sym"] / paper, "speedup")] if has_sym else []
         rows.append(f"| {f} | " + " | ".join(cells) + " |")
     values.update(
         met=int(sum(values[f"{f}_best"] <= values[f"{f}_std_paper"] for f in fields)),
@@ -356,6 +390,13 @@ def population_summary(table: Table, fields) -> tuple[dict, str]:
         ref_time=float(np.median([v(f, "ours + refinement", "time") for f in fields])),
         dem_time=float(np.median([v(f, "diffusion DEM", "time") for f in fields])),
     )
+    if has_sym:
+        values.update(
+            met_sym=int(sum(values[f"{f}_best_sym"] <= values[f"{f}_std_paper"] for f in fields)),
+            flips_sym=int(sum(v(f, m, "n_flipped") for f in fields for m in (SYM, SYM_REF))),
+            speed_sym=float(np.median([v(f, SYM, "speedup") for f in fields])),
+            speed_sym_min=float(min(v(f, SYM, "speedup") for f in fields)),
+        )
     return values, "\n".join(rows)
 
 

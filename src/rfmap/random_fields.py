@@ -240,7 +240,7 @@ class RandomBeltramiConfig:
     low : float
         Share of low-frequency fields, whose number of modes and frequencies are drawn from ``low_modes`` and
         ``low_freq`` instead (0 draws no extra random number, so the streams of older configurations are kept).
-        At equal :math:`\|\mu\|_\infty` a map with a few slow modes moves the mesh much further than one with
+        At equal :math:`\\|\\mu\\|_\\infty` a map with a few slow modes moves the mesh much further than one with
         many fast modes, and a model trained on the default ranges reconstructs such maps with about three times
         the vertex error (measured on held-out random maps).
     low_modes : (int, int)

@@ -33,6 +33,7 @@ from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
 from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
+from .symmetry import resolve_symmetry, symmetrized_displacement
 from .repair import repair_map
 from .result import MapResult
 from .tasks import TaskSpec, encode
@@ -284,23 +285,40 @@ class Surrogate:
         return self._unit_mass(out[:, 0].reshape((n_work,) * d), False)
 
     # ------------------------------------------------------------------ inference
+    def _symmetry(self, symmetrize) -> str | None:
+        """The symmetry group of a ``symmetrize`` argument (density models only; :mod:`rfmap.symmetry`)."""
+        if symmetrize is False or symmetrize is None:
+            return None
+        if self.spec.kind != "density":
+            raise ValueError(f"symmetrize averages density maps over the symmetries of the square or cube; "
+                             f"it does not apply to {self.spec.kind} maps")
+        return resolve_symmetry(symmetrize, self.spec.dim)
+
     def work_n(self, n: int) -> int:
         """The working grid side used for an output of side ``n``: ``n`` clipped to the training range."""
         lo, hi = self.n_range
         return int(min(max(n, lo), hi))
 
     @torch.no_grad()
-    def displacement(self, grids: np.ndarray) -> torch.Tensor:
+    def displacement(self, grids: np.ndarray, symmetrize: bool | str = False) -> torch.Tensor:
         r"""Network output :math:`\psi` for a batch of preprocessed fields on one regular grid.
 
         Parameters
         ----------
         grids : array, shape (B, N, ..., N), real density (unit mass) or complex Beltrami coefficient
+        symmetrize : bool or str
+            Density models: the mean of the network's output over symmetries of the square or cube
+            (:func:`rfmap.symmetry.symmetrized_displacement`; ``True`` the dimension's
+            :data:`rfmap.symmetry.DEFAULT_SYMMETRY`, or a group of :data:`rfmap.symmetry.SYMMETRY_GROUPS`), one
+            network evaluation per symmetry.
 
         Returns
         -------
         Tensor, float32, shape (B, d, N, ..., N)
         """
+        group = self._symmetry(symmetrize)
+        if group is not None:
+            return symmetrized_displacement(self.displacement, grids, group)
         g = np.asarray(grids)
         B, n, d = g.shape[0], g.shape[1], self.spec.dim
         if g.ndim != d + 1:
@@ -313,7 +331,8 @@ class Surrogate:
 
     def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
             alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None,
-            repair: bool = True, polish: bool | float = False, guard: bool = GUARD) -> MapResult:
+            repair: bool = True, polish: bool | float = False, guard: bool = GUARD,
+            symmetrize: bool | str = False) -> MapResult:
         """Map one field.
 
         Parameters
@@ -355,6 +374,10 @@ class Surrogate:
         guard : bool
             With ``polish``: after a warm flow also run the cold flow and keep the better map
             (``rfmap.hybrid.GUARD``), so that the result is never worse than the flow-based solver alone.
+        symmetrize : bool or str
+            Density maps: average the network's displacement over symmetries of the square or cube
+            (:mod:`rfmap.symmetry`: ``True`` for :data:`rfmap.symmetry.DEFAULT_SYMMETRY`, 8 evaluations in 2D and 6
+            in 3D, or a group name), before everything else; ``info["symmetrize"]`` records the group.
 
         Returns
         -------
@@ -365,12 +388,14 @@ class Surrogate:
             :func:`rfmap.repair.repair_map`), and with ``polish`` the report
             ``info["polish"]`` (warm or cold start and both stages' times and metrics).
         """
+        group = self._symmetry(symmetrize)
         inp, n = self._resolve(field, n, preprocess)
         return self._map_one(inp, n, points, refine, work_n, alpha, refine_bounds, repair=repair, polish=polish,
-                             guard=guard, regrid=work_n is None)
+                             guard=guard, regrid=work_n is None, symmetrize=group)
 
     def map_batch(self, fields: Sequence, n: int | None = None, **kw) -> list[MapResult]:
         """Map several fields with one batched network evaluation (same ``n`` for all)."""
+        group = self._symmetry(kw.get("symmetrize", False))
         inps = [self._resolve(f, n, kw.get("preprocess", True)) for f in fields]
         ns = {k for _, k in inps}
         if len(ns) != 1:
@@ -378,16 +403,17 @@ class Surrogate:
         nn_ = ns.pop()
         nw = kw.get("work_n") or self.work_n(nn_)
         t0 = time.perf_counter()
-        psi = self.displacement(np.stack([self._work_grid(i, nw) for i, _ in inps]))
+        psi = self.displacement(np.stack([self._work_grid(i, nw) for i, _ in inps]), group)
         dt = (time.perf_counter() - t0) / len(inps)
         return [self._map_one(i, nn_, kw.get("points"), kw.get("refine", False), nw, kw.get("alpha"),
                               kw.get("refine_bounds"), psi=psi[k:k + 1], net_time=dt,
                               repair=kw.get("repair", True), polish=kw.get("polish", False),
-                              guard=kw.get("guard", GUARD), regrid=kw.get("work_n") is None)
+                              guard=kw.get("guard", GUARD), regrid=kw.get("work_n") is None, symmetrize=group)
                 for k, (i, _) in enumerate(inps)]
 
     def _map_one(self, inp: _Input, n: int, points, refine, work_n, alpha, bounds, psi=None, net_time=None,
-                 repair: bool = True, polish: bool | float = False, guard: bool = GUARD, regrid: bool = False):
+                 repair: bool = True, polish: bool | float = False, guard: bool = GUARD, regrid: bool = False,
+                 symmetrize: str | None = None):
         """Evaluate the network on the working grid (unless ``psi`` is given), resample its displacement and the
         input field on the output mesh, apply the stretching vector (refined or given), repair folds, and polish."""
         if polish is not False:
@@ -408,7 +434,7 @@ class Surrogate:
             """The network's map of the output mesh from working grid ``w`` (refined or with the given alpha)."""
             t0 = time.perf_counter()
             if psi_w is None:
-                psi_w = self.displacement(self._work_grid(inp, w)[None])
+                psi_w = self.displacement(self._work_grid(inp, w)[None], symmetrize or False)
             t_net = time.perf_counter() - t0 if (net_time is None or w != nw) else net_time
             t1 = time.perf_counter()
             psi64_w = self._displacement_at(psi_w, ref, n if points is None and n == w else None)
@@ -425,7 +451,7 @@ class Surrogate:
             return psi_w, mapped_w, a_w, extra, t_net, t_net + time.perf_counter() - t1
 
         psi, mapped, a, extra, t_net, t_map = network_map(nw, psi)
-        info: dict[str, Any] = {"work_n": nw, "network_time": t_net}
+        info: dict[str, Any] = {"work_n": nw, "network_time": t_net, "symmetrize": symmetrize}
         if (repair and regrid and polish is False and self.spec.dim in REGRID_DIMS and points is None
                 and self._flipped(mapped, n)):
             # a folded map: try the network on coarser working grids before any repair (REGRID_DIMS)

@@ -1,0 +1,148 @@
+r"""Test-time symmetrization of a density surrogate over the symmetries of the unit square or cube.
+
+The symmetries of :math:`\Omega = [0, 1]^d` are the axis reflections :math:`x_i \mapsto 1 - x_i` and the axis
+permutations (the hyperoctahedral group: 8 elements in 2D, 48 in 3D); every one maps the regular grid onto itself.
+The density-equalizing problem commutes with them: if :math:`u` equalizes :math:`\rho`, then
+:math:`g^{-1} \circ u \circ g` equalizes :math:`\rho \circ g`, so the displacement :math:`d = u - x` of the
+transformed field is the transformed displacement,
+
+.. math::
+
+    d_{\rho \circ g}(x) = A_g^{-1}\, d_\rho(g x), \qquad g x = A_g x + b_g,
+
+(a reflection of axis :math:`i` negates component :math:`i` and flips the array along it; a permutation of the
+axes permutes the components and transposes the array).  The boundary factor :math:`\mathcal{B}` of
+:func:`rfmap.nn.model.apply_displacement` is invariant in the same way, so the rule holds for the network's
+:math:`\psi` as well.  A trained network is equivariant only approximately: its errors on :math:`\rho` and on
+:math:`\rho \circ g` differ.  The symmetrized prediction
+
+.. math::
+
+    \bar\psi = \frac{1}{|S|} \sum_{g \in S} A_g\, \psi(\rho \circ g^{-1}) \circ g^{-1}
+
+over a set :math:`S` of symmetries is exact wherever :math:`\psi` is, and averages out the part of the error that
+changes with :math:`g`; it costs :math:`|S|` network evaluations.  Measured on the held-out validation fields
+(never the paper's test fields) the average lowers Std(rho~_map) by 10-20 % in 3D and removes most folds on steep
+ramps; chapter 8 reports it.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import torch
+
+__all__ = ["Symmetry", "SYMMETRY_GROUPS", "DEFAULT_SYMMETRY", "symmetries", "transform_grid", "restore_displacement",
+           "symmetrized_displacement", "resolve_symmetry"]
+
+#: the sets of symmetries offered: ``flips`` (every combination of axis reflections, 2^d), ``permutations`` (every
+#: order of the axes, d!), ``cyclic`` (the d cyclic orders of the axes), ``full`` (all 2^d d! symmetries)
+SYMMETRY_GROUPS = ("flips", "permutations", "cyclic", "full")
+#: the set used by ``symmetrize=True``, per dimension: all 8 in 2D; in 3D the 6 axis orders (chosen on the held-out
+#: validation fields at N = 48 against 3 cyclic orders, 4 and 8 reflections: about as accurate as the 8 reflections
+#: for three quarters of their cost)
+DEFAULT_SYMMETRY = {2: "full", 3: "permutations"}
+
+
+@dataclass(frozen=True)
+class Symmetry:
+    """One symmetry of the unit cube: reflect the axes in ``flips``, then order the axes as ``perm``."""
+
+    flips: tuple[int, ...]
+    perm: tuple[int, ...]
+
+
+def symmetries(dim: int, group: str) -> list[Symmetry]:
+    """The symmetries of ``group`` (:data:`SYMMETRY_GROUPS`) in dimension ``dim``; the identity comes first."""
+    if dim not in (2, 3):
+        raise ValueError(f"symmetrization is defined for 2D and 3D grids, got dim={dim}")
+    ident = tuple(range(dim))
+    flips = [f for r in range(dim + 1) for f in itertools.combinations(range(dim), r)]
+    if group == "flips":
+        return [Symmetry(f, ident) for f in flips]
+    if group == "permutations":
+        return [Symmetry((), p) for p in itertools.permutations(range(dim))]
+    if group == "cyclic":
+        return [Symmetry((), tuple((i + k) % dim for i in range(dim))) for k in range(dim)]
+    if group == "full":
+        return [Symmetry(f, p) for f in flips for p in itertools.permutations(range(dim))]
+    raise ValueError(f"unknown symmetry group {group!r}; expected one of {', '.join(SYMMETRY_GROUPS)}")
+
+
+def resolve_symmetry(symmetrize: bool | str, dim: int) -> str | None:
+    """The group name for a ``symmetrize`` argument: ``False`` gives ``None``, ``True`` the
+    :data:`DEFAULT_SYMMETRY` of the dimension, a name itself (checked)."""
+    if symmetrize is False or symmetrize is None:
+        return None
+    group = DEFAULT_SYMMETRY.get(dim) if symmetrize is True else symmetrize
+    if not isinstance(group, str) or group not in SYMMETRY_GROUPS:
+        raise ValueError(f"symmetrize must be True, False or one of {', '.join(SYMMETRY_GROUPS)}; got {symmetrize!r}")
+    symmetries(dim, group)  # checks the dimension
+    return group
+
+
+def transform_grid(grids: np.ndarray, s: Symmetry) -> np.ndarray:
+    """Fields on the grid seen through symmetry ``s``.
+
+    Parameters
+    ----------
+    grids : array, shape (B, N, ..., N)
+
+    Returns
+    -------
+    array, shape (B, N, ..., N), contiguous: the fields reflected along ``s.flips``, then with axes ``s.perm``
+    """
+    g = np.asarray(grids)
+    for ax in s.flips:
+        g = np.flip(g, axis=1 + ax)
+    return np.ascontiguousarray(np.transpose(g, (0,) + tuple(1 + p for p in s.perm)))
+
+
+def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
+    """The displacement of the untransformed fields from that of the fields of :func:`transform_grid`.
+
+    Parameters
+    ----------
+    psi : Tensor, shape (B, d, N, ..., N)
+
+    Returns
+    -------
+    Tensor, shape (B, d, N, ..., N): axes and components put back in order, then every reflected axis flipped back
+    and its component negated
+    """
+    d = psi.shape[1]
+    inv = [int(i) for i in np.argsort(s.perm)]
+    out = psi.permute(0, 1, *[2 + q for q in inv])[:, inv]
+    if s.flips:
+        out = out.flip([2 + ax for ax in s.flips])
+        sign = torch.ones(d, dtype=out.dtype, device=out.device)
+        sign[list(s.flips)] = -1
+        out = out * sign.view(1, d, *([1] * d))
+    return out.contiguous()
+
+
+def symmetrized_displacement(fn: Callable[[np.ndarray], torch.Tensor], grids: np.ndarray, group: str) -> torch.Tensor:
+    r"""The mean of :math:`A_g\,\psi(\rho \circ g^{-1}) \circ g^{-1}` over the symmetries of ``group``.
+
+    Parameters
+    ----------
+    fn : callable
+        The network's displacement of a batch of fields, (B, N, ..., N) -> Tensor (B, d, N, ..., N).
+    grids : array, shape (B, N, ..., N)
+    group : str
+        One of :data:`SYMMETRY_GROUPS`.  The symmetries are evaluated one after another (memory as for one
+        evaluation).
+
+    Returns
+    -------
+    Tensor, shape (B, d, N, ..., N)
+    """
+    g = np.asarray(grids)
+    total = None
+    syms = symmetries(g.ndim - 1, group)
+    for s in syms:
+        psi = restore_displacement(fn(transform_grid(g, s)), s)
+        total = psi if total is None else total + psi
+    return total / len(syms)
