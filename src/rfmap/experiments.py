@@ -410,7 +410,8 @@ def glue_all(values: dict, prefix: str) -> None:
 
 # ------------------------------------------------------------------------------------------- generalization
 def generalization_table(sur, count: int = 50, n: int | None = None, refine: bool = True,
-                         classical: bool = True, low_frequency: bool = False) -> Table:
+                         classical: bool = True, low_frequency: bool = False,
+                         symmetrize: bool | str = False) -> Table:
     """Surrogate against the classical solver on ``count`` seeded random fields that training never drew (the
     ``report`` stream of :mod:`rfmap.validation`, used for nothing else), on the same ``N``-grid.
 
@@ -420,7 +421,8 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     and ``all``; columns: mean and worst metric, flipped elements of the raw network map, and mean time.
     ``classical=False`` leaves the classical solver's rows out (when another table already has them);
     ``low_frequency`` (Beltrami models) draws random maps of 1-4 slow modes instead (table
-    ``tab:generalization-low-NAME``).
+    ``tab:generalization-low-NAME``); ``symmetrize`` (density models) adds the network averaged over symmetries of
+    the domain, with refinement and fold handling (:data:`SYM_REF`, or :data:`SYM` without ``refine``).
     """
     from .inputs import preprocess_density
     from .mesh import grid_points
@@ -444,6 +446,8 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
         variants = [("ours", raw)]
         if refine:
             variants.append(("ours + refinement", sur.map(vf.field, n, refine=True)))
+        if symmetrize:
+            variants.append((SYM_REF if refine else SYM, sur.map(vf.field, n, refine=refine, symmetrize=symmetrize)))
         if spec.kind == "beltrami":
             if classical:
                 variants.append(("classical (LBS)", solve_lbs(vf.field, n)))

@@ -376,7 +376,7 @@ class Surrogate:
             (``rfmap.hybrid.GUARD``), so that the result is never worse than the flow-based solver alone.
         symmetrize : bool or str
             Density maps: average the network's displacement over symmetries of the square or cube
-            (:mod:`rfmap.symmetry`: ``True`` for :data:`rfmap.symmetry.DEFAULT_SYMMETRY`, 8 evaluations in 2D and 6
+            (:mod:`rfmap.symmetry`: ``True`` for :data:`rfmap.symmetry.DEFAULT_SYMMETRY`, 8 evaluations in 2D and 3
             in 3D, or a group name), before everything else; ``info["symmetrize"]`` records the group.
 
         Returns
