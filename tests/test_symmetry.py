@@ -109,13 +109,7 @@ def test_symmetrized_surrogate_map_is_equivariant(dim, n, boundary):
     np.testing.assert_allclose(batch[0].mapped_points, r.mapped_points, atol=1e-6)
 
 
-def test_symmetrize_rejects_beltrami_models_and_unknown_groups():
-    from rfmap.surrogate import Surrogate
-    from rfmap.tasks import TaskSpec
-
-    bel = Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, n_range=[9, 17])
-    with pytest.raises(ValueError, match="does not apply to beltrami"):
-        bel.map(lambda p: 0.1 * p[:, 0] + 0j, 13, symmetrize=True)
+def test_symmetrize_rejects_unknown_groups():
     with pytest.raises(ValueError, match="symmetrize must be"):
         _random_surrogate(2).map(np.ones((13, 13)), symmetrize="rotations")
 
@@ -128,9 +122,32 @@ def test_cli_symmetrize(tmp_path, capsys):
                  "--out", str(out)]) == 0
     assert "mean over 4 symmetries (flips)" in capsys.readouterr().out and out.exists()
     bad = tmp_path / "b.npz"
-    assert main(["map", "--model", "beltrami2d", "--field", "T1", "--n", "17", "--symmetrize",
-                 "--out", str(bad)]) == 2
-    assert "does not apply to beltrami" in capsys.readouterr().err and not bad.exists()
     with pytest.raises(SystemExit) as e:
         main(["map", "--model", "deq2d-square", "--field", "ring", "--symmetrize", "rot", "--out", str(bad)])
     assert e.value.code == 2 and not bad.exists()
+
+
+def test_beltrami_coefficient_transforms_as_the_conjugated_map():
+    """For an exact random map f and each symmetry g of the square (g x = A x + b), the coefficient of
+    g o f o g^-1, computed from its Jacobian A J_f(g^-1 x) A^-1, equals transform_grid of f's coefficient
+    (to 1e-12)."""
+    from rfmap.geometry import beltrami_from_jacobian
+    from rfmap.mesh import grid_points
+    from rfmap.random_fields import RandomBeltramiConfig, RandomMap
+
+    n = 11
+    f = RandomMap(np.random.default_rng(4), RandomBeltramiConfig(sup=(0.5, 0.5), modes=(3, 3)))
+    x = grid_points(n, 2)
+    mu = f.mu(x).reshape(1, n, n)
+    for s in symmetries(2, "full"):
+        # the affine map g of the array transform: transform_grid(h)[idx] = h[g^-1 applied to idx]
+        # g^-1(x), the old coordinates of a new point x: undo the permutation, then the reflections
+        y = x[:, np.argsort(s.perm)]
+        y = np.where(np.isin(np.arange(2), s.flips), 1 - y, y)
+        A = np.eye(2)[list(s.perm)]  # new axis k reads old axis perm[k]
+        refl = np.diag([-1.0 if k in s.flips else 1.0 for k in range(2)])
+        G = np.linalg.inv(A @ refl)  # dy/dx, the linear part of g^-1
+        Jy = f.jacobian(y)
+        J = np.linalg.inv(G) @ Jy @ G  # Jacobian of g o f o g^-1 at x
+        expected = beltrami_from_jacobian(torch.as_tensor(J)).numpy().reshape(1, n, n)
+        np.testing.assert_allclose(transform_grid(mu, s), expected, atol=1e-12)

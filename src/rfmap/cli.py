@@ -275,7 +275,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="with --polish: return the warm flow's map without also running the cold flow and keeping "
                         "the better one")
     s.add_argument("--symmetrize", nargs="?", const=True, default=False, type=_symmetry_arg, metavar="GROUP",
-                   help="density maps: average the network over symmetries of the square or cube (default set, or "
+                   help="average the network over symmetries of the square or cube (default set, or "
                         "one of flips, permutations, cyclic, full); one network evaluation per symmetry")
     s.add_argument("--out", required=True, help="output .npz")
     s.add_argument("--vtk", default=None, help="also write the mapped mesh as VTK (.vtu)")

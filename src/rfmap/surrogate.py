@@ -286,12 +286,7 @@ class Surrogate:
 
     # ------------------------------------------------------------------ inference
     def _symmetry(self, symmetrize) -> str | None:
-        """The symmetry group of a ``symmetrize`` argument (density models only; :mod:`rfmap.symmetry`)."""
-        if symmetrize is False or symmetrize is None:
-            return None
-        if self.spec.kind != "density":
-            raise ValueError(f"symmetrize averages density maps over the symmetries of the square or cube; "
-                             f"it does not apply to {self.spec.kind} maps")
+        """The symmetry group of a ``symmetrize`` argument (:mod:`rfmap.symmetry`)."""
         return resolve_symmetry(symmetrize, self.spec.dim)
 
     def work_n(self, n: int) -> int:
@@ -307,7 +302,7 @@ class Surrogate:
         ----------
         grids : array, shape (B, N, ..., N), real density (unit mass) or complex Beltrami coefficient
         symmetrize : bool or str
-            Density models: the mean of the network's output over symmetries of the square or cube
+            The mean of the network's output over symmetries of the square or cube
             (:func:`rfmap.symmetry.symmetrized_displacement`; ``True`` the dimension's
             :data:`rfmap.symmetry.DEFAULT_SYMMETRY`, or a group of :data:`rfmap.symmetry.SYMMETRY_GROUPS`), one
             network evaluation per symmetry.
@@ -375,7 +370,7 @@ class Surrogate:
             With ``polish``: after a warm flow also run the cold flow and keep the better map
             (``rfmap.hybrid.GUARD``), so that the result is never worse than the flow-based solver alone.
         symmetrize : bool or str
-            Density maps: average the network's displacement over symmetries of the square or cube
+            Average the network's displacement over symmetries of the square or cube
             (:mod:`rfmap.symmetry`: ``True`` for :data:`rfmap.symmetry.DEFAULT_SYMMETRY`, 8 evaluations in 2D and 3
             in 3D, or a group name), before everything else; ``info["symmetrize"]`` records the group.
 

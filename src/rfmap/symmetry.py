@@ -86,21 +86,41 @@ def resolve_symmetry(symmetrize: bool | str, dim: int) -> str | None:
     return group
 
 
+def _odd(perm: tuple[int, ...]) -> bool:
+    """Whether a permutation is odd (an odd number of inversions)."""
+    return sum(a > b for i, a in enumerate(perm) for b in perm[i + 1:]) % 2 == 1
+
+
 def transform_grid(grids: np.ndarray, s: Symmetry) -> np.ndarray:
-    """Fields on the grid seen through symmetry ``s``.
+    r"""Fields on the grid seen through symmetry ``s``.
+
+    A density is a scalar: only its samples move.  A complex array is a Beltrami coefficient (2D), whose values
+    change too: for :math:`f' = g \circ f \circ g^{-1}` with :math:`g(z) = e^{i\theta} z + c` the coefficient is
+    :math:`\mu_{f'} = e^{2i\theta}\,\mu_f \circ g^{-1}`, and with the reflection
+    :math:`g(z) = e^{i\theta} \bar z + c` it is :math:`e^{2i\theta}\,\overline{\mu_f \circ g^{-1}}`.  A
+    reflection of either axis is such a reflection with :math:`e^{2i\theta} = 1` (a conjugate), the swap of the two
+    axes one with :math:`e^{2i\theta} = -1` (minus the conjugate).
 
     Parameters
     ----------
-    grids : array, shape (B, N, ..., N)
+    grids : array, shape (B, N, ..., N), real (density) or complex (Beltrami coefficient)
 
     Returns
     -------
     array, shape (B, N, ..., N), contiguous: the fields reflected along ``s.flips``, then with axes ``s.perm``
+    (and, for a Beltrami coefficient, its values transformed as above)
     """
     g = np.asarray(grids)
     for ax in s.flips:
         g = np.flip(g, axis=1 + ax)
-    return np.ascontiguousarray(np.transpose(g, (0,) + tuple(1 + p for p in s.perm)))
+    g = np.ascontiguousarray(np.transpose(g, (0,) + tuple(1 + p for p in s.perm)))
+    if np.iscomplexobj(g):
+        odd = _odd(s.perm)
+        if (len(s.flips) + odd) % 2:
+            g = np.conj(g)
+        if odd:
+            g = -g
+    return g
 
 
 def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
