@@ -182,7 +182,12 @@ def _lbs(name: str, n: int) -> MapResult:
     return min((solve_lbs(mu, n) for _ in range(3)), key=lambda r: r.time)
 
 
-def _beltrami_rows(sur, table: Table, cases: list[tuple[str, str, int]], paper: dict, refine: bool):
+#: row names of the symmetrized network (``symmetrize`` of the tables; :mod:`rfmap.symmetry`)
+SYM, SYM_REF = "ours, symmetrized", "ours, symmetrized + refinement"
+
+
+def _beltrami_rows(sur, table: Table, cases: list[tuple[str, str, int]], paper: dict, refine: bool,
+                   symmetrize: bool | str = False):
     results = {}
     for case, name, n in cases:
         ours = _timed_map(sur, name, n, refine=refine)
@@ -190,26 +195,36 @@ def _beltrami_rows(sur, table: Table, cases: list[tuple[str, str, int]], paper: 
         mo, ml = _beltrami_metrics(ours, name), _beltrami_metrics(lbs, name)
         mo["speedup"] = ml["time"] / mo["time"]
         table.add(case, "ours", mo)
+        results[case] = {"ours": ours, "lbs": lbs, "exact": exact_beltrami_result(name, n)}
+        if symmetrize:
+            sym = _timed_map(sur, name, n, refine=refine, symmetrize=symmetrize)
+            ms = _beltrami_metrics(sym, name)
+            ms["speedup"] = ml["time"] / ms["time"]
+            table.add(case, SYM, ms)
+            results[case]["ours+sym"] = sym
         table.add(case, "LBS", ml)
         if case in paper["rows"]:
             table.add(case, "paper", paper["rows"][case])
-        results[case] = {"ours": ours, "lbs": lbs, "exact": exact_beltrami_result(name, n)}
     return table, results
 
 
 _BEL_COLS = ["time", "speedup", "mean_dd", "mean_dmu", "mean_dmu_pl", "n_flipped", "min_jacobian"]
 
 
-def beltrami_table(sur, n: int = PAPER_N[2], maps=TEST_FIELDS["beltrami", 2], refine: bool = False):
-    """tab:reconstruction_results_mu: our model, the Linear Beltrami Solver and the paper on T1–T4 at ``n``."""
+def beltrami_table(sur, n: int = PAPER_N[2], maps=TEST_FIELDS["beltrami", 2], refine: bool = False,
+                   symmetrize: bool | str = False):
+    """tab:reconstruction_results_mu: our model, the Linear Beltrami Solver and the paper on T1–T4 at ``n``;
+    ``symmetrize`` adds the network averaged over symmetries of the square (row :data:`SYM`)."""
     t = Table("tab:reconstruction_results_mu", f"Reconstruction from Beltrami coefficients (N = {n})", _BEL_COLS)
-    return _beltrami_rows(sur, t, [(m, m, n) for m in maps], paper_table(t.label), refine)
+    return _beltrami_rows(sur, t, [(m, m, n) for m in maps], paper_table(t.label), refine, symmetrize)
 
 
-def beltrami_resolution_table(sur, ns=(48, 64, 80, 96), name: str = "T1-res", refine: bool = False):
-    """tab:reconstruction_results_res: the same model on ``name`` at several resolutions."""
+def beltrami_resolution_table(sur, ns=(48, 64, 80, 96), name: str = "T1-res", refine: bool = False,
+                              symmetrize: bool | str = False):
+    """tab:reconstruction_results_res: the same model on ``name`` at several resolutions (``symmetrize`` as in
+    :func:`beltrami_table`)."""
     t = Table("tab:reconstruction_results_res", f"Reconstruction of {name} at several resolutions", _BEL_COLS)
-    return _beltrami_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(t.label), refine)
+    return _beltrami_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(t.label), refine, symmetrize)
 
 
 def _density_values(res: MapResult, with_mu: bool) -> dict:
@@ -225,10 +240,6 @@ def _classical(name: str, n: int, boundary: str) -> MapResult:
     from .solvers import solve_dem
 
     return solve_dem(DENSITIES[name].sample(n), boundary=boundary)
-
-
-#: row names of the symmetrized network (``symmetrize`` of the density tables; :mod:`rfmap.symmetry`)
-SYM, SYM_REF = "ours, symmetrized", "ours, symmetrized + refinement"
 
 
 def _density_rows(sur, table, cases, paper, refine, boundary, classical=True, symmetrize=False):
