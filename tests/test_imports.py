@@ -26,7 +26,7 @@ LAYERS: dict[str, int] = {
     # classical solvers, the network, the losses
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1, "rfmap.solvers.flow": 1,
     "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.nn.fno": 1, "rfmap.nn.registry": 1,
-    "rfmap.losses": 1,
+    "rfmap.losses": 1, "rfmap.symmetry": 1,
     # tasks, training, refinement, inference, post-processing, plotting
     "rfmap.tasks": 2, "rfmap.config": 2, "rfmap.train": 2, "rfmap.refine": 2, "rfmap.surrogate": 2,
     "rfmap.pretrained": 2, "rfmap.repair": 2, "rfmap.validation": 2, "rfmap.hybrid": 2, "rfmap.stress": 2, "rfmap.viz": 2,

@@ -398,7 +398,8 @@ class Surrogate:
         nn_ = ns.pop()
         nw = kw.get("work_n") or self.work_n(nn_)
         t0 = time.perf_counter()
-        psi = self.displacement(np.stack([self._work_grid(i, nw) for i, _ in inps]), group)
+        grids = np.stack([self._work_grid(i, nw) for i, _ in inps])
+        psi = self.displacement(grids, group) if group else self.displacement(grids)
         dt = (time.perf_counter() - t0) / len(inps)
         return [self._map_one(i, nn_, kw.get("points"), kw.get("refine", False), nw, kw.get("alpha"),
                               kw.get("refine_bounds"), psi=psi[k:k + 1], net_time=dt,
@@ -429,7 +430,8 @@ class Surrogate:
             """The network's map of the output mesh from working grid ``w`` (refined or with the given alpha)."""
             t0 = time.perf_counter()
             if psi_w is None:
-                psi_w = self.displacement(self._work_grid(inp, w)[None], symmetrize or False)
+                grid = self._work_grid(inp, w)[None]
+                psi_w = self.displacement(grid, symmetrize) if symmetrize else self.displacement(grid)
             t_net = time.perf_counter() - t0 if (net_time is None or w != nw) else net_time
             t1 = time.perf_counter()
             psi64_w = self._displacement_at(psi_w, ref, n if points is None and n == w else None)
