@@ -137,14 +137,16 @@ def test_reproduce_dem3d_writes_every_table(tmp_path, monkeypatch):
     import rfmap.experiments as E
 
     pop, res = E.population_table, E.resolution_table
-    monkeypatch.setattr(E, "population_table", lambda sur, refine=True: pop(sur, ["sin-cos-3d"], n=9, refine=refine))
-    monkeypatch.setattr(E, "resolution_table", lambda sur, refine=False: res(sur, ns=(9,), refine=refine))
-    paths = E.reproduce("dem3d", tmp_path, refine=True)
+    monkeypatch.setattr(E, "population_table", lambda sur, refine=True, symmetrize=False: pop(
+        sur, ["sin-cos-3d"], n=9, refine=refine, symmetrize=symmetrize))
+    monkeypatch.setattr(E, "resolution_table", lambda sur, refine=False, symmetrize=False: res(
+        sur, ns=(9,), refine=refine, symmetrize=symmetrize))
+    paths = E.reproduce("dem3d", tmp_path, refine=True, symmetrize="cyclic")
     assert sorted(p.name for p in paths) == sorted(
         f"tab-{s}.{ext}" for s in ("3d-population-test", "3d-population-test-fb", "3d-resolution-test")
         for ext in ("md", "csv"))
     text = (tmp_path / "tab-3d-resolution-test.md").read_text()
-    assert "ours + refinement" in text and "diffusion DEM" in text
+    assert "ours + refinement" in text and "diffusion DEM" in text and "ours, symmetrized + refinement" in text
     with pytest.raises(ValueError, match="unknown experiment"):
         E.reproduce("dem4d", tmp_path)
 

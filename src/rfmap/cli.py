@@ -210,7 +210,8 @@ def cmd_reproduce(args) -> int:
     from .device import resolve_device
 
     device = resolve_device(args.device)  # before any work: a bad device is one line and exit 2
-    for path in reproduce(args.experiment, args.out, refine=not args.no_refine, device=device):
+    for path in reproduce(args.experiment, args.out, refine=not args.no_refine, device=device,
+                          symmetrize=args.symmetrize):
         print(f"wrote {path}")
     return 0
 
@@ -308,6 +309,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("experiment", choices=["beltrami", "dem2d", "dem3d"])
     s.add_argument("--out", default="reproduction", help="output directory")
     s.add_argument("--no-refine", action="store_true", help="skip weight refinement")
+    s.add_argument("--symmetrize", nargs="?", const=True, default=False, type=_symmetry_arg, metavar="GROUP",
+                   help="add the rows of the networks averaged over the domain's symmetries")
     s.add_argument("--device", default="cpu", help="where the networks run: cpu (default), cuda or auto")
     s.set_defaults(func=cmd_reproduce)
     return p

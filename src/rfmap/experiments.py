@@ -316,9 +316,11 @@ def resolution_table(sur, ns=None, refine: bool = False, classical: bool = True,
                          symmetrize)
 
 
-def reproduce(experiment: str, out_dir, *, refine: bool = True, device="cpu") -> list[Path]:
+def reproduce(experiment: str, out_dir, *, refine: bool = True, device="cpu",
+              symmetrize: bool | str = False) -> list[Path]:
     """Write the tables of one experiment (``beltrami``, ``dem2d``, ``dem3d``) as Markdown and CSV; the networks
-    run on ``device`` (``'cpu'``, ``'cuda'`` or ``'auto'``), the classical solvers on the CPU."""
+    run on ``device`` (``'cpu'``, ``'cuda'`` or ``'auto'``), the classical solvers on the CPU.  ``symmetrize`` adds
+    the rows of the networks averaged over symmetries of the domain (:mod:`rfmap.symmetry`)."""
     from .surrogate import Surrogate, models
 
     def need(name):
@@ -330,17 +332,17 @@ def reproduce(experiment: str, out_dir, *, refine: bool = True, device="cpu") ->
     paths: list[Path] = []
     if experiment == "beltrami":
         sur = need("beltrami2d")
-        paths += beltrami_table(sur)[0].save(out_dir)
-        paths += beltrami_resolution_table(sur)[0].save(out_dir)
+        paths += beltrami_table(sur, symmetrize=symmetrize)[0].save(out_dir)
+        paths += beltrami_resolution_table(sur, symmetrize=symmetrize)[0].save(out_dir)
     elif experiment == "dem2d":
-        paths += population_table(need("deq2d-square"), refine=refine)[0].save(out_dir)
-        paths += population_table(need("deq2d-free"), refine=refine)[0].save(out_dir)
-        paths += resolution_table(need("deq2d-square"))[0].save(out_dir)
+        paths += population_table(need("deq2d-square"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
+        paths += population_table(need("deq2d-free"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
+        paths += resolution_table(need("deq2d-square"), symmetrize=symmetrize)[0].save(out_dir)
     elif experiment == "dem3d":
-        paths += population_table(need("dem3d-cube"), refine=refine)[0].save(out_dir)
-        paths += resolution_table(need("dem3d-cube"), refine=refine)[0].save(out_dir)
+        paths += population_table(need("dem3d-cube"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
+        paths += resolution_table(need("dem3d-cube"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
         if "dem3d-free" in models():
-            paths += population_table(need("dem3d-free"), refine=refine)[0].save(out_dir)
+            paths += population_table(need("dem3d-free"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
         else:
             print("rfmap reproduce dem3d: no free-boundary 3D model is shipped; tab:3d_population_test_fb skipped")
     else:
