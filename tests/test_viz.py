@@ -4,6 +4,7 @@ import matplotlib
 matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 from rfmap.nn.model import MultiResUNet  # noqa: E402
@@ -34,4 +35,23 @@ def test_architecture_diagram_draws_into_a_given_axes():
     fig, ax = plt.subplots()
     assert architecture_diagram(MultiResUNet(2, 1, 4, 2), ax=ax) is ax
     assert len(ax.patches) == 2 * 2 + 1 + 4  # EDC stages + input, lift, head, output
+    plt.close(fig)
+
+
+def test_vertex_error_panels_show_the_error_of_each_map():
+    from rfmap.result import MapResult
+    from rfmap.mesh import grid_mesh
+    from rfmap.viz import vertex_error_panels
+
+    n = 9
+    mesh = grid_mesh(n, 2)
+    exact = MapResult(mesh.points, mesh.points.copy(), mesh.elements, None, kind="density")
+    shifted = MapResult(mesh.points, mesh.points + [0.01, 0.0], mesh.elements, None, kind="density")
+    fig = vertex_error_panels({"ours": shifted, "exact": exact}, exact, n=n)
+    titles = [ax.get_title() for ax in fig.axes[:2]]
+    assert titles == ["ours: mean 1.00e-02", "exact: mean 0.00e+00"]
+    img = fig.axes[0].images[0].get_array()
+    np.testing.assert_allclose(img, 0.01)
+    with pytest.raises(ValueError, match="grid"):
+        vertex_error_panels({"ours": shifted}, exact, n=n + 1)
     plt.close(fig)

@@ -13,7 +13,7 @@ __all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "p
            "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
            "population_figure", "volume_rows", "render_lattice", "plot_batch", "plot_loss_terms", "training_curves", "learning_curves", "CAMERA_3D", "LOSS_TERMS", "plot_regions", "cartogram_figure",
            "cartogram_panels", "area_error_histograms", "time_accuracy_figure", "validation_vs_time",
-           "table_lines", "plot_slice_outline", "displacement_demand_figure"]
+           "table_lines", "plot_slice_outline", "displacement_demand_figure", "vertex_error_panels"]
 
 STYLE = {
     "figure.dpi": 110,
@@ -289,6 +289,39 @@ def plot_beltrami_row(axes, exact, lbs, ours, *, n: int, label: str = "", bins: 
         ax.hist(e, bins=bins, range=(0, hi), color="tab:blue" if name == "LBS" else "tab:orange")
         ax.set_title(f"$|\\mu_{{truth}}-\\mu_{{pred}}|$ {name}")
         ax.set_yscale("log")
+
+
+def vertex_error_panels(results: dict, exact, *, n: int, title: str = ""):
+    r"""One panel per 2D map of ``results`` (``{name: MapResult}`` on the ``n``-grid): the vertex error
+    :math:`|u(x) - u_{\text{exact}}(x)|` as an image over the unit square, on a shared colour scale, with its mean
+    in the panel title.
+
+    Parameters
+    ----------
+    results : dict of str to MapResult
+        Maps of the same ``n``-grid (``ref_points`` of shape (n^2, 2)).
+    exact : MapResult
+        The exact map on the same grid.
+
+    Returns
+    -------
+    matplotlib Figure
+    """
+    import matplotlib.pyplot as plt
+
+    errs = {}
+    for name, r in results.items():
+        if r.ref_points.shape != (n * n, 2) or exact.mapped_points.shape != (n * n, 2):
+            raise ValueError(f"vertex_error_panels needs 2D maps of the {n}-grid, got {r.ref_points.shape}")
+        errs[name] = np.linalg.norm(r.mapped_points - exact.mapped_points, axis=1).reshape(n, n)
+    hi = max(float(e.max()) for e in errs.values()) or 1.0
+    fig, axes = plt.subplots(1, len(errs), figsize=(3.3 * len(errs), 3.0), squeeze=False)
+    for ax, (name, e) in zip(axes[0], errs.items()):
+        im = ax.imshow(e.T, origin="lower", extent=(0, 1, 0, 1), vmin=0, vmax=hi, cmap="magma")
+        ax.set_title(f"{title} {name}: mean {e.mean():.2e}".strip())
+        ax.set_aspect("equal")
+    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.85, label="vertex error")
+    return fig
 
 
 def population_figure(maps: dict, fields, label: str, *, n: int, method: str = "ours+refine"):
