@@ -18,7 +18,7 @@ axes permutes the components and transposes the array).  The boundary factor :ma
 
 .. math::
 
-    \bar\psi = \frac{1}{|S|} \sum_{g \in S} A_g\, \psi(\rho \circ g^{-1}) \circ g^{-1}
+    \bar\psi = \frac{1}{|S|} \sum_{g \in S} A_g\, \psi(\rho \circ g) \circ g^{-1}
 
 over a set :math:`S` of symmetries is exact wherever :math:`\psi` is, and averages out the part of the error that
 changes with :math:`g`; it costs :math:`|S|` network evaluations.  Measured on the held-out validation fields
@@ -147,7 +147,7 @@ def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
 
 
 def symmetrized_displacement(fn: Callable[[np.ndarray], torch.Tensor], grids: np.ndarray, group: str) -> torch.Tensor:
-    r"""The mean of :math:`A_g\,\psi(\rho \circ g^{-1}) \circ g^{-1}` over the symmetries of ``group``.
+    r"""The mean of :math:`A_g\,\psi(\rho \circ g) \circ g^{-1}` over the symmetries of ``group``.
 
     Parameters
     ----------
