@@ -331,8 +331,8 @@ def test_reproduce_runs_the_networks_on_the_requested_device(tmp_path, monkeypat
         def save(self, out):
             return []
 
-    monkeypatch.setattr(E, "beltrami_table", lambda sur: (seen.append(sur.device) or Probe(), None))
-    monkeypatch.setattr(E, "beltrami_resolution_table", lambda sur: (Probe(), None))
+    monkeypatch.setattr(E, "beltrami_table", lambda sur, **kw: (seen.append(sur.device) or Probe(), None))
+    monkeypatch.setattr(E, "beltrami_resolution_table", lambda sur, **kw: (Probe(), None))
     E.reproduce("beltrami", tmp_path, device=torch.device("cpu"))
     assert seen == [torch.device("cpu")]
 
