@@ -8,8 +8,9 @@ field on the same grid; both are medians over the repeats (one classical solve i
 surrogate.
 ``traced`` is the same map with the network evaluated through its TorchScript trace (``Surrogate.trace``: the same
 operations and parameters without Python's per-module overhead; tracing a shape, about 0.2 s, happens once in the
-warm-up call and is not in the median), what a user mapping many fields of one size gets. ``symmetrized`` is the traced map averaged over the domain's
-symmetries (``symmetrize=True``: 8 network evaluations in 2D, 3 in 3D; ``rfmap.symmetry``).
+warm-up call and is not in the median), what a user mapping many fields of one size gets.
+``symmetrized`` is the traced map averaged over the domain's symmetries (``symmetrize=True``: 8 network
+evaluations in 2D, 3 in 3D; ``rfmap.symmetry``).
 Models that are not shipped are replaced by an untrained network of the ``full`` preset's size (same cost).
 """
 from __future__ import annotations
@@ -49,8 +50,8 @@ def inference_rows(name: str, ns, repeats: int):
     kind, dim = sur.spec.kind, sur.spec.dim
     field = "T1" if kind == "beltrami" else ("multi-freq" if dim == 2 else "multi-freq-3d")
     print(f"\n### {sur.name}: {kind}, {dim}D, field {field} (medians of {repeats} runs)\n")
-    print("| N | working grid | surrogate (s) | network only (s) | traced (s) | symmetrized (s) | classical (s) | ratio "
-          "| ratio traced | ratio symmetrized |")
+    print("| N | working grid | surrogate (s) | network only (s) | traced (s) | symmetrized (s) | classical (s) "
+          "| ratio | ratio traced | ratio symmetrized |")
     print("|---|---|---|---|---|---|---|---|---|---|")
     for n in ns:
         rs, t_sur = median_of(lambda: sur.trace(False).map(field, n), repeats)
