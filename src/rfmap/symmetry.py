@@ -12,7 +12,7 @@ transformed field is the transformed displacement,
 
 (a reflection of axis :math:`i` negates component :math:`i` and flips the array along it; a permutation of the
 axes permutes the components and transposes the array).  The boundary factor :math:`\mathcal{B}` of
-:func:`rfmap.nn.model.apply_displacement` is invariant in the same way, so the rule holds for the network's
+:func:`rfmap.nn.apply_displacement` is invariant in the same way, so the rule holds for the network's
 :math:`\psi` as well.  A trained network is equivariant only approximately: its errors on :math:`\rho` and on
 :math:`\rho \circ g` differ.  The symmetrized prediction
 
