@@ -254,26 +254,24 @@ def _density_rows(sur, table, cases, paper, refine, boundary, classical=True, sy
             vr = _density_values(ref, with_mu)
             vr["alpha"] = ref.info["alpha"]
             entry["ours+refine"] = ref
-        sym_rows = []
+        sym_rows: dict[str, dict] = {}
         if symmetrize:
-            sym = _timed_map(sur, name, n, symmetrize=symmetrize)
-            entry["ours+sym"] = sym
-            sym_rows.append((SYM, sym, _density_values(sym, with_mu)))
+            sym = entry["ours+sym"] = _timed_map(sur, name, n, symmetrize=symmetrize)
+            sym_rows[SYM] = _density_values(sym, with_mu)
             if refine:
-                sref = sur.map(name, n, refine=True, symmetrize=symmetrize)
-                entry["ours+sym+refine"] = sref
-                sym_rows.append((SYM_REF, sref, {**_density_values(sref, with_mu), "alpha": sref.info["alpha"]}))
+                sref = entry["ours+sym+refine"] = sur.map(name, n, refine=True, symmetrize=symmetrize)
+                sym_rows[SYM_REF] = {**_density_values(sref, with_mu), "alpha": sref.info["alpha"]}
         if classical:
             cl = _classical(name, n, boundary)
             vc = _density_values(cl, with_mu)
             vo["speedup"] = cl.time / ours.time
             if symmetrize:
-                sym_rows[0][2]["speedup"] = cl.time / sym_rows[0][1].time
+                sym_rows[SYM]["speedup"] = cl.time / entry["ours+sym"].time
             entry["classical"] = cl
         table.add(case, "ours", vo)
         if refine:
             table.add(case, "ours + refinement", vr)
-        for method, _, values in sym_rows:
+        for method, values in sym_rows.items():
             table.add(case, method, values)
         if classical:
             table.add(case, "diffusion DEM", vc)

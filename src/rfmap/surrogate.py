@@ -33,9 +33,9 @@ from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
 from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
-from .symmetry import resolve_symmetry, symmetrized_displacement
 from .repair import repair_map
 from .result import MapResult
+from .symmetry import resolve_symmetry, symmetrized_displacement
 from .tasks import TaskSpec, encode
 
 __all__ = ["Surrogate", "models", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
