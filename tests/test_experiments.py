@@ -226,3 +226,27 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     for name in ("deq2d-square", "deq2d-free", "dem2d-square"):
         assert training_fields_text(get_config(name, "full").to_dict()) == \
             "modes, steps, peaks 15 %, ramps 15 %, single hard ramps or peaks 30 %"
+
+
+def test_distortion_table_puts_models_side_by_side_on_unseen_fields():
+    """The identity network leaves every field as it came (Std of the input, |mu| = 0, ratio 0 against the reference
+    model); the reference's own ratio is exactly 1; a Beltrami or 3D model is refused."""
+    from rfmap import load_or_train
+    from rfmap.experiments import distortion_table
+    from rfmap.tasks import TaskSpec
+
+    ci = load_or_train("deq2d-square", "ci")
+    ident = Surrogate.untrained(TaskSpec("density", 2, "square"), base=4, depth=2, name="deq2d-square",
+                                n_range=[9, 17])
+    t = distortion_table({"trained": ci, "identity": ident}, count=4, n=17)
+    assert [(c, m) for c, m, _ in t.rows][-2:] == [("all", "trained"), ("all", "identity")]
+    assert {c for c, _, _ in t.rows} == {"smooth", "steps", "peak", "ramp", "all"}
+    assert t.value("all", "trained", "mu_ratio") == pytest.approx(1.0, abs=1e-12)
+    assert t.value("all", "identity", "mean_mu") == pytest.approx(0.0, abs=1e-6)
+    assert t.value("all", "identity", "mu_ratio") == pytest.approx(0.0, abs=1e-5)
+    assert t.value("all", "trained", "mean_mu") > 1e-3
+    assert t.value("all", "trained", "std_rho_map") < t.value("all", "identity", "std_rho_map")
+    with pytest.raises(ValueError, match="2D density"):
+        distortion_table({"b": load_or_train("beltrami2d", "ci")}, count=4, n=17)
+    with pytest.raises(ValueError, match="at least one"):
+        distortion_table({}, count=4)

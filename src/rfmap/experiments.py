@@ -25,7 +25,7 @@ __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table"
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
            "COLUMN_TITLES", "format_value", "DIGITS", "generalization_table", "WARM_MODELS", "benchmark_fields",
            "time_to_accuracy", "summarize", "residual_floor", "warm_start_residuals",
-           "displacement_demand", "recipe_table", "training_fields_text", "SYM", "SYM_REF"]
+           "displacement_demand", "distortion_table", "recipe_table", "training_fields_text", "SYM", "SYM_REF"]
 
 DATA = Path(__file__).resolve().parent / "data"
 
@@ -39,7 +39,7 @@ COLUMN_TITLES = {
     "count": "fields", "demand_median": "demand (median)", "demand_p90": "demand (90 %)",
     "reach_ratio": "reach / demand", "left_net": "left, ours", "left_classical": "left, classical",
     "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "held_out": "held-out mean",
-    "val_n": "held-out N",
+    "val_n": "held-out N", "mu_ratio": "mean |μ| ratio",
 }
 #: significant digits of every number in a table (times: one fewer, with their unit)
 DIGITS = 4
@@ -488,6 +488,68 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
                 table.add(k, method, {"mean": float(v.mean()), "worst": float(v.max()),
                                       "n_flipped": int(sum(x[1] for x in vals)),
                                       "time": float(np.mean([x[2] for x in vals]))})
+    return table
+
+
+def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table:
+    r"""Density equalization against angular distortion of several 2D density models on the same ``count`` unseen
+    random fields (the ``report`` stream of :mod:`rfmap.validation`), raw network maps on the ``N``-grid.
+
+    For each model and each kind of field (and ``all``): the mean and the worst Std(rho~_map), the mean over fields
+    of the mean :math:`|\mu|` over triangles, the largest :math:`|\mu|`, the smallest Jacobian and the flipped
+    triangles; the last column is each
+    field's mean :math:`|\mu|` divided by that of the first model on the same field, averaged over the fields.  A
+    DEQ loss (density + :math:`\lambda\int|\mu|^2`, paper Eq. (beltrami_energy)) should lower the mean :math:`|\mu|` against a
+    pure DEM loss at about the same Std(rho~_map).
+
+    Parameters
+    ----------
+    surs : dict
+        ``{label: Surrogate}`` of 2D density models; the first is the reference of the ratio column.
+    count : int
+        Unseen fields (4 kinds, in turn).
+    n : int, optional
+        Grid side (default the paper's 51).
+
+    Returns
+    -------
+    Table
+        ``tab:distortion``: rows ``(kind, label)``, columns ``std_rho_map``, ``worst``, ``mean_mu``, ``max_mu``,
+        ``min_jacobian``, ``n_flipped``, ``mu_ratio``.
+    """
+    from .validation import validation_fields
+
+    if not surs:
+        raise ValueError("distortion_table needs at least one model")
+    for label, sur in surs.items():
+        if sur.spec.kind != "density" or sur.spec.dim != 2:
+            raise ValueError(f"{label}: distortion_table compares 2D density models, got {sur.spec.kind} "
+                             f"{sur.spec.dim}D")
+    n = int(n or PAPER_N[2])
+    fields = validation_fields("density", 2, count, stream="report")
+    per: dict[tuple[str, str], list[tuple[float, float, float, int, float]]] = {}
+    first = next(iter(surs))
+    for vf in fields:
+        kind = vf.label.rsplit("-", 1)[0]
+        ms = {label: sur.map(vf.field, n, repair=False).metrics() for label, sur in surs.items()}
+        for label, m in ms.items():
+            ref = ms[first].mean_mu
+            vals = (m.std_rho_map, m.mean_mu, m.max_mu, m.n_flipped, m.mean_mu / ref if ref > 0 else np.nan,
+                    m.min_jacobian)
+            for k in (kind, "all"):
+                per.setdefault((k, label), []).append(vals)
+    table = Table("tab:distortion", f"{len(fields)} unseen random densities at N = {n}: equalization and "
+                  f"angular distortion of the raw maps (mean |μ| ratio: against {first} on the same field)",
+                  ["std_rho_map", "worst", "mean_mu", "max_mu", "min_jacobian", "n_flipped", "mu_ratio"])
+    kinds = sorted({k for k, _ in per if k != "all"}) + ["all"]
+    for k in kinds:
+        for label in surs:
+            v = np.array(per[(k, label)])
+            table.add(k, label, {"std_rho_map": float(v[:, 0].mean()), "worst": float(v[:, 0].max()),
+                                 "mean_mu": float(v[:, 1].mean()),
+                                 "max_mu": float(v[:, 2].max()), "min_jacobian": float(v[:, 5].min()),
+                                 "n_flipped": int(v[:, 3].sum()),
+                                 "mu_ratio": float(v[:, 4].mean())})
     return table
 
 
