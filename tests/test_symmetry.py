@@ -69,6 +69,27 @@ def test_full_symmetrization_makes_any_operator_equivariant(dim, n):
         torch.testing.assert_close(moved, sym, rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize("dim, n", [(2, 9), (3, 7)])
+def test_batched_copies_match_one_at_a_time(dim, n):
+    """Stacking the copies into batches changes how often the operator runs (ceil(|S| / copies per batch)), not the
+    result (float64 round-off); a batch of one point per call is the sequential evaluation."""
+    grids = np.random.default_rng(4).random((2,) + (n,) * dim)
+    calls = []
+
+    def counted(g):
+        calls.append(g.shape[0])
+        return lopsided(g)
+
+    one = symmetrized_displacement(counted, grids, "full", batch_points=1)
+    assert calls == [2] * len(symmetries(dim, "full"))
+    for copies in (3, 1000):
+        calls.clear()
+        out = symmetrized_displacement(counted, grids, "full", batch_points=copies * grids.size)
+        size = len(symmetries(dim, "full"))
+        assert len(calls) == -(-size // min(copies, size)) and sum(calls) == 2 * size
+        torch.testing.assert_close(out, one, rtol=0, atol=1e-12)
+
+
 def _random_surrogate(dim, boundary="square"):
     from rfmap.surrogate import Surrogate
     from rfmap.tasks import TaskSpec
@@ -151,3 +172,14 @@ def test_beltrami_coefficient_transforms_as_the_conjugated_map():
         J = np.linalg.inv(G) @ Jy @ G  # Jacobian of g o f o g^-1 at x
         expected = beltrami_from_jacobian(torch.as_tensor(J)).numpy().reshape(1, n, n)
         np.testing.assert_allclose(transform_grid(mu, s), expected, atol=1e-12)
+
+
+@pytest.mark.parametrize("dim, n", [(2, 13), (3, 9)])
+def test_surrogate_batched_symmetrization_matches_sequential(dim, n):
+    """The network's batched copies agree with one evaluation per symmetry to float32 round-off."""
+    sur = _random_surrogate(dim)
+    grids = (1.0 + np.random.default_rng(5).random((1,) + (n,) * dim)).astype(np.float32)
+    batched = sur.displacement(grids, symmetrize="full")
+    seq = symmetrized_displacement(sur.displacement, grids, "full", batch_points=1)
+    assert batched.abs().max() > 1e-3
+    torch.testing.assert_close(batched, seq, rtol=0, atol=1e-5)
