@@ -527,13 +527,13 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
                              f"{sur.spec.dim}D")
     n = int(n or PAPER_N[2])
     fields = validation_fields("density", 2, count, stream="report")
-    per: dict[tuple[str, str], list[tuple[float, float, float, int, float]]] = {}
+    per: dict[tuple[str, str], list[tuple[float, float, float, int, float, float]]] = {}
     first = next(iter(surs))
     for vf in fields:
         kind = vf.label.rsplit("-", 1)[0]
         ms = {label: sur.map(vf.field, n, repair=False).metrics() for label, sur in surs.items()}
+        ref = ms[first].mean_mu
         for label, m in ms.items():
-            ref = ms[first].mean_mu
             vals = (m.std_rho_map, m.mean_mu, m.max_mu, m.n_flipped, m.mean_mu / ref if ref > 0 else np.nan,
                     m.min_jacobian)
             for k in (kind, "all"):
