@@ -80,19 +80,10 @@ __all__ = ["solve_flow", "poisson_flux", "box_mean", "rasterize_elements", "resi
            "lumped_residual", "vertex_residual"]
 
 
-def _cos_synthesis(coef: np.ndarray, axis: int) -> np.ndarray:
-    r""":math:`\sum_k c_k \cos(\pi k j/(M-1))` along ``axis`` at the nodes ``j`` (inverse of the type-I DCT)."""
-    b = np.moveaxis(coef, axis, -1).copy()
-    b[..., 1:-1] *= 0.5
-    return np.moveaxis(dct(b, type=1, axis=-1, workers=fft_workers()), -1, axis)
-
-
-def _sin_synthesis(coef: np.ndarray, axis: int) -> np.ndarray:
-    r""":math:`\sum_k c_k \sin(\pi k j/(M-1))` along ``axis`` at the nodes ``j`` (zero at both ends)."""
-    b = np.moveaxis(coef, axis, -1)
-    out = np.zeros_like(b)
-    out[..., 1:-1] = 0.5 * dst(b[..., 1:-1], type=1, axis=-1, workers=fft_workers())
-    return np.moveaxis(out, -1, axis)
+def _dct1(x: np.ndarray, axis: int) -> np.ndarray:
+    r"""Unnormalised type-I DCT along ``axis`` (may overwrite ``x``): :math:`\sum_k e_k x_k \cos(\pi k j/(M-1))` at the
+    nodes ``j``, with :math:`e_k = 1` at both ends and 2 inside."""
+    return dct(x, type=1, axis=axis, workers=fft_workers(), overwrite_x=True)
 
 
 def gaussian_blur(values: np.ndarray, sigma: float) -> np.ndarray:
@@ -156,26 +147,42 @@ def poisson_flux(values: np.ndarray, dtype=np.float64) -> np.ndarray:
         The flux components on the grid; the normal component is exactly zero on the walls.
     """
     d, m = values.ndim, values.shape[0]
-    a = cosine_coefficients(np.asarray(values, dtype=dtype), workers=fft_workers())
+    # With y = DCT-I(p) (unnormalised), a_k = e_k y_k / (2(M-1))^d (e_k = 1 at the ends, 2 inside, per axis), and the
+    # synthesis along a cosine axis is the type-I DCT of the coefficients with their interior halved, so the e_k cancel
+    # there; along the differentiated (sine) axis only interior k contribute, with the factor 2 of e_k kept.
+    # Transforms along an axis commute with factors along another, so the cosine syntheses are shared between the
+    # components: in 3D eight one-axis transforms instead of nine, and no transposed copies.
+    y = dctn(np.asarray(values, dtype=dtype), type=1, workers=fft_workers())
     k = (math.pi * np.arange(m)).astype(dtype)
     k2 = np.zeros((m,) * d, dtype=dtype)
     for ax in range(d):
-        shape = [1] * d
-        shape[ax] = m
-        k2 = k2 + (k ** 2).reshape(shape)
+        k2 += (k ** 2).reshape([m if j == ax else 1 for j in range(d)])
     k2.flat[0] = 1.0
-    phi = a / k2
+    k2 *= (2.0 * (m - 1)) ** d
+    phi = np.divide(y, k2, out=y)
     phi.flat[0] = 0.0
+
     out = np.empty((d,) + (m,) * d, dtype=dtype)
-    for i in range(d):
-        shape = [1] * d
-        shape[i] = m
-        g = phi * k.reshape(shape)
-        g = _sin_synthesis(g, i)
-        for j in range(d):
-            if j != i:
-                g = _cos_synthesis(g, j)
-        out[i] = g
+
+    def deriv(g: np.ndarray, i: int) -> None:
+        r"""``out[i]``: the sine synthesis along axis ``i`` of :math:`g\,\pi k_i` -- the type-I DST of the interior
+        coefficients, :math:`\sum_{k=1}^{M-2} 2 g_k \pi k \sin(\pi k j/(M-1))`, zero on the two walls."""
+        inner = tuple(slice(1, m - 1) if j == i else slice(None) for j in range(d))
+        wall = [slice(None)] * d
+        for end in (0, m - 1):
+            wall[i] = end
+            out[i][tuple(wall)] = 0.0
+        g = g[inner] * k[1:-1].reshape([m - 2 if j == i else 1 for j in range(d)])
+        out[i][inner] = dst(g, type=1, axis=i, workers=fft_workers(), overwrite_x=True)
+
+    if d == 2:
+        deriv(_dct1(phi.copy(), 1), 0)
+        deriv(_dct1(phi, 0), 1)
+        return out
+    p2 = _dct1(phi.copy(), 2)  # cosine along axis 2: shared by components 0 and 1
+    deriv(_dct1(p2.copy(), 1), 0)
+    deriv(_dct1(p2, 0), 1)
+    deriv(_dct1(_dct1(phi, 0), 1), 2)
     return out
 
 
