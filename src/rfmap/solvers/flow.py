@@ -147,26 +147,48 @@ def poisson_flux(values: np.ndarray, dtype=np.float64) -> np.ndarray:
         The flux components on the grid; the normal component is exactly zero on the walls.
     """
     d, m = values.ndim, values.shape[0]
-    # With y = DCT-I(p) (unnormalised), a_k = e_k y_k / (2(M-1))^d (e_k = 1 at the ends, 2 inside, per axis), and the
-    # synthesis along a cosine axis is the type-I DCT of the coefficients with their interior halved, so the e_k cancel
-    # there; along the differentiated (sine) axis only interior k contribute, with the factor 2 of e_k kept.
-    # Transforms along an axis commute with factors along another, so the cosine syntheses are shared between the
-    # components: in 3D eight one-axis transforms instead of nine, and no transposed copies.
+    b = _half_coefficients(values, dtype)
+    b /= _eigenvalues(d, m, b.dtype)
+    b.flat[0] = 0.0
+    return _flux_synthesis(b)
+
+
+def _half_coefficients(values: np.ndarray, dtype=np.float64) -> np.ndarray:
+    r""":math:`b_k = \mathrm{DCT\text{-}I}(p)_k / (2(M-1))^d` (unnormalised transform) of grid values ``p``: the cosine
+    coefficients :math:`a_k` of their interpolant with every interior index halved per axis (:math:`a_k = e_k b_k`,
+    :math:`e_k = 1` at the ends and 2 inside).  A type-I DCT of :math:`b` along an axis is the cosine synthesis
+    along it (:func:`_dct1`).  Shape (M,)*d, of ``dtype``."""
+    d, m = values.ndim, values.shape[0]
     y = dctn(np.asarray(values, dtype=dtype), type=1, workers=fft_workers())
-    k = (math.pi * np.arange(m)).astype(dtype)
-    k2 = np.zeros((m,) * d, dtype=dtype)
+    y *= y.dtype.type(1.0 / (2.0 * (m - 1)) ** d)
+    return y
+
+
+def _eigenvalues(d: int, m: int, dtype=np.float64) -> np.ndarray:
+    r"""The Laplacian's eigenvalues :math:`\pi^2|k|^2` of the cosine modes, shape (M,)*d, with 1 at :math:`k = 0`
+    (so that it can divide)."""
+    k2 = (math.pi * np.arange(m, dtype=np.float64)) ** 2
+    lam = np.zeros((m,) * d, dtype=dtype)
     for ax in range(d):
-        k2 += (k ** 2).reshape([m if j == ax else 1 for j in range(d)])
-    k2.flat[0] = 1.0
-    k2 *= (2.0 * (m - 1)) ** d
-    phi = np.divide(y, k2, out=y)
-    phi.flat[0] = 0.0
+        lam += k2.astype(dtype).reshape([m if j == ax else 1 for j in range(d)])
+    lam.flat[0] = 1.0
+    return lam
 
-    out = np.empty((d,) + (m,) * d, dtype=dtype)
 
-    def deriv(g: np.ndarray, i: int) -> None:
-        r"""``out[i]``: the sine synthesis along axis ``i`` of :math:`g\,\pi k_i` -- the type-I DST of the interior
-        coefficients, :math:`\sum_{k=1}^{M-2} 2 g_k \pi k \sin(\pi k j/(M-1))`, zero on the two walls."""
+def _flux_synthesis(b: np.ndarray) -> np.ndarray:
+    r"""The flux :math:`-\nabla\psi` at the grid nodes of the potential :math:`\psi = \sum_k e_k b_k \prod_i
+    \cos(\pi k_i x_i)` given by its half coefficients ``b`` (:func:`_half_coefficients`; consumed), shape (d, M..).
+
+    :math:`-\partial_i\psi = \sum_k e_k b_k\,\pi k_i \sin(\pi k_i x_i) \prod_{j\ne i}\cos(\pi k_j x_j)`: cosine
+    syntheses along the other axes and, along axis ``i``, the type-I DST of the interior coefficients (only interior
+    :math:`k_i` contribute; zero on both walls).  Transforms along an axis commute with factors along another, so the
+    cosine syntheses are shared between the components: in 3D eight one-axis transforms, and no transposed copies.
+    """
+    d, m = b.ndim, b.shape[0]
+    k = (math.pi * np.arange(m)).astype(b.dtype)
+    out = np.empty((d,) + (m,) * d, dtype=b.dtype)
+
+    def deriv(g: np.ndarray, i: int) -> None:  # out[i]: the sine synthesis along axis i of g * pi k_i
         inner = tuple(slice(1, m - 1) if j == i else slice(None) for j in range(d))
         wall = [slice(None)] * d
         for end in (0, m - 1):
@@ -176,13 +198,13 @@ def poisson_flux(values: np.ndarray, dtype=np.float64) -> np.ndarray:
         out[i][inner] = dst(g, type=1, axis=i, workers=fft_workers(), overwrite_x=True)
 
     if d == 2:
-        deriv(_dct1(phi.copy(), 1), 0)
-        deriv(_dct1(phi, 0), 1)
+        deriv(_dct1(b.copy(), 1), 0)
+        deriv(_dct1(b, 0), 1)
         return out
-    p2 = _dct1(phi.copy(), 2)  # cosine along axis 2: shared by components 0 and 1
+    p2 = _dct1(b.copy(), 2)  # cosine along axis 2: shared by components 0 and 1
     deriv(_dct1(p2.copy(), 1), 0)
     deriv(_dct1(p2, 0), 1)
-    deriv(_dct1(_dct1(phi, 0), 1), 2)
+    deriv(_dct1(_dct1(b, 0), 1), 2)
     return out
 
 
