@@ -305,3 +305,14 @@ def test_an_allocation_that_fails_is_one_line_and_exit_2(tmp_path, capsys, monke
     rc, _, err = run_main(capsys, "solve", "--method", "dem", "--field", "sin-cos", "--n", "17", "--out", out)
     assert_one_line_error(rc, err, match="out of memory (Unable to allocate 9.3 GiB")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_map_warns_in_one_line_when_the_map_undoes_equalization(tmp_path, capsys, tiny_model):
+    f = tmp_path / "flat.npy"
+    np.save(f, np.ones((21, 21)))
+    out = tmp_path / "flat.npz"
+    rc, stdout, err = run_main(capsys, "map", "--model", tiny_model, "--field-file", f, "--out", out)
+    assert rc == 0 and out.exists() and f"wrote {out}" in stdout
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("rfmap map: warning: the network's map leaves this density less")
+    assert "--refine" in lines[0] and "--polish" in lines[0] and "Warning" not in err

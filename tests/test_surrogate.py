@@ -489,3 +489,61 @@ def test_with_polish_a_folded_3d_map_starts_cold_without_trying_coarser_grids():
     sur = _folding_then_benign(tiny(TaskSpec("density", 3, "square"), n_range=[9, 17]), benign_below=10)
     r = sur.map(rising, 17, polish=True)
     assert "regrid" not in r.info and r.info["polish"]["start"] == "cold" and r.metrics().n_flipped == 0
+
+
+# ----------------------------------------------------------------------------------------------- map quality
+
+
+@pytest.mark.parametrize("n, d", [(21, 2), (9, 3)])
+def test_density_quality_matches_the_metrics(n, d):
+    from rfmap.mesh import grid_mesh
+    from rfmap.result import MapResult
+
+    ref = grid_points(n, d)
+    rng = np.random.default_rng(0)
+    dens = 0.5 + rng.random(len(ref))
+    for amp in (0.02, 0.0):  # a smooth map (float32 measures), and the identity
+        mapped = ref + amp * np.sin(2 * np.pi * ref[:, ::-1]) * (ref * (1 - ref)).prod(1, keepdims=True) * 16
+        q = S.density_quality(ref, mapped, dens, n)
+        m = MapResult(ref_points=ref, mapped_points=mapped, elements=grid_mesh(n, d).elements, field=dens,
+                      kind="density", time=0.0).metrics()
+        assert q["std_rho_orig"] == pytest.approx(m.std_rho_orig, rel=1e-12)
+        assert q["std_rho_map"] == pytest.approx(m.std_rho_map, rel=1e-5)
+        assert q["min_jacobian"] == pytest.approx(m.min_jacobian, rel=1e-5)
+        assert q["worse"] == (m.std_rho_map > m.std_rho_orig * (1 + S.QUALITY_MARGIN))
+    assert not q["worse"] and q["min_jacobian"] == pytest.approx(1.0, rel=1e-5)  # the identity (float32 measures)
+
+
+def test_density_quality_of_thin_and_broken_maps():
+    from rfmap.mesh import grid_mesh
+    from rfmap.result import MapResult
+
+    n = 11
+    ref = grid_points(n, 2)
+    dens = 1.0 + ref[:, 0]
+    mapped = ref.copy()
+    mapped[60] += 0.9999 * (ref[61] - ref[60])  # an interior vertex almost onto its neighbour: slivers
+    q = S.density_quality(ref, mapped, dens, n)
+    m = MapResult(ref_points=ref, mapped_points=mapped, elements=grid_mesh(n, 2).elements, field=dens,
+                  kind="density", time=0.0).metrics()
+    assert q["min_jacobian"] < 1e-3  # decided in double precision: exact to round-off
+    assert q["min_jacobian"] == pytest.approx(m.min_jacobian, rel=1e-9)
+    assert q["std_rho_map"] == pytest.approx(m.std_rho_map, rel=1e-9) and q["worse"]
+    mapped[3] = np.nan
+    assert S.density_quality(ref, mapped, dens, n)["worse"]
+
+
+def test_a_map_that_undoes_equalization_warns():
+    import warnings
+
+    flat = lambda x: np.ones(x.shape[:-1])  # noqa: E731  a uniform density: any movement makes it less equal
+    with pytest.warns(S.PoorMapWarning, match=r"less equal than it was .*refine=True.*polish=True"):
+        r = tiny(head_seed=3).map(flat, 21)
+    assert r.info["quality"]["worse"] and r.info["quality"]["std_rho_map"] > 1e-3
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with S.quiet_quality():
+            tiny(head_seed=3).map(flat, 21)
+        good = tiny().map(bump, 21)  # the untrained network: the identity, no worse than the input
+    assert not good.info["quality"]["worse"]
+    assert "quality" not in tiny(head_seed=3).map(flat, points=grid_points(21, 2)[::7]).info

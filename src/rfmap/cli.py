@@ -93,7 +93,7 @@ def cmd_models(args) -> int:
 
 
 def cmd_map(args) -> int:
-    from .surrogate import Surrogate, models
+    from .surrogate import Surrogate, models, quiet_quality
 
     from .device import resolve_device
 
@@ -119,8 +119,9 @@ def cmd_map(args) -> int:
     polish = False if args.polish is None else (True if args.polish == "default" else args.polish)
     if args.no_guard and polish is False:
         raise CLIError("--no-guard only applies with --polish")
-    res = sur.map(field, args.n, points, refine=args.refine, repair=not args.no_repair, polish=polish,
-                  guard=not args.no_guard, symmetrize=args.symmetrize)
+    with quiet_quality():  # a poor map is reported below, in one line
+        res = sur.map(field, args.n, points, refine=args.refine, repair=not args.no_repair, polish=polish,
+                      guard=not args.no_guard, symmetrize=args.symmetrize)
     res.save(args.out)
     if args.vtk:
         res.to_vtk(args.vtk)
@@ -133,6 +134,10 @@ def cmd_map(args) -> int:
     if "regrid" in res.info:
         print(regrid_summary(res.info["regrid"]))
     print(repair_summary(res.info.get("repair")))
+    if res.info.get("quality", {}).get("worse"):
+        from .surrogate import quality_message
+
+        print(f"rfmap map: warning: {quality_message(res.info['quality'], '--refine', '--polish')}", file=sys.stderr)
     if "polish" in res.info:
         p = res.info["polish"]
         st = p["stages"]

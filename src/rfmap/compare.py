@@ -21,6 +21,7 @@ import numpy as np
 from .experiments import Table, generalization_table
 from .mesh import jittered_points
 from .paper_fields import PAPER_N, TEST_FIELDS
+from .surrogate import quiet_quality
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
            "generalization_tables", "inference_table", "race", "wins"]
@@ -68,6 +69,7 @@ def _row(res, raw) -> dict:
             "flips_repaired": m.n_flipped, "time": res.time}
 
 
+@quiet_quality()
 def paper_fields_table(surs: dict, n: int | None = None, fields=None, refine: bool = True) -> Table:
     """The paper's four 2D population tests at ``N``: raw and refined Std, raw and repaired flips, per model."""
     _check(surs)
@@ -84,6 +86,7 @@ def paper_fields_table(surs: dict, n: int | None = None, fields=None, refine: bo
     return t
 
 
+@quiet_quality()
 def resolution_table(surs: dict, ns=(32, 51, 64, 128, 256), field: str = "multi-freq") -> Table:
     """One field across grid sides: each model on its default working grid (``work``) and on the requested grid
     itself (``native``, ``work_n = N``)."""
@@ -103,6 +106,7 @@ def resolution_table(surs: dict, ns=(32, 51, 64, 128, 256), field: str = "multi-
     return t
 
 
+@quiet_quality()
 def points_table(surs: dict, field: str = "sin-cos", n: int = 51, seed: int = 0) -> Table:
     """The map at query points instead of the grid: ``n**2`` points jittered off the grid (Sobol jitter of
     strength 0.2) and as many points scattered uniformly (plus the square's corners); the metrics are taken on the
@@ -120,6 +124,7 @@ def points_table(surs: dict, field: str = "sin-cos", n: int = 51, seed: int = 0)
     return t
 
 
+@quiet_quality()
 def generalization_tables(surs: dict, count: int = 50, n: int | None = None) -> Table:
     """:func:`rfmap.experiments.generalization_table` of every model on the same unseen random fields, merged
     (the classical solver's rows once)."""
@@ -140,6 +145,7 @@ def generalization_tables(surs: dict, count: int = 50, n: int | None = None) -> 
     return merged
 
 
+@quiet_quality()
 def inference_table(surs: dict, ns=(51, 128, 256), field: str = "multi-freq", repeats: int = 5) -> Table:
     """Median time of one raw network map (encoding, network, resampling; no refinement, no repair) per model and
     grid side, on the default working grid and natively."""

@@ -20,6 +20,7 @@ import numpy as np
 from .mesh import grid_mesh
 from .paper_fields import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
 from .result import MapResult
+from .surrogate import quiet_quality
 
 __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table", "population_table",
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
@@ -142,6 +143,7 @@ class Table:
         return [md, cs]
 
 
+@quiet_quality()
 def _timed_map(sur, name, n, refine=False, repeats: int = 3, slow: float = 1.0, **kw):
     """The fastest of ``repeats`` timed maps after a warm-up; a single timed map when the warm-up took more than
     ``slow`` seconds (3D maps with a repair: the spread of repeated timings is then far below the quoted digits).
@@ -242,6 +244,7 @@ def _classical(name: str, n: int, boundary: str) -> MapResult:
     return solve_dem(DENSITIES[name].sample(n), boundary=boundary)
 
 
+@quiet_quality()
 def _density_rows(sur, table, cases, paper, refine, boundary, classical=True, symmetrize=False):
     results = {}
     with_mu = sur.spec.dim == 2
@@ -420,6 +423,7 @@ def glue_all(values: dict, prefix: str) -> None:
 
 
 # ------------------------------------------------------------------------------------------- generalization
+@quiet_quality()
 def generalization_table(sur, count: int = 50, n: int | None = None, refine: bool = True,
                          classical: bool = True, low_frequency: bool = False,
                          symmetrize: bool | str = False) -> Table:
@@ -491,6 +495,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     return table
 
 
+@quiet_quality()
 def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table:
     r"""Density equalization against angular distortion of several 2D density models on the same ``count`` unseen
     random fields (the ``report`` stream of :mod:`rfmap.validation`), raw network maps on the ``N``-grid.
@@ -555,6 +560,7 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
     return table
 
 
+@quiet_quality()
 def displacement_demand(sur, count: int = 16, train_count: int = 60, n: int | None = None) -> tuple[Table, list]:
     r"""How far each field asks the map to move its points, and how far the network moves them.
 

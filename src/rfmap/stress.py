@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from .mesh import grid_points
+from .surrogate import quiet_quality
 
 __all__ = ["hard_density", "hard_beltrami", "first_folding", "self_crossing_map"]
 
@@ -71,6 +72,7 @@ def hard_beltrami(rng: np.random.Generator, n: int, *, sup: tuple[float, float] 
     return mu.reshape(n, n)
 
 
+@quiet_quality()
 def first_folding(sur, n: int, *, seed: int = 0, tries: int = 50) -> tuple[int, np.ndarray]:
     """The first seed from ``seed`` on whose hard field the raw map of surrogate ``sur`` on the ``N``-grid folds.
 

@@ -11,7 +11,9 @@ unstructured cloud, and :math:`u(x_q) = x_q + \mathcal{B}(x_q) \odot (\alpha \od
 """
 from __future__ import annotations
 
+import contextlib
 import json
+import math
 import os
 import time
 import warnings
@@ -24,10 +26,11 @@ import torch
 
 from ._version import __version__
 from .inputs import check_density, check_mu, preprocess_density, unit_mass
+from .metrics import density_std
 from .mesh import check_n, element_centroids, element_measures, grid_mesh, grid_points, grid_vertex_weights, interpolate, \
     triangulate, vertex_weights
 from .device import resolve_device
-from .geometry import grid_signed_measures
+from .geometry import grid_element_mean, grid_signed_measures
 from .hybrid import GUARD
 from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
@@ -35,10 +38,11 @@ from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
 from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
 from .repair import repair_map
 from .result import MapResult
+from .solvers.flow import F32_MARGIN
 from .symmetry import resolve_symmetry, symmetrized_displacement
 from .tasks import TaskSpec, encode
 
-__all__ = ["Surrogate", "models", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
+__all__ = ["Surrogate", "models", "PoorMapWarning", "QUALITY_MARGIN", "quiet_quality", "density_quality", "quality_message", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
 
 #: Dimensions in which a folded network map of a grid (with ``repair``, the default working grid and no query points)
 #: is first evaluated again on coarser working grids, :data:`REGRID_STEP` sides apart down to the bottom of the
@@ -73,6 +77,75 @@ class _Input:
     grid: np.ndarray  # (N_in,)*d real density or complex mu at the vertices of the input grid
     fn: Callable | None  # exact evaluator when available (names, callables)
     preprocess: bool = True
+
+
+
+#: :func:`density_quality` calls a map worse than the input when its Std(rho~_map) exceeds Std(rho~_orig) by more
+#: than this fraction (far above the single-precision measures' error, so that the identity never counts as worse)
+QUALITY_MARGIN = 1e-4
+
+
+class PoorMapWarning(RuntimeWarning):
+    """A density map that left the density less equal than it was (:func:`density_quality`); issued by
+    :meth:`Surrogate.map` with the measured numbers and the remedies."""
+
+
+@contextlib.contextmanager
+def quiet_quality():
+    """Silence :class:`PoorMapWarning` inside the block: for code that maps many fields and reports their metrics
+    itself (tables, validation)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", PoorMapWarning)
+        yield
+
+
+def density_quality(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str, Any]:
+    r"""Whether a density map of the ``N``-grid left the density more equal than it was.
+
+    :math:`\mathrm{Std}(\tilde\rho)` of the element densities (population over measure, normalised to mean 1; as
+    :func:`rfmap.metrics.compute_metrics`) on the reference and on the mapped grid, and the smallest Jacobian
+    determinant (mapped over reference measure).
+
+    Parameters
+    ----------
+    ref, mapped : ndarray, shape (N**d, d)
+        The grid's vertices (:func:`rfmap.mesh.grid_points` order) and their images.
+    density : ndarray, shape (N**d,)
+        Vertex densities.
+    n : int
+        Grid side.
+
+    Returns
+    -------
+    dict
+        ``std_rho_orig``, ``std_rho_map``, ``min_jacobian`` and ``worse``: whether Std(rho~_map) exceeds
+        Std(rho~_orig) by more than the fraction :data:`QUALITY_MARGIN` (or the map is not finite), i.e. the map
+        undid more than it did.
+    """
+    d = ref.shape[1]
+    if not np.isfinite(mapped).all():
+        return {"std_rho_orig": float("nan"), "std_rho_map": float("nan"), "min_jacobian": float("nan"),
+                "worse": True}
+    # every element of the N-grid has the same reference measure; the mapped measures in single precision (a quarter
+    # of the time at 3D N = 48) unless an element is too thin for it (as rfmap.solvers.flow.F32_MARGIN)
+    ref_measure = 1.0 / ((n - 1) ** d * math.factorial(d))
+    meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(mapped, dtype=np.float32))[None], n)[0].double()
+    if float(meas.min()) <= F32_MARGIN * ref_measure:
+        meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(mapped, dtype=np.float64))[None], n)[0]
+    mean = grid_element_mean(torch.as_tensor(np.asarray(density, dtype=np.float64)).reshape(1, -1), n, d)[0]
+    orig = float((mean / mean.mean()).std())  # density_std with equal measures
+    new = density_std(mean * ref_measure, meas)
+    return {"std_rho_orig": orig, "std_rho_map": new, "min_jacobian": float(meas.min()) / ref_measure,
+            "worse": bool(not new <= orig * (1.0 + QUALITY_MARGIN))}
+
+
+def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish: str = "polish=True") -> str:
+    """One line for a density map that left the density less equal than it was (:func:`density_quality`);
+    ``refine`` and ``polish`` name the two remedies (the API's keywords by default, the CLI's flags there)."""
+    return (f"the network's map leaves this density less equal than it was (Std(rho~_map) "
+            f"{quality['std_rho_map']:.3g} > Std(rho~_orig) {quality['std_rho_orig']:.3g}, smallest Jacobian "
+            f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
+            f"refinement) or {polish} (the flow-based finish) can help")
 
 
 class Surrogate:
@@ -381,7 +454,10 @@ class Surrogate:
             objective before/after, when coarser working grids were tried ``info["regrid"]`` (``from``, ``tried``,
             ``work_n``: the grid taken or ``None``, ``time``), with ``repair`` the report ``info["repair"]`` (see
             :func:`rfmap.repair.repair_map`), and with ``polish`` the report
-            ``info["polish"]`` (warm or cold start and both stages' times and metrics).
+            ``info["polish"]`` (warm or cold start and both stages' times and metrics).  A density map of the output
+            grid without ``polish`` also carries ``info["quality"]`` (:func:`density_quality`), and when it leaves
+            the density less equal than it was (a field unlike the training fields) a :class:`PoorMapWarning` names
+            the numbers and the remedies (``refine``, ``polish``; :func:`quiet_quality` silences it).
         """
         group = self._symmetry(symmetrize)
         inp, n = self._resolve(field, n, preprocess)
@@ -498,6 +574,10 @@ class Surrogate:
                                                 tol=tol, stage_time=t_map, start=start, guard=guard)
             info["polish"].update(smooth_passes=passes, smooth_edges=edges, output_passes=out_passes)
             t_map += info["polish"]["time"]
+        if self.spec.kind == "density" and points is None and polish is False:
+            info["quality"] = density_quality(ref, mapped, fvals, n)
+            if info["quality"]["worse"]:
+                warnings.warn(quality_message(info["quality"]), PoorMapWarning, stacklevel=3)
         return MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals,
                          kind=self.spec.kind, time=t_map, info=info)
 

@@ -49,7 +49,7 @@ from .config import PRESETS, TrainConfig, config_names, get_config
 from .device import resolve_device
 from .nn.registry import build_model
 from .paper_fields import BELTRAMI_MAPS, TEST_FIELDS
-from .surrogate import Surrogate, models
+from .surrogate import Surrogate, models, quiet_quality
 from .tasks import TaskSpec, draw_samples, make_batch, task_loss
 from .validation import evaluate, score
 
@@ -277,6 +277,7 @@ def validate(sur: Surrogate, cfg: TrainConfig) -> dict:
     return evaluate(sur, cfg.val_ns, cfg.val_count)
 
 
+@quiet_quality()
 def report_paper_fields(sur: Surrogate, n: int, fields: list[str] | None = None) -> dict:
     """Metrics on the paper's test fields at grid side ``n`` (a report; never used to select a model)."""
     fields = fields or PAPER_FIELDS[(sur.spec.kind, sur.spec.dim)]

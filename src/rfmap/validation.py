@@ -114,8 +114,11 @@ def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "valid
 
 
 def _raw_map(sur, field, n: int):
+    from .surrogate import quiet_quality  # the metrics say how poor a map is; no warning per field
+
     kw = {"repair": False} if "repair" in inspect.signature(sur.map).parameters else {}
-    return sur.map(field, n, **kw)
+    with quiet_quality():
+        return sur.map(field, n, **kw)
 
 
 def evaluate(sur, ns, count: int = 16) -> dict:
