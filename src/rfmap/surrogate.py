@@ -575,7 +575,9 @@ class Surrogate:
             info["polish"].update(smooth_passes=passes, smooth_edges=edges, output_passes=out_passes)
             t_map += info["polish"]["time"]
         if self.spec.kind == "density" and points is None and polish is False:
+            t6 = time.perf_counter()
             info["quality"] = density_quality(ref, mapped, fvals, n)
+            t_map += time.perf_counter() - t6
             if info["quality"]["worse"]:
                 warnings.warn(quality_message(info["quality"]), PoorMapWarning, stacklevel=3)
         return MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals,
