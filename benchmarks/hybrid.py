@@ -2,8 +2,9 @@
 refined) and the hybrid (surrogate polished by the flow; with its guard, and its warm flow alone), on the paper's
 test fields and on unseen random fields.
 
-Every method runs on the same field one after another in one process, so the time ratios are side by side; the
-absolute times depend on the machine and its load.  The table gives, per case, the mean over the fields and the
+Every method runs on the same field one after another in one process, so the time ratios are side by side, after
+one untimed run of every method on each case's first field (``time_to_accuracy(warmup=True)``); the absolute times
+depend on the machine and its load.  The table gives, per case, the mean over the fields and the
 ratios to the best classical solver of that case (the one with the lower mean Std).
 
 Usage::

@@ -663,3 +663,24 @@ def test_velocity_is_the_same_on_any_number_of_threads(d, n):
     assert out[1].shape == (n ** d, d)
     np.testing.assert_array_equal(out[2], out[1])
     np.testing.assert_array_equal(out[4], out[1])
+
+
+def test_time_to_accuracy_warms_every_method_up_once(monkeypatch):
+    """With ``warmup`` every method runs once more, on the first field, and that run leaves no row."""
+    import rfmap.hybrid as hybrid
+    from rfmap.experiments import time_to_accuracy
+
+    calls = []
+    real = hybrid.compare_methods
+
+    def counting(density, surrogate=None, **kw):
+        calls.append(density.copy())
+        return real(density, surrogate, **kw)
+
+    monkeypatch.setattr(hybrid, "compare_methods", counting)
+    for warmup, runs in ((False, 2), (True, 3)):
+        calls.clear()
+        rows = time_to_accuracy(2, 17, paper=False, random=2, methods=("flow",), warmup=warmup)
+        assert [r["field"] for r in rows] == ["random-0", "random-1"] and len(calls) == runs
+        if warmup:
+            np.testing.assert_array_equal(calls[0], calls[1])  # the warm-up ran on the first field
