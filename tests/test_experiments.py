@@ -250,3 +250,25 @@ def test_distortion_table_puts_models_side_by_side_on_unseen_fields():
         distortion_table({"b": load_or_train("beltrami2d", "ci")}, count=4, n=17)
     with pytest.raises(ValueError, match="at least one"):
         distortion_table({}, count=4)
+
+
+def test_the_classical_solver_is_timed_like_the_surrogate(monkeypatch):
+    """Warm-up, then the fastest of three runs; a single timed run when the warm-up was slow."""
+    import rfmap.solvers as solvers
+    from rfmap.experiments import _classical
+
+    real, times = solvers.solve_dem, iter([0.5, 0.2, 0.3, 0.9])
+    calls = []
+
+    def fake(density, **kw):
+        calls.append(kw)
+        res = real(density, **kw)
+        res.time = next(times)
+        return res
+
+    monkeypatch.setattr(solvers, "solve_dem", fake)
+    res = _classical("sin-cos", 11, "square")
+    assert len(calls) == 4 and res.time == 0.2  # the warm-up's 0.5 is not among the candidates
+    calls.clear()
+    times = iter([0.5, 0.7])
+    assert _classical("sin-cos", 11, "square", slow=0.0).time == 0.7 and len(calls) == 2
