@@ -42,7 +42,8 @@ from .solvers.flow import F32_MARGIN
 from .symmetry import resolve_symmetry, symmetrized_displacement
 from .tasks import TaskSpec, encode
 
-__all__ = ["Surrogate", "models", "PoorMapWarning", "QUALITY_MARGIN", "quiet_quality", "density_quality", "quality_message", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
+__all__ = ["Surrogate", "models", "PoorMapWarning", "QUALITY_MARGIN", "quiet_quality", "density_quality",
+           "quality_message", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
 
 #: Dimensions in which a folded network map of a grid (with ``repair``, the default working grid and no query points)
 #: is first evaluated again on coarser working grids, :data:`REGRID_STEP` sides apart down to the bottom of the
@@ -77,7 +78,6 @@ class _Input:
     grid: np.ndarray  # (N_in,)*d real density or complex mu at the vertices of the input grid
     fn: Callable | None  # exact evaluator when available (names, callables)
     preprocess: bool = True
-
 
 
 #: :func:`density_quality` calls a map worse than the input when its Std(rho~_map) exceeds Std(rho~_orig) by more
