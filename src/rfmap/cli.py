@@ -265,7 +265,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--exact", default=None, help="Beltrami test map to measure |Δd| and |Δμ| against")
     s.set_defaults(func=cmd_metrics)
 
-    s = sub.add_parser("map", help="map a field with a neural surrogate")
+    s = sub.add_parser("map", help="map a field with a neural surrogate",
+                       description="Map a field with a neural surrogate. A density map that leaves the density less "
+                                   "equal than it was is still written, with one warning line on stderr.")
     s.add_argument("--model", required=True, help="a shipped model name (rfmap models) or a .safetensors path")
     g = s.add_mutually_exclusive_group(required=True)
     g.add_argument("--field", help="a built-in field name")
