@@ -371,7 +371,8 @@ class Cartogram:
     map_time : float
         Seconds in the map computations themselves (solver or surrogate) over all iterations.
     info : dict
-        ``iterations``, per-iteration ``results`` (:class:`rfmap.result.MapResult`), ``sea`` density.
+        ``iterations``, ``kept`` (the pass whose polygons are returned), ``max_error`` per pass, per-iteration
+        ``results`` (:class:`rfmap.result.MapResult`), ``sea`` density.
     """
 
     features: list
@@ -497,7 +498,8 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
         Side ``N`` of the density raster and of the classical solver's grid.
     tol, max_iterations : float, int
         Passes are repeated, each from the previous pass's polygons, until the largest relative area error is at
-        most ``tol`` (the usual stopping rule of cartogram tools) or ``max_iterations`` passes are done.
+        most ``tol`` (the usual stopping rule of cartogram tools), a pass no longer lowers it, or ``max_iterations``
+        passes are done; the polygons of the pass with the lowest largest error are returned.
     iterations : int, optional
         A fixed number of passes instead (``tol`` and ``max_iterations`` are then ignored).
     margin : float
@@ -518,7 +520,8 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
     Returns
     -------
     Cartogram
-        ``info["max_error"]`` lists the largest relative area error after every pass.
+        ``info["max_error"]`` lists the largest relative area error after every pass, ``info["iterations"]`` the
+        passes run and ``info["kept"]`` the pass whose polygons are returned (1-based).
 
     Raises
     ------
@@ -563,6 +566,7 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
     inverse = inverse.reshape(-1)
     current, mapped = uniq, regions
     results, history, map_time = [], [], 0.0
+    best = None  # (largest area error, polygons, pass) of the best pass so far
     for _ in range(int(passes)):
         dens, sea = density_grid(mapped, values, n, supersample=supersample)
         res = _grid_map(method, dens, surrogate, solver_kw or {})
@@ -571,8 +575,13 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
         results.append(res)
         mapped = shapely.set_coordinates(regions.copy(), current[inverse])
         history.append(cartogram_metrics(mapped, values, topology=False).max_error)
-        if not fixed and history[-1] <= tol:
-            break
+        if best is None or history[-1] < best[0]:
+            best = (history[-1], mapped, len(results))
+        if not fixed and (history[-1] <= tol or len(history) > 1 and not history[-1] < history[-2]):
+            break  # within tolerance, or a pass that no longer lowers the largest error
+    kept = len(results)
+    if not fixed:  # the polygons of the pass with the lowest largest error
+        mapped, kept = best[1], best[2]
     elapsed = time.perf_counter() - t0
 
     out = []
@@ -582,7 +591,8 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
         out.append(f)
     return Cartogram(features=out, regions=regions, mapped=mapped, values=values, floored=floored, frame=frame,
                      method=method, n=n, time=elapsed, map_time=map_time,
-                     info={"iterations": len(results), "max_error": history, "results": results, "sea": sea})
+                     info={"iterations": len(results), "kept": kept, "max_error": history, "results": results,
+                           "sea": sea})
 
 
 def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogate=None) -> dict:
