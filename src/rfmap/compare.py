@@ -106,7 +106,6 @@ def resolution_table(surs: dict, ns=(32, 51, 64, 128, 256), field: str = "multi-
     return t
 
 
-@quiet_quality()
 def points_table(surs: dict, field: str = "sin-cos", n: int = 51, seed: int = 0) -> Table:
     """The map at query points instead of the grid: ``n**2`` points jittered off the grid (Sobol jitter of
     strength 0.2) and as many points scattered uniformly (plus the square's corners); the metrics are taken on the
@@ -124,7 +123,6 @@ def points_table(surs: dict, field: str = "sin-cos", n: int = 51, seed: int = 0)
     return t
 
 
-@quiet_quality()
 def generalization_tables(surs: dict, count: int = 50, n: int | None = None) -> Table:
     """:func:`rfmap.experiments.generalization_table` of every model on the same unseen random fields, merged
     (the classical solver's rows once)."""

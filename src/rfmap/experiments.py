@@ -143,7 +143,6 @@ class Table:
         return [md, cs]
 
 
-@quiet_quality()
 def _timed_map(sur, name, n, refine=False, repeats: int = 3, slow: float = 1.0, **kw):
     """The fastest of ``repeats`` timed maps after a warm-up; a single timed map when the warm-up took more than
     ``slow`` seconds (3D maps with a repair: the spread of repeated timings is then far below the quoted digits).

@@ -99,7 +99,7 @@ def quiet_quality():
         yield
 
 
-def density_quality(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str, Any]:
+def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str, Any]:
     r"""Whether a density map of the ``N``-grid left the density more equal than it was.
 
     :math:`\mathrm{Std}(\tilde\rho)` of the element densities (population over measure, normalised to mean 1; as
@@ -108,8 +108,9 @@ def density_quality(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n:
 
     Parameters
     ----------
-    ref, mapped : ndarray, shape (N**d, d)
-        The grid's vertices (:func:`rfmap.mesh.grid_points` order) and their images.
+    mapped : ndarray, shape (N**d, d)
+        The images of the grid's vertices (:func:`rfmap.mesh.grid_points` order); every reference element has
+        the same measure, so the reference vertices themselves are not needed.
     density : ndarray, shape (N**d,)
         Vertex densities.
     n : int
@@ -122,7 +123,7 @@ def density_quality(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n:
         Std(rho~_orig) by more than the fraction :data:`QUALITY_MARGIN` (or the map is not finite), i.e. the map
         undid more than it did.
     """
-    d = ref.shape[1]
+    d = mapped.shape[1]
     if not np.isfinite(mapped).all():
         return {"std_rho_orig": float("nan"), "std_rho_map": float("nan"), "min_jacobian": float("nan"),
                 "worse": True}
@@ -576,7 +577,7 @@ class Surrogate:
             t_map += info["polish"]["time"]
         if self.spec.kind == "density" and points is None and polish is False:
             t6 = time.perf_counter()
-            info["quality"] = density_quality(ref, mapped, fvals, n)
+            info["quality"] = density_quality(mapped, fvals, n)
             t_map += time.perf_counter() - t6
             if info["quality"]["worse"]:
                 warnings.warn(quality_message(info["quality"]), PoorMapWarning, stacklevel=3)
