@@ -291,6 +291,8 @@ def test_paper_presets_carry_the_papers_hyperparameters():
     (["--steps", "0"], "at least 1"),
     (["--lr=-1e-4"], "--lr must be a positive number"),
     (["--lr", "nan"], "--lr must be a positive number"),
+    (["--ema", "1"], "--ema must lie in [0, 1)"),
+    (["--ema=-0.5"], "--ema must lie in [0, 1)"),
 ] + ([] if torch.cuda.is_available() else [(["--device", "cuda"], "no CUDA device")]))
 def test_train_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, extra, message):
     out = tmp_path / "run"
@@ -348,3 +350,44 @@ def test_train_cli_lr_override_is_used_and_recorded(tmp_path):
     assert sur.meta["config"]["lr"] == 3e-4 and "--lr 0.0003" in sur.meta["command"]
     first = json.loads((out / "log.jsonl").read_text().splitlines()[0])
     assert 0 < first["lr"] <= 3e-4
+
+
+def test_weight_average_follows_its_recursion_and_is_what_ships(tmp_path):
+    """WeightAverage against the recursion written out by hand, then a run with --ema: the shipped weights are the
+    average (not the weights as trained), the command and config record it, and a resumed run restores it."""
+    from rfmap.surrogate import Surrogate
+    from rfmap.train import WeightAverage
+
+    lin = torch.nn.Linear(3, 2)
+    avg = WeightAverage(lin, 0.9)
+    expect = [p.detach().clone() for p in lin.parameters()]
+    for t in range(1, 31):
+        with torch.no_grad():
+            for p in lin.parameters():
+                p.add_(torch.randn_like(p))
+        avg.update()
+        beta = min(0.9, (1 + t) / (10 + t))
+        expect = [e + (1 - beta) * (p.detach() - e) for e, p in zip(expect, lin.parameters())]
+    state = avg.averaged_state(lin)
+    for (name, _), e in zip(lin.named_parameters(), expect):
+        assert torch.allclose(state[name], e, atol=1e-6, rtol=0)
+    assert not torch.allclose(state["weight"], lin.weight)  # the average is not the last iterate
+    with pytest.raises(ValueError, match="decay"):
+        WeightAverage(lin, 1.0)
+
+    out = tmp_path / "run"
+    code = cli_main(["train", "--config", "deq2d-square", "--preset", "ci", "--out", str(out), "--no-progress",
+                     "--steps", "12", "--lr", "1e-2", "--ema", "0.5"])
+    assert code == 0
+    sur = Surrogate.load(out / "deq2d-square.safetensors")
+    assert sur.meta["config"]["ema"] == 0.5 and "--ema 0.5" in sur.meta["command"]
+    ck = torch.load(out / "checkpoint.pt", weights_only=True)
+    assert ck["average"]["updates"] == 12
+    # with the last state shipped, the file holds the checkpoint's average, not its trained weights
+    cfg = get_config("deq2d-square", "ci").with_overrides(steps=12, lr=1e-2, ema=0.5, select_best=False)
+    last = T.train(cfg, tmp_path / "last", progress=False)
+    ck = torch.load(tmp_path / "last" / "checkpoint.pt", weights_only=True)
+    shipped = last.model.state_dict()
+    for name, t in ck["average"]["shadow"].items():
+        assert torch.allclose(shipped[name], t.float(), atol=1e-6, rtol=0), name
+    assert any(not torch.allclose(shipped[k], ck["model"][k].float()) for k in ck["average"]["shadow"])

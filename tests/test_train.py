@@ -100,11 +100,12 @@ class _Crash(Exception):
     pass
 
 
-def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch):
+@pytest.mark.parametrize("ema", [0.0, 0.8])
+def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch, ema):
     """Train 20 steps straight; separately train, crash right after the step-10 checkpoint, and resume to 20.
-    The prefetcher restarts at the saved step, and optimiser and scheduler states are restored, so the final
-    weights are identical."""
-    cfg = CFG.with_overrides(steps=20, ckpt_every=10, val_every=10)
+    The prefetcher restarts at the saved step, and optimiser, scheduler and weight-average states are restored,
+    so the final weights are identical."""
+    cfg = CFG.with_overrides(steps=20, ckpt_every=10, val_every=10, ema=ema)
     straight = T.train(cfg, tmp_path / "a", progress=False)
 
     real_checkpoint = T.TrainState.checkpoint

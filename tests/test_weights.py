@@ -45,10 +45,11 @@ def test_metadata_records_provenance(name):
         later = ("low", "low_modes", "low_freq")
         stored["beltrami_field"] = {**{k: v for k, v in defaults.items() if k in later},
                                     **stored["beltrami_field"]}
+    stored.setdefault("ema", 0.0)  # weight averaging, added later (runs before it trained without)
     # overrides given on the recorded command line (e.g. --steps for a warm restart) are what it says they are
     words = meta.get("command", "").split()
     for flag, key, kind in (("--steps", "steps", int), ("--batch", "batch", int), ("--seed", "seed", int),
-                            ("--lr", "lr", float)):
+                            ("--lr", "lr", float), ("--ema", "ema", float)):
         if flag in words:
             assert stored[key] == kind(words[words.index(flag) + 1])
             expected[key] = stored[key]

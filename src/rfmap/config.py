@@ -64,7 +64,9 @@ class TrainConfig:
     Optimiser defaults follow the paper: AdamW, gradient clipping at 1.0, a random training resolution per step,
     Sobol-jittered sampling.  ``schedule`` is ``'cosine'`` (linear warm-up then cosine decay), ``'step'``
     (decay by ``gamma`` every ``step_size`` steps) or ``'restarts'`` (cosine annealing with warm restarts,
-    ``T0``, ``T_mult``).
+    ``T0``, ``T_mult``).  ``ema`` > 0 keeps an exponential moving average of the weights (Polyak averaging,
+    :class:`rfmap.train.WeightAverage`) with that decay; validation, the checkpoint choice and the shipped file then
+    use the averaged weights (0, the default: the weights as trained).
     """
 
     name: str
@@ -86,6 +88,7 @@ class TrainConfig:
     T_mult: int = 2
     lr_min: float = 1e-6
     clip: float = 1.0
+    ema: float = 0.0
     loss: LossWeights = LossWeights()
     density_field: RandomDensityConfig | None = None
     beltrami_field: RandomBeltramiConfig | None = None

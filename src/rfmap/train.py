@@ -18,6 +18,10 @@ arithmetic up to float rounding, but oneDNN's 3D convolutions, their backward pa
 (measured: one ``dem3d-cube`` step at batch 2, N = 48, 626 -> 430 ms on two threads).  2D networks keep the
 contiguous format, which is as fast there.
 
+``--ema DECAY`` keeps an exponential moving average of the weights (:class:`WeightAverage`); validation, the choice of
+the shipped checkpoint and the shipped file then use the averaged weights, which bounce less between checkpoints than
+the weights as trained.
+
 ``--init`` starts from shipped or saved weights with a fresh optimiser and schedule (a warm restart); the
 metadata keeps the lineage (parent name and SHA-256, cumulative steps and wall time).
 
@@ -54,7 +58,7 @@ from .tasks import TaskSpec, draw_samples, make_batch, task_loss
 from .validation import evaluate, score
 
 __all__ = ["train", "validate", "report_paper_fields", "resolve_device", "load_init", "main", "PAPER_FIELDS",
-           "TrainState", "memory_format"]
+           "TrainState", "WeightAverage", "memory_format"]
 
 #: the paper's test fields per (kind, dim): evaluated as a report at the end of training, never for selection
 PAPER_FIELDS = TEST_FIELDS
@@ -360,6 +364,59 @@ def load_init(source: str, cfg: TrainConfig) -> tuple[Surrogate, dict]:
     return parent, record
 
 
+# ------------------------------------------------------------------------------------------- weight averaging
+class WeightAverage:
+    r"""An exponential moving average of a model's parameters (Polyak averaging).
+
+    After the ``t``-th optimiser step (``t = 1, 2, ...`` from the start of the run)
+
+    .. math:: \bar w \leftarrow \bar w + (1 - \beta_t)(w - \bar w), \qquad
+              \beta_t = \min\!\left(\beta, \frac{1 + t}{10 + t}\right),
+
+    the usual warm-up of the decay, so that the average soon forgets the starting weights.  With ``beta = 0.999``
+    it spans about the last thousand steps.  Buffers (none in the shipped networks, which normalise by groups) are
+    taken from the model as they are.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        The model being trained (not a DistributedDataParallel wrapper).
+    decay : float
+        ``beta`` in ``(0, 1)``.
+    """
+
+    def __init__(self, model: torch.nn.Module, decay: float):
+        if not 0.0 < decay < 1.0:
+            raise ValueError(f"the weight-average decay must lie in (0, 1), got {decay}")
+        self.decay = float(decay)
+        self.names = [n for n, _ in model.named_parameters()]
+        self.params = [p for _, p in model.named_parameters()]
+        self.shadow = [p.detach().clone() for p in self.params]
+        self.updates = 0
+
+    @torch.no_grad()
+    def update(self) -> None:
+        """Fold the model's current parameters into the average (call after every optimiser step)."""
+        self.updates += 1
+        beta = min(self.decay, (1.0 + self.updates) / (10.0 + self.updates))
+        torch._foreach_lerp_(self.shadow, [p.detach() for p in self.params], 1.0 - beta)
+
+    def averaged_state(self, model: torch.nn.Module) -> dict:
+        """``model.state_dict()`` with the averaged parameters in place of the trained ones (detached copies)."""
+        state = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        for name, avg in zip(self.names, self.shadow):
+            state[name] = avg.detach().clone()
+        return state
+
+    def state_dict(self) -> dict:
+        return {"updates": self.updates, "shadow": {n: t.detach().cpu() for n, t in zip(self.names, self.shadow)}}
+
+    def load_state_dict(self, state: dict) -> None:
+        self.updates = int(state["updates"])
+        for name, t in zip(self.names, self.shadow):
+            t.copy_(state["shadow"][name])
+
+
 # ------------------------------------------------------------------------------------------------------ state
 @dataclass
 class TrainState:
@@ -380,7 +437,8 @@ class TrainState:
     command: str | None = None  # the command line that started the run (kept across --resume)
     resumed: list = field(default_factory=list)  # the command lines that continued it after interruptions
     best: dict | None = None  # {"step", "score", "summary", "state"}
-    ema: float | None = None
+    ema: float | None = None  # running mean of the loss (progress bar)
+    avg: WeightAverage | None = None  # the averaged weights (cfg.ema > 0)
     t_start: float = 0.0
 
     @property
@@ -405,13 +463,18 @@ class TrainState:
                     "best": None if self.best is None else {k: json.dumps(v) for k, v in self.best.items()
                                                             if k != "state"},
                     "best_state": None if self.best is None else self.best["state"],
+                    "average": None if self.avg is None else self.avg.state_dict(),
                     "config": json.dumps(self.cfg.to_dict(), sort_keys=True)}, tmp)
         os.replace(tmp, self.out / "checkpoint.pt")
 
     def cpu_surrogate(self, final: dict | None = None) -> Surrogate:
-        """A CPU copy of the current model with its metadata (used for validation and for the shipped file)."""
+        """A CPU copy of the current model (its averaged weights when ``cfg.ema`` > 0) with its metadata (used for
+        validation and for the shipped file)."""
         cfg = self.cfg
-        model = copy.deepcopy(self.model).float().cpu().to(memory_format=torch.contiguous_format).eval()
+        model = copy.deepcopy(self.model)
+        if self.avg is not None:
+            model.load_state_dict(self.avg.averaged_state(self.model))
+        model = model.float().cpu().to(memory_format=torch.contiguous_format).eval()
         elapsed = self.elapsed()
         parent = self.lineage[-1] if self.lineage else {"cumulative_steps": 0, "cumulative_wall_time": 0.0}
         meta = {"name": cfg.name, "preset": cfg.preset, "n_range": list(cfg.n_range), "config": cfg.to_dict(),
@@ -450,6 +513,8 @@ def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool
                                                         else None)
     opt = torch.optim.AdamW(model.parameters(), lr=cfg.lr, weight_decay=cfg.weight_decay, betas=cfg.betas)
     st = TrainState(cfg, model, net, opt, None, out, device, rank, world, lineage=lineage, command=command)
+    if cfg.ema:
+        st.avg = WeightAverage(model, cfg.ema)
     # time-aware cosine in a single process only (ranks must agree on the learning rate)
     clock = (lambda: st.elapsed() if st.t_start else 0.0) if world == 1 else None
     st.sched = sched = _scheduler(opt, cfg, clock=clock)
@@ -463,6 +528,8 @@ def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool
         opt.load_state_dict(state["opt"])
         sched.load_state_dict(state["sched"])
         st.step, st.elapsed0 = int(state["step"]), float(state["elapsed"])
+        if st.avg is not None and state.get("average"):
+            st.avg.load_state_dict(state["average"])
         st.lineage = json.loads(state.get("lineage", "[]"))
         # the metadata keeps the command that started the run (the one to repeat it) and lists the resumptions
         st.resumed = json.loads(state.get("resumed", "[]")) + ([command] if command else [])
@@ -546,6 +613,8 @@ def _train_step(st: TrainState, n: int, pts: np.ndarray, par: np.ndarray) -> tup
     gnorm = float(torch.nn.utils.clip_grad_norm_(st.model.parameters(), cfg.clip))
     st.opt.step()
     st.sched.step()
+    if st.avg is not None:
+        st.avg.update()
     return float(loss.detach()), parts, gnorm
 
 
@@ -554,9 +623,9 @@ def _validate_and_keep(st: TrainState, bar) -> dict:
     st.log({"step": st.step, "validation": v, "elapsed": round(st.elapsed(), 2)})
     s = score(v["mean"])
     if st.best is None or s < tuple(st.best["score"]):
+        state = st.model.state_dict() if st.avg is None else st.avg.averaged_state(st.model)
         st.best = {"step": st.step, "score": list(s), "summary": v["mean"],
-                   "state": {k: t.detach().cpu().clone() for k, t in st.model.state_dict().items()
-                             if isinstance(t, torch.Tensor)}}
+                   "state": {k: t.detach().cpu().clone() for k, t in state.items() if isinstance(t, torch.Tensor)}}
     if bar is not None:
         bar.write(f"step {st.step}: validation {v['mean']}")
     return v
@@ -600,6 +669,9 @@ def _finish(st: TrainState) -> Surrogate:
     cfg = st.cfg
     if st.rank != 0:
         return st.cpu_surrogate()
+    if st.avg is not None:  # from here on the model holds the averaged weights (the checkpoint keeps both)
+        st.model.load_state_dict(st.avg.averaged_state(st.model))
+        st.avg = None
     last = validate(st.cpu_surrogate(), cfg)
     selected = st.step
     if cfg.select_best and st.best is not None and tuple(st.best["score"]) < score(last["mean"]):
@@ -663,6 +735,9 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--time-limit", type=float, default=None, help="override the wall-time limit (s; 0: none)")
     p.add_argument("--lr", type=float, default=None,
                    help="override the peak learning rate (e.g. lower for a gentle warm restart with --init)")
+    p.add_argument("--ema", type=float, default=None, metavar="DECAY",
+                   help="keep an exponential moving average of the weights with this decay (e.g. 0.999); validation, "
+                        "checkpoint choice and the shipped file use it (0: off, the default)")
     p.add_argument("--threads", type=int, default=None, help="torch CPU threads per process")
     p.add_argument("--workers", type=int, default=None, help="batch-drawing worker processes (0: a thread)")
     p.add_argument("--seed", type=int, default=None)
@@ -674,7 +749,7 @@ def run(args) -> Surrogate:
     cfg = get_config(args.config, args.preset)
     over = {k: v for k, v in {"steps": args.steps, "batch": args.batch, "time_limit": args.time_limit,
                               "threads": args.threads, "seed": args.seed, "workers": args.workers,
-                              "lr": args.lr}.items()
+                              "lr": args.lr, "ema": args.ema}.items()
             if v is not None}
     for k in ("steps", "batch"):
         if k in over and over[k] < 1:
@@ -683,6 +758,8 @@ def run(args) -> Surrogate:
         raise ValueError("--workers and --threads must not be negative")
     if "lr" in over and not (math.isfinite(over["lr"]) and over["lr"] > 0):
         raise ValueError(f"--lr must be a positive number, got {over['lr']}")
+    if "ema" in over and not (math.isfinite(over["ema"]) and 0.0 <= over["ema"] < 1.0):
+        raise ValueError(f"--ema must lie in [0, 1), got {over['ema']}")
     cfg = cfg.with_overrides(**over)
     device = resolve_device(args.device)
     if args.init and args.resume:
@@ -710,7 +787,7 @@ def _command_line(args) -> str:
         parts.append(f"--preset {args.preset}")
     for flag, val in [("--steps", args.steps), ("--batch", args.batch), ("--time-limit", args.time_limit),
                       ("--threads", args.threads), ("--workers", args.workers), ("--seed", args.seed),
-                      ("--lr", args.lr), ("--init", args.init)]:
+                      ("--lr", args.lr), ("--ema", args.ema), ("--init", args.init)]:
         if val is not None:
             parts.append(f"{flag} {val:g}" if isinstance(val, float) else f"{flag} {val}")
     if args.device and args.device != "cpu":
