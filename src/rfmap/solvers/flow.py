@@ -590,7 +590,7 @@ def vertex_residual(elements: np.ndarray, population: np.ndarray, measure: np.nd
         return x
     e, k = elements.shape
     A = sp.csr_matrix((np.full(e * k, 1.0 / k), elements.reshape(-1), np.arange(0, e * k + 1, k)), shape=(e, n))
-    At = A.T.tocsr()
+    At = A.T  # a CSC view: its products cost about as much as CSR ones, without the 55 ms conversion (3D N = 48)
     w = np.asarray(measure, dtype=np.float64)
 
     def normal(v: np.ndarray) -> np.ndarray:
