@@ -207,7 +207,9 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     assert t.value("new", "unet", "fields") == \
         "modes, steps, peaks 15 %, ramps 15 % (height ×2.5), single hard ramps or peaks 30 %"
     assert t.value("new", "unet", "fold") == "100 from 0.05"
-    assert t.value("new", "unet", "lr") == 2e-4
+    assert t.value("new", "unet", "lr") == 2e-4 and t.value("new", "unet", "ema") is None
+    sur.meta["config"]["ema"] = 0.999
+    assert recipe_table({"new": sur}).value("new", "unet", "ema") == 0.999
     assert t.value("new", "unet", "steps") == 1300 and t.value("new", "unet", "train_time") == 10.0
     assert t.value("new", "unet", "val_n") == "51/128"
     assert t.value("new", "unet", "held_out") == 0.125 and t.value("new", "unet", "n_flipped") == 7

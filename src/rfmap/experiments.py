@@ -39,7 +39,7 @@ COLUMN_TITLES = {
     "train_time": "training (min)", "validation": "held-out Std ρ̃ map", "work_n": "network grid", "arch": "arch",
     "count": "fields", "demand_median": "demand (median)", "demand_p90": "demand (90 %)",
     "reach_ratio": "reach / demand", "left_net": "left, ours", "left_classical": "left, classical",
-    "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "held_out": "held-out mean",
+    "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "ema": "weight average", "held_out": "held-out mean",
     "val_n": "held-out N", "mu_ratio": "mean |μ| ratio",
 }
 #: significant digits of every number in a table (times: one fewer, with their unit)
@@ -823,14 +823,15 @@ def training_fields_text(config: dict) -> str:
 
 def recipe_table(surs: dict) -> Table:
     r"""How each model was trained, from its metadata: the training fields (:func:`training_fields_text`), the fold
-    penalty (weight, from :math:`\det J < \tau`), the peak learning rate of the last run, the cumulative steps
+    penalty (weight, from :math:`\det J < \tau`), the peak learning rate of the last run, the decay of its weight
+    average (``ema``; ``None`` when it shipped the weights as trained), the cumulative steps
     and minutes over its ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end
     of training (grid sides; the selection score, i.e. the mean metric with every folded map counted as the identity
     map, where recorded, else the capped or the plain mean; flipped elements over all held-out maps;
     :func:`rfmap.validation.evaluate`).  Older weights were validated on fewer sides, so their numbers are not
     comparable with those of later runs."""
     t = Table("tab:recipes", "How the models were trained",
-              ["fields", "fold", "lr", "steps", "train_time", "val_n", "held_out", "n_flipped"])
+              ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "n_flipped"])
     for name, s in surs.items():
         meta = s.meta
         cfg = meta.get("config") or {}
@@ -841,6 +842,7 @@ def recipe_table(surs: dict) -> Table:
             "fields": training_fields_text(cfg) if cfg else None,
             "fold": f"{loss.get('fold', 10.0):g} from {loss.get('fold_threshold', 0.02):g}" if cfg else None,
             "lr": float(cfg["lr"]) if "lr" in cfg else None,
+            "ema": float(cfg["ema"]) if cfg.get("ema") else None,
             "steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
             "train_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 60.0,
             "val_n": "/".join(str(n) for n in (cfg.get("val_sizes") or [cfg.get("val_n", "?")])) if cfg else None,
