@@ -292,6 +292,7 @@ def test_paper_presets_carry_the_papers_hyperparameters():
     (["--lr=-1e-4"], "--lr must be a positive number"),
     (["--lr", "nan"], "--lr must be a positive number"),
     (["--ema", "1"], "--ema must lie in [0, 1)"),
+    (["--finish"], "--finish ends a run from its checkpoint"),
     (["--ema=-0.5"], "--ema must lie in [0, 1)"),
 ] + ([] if torch.cuda.is_available() else [(["--device", "cuda"], "no CUDA device")]))
 def test_train_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, extra, message):

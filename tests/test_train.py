@@ -143,6 +143,39 @@ def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch, ema):
     assert loss_a == loss_b
 
 
+def test_finish_ends_a_stopped_run_from_its_checkpoint(tmp_path, monkeypatch):
+    """A run stopped after its step-10 checkpoint, ended with --resume --finish: no further step, the weight file
+    holds the best validated (averaged) state, and the metadata records the starting and the finishing command."""
+    cfg = CFG.with_overrides(steps=20, ckpt_every=10, val_every=5, ema=0.5)
+    real_checkpoint = T.TrainState.checkpoint
+
+    def checkpoint_then_crash(self):
+        real_checkpoint(self)
+        if self.step == 10:
+            raise _Crash
+
+    monkeypatch.setattr(T.TrainState, "checkpoint", checkpoint_then_crash)
+    start = f"rfmap train --config {cfg.name} --preset ci --steps 20 --ema 0.5"
+    with pytest.raises(_Crash):
+        T.train(cfg, tmp_path, progress=False, command=start)
+    monkeypatch.setattr(T.TrainState, "checkpoint", real_checkpoint)
+    ck = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
+    sur = T.train(cfg, tmp_path, progress=False, resume=True, finish=True, command=start + " --resume --finish")
+    assert sur.meta["steps"] == 10 and sur.meta["command"] == start
+    assert sur.meta["resumed"] == [start + " --resume --finish"]
+    losses = [json.loads(x) for x in (tmp_path / "log.jsonl").read_text().splitlines()]
+    assert max(r["step"] for r in losses if "loss" in r) == 10  # nothing trained after the checkpoint
+    final = [r for r in losses if r.get("final")][-1]
+    assert sur.meta["selected_step"] == final["selected_step"]
+    # the shipped weights: the best validated state, or the average at the checkpoint's step
+    best = json.loads(ck["best"]["step"])
+    want = ck["best_state"] if final["selected_step"] == best and best != 10 else ck["average"]["shadow"]
+    for k, v in want.items():
+        assert torch.allclose(sur.model.state_dict()[k], v.float(), atol=1e-6, rtol=0), k
+    with pytest.raises(ValueError, match="--finish"):
+        T.train(cfg, tmp_path / "none", progress=False, finish=True)
+
+
 def test_started_as_rebuilds_the_starting_command_of_an_old_checkpoint():
     assert T._started_as("rfmap train --config x --lr 0.0002 --resume", []) == "rfmap train --config x --lr 0.0002"
     parent = [{"name": "x", "sha256": "0" * 64}]

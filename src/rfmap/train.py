@@ -552,7 +552,7 @@ def _started_as(command: str | None, lineage: list) -> str | None:
     """
     if not command:
         return command
-    words = [w for w in command.split() if w != "--resume"]
+    words = [w for w in command.split() if w not in ("--resume", "--finish")]
     if lineage and "--init" not in words:
         words += ["--init", str(lineage[-1]["name"])]
     return " ".join(words)
@@ -560,7 +560,7 @@ def _started_as(command: str | None, lineage: list) -> str | None:
 
 def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | None = None,
           device: str | torch.device | None = "cpu", progress: bool = True, log_every: int = 10,
-          command: str | None = None) -> Surrogate:
+          command: str | None = None, finish: bool = False) -> Surrogate:
     """Train ``cfg``; returns the trained :class:`Surrogate` (also written to ``out_dir``).
 
     Parameters
@@ -573,9 +573,16 @@ def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | N
         ``'cpu'`` (default), ``'cuda'`` or ``'auto'``; on CUDA the network runs under bf16 autocast.
     command : str, optional
         The command line that started the run (recorded in the metadata).
+    finish : bool
+        With ``resume``: train no further, but end the run from its checkpoint as if its budget were spent (final
+        validation, the choice of the best validated state, the paper-field report and the weight file), e.g. after
+        the run was stopped early.
     """
     dev = device if isinstance(device, torch.device) else resolve_device(device)
     out = Path(out_dir or Path("runs") / cfg.name)
+    if finish and not (resume and (out / "checkpoint.pt").exists()):
+        raise ValueError(f"--finish ends a run from its checkpoint: give --resume and an --out with checkpoint.pt "
+                         f"(none in {out})")
     rank, _ = _dist_info()
     if rank == 0:
         out.mkdir(parents=True, exist_ok=True)
@@ -586,13 +593,14 @@ def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | N
         from tqdm.auto import tqdm
 
         bar = tqdm(total=cfg.steps, initial=st.step, desc=f"train {cfg.name}", unit="step", dynamic_ncols=True)
-    loader = _loader(cfg, st.rank, st.step, cfg.steps)
-    try:
-        _loop(st, loader, bar, log_every)
-    finally:
-        loader.close()
-        if bar is not None:
-            bar.close()
+    if not finish:
+        loader = _loader(cfg, st.rank, st.step, cfg.steps)
+        try:
+            _loop(st, loader, bar, log_every)
+        finally:
+            loader.close()
+    if bar is not None:
+        bar.close()
     return _finish(st)
 
 
@@ -727,6 +735,9 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
                         "default: $RFMAP_SCALE or full")
     p.add_argument("--out", default=None, help="output directory (default runs/CONFIG)")
     p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--finish", action="store_true",
+                   help="with --resume: train no further; end the run from its checkpoint (final validation, best "
+                        "validated state, weight file), e.g. after stopping it early")
     p.add_argument("--init", default=None, metavar="MODEL|FILE",
                    help="start from a shipped model or a .safetensors file (fresh optimiser and schedule)")
     p.add_argument("--device", default="cpu", help="auto, cpu (default) or cuda; CUDA trains under bf16 autocast")
@@ -775,7 +786,7 @@ def run(args) -> Surrogate:
         torch.distributed.init_process_group(backend)
     try:
         return train(cfg, args.out, resume=args.resume, init=args.init, device=device,
-                     progress=not args.no_progress, command=_command_line(args))
+                     progress=not args.no_progress, command=_command_line(args), finish=args.finish)
     finally:
         if world > 1 and torch.distributed.is_initialized():
             torch.distributed.destroy_process_group()
@@ -794,6 +805,8 @@ def _command_line(args) -> str:
         parts.append(f"--device {args.device}")
     if args.resume:
         parts.append("--resume")
+    if args.finish:
+        parts.append("--finish")
     return " ".join(parts)
 
 
