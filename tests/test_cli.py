@@ -177,10 +177,15 @@ def test_models_lineage_lists_every_run(capsys):
         runs = meta.get("lineage", []) + [meta]
         head = f"{name}: {len(runs)} run(s), {meta.get('cumulative_steps', meta['steps'])} steps"
         assert head in stdout
-        block = stdout.split(head, 1)[1]
-        lines = [ln.strip() for ln in block.splitlines()[1:len(runs) + 1]]
-        for k, (line, run) in enumerate(zip(lines, runs), 1):
+        block = stdout.split(head, 1)[1].splitlines()[1:]
+        lines = [ln.strip() for ln in block if ln.startswith("  ")]  # this model's runs and their resumptions
+        numbered = [ln for ln in lines if not ln.startswith("then ")][:len(runs)]
+        for k, (line, run) in enumerate(zip(numbered, runs), 1):
             assert line.startswith(f"{k}. {run['command']}   # {run['steps']} steps")
+            # a run's resumptions (e.g. an early end with --resume --finish) follow it
+            after = lines[lines.index(line) + 1:]
+            for j, again in enumerate(run.get("resumed") or []):
+                assert after[j] == f"then {again}"
         assert sum(int(r["steps"]) for r in runs) == meta.get("cumulative_steps", meta["steps"])
 
 

@@ -148,6 +148,12 @@ def test_init_warm_restart_records_the_lineage(tmp_path):
     assert float(parent.model.head.weight.detach().abs().max()) > 0
     start = T._build_state(CFG, tmp_path / "s", torch.device("cpu"), False, str(ppath), None)
     assert all(torch.equal(start.model.state_dict()[k], v) for k, v in parent.model.state_dict().items())
+    # a parent that was resumed (or ended with --resume --finish) passes its resumptions on to the chain
+    assert "resumed" not in lin[0]
+    parent.meta["resumed"] = ["rfmap train --config deq2d-square --preset ci --resume --finish"]
+    parent.save(tmp_path / "r" / "deq2d-square.safetensors")
+    _, record = T.load_init(str(tmp_path / "r" / "deq2d-square.safetensors"), CFG)
+    assert record["resumed"] == parent.meta["resumed"]
 
 
 def test_init_of_another_task_or_architecture_is_refused(tmp_path):

@@ -84,11 +84,14 @@ def cmd_models(args) -> int:
             sha = run.get("sha256")
             print(f"  {k}. {run.get('command', '?')}   # {run.get('steps')} steps, "
                   f"{float(run.get('wall_time', 0.0)) / 60:.0f} min" + (f", sha256 {sha[:12]}" if sha else ""))
+            for again in run.get("resumed") or []:  # continued after an interruption, or ended with --finish
+                print(f"     then {again}")
     if args.lineage and names:
         print("In a chain, '--init NAME' continues from the weights the run before it wrote: pass that run's "
               "runs/NAME/NAME.safetensors to --init to repeat the chain. A run with a --time-limit stops on the clock "
               "and its schedule follows the elapsed time, so a repeat on another machine trains as long, not for the "
-              "same steps.")
+              "same steps; a run that was stopped and ended with '--resume --finish' lists that command under it "
+              "(stop it at the same step).")
     return 0
 
 

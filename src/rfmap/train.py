@@ -361,6 +361,8 @@ def load_init(source: str, cfg: TrainConfig) -> tuple[Surrogate, dict]:
               "wall_time": float(meta.get("wall_time", 0.0)),
               "cumulative_steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
               "cumulative_wall_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0)))}
+    if meta.get("resumed"):
+        record["resumed"] = list(meta["resumed"])
     return parent, record
 
 
