@@ -100,6 +100,21 @@ class _Crash(Exception):
     pass
 
 
+def _train_until_crash(cfg, out, command, monkeypatch, at: int = 10) -> None:
+    """Train ``cfg`` into ``out`` and crash right after the checkpoint of step ``at``."""
+    real_checkpoint = T.TrainState.checkpoint
+
+    def checkpoint_then_crash(self):
+        real_checkpoint(self)
+        if self.step == at:
+            raise _Crash
+
+    monkeypatch.setattr(T.TrainState, "checkpoint", checkpoint_then_crash)
+    with pytest.raises(_Crash):
+        T.train(cfg, out, progress=False, command=command)
+    monkeypatch.setattr(T.TrainState, "checkpoint", real_checkpoint)
+
+
 @pytest.mark.parametrize("ema", [0.0, 0.8])
 def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch, ema):
     """Train 20 steps straight; separately train, crash right after the step-10 checkpoint, and resume to 20.
@@ -108,18 +123,8 @@ def test_resume_reproduces_an_uninterrupted_run(tmp_path, monkeypatch, ema):
     cfg = CFG.with_overrides(steps=20, ckpt_every=10, val_every=10, ema=ema)
     straight = T.train(cfg, tmp_path / "a", progress=False)
 
-    real_checkpoint = T.TrainState.checkpoint
-
-    def checkpoint_then_crash(self):
-        real_checkpoint(self)
-        if self.step == 10:
-            raise _Crash
-
-    monkeypatch.setattr(T.TrainState, "checkpoint", checkpoint_then_crash)
     start = f"rfmap train --config {cfg.name} --preset ci --steps 20"
-    with pytest.raises(_Crash):
-        T.train(cfg, tmp_path / "b", progress=False, command=start)
-    monkeypatch.setattr(T.TrainState, "checkpoint", real_checkpoint)
+    _train_until_crash(cfg, tmp_path / "b", start, monkeypatch)
     assert not (tmp_path / "b" / f"{cfg.name}.safetensors").exists()
     ck = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=True)
     assert ck["step"] == 10
@@ -147,18 +152,8 @@ def test_finish_ends_a_stopped_run_from_its_checkpoint(tmp_path, monkeypatch):
     """A run stopped after its step-10 checkpoint, ended with --resume --finish: no further step, the weight file
     holds the best validated (averaged) state, and the metadata records the starting and the finishing command."""
     cfg = CFG.with_overrides(steps=20, ckpt_every=10, val_every=5, ema=0.5)
-    real_checkpoint = T.TrainState.checkpoint
-
-    def checkpoint_then_crash(self):
-        real_checkpoint(self)
-        if self.step == 10:
-            raise _Crash
-
-    monkeypatch.setattr(T.TrainState, "checkpoint", checkpoint_then_crash)
     start = f"rfmap train --config {cfg.name} --preset ci --steps 20 --ema 0.5"
-    with pytest.raises(_Crash):
-        T.train(cfg, tmp_path, progress=False, command=start)
-    monkeypatch.setattr(T.TrainState, "checkpoint", real_checkpoint)
+    _train_until_crash(cfg, tmp_path, start, monkeypatch)
     ck = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
     sur = T.train(cfg, tmp_path, progress=False, resume=True, finish=True, command=start + " --resume --finish")
     assert sur.meta["steps"] == 10 and sur.meta["command"] == start
