@@ -39,7 +39,8 @@ COLUMN_TITLES = {
     "train_time": "training (min)", "validation": "held-out Std ρ̃ map", "work_n": "network grid", "arch": "arch",
     "count": "fields", "demand_median": "demand (median)", "demand_p90": "demand (90 %)",
     "reach_ratio": "reach / demand", "left_net": "left, ours", "left_classical": "left, classical",
-    "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "ema": "weight average", "held_out": "held-out mean",
+    "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "ema": "weight average",
+    "held_out": "held-out mean",
     "val_n": "held-out N", "mu_ratio": "mean |μ| ratio",
 }
 #: significant digits of every number in a table (times: one fewer, with their unit)

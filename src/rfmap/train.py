@@ -595,14 +595,16 @@ def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | N
         from tqdm.auto import tqdm
 
         bar = tqdm(total=cfg.steps, initial=st.step, desc=f"train {cfg.name}", unit="step", dynamic_ncols=True)
-    if not finish:
-        loader = _loader(cfg, st.rank, st.step, cfg.steps)
-        try:
-            _loop(st, loader, bar, log_every)
-        finally:
-            loader.close()
-    if bar is not None:
-        bar.close()
+    try:
+        if not finish:  # --finish: no further step, straight to the end of the run
+            loader = _loader(cfg, st.rank, st.step, cfg.steps)
+            try:
+                _loop(st, loader, bar, log_every)
+            finally:
+                loader.close()
+    finally:
+        if bar is not None:
+            bar.close()
     return _finish(st)
 
 
