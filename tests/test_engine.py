@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from rfmap.cli import main as cli_main
 from rfmap.config import CONFIGS, get_config
 from rfmap.device import resolve_device
 from rfmap.random_fields import RandomMap, RandomBeltramiConfig
+from rfmap.surrogate import WEIGHTS_DIR, Surrogate
 from rfmap.mesh import grid_points
 from rfmap.tasks import draw_samples
 from rfmap.validation import VALIDATION_SEED, evaluate, score, validation_fields
@@ -235,7 +237,7 @@ def test_score_counts_a_folded_map_as_the_identity(monkeypatch):
     fake = {0: (50.0, 0.4, 3), 1: (0.2, 0.5, 2), 2: (0.1, 0.3, 0), 3: (0.3, 0.6, 0)}
     calls = iter(range(4))
 
-    def raw_map(s, field, n):
+    def raw_map(s, field, n, repair=False):
         std_map, std_orig, flips = fake[next(calls)]
         return SimpleNamespace(metrics=lambda: SimpleNamespace(std_rho_map=std_map, std_rho_orig=std_orig,
                                                                n_flipped=flips, min_jacobian=-0.1 if flips else 0.2))
@@ -255,6 +257,48 @@ def test_score_counts_a_folded_map_as_the_identity(monkeypatch):
     old_clean, old_folded = {"std_rho_map": 0.3, "n_flipped": 0}, {"std_rho_map": 0.1, "n_flipped": 1,
                                                                     "folded_fields": 1, "capped": 0.1}
     assert score(old_clean) == (0, 0.3) and score(hardly_moves) < score(old_folded)
+    # a diverged network (non-finite points, hence a NaN Std and no flipped element counted) is no map either
+    fake.update({0: (float("nan"), 0.4, 0)})
+    calls = iter(range(4))
+    m = V.evaluate(sur, (17,), count=4)["mean"]
+    assert m["folded_fields"] == 2 and np.isfinite(m["penalized"])
+    np.testing.assert_allclose(m["penalized"], (0.4 + 0.5 + 0.1 + 0.3) / 4)
+
+
+def test_evaluate_with_repair_scores_the_maps_a_user_gets():
+    """``evaluate(..., repair=True)`` (``TrainConfig.val_repair``): the shipped 3D model folds some held-out ramps
+    at N = 48; the delivered maps (regridded or repaired) are fold-free, and the records say which raw maps folded,
+    as many as the raw evaluation counts."""
+    sur = Surrogate.load(Path(WEIGHTS_DIR) / "dem3d-free.safetensors")
+    raw = evaluate(sur, (48,), count=4)
+    delivered = evaluate(sur, (48,), count=4, repair=True)
+    assert delivered["mean"]["path"] == "repaired" and "path" not in raw["mean"]
+    assert delivered["mean"]["folded_fields"] == 0 and delivered["mean"]["n_flipped"] == 0
+    assert delivered["mean"]["raw_folded_fields"] == raw["mean"]["folded_fields"]
+    for key, rec in raw.items():
+        if key != "mean":
+            assert delivered[key]["raw_folded"] == (rec["n_flipped"] > 0)
+            if not rec["n_flipped"]:  # an unfolded map is delivered as the network made it
+                assert delivered[key]["std_rho_map"] == pytest.approx(rec["std_rho_map"], rel=1e-6)
+    assert delivered["mean"]["penalized"] == pytest.approx(delivered["mean"]["std_rho_map"])
+
+
+def test_a_warm_restart_validates_its_parent_and_ships_it_when_nothing_beats_it(tmp_path):
+    """With ``init`` the parent is validated at step 0 and competes with every checkpoint: a child trained at an
+    absurd learning rate ships the parent's weights (selected step 0)."""
+    # a parent better than the identity on the validation fields (the ci fields without peaks and ramps)
+    T.train(CFG.with_overrides(steps=40, val_every=1000, lr=1e-2, density_field=None), tmp_path / "p", progress=False)
+    ppath = tmp_path / "p" / "deq2d-square.safetensors"
+    parent = Surrogate.load(ppath)
+    child = T.train(CFG.with_overrides(steps=4, val_every=2, lr=5.0, warmup=0), tmp_path / "c", progress=False,
+                    init=str(ppath))
+    recs = [json.loads(x) for x in (tmp_path / "c" / "log.jsonl").read_text().splitlines()]
+    first = [r for r in recs if "validation" in r][0]
+    assert first["step"] == 0
+    assert score(first["validation"]["mean"]) == score(evaluate(parent, CFG.val_ns, CFG.val_count)["mean"])
+    assert child.meta["selected_step"] == 0
+    for k, v in parent.model.state_dict().items():
+        assert torch.equal(child.model.state_dict()[k], v)
 
 
 def test_resolve_device():

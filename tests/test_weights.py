@@ -27,8 +27,8 @@ def test_metadata_records_provenance(name):
     # of its validation (held-out fields, sizes, checkpoint choice), some of which postdate older weights
     stored = dict(meta["config"])
     expected = cfg.to_dict()
-    for key in ("threads", "time_limit", "workers", "val_sizes", "val_count", "select_best", "val_every",
-                "ckpt_every", "val_n"):
+    for key in ("threads", "time_limit", "workers", "val_sizes", "val_count", "val_repair", "select_best",
+                "val_every", "ckpt_every", "val_n"):
         stored.pop(key, None)
         expected.pop(key, None)
     # model fields added after the weights were made (the FNO's) take their defaults, which leave a U-Net unchanged

@@ -66,7 +66,10 @@ class TrainConfig:
     (decay by ``gamma`` every ``step_size`` steps) or ``'restarts'`` (cosine annealing with warm restarts,
     ``T0``, ``T_mult``).  ``ema`` > 0 keeps an exponential moving average of the weights (Polyak averaging,
     :class:`rfmap.train.WeightAverage`) with that decay; validation, the checkpoint choice and the shipped file then
-    use the averaged weights (0, the default: the weights as trained).
+    use the averaged weights (0, the default: the weights as trained).  ``val_repair``: score the held-out maps as
+    ``Surrogate.map`` delivers them (a folded network map regridded or repaired; :func:`rfmap.validation.evaluate`)
+    instead of the raw network output.  A run started with ``init`` validates its parent at step 0, so that the
+    parent competes with every checkpoint.
     """
 
     name: str
@@ -98,6 +101,7 @@ class TrainConfig:
     val_n: int = 51
     val_sizes: tuple[int, ...] = ()
     val_count: int = 16
+    val_repair: bool = False
     select_best: bool = True
     workers: int = 0
     ckpt_every: int = 250
@@ -122,7 +126,7 @@ def _presets(name, task, description, ci: dict, full: dict, paper: dict, paper_n
     base = TrainConfig(name=name, task=task, description=description, **common)
     # the paper's runs: no wall-time limit, every thread of the machine, one batch worker
     paper = {"time_limit": 0.0, "threads": 0, "workers": 1, "val_every": 1000, "ckpt_every": 500,
-             **{k: full[k] for k in ("val_sizes", "val_count") if k in full}, **paper}
+             **{k: full[k] for k in ("val_sizes", "val_count", "val_repair") if k in full}, **paper}
     return {"ci": replace(base, preset="ci", **ci), "full": replace(base, preset="full", **full),
             "paper": replace(base, preset="paper", description=f"{description} Paper preset: {paper_note}",
                              **paper)}
@@ -167,7 +171,8 @@ _HARD3_NOTE = ("The random training densities include narrow peaks and steep ram
 _N48_NOTE = " Trained at N in [48, 96], so that the paper's 51-point grid runs at its own size."
 #: validation of the 2D and 3D full presets: 16 held-out random fields at these grid sides
 _VAL2 = dict(val_sizes=(51, 128), val_count=16)
-_VAL3 = dict(val_sizes=(32, 48), val_count=16)
+#: (3D: scored on the maps as Surrogate.map delivers them, a folded map regridded or repaired; see rfmap.validation)
+_VAL3 = dict(val_sizes=(32, 48), val_count=16, val_repair=True)
 _PAPER_2D = dict(steps=12000, batch=8, lr=1e-5, weight_decay=1e-5, schedule="step", step_size=200, gamma=0.5,
                  warmup=0, n_range=(64, 96), clip=1.0)
 _NOTE_2D = ("12,000 epochs, AdamW lr 1e-5, weight decay 1e-5, x0.5 every 200 epochs, N in [64, 96], clip 1.0, as "

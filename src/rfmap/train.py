@@ -278,7 +278,7 @@ def _loader(cfg: TrainConfig, rank: int, start: int, stop: int):
 # ------------------------------------------------------------------------------------------------- validation
 def validate(sur: Surrogate, cfg: TrainConfig) -> dict:
     """Metrics on the held-out random fields (:func:`rfmap.validation.evaluate`) at ``cfg.val_ns``."""
-    return evaluate(sur, cfg.val_ns, cfg.val_count)
+    return evaluate(sur, cfg.val_ns, cfg.val_count, repair=cfg.val_repair)
 
 
 @quiet_quality()
@@ -596,6 +596,8 @@ def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | N
 
         bar = tqdm(total=cfg.steps, initial=st.step, desc=f"train {cfg.name}", unit="step", dynamic_ncols=True)
     try:
+        if init is not None and not resume and not finish and st.rank == 0 and cfg.select_best:
+            _validate_and_keep(st, bar)  # the parent competes: a run that improves on nothing ships its parent
         if not finish:  # --finish: no further step, straight to the end of the run
             loader = _loader(cfg, st.rank, st.step, cfg.steps)
             try:
