@@ -200,7 +200,7 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     cfg["density_field"]["ramp_scale"] = 2.5
     cfg["loss"]["fold"], cfg["loss"]["fold_threshold"] = 100.0, 0.05
     meta = {"config": cfg, "steps": 300, "cumulative_steps": 1300, "wall_time": 60.0, "cumulative_wall_time": 600.0,
-            "final_metrics": {"mean": {"std_rho_map": 0.125, "n_flipped": 7}}}
+            "final_metrics": {"mean": {"std_rho_map": 0.125, "n_flipped": 7, "folded_fields": 2}}}
     sur = Surrogate.untrained(TaskSpec("density", 2, "square"), base=4, depth=2, **meta)
     old = Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, steps=5, wall_time=30.0)
     t = recipe_table({"new": sur, "old": old})
@@ -212,11 +212,16 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     assert recipe_table({"new": sur}).value("new", "unet", "ema") == 0.999
     assert t.value("new", "unet", "steps") == 1300 and t.value("new", "unet", "train_time") == 10.0
     assert t.value("new", "unet", "val_n") == "51/128"
-    assert t.value("new", "unet", "held_out") == 0.125 and t.value("new", "unet", "n_flipped") == 7
+    assert t.value("new", "unet", "held_out") == 0.125 and t.value("new", "unet", "folded_maps") == 2
+    assert t.value("new", "unet", "scored") == "raw"
     assert t.value("old", "unet", "fields") is None and t.value("old", "unet", "steps") == 5
     # the selection score where the metadata records it: a folded map counted as the identity, not its huge Std
     sur.meta["final_metrics"]["mean"].update({"std_rho_map": 40.0, "capped": 0.2, "penalized": 0.25})
     assert recipe_table({"new": sur}).value("new", "unet", "held_out") == 0.25
+    # scored on the delivered maps (val_repair): the maps the network itself folded are counted apart
+    sur.meta["final_metrics"]["mean"].update({"folded_fields": 0, "path": "repaired", "raw_folded_fields": 3})
+    again = recipe_table({"new": sur})
+    assert again.value("new", "unet", "scored") == "delivered" and again.value("new", "unet", "folded_maps") == 3
     assert "| new | unet | modes, steps" in t.to_markdown()
     bel = get_config("beltrami2d", "full")
     for low, text in ((0.0, "random boundary-fixing maps"), (0.3, "random boundary-fixing maps, low-frequency 30 %")):

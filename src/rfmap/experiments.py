@@ -40,7 +40,7 @@ COLUMN_TITLES = {
     "count": "fields", "demand_median": "demand (median)", "demand_p90": "demand (90 %)",
     "reach_ratio": "reach / demand", "left_net": "left, ours", "left_classical": "left, classical",
     "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "ema": "weight average",
-    "held_out": "held-out mean",
+    "held_out": "held-out mean", "scored": "held-out maps scored", "folded_maps": "folded held-out maps",
     "val_n": "held-out N", "mu_ratio": "mean |μ| ratio",
 }
 #: significant digits of every number in a table (times: one fewer, with their unit)
@@ -828,11 +828,12 @@ def recipe_table(surs: dict) -> Table:
     average (``ema``; ``None`` when it shipped the weights as trained), the cumulative steps
     and minutes over its ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end
     of training (grid sides; the selection score, i.e. the mean metric with every folded map counted as the identity
-    map, where recorded, else the capped or the plain mean; flipped elements over all held-out maps;
-    :func:`rfmap.validation.evaluate`).  Older weights were validated on fewer sides, so their numbers are not
-    comparable with those of later runs."""
+    map, where recorded, else the capped or the plain mean; which maps were scored: ``raw`` network output or the maps
+    as ``Surrogate.map`` ``delivered`` them, a folded map regridded or repaired (``TrainConfig.val_repair``); how many
+    held-out maps the network itself folded; :func:`rfmap.validation.evaluate`).  Older weights were validated on
+    fewer sides, so their numbers are not comparable with those of later runs."""
     t = Table("tab:recipes", "How the models were trained",
-              ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "n_flipped"])
+              ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "scored", "folded_maps"])
     for name, s in surs.items():
         meta = s.meta
         cfg = meta.get("config") or {}
@@ -848,5 +849,7 @@ def recipe_table(surs: dict) -> Table:
             "train_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 60.0,
             "val_n": "/".join(str(n) for n in (cfg.get("val_sizes") or [cfg.get("val_n", "?")])) if cfg else None,
             "held_out": None if metric is None else float(metric),
-            "n_flipped": int(val["n_flipped"]) if "n_flipped" in val else None})
+            "scored": ("delivered" if val.get("path") == "repaired" else "raw") if val else None,
+            "folded_maps": (int(val["raw_folded_fields"]) if "raw_folded_fields" in val else
+                            int(val["folded_fields"]) if "folded_fields" in val else None)})
     return t
