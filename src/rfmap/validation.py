@@ -29,7 +29,9 @@ than as the identity.  Measured on the 3D cube model's validation set (mean Std 
 the average weights of a run at step 1,000 against those at step 7,000: raw and penalized 0.2590 against 0.2915
 (2 against 5 folded ramps: the raw rule prefers step 1,000), delivered 0.2317 against 0.2132 (step 7,000 is better
 on every kind, the ramps included: 0.711 against 0.656).  The raw rule picked checkpoints by how many of the
-steep ramps folded, not by the maps users receive.
+steep ramps folded, not by the maps users receive.  A delivered map can be worse than no map (a repair that
+leaves a steep ramp at Std 2.5 against the identity's 1.0 was seen); in the score it counts as the identity, so that
+one failed repair does not decide the choice as one fold did before.
 """
 from __future__ import annotations
 
@@ -153,8 +155,9 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False) -> dict:
         mean counts a folded map as no better than no map (a map with non-finite points counts as folded).
         ``penalized``: the mean metric with each folded map's
         value replaced by that of the identity map (a folded map is worth no more than no map, even where its own
-        value is lower); the selection score.  With ``repair`` the metrics are those of the delivered maps, every
-        record gains ``raw_folded`` (the network's own map was folded) and ``"mean"`` gains ``"path": "repaired"``
+        value is lower); the selection score.  With ``repair`` the metrics are those of the delivered maps (and in
+        ``penalized`` a delivered map that is worse than the identity counts as the identity), every record gains
+        ``raw_folded`` (the network's own map was folded) and ``"mean"`` gains ``"path": "repaired"``
         and ``raw_folded_fields``.
     """
     spec = sur.spec
@@ -178,7 +181,9 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False) -> dict:
             broken = bool(m.n_flipped) or not np.isfinite(value)
             primary.append(value)
             capped.append(min(value, baseline) if broken else value)
-            penalized.append(baseline if broken else value)
+            # delivered maps are fold-free; one that leaves the field less equal than it was (a repair can) is
+            # worth no more than no map
+            penalized.append(baseline if broken else (min(value, baseline) if repair else value))
             flips += int(m.n_flipped)
             folded += int(broken)
             min_j = min(min_j, float(m.min_jacobian))
