@@ -242,7 +242,7 @@ def test_score_counts_a_folded_map_as_the_identity(monkeypatch):
         return SimpleNamespace(metrics=lambda: SimpleNamespace(std_rho_map=std_map, std_rho_orig=std_orig,
                                                                n_flipped=flips, min_jacobian=-0.1 if flips else 0.2))
 
-    monkeypatch.setattr(V, "_raw_map", raw_map)
+    monkeypatch.setattr(V, "_held_out_map", raw_map)
     m = V.evaluate(sur, (17,), count=4)["mean"]
     assert m["folded_fields"] == 2 and m["n_flipped"] == 5
     np.testing.assert_allclose(m["std_rho_map"], (50.0 + 0.2 + 0.1 + 0.3) / 4)

@@ -124,7 +124,7 @@ def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "valid
     return [_density_field(j, DENSITY_KINDS[j % len(DENSITY_KINDS)], dim, stream) for j in range(count)]
 
 
-def _raw_map(sur, field, n: int, repair: bool = False):
+def _held_out_map(sur, field, n: int, repair: bool = False):
     from .surrogate import quiet_quality  # the metrics say how poor a map is; no warning per field
 
     kw = {"repair": repair} if "repair" in inspect.signature(sur.map).parameters else {}
@@ -166,7 +166,7 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False) -> dict:
     primary, capped, penalized, flips, folded, min_j, raw_folded = [], [], [], 0, 0, np.inf, 0
     for n in ns:
         for vf in fields:
-            r = _raw_map(sur, vf.field, int(n), repair)
+            r = _held_out_map(sur, vf.field, int(n), repair)
             if spec.kind == "beltrami":
                 exact = vf.exact(r.ref_points)
                 m = r.metrics(exact_points=exact)
