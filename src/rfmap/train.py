@@ -498,7 +498,9 @@ class TrainState:
 def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool, init: str | None,
                  command: str | None) -> TrainState:
     rank, world = _dist_info()
-    if cfg.threads and device.type == "cpu":
+    if cfg.threads:  # on CUDA too: validation, refinement and the paper-field report run on a CPU copy, and two
+        # runs sharing a 16-core GPU machine with torch's default threads each spent 150-180 s per 3D validation
+        # (7 s on a 2-core CPU with 2 threads): the threads of the two processes and their batch workers competed
         torch.set_num_threads(cfg.threads)
     torch.manual_seed(cfg.seed)
     spec = cfg.task
@@ -755,7 +757,8 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--ema", type=float, default=None, metavar="DECAY",
                    help="keep an exponential moving average of the weights with this decay (e.g. 0.999); validation, "
                         "checkpoint choice and the shipped file use it (0: off, the default)")
-    p.add_argument("--threads", type=int, default=None, help="torch CPU threads per process")
+    p.add_argument("--threads", type=int, default=None,
+                   help="torch CPU threads per process (also with --device cuda: validation runs on a CPU copy)")
     p.add_argument("--workers", type=int, default=None, help="batch-drawing worker processes (0: a thread)")
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--no-progress", action="store_true")
