@@ -319,5 +319,6 @@ def test_map_warns_in_one_line_when_the_map_undoes_equalization(tmp_path, capsys
     rc, stdout, err = run_main(capsys, "map", "--model", tiny_model, "--field-file", f, "--out", out)
     assert rc == 0 and out.exists() and f"wrote {out}" in stdout
     lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("rfmap map: warning: the network's map leaves this density less")
+    assert len(lines) == 1 and lines[0].startswith("rfmap map: warning: the network's map left this density less")
+    assert "shortened to 0 of itself" in lines[0]  # a uniform density: the identity is the best map
     assert "--refine" in lines[0] and "--polish" in lines[0] and "Warning" not in err

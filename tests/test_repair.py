@@ -460,3 +460,61 @@ def test_scale_repair_cost_follows_the_folded_region():
     assert 0 < info["affected"] < 0.05 * len(pts)
     moved = np.abs(out - pts).max(1) > 0
     assert moved.sum() == info["affected"]
+
+
+# ------------------------------------------------------------------------------------ shortened maps (never worse)
+def _ramp_and_its_map(n: int, dim: int, boundary: str):
+    """A density ramp on the N-grid and the flow-based solver's map of it (a near-equalizing map)."""
+    from rfmap.solvers import solve_dem
+
+    pts = grid_mesh(n, dim).points
+    dens = (1.0 + 2.0 * pts[:, 0]).reshape((n,) * dim)
+    res = solve_dem(dens, method="flow", boundary=boundary)
+    return res.ref_points, res.mapped_points, res.field
+
+
+@pytest.mark.parametrize("dim, n, boundary", [(2, 17, "square"), (2, 17, "free"), (3, 9, "square")])
+def test_shorten_map_finds_the_scale_of_an_overshooting_map(dim, n, boundary):
+    from rfmap.repair import fold_free, shorten_map
+    from rfmap.surrogate import density_quality
+
+    ref, good, dens = _ramp_and_its_map(n, dim, boundary)
+    std_good = density_quality(good, dens, n)["std_rho_map"]
+    factor = 1.6  # the solver's displacement overshot by 60 %: the best shortened map is near s = 1 / 1.6
+    over = ref + factor * (good - ref)
+    out, rep = shorten_map(ref, over, dens, n, boundary=boundary)
+    q = density_quality(out, dens, n)
+    assert rep["scale"] == pytest.approx(1 / factor, abs=0.05)
+    assert q["std_rho_map"] == pytest.approx(rep["std_after"], rel=1e-6)
+    assert q["std_rho_map"] <= min(rep["std_before"], rep["std_identity"]) and q["std_rho_map"] < 2 * std_good
+    assert fold_free(out, None, grid_n=n, boundary=boundary)
+    if boundary == "square":  # the walls stay walls: every coordinate that was 0 or 1 still is
+        on_wall = np.isclose(ref, 0.0) | np.isclose(ref, 1.0)
+        assert np.allclose(out[on_wall], ref[on_wall], atol=1e-12)
+
+
+def test_shorten_map_of_a_folded_map_is_fold_free_and_no_worse_than_the_identity():
+    from rfmap.repair import fold_free, shorten_map
+    from rfmap.surrogate import density_quality
+
+    n = 17
+    ref, good, dens = _ramp_and_its_map(n, 2, "square")
+    folded = ref + 12.0 * (good - ref)  # far past the walls' neighbours: folded
+    assert not fold_free(folded, None, grid_n=n)
+    out, rep = shorten_map(ref, folded, dens, n, boundary="square")
+    assert rep["std_before"] == np.inf and 0.0 < rep["scale"] < 1.0
+    assert fold_free(out, None, grid_n=n)
+    assert density_quality(out, dens, n)["std_rho_map"] < rep["std_identity"]
+
+
+def test_shorten_map_keeps_a_good_map_and_refuses_bad_input():
+    from rfmap.repair import shorten_map
+
+    n = 17
+    ref, good, dens = _ramp_and_its_map(n, 2, "square")
+    out, rep = shorten_map(ref, good, dens, n, boundary="square")
+    assert rep["scale"] > 0.9 and rep["std_after"] <= rep["std_before"]
+    with pytest.raises(ValueError, match="N-grid"):
+        shorten_map(ref[:-1], good[:-1], dens[:-1], n, boundary="square")
+    with pytest.raises(ValueError, match="samples"):
+        shorten_map(ref, good, dens, n, boundary="square", samples=0)

@@ -137,10 +137,11 @@ def cmd_map(args) -> int:
     if "regrid" in res.info:
         print(regrid_summary(res.info["regrid"]))
     print(repair_summary(res.info.get("repair")))
-    if res.info.get("quality", {}).get("worse"):
+    if res.info.get("quality", {}).get("worse") or "shorten" in res.info:
         from .surrogate import quality_message
 
-        print(f"rfmap map: warning: {quality_message(res.info['quality'], '--refine', '--polish')}", file=sys.stderr)
+        msg = quality_message(res.info["quality"], "--refine", "--polish", res.info.get("shorten"))
+        print(f"rfmap map: warning: {msg}", file=sys.stderr)
     if "polish" in res.info:
         p = res.info["polish"]
         st = p["stages"]
@@ -279,7 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--points", default=None, help=".npy array (P, d) of query points")
     s.add_argument("--refine", action="store_true", help="apply weight refinement")
     s.add_argument("--no-repair", action="store_true",
-                   help="return the raw network map, without removing folded elements")
+                   help="return the raw network map, without removing folded elements or shortening a map that "
+                        "leaves the density less equal than it was")
     s.add_argument("--polish", nargs="?", const="default", default=None, type=_polish_arg, metavar="TOL",
                    help="finish the density map with the flow-based solver (optionally to Std(rho~_map) <= TOL)")
     s.add_argument("--no-guard", action="store_true",

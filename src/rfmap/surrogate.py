@@ -36,7 +36,7 @@ from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
 from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
-from .repair import repair_map
+from .repair import repair_map, shorten_map
 from .result import MapResult
 from .solvers.flow import F32_MARGIN
 from .symmetry import resolve_symmetry, symmetrized_displacement
@@ -120,8 +120,8 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     -------
     dict
         ``std_rho_orig``, ``std_rho_map``, ``min_jacobian`` and ``worse``: whether Std(rho~_map) exceeds
-        Std(rho~_orig) by more than the fraction :data:`QUALITY_MARGIN` (or the map is not finite), i.e. the map
-        undid more than it did.
+        Std(rho~_orig) by more than the fraction :data:`QUALITY_MARGIN` and 1e-5 (or the map is not finite), i.e.
+        the map undid more than it did.
     """
     d = mapped.shape[1]
     if not np.isfinite(mapped).all():
@@ -137,12 +137,23 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     orig = float((mean / mean.mean()).std())  # density_std with equal measures
     new = density_std(mean * ref_measure, meas)
     return {"std_rho_orig": orig, "std_rho_map": new, "min_jacobian": float(meas.min()) / ref_measure,
-            "worse": bool(not new <= orig * (1.0 + QUALITY_MARGIN))}
+            "worse": bool(not new <= orig * (1.0 + QUALITY_MARGIN) + 1e-5)}  # float32 round-off: ~1e-6
 
 
-def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish: str = "polish=True") -> str:
+def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish: str = "polish=True",
+                    shorten: dict[str, Any] | None = None) -> str:
     """One line for a density map that left the density less equal than it was (:func:`density_quality`);
-    ``refine`` and ``polish`` name the two remedies (the API's keywords by default, the CLI's flags there)."""
+    ``refine`` and ``polish`` name the two remedies (the API's keywords by default, the CLI's flags there).  With
+    ``shorten`` (the report of :func:`rfmap.repair.shorten_map`) the line says that the map was shortened and what
+    it reaches now."""
+    if shorten is not None:
+        before = shorten["std_before"]
+        return (f"the network's map left this density less equal than it was (Std(rho~_map) "
+                f"{'folded' if not math.isfinite(before) else format(before, '.3g')} >= Std(rho~_orig) "
+                f"{quality['std_rho_orig']:.3g}); its displacement was shortened to {shorten['scale']:.3g} of "
+                f"itself (Std(rho~_map) {quality['std_rho_map']:.3g}, smallest Jacobian "
+                f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
+                f"refinement) or {polish} (the flow-based finish) can help")
     return (f"the network's map leaves this density less equal than it was (Std(rho~_map) "
             f"{quality['std_rho_map']:.3g} > Std(rho~_orig) {quality['std_rho_orig']:.3g}, smallest Jacobian "
             f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
@@ -429,8 +440,11 @@ class Surrogate:
             Search interval of every component of :math:`\\alpha` (default :data:`rfmap.refine.REFINE`).
         repair : bool
             Make the returned map fold-free (:func:`rfmap.repair.repair_map`, after any refinement); with query
-            ``points`` the map of the working grid is repaired first and then interpolated.  ``False`` returns the
-            raw network map.
+            ``points`` the map of the working grid is repaired first and then interpolated.  A density map of the
+            output grid (without ``polish``) that is then still no more equal than the input is shortened to the
+            most equal fold-free map between the identity and itself (:func:`rfmap.repair.shorten_map`;
+            ``info["shorten"]``), so the delivered map never leaves the density less equal than it was.
+            ``False`` returns the raw network map.
         polish : bool or float
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
             (``rfmap.hybrid.polish_map``), started from the map of the network's displacement smoothed on the
@@ -457,8 +471,9 @@ class Surrogate:
             :func:`rfmap.repair.repair_map`), and with ``polish`` the report
             ``info["polish"]`` (warm or cold start and both stages' times and metrics).  A density map of the output
             grid without ``polish`` also carries ``info["quality"]`` (:func:`density_quality`), and when it leaves
-            the density less equal than it was (a field unlike the training fields) a :class:`PoorMapWarning` names
-            the numbers and the remedies (``refine``, ``polish``; :func:`quiet_quality` silences it).
+            the density less equal than it was (a field unlike the training fields), or had to be shortened not to,
+            a :class:`PoorMapWarning` names the numbers and the remedies (``refine``, ``polish``;
+            :func:`quiet_quality` silences it).
         """
         group = self._symmetry(symmetrize)
         inp, n = self._resolve(field, n, preprocess)
@@ -578,9 +593,17 @@ class Surrogate:
         if self.spec.kind == "density" and points is None and polish is False:
             t6 = time.perf_counter()
             info["quality"] = density_quality(mapped, fvals, n)
+            q = info["quality"]
+            if repair and not q["std_rho_map"] < q["std_rho_orig"]:
+                # less equal than no map at all: the most equal fold-free shortened map (never worse than the
+                # identity; rfmap.repair.shorten_map)
+                mapped, info["shorten"] = shorten_map(ref, mapped, fvals, n, boundary=self.spec.boundary)
+                info["quality"] = density_quality(mapped, fvals, n)
+                info["quality"]["shortened_from"] = q["std_rho_map"]
             t_map += time.perf_counter() - t6
-            if info["quality"]["worse"]:
-                warnings.warn(quality_message(info["quality"]), PoorMapWarning, stacklevel=3)
+            if info["quality"]["worse"] or "shorten" in info:
+                warnings.warn(quality_message(info["quality"], shorten=info.get("shorten")), PoorMapWarning,
+                              stacklevel=3)
         return MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals,
                          kind=self.spec.kind, time=t_map, info=info)
 

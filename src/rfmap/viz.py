@@ -13,7 +13,7 @@ __all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "p
            "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
            "population_figure", "volume_rows", "render_lattice", "plot_batch", "plot_loss_terms", "training_curves", "learning_curves", "CAMERA_3D", "LOSS_TERMS", "plot_regions", "cartogram_figure",
            "cartogram_panels", "area_error_histograms", "time_accuracy_figure", "validation_vs_time",
-           "table_lines", "plot_slice_outline", "displacement_demand_figure", "vertex_error_panels"]
+           "table_lines", "plot_slice_outline", "displacement_demand_figure", "vertex_error_panels", "shorten_curve"]
 
 STYLE = {
     "figure.dpi": 110,
@@ -759,5 +759,26 @@ def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = Tru
         ax.set_xscale("log", base=2)
     ax.set_yscale("log")
     ax.set(xlabel="N", ylabel=column)
+    ax.legend(fontsize=8)
+    return ax
+
+
+def shorten_curve(report: dict, ax=None, *, title: str | None = None):
+    r"""Std(rho~) of the shortened maps :math:`u_s = x + s\,(u - x)` against the scale ``s``, from the report of
+    :func:`rfmap.repair.shorten_map` (``info["shorten"]`` of ``Surrogate.map``): the evaluated scales (folded ones
+    marked at the top), the identity's level and the chosen scale; returns the axes."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(5.2, 3.4), layout="constrained")
+    s, j = np.array(report["curve"], dtype=float).T
+    ok = np.isfinite(j)
+    ax.plot(s[ok], j[ok], "o-", ms=3, lw=1.2, color="C0", label=r"fold-free $u_s$")
+    if (~ok).any():
+        top = float(j[ok].max()) if ok.any() else 1.0
+        ax.plot(s[~ok], np.full((~ok).sum(), top), "x", color="C3", label=r"folded $u_s$")
+    ax.axhline(report["std_identity"], color="0.4", ls=":", lw=1, label="identity (no map)")
+    ax.axvline(report["scale"], color="C2", ls="--", lw=1, label=f"chosen s = {report['scale']:.3g}")
+    ax.set(xlabel="scale s of the displacement", ylabel=r"Std($\tilde\rho_{map}$)", title=title)
     ax.legend(fontsize=8)
     return ax
