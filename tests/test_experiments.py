@@ -5,6 +5,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+import torch
 
 from rfmap.experiments import Table, beltrami_table, format_value, paper_table, population_table, resolution_table
 from rfmap.surrogate import Surrogate
@@ -82,6 +83,22 @@ def test_beltrami_table_on_untrained_model():
     assert maps["T1"]["ours+sym"].info["symmetrize"] == "full"
     assert table.value("T1", "LBS", "mean_dd") < 2e-3
     assert table.value("T1", "paper", "mean_dd") == pytest.approx(0.00943353)
+
+
+def test_beltrami_table_refinement_rows():
+    """With ``refine`` the weight-refined maps get their own rows beside the raw ones: the refined network of a
+    trained-looking (random) model has the alpha it reports and a Beltrami objective no larger than the raw map's."""
+    torch.manual_seed(0)
+    sur = Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, name="tiny")
+    with torch.no_grad():
+        sur.model.head.weight.mul_(0).add_(0.05 * torch.randn(sur.model.head.weight.shape))
+    table, maps = beltrami_table(sur, n=17, maps=("T2",), refine=True, symmetrize=True)
+    methods = [m for c, m, _ in table.rows if c == "T2"]
+    assert {"ours", "ours + refinement", "ours, symmetrized", "ours, symmetrized + refinement"} <= set(methods)
+    ref = maps["T2"]["ours+refine"]
+    assert table.value("T2", "ours + refinement", "alpha") == ref.info["alpha"] and len(ref.info["alpha"]) == 2
+    assert ref.info["refine_objective"] <= ref.info["refine_objective_start"] + 1e-15
+    assert maps["T2"]["ours+sym+refine"].info["symmetrize"] == "full"
 
 
 def test_population_and_resolution_tables_on_untrained_model():
