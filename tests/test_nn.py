@@ -229,7 +229,8 @@ def test_map_at_fixed_work_grid_is_consistent_across_output_resolutions():
 
 
 def test_native_resolutions_agree_loosely():
-    """The network evaluated natively at two similar resolutions (33 and 35), compared on the 17-grid.
+    """The network evaluated natively at two similar resolutions (33 and 35), compared on the 17-grid (raw maps:
+    delivered ones of this random network would fall back towards the identity, ``rfmap.repair.shorten_map``).
 
     Tolerance reasoning: convolutions act on grid indices, so a feature at a physical point depends on the grid
     spacing h, and zero padding creates boundary layers a few cells wide whose physical width scales with h.
@@ -242,14 +243,15 @@ def test_native_resolutions_agree_loosely():
     """
     torch.manual_seed(0)
     sur = Surrogate(perturb_head(MultiResUNet(2, 1, base=4, depth=2), seed=1), TaskSpec("density", 2, "square"))
-    da = sur.map(smooth_density, 17, work_n=33).displacement.ravel()
-    db = sur.map(smooth_density, 17, work_n=35).displacement.ravel()
+    da = sur.map(smooth_density, 17, work_n=33, repair=False).displacement.ravel()
+    db = sur.map(smooth_density, 17, work_n=35, repair=False).displacement.ravel()
     rel = np.linalg.norm(da - db) / np.linalg.norm(da)
     corr = np.corrcoef(da, db)[0, 1]
     assert rel < 0.75, rel
     assert corr > 0.6, corr
     # a transposed displacement (axes swapped) would not pass the same bound
-    dt = sur.map(smooth_density, 17, work_n=35).displacement.reshape(17, 17, 2).transpose(1, 0, 2)[..., ::-1]
+    dt = sur.map(smooth_density, 17, work_n=35, repair=False).displacement.reshape(17, 17, 2)
+    dt = dt.transpose(1, 0, 2)[..., ::-1]
     assert np.linalg.norm(da - dt.ravel()) / np.linalg.norm(da) > rel
 
 
