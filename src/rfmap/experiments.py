@@ -198,23 +198,23 @@ def _beltrami_rows(sur, table: Table, cases: list[tuple[str, str, int]], paper: 
         mo["speedup"] = ml["time"] / mo["time"]
         table.add(case, "ours", mo)
         results[case] = {"ours": ours, "lbs": lbs, "exact": exact_beltrami_result(name, n)}
-        if refine:  # the paper's weight refinement (Sec. 4.3) on the Beltrami objective, as the density tables
-            ref = results[case]["ours+refine"] = _timed_map(sur, name, n, refine=True)
-            mr = {**_beltrami_metrics(ref, name), "alpha": ref.info["alpha"]}
-            mr["speedup"] = ml["time"] / mr["time"]
-            table.add(case, "ours + refinement", mr)
+
+        def extra_row(key: str, method: str, **kw) -> None:
+            """A further surrogate row: refined (the paper's weight refinement, Sec. 4.3, as in the density
+            tables) and/or symmetrized."""
+            res = results[case][key] = _timed_map(sur, name, n, **kw)
+            values = _beltrami_metrics(res, name)
+            values["speedup"] = ml["time"] / values["time"]
+            if kw.get("refine"):
+                values["alpha"] = res.info["alpha"]
+            table.add(case, method, values)
+
+        if refine:
+            extra_row("ours+refine", "ours + refinement", refine=True)
         if symmetrize:
-            sym = _timed_map(sur, name, n, symmetrize=symmetrize)
-            ms = _beltrami_metrics(sym, name)
-            ms["speedup"] = ml["time"] / ms["time"]
-            table.add(case, SYM, ms)
-            results[case]["ours+sym"] = sym
+            extra_row("ours+sym", SYM, symmetrize=symmetrize)
             if refine:
-                sref = results[case]["ours+sym+refine"] = _timed_map(sur, name, n, refine=True,
-                                                                     symmetrize=symmetrize)
-                msr = {**_beltrami_metrics(sref, name), "alpha": sref.info["alpha"]}
-                msr["speedup"] = ml["time"] / msr["time"]
-                table.add(case, SYM_REF, msr)
+                extra_row("ours+sym+refine", SYM_REF, refine=True, symmetrize=symmetrize)
         table.add(case, "LBS", ml)
         if case in paper["rows"]:
             table.add(case, "paper", paper["rows"][case])

@@ -89,6 +89,7 @@ import torch
 from .geometry import beltrami_coefficient, grid_element_mean, grid_min_measure, grid_signed_measures, grid_simplices, \
     signed_measures
 from .mesh import grid_points
+from .metrics import density_std
 from .surface import boundary_crossings, boundary_faces, boundary_loop, grid_surface_intersections, \
     surface_intersections
 
@@ -174,14 +175,6 @@ def surface_repair(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *,
 SHORTEN_SAMPLES = 10
 
 
-def _grid_density_std(points: np.ndarray, element_density: torch.Tensor, n: int) -> float:
-    """Std(rho~_map) of a map of the ``N``-grid whose elements carry ``element_density`` on equal reference
-    measures (population proportional to the element density)."""
-    meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(points, dtype=np.float64))[None], n)[0]
-    rho = element_density / meas
-    return float((rho / rho.mean()).std())
-
-
 def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int, *, boundary: str,
                 samples: int = SHORTEN_SAMPLES, rounds: int = 12) -> tuple[np.ndarray, dict[str, Any]]:
     r"""The most equal fold-free map among the shortened maps :math:`u_s = x + s\,(u - x)`, :math:`0 \le s \le 1`.
@@ -236,7 +229,9 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
         if s not in cache:
             pts = ref + s * disp
             ok = s == 0.0 or fold_free(pts, None, grid_n=n, boundary=boundary)
-            cache[s] = _grid_density_std(pts, pop, n) if ok else math.inf
+            # equal reference measures: the element means are the populations up to a common factor
+            meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(pts))[None], n)[0]
+            cache[s] = density_std(pop, meas) if ok else math.inf
         return cache[s]
 
     grid = [k / samples for k in range(samples + 1)]
