@@ -322,3 +322,19 @@ def test_map_warns_in_one_line_when_the_map_undoes_equalization(tmp_path, capsys
     assert len(lines) == 1 and lines[0].startswith("rfmap map: warning: the network's map left this density less")
     assert "shortened to 0 of itself" in lines[0]  # a uniform density: the identity is the best map
     assert "--refine" in lines[0] and "--polish" in lines[0] and "Warning" not in err
+
+
+def test_map_of_query_points_warns_in_one_line_when_shortened(tmp_path, capsys, tiny_model):
+    """Query points are judged on the working grid (rfmap.surrogate.Surrogate._shorten_query); the CLI's line
+    then names the grid-only remedy as such."""
+    from rfmap.mesh import grid_points
+
+    f, pts = tmp_path / "flat.npy", tmp_path / "pts.npy"
+    np.save(f, np.ones((21, 21)))
+    np.save(pts, grid_points(21, 2)[::5])
+    out = tmp_path / "flat.npz"
+    rc, stdout, err = run_main(capsys, "map", "--model", tiny_model, "--field-file", f, "--points", pts,
+                               "--out", out)
+    assert rc == 0 and out.exists()
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "shortened to 0 of itself" in lines[0] and "--polish (on a grid)" in lines[0]

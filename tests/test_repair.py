@@ -518,3 +518,24 @@ def test_shorten_map_keeps_a_good_map_and_refuses_bad_input():
         shorten_map(ref[:-1], good[:-1], dens[:-1], n, boundary="square")
     with pytest.raises(ValueError, match="samples"):
         shorten_map(ref, good, dens, n, boundary="square", samples=0)
+
+
+@pytest.mark.parametrize("dim, n, boundary", [(2, 17, "square"), (3, 9, "square"), (2, 17, "free")])
+def test_shorten_map_on_a_general_mesh_matches_the_grid_path(dim, n, boundary):
+    """Given the grid's elements instead of its side, shorten_map takes the general-mesh path (measures and fold
+    checks per element) and must choose the same scale and map; bad combinations are refused."""
+    from rfmap.repair import shorten_map
+
+    ref, good, dens = _ramp_and_its_map(n, dim, boundary)
+    over = ref + 1.6 * (good - ref)
+    out_grid, rep_grid = shorten_map(ref, over, dens, n, boundary=boundary)
+    out_mesh, rep_mesh = shorten_map(ref, over, dens, elements=grid_mesh(n, dim).elements, boundary=boundary)
+    assert rep_mesh["scale"] == pytest.approx(rep_grid["scale"], abs=1e-12)
+    assert rep_mesh["std_after"] == pytest.approx(rep_grid["std_after"], rel=1e-9)
+    np.testing.assert_allclose(out_mesh, out_grid, atol=1e-12)
+    with pytest.raises(ValueError, match="exactly one"):
+        shorten_map(ref, over, dens, boundary=boundary)
+    with pytest.raises(ValueError, match="exactly one"):
+        shorten_map(ref, over, dens, n, elements=grid_mesh(n, dim).elements, boundary=boundary)
+    with pytest.raises(ValueError, match="density has"):
+        shorten_map(ref, over, dens[:-1], elements=grid_mesh(n, dim).elements, boundary=boundary)

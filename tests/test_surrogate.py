@@ -553,4 +553,41 @@ def test_a_map_that_undoes_equalization_warns():
             tiny(head_seed=3).map(flat, 21)
         good = tiny().map(bump, 21)  # the untrained network: the identity, no worse than the input
     assert not good.info["quality"]["worse"]
-    assert "quality" not in tiny(head_seed=3).map(flat, points=grid_points(21, 2)[::7]).info
+    with pytest.warns(S.PoorMapWarning, match="shortened to 0 of itself"):  # query points: judged on the grid
+        cloud = tiny(head_seed=3).map(flat, points=grid_points(21, 2)[::7])
+    assert "quality" not in cloud.info and cloud.info["shorten"]["scale"] == 0.0
+
+
+def test_query_points_are_shortened_as_their_working_grid_map():
+    """A density map of query points is shortened by the scale the working grid's delivered map gets, so that grid
+    and points deliver one map; the judgement is made on the working grid and reported."""
+    sur = tiny(head_seed=6)
+    with pytest.warns(S.PoorMapWarning, match=r"shortened to"):
+        grid = sur.map(bump, 21, work_n=21)
+    with pytest.warns(S.PoorMapWarning, match=r"shortened to .*polish=True \(on a grid\)"):
+        q = sur.map(bump, 21, points=grid_points(21, 2), work_n=21)
+    s_grid, rep = grid.info["shorten"]["scale"], q.info["shorten"]
+    assert 0.0 < s_grid < 1.0  # a genuine shortening, not one of the ends
+    assert rep["scale"] == pytest.approx(s_grid, abs=1e-12)
+    assert rep["decided_on"] == "working grid" and rep["work_n"] == 21 and not rep["query_mesh"]
+    assert rep["quality"]["std_rho_map"] < rep["quality"]["std_rho_orig"]  # judged better than no map there
+    m = q.metrics()
+    assert m.n_flipped == 0 and m.std_rho_map < m.std_rho_orig
+    # a scattered cloud: the same scale
+    cloud = np.vstack([np.random.default_rng(1).random((300, 2)), [[0, 0], [0, 1], [1, 0], [1, 1]]])
+    with pytest.warns(S.PoorMapWarning):
+        c = sur.map(bump, 21, points=cloud, work_n=21)
+    assert c.info["shorten"]["scale"] == pytest.approx(s_grid, abs=1e-12) and c.metrics().n_flipped == 0
+
+
+def test_query_shortening_falls_back_to_the_query_mesh(monkeypatch):
+    """When the working grid's scale would fold the query mesh, the scale is chosen on the query mesh itself."""
+    import rfmap.surrogate as surmod
+
+    monkeypatch.setattr(surmod, "fold_free", lambda *a, **k: False)  # pretend the working grid's scale folds
+    with pytest.warns(S.PoorMapWarning):
+        q = tiny(head_seed=6).map(bump, 21, points=grid_points(21, 2)[::3], work_n=21)
+    rep = q.info["shorten"]
+    assert rep["query_mesh"] and rep["scale"] == rep["query_report"]["scale"]
+    m = q.metrics()
+    assert m.n_flipped == 0 and m.std_rho_map <= m.std_rho_orig + 1e-12

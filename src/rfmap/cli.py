@@ -140,7 +140,9 @@ def cmd_map(args) -> int:
     if res.info.get("quality", {}).get("worse") or "shorten" in res.info:
         from .surrogate import quality_message
 
-        msg = quality_message(res.info["quality"], "--refine", "--polish", res.info.get("shorten"))
+        quality = res.info["quality"] if "quality" in res.info else res.info["shorten"]["quality"]  # query points
+        msg = quality_message(quality, "--refine", "--polish" if points is None else "--polish (on a grid)",
+                              res.info.get("shorten"))
         print(f"rfmap map: warning: {msg}", file=sys.stderr)
     if "polish" in res.info:
         p = res.info["polish"]

@@ -175,8 +175,9 @@ def surface_repair(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *,
 SHORTEN_SAMPLES = 10
 
 
-def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int, *, boundary: str,
-                samples: int = SHORTEN_SAMPLES, rounds: int = 12) -> tuple[np.ndarray, dict[str, Any]]:
+def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int | None = None, *, boundary: str,
+                elements: np.ndarray | None = None, samples: int = SHORTEN_SAMPLES,
+                rounds: int = 12) -> tuple[np.ndarray, dict[str, Any]]:
     r"""The most equal fold-free map among the shortened maps :math:`u_s = x + s\,(u - x)`, :math:`0 \le s \le 1`.
 
     A density map that leaves the density less equal than it was (a field unlike a surrogate's training fields, or
@@ -195,15 +196,19 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
 
     Parameters
     ----------
-    ref, mapped : ndarray, shape (N**d, d)
-        The ``N``-grid (:func:`rfmap.mesh.grid_points` order) and its images.
-    density : ndarray, shape (N**d,)
+    ref, mapped : ndarray, shape (P, d)
+        The mesh's vertices and their images: the ``N``-grid (:func:`rfmap.mesh.grid_points` order, ``P = N**d``)
+        with ``n``, or any simplicial mesh with ``elements``.
+    density : ndarray, shape (P,)
         Vertex densities (the population of an element is its mean vertex density times its measure, as in
         :mod:`rfmap.metrics`).
-    n : int
-        Grid side.
+    n : int, optional
+        Grid side (the fast strided measures of the grid mesh).
     boundary : {"fixed", "square", "free"}
         Selects the embedding check of :func:`fold_free` (free boundaries).
+    elements : int ndarray, shape (m, d+1), optional
+        The elements of a general mesh (e.g. the Delaunay mesh of query points); exactly one of ``n`` and
+        ``elements`` is given.
 
     Returns
     -------
@@ -216,21 +221,28 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
     ref = np.asarray(ref, np.float64)
     disp = np.asarray(mapped, np.float64) - ref
     d = ref.shape[1]
-    if ref.shape != disp.shape or ref.shape[0] != n ** d:
-        raise ValueError(f"shorten_map needs the N-grid's {n ** d} points and their images; got {ref.shape} and "
-                         f"{disp.shape}")
+    if (n is None) == (elements is None):
+        raise ValueError("shorten_map needs exactly one of n (a grid mesh) and elements (a general mesh)")
+    if ref.shape != disp.shape or (n is not None and ref.shape[0] != n ** d):
+        want = f"the N-grid's {n ** d} points" if n is not None else "matching points"
+        raise ValueError(f"shorten_map needs {want} and their images; got {ref.shape} and {disp.shape}")
     if samples < 1 or rounds < 0:
         raise ValueError(f"samples must be at least 1 and rounds non-negative, got {samples} and {rounds}")
     dens = torch.as_tensor(np.asarray(density, dtype=np.float64)).reshape(1, -1)
-    pop = grid_element_mean(dens, n, d)[0]
+    if dens.shape[1] != ref.shape[0]:
+        raise ValueError(f"density has {dens.shape[1]} values for {ref.shape[0]} vertices")
+    if n is not None:  # equal reference measures: the element means are the populations up to a common factor
+        pop = grid_element_mean(dens, n, d)[0]
+    else:
+        el = np.asarray(elements)
+        pop = dens[0, torch.as_tensor(el)].mean(-1) * torch.as_tensor(_measures(ref, el, None))
     cache: dict[float, float] = {}
 
     def J(s: float) -> float:
         if s not in cache:
             pts = ref + s * disp
-            ok = s == 0.0 or fold_free(pts, None, grid_n=n, boundary=boundary)
-            # equal reference measures: the element means are the populations up to a common factor
-            meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(pts))[None], n)[0]
+            ok = s == 0.0 or fold_free(pts, elements, grid_n=n, boundary=boundary)
+            meas = torch.as_tensor(_measures(pts, elements, n))
             cache[s] = density_std(pop, meas) if ok else math.inf
         return cache[s]
 

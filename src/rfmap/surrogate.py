@@ -36,7 +36,7 @@ from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
 from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
-from .repair import repair_map, shorten_map
+from .repair import fold_free, repair_map, shorten_map
 from .result import MapResult
 from .solvers.flow import F32_MARGIN
 from .symmetry import resolve_symmetry, symmetrized_displacement
@@ -443,7 +443,9 @@ class Surrogate:
             ``points`` the map of the working grid is repaired first and then interpolated.  A density map of the
             output grid (without ``polish``) that is then still no more equal than the input is shortened to the
             most equal fold-free map between the identity and itself (:func:`rfmap.repair.shorten_map`;
-            ``info["shorten"]``), so the delivered map never leaves the density less equal than it was.
+            ``info["shorten"]``), so the delivered map never leaves the density less equal than it was.  A density
+            map of query ``points`` is shortened by the scale its working grid's map would be shortened by (the
+            judgement is made there; :meth:`_shorten_query`), so that grid and points deliver one map.
             ``False`` returns the raw network map.
         polish : bool or float
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
@@ -590,6 +592,15 @@ class Surrogate:
                                                 tol=tol, stage_time=t_map, start=start, guard=guard)
             info["polish"].update(smooth_passes=passes, smooth_edges=edges, output_passes=out_passes)
             t_map += info["polish"]["time"]
+        if self.spec.kind == "density" and points is not None and repair and polish is False:
+            # query points: shortened as the working grid's map would be, so that the delivered map is one map
+            t6 = time.perf_counter()
+            mapped, short, q = self._shorten_query(inp, nw, psi, a, ref, mapped, elements, fvals)
+            t_map += time.perf_counter() - t6
+            if short is not None:
+                info["shorten"] = short
+                warnings.warn(quality_message(q, polish="polish=True (on a grid)", shorten=short), PoorMapWarning,
+                              stacklevel=3)
         if self.spec.kind == "density" and points is None and polish is False:
             t6 = time.perf_counter()
             info["quality"] = density_quality(mapped, fvals, n)
@@ -654,6 +665,45 @@ class Surrogate:
         if grid_report["needed"] and report["method"] == "none":
             report["method"] = "grid " + grid_report["method"]
         return out, report
+
+    def _shorten_query(self, inp: _Input, nw: int, psi, alpha, ref, mapped, elements, fvals):
+        r"""Shorten a density map of query points as its working grid's map would be shortened.
+
+        The delivered map of an output grid is shortened (:func:`rfmap.repair.shorten_map`) when it leaves the
+        density no more equal than it was.  Query points have no grid to judge on, so the judgement is made on the
+        working grid ``nw``: its (repaired) map and the input density sampled there.  When that map is shortened
+        to :math:`u_s = x + s\,(u - x)`, the query map is shortened by the same :math:`s` — the two are then one
+        map, evaluated at different points — unless that folds an element of the query mesh; then the scale is
+        chosen on the query mesh itself (``report["query_mesh"]``).
+
+        Returns
+        -------
+        (mapped, report or None, quality)
+            ``report`` is that of :func:`rfmap.repair.shorten_map` with ``decided_on``, ``work_n``,
+            ``query_mesh`` and ``quality`` (:func:`density_quality` of the working grid's delivered map, with
+            ``shortened_from``), which is also returned.
+        """
+        d = self.spec.dim
+        grid = grid_points(nw, d)
+        u = apply_displacement(torch.as_tensor(grid), self._displacement_at(psi, grid, nw), self.spec.boundary,
+                               torch.as_tensor(alpha)).numpy()
+        grid_elements = grid_mesh(nw, d).elements
+        if self._flipped(u, nw):
+            u, _ = repair_map(grid, u, grid_elements, boundary=self.spec.boundary, grid_n=nw)
+        dens = self._work_grid(inp, nw).reshape(-1)
+        q = density_quality(u, dens, nw)
+        if q["std_rho_map"] < q["std_rho_orig"]:
+            return mapped, None, q
+        u_s, report = shorten_map(grid, u, dens, nw, boundary=self.spec.boundary)
+        q_after = density_quality(u_s, dens, nw)
+        q_after["shortened_from"] = q["std_rho_map"]
+        s = report["scale"]
+        out = ref + s * (mapped - ref)
+        report.update(decided_on="working grid", work_n=nw, query_mesh=False, quality=q_after)
+        if s > 0.0 and not fold_free(out, elements, boundary=self.spec.boundary):
+            out, mesh_report = shorten_map(ref, mapped, fvals, elements=elements, boundary=self.spec.boundary)
+            report.update(query_mesh=True, scale=mesh_report["scale"], query_report=mesh_report)
+        return out, report, q_after
 
     def _output_mesh(self, n: int, points) -> tuple[np.ndarray, np.ndarray]:
         """The output mesh: the ``N``-grid, or a Delaunay triangulation of the query points."""
