@@ -288,6 +288,24 @@ def test_residual_floor_rows():
     assert by[33, "diffusion"] < 0.75 * by[17, "diffusion"] and by[33, "flow"] < 0.75 * by[17, "flow"]
 
 
+def test_flow_convergence_rows():
+    """One row per field and flow setting, labelled; the flow's map is fold-free and near diffusion's Std under
+    every setting; a tighter step tolerance takes more steps; the diffusion run is shared by a field's rows."""
+    from rfmap.experiments import FLOW_SETTINGS, flow_convergence
+
+    rows = flow_convergence(2, 17, "square", random=1)
+    labels = ["default", "rtol=0.02", "rtol=0.005", "refine=4"]
+    fields = list(dict.fromkeys(r["field"] for r in rows))
+    assert len(FLOW_SETTINGS) == 4 and len(rows) == 4 * len(fields) and "random-0" in fields
+    assert [r["setting"] for r in rows] == labels * len(fields)
+    by = {(r["field"], r["setting"]): r for r in rows}
+    for f in fields:
+        assert len({by[f, s]["std_diffusion"] for s in labels}) == 1
+        assert by[f, "rtol=0.005"]["steps"] > by[f, "default"]["steps"]
+    for r in rows:
+        assert r["n_flipped"] == 0 and 0.5 < r["std_ratio"] < 2.0 and r["time_ratio"] > 0
+
+
 def test_warm_start_residuals_rows():
     """Five maps per N; the two flows from the identity start from the same map and differ only by the route of the
     density to the raster, and end at the same Std; all flows are far below the input's variation; a Beltrami model

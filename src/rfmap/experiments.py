@@ -25,7 +25,8 @@ from .surrogate import quiet_quality
 __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table", "population_table",
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
            "COLUMN_TITLES", "format_value", "DIGITS", "generalization_table", "WARM_MODELS", "benchmark_fields",
-           "time_to_accuracy", "summarize", "residual_floor", "warm_start_residuals",
+           "time_to_accuracy", "summarize", "residual_floor", "flow_convergence", "FLOW_SETTINGS",
+           "warm_start_residuals",
            "displacement_demand", "distortion_table", "recipe_table", "training_fields_text", "SYM", "SYM_REF"]
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -755,6 +756,46 @@ def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: s
             rows.append({"n": int(n), "method": method, "std": sc["std"], "smooth": sc["smooth"],
                          "element_fraction": sc["element_fraction"], "time": res.time,
                          "n_flipped": res.metrics().n_flipped})
+    return rows
+
+
+#: The flow settings of :func:`flow_convergence`: the default, the step tolerance 10 and 40 times tighter, and the
+#: density raster twice as fine (``refine=4``).
+FLOW_SETTINGS = ({}, {"rtol": 0.02}, {"rtol": 0.005}, {"refine": 4})
+
+
+def flow_convergence(dim: int = 2, n: int = 256, boundary: str = "square", *, random: int = 2,
+                     settings=FLOW_SETTINGS) -> list[dict[str, Any]]:
+    r"""Whether the flow-based solver's gap to the diffusion solver is a convergence error.
+
+    On the paper's test densities and ``random`` unseen random fields (:func:`benchmark_fields`) the diffusion
+    solver runs once and the flow-based solver once per entry of ``settings`` (keyword arguments of
+    :func:`rfmap.solvers.flow.solve_flow`: a tighter step tolerance ``rtol``, a finer density raster ``refine``).
+    If the flow's final :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` were above diffusion's because its time
+    integration or its raster were too coarse, tightening them would close the gap; if it stays, the two solvers
+    end at different maps, each converged.
+
+    Returns
+    -------
+    list of dict
+        One row per field and flow setting: ``field``, ``setting`` (a label such as ``"rtol=0.02"``,
+        ``"default"``), ``std_ratio`` and ``time_ratio`` (flow over diffusion, same field, same process),
+        ``steps``, ``n_flipped``, and the diffusion solver's ``std_diffusion`` and ``time_diffusion`` (s).
+    """
+    from .solvers import solve_dem
+    from .solvers.flow import solve_flow
+
+    rows = []
+    for label, dens in benchmark_fields(dim, n, random=random):
+        diff = solve_dem(dens, boundary=boundary)
+        s_d = diff.metrics().std_rho_map
+        for kw in settings:
+            flow = solve_flow(dens, boundary=boundary, **kw)
+            m = flow.metrics()
+            rows.append({"field": label, "setting": ", ".join(f"{k}={v}" for k, v in kw.items()) or "default",
+                         "std_ratio": m.std_rho_map / s_d, "time_ratio": flow.time / diff.time,
+                         "steps": int(flow.info["steps"]), "n_flipped": int(m.n_flipped),
+                         "std_diffusion": s_d, "time_diffusion": diff.time})
     return rows
 
 
