@@ -197,8 +197,10 @@ class _Summary:
 
 def _in_box(points: np.ndarray, boundary: str, n: int) -> bool:
     """Whether ``points`` lie in the flow's box: the unit square/cube, or for a free boundary the sea box
-    :math:`[-L, 1 + L]^d` with :math:`L` half the square (``solve_flow``'s default margin, whole cells)."""
-    pad = 0.0 if boundary == "square" else max(1, round(0.5 * (n - 1))) / (n - 1)
+    :math:`[-L, 1 + L]^d` (``L``: ``solve_flow``'s default margin of the dimension, whole cells)."""
+    from .solvers.flow import MARGIN
+
+    pad = 0.0 if boundary == "square" else max(1, round(MARGIN[points.shape[1]] * (n - 1))) / (n - 1)
     return bool(points.min() >= -pad and points.max() <= 1 + pad)
 
 
