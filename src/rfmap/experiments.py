@@ -770,7 +770,7 @@ def flow_convergence(dim: int = 2, n: int = 256, boundary: str = "square", *, ra
 
     On the paper's test densities and ``random`` unseen random fields (:func:`benchmark_fields`) the diffusion
     solver runs once and the flow-based solver once per entry of ``settings`` (keyword arguments of
-    :func:`rfmap.solvers.flow.solve_flow`: a tighter step tolerance ``rtol``, a finer density raster ``refine``).
+    ``rfmap.solvers.flow.solve_flow``: a tighter step tolerance ``rtol``, a finer density raster ``refine``).
     If the flow's final :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` were above diffusion's because its time
     integration or its raster were too coarse, tightening them would close the gap; if it stays, the two solvers
     end at different maps, each converged.

@@ -445,7 +445,7 @@ class Surrogate:
             most equal fold-free map between the identity and itself (:func:`rfmap.repair.shorten_map`;
             ``info["shorten"]``), so the delivered map never leaves the density less equal than it was.  A density
             map of query ``points`` is shortened by the scale its working grid's map would be shortened by (the
-            judgement is made there; :meth:`_shorten_query`), so that grid and points deliver one map.
+            judgement is made there; ``Surrogate._shorten_query``), so that grid and points deliver one map.
             ``False`` returns the raw network map.
         polish : bool or float
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
