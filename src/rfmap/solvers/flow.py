@@ -70,7 +70,7 @@ import numpy as np
 import torch
 from scipy.fft import dct, dctn, dst
 
-from ..geometry import grid_cell_simplices, grid_element_mean, grid_signed_measures
+from ..geometry import grid_cell_simplices, grid_element_mean, grid_min_measure, grid_signed_measures
 from ..mesh import grid_mesh
 from ..result import MapResult
 from .diffusion import DEM_BOUNDARIES, _balanced_sea, _check_grid_density, _torch_threads, cosine_coefficients, \
@@ -637,49 +637,18 @@ def residual_density(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, 
     return density[elements].mean(1) * _measures(ref, elements) / _measures(mapped, elements)
 
 
-#: the fold check of a step decides on float32 measures unless the smallest is below this fraction of the mean
-#: element measure; float64 then decides (the float32 rounding error of a grid element's measure is about
+#: the fold check of a step (:func:`rfmap.geometry.grid_min_measure`, with the same threshold) and
+#: ``rfmap.surrogate.density_quality`` decide on float32 measures unless the smallest is below this fraction of the
+#: reference element measure; float64 then decides (the float32 rounding error of a grid element's measure is about
 #: 1e-6 / h of the mean, so this leaves a margin of about 20 at N = 1000)
 F32_MARGIN = 1e-3
 
 
 def _turned_over(x: np.ndarray, n: int) -> bool:
-    """Whether an element of the ``N``-grid mesh with vertices at ``x`` (N**d, d) has non-positive measure.
-
-    Decided on float32 measures (a third of the float64 time at 3D N = 48) when their minimum is clearly positive
-    (:data:`F32_MARGIN` of the mean measure of a grid filling the box), else on float64 measures; only the minimum is
-    formed (:func:`_grid_min_measure`).
-    """
-    # both sides times d!: the mean of d! |element| of the grid filling the unit box is 1 / (N-1)^d (the points of
-    # a free boundary's map fill less of the box, which only makes the float32 test more cautious)
-    if float(_grid_min_measure(torch.from_numpy(x).float(), n)) > F32_MARGIN / (n - 1) ** x.shape[1]:
-        return False
-    return float(_grid_min_measure(torch.from_numpy(x), n)) <= 0.0
-
-
-def _grid_min_measure(points: torch.Tensor, n: int) -> torch.Tensor:
-    """Smallest signed measure (times d!) of the ``N``-grid mesh's elements at vertex positions ``points`` (N**d, d):
-    as :func:`rfmap.geometry.grid_signed_measures`, type by type, without concatenating the measures."""
-    d = points.shape[1]
-    g = points.reshape(*([n] * d), d).movedim(-1, 0).contiguous()
-
-    def corner(off):
-        return g[(slice(None),) + tuple(slice(o, n - 1 + o) for o in off)]
-
-    best = None
-    for simplex in grid_cell_simplices(d):
-        c0, *rest = [corner(off) for off in simplex]
-        e = [c - c0 for c in rest]
-        if d == 2:
-            a, b = e
-            m = a[0] * b[1] - a[1] * b[0]
-        else:
-            a, b, c = e
-            m = (a[0] * (b[1] * c[2] - b[2] * c[1]) + a[1] * (b[2] * c[0] - b[0] * c[2])
-                 + a[2] * (b[0] * c[1] - b[1] * c[0]))
-        low = m.min()
-        best = low if best is None else torch.minimum(best, low)
-    return best
+    """Whether an element of the ``N``-grid mesh with vertices at ``x`` (N**d, d) has non-positive measure
+    (:func:`rfmap.geometry.grid_min_measure`: float32 unless the minimum is too close to zero for it, and only the
+    minimum is formed)."""
+    return grid_min_measure(x, n) <= 0.0
 
 
 class _Stalled(RuntimeError):
