@@ -902,7 +902,8 @@ def solve_flow(
         if measures(mapped).min() <= 0:
             raise ValueError("start has folded (non-positively oriented) elements")
         raster = None
-    history = [std_of(mapped)]
+    # from the identity every element keeps its (equal) reference measure: Std of the populations, no measure pass
+    history = [float((pop / pop.mean()).std(ddof=1)) if start is None else std_of(mapped)]
     best, best_std = mapped, history[0]
 
     totals = {"steps": 0, "rejected": 0, "fold_rejections": 0, "evaluations": 0}
