@@ -572,8 +572,9 @@ class Surrogate:
                                   "time": time.perf_counter() - t3, "metrics_before": cheap,
                                   "metrics_after": dict(cheap)}
             else:
+                work = self._working_grid_map(psi, a) if points is not None else None
                 mapped, info["repair"] = self._repair(ref, mapped, elements, fvals, n if points is None else None,
-                                                      psi, a)
+                                                      work)
             t_map += time.perf_counter() - t3
         if polish is not False:
             from .hybrid import (OUTPUT_PASSES, SMOOTH_EDGES, polish_map, smooth_displacement,
@@ -595,7 +596,7 @@ class Surrogate:
         if self.spec.kind == "density" and points is not None and repair and polish is False:
             # query points: shortened as the working grid's map would be, so that the delivered map is one map
             t6 = time.perf_counter()
-            mapped, short, q = self._shorten_query(inp, nw, psi, a, ref, mapped, elements, fvals)
+            mapped, short, q = self._shorten_query(inp, work, ref, mapped, elements, fvals)
             t_map += time.perf_counter() - t6
             if short is not None:
                 info["shorten"] = short
@@ -643,22 +644,30 @@ class Surrogate:
         meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(mapped))[None], n)[0]
         return int((meas <= 0).sum())
 
-    def _repair(self, ref, mapped, elements, fvals, grid_n, psi, alpha) -> tuple[np.ndarray, dict]:
+    def _working_grid_map(self, psi, alpha) -> tuple[int, np.ndarray, np.ndarray, dict]:
+        """The map of the working grid (the grid of ``psi``, with the stretching vector ``alpha``) made fold-free by
+        :func:`rfmap.repair.repair_map`: ``(side, grid points, repaired map, repair report)``; what a map of query
+        points is interpolated from and judged on."""
+        nw, d = psi.shape[-1], self.spec.dim
+        grid = grid_points(nw, d)
+        u = apply_displacement(torch.as_tensor(grid), self._displacement_at(psi, grid, nw), self.spec.boundary,
+                               torch.as_tensor(alpha)).numpy()
+        u_rep, report = repair_map(grid, u, grid_mesh(nw, d).elements, boundary=self.spec.boundary, grid_n=nw)
+        return nw, grid, u_rep, report
+
+    def _repair(self, ref, mapped, elements, fvals, grid_n, work) -> tuple[np.ndarray, dict]:
         """:func:`rfmap.repair.repair_map` of the output map; at query points, the working-grid map is repaired
-        first and its displacement interpolated, then any fold left on the query mesh is repaired there."""
+        first (``work``, :meth:`_working_grid_map`) and its displacement interpolated, then any fold left on the
+        query mesh is repaired there."""
         kw = {"boundary": self.spec.boundary, "density": fvals if self.spec.kind == "density" else None,
               "mu": fvals if self.spec.kind == "beltrami" else None}
         if grid_n is not None:
             return repair_map(ref, mapped, elements, grid_n=grid_n, **kw)
-        nw, d = psi.shape[-1], self.spec.dim
-        grid = torch.as_tensor(grid_points(nw, d))
-        u = apply_displacement(grid, self._displacement_at(psi, grid.numpy(), nw), self.spec.boundary,
-                               torch.as_tensor(alpha)).numpy()
-        u_rep, grid_report = repair_map(grid.numpy(), u, grid_mesh(nw, d).elements, boundary=self.spec.boundary,
-                                        grid_n=nw)
+        nw, grid, u_rep, grid_report = work
+        d = self.spec.dim
         n_raw = int((element_measures(mapped, elements) <= 0).sum())
         if grid_report["needed"]:
-            disp = torch.as_tensor((u_rep - grid.numpy()).T.reshape(1, d, *([nw] * d)))
+            disp = torch.as_tensor((u_rep - grid).T.reshape(1, d, *([nw] * d)))
             mapped = ref + interpolate(disp, torch.as_tensor(ref))[0].numpy()
         out, report = repair_map(ref, mapped, elements, **kw)
         report.update(needed=report["needed"] or grid_report["needed"], n_flipped_before=n_raw, grid=grid_report)
@@ -666,15 +675,15 @@ class Surrogate:
             report["method"] = "grid " + grid_report["method"]
         return out, report
 
-    def _shorten_query(self, inp: _Input, nw: int, psi, alpha, ref, mapped, elements, fvals):
+    def _shorten_query(self, inp: _Input, work, ref, mapped, elements, fvals):
         r"""Shorten a density map of query points as its working grid's map would be shortened.
 
         The delivered map of an output grid is shortened (:func:`rfmap.repair.shorten_map`) when it leaves the
         density no more equal than it was.  Query points have no grid to judge on, so the judgement is made on the
-        working grid ``nw``: its (repaired) map and the input density sampled there.  When that map is shortened
-        to :math:`u_s = x + s\,(u - x)`, the query map is shortened by the same :math:`s` — the two are then one
-        map, evaluated at different points — unless that folds an element of the query mesh; then the scale is
-        chosen on the query mesh itself (``report["query_mesh"]``).
+        working grid: its repaired map ``work`` (:meth:`_working_grid_map`) and the input density sampled there.
+        When that map is shortened to :math:`u_s = x + s\,(u - x)`, the query map is shortened by the same
+        :math:`s` — the two are then one map, evaluated at different points — unless that folds an element of the
+        query mesh; then the scale is chosen on the query mesh itself (``report["query_mesh"]``).
 
         Returns
         -------
@@ -683,13 +692,7 @@ class Surrogate:
             ``query_mesh`` and ``quality`` (:func:`density_quality` of the working grid's delivered map, with
             ``shortened_from``), which is also returned.
         """
-        d = self.spec.dim
-        grid = grid_points(nw, d)
-        u = apply_displacement(torch.as_tensor(grid), self._displacement_at(psi, grid, nw), self.spec.boundary,
-                               torch.as_tensor(alpha)).numpy()
-        grid_elements = grid_mesh(nw, d).elements
-        if self._flipped(u, nw):
-            u, _ = repair_map(grid, u, grid_elements, boundary=self.spec.boundary, grid_n=nw)
+        nw, grid, u, _ = work
         dens = self._work_grid(inp, nw).reshape(-1)
         q = density_quality(u, dens, nw)
         if q["std_rho_map"] < q["std_rho_orig"]:

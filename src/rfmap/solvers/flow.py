@@ -454,9 +454,10 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
     :math:`\sum\lambda_i \le 1`, up to round-off); the work is the total node count of the bounding boxes,
     vectorized in chunks of ``chunk`` (element, node) pairs.  When the mesh is a map of the ``N``-grid mesh
     (:func:`rfmap.mesh.grid_mesh`'s elements) that fills enough of its bounding box (:data:`WALK_FILL`: the square
-    and cube boundaries, and the free boundary's mapped squares and cubes) the nodes are first located by a Newton walk on the grid (:func:`_walk_grid`, a few vectorized
-    steps over the nodes instead of a scan over the elements; 0.4 s against 1.6 s at 3D N = 48, ``M`` = 95), and
-    only the elements whose boxes hold a node it did not find are scanned.
+    and cube boundaries, and the free boundary's mapped squares and cubes) the nodes are first located by a Newton
+    walk on the grid (:func:`_walk_grid`, a few vectorized steps over the nodes instead of a scan over the elements;
+    0.4 s against 1.6 s at 3D N = 48, ``M`` = 95), and only the elements whose boxes hold a node it did not find are
+    scanned.
 
     * ``at="elements"``: ``values`` is piecewise constant, one value per element; a node on a shared face takes
       the value of one of its elements (which one depends on the element order, so a raster whose nodes sit on
