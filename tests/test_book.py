@@ -187,6 +187,20 @@ def test_notebook_is_committed_without_outputs(nb):
         assert cell.get("execution_count") is None, f"{nb.name}: code cell {i} has an execution count"
 
 
+@pytest.mark.parametrize("nb", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
+def test_notebook_cells_have_unique_ids(nb):
+    """nbformat 4.5 requires every cell to carry a unique ``id`` (1-64 letters, digits, ``-`` or ``_``); a missing
+    one is filled in with a warning today and will be an error in later nbformat versions."""
+    data = json.loads(nb.read_text(encoding="utf-8"))
+    assert (data["nbformat"], data["nbformat_minor"]) >= (4, 5), f"{nb.name}: nbformat below 4.5"
+    ids = [cell.get("id") for cell in data["cells"]]
+    missing = [i for i, c in enumerate(ids) if c is None]
+    assert not missing, f"{nb.name}: cells {missing} have no id"
+    bad = [c for c in ids if not re.fullmatch(r"[A-Za-z0-9_-]{1,64}", c)]
+    assert not bad, f"{nb.name}: invalid cell ids {bad}"
+    assert len(set(ids)) == len(ids), f"{nb.name}: duplicate cell ids"
+
+
 # ----------------------------------------------------------------------------------------------- self-containment
 def test_project_does_not_read_the_paper_sources():
     needle = re.compile(re.escape("..") + "/" + "shared|" + "shared" + "/paper")
