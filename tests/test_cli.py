@@ -337,4 +337,4 @@ def test_map_of_query_points_warns_in_one_line_when_shortened(tmp_path, capsys, 
                                "--out", out)
     assert rc == 0 and out.exists()
     lines = [ln for ln in err.splitlines() if ln.strip()]
-    assert len(lines) == 1 and "shortened to 0 of itself" in lines[0] and "--polish (on a grid)" in lines[0]
+    assert len(lines) == 1 and "shortened to 0 of itself" in lines[0] and "--polish (the flow-based finish, on a grid only)" in lines[0]

@@ -141,8 +141,7 @@ def cmd_map(args) -> int:
         from .surrogate import quality_message
 
         quality = res.info["quality"] if "quality" in res.info else res.info["shorten"]["quality"]  # query points
-        msg = quality_message(quality, "--refine", "--polish" if points is None else "--polish (on a grid)",
-                              res.info.get("shorten"))
+        msg = quality_message(quality, "--refine", "--polish", res.info.get("shorten"), grid_only=points is not None)
         print(f"rfmap map: warning: {msg}", file=sys.stderr)
     if "polish" in res.info:
         p = res.info["polish"]

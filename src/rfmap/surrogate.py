@@ -141,11 +141,12 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
 
 
 def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish: str = "polish=True",
-                    shorten: dict[str, Any] | None = None) -> str:
+                    shorten: dict[str, Any] | None = None, *, grid_only: bool = False) -> str:
     """One line for a density map that left the density less equal than it was (:func:`density_quality`);
-    ``refine`` and ``polish`` name the two remedies (the API's keywords by default, the CLI's flags there).  With
-    ``shorten`` (the report of :func:`rfmap.repair.shorten_map`) the line says that the map was shortened and what
-    it reaches now."""
+    ``refine`` and ``polish`` name the two remedies (the API's keywords by default, the CLI's flags there), and
+    ``grid_only`` says that the second one maps a grid only (a map at query points).  With ``shorten`` (the report
+    of :func:`rfmap.repair.shorten_map`) the line says that the map was shortened and what it reaches now."""
+    finish = "the flow-based finish, on a grid only" if grid_only else "the flow-based finish"
     if shorten is not None:
         before = shorten["std_before"]
         return (f"the network's map left this density less equal than it was (Std(rho~_map) "
@@ -153,11 +154,11 @@ def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish
                 f"{quality['std_rho_orig']:.3g}); its displacement was shortened to {shorten['scale']:.3g} of "
                 f"itself (Std(rho~_map) {quality['std_rho_map']:.3g}, smallest Jacobian "
                 f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
-                f"refinement) or {polish} (the flow-based finish) can help")
+                f"refinement) or {polish} ({finish}) can help")
     return (f"the network's map leaves this density less equal than it was (Std(rho~_map) "
             f"{quality['std_rho_map']:.3g} > Std(rho~_orig) {quality['std_rho_orig']:.3g}, smallest Jacobian "
             f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
-            f"refinement) or {polish} (the flow-based finish) can help")
+            f"refinement) or {polish} ({finish}) can help")
 
 
 class Surrogate:
@@ -600,7 +601,7 @@ class Surrogate:
             t_map += time.perf_counter() - t6
             if short is not None:
                 info["shorten"] = short
-                warnings.warn(quality_message(q, polish="polish=True (on a grid)", shorten=short), PoorMapWarning,
+                warnings.warn(quality_message(q, shorten=short, grid_only=True), PoorMapWarning,
                               stacklevel=3)
         if self.spec.kind == "density" and points is None and polish is False:
             t6 = time.perf_counter()
