@@ -226,3 +226,66 @@ def test_residual_scales_split_a_smooth_residual_from_element_noise():
     assert s["std"] > 0.05 and s["element_fraction"] > 0.7
     with pytest.raises(ValueError, match="folded"):
         residual_scales(x, np.stack([1 - x[:, 0], x[:, 1]], 1), m.elements, uniform)  # a mirror image
+
+
+def _wall_fields(d: int, n: int):
+    """A gradient g (no flux through the walls) and a divergence-free r, both vanishing normally on the walls, at
+    the vertices of the n-grid, and their exact L2 norms squared over the unit square/cube."""
+    from rfmap.mesh import grid_points
+
+    x = grid_points(n, d)
+    pi, s, c = np.pi, np.sin, np.cos
+    if d == 2:
+        g = np.stack([-pi * s(pi * x[:, 0]) * c(2 * pi * x[:, 1]) - 0.9 * pi * s(3 * pi * x[:, 0]),
+                      -2 * pi * c(pi * x[:, 0]) * s(2 * pi * x[:, 1])], 1)  # grad(cos(pi x)cos(2pi y) + .3cos(3pi x))
+        r = np.stack([pi * s(pi * x[:, 0]) * c(pi * x[:, 1]), -pi * c(pi * x[:, 0]) * s(pi * x[:, 1])], 1)
+        return x, g, r, pi**2 * (0.25 + 0.405 + 1.0), pi**2 * 0.5
+    z = c(pi * x[:, 2])  # g = grad(cos(pi x) cos(2 pi y) cos(pi z))
+    g = np.stack([-pi * s(pi * x[:, 0]) * c(2 * pi * x[:, 1]) * z, -2 * pi * c(pi * x[:, 0]) * s(2 * pi * x[:, 1]) * z,
+                  -pi * c(pi * x[:, 0]) * c(2 * pi * x[:, 1]) * s(pi * x[:, 2])], 1)
+    r = np.stack([pi * s(pi * x[:, 0]) * c(pi * x[:, 1]) * z, -pi * c(pi * x[:, 0]) * s(pi * x[:, 1]) * z, 0 * z], 1)
+    return x, g, r, pi**2 * (1 + 4 + 1) / 8, pi**2 * (1 + 1) / 8
+
+
+@pytest.mark.parametrize("d,n", [(2, 33), (3, 17)])
+def test_rotational_share_of_exact_fields(d, n):
+    """0 for a gradient (to round-off), 1 for a divergence-free field, 0 for the identity, the exact L2 ratio
+    ||r|| / ||g + r|| for a sum (the two parts are orthogonal), and independent of the displacement's size."""
+    from rfmap.metrics import rotational_share
+
+    x, g, r, g2, r2 = _wall_fields(d, n)
+    assert rotational_share(x, x + 0.01 * g) < 1e-12
+    assert rotational_share(x, x + 0.01 * r) == pytest.approx(1.0, abs=1e-12)
+    assert rotational_share(x, x) == 0.0
+    mixed = rotational_share(x, x + 0.01 * (g + r))
+    assert mixed == pytest.approx(np.sqrt(r2 / (g2 + r2)), rel=1e-10)
+    assert rotational_share(x, x + 0.002 * (g + r)) == pytest.approx(mixed, rel=1e-12)
+
+
+def test_rotational_share_keeps_nodal_gradients_of_the_highest_cosine():
+    """The gradient of cos(pi (N-1) x) cos(pi y) has the nodal samples (0, -pi cos(pi (N-1) x) sin(pi y)): kept
+    whole, as a gradient."""
+    from rfmap.mesh import grid_points
+    from rfmap.metrics import rotational_share
+
+    n = 17
+    x = grid_points(n, 2)
+    g = np.stack([np.zeros(len(x)), -np.pi * np.cos(np.pi * (n - 1) * x[:, 0]) * np.sin(np.pi * x[:, 1])], 1)
+    assert rotational_share(x, x + 1e-3 * g) < 1e-12
+
+
+def test_rotational_share_refuses_bad_maps():
+    from rfmap.mesh import grid_points
+    from rfmap.metrics import rotational_share
+
+    x = grid_points(9, 2)
+    with pytest.raises(ValueError, match="walls"):
+        rotational_share(x, x + 0.01)  # a shift moves the boundary vertices off their walls
+    with pytest.raises(ValueError, match="grid_points"):
+        rotational_share(x[::-1], x[::-1])
+    with pytest.raises(ValueError, match="shape"):
+        rotational_share(x, x[:-1])
+    bad = x.copy()
+    bad[40, 0] = np.nan
+    with pytest.raises(ValueError, match="non-finite"):
+        rotational_share(x, bad)

@@ -304,6 +304,11 @@ def test_flow_convergence_rows():
         assert by[f, "rtol=0.005"]["steps"] > by[f, "default"]["steps"]
     for r in rows:
         assert r["n_flipped"] == 0 and 0.5 < r["std_ratio"] < 2.0 and r["time_ratio"] > 0
+        assert 0.0 <= r["rotation_diffusion"] < 1.0 and 0.0 <= r["rotation"] < 1.0
+    # the flow's velocity -grad(phi)/rho_t is not a gradient; diffusion's -grad(log rho_t) is
+    assert all(by[f, "default"]["rotation"] > by[f, "default"]["rotation_diffusion"] for f in fields)
+    free = flow_convergence(2, 17, "free", random=0, settings=({},))
+    assert all(r["rotation"] is None and r["rotation_diffusion"] is None for r in free)
 
 
 def test_warm_start_residuals_rows():

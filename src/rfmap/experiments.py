@@ -780,22 +780,31 @@ def flow_convergence(dim: int = 2, n: int = 256, boundary: str = "square", *, ra
     list of dict
         One row per field and flow setting: ``field``, ``setting`` (a label such as ``"rtol=0.02"``,
         ``"default"``), ``std_ratio`` and ``time_ratio`` (flow over diffusion, same field, same process),
-        ``steps``, ``n_flipped``, and the diffusion solver's ``std_diffusion`` and ``time_diffusion`` (s).
+        ``steps``, ``n_flipped``, and the diffusion solver's ``std_diffusion`` and ``time_diffusion`` (s).  With
+        ``boundary="square"`` also ``rotation`` and ``rotation_diffusion``: the share of the flow's and of the
+        diffusion solver's displacement that is not a gradient (:func:`rfmap.metrics.rotational_share`; ``None``
+        for a free boundary, whose walls move).
     """
+    from .metrics import rotational_share
     from .solvers import solve_dem
     from .solvers.flow import solve_flow
+
+    def rotation(res):
+        return rotational_share(res.ref_points, res.mapped_points) if boundary == "square" else None
 
     rows = []
     for label, dens in benchmark_fields(dim, n, random=random):
         diff = solve_dem(dens, boundary=boundary)
         s_d = diff.metrics().std_rho_map
+        rot_d = rotation(diff)
         for kw in settings:
             flow = solve_flow(dens, boundary=boundary, **kw)
             m = flow.metrics()
             rows.append({"field": label, "setting": ", ".join(f"{k}={v}" for k, v in kw.items()) or "default",
                          "std_ratio": m.std_rho_map / s_d, "time_ratio": flow.time / diff.time,
                          "steps": int(flow.info["steps"]), "n_flipped": int(m.n_flipped),
-                         "std_diffusion": s_d, "time_diffusion": diff.time})
+                         "std_diffusion": s_d, "time_diffusion": diff.time,
+                         "rotation": rotation(flow), "rotation_diffusion": rot_d})
     return rows
 
 

@@ -20,7 +20,7 @@ import torch
 from .geometry import beltrami_coefficient, grid_element_mean, grid_signed_measures, signed_measures
 from .mesh import grid_size
 
-__all__ = ["MapMetrics", "compute_metrics", "density_std", "element_population", "residual_scales"]
+__all__ = ["MapMetrics", "compute_metrics", "density_std", "element_population", "residual_scales", "rotational_share"]
 
 
 @dataclass
@@ -197,3 +197,95 @@ def residual_scales(ref, mapped, elements, density) -> dict[str, float]:
     std = float(r.std(ddof=1))
     sm = float(smooth.std())
     return {"std": std, "smooth": sm, "element_fraction": float(max(0.0, 1.0 - sm**2 / max(std**2, 1e-300)))}
+
+
+def _wall_coefficients(values: np.ndarray, axis: int) -> np.ndarray:
+    r"""Amplitudes of the trigonometric interpolant of nodal values ``values`` (shape (N,)*d) that vanish on the two
+    walls normal to ``axis``: sines :math:`\sin(\pi k x)`, :math:`1 \le k \le N-2`, along ``axis`` and cosines
+    :math:`\cos(\pi k x)`, :math:`0 \le k \le N-1`, along the other axes, so that
+    ``values`` :math:`= \sum_k c_k \prod_i \varphi_{k_i}(x_i)` at the nodes :math:`x = j/(N-1)`.  Shape (N,)*d,
+    zero at :math:`k_{\text{axis}} \in \{0, N-1\}` (no such sine)."""
+    from scipy.fft import dct, dst
+
+    n = values.shape[0]
+    inner = np.take(values, np.arange(1, n - 1), axis=axis)
+    c = dst(inner, type=1, axis=axis) / (n - 1)  # unnormalized DST-I over the N-2 interior nodes
+    e = np.full(n, 2.0)
+    e[[0, -1]] = 1.0
+    for ax in range(values.ndim):
+        if ax != axis:  # cosine amplitudes: DCT-I / (2 (N-1)), doubled inside
+            shape = [1] * values.ndim
+            shape[ax] = n
+            c = dct(c, type=1, axis=ax) * (e / (2.0 * (n - 1))).reshape(shape)
+    pad = [(0, 0)] * values.ndim
+    pad[axis] = (1, 1)
+    return np.pad(c, pad)
+
+
+def rotational_share(ref, mapped) -> float:
+    r"""The share of a map's displacement that is not a gradient: :math:`\|\psi - P\psi\| / \|\psi\|`.
+
+    The displacement :math:`\psi = u - \mathrm{id}` of a map of the ``N``-grid of the unit square or cube whose
+    boundary vertices stay on their walls (``boundary="square"``) is expanded, component :math:`i` in sines along
+    axis :math:`i` and cosines along the others (the series that vanish on the walls normal to that axis).  A
+    gradient :math:`\nabla\chi` of :math:`\chi = \sum_k \chi_k \prod_i \cos(\pi k_i x_i)` (no flux through the walls)
+    has, mode by mode, coefficients parallel to :math:`k`; :math:`P` projects every mode's coefficient vector onto
+    :math:`k`, which is the :math:`L^2` orthogonal (Helmholtz) projection of the interpolant onto such gradients.
+    The norms are the :math:`L^2` norms of the interpolants (Parseval).  The highest cosine
+    :math:`\cos(\pi (N-1) x)` has a derivative that vanishes at every node, so along an axis where a mode is that
+    high its wavenumber counts as 0: the nodal samples of every such gradient are kept whole.
+
+    A density-equalizing map must have :math:`\det Du = \rho_0/\bar\rho`, which fixes the map only up to such
+    rotational parts.  The diffusion flow's velocity :math:`-\nabla \log\rho_t` is a gradient at every instant;
+    the flow-based solver's :math:`-\nabla\phi/\rho_t` is not where :math:`\nabla\rho_t` is not parallel to
+    :math:`\nabla\phi`.
+
+    Parameters
+    ----------
+    ref : array, shape (N**d, d)
+        The vertices of ``rfmap.mesh.grid_points(N, d)``, d = 2 or 3.
+    mapped : array, shape (N**d, d)
+        Their images; every boundary vertex on its walls (to 1e-9).
+
+    Returns
+    -------
+    float
+        In [0, 1]: 0 for a gradient displacement (and for the identity), 1 for a divergence-free one.
+    """
+    from .mesh import grid_points
+
+    ref = np.asarray(ref, dtype=np.float64)
+    mapped = np.asarray(mapped, dtype=np.float64)
+    if ref.ndim != 2 or ref.shape[1] not in (2, 3) or mapped.shape != ref.shape:
+        raise ValueError(f"ref and mapped must both have shape (N**d, d), d = 2 or 3; got {ref.shape} and "
+                         f"{mapped.shape}")
+    d = ref.shape[1]
+    n = int(round(ref.shape[0] ** (1.0 / d)))
+    if n < 3 or n**d != ref.shape[0] or not np.allclose(ref, grid_points(n, d), rtol=0.0, atol=1e-12):
+        raise ValueError("ref must be the vertices of rfmap.mesh.grid_points(N, d) with N >= 3")
+    if not np.isfinite(mapped).all():
+        raise ValueError("the map has non-finite points")
+    psi = (mapped - ref).T.reshape(d, *(n,) * d)
+    for i in range(d):
+        wall = np.take(psi[i], [0, n - 1], axis=i)
+        if np.abs(wall).max() > 1e-9:
+            raise ValueError("the boundary vertices must stay on their walls (a map with boundary 'square'); "
+                             f"the largest normal displacement on a wall is {np.abs(wall).max():.3g}")
+    coef = np.stack([_wall_coefficients(psi[i], i) for i in range(d)])
+    k = np.arange(n, dtype=np.float64)
+    k[-1] = 0.0  # the highest cosine's derivative vanishes at the nodes
+    ks = np.stack(np.meshgrid(*([k] * d), indexing="ij"))  # (d, N, ..., N)
+    k2 = (ks**2).sum(0)
+    dot = (ks * coef).sum(0)
+    grad = ks * np.divide(dot, k2, out=np.zeros_like(dot), where=k2 > 0)
+    w1 = np.full(n, 0.5)
+    w1[0] = 1.0  # integral of the squared cosine (or sine) over [0, 1]
+    weight = np.ones((n,) * d)
+    for ax in range(d):
+        shape = [1] * d
+        shape[ax] = n
+        weight = weight * w1.reshape(shape)
+    total = float((weight * (coef**2).sum(0)).sum())
+    if total == 0.0:
+        return 0.0
+    return float(np.sqrt((weight * ((coef - grad) ** 2).sum(0)).sum() / total))
