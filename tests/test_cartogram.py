@@ -194,6 +194,37 @@ def test_hybrid_needs_polish_support():
             cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="hybrid", surrogate=sur, n=64)
 
 
+def test_flow_cartogram_meets_the_tolerance():
+    """The flow-based method: the big region takes its share to the 1 % tolerance, with the topology intact, and the
+    flow solver runs one flow per pass (FLOW_SETTINGS' tol=0) even when the raster is nearly uniform."""
+    from rfmap.cartogram import FLOW_SETTINGS
+
+    c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="flow", n=64)
+    m = c.metrics()
+    assert c.method == "flow" and m.max_error <= 0.01 and m.topology_ok
+    assert c.areas[3] / c.areas.sum() == pytest.approx(5 / 8, abs=0.01)
+    assert FLOW_SETTINGS["tol"] == 0.0
+    assert all(r.info["passes"] == 1 and r.info["method"] == "flow" for r in c.info["results"])
+
+
+def test_cli_flow_cartogram(tmp_path, capsys):
+    src, out = tmp_path / "in.geojson", tmp_path / "out.geojson"
+    src.write_text(json.dumps(grid_2x2([1, 1, 1, 5])))
+    rc, stdout, err = run_cli(capsys, "cartogram", src, "--value", "pop", "--method", "flow", "--n", 48, "--out", out)
+    assert rc == 0, err
+    assert ", flow, N = 48" in stdout and "valid, no overlaps" in stdout
+    assert len(json.loads(out.read_text())["features"]) == 4
+
+
+def test_cli_cartogram_methods_match_the_library():
+    from rfmap.cartogram import CARTOGRAM_METHODS
+    from rfmap.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if a.dest == "cmd")
+    method = next(a for a in sub.choices["cartogram"]._actions if a.dest == "method")
+    assert tuple(method.choices) == CARTOGRAM_METHODS
+
+
 def test_surrogate_cartogram():
     c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="surrogate", n=64, iterations=2)
     assert c.info["iterations"] == 2

@@ -342,7 +342,8 @@ def test_warm_start_residuals_rows():
     (-np.ones((5, 5)), {}, None),
     (np.full((5, 5), np.nan), {}, None),
     (np.ones((5, 5)), {"boundary": "fixed"}, "unknown boundary"),
-    (np.ones((5, 5)), {"tol": 0}, "tol"),
+    (np.ones((5, 5)), {"tol": -1e-3}, "tol"),
+    (np.ones((5, 5)), {"tol": float("inf")}, "tol"),
     (np.ones((5, 5)), {"rtol": -1.0}, "rtol"),
     (np.ones((5, 5)), {"refine": 0}, "refine"),
     (np.ones((5, 5)), {"stall": 2.0}, "stall"),
@@ -352,6 +353,19 @@ def test_warm_start_residuals_rows():
 def test_bad_input(bad, kw, match):
     with pytest.raises(ValueError, match=match):
         solve_flow(bad, **kw)
+
+
+def test_tol_zero_runs_a_pass_below_the_default_tolerance():
+    """A density whose Std is below the default tol is returned unmapped by default; with tol=0 one pass runs and
+    lowers it; an exactly uniform density has nothing to map either way."""
+    x = np.linspace(0.0, 1.0, 33)
+    dens = 1.0 + 1e-3 * np.cos(np.pi * x)[:, None] * np.cos(np.pi * x)[None, :]
+    default = solve_flow(dens)
+    assert default.info["passes"] == 0 and np.array_equal(default.mapped_points, default.ref_points)
+    once = solve_flow(dens, tol=0.0)
+    assert once.info["passes"] == 1
+    assert once.metrics().std_rho_map < 0.2 * default.metrics().std_rho_map and once.metrics().n_flipped == 0
+    assert solve_flow(np.ones((9, 9)), tol=0.0).info["passes"] == 0
 
 
 # --------------------------------------------------------------------------------------------------- hybrid

@@ -305,11 +305,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="print, per model, the rfmap train commands of every run behind its weights")
     s.set_defaults(func=cmd_models)
 
-    s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion cartogram)")
+    s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)")
     s.add_argument("input", help="GeoJSON FeatureCollection of Polygon / MultiPolygon features")
     s.add_argument("--value", required=True, help="the feature property holding each region's value")
-    s.add_argument("--method", choices=["dem", "surrogate", "hybrid"], default="dem",
-                   help="classical diffusion (default), neural surrogate, or the surrogate polished by the flow")
+    s.add_argument("--method", choices=["dem", "flow", "surrogate", "hybrid"], default="dem",  # CARTOGRAM_METHODS
+                   help="classical diffusion (default), classical flow-based method (faster), neural surrogate, or "
+                        "the surrogate polished by the flow")
     s.add_argument("--n", type=int, default=256, help="grid side N of the density raster (default 256)")
     s.add_argument("--tol", type=float, default=0.01,
                    help="repeat passes until the largest relative area error is at most this (default 0.01)")

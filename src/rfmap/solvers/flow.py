@@ -777,7 +777,10 @@ def solve_flow(
     progress : bool
         Show a ``tqdm`` progress bar over the time of each pass.
     tol : float
-        Stop after the pass whose :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is at most ``tol``.
+        Stop after the pass whose :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is at most ``tol`` (no pass at all
+        when the input's is); 0 leaves the passes to ``max_passes`` and ``stall`` (a caller with its own stopping
+        rule, such as the passes of ``rfmap.cartogram.cartogram``, runs exactly one pass of a density that is not
+        exactly uniform).
     rtol : float, optional
         Largest predictor–corrector difference of an accepted step, in grid spacings of the raster's box; default
         :data:`RTOL` of the dimension (0.2 in 2D, 0.4 in 3D).
@@ -836,7 +839,9 @@ def solve_flow(
         rtol = RTOL[dens.ndim]
     if margin is None:
         margin = MARGIN[dens.ndim]
-    for name, val in (("tol", tol), ("rtol", rtol), ("margin", margin), ("stall", stall)):
+    if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not math.isfinite(tol) or tol < 0:
+        raise ValueError(f"tol must be a finite number >= 0, got {tol!r}")
+    for name, val in (("rtol", rtol), ("margin", margin), ("stall", stall)):
         if isinstance(val, bool) or not isinstance(val, numbers.Real) or not math.isfinite(val) or val <= 0:
             raise ValueError(f"{name} must be a positive finite number, got {val!r}")
     if stall > 1:
