@@ -16,7 +16,8 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    ``boundary="square"``: the square's walls are the edge of the sea and stay put), the flow-based DEM of Gastner,
    Seguy & More (2018) that today's cartogram programs run (``solve_dem(method="flow")``, one flow per pass), or a
    neural surrogate of the same task (``deq2d-square``) on its working grid, where its output is repaired to be
-   fold-free.  The grid map's
+   fold-free.  The hybrid resamples the network's map to the ``N``-grid and finishes it there with the flow
+   (``Surrogate.map(polish=...)``, :data:`HYBRID_POLISH`).  The grid map's
    displacement is interpolated bilinearly at the distinct polygon vertices (:func:`rfmap.mesh.interpolate`).
 4. **Passes.**  A diffusion on an ``N``-grid smears every coastline and border over a grid cell, so small dense
    regions come out a little small and sparse ones a little large.  The cartogram is therefore computed again from
@@ -69,6 +70,7 @@ __all__ = [
     "MONTREAL_CANDIDATES",
     "DEM_SETTINGS",
     "FLOW_SETTINGS",
+    "HYBRID_POLISH",
     "ZERO_FLOOR",
 ]
 
@@ -301,6 +303,12 @@ DEM_SETTINGS = {"refine": 1, "tol_end": 1e-2}
 #: candidate's votes): largest area error 0.003-0.009 in 4-6 passes and 0.38-0.87 s, against 0.0048-0.0069 in 4-7
 #: passes and 0.40-1.12 s with ``refine=2``; the diffusion DEM reaches 0.0024-0.0077 in 4-6 passes and 1.0-1.5 s.
 FLOW_SETTINGS = {"refine": 1, "tol": 0.0}
+#: The hybrid's polish tolerance on Std(rho~_map) (``Surrogate.map(polish=...)``): far below any raster's variation, so
+#: that every pass runs its flow, for the reason of :data:`FLOW_SETTINGS`' ``tol=0``.  The polish runs on the
+#: raster's ``N``-grid (the network's map resampled to it): on the network's working grid (96 for ``deq2d-square``)
+#: with the solver's default tolerance, Montreal's total votes at N = 256 stopped at a largest error of 0.027 after 9
+#: passes (Bergeron's votes: 0.063 after 10); on the ``N``-grid, 0.0049-0.0069 in 4-7 passes and 0.67-1.32 s.
+HYBRID_POLISH = 1e-9
 
 
 def _at_points(res, points: np.ndarray) -> np.ndarray:
@@ -312,8 +320,9 @@ def _at_points(res, points: np.ndarray) -> np.ndarray:
 
 
 def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
-    """The map of the unit square for one pass: the classical DEM with fixed walls, or the surrogate's map on its
-    working grid (repaired there, so that it is fold-free before it is interpolated at the polygon vertices)."""
+    """The map of the unit square for one pass: the classical diffusion or flow DEM with fixed walls, the
+    surrogate's map on its working grid (repaired there, so that it is fold-free before it is interpolated at the
+    polygon vertices), or the hybrid's on the raster's ``N``-grid."""
     if method in ("dem", "flow"):
         from .solvers import solve_dem
 
@@ -322,10 +331,11 @@ def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
         return solve_dem(density, boundary="square", **{**DEM_SETTINGS, **solver_kw})
     from .surrogate import quiet_quality
 
-    kw = {"polish": True} if method == "hybrid" else {}
     # the raster's Std(rho~) counts the sea and every region's edge; the cartogram judges a pass by its area errors
     with quiet_quality():
-        return surrogate.map(density, surrogate.work_n(density.shape[0]), preprocess=False, **kw)
+        if method == "hybrid":  # the network's map resampled to the N-grid and finished there by the flow
+            return surrogate.map(density, density.shape[0], preprocess=False, polish=HYBRID_POLISH)
+        return surrogate.map(density, surrogate.work_n(density.shape[0]), preprocess=False)
 
 
 def _supports_polish(surrogate) -> bool:
