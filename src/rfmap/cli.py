@@ -26,20 +26,61 @@ def _field_names() -> str:
     return ", ".join(field_names())
 
 
+def _load_npy(path: str) -> np.ndarray:
+    """An array from a ``.npy`` file (no pickles); a :class:`CLIError` if it cannot be read."""
+    try:
+        return np.load(path, allow_pickle=False)
+    except Exception as e:  # noqa: BLE001
+        raise CLIError(f"cannot read {path}: {e}") from e
+
+
+def _grid_field_file(args) -> tuple[np.ndarray, int]:
+    """``rfmap solve --field-file``: the array, sampled on an ``N^d`` grid, and ``N`` (``--n`` may only repeat it)."""
+    from .mesh import check_n
+
+    arr = _load_npy(args.field_file)
+    if arr.ndim not in (2, 3) or len(set(arr.shape)) != 1:
+        raise CLIError(f"--field-file must hold a field sampled on an N^d grid, shape (N, N) or (N, N, N); "
+                       f"got shape {arr.shape}")
+    n = check_n(arr.shape[0])
+    if args.n is not None and args.n != n:
+        raise CLIError(f"--n {args.n} does not match the grid side {n} of {args.field_file}")
+    return arr, n
+
+
 def cmd_solve(args) -> int:
+    from .inputs import check_mu, preprocess_density
+    from .mesh import square_triangles
     from .paper_fields import BELTRAMI_MAPS, DENSITIES, get_field, sample_mu
     from .solvers import solve_dem, solve_lbs
 
-    f = get_field(args.field)
-    if args.method == "lbs":
-        if f.kind != "beltrami":
-            raise CLIError(f"method lbs needs a Beltrami test map ({', '.join(BELTRAMI_MAPS)}), got {args.field!r}")
-        mu = sample_mu(f.name, args.n)
-        res = solve_lbs(mu, args.n, boundary="fixed" if args.boundary in (None, "fixed") else args.boundary)
+    if args.field_file:
+        arr, n = _grid_field_file(args)
+        if args.method == "lbs":
+            if arr.ndim != 2:
+                raise CLIError(f"method lbs needs a 2D Beltrami coefficient, shape (N, N); got shape {arr.shape}")
+            # the mean of the three vertex values on every triangle: the P1 interpolant's mean (|mu| < 1 stays)
+            mu = check_mu(arr, name="the Beltrami coefficient").reshape(-1)[square_triangles(n)].mean(1)
+        else:
+            if np.iscomplexobj(arr):
+                raise CLIError(f"method {args.method} needs a real density; {args.field_file} is complex")
+            density = preprocess_density(arr)  # as rfmap map does: minimum shifted to 0.1, unit mass
     else:
-        if f.kind != "density":
+        if args.n is None:
+            raise CLIError("--n is required with --field (with --field-file the array's side gives N)")
+        f, n = get_field(args.field), args.n
+        if args.method == "lbs" and f.kind != "beltrami":
+            raise CLIError(f"method lbs needs a Beltrami test map ({', '.join(BELTRAMI_MAPS)}), got {args.field!r}")
+        if args.method != "lbs" and f.kind != "density":
             raise CLIError(f"method {args.method} needs a density ({', '.join(DENSITIES)}), got {args.field!r}")
-        res = solve_dem(f.sample(args.n), method="flow" if args.method == "flow" else "diffusion",
+        if args.method == "lbs":
+            mu = sample_mu(f.name, n)
+        else:
+            density = f.sample(n)
+    if args.method == "lbs":
+        res = solve_lbs(mu, n, boundary="fixed" if args.boundary in (None, "fixed") else args.boundary)
+    else:
+        res = solve_dem(density, method="flow" if args.method == "flow" else "diffusion",
                         boundary=args.boundary or "square", progress=not args.quiet)
     res.save(args.out)
     if not args.quiet:
@@ -106,19 +147,8 @@ def cmd_map(args) -> int:
     if sur is None:
         raise CLIError(f"unknown model {args.model!r}: not a shipped model ({', '.join(models()) or 'none'}) "
                        "nor a weight file")
-    if args.field_file:
-        try:
-            field = np.load(args.field_file, allow_pickle=False)
-        except Exception as e:  # noqa: BLE001
-            raise CLIError(f"cannot read {args.field_file}: {e}") from e
-    else:
-        field = args.field
-    points = None
-    if args.points:
-        try:
-            points = np.load(args.points, allow_pickle=False)
-        except Exception as e:  # noqa: BLE001
-            raise CLIError(f"cannot read {args.points}: {e}") from e
+    field = _load_npy(args.field_file) if args.field_file else args.field
+    points = _load_npy(args.points) if args.points else None
     polish = False if args.polish is None else (True if args.polish == "default" else args.polish)
     if args.no_guard and polish is False:
         raise CLIError("--no-guard only applies with --polish")
@@ -257,8 +287,11 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("solve", help="run a classical solver (Linear Beltrami Solver, diffusion or flow DEM)")
     s.add_argument("--method", choices=["lbs", "dem", "flow"], required=True,
                    help="lbs (Beltrami), dem (diffusion DEM) or flow (flow-based DEM, faster)")
-    s.add_argument("--field", required=True, help="a built-in field name")
-    s.add_argument("--n", type=int, required=True, help="grid side N")
+    g = s.add_mutually_exclusive_group(required=True)
+    g.add_argument("--field", help="a built-in field name")
+    g.add_argument("--field-file", help=".npy array sampled on an N^d grid: a density (preprocessed as by rfmap map) "
+                                        "or, for lbs, a complex Beltrami coefficient (N, N) at the vertices")
+    s.add_argument("--n", type=int, default=None, help="grid side N (with --field-file: the array's side)")
     s.add_argument("--boundary", choices=["square", "free", "fixed"], default=None,
                    help="dem: square (default) or free; lbs: fixed (default) or square")
     s.add_argument("--out", required=True, help="output .npz")
