@@ -518,8 +518,8 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
         :func:`read_regions`).
     method : {"dem", "flow", "surrogate", "hybrid"}
         ``"dem"``: the classical diffusion DEM; ``"flow"``: the classical flow-based DEM (:data:`FLOW_SETTINGS`);
-        ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the surrogate polished by the classical flow
-        (``Surrogate.map(polish=True)``).
+        ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the surrogate's map finished by the classical
+        flow on the ``N``-grid (``Surrogate.map(polish=HYBRID_POLISH)``).
     n : int
         Side ``N`` of the density raster and of the classical solver's grid.
     tol, max_iterations : float, int
