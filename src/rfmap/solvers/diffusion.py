@@ -207,7 +207,7 @@ def _contract(values: np.ndarray, w: np.ndarray) -> float:
     return float(out)
 
 
-def _balanced_sea(dens: np.ndarray, pad: int, refine: int) -> tuple[np.ndarray, float]:
+def _balanced_sea(dens: np.ndarray, pad: int, refine: int, blend: float = 0.0) -> tuple[np.ndarray, float]:
     r"""Fine-grid initial density of the free-boundary box and its sea level :math:`s`.
 
     At :math:`t\to\infty` the density is uniform, equal to the box mean :math:`a_0`, and the mapped domain has area
@@ -216,6 +216,22 @@ def _balanced_sea(dens: np.ndarray, pad: int, refine: int) -> tuple[np.ndarray, 
     ``p_B``: the P1 interpolant of the sea indicator), both are affine in :math:`s`, and
     :math:`m_\Omega(s) = a_0(s)\,|\Omega|` is solved exactly.  A plain mean-density sea is off by :math:`O(h)`
     because the cells just outside the coast carry part of the coastal density.
+
+    With ``blend`` :math:`= L > 0` the sea does not jump to :math:`s` at the coast: at a distance :math:`r` from the
+    domain it holds :math:`w\,p_{\text{edge}} + (1 - w)\,s`, with :math:`p_{\text{edge}}` the density of the
+    nearest coast vertex and :math:`w = \operatorname{smoothstep}(1 - r/L)`; ``p_A`` is then :math:`w\,p_{\text{edge}}`
+    (1 inside the domain) and ``p_B`` the interpolant of :math:`1 - w`, and :math:`s` is balanced as before.
+
+    Parameters
+    ----------
+    dens : ndarray, shape (N,)*d
+        Vertex densities of the domain.
+    pad : int
+        Sea width in vertex spacings on every side (``N_box = N + 2 pad``).
+    refine : int
+        Raster refinement (``M = refine (N_box - 1) + 1``).
+    blend : float
+        :math:`L` in the domain's length units (0: the sea starts at the coast).
 
     Returns
     -------
@@ -226,10 +242,19 @@ def _balanced_sea(dens: np.ndarray, pad: int, refine: int) -> tuple[np.ndarray, 
     d, n = dens.ndim, dens.shape[0]
     nb = n + 2 * pad
     inner = (slice(pad, pad + n),) * d
-    vals = np.zeros((nb,) * d)
-    vals[inner] = dens
-    ind = np.ones((nb,) * d)
-    ind[inner] = 0.0
+    if blend > 0:
+        outside = np.maximum(pad - np.arange(nb), np.arange(nb) - (pad + n - 1)).clip(0) / (n - 1)
+        r2 = np.zeros((nb,) * d)
+        for ax in range(d):
+            r2 += (outside**2).reshape([nb if j == ax else 1 for j in range(d)])
+        w = np.clip(1.0 - np.sqrt(r2) / blend, 0.0, 1.0)
+        w = w * w * (3.0 - 2.0 * w)  # smoothstep: w and its slope are continuous at r = 0 and r = L
+        vals, ind = np.pad(dens, pad, mode="edge") * w, 1.0 - w
+    else:
+        vals = np.zeros((nb,) * d)
+        vals[inner] = dens
+        ind = np.ones((nb,) * d)
+        ind[inner] = 0.0
     fine_a, fine_b = p1_upsample(vals, refine), p1_upsample(ind, refine)
     m = fine_a.shape[0]
     lo, hi = pad / (nb - 1), (pad + n - 1) / (nb - 1)
