@@ -272,6 +272,17 @@ def test_sea_blend_tames_a_dense_coast():
         solve_flow(dens, boundary="free", sea_blend=-0.1)
 
 
+def test_sea_blend_study_rows():
+    """One row per report field with its kind; the blend helps the ramp against the coast; no folds."""
+    from rfmap.experiments import sea_blend_study
+
+    rows = sea_blend_study(2, 33, count=4)
+    assert [r["kind"] for r in rows] == ["smooth", "steps", "peak", "ramp"]
+    ramp = rows[3]
+    assert ramp["ratio_abrupt"] > 2 * ramp["ratio_blended"] and ramp["shift"] > 1.0
+    assert all(r["n_flipped"] == 0 and r["std_diffusion"] > 0 for r in rows)
+
+
 def test_stalled_pass_is_redone_with_a_blurred_density():
     """A ramp sharper than the mesh (an unseen validation field, free boundary, N = 51) squeezes one element to zero
     measure at t ~ 0.09 of the unblurred flow, so no step is accepted: the pass must be redone with a blurred

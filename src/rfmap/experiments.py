@@ -26,7 +26,7 @@ __all__ = ["paper_table", "Table", "beltrami_table", "beltrami_resolution_table"
            "resolution_table", "reproduce", "exact_beltrami_result", "population_summary", "glue_all",
            "COLUMN_TITLES", "format_value", "DIGITS", "generalization_table", "WARM_MODELS", "benchmark_fields",
            "time_to_accuracy", "summarize", "residual_floor", "flow_convergence", "FLOW_SETTINGS",
-           "warm_start_residuals",
+           "warm_start_residuals", "sea_blend_study",
            "displacement_demand", "distortion_table", "recipe_table", "training_fields_text", "SYM", "SYM_REF"]
 
 DATA = Path(__file__).resolve().parent / "data"
@@ -723,6 +723,46 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 row["time_ratio"] = a["time"] / agg[best]["time"]
             out.append(row)
     return out
+
+
+def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float = 0.25) -> list[dict[str, Any]]:
+    r"""The free boundary's flow with the diffusion solver's sea and with a blended one, beside the diffusion solver.
+
+    On ``count`` unseen random fields of the ``report`` stream (:func:`rfmap.validation.validation_fields`: smooth,
+    steps, peak and ramp in turn, preprocessed) the diffusion solver and the flow-based solver run with
+    ``boundary="free"``; the flow twice, with the sea that jumps to its level at the coast (``sea_blend=0``, the
+    diffusion solver's) and with ``sea_blend=blend`` (``rfmap.solvers.flow.solve_flow``).
+
+    Returns
+    -------
+    list of dict
+        One row per field: ``field``, ``kind``, ``std_diffusion``, ``ratio_abrupt`` and ``ratio_blended`` (the
+        flow's final Std(rho~_map) over the diffusion solver's), ``shift`` (the largest distance between the two
+        flows' mapped vertices, in grid spacings: how far the blend moves the map, its coastline included),
+        ``stalled_abrupt`` and ``stalled_blended`` (whether the flow's pass stalled and was redone with a blurred
+        density, ``info["stall_blurs"]``) and ``n_flipped`` (both flows together).
+    """
+    from .inputs import preprocess_density
+    from .mesh import grid_points
+    from .solvers import solve_dem
+    from .solvers.flow import solve_flow
+    from .validation import validation_fields
+
+    pts = grid_points(n, dim)
+    rows = []
+    for vf in validation_fields("density", dim, count, stream="report"):
+        dens = preprocess_density(np.asarray(vf.field(pts)).reshape((n,) * dim))
+        s_d = solve_dem(dens, boundary="free").metrics().std_rho_map
+        abrupt = solve_flow(dens, boundary="free")
+        blended = solve_flow(dens, boundary="free", sea_blend=blend)
+        ma, mb = abrupt.metrics(), blended.metrics()
+        rows.append({"field": vf.label, "kind": vf.label.rsplit("-", 1)[0], "std_diffusion": s_d,
+                     "ratio_abrupt": ma.std_rho_map / s_d, "ratio_blended": mb.std_rho_map / s_d,
+                     "shift": float(np.abs(blended.mapped_points - abrupt.mapped_points).max() * (n - 1)),
+                     "stalled_abrupt": bool(abrupt.info["stall_blurs"]),
+                     "stalled_blended": bool(blended.info["stall_blurs"]),
+                     "n_flipped": int(ma.n_flipped + mb.n_flipped)})
+    return rows
 
 
 def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: str = "square") -> list[dict[str, Any]]:

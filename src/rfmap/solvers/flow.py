@@ -51,9 +51,10 @@ Boundary conditions follow ``rfmap.solvers.diffusion.solve_dem``: ``"square"`` k
 vertices slide, corners stay); ``"free"`` embeds the square in :math:`[-L, 1+L]^d` filled with a sea whose level is
 balanced so that the domain keeps its measure (``_balanced_sea``), and later passes fill the sea with the domain's
 mean residual density.  The flow's velocity :math:`-\nabla\phi/\rho_t` carries the density's jumps into the map,
-and the jump from a dense coast to the sea shears the coastal elements: on held-out fields with a steep ramp
-(``rfmap.validation``) the flow ends 9-24 times above the diffusion solver's Std(rho~_map) at 2D N = 256 and 4-5
-times at 3D N = 48.  ``sea_blend`` lets the sea start at the coast's own density instead (see ``solve_flow``).
+and a steep jump from a dense coast to the sea can squeeze a coastal element to zero measure: on held-out fields
+with a steep ramp against the coast (``rfmap.validation``) the pass stalls, its blurred retries (below) leave much of
+the density unequalized, and the flow ends 9-24 times above the diffusion solver's Std(rho~_map) at 2D N = 256 and
+4-5 times at 3D N = 48.  ``sea_blend`` lets the sea start at the coast's own density instead (see ``solve_flow``).
 
 The same passes finish any fold-free starting map (``start``): the first pass then flows the residual density of
 the starting map.  :mod:`rfmap.hybrid` uses this to polish a neural surrogate's map.
