@@ -730,17 +730,20 @@ def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float 
 
     On ``count`` unseen random fields of the ``report`` stream (:func:`rfmap.validation.validation_fields`: smooth,
     steps, peak and ramp in turn, preprocessed) the diffusion solver and the flow-based solver run with
-    ``boundary="free"``; the flow twice, with the sea that jumps to its level at the coast (``sea_blend=0``, the
-    diffusion solver's) and with ``sea_blend=blend`` (``rfmap.solvers.flow.solve_flow``).
+    ``boundary="free"``; the flow three times (``rfmap.solvers.flow.solve_flow``): with the sea that jumps to its
+    level at the coast (the diffusion solver's) and only blurred retries after a stall (``stall_blend=0``); as by
+    default (that sea, but a stalled first pass redone with the sea blended over ``STALL_BLEND``); and with the sea
+    blended over ``blend`` from the start (``sea_blend=blend``).
 
     Returns
     -------
     list of dict
-        One row per field: ``field``, ``kind``, ``std_diffusion``, ``ratio_abrupt`` and ``ratio_blended`` (the
-        flow's final Std(rho~_map) over the diffusion solver's), ``shift`` (the largest distance between the two
-        flows' mapped vertices, in grid spacings: how far the blend moves the map, its coastline included),
-        ``stalled_abrupt`` and ``stalled_blended`` (whether the flow's pass stalled and was redone with a blurred
-        density, ``info["stall_blurs"]``) and ``n_flipped`` (both flows together).
+        One row per field: ``field``, ``kind``, ``std_diffusion``, ``ratio_abrupt``, ``ratio_default`` and
+        ``ratio_blended`` (the flows' final Std(rho~_map) over the diffusion solver's), ``stalled`` (whether the
+        abrupt sea's first pass stalled), ``fallback`` (whether the default flow redid it with a blended sea),
+        ``shift`` (the largest distance between the blended and the abrupt flows' mapped vertices, in grid
+        spacings: how far the blend moves the map, its coastline included), ``time_default`` (the default flow's
+        time over the diffusion solver's) and ``n_flipped`` (all flows together).
     """
     from .inputs import preprocess_density
     from .mesh import grid_points
@@ -752,16 +755,19 @@ def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float 
     rows = []
     for vf in validation_fields("density", dim, count, stream="report"):
         dens = preprocess_density(np.asarray(vf.field(pts)).reshape((n,) * dim))
-        s_d = solve_dem(dens, boundary="free").metrics().std_rho_map
-        abrupt = solve_flow(dens, boundary="free")
+        diffusion = solve_dem(dens, boundary="free")
+        s_d = diffusion.metrics().std_rho_map
+        abrupt = solve_flow(dens, boundary="free", stall_blend=0.0)
+        default = solve_flow(dens, boundary="free")
         blended = solve_flow(dens, boundary="free", sea_blend=blend)
-        ma, mb = abrupt.metrics(), blended.metrics()
+        ma, md, mb = abrupt.metrics(), default.metrics(), blended.metrics()
         rows.append({"field": vf.label, "kind": vf.label.rsplit("-", 1)[0], "std_diffusion": s_d,
-                     "ratio_abrupt": ma.std_rho_map / s_d, "ratio_blended": mb.std_rho_map / s_d,
+                     "ratio_abrupt": ma.std_rho_map / s_d, "ratio_default": md.std_rho_map / s_d,
+                     "ratio_blended": mb.std_rho_map / s_d, "stalled": bool(abrupt.info["stall_blurs"]),
+                     "fallback": bool(default.info["sea_fallback"]),
                      "shift": float(np.abs(blended.mapped_points - abrupt.mapped_points).max() * (n - 1)),
-                     "stalled_abrupt": bool(abrupt.info["stall_blurs"]),
-                     "stalled_blended": bool(blended.info["stall_blurs"]),
-                     "n_flipped": int(ma.n_flipped + mb.n_flipped)})
+                     "time_default": default.time / diffusion.time,
+                     "n_flipped": int(ma.n_flipped + md.n_flipped + mb.n_flipped)})
     return rows
 
 

@@ -54,7 +54,9 @@ mean residual density.  The flow's velocity :math:`-\nabla\phi/\rho_t` carries t
 and a steep jump from a dense coast to the sea can squeeze a coastal element to zero measure: on held-out fields
 with a steep ramp against the coast (``rfmap.validation``) the pass stalls, its blurred retries (below) leave much of
 the density unequalized, and the flow ends 9-24 times above the diffusion solver's Std(rho~_map) at 2D N = 256 and
-4-5 times at 3D N = 48.  ``sea_blend`` lets the sea start at the coast's own density instead (see ``solve_flow``).
+4-5 times at 3D N = 48.  A stalled first pass of a free boundary is therefore first redone with a sea that starts at
+the coast's own density and blends to its level (``stall_blend``); ``sea_blend`` asks for that sea from the start
+(see ``solve_flow``).
 
 The same passes finish any fold-free starting map (``start``): the first pass then flows the residual density of
 the starting map.  :mod:`rfmap.hybrid` uses this to polish a neural surrogate's map.
@@ -81,7 +83,7 @@ from ..result import MapResult
 from .diffusion import DEM_BOUNDARIES, _balanced_sea, _check_grid_density, _torch_threads, cosine_coefficients, \
     fft_workers, p1_upsample
 
-__all__ = ["solve_flow", "poisson_flux", "box_mean", "rasterize_elements", "residual_density",
+__all__ = ["STALL_BLEND", "solve_flow", "poisson_flux", "box_mean", "rasterize_elements", "residual_density",
            "lumped_residual", "vertex_residual"]
 
 
@@ -673,6 +675,14 @@ RTOL = {2: 0.2, 3: 0.4}
 #: 1.6 grid spacings (0.07-0.43 on all but the octant), less than the flow's own distance from the diffusion map
 MARGIN = {2: 0.5, 3: 0.25}
 
+#: Sea blend (``solve_flow(stall_blend=...)``) of the first remedy for a stalled first pass of a free boundary's cold
+#: start, tried before the blurred retries (``STALL_BLURS``).  Held-out report fields at 2D N = 256 whose steep ramp
+#: presses a dense coast against the sea stalled with the diffusion solver's sea, and the blurred retries left them
+#: 15-27 times above the diffusion solver's Std(rho~_map); with the sea blended over 0.25 none stalled and they ended
+#: at 0.9-1.0 times (``rfmap.experiments.sea_blend_study``).  A pass that does not stall keeps the diffusion solver's
+#: sea.
+STALL_BLEND = 0.25
+
 #: a pass stalls when the step falls below this (in units of the unit time interval)
 STALL_DT = 1e-9
 #: blur widths (vertex grid spacings) of the retries of a stalled pass
@@ -748,6 +758,21 @@ class _FlowPass:
         return y, {"steps": accepted, "rejected": rejected, "fold_rejections": folds}
 
 
+def _sea_raster(dens: np.ndarray, pad: int, refine: int, blend: float) -> tuple[np.ndarray, float, float]:
+    """The free boundary's first raster with its balanced sea (``rfmap.solvers.diffusion._balanced_sea``) blended
+    over ``blend``, halved while the blended sea would not be positive (down to an eighth, then 0); returns the
+    raster, the sea level and the blend used.  ``RuntimeError`` if even the abrupt sea cannot be balanced."""
+    floor = blend / 8
+    while True:
+        raster, sea = _balanced_sea(dens, pad, refine, blend)
+        if blend == 0 or (sea > 0 and raster.min() > 0):
+            break
+        blend = blend / 2 if blend > floor else 0.0
+    if not sea > 0:
+        raise RuntimeError(f"could not balance the sea density (got {sea:.4g})")
+    return raster, float(sea), float(blend)
+
+
 def solve_flow(
     density,
     *,
@@ -758,6 +783,7 @@ def solve_flow(
     refine: int = 2,
     margin: float | None = None,
     sea_blend: float = 0.0,
+    stall_blend: float = STALL_BLEND,
     max_passes: int = 1,
     stall: float = 0.8,
     blur: float = 0.0,
@@ -825,6 +851,11 @@ def solve_flow(
     stall_blurs : tuple of float
         Blur widths (vertex spacings) of the retries of a stalled pass (see the module docstring); ``()`` makes a
         stall a ``RuntimeError`` at once (the hybrid then starts cold rather than blur a warm start).
+    stall_blend : float
+        For the first pass of a free boundary's cold start with ``sea_blend=0``: when it stalls, it is first redone
+        once with the sea blended over this width (:data:`STALL_BLEND`; ``info["sea_fallback"]``, and
+        ``info["sea_blend"]`` the width used), and only then, if it stalls again, with blurred densities; 0 skips
+        this remedy.
     num_threads : int, optional
         Torch threads for the interpolation and the element measures (restored afterwards); as in
         ``rfmap.solvers.diffusion.solve_dem``, default 1 in 2D and torch's setting in 3D.
@@ -915,14 +946,7 @@ def solve_flow(
         if boundary == "square":
             raster = p1_upsample(dens, int(refine))
         else:
-            blend_floor = sea_blend / 8
-            while True:  # a blend whose balanced sea is not positive is narrowed, then dropped
-                raster, sea = _balanced_sea(dens, pad, int(refine), sea_blend)
-                if sea_blend == 0 or (sea > 0 and raster.min() > 0):
-                    break
-                sea_blend = sea_blend / 2 if sea_blend > blend_floor else 0.0
-            if not sea > 0:
-                raise RuntimeError(f"could not balance the sea density (got {sea:.4g})")
+            raster, sea, sea_blend = _sea_raster(dens, pad, int(refine), sea_blend)
     else:
         mapped = np.array(start, dtype=np.float64)
         if mapped.shape != ref.shape:
@@ -941,6 +965,7 @@ def solve_flow(
 
     totals = {"steps": 0, "rejected": 0, "fold_rejections": 0, "evaluations": 0}
     stall_retries: list[float] = []
+    sea_fallback = False  # whether a stalled first pass was redone with a blended sea
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -967,19 +992,28 @@ def solve_flow(
                     bar.n = 0
                     bar.refresh()
                 width = blur * 0.5 ** passes
-                for retry in range(len(stall_blurs) + 1):
+                retry = 0
+                while True:
                     fp = _FlowPass(raster, width / (n - 1) / scale)
                     try:
                         y_next, info = fp.run(y, lambda x: _turned_over(x, n), project, h=1.0 / (nb - 1),
                                               rtol=float(rtol), max_steps=int(max_steps), bar=bar)
                     except _Stalled as exc:
                         totals["evaluations"] += fp.evaluations
+                        if (boundary == "free" and start is None and passes == 0 and sea_blend == 0
+                                and stall_blend > 0 and not sea_fallback):
+                            # first remedy: the coast's jump to the sea is what collapses an element; blend it
+                            raster, sea, sea_blend = _sea_raster(dens, pad, int(refine), stall_blend)
+                            sea_fallback = sea_blend > 0
+                            if sea_fallback:
+                                continue
                         if retry == len(stall_blurs):
                             raise RuntimeError(f"flow map stalled with the density blurred over {width:g} grid "
                                                f"spacings: {exc}") from None
                         # a density jump sharper than the mesh: blur it (as cartogram programs do) and redo the pass
                         width = max(width, stall_blurs[retry])
                         stall_retries.append(width)
+                        retry += 1
                         continue
                     break
                 y = y_next
@@ -1006,5 +1040,6 @@ def solve_flow(
     if sea is not None:
         info["sea_density"] = sea
         info["sea_blend"] = float(sea_blend)
+        info["sea_fallback"] = sea_fallback
     return MapResult(ref_points=ref, mapped_points=best if keep_best else mapped, elements=elements, field=field,
                      kind="density", time=elapsed, info=info)
