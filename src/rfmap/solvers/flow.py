@@ -676,11 +676,12 @@ RTOL = {2: 0.2, 3: 0.4}
 MARGIN = {2: 0.5, 3: 0.25}
 
 #: Sea blend (``solve_flow(stall_blend=...)``) of the first remedy for a stalled first pass of a free boundary's cold
-#: start, tried before the blurred retries (``STALL_BLURS``).  Held-out report fields at 2D N = 256 whose steep ramp
-#: presses a dense coast against the sea stalled with the diffusion solver's sea, and the blurred retries left them
-#: 15-27 times above the diffusion solver's Std(rho~_map); with the sea blended over 0.25 none stalled and they ended
-#: at 0.9-1.0 times (``rfmap.experiments.sea_blend_study``).  A pass that does not stall keeps the diffusion solver's
-#: sea.
+#: start, tried before the blurred retries (``STALL_BLURS``).  The width was chosen on the validation stream
+#: (``rfmap.validation``, 16 fields at 2D N = 256, the blend applied from the start): mean Std(rho~_map) over the
+#: diffusion solver's 6.34 (no blend), 1.195 (0.125), 1.150 (0.25), 1.151 (0.375), 1.178 (0.5).  On the report stream
+#: (``rfmap.experiments.sea_blend_study``, chapter 10) the two of eight fields that stall, steep ramps pressing a
+#: dense coast against the sea, went from 15-27 times diffusion's (blurred retries) to 0.9-1.0 times.  A pass that
+#: does not stall keeps the diffusion solver's sea.
 STALL_BLEND = 0.25
 
 #: a pass stalls when the step falls below this (in units of the unit time interval)
