@@ -273,6 +273,8 @@ def test_sea_blend_tames_a_dense_coast():
         assert res.metrics().std_rho_map < 2 * diffusion and res.metrics().n_flipped == 0
     with pytest.raises(ValueError, match="sea_blend"):
         solve_flow(dens, boundary="free", sea_blend=-0.1)
+    with pytest.raises(ValueError, match="stall_blend"):
+        solve_flow(dens, boundary="free", stall_blend=float("nan"))
 
 
 def test_sea_blend_study_rows():

@@ -889,12 +889,10 @@ def solve_flow(
         rtol = RTOL[dens.ndim]
     if margin is None:
         margin = MARGIN[dens.ndim]
-    if isinstance(sea_blend, bool) or not isinstance(sea_blend, numbers.Real) or not math.isfinite(sea_blend) \
-            or sea_blend < 0:
-        raise ValueError(f"sea_blend must be a finite number >= 0, got {sea_blend!r}")
+    for name, val in (("sea_blend", sea_blend), ("stall_blend", stall_blend), ("tol", tol)):
+        if isinstance(val, bool) or not isinstance(val, numbers.Real) or not math.isfinite(val) or val < 0:
+            raise ValueError(f"{name} must be a finite number >= 0, got {val!r}")
     sea_blend = float(sea_blend)
-    if isinstance(tol, bool) or not isinstance(tol, numbers.Real) or not math.isfinite(tol) or tol < 0:
-        raise ValueError(f"tol must be a finite number >= 0, got {tol!r}")
     for name, val in (("rtol", rtol), ("margin", margin), ("stall", stall)):
         if isinstance(val, bool) or not isinstance(val, numbers.Real) or not math.isfinite(val) or val <= 0:
             raise ValueError(f"{name} must be a positive finite number, got {val!r}")
@@ -967,6 +965,7 @@ def solve_flow(
     totals = {"steps": 0, "rejected": 0, "fold_rejections": 0, "evaluations": 0}
     stall_retries: list[float] = []
     sea_fallback = False  # whether a stalled first pass was redone with a blended sea
+    fallback_tried = False
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -1002,7 +1001,8 @@ def solve_flow(
                     except _Stalled as exc:
                         totals["evaluations"] += fp.evaluations
                         if (boundary == "free" and start is None and passes == 0 and sea_blend == 0
-                                and stall_blend > 0 and not sea_fallback):
+                                and stall_blend > 0 and not fallback_tried):
+                            fallback_tried = True
                             # first remedy: the coast's jump to the sea is what collapses an element; blend it
                             raster, sea, sea_blend = _sea_raster(dens, pad, int(refine), stall_blend)
                             sea_fallback = sea_blend > 0
