@@ -1,7 +1,7 @@
 """The ``rfmap`` command line.
 
 Subcommands: ``solve`` (classical solvers), ``metrics``, ``map`` (neural surrogates), ``train``, ``models``,
-``reproduce`` (the paper's tables), ``cartogram`` (GeoJSON regions resized by a value).  Errors in the input print
+``reproduce`` (the paper's tables), ``validate`` (score saved weights on the validation stream), ``cartogram`` (GeoJSON regions resized by a value).  Errors in the input print
 one line and exit with status 2; no partial output file is left behind.
 """
 from __future__ import annotations
@@ -222,6 +222,22 @@ def cmd_train(args) -> int:
     return 0
 
 
+def cmd_validate(args) -> int:
+    from .selection import score_weights, scores_table, ship_best
+
+    if args.count is not None and args.count < 1:
+        raise CLIError(f"--count must be at least 1, got {args.count}")
+    sizes = tuple(args.n) if args.n else None
+    if sizes and min(sizes) < 3:
+        raise CLIError(f"--n must be at least 3, got {min(sizes)}")
+    scored = score_weights(args.weights, count=args.count, sizes=sizes, progress=not args.no_progress)
+    print(scores_table(scored))
+    if args.ship:
+        w, j = ship_best(scored, args.ship, args.name)
+        print(f"shipped {scored[0].path.name} as {w} (+ {j.name})")
+    return 0
+
+
 def cmd_cartogram(args) -> int:
     from .cartogram import cartogram
 
@@ -337,6 +353,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--lineage", action="store_true",
                    help="print, per model, the rfmap train commands of every run behind its weights")
     s.set_defaults(func=cmd_models)
+
+    s = sub.add_parser("validate", help="score saved weights (e.g. training snapshots) on the validation stream")
+    s.add_argument("weights", nargs="+", help=".safetensors files or folders of them (e.g. OUT/snapshots)")
+    s.add_argument("--count", type=int, default=None, help="validation fields (default: the config's)")
+    s.add_argument("--n", type=int, nargs="+", default=None, help="grid sides (default: the config's)")
+    s.add_argument("--ship", default=None, metavar="DIR", help="write the best as DIR/NAME.safetensors + .json")
+    s.add_argument("--name", default=None, help="file name of the shipped weights (default: the config's name)")
+    s.add_argument("--no-progress", action="store_true")
+    s.set_defaults(func=cmd_validate)
 
     s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)")
     s.add_argument("input", help="GeoJSON FeatureCollection of Polygon / MultiPolygon features")

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 from .fields import RandomBeltramiConfig, RandomDensityConfig
 from .tasks import LossWeights, TaskSpec
+from .teacher import TeacherConfig
 
 __all__ = ["TrainConfig", "ModelConfig", "CONFIGS", "PRESETS", "get_config", "config_names", "scale"]
 
@@ -66,7 +67,11 @@ class TrainConfig:
     (decay by ``gamma`` every ``step_size`` steps) or ``'restarts'`` (cosine annealing with warm restarts,
     ``T0``, ``T_mult``).  ``ema`` > 0 keeps an exponential moving average of the weights (Polyak averaging,
     :class:`rfmap.train.WeightAverage`) with that decay; validation, the checkpoint choice and the shipped file then
-    use the averaged weights (0, the default: the weights as trained).  ``val_repair``: score the held-out maps as
+    use the averaged weights (0, the default: the weights as trained).  ``teacher`` (density tasks,
+    :class:`rfmap.teacher.TeacherConfig`): a classical solver's map of a share of each batch's fields as a supervised
+    target beside the data-free losses (default: none, data-free as in the paper).  ``snapshot_every`` > 0 writes the
+    weights every that many steps to ``OUT/snapshots/`` (single self-contained files, scored afterwards by
+    ``rfmap validate``).  ``val_repair``: score the held-out maps as
     ``Surrogate.map`` delivers them (a folded network map regridded or repaired; :func:`rfmap.validation.evaluate`)
     instead of the raw network output.  A run started with ``init`` validates its parent at step 0, so that the
     parent competes with every checkpoint.
@@ -102,6 +107,8 @@ class TrainConfig:
     val_sizes: tuple[int, ...] = ()
     val_count: int = 16
     val_repair: bool = False
+    teacher: TeacherConfig = TeacherConfig()
+    snapshot_every: int = 0
     select_best: bool = True
     workers: int = 0
     ckpt_every: int = 250
@@ -116,6 +123,11 @@ class TrainConfig:
     def val_ns(self) -> tuple[int, ...]:
         """Grid sides of the validation on held-out random fields (``val_sizes``, else ``(val_n,)``)."""
         return tuple(self.val_sizes) or (self.val_n,)
+
+    def __post_init__(self):
+        if self.teacher.active and self.task.kind != "density":
+            raise ValueError(f"config {self.name!r} maps a Beltrami coefficient: a classical teacher applies to "
+                             "density configs only")
 
     def with_overrides(self, **kw) -> "TrainConfig":
         return replace(self, **kw)

@@ -161,6 +161,22 @@ def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish
             f"refinement) or {polish} ({finish}) can help")
 
 
+def _embedded_meta(path: Path) -> dict | None:
+    """The metadata stored in a weight file's header by ``Surrogate.save(..., embed=True)``, else ``None``."""
+    from safetensors import SafetensorError, safe_open
+
+    try:
+        with safe_open(str(path), framework="pt") as f:
+            text = (f.metadata() or {}).get("meta")
+    except (SafetensorError, OSError, ValueError) as e:
+        raise ValueError(f"corrupt or truncated weight file {path}: {e}") from e
+    if text is None:
+        return None
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise ValueError(f"corrupt metadata in the header of {path}: {e}") from e
+
 class Surrogate:
     """A trained (or untrained) neural surrogate for one task.
 
@@ -236,8 +252,10 @@ class Surrogate:
         r = self.meta.get("n_range")
         return (int(r[0]), int(r[1])) if r else (self.model.min_size, 1 << 30)
 
-    def save(self, path) -> tuple[Path, Path]:
-        """Write ``path`` (``.safetensors``) and the metadata JSON beside it."""
+    def save(self, path, *, embed: bool = False) -> tuple[Path, Path | None]:
+        """Write ``path`` (``.safetensors``) and the metadata JSON beside it; with ``embed`` the metadata goes into
+        the weight file's header instead (one self-contained file, e.g. a training snapshot; :meth:`load` reads
+        either) and the second path is ``None``."""
         from safetensors.torch import save_file
 
         path = Path(path).with_suffix(".safetensors")
@@ -247,9 +265,14 @@ class Surrogate:
                 "rfmap_version": self.meta.get("rfmap_version", __version__)}
         state = tensor_state(self.model)
         tmp = path.with_suffix(".safetensors.part")
-        save_file(state, str(tmp), metadata={"format": "rfmap", "name": str(meta.get("name", ""))})
+        header = {"format": "rfmap", "name": str(meta.get("name", ""))}
+        if embed:
+            header["meta"] = json.dumps(meta, sort_keys=True)
+        save_file(state, str(tmp), metadata=header)
         os.replace(tmp, path)
         os.chmod(path, 0o644)
+        if embed:
+            return path, None
         jpath = path.with_suffix(".json")
         jpath.write_text(json.dumps(meta, indent=2, sort_keys=True))
         return path, jpath
@@ -267,12 +290,14 @@ class Surrogate:
         jpath = path.with_suffix(".json")
         if not path.exists():
             raise FileNotFoundError(f"no weight file {path}")
-        if not jpath.exists():
-            raise FileNotFoundError(f"no metadata {jpath} next to the weights")
-        try:
-            meta = json.loads(jpath.read_text())
-        except json.JSONDecodeError as e:
-            raise ValueError(f"corrupt metadata {jpath}: {e}") from e
+        meta = _embedded_meta(path) if not jpath.exists() else None
+        if meta is None:
+            if not jpath.exists():
+                raise FileNotFoundError(f"no metadata {jpath} next to the weights")
+            try:
+                meta = json.loads(jpath.read_text())
+            except json.JSONDecodeError as e:
+                raise ValueError(f"corrupt metadata {jpath}: {e}") from e
         try:
             spec = TaskSpec(**meta["task"])
             kw = meta["model"]

@@ -23,6 +23,7 @@ from .fields import (RandomBeltramiConfig, RandomDensity, RandomDensityConfig, R
                      jittered_points, preprocess_density, vertex_weights)
 from .mesh import grid_mesh, grid_points, interpolate
 from .nn.model import BOUNDARIES, apply_displacement
+from .teacher import TeacherConfig, teacher_indices, teacher_loss, teacher_map, teacher_targets
 
 __all__ = ["TaskSpec", "Batch", "encode", "grid_elements", "draw_samples", "make_batch", "sample_batch", "task_loss",
            "KINDS"]
@@ -131,8 +132,9 @@ class Batch:
         if dev.type == "cpu":
             return self
         mv = lambda t: None if t is None else t.to(dev, non_blocking=True)  # noqa: E731
+        extra = {k: mv(v) if isinstance(v, Tensor) else v for k, v in self.extra.items()}
         return Batch(mv(self.inputs), mv(self.ref), self.elements.to(dev), self.n, mv(self.density),
-                     mv(self.mu_target), {**self.extra, "grid_elements": self.on_grid})
+                     mv(self.mu_target), {**extra, "grid_elements": self.on_grid})
 
 
 def _grad_magnitude(values: np.ndarray, n: int, dim: int) -> np.ndarray:
@@ -141,17 +143,18 @@ def _grad_magnitude(values: np.ndarray, n: int, dim: int) -> np.ndarray:
 
 
 def _density_sample(rng, n, dim, cfg: RandomDensityConfig, jitter: float, elements_np):
+    """``(points, unit-mass density at the points, raw field on the regular grid)`` of one training sample."""
     fld = RandomDensity(rng, cfg)
+    grid_vals = fld.on_grid(n)
     if jitter > 0:
-        grid_vals = fld.on_grid(n)
         pts = jittered_points(n, dim, rng, grad_magnitude=_grad_magnitude(grid_vals, n, dim), strength=jitter)
         raw = fld(pts)
         w = vertex_weights(pts, elements_np)
         p = preprocess_density(raw, weights=w)
     else:
         pts = grid_points(n, dim)
-        p = preprocess_density(fld.on_grid(n).reshape((n,) * dim)).reshape(-1)
-    return pts, p
+        p = preprocess_density(grid_vals.reshape((n,) * dim)).reshape(-1)
+    return pts, p, grid_vals.reshape((n,) * dim)
 
 
 def _beltrami_sample(rng, n, cfg: RandomBeltramiConfig, jitter: float, source: str):
@@ -171,7 +174,7 @@ def _beltrami_sample(rng, n, cfg: RandomBeltramiConfig, jitter: float, source: s
 
 def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
                  density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
-                 beltrami_source: str = "map") -> tuple[np.ndarray, np.ndarray]:
+                 beltrami_source: str = "map", teacher: TeacherConfig | None = None):
     """The raw arrays of training samples ``indices`` of step ``step`` on an ``N``-grid (numpy only, so that a
     worker process can draw them and send them to the training process).
 
@@ -179,34 +182,56 @@ def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitte
     across processes (data-parallel training) or drawn by worker processes reproduces the single-process batch
     exactly.
 
+    With an active ``teacher`` (density tasks, :mod:`rfmap.teacher`), the first
+    ``teacher_indices(len(indices), teacher.share)`` samples also get the classical map of their field as a target.
+
     Returns
     -------
     points : ndarray, shape (B, N**d, d), float64
     params : ndarray, shape (B, N**d), the unit-mass density (float64) or the Beltrami coefficient (complex128)
+    targets : ndarray, shape (B, N**d, d), float64 — only with an active ``teacher``: the teacher's map at the
+        sample's vertices, NaN for samples without a target (beyond the share, or the solver failed)
     """
+    indices = list(indices)
     el_np = grid_elements(n, spec.dim).numpy() if spec.kind == "density" and jitter > 0 else None
-    pts_l, par_l = [], []
-    for i in indices:
+    teach = teacher is not None and teacher.active
+    if teach and spec.kind != "density":
+        raise ValueError("a classical teacher applies to density tasks only")
+    n_teach = teacher_indices(len(indices), teacher.share) if teach else 0
+    pts_l, par_l, tgt_l = [], [], []
+    for k, i in enumerate(indices):
         rng = np.random.default_rng([seed, step, int(i)])
         if spec.kind == "density":
             cfg = density_cfg or RandomDensityConfig.for_dim(spec.dim)
-            pts, par = _density_sample(rng, n, spec.dim, cfg, jitter, el_np)
+            pts, par, raw_grid = _density_sample(rng, n, spec.dim, cfg, jitter, el_np)
+            if teach:
+                mapped = teacher_map(raw_grid, spec.boundary, teacher.method) if k < n_teach else None
+                tgt_l.append(np.full_like(pts, np.nan) if mapped is None else teacher_targets(pts, n, mapped))
         else:
             pts, par = _beltrami_sample(rng, n, beltrami_cfg or RandomBeltramiConfig(), jitter, beltrami_source)
         pts_l.append(pts)
         par_l.append(par)
+    if teach:
+        return np.stack(pts_l), np.stack(par_l), np.stack(tgt_l)
     return np.stack(pts_l), np.stack(par_l)
 
 
-def make_batch(spec: TaskSpec, points: np.ndarray, params: np.ndarray, n: int) -> Batch:
-    """Tensors of a training batch from the arrays of :func:`draw_samples` (float32 / complex64)."""
+def make_batch(spec: TaskSpec, points: np.ndarray, params: np.ndarray, n: int,
+               targets: np.ndarray | None = None) -> Batch:
+    """Tensors of a training batch from the arrays of :func:`draw_samples` (float32 / complex64); ``targets``
+    (a teacher's maps, NaN rows for samples without one) become ``extra["target"]`` and ``extra["target_mask"]``."""
     elements = grid_elements(n, spec.dim)
     ref = torch.as_tensor(points, dtype=torch.float32)
     par = torch.as_tensor(params)
     par = par.to(torch.complex64) if par.is_complex() else par.float()
     inputs = encode(ref, par, spec, n)
     if spec.kind == "density":
-        return Batch(inputs, ref, elements, n, density=par)
+        extra = {}
+        if targets is not None:
+            mask = np.isfinite(targets).all(axis=(1, 2))
+            extra = {"target": torch.as_tensor(np.where(mask[:, None, None], targets, points), dtype=torch.float32),
+                     "target_mask": torch.as_tensor(mask)}
+        return Batch(inputs, ref, elements, n, density=par, extra=extra)
     return Batch(inputs, ref, elements, n, mu_target=par[:, elements].mean(-1))
 
 
@@ -245,8 +270,10 @@ class LossWeights:
     density_tangent: bool = False
 
 
-def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights) -> tuple[Tensor, dict]:
-    """Total loss and its parts for network output ``psi`` of shape ``(B, d, *S)``."""
+def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights,
+              teacher_weight: float = 0.0) -> tuple[Tensor, dict]:
+    """Total loss and its parts for network output ``psi`` of shape ``(B, d, *S)``; ``teacher_weight`` > 0 adds
+    the supervised term :func:`rfmap.teacher.teacher_loss` where the batch carries targets."""
     B, d = psi.shape[:2]
     disp = psi.reshape(B, d, -1).transpose(1, 2)
     mapped = apply_displacement(batch.ref, disp, spec.boundary)
@@ -277,4 +304,8 @@ def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights) -
     if weights.fold:
         parts["fold"] = L.fold_penalty(batch.ref, mapped, batch.elements, weights.fold_threshold, **mk)
         total = total + weights.fold * parts["fold"]
+    if teacher_weight and "target" in batch.extra:
+        parts["teacher"] = teacher_loss(mapped, batch.extra["target"], batch.ref, batch.extra["target_mask"],
+                                        batch.n)
+        total = total + teacher_weight * parts["teacher"]
     return total, {k: float(v.detach()) for k, v in parts.items()}

@@ -55,7 +55,7 @@ from .nn.registry import build_model
 from .paper_fields import BELTRAMI_MAPS, TEST_FIELDS
 from .surrogate import Surrogate, models, quiet_quality
 from .tasks import TaskSpec, draw_samples, make_batch, task_loss
-from .validation import evaluate, score
+from .validation import evaluate, family_table, score
 
 __all__ = ["train", "validate", "report_paper_fields", "resolve_device", "load_init", "main", "PAPER_FIELDS",
            "TrainState", "WeightAverage", "memory_format"]
@@ -108,14 +108,15 @@ def step_size_n(cfg: TrainConfig, step: int) -> int:
 
 
 # ---------------------------------------------------------------------------------------------------- batches
-def draw_step(cfg: TrainConfig, step: int, rank: int = 0) -> tuple[int, np.ndarray, np.ndarray]:
-    """The raw arrays of rank ``rank``'s share of step ``step``: ``(n, points, params)`` (a pure function of the
-    configuration, the step and the rank)."""
+def draw_step(cfg: TrainConfig, step: int, rank: int = 0) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None]:
+    """The raw arrays of rank ``rank``'s share of step ``step``: ``(n, points, params, targets)`` (a pure function of
+    the configuration, the step and the rank); ``targets`` are the teacher's maps (:mod:`rfmap.teacher`, NaN where
+    a sample has none), ``None`` without a teacher."""
     n = step_size_n(cfg, step)
-    pts, par = draw_samples(cfg.task, seed=cfg.seed, step=step, indices=range(rank * cfg.batch, (rank + 1) * cfg.batch),
-                            n=n, jitter=cfg.jitter, density_cfg=cfg.density_field, beltrami_cfg=cfg.beltrami_field,
-                            beltrami_source=cfg.beltrami_source)
-    return n, pts, par
+    drawn = draw_samples(cfg.task, seed=cfg.seed, step=step, indices=range(rank * cfg.batch, (rank + 1) * cfg.batch),
+                         n=n, jitter=cfg.jitter, density_cfg=cfg.density_field, beltrami_cfg=cfg.beltrami_field,
+                         beltrami_source=cfg.beltrami_source, teacher=cfg.teacher)
+    return (n, *drawn) if len(drawn) == 3 else (n, *drawn, None)
 
 
 class _ThreadLoader:
@@ -469,6 +470,14 @@ class TrainState:
                     "config": json.dumps(self.cfg.to_dict(), sort_keys=True)}, tmp)
         os.replace(tmp, self.out / "checkpoint.pt")
 
+    def snapshot(self) -> Path:
+        """Write the current (averaged) weights with their metadata as one self-contained file,
+        ``OUT/snapshots/NAME-stepSSSSSSS.safetensors`` (``rfmap validate`` scores such files afterwards)."""
+        sur = self.cpu_surrogate()
+        sur.meta["snapshot_step"] = self.step
+        path, _ = sur.save(self.out / "snapshots" / f"{self.cfg.name}-step{self.step:07d}.safetensors", embed=True)
+        return path
+
     def cpu_surrogate(self, final: dict | None = None) -> Surrogate:
         """A CPU copy of the current model (its averaged weights when ``cfg.ema`` > 0) with its metadata (used for
         validation and for the shipped file)."""
@@ -598,7 +607,7 @@ def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | N
 
         bar = tqdm(total=cfg.steps, initial=st.step, desc=f"train {cfg.name}", unit="step", dynamic_ncols=True)
     try:
-        if init is not None and not resume and not finish and st.rank == 0 and cfg.select_best:
+        if init is not None and not resume and not finish and st.rank == 0 and cfg.select_best and cfg.val_every:
             _validate_and_keep(st, bar)  # the parent competes: a run that improves on nothing ships its parent
         if not finish:  # --finish: no further step, straight to the end of the run
             loader = _loader(cfg, st.rank, st.step, cfg.steps)
@@ -612,9 +621,10 @@ def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | N
     return _finish(st)
 
 
-def _train_step(st: TrainState, n: int, pts: np.ndarray, par: np.ndarray) -> tuple[float, dict, float]:
+def _train_step(st: TrainState, n: int, pts: np.ndarray, par: np.ndarray,
+                targets: np.ndarray | None = None) -> tuple[float, dict, float]:
     cfg = st.cfg
-    batch = make_batch(cfg.task, pts, par, n).to(st.device)
+    batch = make_batch(cfg.task, pts, par, n, targets).to(st.device)
     batch.inputs = batch.inputs.contiguous(memory_format=memory_format(cfg.task.dim))
     st.model.train()
     if st.device.type == "cuda":
@@ -623,7 +633,7 @@ def _train_step(st: TrainState, n: int, pts: np.ndarray, par: np.ndarray) -> tup
         psi = psi.float()
     else:
         psi = st.net(batch.inputs)
-    loss, parts = task_loss(cfg.task, batch, psi, cfg.loss)
+    loss, parts = task_loss(cfg.task, batch, psi, cfg.loss, cfg.teacher.weight if cfg.teacher.active else 0.0)
     st.opt.zero_grad(set_to_none=True)
     loss.backward()
     gnorm = float(torch.nn.utils.clip_grad_norm_(st.model.parameters(), cfg.clip))
@@ -643,7 +653,9 @@ def _validate_and_keep(st: TrainState, bar) -> dict:
         st.best = {"step": st.step, "score": list(s), "summary": v["mean"],
                    "state": {k: t.detach().cpu().clone() for k, t in state.items() if isinstance(t, torch.Tensor)}}
     if bar is not None:
-        bar.write(f"step {st.step}: validation {v['mean']}")
+        m = v["mean"]
+        fam = family_table(m)
+        bar.write(f"step {st.step}: validation {fam}" if fam else f"step {st.step}: validation {m}")
     return v
 
 
@@ -653,8 +665,8 @@ def _loop(st: TrainState, loader, bar, log_every: int) -> None:
         return  # resumed after its time limit: nothing left to train (elapsed0 comes from the checkpoint, so every
         # rank of a data-parallel run decides alike; the clock inside the loop is agreed on by all_reduce)
     while st.step < cfg.steps:
-        n, pts, par = loader.get(st.step)
-        lv, parts, gnorm = _train_step(st, n, pts, par)
+        n, pts, par, targets = loader.get(st.step)
+        lv, parts, gnorm = _train_step(st, n, pts, par, targets)
         st.step += 1
         st.ema = lv if st.ema is None else 0.95 * st.ema + 0.05 * lv
         elapsed = st.elapsed()
@@ -669,10 +681,13 @@ def _loop(st: TrainState, loader, bar, log_every: int) -> None:
             flag = torch.tensor([float(stop)], device=st.device if st.device.type == "cuda" else "cpu")
             torch.distributed.all_reduce(flag)
             stop = bool(flag.item() > 0)
-        if st.rank == 0 and st.step % cfg.val_every == 0 and st.step < cfg.steps and not stop:
+        if st.rank == 0 and cfg.val_every and st.step % cfg.val_every == 0 and st.step < cfg.steps and not stop:
             _validate_and_keep(st, bar)
         if st.step % cfg.ckpt_every == 0 or stop or st.step == cfg.steps:
             st.checkpoint()
+        if cfg.snapshot_every and st.rank == 0 and (st.step % cfg.snapshot_every == 0 or stop
+                                                    or st.step == cfg.steps):
+            st.snapshot()
         if stop:
             if bar is not None:
                 bar.write(f"time limit of {cfg.time_limit:.0f} s reached at step {st.step}")
@@ -688,6 +703,12 @@ def _finish(st: TrainState) -> Surrogate:
     if st.avg is not None:  # from here on the model holds the averaged weights (the checkpoint keeps both)
         st.model.load_state_dict(st.avg.averaged_state(st.model))
         st.avg = None
+    if not cfg.val_every:  # no validation here (a run on a lent accelerator): rfmap validate scores its snapshots
+        sur = st.cpu_surrogate()
+        sur.meta["selected_step"] = st.step
+        sur.meta["history"] = history(st.out / "log.jsonl")
+        sur.save(st.out / f"{cfg.name}.safetensors")
+        return sur
     last = validate(st.cpu_surrogate(), cfg)
     selected = st.step
     if cfg.select_best and st.best is not None and tuple(st.best["score"]) < score(last["mean"]):
@@ -761,6 +782,18 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
                    help="torch CPU threads per process (also with --device cuda: validation runs on a CPU copy)")
     p.add_argument("--workers", type=int, default=None, help="batch-drawing worker processes (0: a thread)")
     p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--teacher", default=None, metavar="flow|diffusion|none",
+                   help="density configs: a classical solver's map of a share of each batch's fields as a supervised "
+                        "target beside the data-free losses (rfmap.teacher; default: the config's, none)")
+    p.add_argument("--teacher-share", type=float, default=None, help="share of each batch with a target (0, 1]")
+    p.add_argument("--teacher-weight", type=float, default=None, help="weight of the teacher's displacement loss")
+    p.add_argument("--base", type=int, default=None, help="override the U-Net's base width (channels)")
+    p.add_argument("--depth", type=int, default=None, help="override the U-Net's number of levels")
+    p.add_argument("--snapshot-every", type=int, default=None, metavar="K",
+                   help="write the weights every K steps to OUT/snapshots/ (self-contained files for rfmap validate)")
+    p.add_argument("--no-validate", action="store_true",
+                   help="no validation during or after the run (e.g. on an accelerator); score the snapshots "
+                        "afterwards with rfmap validate")
     p.add_argument("--no-progress", action="store_true")
     return p
 
@@ -780,7 +813,7 @@ def run(args) -> Surrogate:
         raise ValueError(f"--lr must be a positive number, got {over['lr']}")
     if "ema" in over and not (math.isfinite(over["ema"]) and 0.0 <= over["ema"] < 1.0):
         raise ValueError(f"--ema must lie in [0, 1), got {over['ema']}")
-    cfg = cfg.with_overrides(**over)
+    cfg = cfg.with_overrides(**over, **_structured_overrides(cfg, args))
     device = resolve_device(args.device)
     if args.init and args.resume:
         raise ValueError("--init and --resume exclude each other (a resumed run keeps its own lineage)")
@@ -801,17 +834,57 @@ def run(args) -> Surrogate:
             torch.distributed.destroy_process_group()
 
 
+def _structured_overrides(cfg: TrainConfig, args) -> dict:
+    """Overrides of the nested options (teacher, model) and of validation from the command line; ``ValueError``
+    on values out of range."""
+    from dataclasses import replace as _replace
+
+    from .teacher import TeacherConfig
+
+    over: dict = {}
+    t = {k: v for k, v in {"method": getattr(args, "teacher", None), "share": getattr(args, "teacher_share", None),
+                           "weight": getattr(args, "teacher_weight", None)}.items() if v is not None}
+    if t:
+        over["teacher"] = TeacherConfig(**{**cfg.teacher.__dict__, **t})
+        if over["teacher"].active and cfg.task.kind != "density":
+            raise ValueError(f"--teacher: config {cfg.name!r} maps a Beltrami coefficient; a classical teacher "
+                             "applies to density configs only")
+    m = {k: v for k, v in {"base": getattr(args, "base", None), "depth": getattr(args, "depth", None)}.items()
+         if v is not None}
+    if m:
+        if cfg.model.arch != "unet":
+            raise ValueError("--base and --depth apply to U-Net configs")
+        if any(v < 1 for v in m.values()):
+            raise ValueError(f"--base and --depth must be at least 1, got {m}")
+        over["model"] = _replace(cfg.model, **m)
+    every = getattr(args, "snapshot_every", None)
+    if every is not None:
+        if every < 0:
+            raise ValueError(f"--snapshot-every must not be negative, got {every}")
+        over["snapshot_every"] = every
+    if getattr(args, "no_validate", False):
+        over.update(val_every=0, select_best=False)
+    return over
+
+
 def _command_line(args) -> str:
     parts = ["rfmap train", f"--config {args.config}"]
     if args.preset:
         parts.append(f"--preset {args.preset}")
     for flag, val in [("--steps", args.steps), ("--batch", args.batch), ("--time-limit", args.time_limit),
                       ("--threads", args.threads), ("--workers", args.workers), ("--seed", args.seed),
-                      ("--lr", args.lr), ("--ema", args.ema), ("--init", args.init)]:
+                      ("--lr", args.lr), ("--ema", args.ema), ("--init", args.init),
+                      ("--teacher", getattr(args, "teacher", None)),
+                      ("--teacher-share", getattr(args, "teacher_share", None)),
+                      ("--teacher-weight", getattr(args, "teacher_weight", None)),
+                      ("--base", getattr(args, "base", None)), ("--depth", getattr(args, "depth", None)),
+                      ("--snapshot-every", getattr(args, "snapshot_every", None))]:
         if val is not None:
             parts.append(f"{flag} {val:g}" if isinstance(val, float) else f"{flag} {val}")
     if args.device and args.device != "cpu":
         parts.append(f"--device {args.device}")
+    if getattr(args, "no_validate", False):
+        parts.append("--no-validate")
     if args.resume:
         parts.append("--resume")
     if args.finish:
