@@ -51,7 +51,7 @@ def test_3d_training_runs_channels_last_with_the_same_arithmetic(tmp_path):
     b = build_model(cfg.model.kwargs(3, 1))
     b.load_state_dict(a.state_dict())
     b = b.to(memory_format=torch.channels_last_3d)
-    n, pts, par = T.draw_step(cfg, 0)
+    n, pts, par, _ = T.draw_step(cfg, 0)
     batch = make_batch(cfg.task, pts, par, n)
     la, _ = task_loss(cfg.task, batch, a(batch.inputs), cfg.loss)
     lb, _ = task_loss(cfg.task, batch, b(batch.inputs.contiguous(memory_format=torch.channels_last_3d)), cfg.loss)
@@ -126,10 +126,10 @@ def test_single_blas_thread_env_sets_and_restores_the_variables(monkeypatch):
 
 
 def test_draw_step_is_a_pure_function_of_step_and_rank():
-    n1, p1, q1 = T.draw_step(CFG, 7, rank=0)
-    n2, p2, q2 = T.draw_step(CFG, 7, rank=0)
+    n1, p1, q1, _ = T.draw_step(CFG, 7, rank=0)
+    n2, p2, q2, _ = T.draw_step(CFG, 7, rank=0)
     assert n1 == n2 and np.array_equal(p1, p2) and np.array_equal(q1, q2)
-    _, p3, _ = T.draw_step(CFG, 7, rank=1)
+    _, p3, _, _ = T.draw_step(CFG, 7, rank=1)
     assert not np.array_equal(p1, p3)
 
 
@@ -248,7 +248,9 @@ def test_score_counts_a_folded_map_as_the_identity(monkeypatch):
     np.testing.assert_allclose(m["std_rho_map"], (50.0 + 0.2 + 0.1 + 0.3) / 4)
     np.testing.assert_allclose(m["capped"], (0.4 + 0.2 + 0.1 + 0.3) / 4)
     np.testing.assert_allclose(m["penalized"], (0.4 + 0.5 + 0.1 + 0.3) / 4)
-    assert score(m) == (0, m["penalized"])
+    # the score: the mean over families of Std(map)/Std(orig), a folded map counted as 1 (one field per family)
+    assert score(m) == (0, m["family_score"])
+    np.testing.assert_allclose(m["family_score"], (1.0 + 1.0 + 0.1 / 0.3 + 0.3 / 0.6) / 4)
     # a fold-free model that hardly moves (penalized 0.5) ranks below a much better one with one folded map
     good_but_folded = {"std_rho_map": 9.0, "n_flipped": 4, "folded_fields": 1, "capped": 0.15, "penalized": 0.2}
     hardly_moves = {"std_rho_map": 0.5, "n_flipped": 0, "folded_fields": 0, "capped": 0.5, "penalized": 0.5}
@@ -256,7 +258,7 @@ def test_score_counts_a_folded_map_as_the_identity(monkeypatch):
     # summaries written before the penalized mean existed: fold-free ones by their mean, folded ones after all others
     old_clean, old_folded = {"std_rho_map": 0.3, "n_flipped": 0}, {"std_rho_map": 0.1, "n_flipped": 1,
                                                                     "folded_fields": 1, "capped": 0.1}
-    assert score(old_clean) == (0, 0.3) and score(hardly_moves) < score(old_folded)
+    assert score(old_clean) == (1, 0.3) and score(hardly_moves) < score(old_folded)
     # a diverged network (non-finite points, hence a NaN Std and no flipped element counted) is no map either
     fake.update({0: (float("nan"), 0.4, 0)})
     calls = iter(range(4))
