@@ -29,9 +29,9 @@ LAYERS: dict[str, int] = {
     "rfmap.losses": 1, "rfmap.symmetry": 1,
     # tasks, training, refinement, inference, post-processing, plotting
     "rfmap.tasks": 2, "rfmap.config": 2, "rfmap.train": 2, "rfmap.refine": 2, "rfmap.surrogate": 2,
-    "rfmap.pretrained": 2, "rfmap.repair": 2, "rfmap.validation": 2, "rfmap.hybrid": 2, "rfmap.stress": 2, "rfmap.viz": 2,
+    "rfmap.pretrained": 2, "rfmap.repair": 2, "rfmap.validation": 2, "rfmap.teacher": 2, "rfmap.selection": 2, "rfmap.hybrid": 2, "rfmap.stress": 2, "rfmap.viz": 2,
     # the paper's experiments and applications, then the command line and the package's front door
-    "rfmap.experiments": 3, "rfmap.cartogram": 3, "rfmap.compare": 3,
+    "rfmap.experiments": 3, "rfmap.cartogram": 3, "rfmap.compare": 3, "rfmap.studies": 3,
     "rfmap.cli": 4, "rfmap": 4,
 }
 
