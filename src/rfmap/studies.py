@@ -1,4 +1,4 @@
-r"""Training studies: runs of one configuration that differ in one option, trained side by side for the same wall
+r"""Training records: the budget behind a shipped model, and studies of runs of one configuration that differ in one option, trained side by side for the same wall
 time, and their validation curves.
 
 ``benchmarks/train_study.py`` starts the runs at once (one thread each, so that they share the machine alike),
@@ -10,9 +10,12 @@ families), never the paper's test fields.
 from __future__ import annotations
 
 import json
+import shlex
 from pathlib import Path
 
-__all__ = ["STUDIES_DIR", "collect", "load_study", "study_names", "study_table", "plot_study"]
+__all__ = ["STUDIES_DIR", "collect", "load_study", "study_names", "study_table", "plot_study", "study_values",
+           "training_budget", "budget_table", "teacher_of", "to_markdown", "example_field",
+           "map_gap"]
 
 STUDIES_DIR = Path(__file__).resolve().parent / "data" / "studies"
 
@@ -22,7 +25,8 @@ def _curve(log_path: Path) -> dict:
     last_step, last_elapsed = 0, 0.0
     for line in Path(log_path).read_text().splitlines():
         rec = json.loads(line)
-        if "validation" in rec and not rec.get("final"):
+        # the final record scores the shipped state: a point of the curve only when that is the last step's
+        if "validation" in rec and (not rec.get("final") or rec.get("selected_step") == rec["step"]):
             m = rec["validation"]["mean"]
             if "family_score" not in m:
                 continue
@@ -34,7 +38,7 @@ def _curve(log_path: Path) -> dict:
         elif "loss" in rec:
             last_step, last_elapsed = int(rec["step"]), float(rec.get("elapsed", 0.0))
     return {"step": steps, "elapsed": elapsed, "score": score, "families": families, "folded_fields": folded,
-            "total_steps": last_step, "total_time": last_elapsed}
+            "total_steps": max([last_step, *steps]), "total_time": max([last_elapsed, *elapsed])}
 
 
 def collect(name: str, runs: dict[str, Path], *, description: str, commands: dict[str, str],
@@ -80,6 +84,22 @@ def study_table(study: dict):
     return pd.DataFrame(rows).set_index("run")
 
 
+def study_values(study: dict) -> dict:
+    """The numbers a page quotes from a study: per run (its position ``i`` in the study) ``run{i}_best``,
+    ``run{i}_last``, ``run{i}_steps`` and ``run{i}_minutes``, ``run{i}_label``; ``winner`` (the label of the run with
+    the lowest best score), ``loser``, ``margin`` (the loser's best score over the winner's) and ``minutes``."""
+    out: dict = {}
+    best = {}
+    for i, (label, r) in enumerate(study["runs"].items()):
+        out.update({f"run{i}_label": label, f"run{i}_best": min(r["score"]), f"run{i}_last": r["score"][-1],
+                    f"run{i}_steps": r["total_steps"], f"run{i}_minutes": r["total_time"] / 60.0})
+        best[label] = min(r["score"])
+    order = sorted(best, key=best.get)
+    out.update(winner=order[0], loser=order[-1], margin=best[order[-1]] / best[order[0]],
+               minutes=max(r["total_time"] for r in study["runs"].values()) / 60.0)
+    return out
+
+
 def plot_study(study: dict, ax=None, *, x: str = "elapsed"):
     """Validation score against wall time (``x='elapsed'``, minutes) or steps (``x='step'``), one line per run."""
     import matplotlib.pyplot as plt
@@ -95,3 +115,111 @@ def plot_study(study: dict, ax=None, *, x: str = "elapsed"):
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return ax
+
+
+def _batch_of(command: str, default: int) -> int:
+    words = shlex.split(command or "")
+    return int(words[words.index("--batch") + 1]) if "--batch" in words else default
+
+
+def training_budget(meta: dict, preset_batch: int) -> dict:
+    """The whole training budget behind weights with metadata ``meta``, over every run of its ``--init`` chain:
+    ``runs``, ``steps``, ``samples`` (steps times each run's batch: the ``--batch`` of its command, else
+    ``preset_batch``) and ``hours`` of wall time."""
+    runs = list(meta.get("lineage", [])) + [{"steps": meta.get("steps", 0), "command": meta.get("command", ""),
+                                               "wall_time": meta.get("wall_time", 0.0)}]
+    samples = sum(int(r.get("steps", 0)) * _batch_of(r.get("command", ""), preset_batch) for r in runs)
+    return {"runs": len(runs), "steps": int(meta.get("cumulative_steps", meta.get("steps", 0))), "samples": samples,
+            "hours": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 3600.0}
+
+
+def teacher_of(meta: dict) -> str:
+    """The classical teacher of the last run behind weights (``'none'``: data-free, as in the paper)."""
+    t = (meta.get("config") or {}).get("teacher") or {}
+    return str(t.get("method", "none")) if float(t.get("weight", 0.0)) > 0 else "none"
+
+
+def budget_table(metas: dict, paper_steps: dict, paper_batch: dict):
+    """One row per model (a :class:`pandas.DataFrame`): runs, steps, samples seen and wall time over the whole
+    chain, the paper's epochs and its samples (an epoch read as one step on a freshly drawn batch of the paper
+    preset's size), the ratios of steps and of samples, and the teacher of the last run."""
+    import pandas as pd
+
+    rows = []
+    for name, meta in metas.items():
+        b = training_budget(meta, int((meta.get("config") or {}).get("batch", 1)))
+        rows.append({"model": name, "runs": b["runs"], "steps": b["steps"], "samples seen": b["samples"],
+                     "wall time (h)": b["hours"], "paper's epochs": paper_steps[name],
+                     "paper's samples": paper_steps[name] * paper_batch[name],
+                     "steps / epochs": b["steps"] / paper_steps[name],
+                     "samples / paper's": b["samples"] / (paper_steps[name] * paper_batch[name]),
+                     "teacher": teacher_of(meta)})
+    return pd.DataFrame(rows).set_index("model")
+
+
+def to_markdown(df) -> str:
+    """A table of this module as Markdown: integers with thousands separators, other numbers with three
+    significant digits (scientific notation below 1e-3), the index as the first column."""
+    def fmt(v):
+        if isinstance(v, bool) or not isinstance(v, (int, float)) and not hasattr(v, "dtype"):
+            return str(v)
+        if not isinstance(v, float) and float(v).is_integer():
+            return f"{int(v):,}"
+        v = float(v)
+        return f"{v:.3g}" if v == 0 or abs(v) >= 1e-3 else f"{v:.2e}"
+
+    cols = [df.index.name or ""] + [str(c) for c in df.columns]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for idx in df.index:  # by cell, so that integer columns keep their type
+        lines.append("| " + " | ".join([str(idx)] + [fmt(df.at[idx, c]) for c in df.columns]) + " |")
+    return "\n".join(lines)
+
+
+def example_field(values: dict, fields, suffix: str = "") -> dict:
+    """The example a sentence quotes from a population summary (``values`` of
+    ``rfmap.experiments.population_summary``): the field where the best surrogate value (``{f}_best{suffix}``) comes
+    closest to the paper's (``{f}_std_paper``), relative to it, so that it is a field that meets the paper whenever
+    one does.  Returns ``field``, ``best``, ``paper``, ``ratio`` and ``verb`` ("meets" or "misses")."""
+    ratio = {f: values[f"{f}_best{suffix}"] / values[f"{f}_std_paper"] for f in fields}
+    f = min(ratio, key=ratio.get)
+    return {"field": f, "best": values[f"{f}_best{suffix}"], "paper": values[f"{f}_std_paper"], "ratio": ratio[f],
+            "verb": "meets" if ratio[f] <= 1.0 else "misses"}
+
+
+def map_gap(sur, n: int, count: int = 4, stream: str = "report"):
+    r"""How far a surrogate's map lies from the classical maps of the same fields, against how far the two classical
+    solvers lie from each other (a :class:`pandas.DataFrame`, one row per field of the held-out ``stream``).
+
+    Columns: Std(rho~) of the input, of the network's raw map and of the diffusion map, and the relative squared
+    distances :math:`\sum_v |a_v - b_v|^2 / \sum_v |b_v - x_v|^2` (the teacher's loss, :mod:`rfmap.teacher`) of
+    the network's map and of the flow map to the diffusion map.  Every density-equalizing map composed with a
+    measure-preserving one equalizes as well, so the data-free losses do not single out one map: a distance near 1
+    or above means the network found another of them.
+    """
+    import numpy as np
+    import pandas as pd
+
+    from .inputs import preprocess_density
+    from .mesh import grid_points
+    from .surrogate import quiet_quality
+    from .teacher import teacher_map
+    from .validation import validation_fields
+
+    spec = sur.spec
+    pts = grid_points(n, spec.dim)
+    rows = []
+    for vf in validation_fields("density", spec.dim, count, stream=stream):
+        raw = vf.field(pts).reshape((n,) * spec.dim)
+        dens = preprocess_density(raw)
+        with quiet_quality():
+            net = sur.map(dens, n, repair=False, preprocess=False)
+        diff = teacher_map(raw, spec.boundary, "diffusion")
+        flow = teacher_map(raw, spec.boundary, "flow")
+        if diff is None or flow is None:
+            continue
+        scale = float(((diff - pts) ** 2).sum())
+        m = net.metrics()
+        rows.append({"field": vf.label, "Std input": m.std_rho_orig, "Std network": m.std_rho_map,
+                     "network to diffusion": float(((net.mapped_points - diff) ** 2).sum()) / scale,
+                     "flow to diffusion": float(((flow - diff) ** 2).sum()) / scale})
+    return pd.DataFrame(rows).set_index("field")
