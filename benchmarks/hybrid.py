@@ -17,9 +17,8 @@ from __future__ import annotations
 
 import argparse
 
-from rfmap.experiments import format_value
-from rfmap.experiments import summarize, time_to_accuracy
-from rfmap.hybrid import METHODS
+from rfmap.paper.benchmarks import METHODS, summarize, time_to_accuracy
+from rfmap.paper.tables import format_value
 
 
 def main(argv=None) -> None:

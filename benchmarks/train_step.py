@@ -22,7 +22,10 @@ import numpy as np
 import torch
 
 from rfmap.config import get_config
-from rfmap.train import _build_state, _loader, _train_step, resolve_device
+from rfmap.device import resolve_device
+from rfmap.training.data import _loader
+from rfmap.training.loop import _train_step
+from rfmap.training.state import _build_state
 
 SIZES = {2: (4, 80), 3: (2, 48)}
 DEFAULT_THREADS = torch.get_num_threads()

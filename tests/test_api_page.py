@@ -11,7 +11,10 @@ PAGE = ROOT / "book" / "api.md"
 MODULES = ["rfmap", "rfmap.surrogate", "rfmap.pretrained", "rfmap.result", "rfmap.solvers", "rfmap.fields",
            "rfmap.paper_fields", "rfmap.random_fields", "rfmap.metrics", "rfmap.repair", "rfmap.surface", "rfmap.refine",
            "rfmap.symmetry", "rfmap.config", "rfmap.train", "rfmap.tasks", "rfmap.losses", "rfmap.validation",
-           "rfmap.device", "rfmap.nn", "rfmap.mesh", "rfmap.geometry", "rfmap.experiments", "rfmap.viz", "rfmap.cartogram"]
+           "rfmap.device", "rfmap.nn", "rfmap.mesh", "rfmap.geometry", "rfmap.experiments", "rfmap.viz", "rfmap.cartogram",
+           "rfmap.training", "rfmap.folds", "rfmap.shorten", "rfmap.regions", "rfmap.paper.tables",
+           "rfmap.paper.reproduce", "rfmap.paper.generalization", "rfmap.paper.recipes", "rfmap.paper.benchmarks",
+           "rfmap.paper.flow_studies"]
 DIRECTIVE = re.compile(r"^\.\. (auto\w+):: (\S+)\n((?:[ \t]+:[^\n]*\n)*)", re.M)
 
 

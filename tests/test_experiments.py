@@ -151,7 +151,7 @@ def test_resolution_table_with_refinement_adds_refined_rows():
 def test_reproduce_dem3d_writes_every_table(tmp_path, monkeypatch):
     """``rfmap reproduce dem3d`` writes the cube, free-boundary and resolution tables (Markdown and CSV) from the
     shipped models; the table builders are shrunk to one small case so this runs in seconds."""
-    import rfmap.experiments as E
+    import rfmap.paper.reproduce as E
 
     pop, res = E.population_table, E.resolution_table
     monkeypatch.setattr(E, "population_table", lambda sur, refine=True, symmetrize=False: pop(
@@ -279,7 +279,7 @@ def test_distortion_table_puts_models_side_by_side_on_unseen_fields():
 def test_the_classical_solver_is_timed_like_the_surrogate(monkeypatch):
     """Warm-up, then the fastest of three runs; a single timed run when the warm-up was slow."""
     import rfmap.solvers as solvers
-    from rfmap.experiments import _classical
+    from rfmap.paper.reproduce import _classical
 
     real, times = solvers.solve_dem, iter([0.5, 0.2, 0.3, 0.9])
     calls = []

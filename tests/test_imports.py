@@ -1,11 +1,18 @@
-"""The package's import graph: no cycle, and every import points down the layers.
+"""The package's dependency graph: no cycle, and every import and every call points down the layers.
 
 Every module of :mod:`rfmap` is parsed (not imported) and all its imports are collected, absolute and relative,
 at module level and inside functions alike: an import inside a function still ties the two modules together.  An
 import of a package counts as an edge to its ``__init__`` only for names that are not submodules.
 
+A module also depends on another when it calls, at run time, a method of an object of a class defined there, even
+without importing it (``compare_methods(density, surrogate)`` calling ``surrogate.map``).  Such calls are found by
+name: ``x.name(...)`` where ``name`` is a public method of exactly one module's classes and of no builtin, numpy,
+torch, scipy, matplotlib or standard-library type the package uses (those names are ambiguous); calls on an
+imported name (a module or a class) are imports already.
+
 Layers, from the bottom: the core (grids, geometry, fields, metrics, results) <- classical solvers, the network and
-the losses <- tasks, training, refinement and the surrogate <- the paper's experiments <- the command line.
+the losses <- tasks, training, refinement and the surrogate <- the paper layer, applications and plotting <- the
+command line.
 """
 from __future__ import annotations
 
@@ -22,21 +29,29 @@ LAYERS: dict[str, int] = {
     # core
     "rfmap._version": 0, "rfmap.device": 0, "rfmap.geometry": 0, "rfmap.mesh": 0, "rfmap.inputs": 0, "rfmap.paper_fields": 0,
     "rfmap.random_fields": 0, "rfmap.fields": 0, "rfmap.metrics": 0, "rfmap.result": 0,
-    "rfmap.surface": 0,
+    "rfmap.surface": 0, "rfmap.folds": 0,
     # classical solvers, the network, the losses
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1, "rfmap.solvers.flow": 1,
+    "rfmap.solvers.spectral": 1, "rfmap.solvers.raster": 1, "rfmap.solvers.locate": 1, "rfmap.solvers.residual": 1,
     "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.nn.fno": 1, "rfmap.nn.registry": 1,
     "rfmap.losses": 1, "rfmap.symmetry": 1,
     # tasks, training, refinement, inference, post-processing, plotting
-    "rfmap.tasks": 2, "rfmap.config": 2, "rfmap.train": 2, "rfmap.refine": 2, "rfmap.surrogate": 2,
-    "rfmap.pretrained": 2, "rfmap.repair": 2, "rfmap.validation": 2, "rfmap.teacher": 2, "rfmap.selection": 2, "rfmap.hybrid": 2, "rfmap.stress": 2, "rfmap.viz": 2,
-    # the paper's experiments and applications, then the command line and the package's front door
-    "rfmap.experiments": 3, "rfmap.cartogram": 3, "rfmap.compare": 3, "rfmap.studies": 3,
+    "rfmap.tasks": 2, "rfmap.config": 2, "rfmap.train": 2, "rfmap.training": 2,
+    "rfmap.training.data": 2, "rfmap.training.averaging": 2, "rfmap.training.state": 2, "rfmap.training.loop": 2,
+    "rfmap.training.cli": 2, "rfmap.refine": 2, "rfmap.surrogate": 2,
+    "rfmap.pretrained": 2, "rfmap.repair": 2, "rfmap.repair.dispatch": 2,
+    "rfmap.repair.lbs": 2, "rfmap.repair.local": 2, "rfmap.repair.scale": 2, "rfmap.repair.embedding": 2,
+    "rfmap.shorten": 2, "rfmap.validation": 2, "rfmap.teacher": 2, "rfmap.selection": 2, "rfmap.hybrid": 2, "rfmap.stress": 2,
+    # the paper layer, the applications and plotting, then the command line and the package's front door
+    "rfmap.viz": 3, "rfmap.experiments": 3, "rfmap.paper": 3, "rfmap.paper.tables": 3, "rfmap.paper.reproduce": 3,
+    "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,
+    "rfmap.paper.flow_studies": 3, "rfmap.cartogram": 3, "rfmap.regions": 3, "rfmap.compare": 3, "rfmap.studies": 3,
     "rfmap.cli": 4, "rfmap": 4,
 }
 
 CORE = ("rfmap.mesh", "rfmap.geometry", "rfmap.fields", "rfmap.metrics")
-ABOVE_CORE = ("rfmap.nn", "rfmap.tasks", "rfmap.train", "rfmap.surrogate", "rfmap.experiments", "rfmap.cli")
+ABOVE_CORE = ("rfmap.nn", "rfmap.tasks", "rfmap.train", "rfmap.training", "rfmap.surrogate", "rfmap.experiments",
+              "rfmap.paper", "rfmap.cli")
 
 
 def _modules() -> dict[str, tuple[str, bool]]:
@@ -71,11 +86,79 @@ def _imports(name: str, path: str, is_pkg: bool, known: set[str]) -> set[str]:
     return {m for m in found if m in known and m != name}
 
 
+def _foreign_methods() -> set[str]:
+    """Method names of the builtin, numpy, torch, scipy, matplotlib and standard-library types the package calls
+    methods on: a call of one of these names may be on such an object, so it is no evidence of a dependency."""
+    import argparse
+    import io
+    import multiprocessing
+    import queue
+    import threading
+
+    import matplotlib
+    import numpy as np
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+    import torch
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots()
+    plt.close(fig)
+    types = (dict, list, set, str, bytes, tuple, int, float, complex, np.ndarray, np.random.Generator, torch.Tensor,
+             torch.nn.Module, torch.optim.Optimizer, io.TextIOWrapper, queue.Queue, threading.Thread, threading.Event,
+             argparse.ArgumentParser, sp.csr_matrix, type(spla.splu(sp.csc_matrix(np.eye(2)))), fig, ax,
+             multiprocessing.get_context("spawn").Queue)
+    return {name for t in types for name in dir(t)}
+
+
+def _calls(trees: dict[str, ast.Module]) -> dict[str, set[str]]:
+    """``{module: the modules whose classes' methods it calls}``, by method name (see the module docstring)."""
+    owners: dict[str, set[str]] = {}
+    for name, tree in trees.items():
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ClassDef):
+                for f in node.body:
+                    if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef)) and not f.name.startswith("_"):
+                        owners.setdefault(f.name, set()).add(name)
+    foreign = _foreign_methods()
+    owner = {m: next(iter(mods)) for m, mods in owners.items() if len(mods) == 1 and m not in foreign}
+    out: dict[str, set[str]] = {}
+    for name, tree in trees.items():
+        imported = {(a.asname or a.name).split(".")[0] for node in ast.walk(tree)
+                    if isinstance(node, (ast.Import, ast.ImportFrom)) for a in node.names}
+        out[name] = {owner[node.func.attr] for node in ast.walk(tree)
+                     if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                     and node.func.attr in owner and owner[node.func.attr] != name
+                     and not (isinstance(node.func.value, ast.Name) and node.func.value.id in imported)}
+    return out
+
+
 @pytest.fixture(scope="module")
-def graph() -> dict[str, set[str]]:
+def parsed() -> tuple[dict[str, tuple[str, bool]], dict[str, ast.Module]]:
     mods = _modules()
+    return mods, {name: ast.parse(open(path, encoding="utf-8").read(), filename=path) for name, (path, _) in mods.items()}
+
+
+@pytest.fixture(scope="module")
+def graph(parsed) -> dict[str, set[str]]:
+    """The imports."""
+    mods, trees = parsed
     known = set(mods)
     return {name: _imports(name, path, is_pkg, known) for name, (path, is_pkg) in mods.items()}
+
+
+@pytest.fixture(scope="module")
+def calls(parsed) -> dict[str, set[str]]:
+    """The calls at run time."""
+    return _calls(parsed[1])
+
+
+@pytest.fixture(scope="module")
+def depends(graph, calls) -> dict[str, set[str]]:
+    """Imports and calls together."""
+    return {name: graph[name] | calls[name] for name in graph}
 
 
 def _reachable(graph, start: str) -> set[str]:
@@ -95,7 +178,7 @@ def test_the_walk_finds_the_package(graph):
     assert "rfmap.solvers.lbs" in graph["rfmap.solvers"]
 
 
-def test_no_import_cycle(graph):
+def _cycles(graph) -> list[list[str]]:
     """Tarjan's strongly connected components: any component of more than one module is a cycle."""
     index, low, stack, on_stack, cycles = {}, {}, [], set(), []
     counter = [0]
@@ -125,7 +208,23 @@ def test_no_import_cycle(graph):
     for v in sorted(graph):
         if v not in index:
             visit(v)
+    return cycles
+
+
+def test_no_import_cycle(graph):
+    cycles = _cycles(graph)
     assert not cycles, f"import cycles among: {cycles}"
+
+
+def test_the_call_walk_finds_calls(calls):
+    assert "rfmap.surrogate" in calls["rfmap.validation"]  # evaluate(sur, ...) calls sur.map
+    assert "rfmap.surrogate" in calls["rfmap.paper.benchmarks"]  # compare_methods calls surrogate.map
+
+
+def test_no_cycle_of_imports_and_calls(depends):
+    """A module that calls another at run time while that one imports it (or calls it) is a cycle too."""
+    cycles = _cycles(depends)
+    assert not cycles, f"cycles of imports and run-time calls among: {cycles}"
 
 
 def test_every_module_has_a_layer(graph):
@@ -139,13 +238,19 @@ def test_imports_point_down_the_layers(graph):
     assert not upward, f"imports from a higher layer: {sorted(upward)}"
 
 
-def test_inference_does_not_depend_on_training(graph):
-    reach = _reachable(graph, "rfmap.surrogate")
-    assert not reach & {"rfmap.train", "rfmap.pretrained", "rfmap.config"}, sorted(reach)
+def test_calls_point_down_the_layers(calls):
+    upward = [(a, b) for a, deps in calls.items() for b in deps
+              if a in LAYERS and b in LAYERS and LAYERS[b] > LAYERS[a]]
+    assert not upward, f"run-time calls into a higher layer: {sorted(upward)}"
+
+
+def test_inference_does_not_depend_on_training(depends):
+    reach = _reachable(depends, "rfmap.surrogate")
+    assert not {m for m in reach if m.startswith(("rfmap.train", "rfmap.pretrained", "rfmap.config"))}, sorted(reach)
 
 
 @pytest.mark.parametrize("core", CORE)
-def test_core_modules_stay_below_the_applications(graph, core):
-    reach = _reachable(graph, core) | {core}
+def test_core_modules_stay_below_the_applications(depends, core):
+    reach = _reachable(depends, core) | {core}
     above = sorted(m for m in reach if any(m == a or m.startswith(a + ".") for a in ABOVE_CORE))
     assert not above, f"{core} depends on {above}"

@@ -255,7 +255,7 @@ def test_colored_sweeps_shorten_fewer_vertices_than_simultaneous_ones(monkeypatc
     """Raising the scales one vertex class at a time (Gauss-Seidel) reverts only the vertex that failed, not its
     element's neighbours: on the inverted bump of test_3d_inverted_region_repaired it leaves fewer vertices
     shortened than raising all at once (Jacobi), and both are fold-free."""
-    import rfmap.repair as R
+    import rfmap.repair.scale as R
 
     n = 11
     mesh = grid_mesh(n, 3)
@@ -332,7 +332,11 @@ def test_surrogate_never_folds(spec, n):
         raw_folds += raw.metrics().n_flipped
         rep = res.info["repair"]
         assert res.metrics().n_flipped == 0 and rep["n_flipped_after"] == 0
-        assert rep["needed"] == (raw.metrics().n_flipped > 0 or rep["needed"])
+        if (res.info.get("regrid") or {}).get("work_n") is not None:
+            continue  # 3D: the map of a coarser working grid, which did not fold, was delivered instead
+        # the repair ran exactly when the raw network map folded, and counted its folds
+        assert rep["needed"] == (raw.metrics().n_flipped > 0)
+        assert rep["n_flipped_before"] == raw.metrics().n_flipped
     assert raw_folds > 0  # the test exercises the repair
 
 
@@ -365,7 +369,8 @@ def test_bad_input_rejected(field, kw, spec):
 def test_fast_path_does_no_repair_work(monkeypatch):
     """Nothing folded: only the fold check runs (no LBS solve, no displacement scaling) and the map is returned
     bit for bit.  What the check costs against the surrogate's own time is measured by benchmarks/repair.py."""
-    import rfmap.repair as R
+    import rfmap.repair.dispatch as R
+    import rfmap.repair.lbs as RL
     import rfmap.solvers.lbs as lbs
 
     spec = TaskSpec("density", 3, "square")
@@ -377,8 +382,8 @@ def test_fast_path_does_no_repair_work(monkeypatch):
         raise AssertionError("repair work on a fold-free map")
 
     monkeypatch.setattr(lbs, "solve_lbs", forbidden)
-    for name in ("lbs_repair", "scale_repair", "cap_mu", "untangle_boundary"):
-        monkeypatch.setattr(R, name, forbidden)
+    for mod, name in ((R, "lbs_repair"), (R, "scale_repair"), (RL, "cap_mu"), (RL, "untangle_boundary")):
+        monkeypatch.setattr(mod, name, forbidden)
     res = sur.map("multi-freq-3d", 17)
     assert res.info["repair"]["needed"] is False
     assert np.array_equal(res.mapped_points, raw.mapped_points)

@@ -15,8 +15,9 @@ from rfmap.fields import sample_density
 from rfmap.mesh import grid_mesh
 from rfmap.solvers import SOLVERS, get_solver, solve_dem, solve_flow
 from rfmap.solvers.diffusion import cosine_coefficients
-from rfmap.solvers.flow import F32_MARGIN, _measures, _turned_over, gaussian_blur, lumped_residual, poisson_flux, \
+from rfmap.solvers.flow import F32_MARGIN, _turned_over, gaussian_blur, lumped_residual, poisson_flux, \
     rasterize_elements, vertex_residual
+from rfmap.solvers.residual import _measures
 from rfmap.stress import hard_density
 
 
@@ -114,7 +115,7 @@ def test_rasterize_grid_walk_matches_the_element_scan(d, shrink, refine):
     """On a map of the grid mesh the Newton walk (with the element scan for the nodes it leaves) gives the same
     raster as scanning every element; with the image shrunk into the box (a free boundary's sea) the uncovered
     nodes keep the fill.  The finer rasters (41 nodes per side) start the walk from a coarse walk's inverse."""
-    from rfmap.solvers.flow import WALK_COARSE, WALK_COARSE_MIN, _grid_side, _locate, _walk_grid
+    from rfmap.solvers.locate import WALK_COARSE, WALK_COARSE_MIN, _grid_side, _locate, _walk_grid
 
     n = 9 if d == 2 else 6
     mesh, y = _bent_mesh(n, d)
@@ -139,7 +140,7 @@ def test_coarse_walk_inverse_is_a_good_start(d, n):
     """The walk's starting points from a 4x coarser raster (``_inverse_guess``) lie within 0.05 grid cells of the
     exact preimages of the raster nodes under a smooth map (the bounding-box guess: more than a cell off), and the
     walk from them finds the same nodes as from the bounding-box guess."""
-    from rfmap.solvers.flow import WALK_STEPS, _inverse_guess, _walk_grid
+    from rfmap.solvers.locate import WALK_STEPS, _inverse_guess, _walk_grid
 
     mesh, y = _bent_mesh(n, d)
     m = 2 * (n - 1) + 1
@@ -234,7 +235,8 @@ def test_blended_sea_is_balanced_and_continuous_at_the_coast():
     """The blended sea keeps the balance of the abrupt one (the domain's mass is the box mean times its measure:
     the same affine equation, solved exactly), starts at the coast's own density and reaches its level at the blend
     width; blend 0 is the abrupt sea."""
-    from rfmap.solvers.diffusion import _balanced_sea, _contract, _interval_weights
+    from rfmap.solvers.raster import balanced_sea as _balanced_sea
+    from rfmap.solvers.spectral import contract as _contract, interval_weights as _interval_weights
 
     rng = np.random.default_rng(3)
     dens = 0.5 + rng.random((17, 17))
@@ -467,7 +469,8 @@ def test_compare_methods_rows_and_summary():
     """The hybrid's run gives two rows, the guarded hybrid and its warm flow alone (timed without the cold flow);
     the guarded hybrid is never worse than the flow, and the summary's ratios are against the best classical row."""
     from rfmap.experiments import summarize
-    from rfmap.hybrid import UNGUARDED, compare_methods
+    from rfmap.hybrid import UNGUARDED
+    from rfmap.paper.benchmarks import compare_methods
     from rfmap.surrogate import Surrogate
 
     dens = sample_density("sin-cos", 33)
@@ -775,7 +778,7 @@ def test_velocity_is_the_same_on_any_number_of_threads(d, n):
 
 def test_time_to_accuracy_warms_every_method_up_once(monkeypatch):
     """With ``warmup`` every method runs once more, on the first field, and that run leaves no row."""
-    import rfmap.hybrid as hybrid
+    import rfmap.paper.benchmarks as hybrid
     from rfmap.experiments import time_to_accuracy
 
     calls = []

@@ -14,8 +14,10 @@ import torch
 from safetensors.torch import load_file
 
 import rfmap.train as T
+import rfmap.training.state as TS
 from rfmap.config import get_config
 from rfmap.nn import build_model
+from rfmap.paper_fields import TEST_FIELDS
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import sample_batch, task_loss
 from rfmap.validation import validation_fields
@@ -79,7 +81,7 @@ def test_outputs_and_metadata(trained):
     # validation on the held-out random fields; the paper's fields only as a report
     assert set(meta["final_metrics"]) == {f"{v.label}@{cfg.val_n}" for v in
                                           validation_fields("density", 2, cfg.val_count)} | {"mean"}
-    assert set(meta["paper_fields_report"]) == set(T.PAPER_FIELDS[("density", 2)]) | {"mean"}
+    assert set(meta["paper_fields_report"]) == set(TEST_FIELDS[("density", 2)]) | {"mean"}
     # one log record per step, losses finite and the lr follows the schedule down to lr_min
     recs = [json.loads(line) for line in (out / "log.jsonl").read_text().splitlines()]
     steps = [r for r in recs if "loss" in r]
@@ -172,18 +174,38 @@ def test_finish_ends_a_stopped_run_from_its_checkpoint(tmp_path, monkeypatch):
 
 
 def test_started_as_rebuilds_the_starting_command_of_an_old_checkpoint():
-    assert T._started_as("rfmap train --config x --lr 0.0002 --resume", []) == "rfmap train --config x --lr 0.0002"
+    assert TS._started_as("rfmap train --config x --lr 0.0002 --resume", []) == "rfmap train --config x --lr 0.0002"
     parent = [{"name": "x", "sha256": "0" * 64}]
-    assert T._started_as("rfmap train --config x --resume", parent) == "rfmap train --config x --init x"
-    assert T._started_as("rfmap train --config x --init y --resume", parent) == "rfmap train --config x --init y"
-    assert T._started_as(None, parent) is None
+    assert TS._started_as("rfmap train --config x --resume", parent) == "rfmap train --config x --init x"
+    assert TS._started_as("rfmap train --config x --init y --resume", parent) == "rfmap train --config x --init y"
+    assert TS._started_as(None, parent) is None
 
 
-def test_resume_after_the_time_limit_trains_nothing(tmp_path):
-    cfg = CFG.with_overrides(steps=10**6, val_every=10**6, ckpt_every=10**6, time_limit=0.5)
+@pytest.fixture
+def fake_clock(monkeypatch):
+    """``time.perf_counter`` replaced by a clock that advances one second whenever the main thread reads it (other
+    threads read it without advancing it), so that a time limit stops training at a step that does not depend on
+    the machine's speed or load."""
+    import threading
+    import time
+
+    now = [0.0]
+
+    def perf_counter():
+        if threading.current_thread() is threading.main_thread():
+            now[0] += 1.0
+        return now[0]
+
+    monkeypatch.setattr(time, "perf_counter", perf_counter)
+    return now
+
+
+def test_resume_after_the_time_limit_trains_nothing(tmp_path, fake_clock):
+    cfg = CFG.with_overrides(steps=10**6, val_every=10**6, ckpt_every=10**6, time_limit=20.0)
     T.train(cfg, tmp_path, progress=False)
     before = torch.load(tmp_path / "checkpoint.pt", weights_only=True)
-    assert 1 <= before["step"] < 10**6  # stopped on the clock
+    # stopped on the (fake) clock, after a few steps: a few clock readings per step
+    assert 1 <= before["step"] <= 20 and before["elapsed"] > cfg.time_limit
     again = T.train(cfg, tmp_path, progress=False, resume=True)
     assert again.meta["steps"] == before["step"]
     for k, v in before["model"].items():
@@ -201,7 +223,7 @@ def test_resume_rescores_the_kept_best_state_by_the_current_rule(tmp_path):
     best = {k: json.loads(v) for k, v in ck["best"].items()}
     ck["best"]["score"] = json.dumps([7, 99.0])  # as if written under another rule
     torch.save(ck, tmp_path / "checkpoint.pt")
-    st = T._build_state(cfg, tmp_path, torch.device("cpu"), resume=True, init=None, command=None)
+    st = TS._build_state(cfg, tmp_path, torch.device("cpu"), resume=True, init=None, command=None)
     assert st.best["score"] == list(score(best["summary"])) and st.best["score"][0] == 0
 
 

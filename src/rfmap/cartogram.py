@@ -52,7 +52,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from .mesh import check_grid_memory, check_n, grid_points, interpolate
+from .mesh import check_grid_memory, check_n, interpolate
+from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, PlanarFrame, _listify, _shapely, _transform, density_grid, \
+    montreal_election, read_regions
+from .solvers import ALIASES
 
 __all__ = [
     "CARTOGRAM_METHODS",
@@ -68,234 +71,24 @@ __all__ = [
     "cartogram_table",
     "montreal_election",
     "MONTREAL_CANDIDATES",
+    "DIFFUSION_SETTINGS",
     "DEM_SETTINGS",
     "FLOW_SETTINGS",
     "HYBRID_POLISH",
     "ZERO_FLOOR",
 ]
 
-#: Methods of :func:`cartogram`.
-CARTOGRAM_METHODS = ("dem", "flow", "surrogate", "hybrid")
-
-#: The candidates of the 2013 Montreal mayoral election (vote counts per district in :func:`montreal_election`).
-MONTREAL_CANDIDATES = ("Coderre", "Bergeron", "Joly")
-
-#: A zero value is replaced by this fraction of the smallest positive density times the region's area.
-ZERO_FLOOR = 0.1
-
-
-def _shapely():
-    try:
-        import shapely
-    except ImportError as e:  # pragma: no cover - shapely is a dependency
-        raise ImportError("cartograms need shapely (pip install shapely)") from e
-    return shapely
-
-
-# ----------------------------------------------------------------------------------------------- input
-def _load_collection(collection) -> dict:
-    """A FeatureCollection ``dict`` from a dict, a JSON string or a path."""
-    if isinstance(collection, dict):
-        return collection
-    if isinstance(collection, (str, os.PathLike)):
-        text = str(collection)
-        if isinstance(collection, os.PathLike) or not text.lstrip().startswith("{"):
-            try:
-                with open(collection, encoding="utf-8") as fh:
-                    text = fh.read()
-            except OSError as e:
-                raise ValueError(f"cannot read {os.fspath(collection)}: {e.strerror or e}") from e
-        try:
-            return json.loads(text)
-        except json.JSONDecodeError as e:
-            raise ValueError(f"not valid GeoJSON (JSON error: {e})") from e
-    raise ValueError(f"expected a GeoJSON FeatureCollection (dict, JSON text or path), got {type(collection).__name__}")
-
-
-def read_regions(collection, value: str, *, floor: float = ZERO_FLOOR):
-    """The polygons of a GeoJSON FeatureCollection and their values, checked.
-
-    Parameters
-    ----------
-    collection : dict, str or path
-        A FeatureCollection of Polygon / MultiPolygon features (a dict, JSON text, or a file name).
-    value : str
-        The feature property holding each region's value (a number :math:`\\ge 0`).
-    floor : float
-        Zero values become ``floor`` times the smallest positive density times the region's area (cartogram tools
-        cannot shrink a region to nothing).
-
-    Returns
-    -------
-    features : list of dict
-        The input features (for their properties and ids).
-    geoms : ndarray of shapely geometries, shape (R,)
-    values : ndarray, float64, shape (R,)
-        The values after flooring.
-    floored : list of int
-        Indices of the regions whose zero value was floored.
-
-    Raises
-    ------
-    ValueError
-        One line naming the problem: not a FeatureCollection, a feature without a Polygon / MultiPolygon geometry
-        or with zero area, a missing, non-numeric, negative, NaN or infinite value, or all values zero.
-    """
-    shapely = _shapely()
-    from shapely.geometry import shape
-
-    fc = _load_collection(collection)
-    if not isinstance(fc, dict) or fc.get("type") != "FeatureCollection" or not isinstance(fc.get("features"), list):
-        raise ValueError("not a GeoJSON FeatureCollection (need {'type': 'FeatureCollection', 'features': [...]})")
-    features = fc["features"]
-    if not features:
-        raise ValueError("the FeatureCollection has no features")
-    geoms, values = [], []
-    for k, feat in enumerate(features):
-        name = _feature_name(feat, k)
-        geom = feat.get("geometry") if isinstance(feat, dict) else None
-        if not isinstance(geom, dict) or geom.get("type") not in ("Polygon", "MultiPolygon"):
-            got = geom.get("type") if isinstance(geom, dict) else type(geom).__name__
-            raise ValueError(f"feature {name}: geometry must be a Polygon or MultiPolygon, got {got}")
-        try:
-            g = shape(geom)
-        except Exception as e:  # noqa: BLE001 - shapely raises several types for malformed coordinates
-            raise ValueError(f"feature {name}: malformed {geom['type']} coordinates ({e})") from e
-        if g.is_empty or not np.isfinite(shapely.get_coordinates(g)).all() or g.area <= 0:
-            raise ValueError(f"feature {name}: empty, non-finite or zero-area geometry")
-        props = feat.get("properties") or {}
-        if value not in props:
-            raise ValueError(f"feature {name} has no property {value!r}")
-        v = props[value]
-        if isinstance(v, bool) or not isinstance(v, numbers.Real):
-            raise ValueError(f"feature {name}: value {value!r} = {v!r} is not a number")
-        v = float(v)
-        if not math.isfinite(v):
-            raise ValueError(f"feature {name}: value {value!r} is {v} (NaN or infinite)")
-        if v < 0:
-            raise ValueError(f"feature {name}: value {value!r} = {v:g} is negative")
-        geoms.append(g)
-        values.append(v)
-    geoms = np.array(geoms, dtype=object)
-    values = np.array(values)
-    zero = np.flatnonzero(values == 0)
-    if zero.size == values.size:
-        raise ValueError(f"every value of {value!r} is zero")
-    if zero.size:
-        areas = shapely.area(geoms)
-        pos = values > 0
-        values[zero] = floor * float(np.min(values[pos] / areas[pos])) * areas[zero]
-    return features, geoms, values, zero.tolist()
-
-
-def _feature_name(feat, k: int) -> str:
-    """``#k`` and, where the feature has one, its id."""
-    fid = feat.get("id") if isinstance(feat, dict) else None
-    return f"#{k}" + (f" (id {fid})" if fid is not None else "")
-
-
-# ----------------------------------------------------------------------------------------------- frame
-@dataclass(frozen=True)
-class PlanarFrame:
-    r"""The input coordinates to the unit square and back: :math:`u = s\,(P(x) - c) + (\tfrac12, \tfrac12)`.
-
-    ``P`` is the equirectangular projection :math:`(\lambda\cos\varphi_0, \varphi)` for longitude/latitude input
-    (``cos_lat`` :math:`= \cos\varphi_0`), the identity for planar input (``cos_lat = 1``); ``c`` is the centre of
-    the projected bounding box and ``s`` fits its longer side into :math:`1 - 2\,\mathrm{margin}`.
-    """
-
-    cos_lat: float
-    center: tuple[float, float]
-    scale: float
-
-    @classmethod
-    def fit(cls, coords: np.ndarray, *, margin: float, projection: str = "auto") -> "PlanarFrame":
-        """The frame of points ``coords`` (P, 2); ``projection`` is ``"auto"`` (equirectangular when every point
-        is a longitude/latitude pair), ``"equirectangular"`` or ``"none"``."""
-        if projection not in ("auto", "equirectangular", "none"):
-            raise ValueError(f"unknown projection {projection!r}; choose auto, equirectangular or none")
-        if not 0 <= margin < 0.5:
-            raise ValueError(f"margin must be in [0, 0.5), got {margin!r}")
-        lonlat = bool((np.abs(coords[:, 0]) <= 180).all() and (np.abs(coords[:, 1]) <= 90).all())
-        geographic = projection == "equirectangular" or (projection == "auto" and lonlat)
-        cos_lat = math.cos(math.radians(0.5 * (coords[:, 1].min() + coords[:, 1].max()))) if geographic else 1.0
-        p = coords * np.array([cos_lat, 1.0])
-        lo, hi = p.min(0), p.max(0)
-        side = float((hi - lo).max())
-        if side <= 0:
-            raise ValueError("the regions have no extent")
-        return cls(cos_lat, tuple(0.5 * (lo + hi)), (1.0 - 2.0 * margin) / side)
-
-    def forward(self, coords: np.ndarray) -> np.ndarray:
-        """Input coordinates (P, 2) to the unit square."""
-        return (coords * np.array([self.cos_lat, 1.0]) - np.array(self.center)) * self.scale + 0.5
-
-    def inverse(self, u: np.ndarray) -> np.ndarray:
-        """Unit-square points (P, 2) to input coordinates."""
-        return ((u - 0.5) / self.scale + np.array(self.center)) / np.array([self.cos_lat, 1.0])
-
-
-def _transform(geoms: np.ndarray, fn) -> np.ndarray:
-    """Apply ``fn`` (P, 2) -> (P, 2) to every vertex of every geometry at once."""
-    shapely = _shapely()
-    return shapely.transform(geoms, fn)
-
-
-# ----------------------------------------------------------------------------------------------- raster
-def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: int = 4) -> tuple[np.ndarray, float]:
-    r"""Vertex densities of the ``N``-grid of the unit square: the mean over each vertex's cell of
-    :math:`\rho = v_i / a_i` inside region :math:`i` and the sea density :math:`\bar\rho = \sum v_i / \sum a_i`
-    elsewhere.
-
-    Parameters
-    ----------
-    geoms : ndarray of shapely geometries, shape (R,), inside the unit square
-    values : ndarray, shape (R,), positive
-    n : int
-        Grid side ``N``; vertex ``(i, j)`` sits at :math:`(i, j)/(N-1)` and its cell is the square of side
-        :math:`h = 1/(N-1)` around it (clipped to the unit square).
-    supersample : int
-        Point-in-polygon samples per cell side (``supersample``\ :sup:`2` per cell).
-
-    Returns
-    -------
-    density : ndarray, shape (N, N), ``density[i, j]`` at :math:`(i, j)/(N-1)`
-    sea : float
-        :math:`\bar\rho`.
-    """
-    shapely = _shapely()
-    n = check_n(n)
-    s = int(supersample)
-    areas = shapely.area(geoms)
-    rho = values / areas
-    sea = float(values.sum() / areas.sum())
-    h = 1.0 / (n - 1)
-    # sample k of vertex i along an axis sits at (i - 1/2 + (k + 1/2)/s) h; fine index f = i*s + k
-    m = n * s
-    t = (np.arange(m) // s - 0.5 + (np.arange(m) % s + 0.5) / s) * h
-    inside = (t >= 0) & (t <= 1)  # samples of boundary cells beyond the square do not count
-    excess = np.zeros((m, m))  # density above the sea at every sample
-    for g, r in zip(geoms, rho):
-        x0, y0, x1, y1 = g.bounds
-        i0, i1 = np.searchsorted(t, [x0, x1])
-        j0, j1 = np.searchsorted(t, [y0, y1])
-        if i1 <= i0 or j1 <= j0:
-            continue
-        xx, yy = np.meshgrid(t[i0:i1], t[j0:j1], indexing="ij")
-        hit = shapely.contains_xy(g, xx, yy)
-        excess[i0:i1, j0:j1] += hit * (r - sea)
-    excess *= inside[:, None] & inside[None, :]
-    count = np.add.reduceat(np.add.reduceat((inside[:, None] & inside[None, :]).astype(float), np.arange(0, m, s), 0),
-                            np.arange(0, m, s), 1)
-    total = np.add.reduceat(np.add.reduceat(excess, np.arange(0, m, s), 0), np.arange(0, m, s), 1)
-    return sea + total / count, sea
+#: Methods of :func:`cartogram` (``"dem"`` is accepted as another name of ``"diffusion"``, as by the solvers).
+CARTOGRAM_METHODS = ("diffusion", "flow", "surrogate", "hybrid")
 
 
 # ----------------------------------------------------------------------------------------------- maps
 #: Settings of :func:`rfmap.solvers.solve_dem` for cartograms: the raster already holds cell means, so the velocity
 #: is evaluated on the vertex grid itself (``refine=1``: three times faster than ``refine=2`` and no less accurate
 #: here), and the flow stops when the remaining displacement is below 1 % of a cell.
-DEM_SETTINGS = {"refine": 1, "tol_end": 1e-2}
+DIFFUSION_SETTINGS = {"refine": 1, "tol_end": 1e-2}
+#: :data:`DIFFUSION_SETTINGS` under the name of the method's old spelling
+DEM_SETTINGS = DIFFUSION_SETTINGS
 #: Settings of the flow-based solver (``solve_dem(method="flow")``) for cartograms: one flow per pass, whatever the
 #: density's remaining variation (``tol=0``: the cartogram's passes stop on the area errors, while the solver's own
 #: tolerance on Std(rho~) would skip a pass once the raster is nearly uniform and leave a district at 1-3 % error),
@@ -323,12 +116,12 @@ def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
     """The map of the unit square for one pass: the classical diffusion or flow DEM with fixed walls, the
     surrogate's map on its working grid (repaired there, so that it is fold-free before it is interpolated at the
     polygon vertices), or the hybrid's on the raster's ``N``-grid."""
-    if method in ("dem", "flow"):
+    if method in ("diffusion", "flow"):
         from .solvers import solve_dem
 
         if method == "flow":
             return solve_dem(density, method="flow", boundary="square", **{**FLOW_SETTINGS, **solver_kw})
-        return solve_dem(density, boundary="square", **{**DEM_SETTINGS, **solver_kw})
+        return solve_dem(density, boundary="square", **{**DIFFUSION_SETTINGS, **solver_kw})
     from .surrogate import quiet_quality
 
     # the raster's Std(rho~) counts the sea and every region's edge; the cartogram judges a pass by its area errors
@@ -338,16 +131,10 @@ def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
         return surrogate.map(density, surrogate.work_n(density.shape[0]), preprocess=False)
 
 
-def _supports_polish(surrogate) -> bool:
-    import inspect
-
-    return "polish" in inspect.signature(surrogate.map).parameters
-
-
-def available_methods(surrogate) -> tuple[str, ...]:
-    """The methods of :func:`cartogram` that ``surrogate`` (an :class:`rfmap.Surrogate`) supports: ``"hybrid"``
-    needs ``Surrogate.map(polish=...)``."""
-    return CARTOGRAM_METHODS if _supports_polish(surrogate) else tuple(m for m in CARTOGRAM_METHODS if m != "hybrid")
+def available_methods(surrogate=None) -> tuple[str, ...]:
+    """The methods of :func:`cartogram` (every :class:`rfmap.Surrogate` supports them all: :data:`CARTOGRAM_METHODS`;
+    the argument is kept for callers that pass their surrogate)."""
+    return CARTOGRAM_METHODS
 
 
 # ----------------------------------------------------------------------------------------------- result
@@ -503,7 +290,7 @@ def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: fl
 
 
 # ----------------------------------------------------------------------------------------------- pipeline
-def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol: float = 0.01,
+def cartogram(collection, value: str, *, method: str = "diffusion", n: int = 256, tol: float = 0.01,
               max_iterations: int = 10, iterations: int | None = None, margin: float = 0.1,
               projection: str = "auto", supersample: int = 4, model: str | None = None, surrogate=None,
               floor: float = ZERO_FLOOR, solver_kw: dict | None = None) -> Cartogram:
@@ -516,10 +303,10 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
     value : str
         The property holding each region's value (numbers :math:`\ge 0`; zeros are floored, see
         :func:`read_regions`).
-    method : {"dem", "flow", "surrogate", "hybrid"}
-        ``"dem"``: the classical diffusion DEM; ``"flow"``: the classical flow-based DEM (:data:`FLOW_SETTINGS`);
-        ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the surrogate's map finished by the classical
-        flow on the ``N``-grid (``Surrogate.map(polish=HYBRID_POLISH)``).
+    method : {"diffusion", "flow", "surrogate", "hybrid"}
+        ``"diffusion"`` (also ``"dem"``): the classical diffusion DEM; ``"flow"``: the classical flow-based DEM
+        (:data:`FLOW_SETTINGS`); ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the surrogate's map
+        finished by the classical flow on the ``N``-grid (``Surrogate.map(polish=HYBRID_POLISH)``).
     n : int
         Side ``N`` of the density raster and of the classical solver's grid.
     tol, max_iterations : float, int
@@ -541,7 +328,7 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
     floor : float
         Zero-value floor (:func:`read_regions`).
     solver_kw : dict, optional
-        Keyword arguments of :func:`rfmap.solvers.solve_dem` over :data:`DEM_SETTINGS` (``"dem"``) or
+        Keyword arguments of :func:`rfmap.solvers.solve_dem` over :data:`DIFFUSION_SETTINGS` (``"diffusion"``) or
         :data:`FLOW_SETTINGS` (``"flow"``).
 
     Returns
@@ -554,11 +341,10 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
     ------
     ValueError
         For bad input (one line: see :func:`read_regions`), an unknown method, a surrogate that does not map 2D
-        densities of the square, or ``"hybrid"`` with a surrogate whose ``map`` has no ``polish`` option.
+        densities of the square.
     """
     shapely = _shapely()
-    from shapely.geometry import mapping as to_geojson
-
+    method = ALIASES.get(method, method)
     if method not in CARTOGRAM_METHODS:
         raise ValueError(f"unknown cartogram method {method!r}; choose one of {', '.join(CARTOGRAM_METHODS)}")
     n = check_n(n)
@@ -570,23 +356,43 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
     if not (isinstance(tol, numbers.Real) and tol >= 0):
         raise ValueError(f"tol must be a number >= 0, got {tol!r}")
     features, geoms, values, floored = read_regions(collection, value, floor=floor)
-    if method not in ("dem", "flow"):
-        if surrogate is None:
-            from .surrogate import Surrogate
-
-            surrogate = Surrogate.pretrained(model or "deq2d-square")
-        spec = surrogate.spec
-        if (spec.kind, spec.dim, spec.boundary) != ("density", 2, "square"):
-            raise ValueError(f"a cartogram needs a 2D density model of the square (e.g. deq2d-square); "
-                             f"{surrogate.name!r} maps {spec.dim}D {spec.kind} fields with a {spec.boundary} boundary")
-        if method == "hybrid" and not _supports_polish(surrogate):
-            raise ValueError("method 'hybrid' needs Surrogate.map(polish=...), which this version of rfmap lacks")
+    if method not in ("diffusion", "flow"):
+        surrogate = _square_surrogate(surrogate, model)
 
     t0 = time.perf_counter()
     frame = PlanarFrame.fit(shapely.get_coordinates(geoms), margin=margin, projection=projection)
     # edges longer than a grid cell are split, so that they bend with the map (and a border that one neighbour
     # draws with more vertices than the other still matches it)
     regions = shapely.segmentize(_transform(geoms, frame.forward), 1.0 / (n - 1))
+    mapped, info, map_time = _passes(regions, values, lambda dens: _grid_map(method, dens, surrogate, solver_kw or {}),
+                                     n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol)
+    elapsed = time.perf_counter() - t0
+    return Cartogram(features=_mapped_features(features, mapped, frame), regions=regions, mapped=mapped,
+                     values=values, floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time,
+                     info=info)
+
+
+def _square_surrogate(surrogate, model: str | None):
+    """The surrogate of a cartogram (``surrogate``, else the shipped ``model``, default ``deq2d-square``), checked
+    to map 2D densities with the square's walls fixed."""
+    if surrogate is None:
+        from .surrogate import Surrogate
+
+        surrogate = Surrogate.pretrained(model or "deq2d-square")
+    spec = surrogate.spec
+    if (spec.kind, spec.dim, spec.boundary) != ("density", 2, "square"):
+        raise ValueError(f"a cartogram needs a 2D density model of the square (e.g. deq2d-square); "
+                         f"{surrogate.name!r} maps {spec.dim}D {spec.kind} fields with a {spec.boundary} boundary")
+    return surrogate
+
+
+def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supersample: int, passes: int,
+            tol: float | None) -> tuple[np.ndarray, dict, float]:
+    """The passes of :func:`cartogram`: each rasterises the current polygons, maps the unit square by
+    ``grid_map(density)`` and moves every distinct vertex.  With ``tol`` they stop within tolerance, or at a pass that
+    no longer lowers the largest area error, and the polygons of the best pass are returned; without, all ``passes``
+    run.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
+    shapely = _shapely()
     # shared borders: every distinct vertex is mapped once, so that neighbours keep identical edges
     # (to 1e-12 of the frame: a split border's points, computed from either end, differ in the last bits)
     uniq, inverse = np.unique(np.round(shapely.get_coordinates(regions), 12), axis=0, return_inverse=True)
@@ -594,9 +400,9 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
     current, mapped = uniq, regions
     results, history, map_time = [], [], 0.0
     best = None  # (largest area error, polygons, pass) of the best pass so far
-    for _ in range(int(passes)):
+    for _ in range(passes):
         dens, sea = density_grid(mapped, values, n, supersample=supersample)
-        res = _grid_map(method, dens, surrogate, solver_kw or {})
+        res = grid_map(dens)
         current = _at_points(res, current)
         map_time += res.time
         results.append(res)
@@ -604,22 +410,25 @@ def cartogram(collection, value: str, *, method: str = "dem", n: int = 256, tol:
         history.append(cartogram_metrics(mapped, values, topology=False).max_error)
         if best is None or history[-1] < best[0]:
             best = (history[-1], mapped, len(results))
-        if not fixed and (history[-1] <= tol or len(history) > 1 and not history[-1] < history[-2]):
+        if tol is not None and (history[-1] <= tol or len(history) > 1 and not history[-1] < history[-2]):
             break  # within tolerance, or a pass that no longer lowers the largest error
     kept = len(results)
-    if not fixed:  # the polygons of the pass with the lowest largest error
+    if tol is not None:  # the polygons of the pass with the lowest largest error
         mapped, kept = best[1], best[2]
-    elapsed = time.perf_counter() - t0
+    return mapped, {"iterations": len(results), "kept": kept, "max_error": history, "results": results,
+                    "sea": sea}, map_time
+
+
+def _mapped_features(features: list, mapped: np.ndarray, frame: PlanarFrame) -> list:
+    """The input features with the mapped polygons (input coordinates) as their geometries."""
+    from shapely.geometry import mapping as to_geojson
 
     out = []
     for feat, g in zip(features, _transform(mapped, frame.inverse)):
         f = {k: v for k, v in feat.items() if k not in ("geometry", "bbox")}
         f.update(type="Feature", geometry=_listify(to_geojson(g)), properties=dict(feat.get("properties") or {}))
         out.append(f)
-    return Cartogram(features=out, regions=regions, mapped=mapped, values=values, floored=floored, frame=frame,
-                     method=method, n=n, time=elapsed, map_time=map_time,
-                     info={"iterations": len(results), "kept": kept, "max_error": history, "results": results,
-                           "sea": sea})
+    return out
 
 
 def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogate=None) -> dict:
@@ -631,7 +440,7 @@ def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogat
     values : sequence of str
         Property names.
     runs : dict
-        ``{label: keyword arguments of cartogram}``, e.g. ``{"dem": {}, "surrogate, 1 pass": {"method":
+        ``{label: keyword arguments of cartogram}``, e.g. ``{"diffusion": {}, "surrogate, 1 pass": {"method":
         "surrogate", "iterations": 1}}``.
     n : int
     surrogate : rfmap.Surrogate, optional
@@ -668,31 +477,3 @@ def cartogram_table(cartos: dict) -> str:
     return "\n".join(lines)
 
 
-def _listify(obj):
-    """Tuples (as shapely's ``mapping`` writes coordinates) to lists, for a GeoJSON dict that equals its JSON."""
-    if isinstance(obj, (list, tuple)):
-        return [_listify(o) for o in obj]
-    if isinstance(obj, dict):
-        return {k: _listify(v) for k, v in obj.items()}
-    return obj
-
-
-# ----------------------------------------------------------------------------------------------- data
-def montreal_election() -> dict:
-    """The 2013 Montreal mayoral election as a FeatureCollection: 58 districts with the votes of
-    :data:`MONTREAL_CANDIDATES` and ``total`` as properties (from the data that plotly ships; needs the ``geo``
-    extra: ``pip install rfmap[geo]``)."""
-    try:
-        import plotly.data
-    except ImportError as e:
-        raise ImportError("the Montreal election data come with plotly: pip install 'rfmap[geo]'") from e
-    gj = plotly.data.election_geojson()
-    table = plotly.data.election()
-    rows = {int(r["district_id"]): r for r in table.to_dict("records")}  # district names differ in spelling
-    feats = []
-    for f in gj["features"]:
-        r = rows[int(f["id"])]
-        props = {"district": f["properties"]["district"], "winner": str(r["winner"]),
-                 **{k: int(r[k]) for k in (*MONTREAL_CANDIDATES, "total")}}
-        feats.append({"type": "Feature", "id": f.get("id"), "properties": props, "geometry": f["geometry"]})
-    return {"type": "FeatureCollection", "features": feats}

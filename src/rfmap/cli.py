@@ -1,13 +1,14 @@
 """The ``rfmap`` command line.
 
-Subcommands: ``solve`` (classical solvers), ``metrics``, ``map`` (neural surrogates), ``train``, ``models``,
-``reproduce`` (the paper's tables), ``validate`` (score saved weights on the validation stream), ``cartogram`` (GeoJSON regions resized by a value).  Errors in the input print
-one line and exit with status 2; no partial output file is left behind.
+Subcommands: ``solve`` (classical solvers), ``metrics``, ``map`` (neural surrogates), ``train`` (its parser is
+:mod:`rfmap.training.cli`), ``models``, ``reproduce`` (the paper's tables), ``validate`` (score saved weights on the
+validation stream), ``cartogram`` (GeoJSON regions resized by a value).  Errors in the input print one line and exit
+with status 2; no partial output file is left behind.  A solver's other name (``--method dem`` for ``diffusion``,
+:data:`rfmap.solvers.ALIASES`) is accepted wherever a method is named.
 """
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 
@@ -18,12 +19,6 @@ __all__ = ["main"]
 
 class CLIError(Exception):
     """A user-facing error: printed as one line."""
-
-
-def _field_names() -> str:
-    from .paper_fields import field_names
-
-    return ", ".join(field_names())
 
 
 def _load_npy(path: str) -> np.ndarray:
@@ -215,7 +210,7 @@ def repair_summary(report: dict | None) -> str:
 
 
 def cmd_train(args) -> int:
-    from .train import run
+    from .training.cli import run
 
     sur = run(args)
     print(f"trained {sur.name}: {sur.meta.get('final_metrics', {}).get('mean')}")
@@ -261,7 +256,7 @@ def cmd_cartogram(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from .experiments import reproduce
+    from .paper.reproduce import reproduce
 
     from .device import resolve_device
 
@@ -294,22 +289,26 @@ def _symmetry_arg(text: str):
     return text
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from .train import build_parser as train_parser
+def _solver_name(text: str) -> str:
+    """A method's name, with another name of a solver (:data:`rfmap.solvers.ALIASES`: ``dem``) spelled as the one."""
+    from .solvers import ALIASES
 
-    p = argparse.ArgumentParser(prog="rfmap", description="Resolution-free neural surrogates for geometric mapping.")
-    sub = p.add_subparsers(dest="cmd", required=True)
+    return ALIASES.get(text, text)
 
+
+def _add_classical(sub) -> None:
+    """``rfmap solve`` and ``rfmap metrics``."""
     s = sub.add_parser("solve", help="run a classical solver (Linear Beltrami Solver, diffusion or flow DEM)")
-    s.add_argument("--method", choices=["lbs", "dem", "flow"], required=True,
-                   help="lbs (Beltrami), dem (diffusion DEM) or flow (flow-based DEM, faster)")
+    s.add_argument("--method", choices=["lbs", "diffusion", "flow", "dem"], metavar="{lbs,diffusion,flow}",
+                   required=True, help="lbs (Beltrami), diffusion (diffusion DEM; also 'dem') or flow (flow-based "
+                                       "DEM, faster)")
     g = s.add_mutually_exclusive_group(required=True)
     g.add_argument("--field", help="a built-in field name")
     g.add_argument("--field-file", help=".npy array sampled on an N^d grid: a density (preprocessed as by rfmap map) "
                                         "or, for lbs, a complex Beltrami coefficient (N, N) at the vertices")
     s.add_argument("--n", type=int, default=None, help="grid side N (with --field-file: the array's side)")
     s.add_argument("--boundary", choices=["square", "free", "fixed"], default=None,
-                   help="dem: square (default) or free; lbs: fixed (default) or square")
+                   help="diffusion and flow: square (default) or free; lbs: fixed (default) or square")
     s.add_argument("--out", required=True, help="output .npz")
     s.add_argument("--quiet", action="store_true")
     s.set_defaults(func=cmd_solve)
@@ -319,6 +318,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--exact", default=None, help="Beltrami test map to measure |Δd| and |Δμ| against")
     s.set_defaults(func=cmd_metrics)
 
+
+def _add_map(sub) -> None:
+    """``rfmap map``."""
     s = sub.add_parser("map", help="map a field with a neural surrogate",
                        description="Map a field with a neural surrogate. A density map that leaves the density less "
                                    "equal than it was is still written, with one warning line on stderr.")
@@ -345,6 +347,44 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--device", default="cpu", help="where the network runs: cpu (default), cuda or auto")
     s.set_defaults(func=cmd_map)
 
+
+def _add_paper_and_cartogram(sub) -> None:
+    """``rfmap cartogram`` and ``rfmap reproduce``."""
+    from .cartogram import CARTOGRAM_METHODS
+
+    s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)")
+    s.add_argument("input", help="GeoJSON FeatureCollection of Polygon / MultiPolygon features")
+    s.add_argument("--value", required=True, help="the feature property holding each region's value")
+    s.add_argument("--method", choices=CARTOGRAM_METHODS, type=_solver_name, default="diffusion",
+                   help="classical diffusion (default; also 'dem'), classical flow-based method (faster), neural "
+                        "surrogate, or the surrogate polished by the flow")
+    s.add_argument("--n", type=int, default=256, help="grid side N of the density raster (default 256)")
+    s.add_argument("--tol", type=float, default=0.01,
+                   help="repeat passes until the largest relative area error is at most this (default 0.01)")
+    s.add_argument("--model", default=None, help="surrogate for --method surrogate/hybrid (default deq2d-square)")
+    s.add_argument("--out", required=True, help="output GeoJSON")
+    s.add_argument("--png", default=None, help="also draw the input and the cartogram side by side (.png)")
+    s.set_defaults(func=cmd_cartogram)
+
+    s = sub.add_parser("reproduce", help="write the paper's tables (Markdown and CSV)")
+    s.add_argument("experiment", choices=["beltrami", "dem2d", "dem3d"])
+    s.add_argument("--out", default="reproduction", help="output directory")
+    s.add_argument("--no-refine", action="store_true", help="skip weight refinement")
+    s.add_argument("--symmetrize", nargs="?", const=True, default=False, type=_symmetry_arg, metavar="GROUP",
+                   help="add the rows of the networks averaged over the domain's symmetries")
+    s.add_argument("--device", default="cpu", help="where the networks run: cpu (default), cuda or auto")
+    s.set_defaults(func=cmd_reproduce)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from .training.cli import build_parser as train_parser
+
+    p = argparse.ArgumentParser(prog="rfmap", description="Resolution-free neural surrogates for geometric mapping.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    _add_classical(sub)
+    _add_map(sub)
+
     s = sub.add_parser("train", help="train a surrogate from a named configuration")
     train_parser(s)
     s.set_defaults(func=cmd_train)
@@ -363,28 +403,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=cmd_validate)
 
-    s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)")
-    s.add_argument("input", help="GeoJSON FeatureCollection of Polygon / MultiPolygon features")
-    s.add_argument("--value", required=True, help="the feature property holding each region's value")
-    s.add_argument("--method", choices=["dem", "flow", "surrogate", "hybrid"], default="dem",  # CARTOGRAM_METHODS
-                   help="classical diffusion (default), classical flow-based method (faster), neural surrogate, or "
-                        "the surrogate polished by the flow")
-    s.add_argument("--n", type=int, default=256, help="grid side N of the density raster (default 256)")
-    s.add_argument("--tol", type=float, default=0.01,
-                   help="repeat passes until the largest relative area error is at most this (default 0.01)")
-    s.add_argument("--model", default=None, help="surrogate for --method surrogate/hybrid (default deq2d-square)")
-    s.add_argument("--out", required=True, help="output GeoJSON")
-    s.add_argument("--png", default=None, help="also draw the input and the cartogram side by side (.png)")
-    s.set_defaults(func=cmd_cartogram)
-
-    s = sub.add_parser("reproduce", help="write the paper's tables (Markdown and CSV)")
-    s.add_argument("experiment", choices=["beltrami", "dem2d", "dem3d"])
-    s.add_argument("--out", default="reproduction", help="output directory")
-    s.add_argument("--no-refine", action="store_true", help="skip weight refinement")
-    s.add_argument("--symmetrize", nargs="?", const=True, default=False, type=_symmetry_arg, metavar="GROUP",
-                   help="add the rows of the networks averaged over the domain's symmetries")
-    s.add_argument("--device", default="cpu", help="where the networks run: cpu (default), cuda or auto")
-    s.set_defaults(func=cmd_reproduce)
+    _add_paper_and_cartogram(sub)
     return p
 
 

@@ -1,7 +1,7 @@
 r"""Two surrogates of one task side by side: the paper's multi-resolution U-Net against a Fourier neural operator.
 
 Every function takes ``surs``, a mapping from a display name to a :class:`rfmap.Surrogate` of the same task, and
-returns an :class:`rfmap.experiments.Table` whose ``method`` column names the model (and the variant).  The metric
+returns an :class:`rfmap.paper.tables.Table` whose ``method`` column names the model (and the variant).  The metric
 is :math:`\operatorname{Std}(\tilde\rho_{map})` (``std_rho_map``, lower is better); ``n_flipped`` counts flipped
 triangles of the *raw* network map (``repair=False``) and ``flips_repaired`` those of the map a user gets (with the
 default bijectivity repair), which must be 0.
@@ -18,8 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .experiments import Table, generalization_table
 from .mesh import jittered_points
+from .paper.generalization import generalization_table
+from .paper.tables import Table
 from .paper_fields import PAPER_N, TEST_FIELDS
 from .surrogate import quiet_quality
 
@@ -124,7 +125,7 @@ def points_table(surs: dict, field: str = "sin-cos", n: int = 51, seed: int = 0)
 
 
 def generalization_tables(surs: dict, count: int = 50, n: int | None = None) -> Table:
-    """:func:`rfmap.experiments.generalization_table` of every model on the same unseen random fields, merged
+    """:func:`rfmap.paper.generalization.generalization_table` of every model on the same unseen random fields, merged
     (the classical solver's rows once)."""
     _check(surs)
     merged = None
@@ -166,7 +167,7 @@ def inference_table(surs: dict, ns=(51, 128, 256), field: str = "multi-freq", re
 def race(configs: dict, seconds: float, out_dir, *, progress: bool = False) -> dict:
     """Train each configuration from scratch for the same wall-clock budget (``time_limit = seconds``), one after
     the other on this machine; returns ``{name: Surrogate}`` (their metadata holds the learning curves)."""
-    from .train import train
+    from .training import train
 
     out = Path(out_dir)
     result = {}

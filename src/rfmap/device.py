@@ -1,9 +1,12 @@
-"""Where tensors live: the ``device`` argument of training, inference and the command line."""
+"""Where tensors live and how many threads work on them: the ``device`` argument of training, inference and the
+command line, and a temporary torch thread count."""
 from __future__ import annotations
+
+import contextlib
 
 import torch
 
-__all__ = ["resolve_device", "DEVICE_CHOICES"]
+__all__ = ["resolve_device", "DEVICE_CHOICES", "torch_threads"]
 
 #: what ``--device`` accepts (``cuda:K`` picks one of several GPUs)
 DEVICE_CHOICES = ("auto", "cpu", "cuda")
@@ -35,3 +38,17 @@ def resolve_device(name: str | torch.device | None = "auto") -> torch.device:
             raise ValueError(f"device {name!r} requested but only {torch.cuda.device_count()} CUDA device(s) exist")
         return dev
     raise ValueError(f"unknown device {name!r}; expected one of {', '.join(DEVICE_CHOICES)} (or cuda:K)")
+
+
+@contextlib.contextmanager
+def torch_threads(n: int | None):
+    """Temporarily set the torch intra-op thread count (``None``: leave it alone)."""
+    if n is None:
+        yield
+        return
+    old = torch.get_num_threads()
+    torch.set_num_threads(max(1, int(n)))
+    try:
+        yield
+    finally:
+        torch.set_num_threads(old)

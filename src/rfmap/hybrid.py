@@ -6,8 +6,8 @@ classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flo
 :math:`u_0`:
 
 1. The residual density is evaluated *exactly* on the flow's raster: it is turned into the P1 vertex field whose
-   element means are :math:`\tilde\rho_e` (``rfmap.solvers.flow.vertex_residual``), and every raster node is
-   located in the mapped mesh and interpolated in its element (``rfmap.solvers.flow.rasterize_elements``).
+   element means are :math:`\tilde\rho_e` (``rfmap.solvers.residual.vertex_residual``), and every raster node is
+   located in the mapped mesh and interpolated in its element (``rfmap.solvers.locate.rasterize_elements``).
    Binning element centroids on a coarse raster instead blurs :math:`\tilde\rho` at the scale of the error it should
    remove, and reading :math:`\tilde\rho_e` itself at the nodes shifts it by up to half an element; the finishing
    flow transports either error faithfully.
@@ -51,9 +51,8 @@ import torch
 from .geometry import grid_element_mean, grid_signed_measures
 from .metrics import density_std
 
-__all__ = ["GUARD", "POOR", "METHODS", "ROWS", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER",
-           "OUTPUT_PASSES", "compare_methods", "polish_map", "polish_tolerance", "smooth_displacement",
-           "smooth_grid_displacement", "smooth_passes"]
+__all__ = ["GUARD", "POOR", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER", "OUTPUT_PASSES",
+           "polish_map", "polish_tolerance", "smooth_displacement", "smooth_grid_displacement", "smooth_passes"]
 
 #: Most time steps of a warm flow before it is abandoned for a cold start.
 WARM_STEPS = 500
@@ -305,59 +304,6 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
     return res.mapped_points, report
 
 
-#: The methods compared by :func:`compare_methods`.
-METHODS = ("diffusion", "flow", "surrogate", "surrogate+refine", "hybrid")
-#: The rows of :func:`compare_methods`, in order: the hybrid's run also gives the row of its warm flow alone, as
-#: ``polish_map(guard=False)`` would have returned it (where the flow started cold, the hybrid's own row).
+#: The row of the hybrid's warm flow alone, as ``polish_map(guard=False)`` would have returned it, beside the
+#: guarded polish (``rfmap.paper.benchmarks.compare_methods``).
 UNGUARDED = "hybrid (no guard)"
-ROWS = METHODS[:-1] + (UNGUARDED, "hybrid")
-
-
-def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "square",
-                    methods=METHODS) -> list[dict[str, Any]]:
-    r"""Std(rho~_map), folds and wall time of every method on one density of the ``N``-grid, run one after another.
-
-    Parameters
-    ----------
-    density : ndarray, shape (N,)*d
-        Vertex densities (preprocessed, unit mass).
-    surrogate : rfmap.Surrogate, optional
-        The network for ``"surrogate"``, ``"surrogate+refine"`` and ``"hybrid"`` (those are skipped without one).
-    boundary : {"square", "free"}
-    methods : sequence of str
-        Any of :data:`METHODS`.
-
-    Returns
-    -------
-    list of dict
-        One row per method: ``method``, ``std_rho_map``, ``n_flipped``, ``time`` (s, the result's own ``time``) and,
-        for the hybrid, ``start`` (warm or cold) and ``kept`` (the map the guard kept); the hybrid's run adds the
-        row :data:`UNGUARDED` before its own: its warm flow's map, timed without the guard's cold flow.
-    """
-    from .solvers import solve_dem
-
-    rows = []
-    for method in methods:
-        if method not in METHODS:
-            raise ValueError(f"unknown method {method!r}; choose from {METHODS}")
-        if method in ("diffusion", "flow"):
-            res = solve_dem(density, method=method, boundary=boundary)
-        elif surrogate is None:
-            continue
-        else:
-            n = density.shape[0]
-            res = surrogate.map(density, n, preprocess=False, refine=method == "surrogate+refine",
-                                polish=method == "hybrid")
-        m = res.metrics()
-        row = {"method": method, "std_rho_map": m.std_rho_map, "n_flipped": m.n_flipped, "time": res.time}
-        if method == "hybrid":
-            p = res.info["polish"]
-            row.update(start=p["start"], kept=p["kept"])
-            st = p["stages"]
-            alone = dict(row, method=UNGUARDED, kept=p["start"])
-            if "cold" in st:  # the warm flow's map, and the time without the guard's cold flow
-                alone.update(std_rho_map=st["warm"]["std_rho_map"], n_flipped=st["warm"]["n_flipped"],
-                             time=res.time - st["cold"]["time"], kept="warm")
-            rows.append(alone)
-        rows.append(row)
-    return rows

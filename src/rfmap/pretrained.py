@@ -32,6 +32,6 @@ def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progres
                 return cached
         except (ValueError, FileNotFoundError):
             pass
-    from .train import train  # training code is needed only here, at ci scale
+    from .training import train  # training code is needed only here, at ci scale
 
     return train(cfg, out, progress=progress)

@@ -115,6 +115,9 @@ def refine_alpha(objective: Callable[[np.ndarray], float], dim: int, *, bounds: 
     best, history = j0, [(alpha.copy(), j0)]
     # first a common (isotropic) stretch, then alternating per-component searches
     s, js = golden_section(lambda t: J(np.full(dim, t)), *bounds, tol=tol)
+    s_scan, js_scan = _rescan(lambda t: J(np.full(dim, t)), bounds, tol, s, js)
+    jagged = js_scan < js  # the scan found what the search missed: guard the per-component searches too
+    s, js = s_scan, js_scan
     if js < best:
         alpha, best = np.full(dim, s), js
         history.append((alpha.copy(), best))
@@ -126,10 +129,32 @@ def refine_alpha(objective: Callable[[np.ndarray], float], dim: int, *, bounds: 
                 return J(a)
 
             t, jt = golden_section(along, *bounds, tol=tol)
+            if jagged:
+                t, jt = _rescan(along, bounds, tol, t, jt)
             if jt < best:
                 alpha[i], best = t, jt
                 history.append((alpha.copy(), best))
     return RefineResult(alpha=alpha, objective=best, objective_start=j0, evaluations=count, history=history)
+
+
+#: points of the coarse geometric scan of the isotropic stretch that guards the golden-section search
+SCAN_POINTS = 9
+
+
+def _rescan(f: Callable[[float], float], bounds: tuple[float, float], tol: float, s: float,
+            js: float) -> tuple[float, float]:
+    """Guard a golden-section result ``(s, js)`` against a non-unimodal objective: scan ``f`` at
+    :data:`SCAN_POINTS` geometrically spaced points of ``bounds`` and, where one beats ``js``, search again between
+    its neighbours.  (Folded maps make :math:`\mathcal{J}` jagged: when the map at :math:`\alpha = 1` overshoots
+    and folds, both first probes can land among folded maps and the search then never reaches the fold-free
+    minimum below 1.)  Returns ``(s, js)`` unchanged when no scanned point is better."""
+    ts = np.geomspace(bounds[0], bounds[1], SCAN_POINTS)
+    vals = [f(float(t)) for t in ts]
+    k = int(np.argmin(vals))
+    if not vals[k] < js:
+        return s, js
+    t, jt = golden_section(f, float(ts[max(k - 1, 0)]), float(ts[min(k + 1, len(ts) - 1)]), tol=tol)
+    return (t, jt) if jt < vals[k] else (float(ts[k]), vals[k])
 
 
 def density_objective(ref, psi, elements, density, boundary, flip_weight: float = REFINE.flip_weight,

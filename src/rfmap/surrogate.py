@@ -36,7 +36,8 @@ from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
 from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
-from .repair import fold_free, repair_map, shorten_map
+from .repair import fold_free, repair_map
+from .shorten import shorten_map
 from .result import MapResult
 from .solvers.flow import F32_MARGIN
 from .symmetry import resolve_symmetry, symmetrized_displacement

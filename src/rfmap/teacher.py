@@ -28,12 +28,12 @@ from torch import Tensor
 
 from .fields import preprocess_density
 from .mesh import interpolate
+from .solvers import ALIASES
 
 __all__ = ["TeacherConfig", "TEACHER_METHODS", "teacher_map", "teacher_targets", "teacher_indices", "teacher_loss"]
 
-#: classical solvers that can teach (``"dem"`` is accepted as another name of ``"diffusion"``)
+#: classical solvers that can teach (``"dem"`` is accepted as another name of ``"diffusion"``, as by the solvers)
 TEACHER_METHODS = ("none", "flow", "diffusion")
-_ALIASES = {"dem": "diffusion"}
 
 
 @dataclass(frozen=True)
@@ -56,7 +56,7 @@ class TeacherConfig:
     weight: float = 0.1
 
     def __post_init__(self):
-        method = _ALIASES.get(self.method, self.method)
+        method = ALIASES.get(self.method, self.method)
         object.__setattr__(self, "method", method)
         if method not in TEACHER_METHODS:
             raise ValueError(f"unknown teacher {self.method!r}; expected one of {', '.join(TEACHER_METHODS)}")

@@ -41,7 +41,6 @@ the cap only guards maps that are not finite.
 """
 from __future__ import annotations
 
-import inspect
 from dataclasses import dataclass, replace
 from typing import Callable
 
@@ -134,9 +133,8 @@ def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "valid
 def _held_out_map(sur, field, n: int, repair: bool = False):
     from .surrogate import quiet_quality  # the metrics say how poor a map is; no warning per field
 
-    kw = {"repair": repair} if "repair" in inspect.signature(sur.map).parameters else {}
     with quiet_quality():
-        return sur.map(field, n, **kw)
+        return sur.map(field, n, repair=repair)
 
 
 def _raw_folded(info: dict) -> bool:

@@ -326,7 +326,7 @@ def vertex_error_panels(results: dict, exact, *, n: int, title: str = ""):
 
 def population_figure(maps: dict, fields, label: str, *, n: int, method: str = "ours+refine"):
     """The paper's 2D population figure: one :func:`plot_map_row` per field of the maps of
-    :func:`rfmap.experiments.population_table`, saved under the paper's ``label``; returns the figure."""
+    :func:`rfmap.paper.reproduce.population_table`, saved under the paper's ``label``; returns the figure."""
     import matplotlib.pyplot as plt
 
     with style():
@@ -651,7 +651,7 @@ def area_error_histograms(cartos: dict, labels, values, *, label: str | None = N
 
 def time_accuracy_figure(rows: list[dict], *, title: str | None = None):
     """Std(rho~_map) against wall time, one panel per (dimension, N, boundary), one marker per field and method
-    (rows of :func:`rfmap.experiments.time_to_accuracy`); log-log axes."""
+    (rows of :func:`rfmap.paper.benchmarks.time_to_accuracy`); log-log axes."""
     import matplotlib.pyplot as plt
 
     cases = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
@@ -678,7 +678,7 @@ def displacement_demand_figure(records: list[dict], *, title: str | None = None)
     """Left: the network map's largest displacement (reach) against the classical map's (demand), one marker per
     field, with the line reach = demand; right: the fraction of the non-uniformity each map leaves,
     Std(rho~_map) / Std(rho~_orig), against the demand.  The band marks the demand of 90 % of the training draws
-    (records of :func:`rfmap.experiments.displacement_demand`)."""
+    (records of :func:`rfmap.paper.generalization.displacement_demand`)."""
     import matplotlib.pyplot as plt
 
     groups = list(dict.fromkeys(r["group"] for r in records))
@@ -742,7 +742,7 @@ def validation_vs_time(metas: dict, ax=None, *, key: str | None = None):
 
 
 def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = True):
-    """One line per ``method`` of an :class:`rfmap.experiments.Table` whose cases are numbers (e.g. grid sides):
+    """One line per ``method`` of an :class:`rfmap.paper.tables.Table` whose cases are numbers (e.g. grid sides):
     ``column`` against the case; returns the axes."""
     import matplotlib.pyplot as plt
 

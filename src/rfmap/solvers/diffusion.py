@@ -48,9 +48,9 @@ Boundary conditions:
   every step (round-off only) and corners stay fixed.  The total area (volume) is exactly conserved.
 * ``"free"``: the unit square sits in a larger box :math:`[-L, 1+L]^d` (same grid spacing, ``margin`` :math:`= L`)
   filled with a "sea" of (nearly) the mean density; all mesh vertices move and the boundary deforms.  The sea level
-  is chosen so that the exact flow conserves the domain's area (see ``_balanced_sea``); the measured area of the
-  mapped mesh is then 1 up to a discretisation error of order :math:`h` with a small constant (about
-  :math:`3\cdot 10^{-4}` for ring at ``N = 51``).
+  is chosen so that the exact flow conserves the domain's area (see ``rfmap.solvers.raster.balanced_sea``); the
+  measured area of the mapped mesh is then 1 up to a discretisation error of order :math:`h` with a small constant
+  (about :math:`3\cdot 10^{-4}` for ring at ``N = 51``).
 
 References
 ----------
@@ -59,20 +59,19 @@ Proc. Natl. Acad. Sci. USA 101(20), 7499–7504 (2004).
 """
 from __future__ import annotations
 
-import contextlib
-import itertools
 import math
 import numbers
 import time
 
 import numpy as np
 import torch
-from scipy.fft import dct, dctn
 
+from ..device import torch_threads
 from ..geometry import grid_min_measure
-from ..inputs import check_density
-from ..mesh import check_n, grid_mesh, interpolate
+from ..mesh import grid_mesh, interpolate
 from ..result import MapResult
+from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
+from .spectral import cosine_coefficients, fft_workers
 
 __all__ = [
     "solve_dem",
@@ -82,190 +81,15 @@ __all__ = [
     "DEM_BOUNDARIES",
 ]
 
-#: Boundary conditions understood by :func:`solve_dem`.
-DEM_BOUNDARIES = ("square", "free")
 
 # Bogacki–Shampine 3(2) tableau
 _BS_C = (0.5, 0.75)
+
+
 _BS_B = (2.0 / 9.0, 1.0 / 3.0, 4.0 / 9.0)
+
+
 _BS_E = (-5.0 / 72.0, 1.0 / 12.0, 1.0 / 9.0, -1.0 / 8.0)  # 3rd-order minus embedded 2nd-order solution
-
-
-def p1_upsample(values: np.ndarray, refine: int) -> np.ndarray:
-    r"""Sample the piecewise-linear interpolant of grid vertex values on a ``refine`` times finer grid.
-
-    The interpolant is linear on every element of :func:`rfmap.mesh.grid_mesh` (P1), i.e. exactly the density whose
-    element integrals :mod:`rfmap.metrics` uses (mean vertex value times measure).  In 2D the square with local
-    coordinates :math:`(s, t)` is split by :math:`s + t = 1`; in 3D the Kuhn split gives the barycentric weights
-    :math:`(1-c_1, c_1-c_2, c_2-c_3, c_3)` of the sorted local coordinates :math:`c_1 \ge c_2 \ge c_3` along the
-    path :math:`v_{000} \to v_{000}+e_{\sigma_1} \to \dots \to v_{111}`.
-
-    Parameters
-    ----------
-    values : ndarray, shape (N,)*d
-    refine : int
-        Refinement factor ``r``; the fine grid has ``M = r (N-1) + 1`` points per side.
-
-    Returns
-    -------
-    ndarray, shape (M,)*d
-        Equals ``values`` on the coarse nodes (``fine[::r, ::r] == values``).
-    """
-    if refine == 1:
-        return values.copy()
-    d, n = values.ndim, values.shape[0]
-    r = int(refine)
-    m = r * (n - 1) + 1
-    # pad one layer so that offset 0 of the (virtual) cell n-1 gives the last fine layer
-    padded = np.pad(values, [(0, 1)] * d, mode="edge")
-    fine = np.empty((r * n,) * d)
-    corners = list(itertools.product((0, 1), repeat=d))
-    for offset in itertools.product(range(r), repeat=d):
-        weights = _p1_corner_weights(np.array(offset) / r)
-        acc = np.zeros((n,) * d)
-        for corner, w in zip(corners, weights):
-            if w != 0.0:
-                acc += w * padded[tuple(slice(c, c + n) for c in corner)]
-        fine[tuple(slice(o, None, r) for o in offset)] = acc
-    return fine[(slice(0, m),) * d]
-
-
-def _p1_corner_weights(loc: np.ndarray) -> list[float]:
-    """Weights of the 2**d cell corners (in ``itertools.product((0, 1), repeat=d)`` order) of the P1 interpolant
-    at local coordinates ``loc`` in the cell, for the element splits of :func:`rfmap.mesh.grid_mesh`."""
-    d = loc.size
-    w = {}
-    if d == 2:
-        s_, t_ = float(loc[0]), float(loc[1])
-        if s_ + t_ <= 1.0:  # triangle (x, y), (x+h, y), (x, y+h)
-            w = {(0, 0): 1.0 - s_ - t_, (1, 0): s_, (0, 1): t_}
-        else:  # triangle (x+h, y), (x+h, y+h), (x, y+h)
-            w = {(1, 1): s_ + t_ - 1.0, (0, 1): 1.0 - s_, (1, 0): 1.0 - t_}
-    else:  # Kuhn simplex along the axes sorted by decreasing local coordinate
-        order = np.argsort(-loc, kind="stable")
-        c = loc[order]
-        bary = [1.0 - c[0], c[0] - c[1], c[1] - c[2], c[2]]
-        vertex = [0] * d
-        w[tuple(vertex)] = bary[0]
-        for k in range(d):
-            vertex[order[k]] = 1
-            w[tuple(vertex)] = w.get(tuple(vertex), 0.0) + bary[k + 1]
-    return [w.get(c, 0.0) for c in itertools.product((0, 1), repeat=d)]
-
-
-def fft_workers() -> int:
-    """Threads for scipy's transforms: the torch thread count the solver runs with."""
-    return max(1, torch.get_num_threads())
-
-
-def cosine_coefficients(values: np.ndarray, workers: int | None = None) -> np.ndarray:
-    r"""Coefficients :math:`a_k` of the cosine interpolant :math:`\sum_k a_k \prod_i \cos(\pi k_i x_i)` of grid values.
-
-    With the unnormalised type-I DCT :math:`y = \mathrm{DCT\text{-}I}(p)` (``scipy.fft.dctn(p, type=1)``),
-    :math:`a_k = y_k \prod_i c_{k_i} / (2(M-1))^d`, :math:`c_0 = c_{M-1} = 1`, :math:`c_k = 2` otherwise.
-
-    Parameters
-    ----------
-    values : ndarray, shape (M,)*d
-        Values at the grid nodes :math:`j/(M-1)` of :math:`[0,1]^d`.
-    workers : int, optional
-        Threads of the transform (``scipy.fft``'s ``workers``; default one).
-
-    Returns
-    -------
-    ndarray, shape (M,)*d, float32 for float32 values, else float64
-    """
-    d, m = values.ndim, values.shape[0]
-    c = np.full(m, 2.0, dtype=np.result_type(values.dtype, np.float32))
-    c[0] = c[-1] = 1.0
-    coef = dctn(values, type=1, workers=workers) / (2.0 * (m - 1)) ** d
-    for ax in range(d):
-        shape = [1] * d
-        shape[ax] = m
-        coef = coef * c.reshape(shape)
-    return coef
-
-
-def _interval_weights(m: int, lo: float, hi: float) -> np.ndarray:
-    r"""Weights :math:`w_j` with :math:`\int_{lo}^{hi} \rho = \sum_j w_j p_j` for the 1D cosine interpolant of
-    values :math:`p_j` at :math:`j/(M-1)`: :math:`w_j = e_j\,\mathrm{DCT\text{-}I}(I)_j / (2(M-1))` with
-    :math:`I_k = \int_{lo}^{hi} \cos(\pi k y)\,dy` and :math:`e_j = 1` at the ends, 2 inside."""
-    k = np.arange(m)
-    integ = np.empty(m)
-    integ[0] = hi - lo
-    integ[1:] = (np.sin(math.pi * k[1:] * hi) - np.sin(math.pi * k[1:] * lo)) / (math.pi * k[1:])
-    e = np.full(m, 2.0)
-    e[0] = e[-1] = 1.0
-    return e * dct(integ, type=1) / (2.0 * (m - 1))
-
-
-def _contract(values: np.ndarray, w: np.ndarray) -> float:
-    r""":math:`\sum_j w_{j_1} \cdots w_{j_d} v_j` (the same 1D weights along every axis)."""
-    out = values
-    for _ in range(values.ndim):
-        out = out @ w
-    return float(out)
-
-
-def _balanced_sea(dens: np.ndarray, pad: int, refine: int, blend: float = 0.0) -> tuple[np.ndarray, float]:
-    r"""Fine-grid initial density of the free-boundary box and its sea level :math:`s`.
-
-    At :math:`t\to\infty` the density is uniform, equal to the box mean :math:`a_0`, and the mapped domain has area
-    :math:`m_{\Omega} / a_0` where :math:`m_\Omega` is the mass of the initial (cosine-interpolated) density on the
-    unit square/cube.  With the P1 density :math:`p = p_A + s\,p_B` (``p_A``: the domain's values with a zero sea,
-    ``p_B``: the P1 interpolant of the sea indicator), both are affine in :math:`s`, and
-    :math:`m_\Omega(s) = a_0(s)\,|\Omega|` is solved exactly.  A plain mean-density sea is off by :math:`O(h)`
-    because the cells just outside the coast carry part of the coastal density.
-
-    With ``blend`` :math:`= L > 0` the sea does not jump to :math:`s` at the coast: at a distance :math:`r` from the
-    domain it holds :math:`w\,p_{\text{edge}} + (1 - w)\,s`, with :math:`p_{\text{edge}}` the density of the
-    nearest coast vertex and :math:`w = \operatorname{smoothstep}(1 - r/L)`; ``p_A`` is then :math:`w\,p_{\text{edge}}`
-    (1 inside the domain) and ``p_B`` the interpolant of :math:`1 - w`, and :math:`s` is balanced as before.
-
-    Parameters
-    ----------
-    dens : ndarray, shape (N,)*d
-        Vertex densities of the domain.
-    pad : int
-        Sea width in vertex spacings on every side (``N_box = N + 2 pad``).
-    refine : int
-        Raster refinement (``M = refine (N_box - 1) + 1``).
-    blend : float
-        :math:`L` in the domain's length units (0: the sea starts at the coast).
-
-    Returns
-    -------
-    fine : ndarray, shape (M,)*d
-        P1-upsampled initial density on the box, ``M = refine (N_box - 1) + 1``.
-    sea : float
-    """
-    d, n = dens.ndim, dens.shape[0]
-    nb = n + 2 * pad
-    inner = (slice(pad, pad + n),) * d
-    if blend > 0:
-        outside = np.maximum(pad - np.arange(nb), np.arange(nb) - (pad + n - 1)).clip(0) / (n - 1)
-        r2 = np.zeros((nb,) * d)
-        for ax in range(d):
-            r2 += (outside**2).reshape([nb if j == ax else 1 for j in range(d)])
-        w = np.clip(1.0 - np.sqrt(r2) / blend, 0.0, 1.0)
-        w = w * w * (3.0 - 2.0 * w)  # smoothstep: w and its slope are continuous at r = 0 and r = L
-        vals, ind = np.pad(dens, pad, mode="edge") * w, 1.0 - w
-    else:
-        vals = np.zeros((nb,) * d)
-        vals[inner] = dens
-        ind = np.ones((nb,) * d)
-        ind[inner] = 0.0
-    fine_a, fine_b = p1_upsample(vals, refine), p1_upsample(ind, refine)
-    m = fine_a.shape[0]
-    lo, hi = pad / (nb - 1), (pad + n - 1) / (nb - 1)
-    w_in = _interval_weights(m, lo, hi)
-    w_all = _interval_weights(m, 0.0, 1.0)  # the trapezoid weights
-    vol = (hi - lo) ** d
-    f_a = _contract(fine_a, w_in) - vol * _contract(fine_a, w_all)
-    f_b = _contract(fine_b, w_in) - vol * _contract(fine_b, w_all)
-    sea = -f_a / f_b
-    fine_a += sea * fine_b
-    return fine_a, float(sea)
 
 
 class CosineDiffusion:
@@ -375,33 +199,10 @@ class CosineDiffusion:
         return interpolate(self.velocity(t, window)[None], local, check=False)[0].numpy()
 
 
-@contextlib.contextmanager
-def _torch_threads(n: int | None):
-    """Temporarily set the torch intra-op thread count (``None``: leave it alone)."""
-    if n is None:
-        yield
-        return
-    old = torch.get_num_threads()
-    torch.set_num_threads(max(1, int(n)))
-    try:
-        yield
-    finally:
-        torch.set_num_threads(old)
-
-
-def _check_grid_density(density) -> np.ndarray:
-    arr = np.asarray(density)
-    if arr.ndim not in (2, 3):
-        raise ValueError(f"density must be a grid field of shape (N, N) or (N, N, N); got {arr.ndim} dimension(s), "
-                         f"shape {arr.shape}")
-    if len(set(arr.shape)) != 1:
-        raise ValueError(f"density must have the same number of vertices per side, got shape {arr.shape}")
-    check_n(arr.shape[0], 3)
-    return check_density(arr)
-
-
 #: fold rejections after which the diffusion flow is stopped at its last fold-free state
 FOLD_STOP = 60
+
+
 #: blur widths (vertex spacings) of the retries of a flow that keeps folding (``solve_dem(fold_guard=True)``)
 FOLD_BLURS = (1.0, 2.0, 4.0)
 
@@ -560,7 +361,7 @@ def solve_dem(
     t_start = time.perf_counter()
     if boundary not in DEM_BOUNDARIES:
         raise ValueError(f"unknown boundary {boundary!r} for the diffusion solver; choose one of {DEM_BOUNDARIES}")
-    dens = _check_grid_density(density)
+    dens = check_grid_density(density)
     for name, val in (("rtol", rtol), ("tol_end", tol_end), ("margin", margin)):
         if isinstance(val, bool) or not isinstance(val, numbers.Real) or not math.isfinite(val) or val <= 0:
             raise ValueError(f"{name} must be a positive finite number, got {val!r}")
@@ -576,7 +377,7 @@ def solve_dem(
         fine = p1_upsample(dens, int(refine))
     else:
         pad = max(1, int(round(margin * (n - 1))))
-        fine, sea = _balanced_sea(dens, pad, int(refine))  # sea close to the mean density
+        fine, sea = balanced_sea(dens, pad, int(refine))  # sea close to the mean density
         if not sea > 0:
             raise RuntimeError(f"could not balance the sea density (got {sea:.4g})")
         scale = (n - 1 + 2 * pad) / (n - 1)
@@ -601,7 +402,7 @@ def solve_dem(
         return grid_min_measure(p, n) > 0.0
 
     threads = num_threads if num_threads is not None else (1 if d == 2 else None)
-    with _torch_threads(threads):
+    with torch_threads(threads):
         field = CosineDiffusion(fine)
         blurs: list[float] = []
         for retry in range(len(FOLD_BLURS) + 1):
@@ -619,7 +420,7 @@ def solve_dem(
     if boundary == "square":
         mapped = project(mapped)
     elapsed = time.perf_counter() - t_start
-    info = {"method": "dem", "boundary": boundary, "n": n, "dim": d, **info, "eval_grid": field.m, "box_grid": nb}
+    info = {"method": "diffusion", "boundary": boundary, "n": n, "dim": d, **info, "eval_grid": field.m, "box_grid": nb}
     if boundary == "free":
         info["sea_density"] = sea
     return MapResult(ref_points=ref, mapped_points=mapped, elements=mesh.elements, field=dens.reshape(-1),

@@ -1,0 +1,198 @@
+r"""Studies of the flow-based solver: its free boundary's sea, where the classical solvers' residual comes from,
+whether its gap to the diffusion solver is a convergence error, and where a flow started from a network's map ends.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .benchmarks import benchmark_fields
+
+__all__ = ["sea_blend_study", "residual_floor", "CONVERGENCE_SETTINGS", "flow_convergence", "warm_start_residuals"]
+
+
+def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float = 0.25) -> list[dict[str, Any]]:
+    r"""The free boundary's flow with the diffusion solver's sea and with a blended one, beside the diffusion solver.
+
+    On ``count`` unseen random fields of the ``report`` stream (:func:`rfmap.validation.validation_fields`: smooth,
+    steps, peak and ramp in turn, preprocessed) the diffusion solver and the flow-based solver run with
+    ``boundary="free"``; the flow three times (``rfmap.solvers.flow.solve_flow``): with the sea that jumps to its
+    level at the coast (the diffusion solver's) and only blurred retries after a stall (``stall_blend=0``); as by
+    default (that sea, but a stalled first pass redone with the sea blended over ``STALL_BLEND``); and with the sea
+    blended over ``blend`` from the start (``sea_blend=blend``).
+
+    Returns
+    -------
+    list of dict
+        One row per field: ``field``, ``kind``, ``std_diffusion``, ``ratio_abrupt``, ``ratio_default`` and
+        ``ratio_blended`` (the flows' final Std(rho~_map) over the diffusion solver's), ``stalled`` (whether the
+        abrupt sea's first pass stalled), ``fallback`` (whether the default flow redid it with a blended sea),
+        ``shift`` (the largest distance between the blended and the abrupt flows' mapped vertices, in grid
+        spacings: how far the blend moves the map, its coastline included), ``time_default`` (the default flow's
+        time over the diffusion solver's) and ``n_flipped`` (all flows together).
+    """
+    from ..inputs import preprocess_density
+    from ..mesh import grid_points
+    from ..solvers import solve_dem
+    from ..solvers.flow import solve_flow
+    from ..validation import validation_fields
+
+    pts = grid_points(n, dim)
+    rows = []
+    for vf in validation_fields("density", dim, count, stream="report"):
+        dens = preprocess_density(np.asarray(vf.field(pts)).reshape((n,) * dim))
+        diffusion = solve_dem(dens, boundary="free")
+        s_d = diffusion.metrics().std_rho_map
+        abrupt = solve_flow(dens, boundary="free", stall_blend=0.0)
+        default = solve_flow(dens, boundary="free")
+        blended = solve_flow(dens, boundary="free", sea_blend=blend)
+        ma, md, mb = abrupt.metrics(), default.metrics(), blended.metrics()
+        rows.append({"field": vf.label, "kind": vf.label.rsplit("-", 1)[0], "std_diffusion": s_d,
+                     "ratio_abrupt": ma.std_rho_map / s_d, "ratio_default": md.std_rho_map / s_d,
+                     "ratio_blended": mb.std_rho_map / s_d, "stalled": bool(abrupt.info["stall_blurs"]),
+                     "fallback": bool(default.info["sea_fallback"]),
+                     "shift": float(np.abs(blended.mapped_points - abrupt.mapped_points).max() * (n - 1)),
+                     "time_default": default.time / diffusion.time,
+                     "n_flipped": int(ma.n_flipped + md.n_flipped + mb.n_flipped)})
+    return rows
+
+
+def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: str = "square") -> list[dict[str, Any]]:
+    r"""Where the classical solvers' final :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` comes from, per grid side.
+
+    For every ``N`` the paper's test density ``density_name`` is mapped by the diffusion solver, by the flow-based
+    solver, and by one more flow pass started from the flow's map (``solve_flow(start=...)``, the residual density
+    located exactly on the raster).  Each result is split by :func:`rfmap.metrics.residual_scales` into the
+    residual's smooth part (what a further flow can act on) and its element-scale part.
+
+    Returns
+    -------
+    list of dict
+        One row per ``N`` and method (``"diffusion"``, ``"flow"``, ``"flow + second pass"``): ``n``, ``method``,
+        ``std`` (= Std(rho~_map)), ``smooth``, ``element_fraction``, ``time`` (s; the second pass alone) and
+        ``n_flipped``.  The second pass's own map is reported, even where it is worse than its start.
+    """
+    from ..metrics import residual_scales
+    from ..paper_fields import sample_density
+    from ..solvers import solve_dem
+    from ..solvers.flow import solve_flow
+
+    rows = []
+    for n in ns:
+        dens = sample_density(density_name, int(n))
+        diff = solve_dem(dens, boundary=boundary)
+        flow = solve_flow(dens, boundary=boundary)
+        again = solve_flow(dens, boundary=boundary, start=flow.mapped_points, keep_best=False)
+        for method, res in (("diffusion", diff), ("flow", flow), ("flow + second pass", again)):
+            sc = residual_scales(res.ref_points, res.mapped_points, res.elements, res.field)
+            rows.append({"n": int(n), "method": method, "std": sc["std"], "smooth": sc["smooth"],
+                         "element_fraction": sc["element_fraction"], "time": res.time,
+                         "n_flipped": res.metrics().n_flipped})
+    return rows
+
+
+#: The flow settings that :func:`flow_convergence` compares: the default, the step tolerance 10 and 40 times
+#: tighter, and the density raster twice as fine (``refine=4``).
+CONVERGENCE_SETTINGS = ({}, {"rtol": 0.02}, {"rtol": 0.005}, {"refine": 4})
+
+
+def flow_convergence(dim: int = 2, n: int = 256, boundary: str = "square", *, random: int = 2,
+                     settings=CONVERGENCE_SETTINGS) -> list[dict[str, Any]]:
+    r"""Whether the flow-based solver's gap to the diffusion solver is a convergence error.
+
+    On the paper's test densities and ``random`` unseen random fields
+    (:func:`~rfmap.paper.benchmarks.benchmark_fields`) the diffusion solver runs once and the flow-based solver once
+    per entry of ``settings`` (keyword arguments of ``rfmap.solvers.flow.solve_flow``: a tighter step tolerance
+    ``rtol``, a finer density raster ``refine``). If the flow's final :math:`\mathrm{Std}(\tilde\rho_{\text{map}})`
+    were above diffusion's because its time integration or its raster were too coarse, tightening them would close
+    the gap; if it stays, the two solvers end at different maps, each converged.
+
+    Returns
+    -------
+    list of dict
+        One row per field and flow setting: ``field``, ``setting`` (a label such as ``"rtol=0.02"``,
+        ``"default"``), ``std_ratio`` and ``time_ratio`` (flow over diffusion, same field, same process),
+        ``steps``, ``n_flipped``, and the diffusion solver's ``std_diffusion`` and ``time_diffusion`` (s).  With
+        ``boundary="square"`` also ``rotation`` and ``rotation_diffusion``: the share of the flow's and of the
+        diffusion solver's displacement that is not a gradient (:func:`rfmap.metrics.rotational_share`; ``None``
+        for a free boundary, whose walls move).
+    """
+    from ..metrics import rotational_share
+    from ..solvers import solve_dem
+    from ..solvers.flow import solve_flow
+
+    def rotation(res):
+        return rotational_share(res.ref_points, res.mapped_points) if boundary == "square" else None
+
+    rows = []
+    for label, dens in benchmark_fields(dim, n, random=random):
+        diff = solve_dem(dens, boundary=boundary)
+        s_d = diff.metrics().std_rho_map
+        rot_d = rotation(diff)
+        for kw in settings:
+            flow = solve_flow(dens, boundary=boundary, **kw)
+            m = flow.metrics()
+            rows.append({"field": label, "setting": ", ".join(f"{k}={v}" for k, v in kw.items()) or "default",
+                         "std_ratio": m.std_rho_map / s_d, "time_ratio": flow.time / diff.time,
+                         "steps": int(flow.info["steps"]), "n_flipped": int(m.n_flipped),
+                         "std_diffusion": s_d, "time_diffusion": diff.time,
+                         "rotation": rotation(flow), "rotation_diffusion": rot_d})
+    return rows
+
+
+def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) -> list[dict[str, Any]]:
+    r"""Why a flow started from a given map ends where it does: four maps of the test density per grid side.
+
+    * ``"cold flow"``: ``solve_flow`` from the identity, the density sampled as its P1 interpolant;
+    * ``"flow from the identity, warm-start route"``: the same start, but through the warm-start route, which
+      rasterizes the residual density of the starting map (here the input density's element means;
+      ``rfmap.solvers.residual.vertex_residual``);
+    * ``"network"``: the surrogate's map ``sur.map(density_name, N)``;
+    * ``"flow from the network"``: one flow pass from the network's map, ``NaN`` where it stalls;
+    * ``"polish"``: ``sur.map(density_name, N, polish=True, guard=False)``, whose flow starts from the map of the
+      network's smoothed displacement (``rfmap.hybrid.smooth_displacement``, and above the working grid
+      ``rfmap.hybrid.smooth_grid_displacement`` on the output grid), ``NaN`` where it starts cold.
+
+    The two identity rows differ only in how the density reaches the raster, so their ratio is the cost of the
+    warm-start route itself; the network row's element-scale share (:func:`rfmap.metrics.residual_scales`) is the
+    part of its residual that no flow can act on, and the last row shows how much of it the smoothing removes.
+    ``sur`` must be a 2D or 3D density surrogate with a square boundary.
+
+    Returns
+    -------
+    list of dict
+        One row per ``N`` and map: ``n``, ``method``, ``std``, ``smooth``, ``element_fraction``, ``time`` (s).
+    """
+    from ..mesh import grid_mesh
+    from ..metrics import residual_scales
+    from ..paper_fields import sample_density
+    from ..solvers.flow import solve_flow
+
+    if sur.spec.kind != "density" or sur.spec.boundary != "square":
+        raise ValueError(f"warm_start_residuals needs a density surrogate with a square boundary, got {sur.spec}")
+    rows = []
+    for n in ns:
+        n = int(n)
+        dens = sample_density(density_name, n)
+        ref = grid_mesh(n, sur.spec.dim).points
+        cold = solve_flow(dens)
+        ident = solve_flow(dens, start=ref, stall_blurs=())
+        net = sur.map(density_name, n)
+        try:
+            warm = solve_flow(dens, start=net.mapped_points, stall_blurs=())
+        except RuntimeError:
+            warm = None
+        pol = sur.map(density_name, n, polish=True, guard=False)
+        if pol.info["polish"]["start"] != "warm":
+            pol = None
+        for method, res in (("cold flow", cold), ("flow from the identity, warm-start route", ident),
+                            ("network", net), ("flow from the network", warm), ("polish", pol)):
+            if res is None:
+                rows.append({"n": n, "method": method, "std": float("nan"), "smooth": float("nan"),
+                             "element_fraction": float("nan"), "time": float("nan")})
+                continue
+            sc = residual_scales(res.ref_points, res.mapped_points, res.elements, res.field)
+            rows.append({"n": n, "method": method, "std": sc["std"], "smooth": sc["smooth"],
+                         "element_fraction": sc["element_fraction"], "time": float(res.time)})
+    return rows

@@ -1,0 +1,58 @@
+r"""How the shipped models were trained, from their metadata: the training fields in words and the recipe table."""
+from __future__ import annotations
+
+from .tables import Table
+
+__all__ = ["training_fields_text", "recipe_table"]
+
+
+def training_fields_text(config: dict) -> str:
+    """The random training fields of a stored training configuration (``meta["config"]``) in words: the paper's
+    smooth modes with steps and patches, plus the sharp features (narrow peaks, steep ramps) where drawn; for Beltrami
+    models the share of low-frequency maps where drawn."""
+    if config["task"]["kind"] == "beltrami":
+        low = (config.get("beltrami_field") or {}).get("low", 0.0)
+        return "random boundary-fixing maps" + (f", low-frequency {100 * low:.0f} %" if low else "")
+    dens = config.get("density_field") or {}
+    extra = []
+    if dens.get("p_peak"):
+        extra.append(f"peaks {100 * dens['p_peak']:.0f} %")
+    if dens.get("p_ramp"):
+        scale = dens.get("ramp_scale", 1.0)
+        extra.append(f"ramps {100 * dens['p_ramp']:.0f} %" + (f" (height ×{scale:g})" if scale != 1.0 else ""))
+    if dens.get("p_hard"):
+        extra.append(f"single hard ramps or peaks {100 * dens['p_hard']:.0f} %")
+    return "modes, steps" + ("".join(f", {e}" for e in extra))
+
+
+def recipe_table(surs: dict) -> Table:
+    r"""How each model was trained, from its metadata: the training fields (:func:`training_fields_text`), the fold
+    penalty (weight, from :math:`\det J < \tau`), the peak learning rate of the last run, the decay of its weight
+    average (``ema``; ``None`` when it shipped the weights as trained), the cumulative steps
+    and minutes over its ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end
+    of training (grid sides; the selection score, i.e. the mean metric with every folded map counted as the identity
+    map, where recorded, else the capped or the plain mean; which maps were scored: ``raw`` network output or the maps
+    as ``Surrogate.map`` ``delivered`` them, a folded map regridded or repaired (``TrainConfig.val_repair``); how many
+    held-out maps the network itself folded; :func:`rfmap.validation.evaluate`).  Older weights were validated on
+    fewer sides, so their numbers are not comparable with those of later runs."""
+    t = Table("tab:recipes", "How the models were trained",
+              ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "scored", "folded_maps"])
+    for name, s in surs.items():
+        meta = s.meta
+        cfg = meta.get("config") or {}
+        loss = cfg.get("loss") or {}
+        val = (meta.get("final_metrics") or {}).get("mean") or {}
+        metric = val.get("penalized", val.get("capped", val.get("mean_dd", val.get("std_rho_map"))))
+        t.add(name, s.model.kwargs().get("arch", "unet"), {
+            "fields": training_fields_text(cfg) if cfg else None,
+            "fold": f"{loss.get('fold', 10.0):g} from {loss.get('fold_threshold', 0.02):g}" if cfg else None,
+            "lr": float(cfg["lr"]) if "lr" in cfg else None,
+            "ema": float(cfg["ema"]) if cfg.get("ema") else None,
+            "steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
+            "train_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 60.0,
+            "val_n": "/".join(str(n) for n in (cfg.get("val_sizes") or [cfg.get("val_n", "?")])) if cfg else None,
+            "held_out": None if metric is None else float(metric),
+            "scored": ("delivered" if val.get("path") == "repaired" else "raw") if val else None,
+            "folded_maps": (int(val["raw_folded_fields"]) if "raw_folded_fields" in val else
+                            int(val["folded_fields"]) if "folded_fields" in val else None)})
+    return t

@@ -1,0 +1,145 @@
+"""The book's tables: the :class:`Table` of rows ``(case, method, {column: value})`` with Markdown and CSV output,
+the formatter of its cells, the paper's published tables (``data/paper_tables.json``) and the glue of numbers into
+the book's text.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import json
+from dataclasses import dataclass, field
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Table", "paper_table", "format_value", "glue_all", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
+
+
+DATA = Path(__file__).resolve().parent.parent / "data"
+
+
+COLUMN_TITLES = {
+    "time": "time", "speedup": "speed-up", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
+    "mean_dmu_pl": "mean |Δμ| vs PL", "std_rho_orig": "Std ρ̃ orig", "std_rho_map": "Std ρ̃ map",
+    "min_jacobian": "min det J", "n_flipped": "flips", "max_mu": "max |μ|", "mean_mu": "mean |μ|",
+    "alpha": "α", "mean": "mean", "median": "median", "worst": "worst",
+    "raw_std": "raw Std ρ̃ map", "flips_repaired": "flips after repair", "parameters": "parameters",
+    "train_time": "training (min)", "validation": "held-out Std ρ̃ map", "work_n": "network grid", "arch": "arch",
+    "count": "fields", "demand_median": "demand (median)", "demand_p90": "demand (90 %)",
+    "reach_ratio": "reach / demand", "left_net": "left, ours", "left_classical": "left, classical",
+    "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "ema": "weight average",
+    "held_out": "held-out mean", "scored": "held-out maps scored", "folded_maps": "folded held-out maps",
+    "val_n": "held-out N", "mu_ratio": "mean |μ| ratio",
+}
+
+
+#: significant digits of every number in a table (times: one fewer, with their unit)
+DIGITS = 4
+
+
+#: data columns per Markdown table; wider tables continue in a second table below, so they fit the page
+MAX_COLUMNS = 6
+
+
+def format_value(v, column: str = "", *, unit: bool = True) -> str:
+    """One table cell: :data:`DIGITS` significant digits; times (column ``time``, seconds) as ``12.3 ms`` or
+    ``2.43 s`` (without ``unit``: seconds, as a plain number); speed-ups as ``41.2×``; integers exactly; a missing
+    value as an em dash (empty without ``unit``)."""
+    if v is None:
+        return "—" if unit else ""
+    if isinstance(v, (bool, np.bool_)):
+        return str(bool(v))
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    if isinstance(v, (list, tuple)):
+        return "(" + ", ".join(f"{float(x):.{DIGITS - 1}g}" for x in v) + ")"
+    if isinstance(v, (float, np.floating)):
+        v = float(v)
+        if not unit:
+            return f"{v:.{DIGITS}g}"
+        if column == "time":
+            return f"{v * 1e3:.{DIGITS - 1}g} ms" if abs(v) < 1 else f"{v:.{DIGITS - 1}g} s"
+        if column == "speedup":
+            return f"{v:.{DIGITS - 1}g}×"
+        return f"{v:.{DIGITS}g}"
+    return str(v)
+
+
+@lru_cache(maxsize=1)
+def _paper() -> dict:
+    return json.loads((DATA / "paper_tables.json").read_text())["tables"]
+
+
+def paper_table(label: str) -> dict:
+    """Published values of a paper table (``tab:...``): ``{'columns': [...], 'rows': {key: {col: value}}}``."""
+    t = _paper()
+    if label not in t:
+        raise ValueError(f"unknown paper table {label!r}; known: {', '.join(t)}")
+    return t[label]
+
+
+@dataclass
+class Table:
+    """Rows of ``(case, method, {column: value})`` with Markdown and CSV output."""
+
+    label: str
+    title: str
+    columns: list[str]
+    rows: list[tuple[str, str, dict]] = field(default_factory=list)
+
+    def add(self, case: str, method: str, values: dict) -> None:
+        self.rows.append((str(case), method, dict(values)))
+
+    def value(self, case: str, method: str, column: str):
+        for c, m, v in self.rows:
+            if c == str(case) and m == method:
+                return v.get(column)
+        raise KeyError((case, method, column))
+
+    def to_markdown(self, max_columns: int | None = MAX_COLUMNS) -> str:
+        """The table as Markdown (cells by :func:`format_value`).  With more than ``max_columns`` data columns
+        it is wrapped: the further columns follow in another table with the same ``case`` and ``method``
+        columns."""
+        cols = list(self.columns)
+        parts_n = -(-len(cols) // max_columns) if max_columns and cols else 1
+        step = max(1, -(-len(cols) // parts_n))  # balanced: 9 columns at most 6 per table give 5 + 4
+        parts = []
+        for i in range(0, max(len(cols), 1), step):
+            chunk = cols[i:i + step]
+            head = ["case", "method"] + [COLUMN_TITLES.get(c, c).replace("|", "\\|") for c in chunk]
+            lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+            for case, method, vals in self.rows:
+                lines.append("| " + " | ".join([case, method] + [format_value(vals.get(c), c) for c in chunk]) + " |")
+            parts.append("\n".join(lines))
+        return "\n\n".join(parts)
+
+    def to_csv(self) -> str:
+        """The table as CSV: one header row of column keys, numbers to :data:`DIGITS` significant digits (times in
+        seconds), empty cells for missing values."""
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(["case", "method"] + self.columns)
+        for case, method, vals in self.rows:
+            w.writerow([case, method] + [format_value(vals.get(c), c, unit=False) for c in self.columns])
+        return buf.getvalue()
+
+    def _repr_markdown_(self) -> str:
+        return f"**{self.title}**\n\n" + self.to_markdown()
+
+    def save(self, out_dir) -> list[Path]:
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        stem = self.label.replace(":", "-").replace("_", "-")
+        md, cs = out / f"{stem}.md", out / f"{stem}.csv"
+        md.write_text(f"{self.title}\n\n{self.to_markdown()}\n")
+        cs.write_text(self.to_csv())
+        return [md, cs]
+
+
+def glue_all(values: dict, prefix: str) -> None:
+    """Glue every entry of ``values`` for the book's text as ``{prefix}_{key}`` (``myst_nb.glue``, not displayed)."""
+    from myst_nb import glue
+
+    for key, value in values.items():
+        glue(f"{prefix}_{key}", value, display=False)

@@ -1,0 +1,261 @@
+r"""GeoJSON regions in the unit square: reading and checking them, the planar frame, and their density raster.
+
+The input stage of a cartogram (:mod:`rfmap.cartogram`): a FeatureCollection of Polygon / MultiPolygon features with
+a value per region (:func:`read_regions`), fitted into the unit square by an equirectangular projection
+(:class:`PlanarFrame`), and rasterised to the vertex densities of the ``N``-grid with the sea at the mean density
+(:func:`density_grid`).  :func:`montreal_election` is a real map to try it on.
+"""
+from __future__ import annotations
+
+import json
+import math
+import numbers
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+from .mesh import check_n
+
+__all__ = ["read_regions", "PlanarFrame", "density_grid", "montreal_election", "MONTREAL_CANDIDATES", "ZERO_FLOOR"]
+
+
+#: The candidates of the 2013 Montreal mayoral election (vote counts per district in :func:`montreal_election`).
+MONTREAL_CANDIDATES = ("Coderre", "Bergeron", "Joly")
+
+
+#: A zero value is replaced by this fraction of the smallest positive density times the region's area.
+ZERO_FLOOR = 0.1
+
+
+def _shapely():
+    try:
+        import shapely
+    except ImportError as e:  # pragma: no cover - shapely is a dependency
+        raise ImportError("cartograms need shapely (pip install shapely)") from e
+    return shapely
+
+
+def _load_collection(collection) -> dict:
+    """A FeatureCollection ``dict`` from a dict, a JSON string or a path."""
+    if isinstance(collection, dict):
+        return collection
+    if isinstance(collection, (str, os.PathLike)):
+        text = str(collection)
+        if isinstance(collection, os.PathLike) or not text.lstrip().startswith("{"):
+            try:
+                with open(collection, encoding="utf-8") as fh:
+                    text = fh.read()
+            except OSError as e:
+                raise ValueError(f"cannot read {os.fspath(collection)}: {e.strerror or e}") from e
+        try:
+            return json.loads(text)
+        except json.JSONDecodeError as e:
+            raise ValueError(f"not valid GeoJSON (JSON error: {e})") from e
+    raise ValueError(f"expected a GeoJSON FeatureCollection (dict, JSON text or path), got {type(collection).__name__}")
+
+
+def read_regions(collection, value: str, *, floor: float = ZERO_FLOOR):
+    """The polygons of a GeoJSON FeatureCollection and their values, checked.
+
+    Parameters
+    ----------
+    collection : dict, str or path
+        A FeatureCollection of Polygon / MultiPolygon features (a dict, JSON text, or a file name).
+    value : str
+        The feature property holding each region's value (a number :math:`\\ge 0`).
+    floor : float
+        Zero values become ``floor`` times the smallest positive density times the region's area (cartogram tools
+        cannot shrink a region to nothing).
+
+    Returns
+    -------
+    features : list of dict
+        The input features (for their properties and ids).
+    geoms : ndarray of shapely geometries, shape (R,)
+    values : ndarray, float64, shape (R,)
+        The values after flooring.
+    floored : list of int
+        Indices of the regions whose zero value was floored.
+
+    Raises
+    ------
+    ValueError
+        One line naming the problem: not a FeatureCollection, a feature without a Polygon / MultiPolygon geometry
+        or with zero area, a missing, non-numeric, negative, NaN or infinite value, or all values zero.
+    """
+    shapely = _shapely()
+    from shapely.geometry import shape
+
+    fc = _load_collection(collection)
+    if not isinstance(fc, dict) or fc.get("type") != "FeatureCollection" or not isinstance(fc.get("features"), list):
+        raise ValueError("not a GeoJSON FeatureCollection (need {'type': 'FeatureCollection', 'features': [...]})")
+    features = fc["features"]
+    if not features:
+        raise ValueError("the FeatureCollection has no features")
+    geoms, values = [], []
+    for k, feat in enumerate(features):
+        name = _feature_name(feat, k)
+        geom = feat.get("geometry") if isinstance(feat, dict) else None
+        if not isinstance(geom, dict) or geom.get("type") not in ("Polygon", "MultiPolygon"):
+            got = geom.get("type") if isinstance(geom, dict) else type(geom).__name__
+            raise ValueError(f"feature {name}: geometry must be a Polygon or MultiPolygon, got {got}")
+        try:
+            g = shape(geom)
+        except Exception as e:  # noqa: BLE001 - shapely raises several types for malformed coordinates
+            raise ValueError(f"feature {name}: malformed {geom['type']} coordinates ({e})") from e
+        if g.is_empty or not np.isfinite(shapely.get_coordinates(g)).all() or g.area <= 0:
+            raise ValueError(f"feature {name}: empty, non-finite or zero-area geometry")
+        props = feat.get("properties") or {}
+        if value not in props:
+            raise ValueError(f"feature {name} has no property {value!r}")
+        v = props[value]
+        if isinstance(v, bool) or not isinstance(v, numbers.Real):
+            raise ValueError(f"feature {name}: value {value!r} = {v!r} is not a number")
+        v = float(v)
+        if not math.isfinite(v):
+            raise ValueError(f"feature {name}: value {value!r} is {v} (NaN or infinite)")
+        if v < 0:
+            raise ValueError(f"feature {name}: value {value!r} = {v:g} is negative")
+        geoms.append(g)
+        values.append(v)
+    geoms = np.array(geoms, dtype=object)
+    values = np.array(values)
+    zero = np.flatnonzero(values == 0)
+    if zero.size == values.size:
+        raise ValueError(f"every value of {value!r} is zero")
+    if zero.size:
+        areas = shapely.area(geoms)
+        pos = values > 0
+        values[zero] = floor * float(np.min(values[pos] / areas[pos])) * areas[zero]
+    return features, geoms, values, zero.tolist()
+
+
+def _feature_name(feat, k: int) -> str:
+    """``#k`` and, where the feature has one, its id."""
+    fid = feat.get("id") if isinstance(feat, dict) else None
+    return f"#{k}" + (f" (id {fid})" if fid is not None else "")
+
+
+@dataclass(frozen=True)
+class PlanarFrame:
+    r"""The input coordinates to the unit square and back: :math:`u = s\,(P(x) - c) + (\tfrac12, \tfrac12)`.
+
+    ``P`` is the equirectangular projection :math:`(\lambda\cos\varphi_0, \varphi)` for longitude/latitude input
+    (``cos_lat`` :math:`= \cos\varphi_0`), the identity for planar input (``cos_lat = 1``); ``c`` is the centre of
+    the projected bounding box and ``s`` fits its longer side into :math:`1 - 2\,\mathrm{margin}`.
+    """
+
+    cos_lat: float
+    center: tuple[float, float]
+    scale: float
+
+    @classmethod
+    def fit(cls, coords: np.ndarray, *, margin: float, projection: str = "auto") -> "PlanarFrame":
+        """The frame of points ``coords`` (P, 2); ``projection`` is ``"auto"`` (equirectangular when every point
+        is a longitude/latitude pair), ``"equirectangular"`` or ``"none"``."""
+        if projection not in ("auto", "equirectangular", "none"):
+            raise ValueError(f"unknown projection {projection!r}; choose auto, equirectangular or none")
+        if not 0 <= margin < 0.5:
+            raise ValueError(f"margin must be in [0, 0.5), got {margin!r}")
+        lonlat = bool((np.abs(coords[:, 0]) <= 180).all() and (np.abs(coords[:, 1]) <= 90).all())
+        geographic = projection == "equirectangular" or (projection == "auto" and lonlat)
+        cos_lat = math.cos(math.radians(0.5 * (coords[:, 1].min() + coords[:, 1].max()))) if geographic else 1.0
+        p = coords * np.array([cos_lat, 1.0])
+        lo, hi = p.min(0), p.max(0)
+        side = float((hi - lo).max())
+        if side <= 0:
+            raise ValueError("the regions have no extent")
+        return cls(cos_lat, tuple(0.5 * (lo + hi)), (1.0 - 2.0 * margin) / side)
+
+    def forward(self, coords: np.ndarray) -> np.ndarray:
+        """Input coordinates (P, 2) to the unit square."""
+        return (coords * np.array([self.cos_lat, 1.0]) - np.array(self.center)) * self.scale + 0.5
+
+    def inverse(self, u: np.ndarray) -> np.ndarray:
+        """Unit-square points (P, 2) to input coordinates."""
+        return ((u - 0.5) / self.scale + np.array(self.center)) / np.array([self.cos_lat, 1.0])
+
+
+def _transform(geoms: np.ndarray, fn) -> np.ndarray:
+    """Apply ``fn`` (P, 2) -> (P, 2) to every vertex of every geometry at once."""
+    shapely = _shapely()
+    return shapely.transform(geoms, fn)
+
+
+def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: int = 4) -> tuple[np.ndarray, float]:
+    r"""Vertex densities of the ``N``-grid of the unit square: the mean over each vertex's cell of
+    :math:`\rho = v_i / a_i` inside region :math:`i` and the sea density :math:`\bar\rho = \sum v_i / \sum a_i`
+    elsewhere.
+
+    Parameters
+    ----------
+    geoms : ndarray of shapely geometries, shape (R,), inside the unit square
+    values : ndarray, shape (R,), positive
+    n : int
+        Grid side ``N``; vertex ``(i, j)`` sits at :math:`(i, j)/(N-1)` and its cell is the square of side
+        :math:`h = 1/(N-1)` around it (clipped to the unit square).
+    supersample : int
+        Point-in-polygon samples per cell side (``supersample``\ :sup:`2` per cell).
+
+    Returns
+    -------
+    density : ndarray, shape (N, N), ``density[i, j]`` at :math:`(i, j)/(N-1)`
+    sea : float
+        :math:`\bar\rho`.
+    """
+    shapely = _shapely()
+    n = check_n(n)
+    s = int(supersample)
+    areas = shapely.area(geoms)
+    rho = values / areas
+    sea = float(values.sum() / areas.sum())
+    h = 1.0 / (n - 1)
+    # sample k of vertex i along an axis sits at (i - 1/2 + (k + 1/2)/s) h; fine index f = i*s + k
+    m = n * s
+    t = (np.arange(m) // s - 0.5 + (np.arange(m) % s + 0.5) / s) * h
+    inside = (t >= 0) & (t <= 1)  # samples of boundary cells beyond the square do not count
+    excess = np.zeros((m, m))  # density above the sea at every sample
+    for g, r in zip(geoms, rho):
+        x0, y0, x1, y1 = g.bounds
+        i0, i1 = np.searchsorted(t, [x0, x1])
+        j0, j1 = np.searchsorted(t, [y0, y1])
+        if i1 <= i0 or j1 <= j0:
+            continue
+        xx, yy = np.meshgrid(t[i0:i1], t[j0:j1], indexing="ij")
+        hit = shapely.contains_xy(g, xx, yy)
+        excess[i0:i1, j0:j1] += hit * (r - sea)
+    excess *= inside[:, None] & inside[None, :]
+    count = np.add.reduceat(np.add.reduceat((inside[:, None] & inside[None, :]).astype(float), np.arange(0, m, s), 0),
+                            np.arange(0, m, s), 1)
+    total = np.add.reduceat(np.add.reduceat(excess, np.arange(0, m, s), 0), np.arange(0, m, s), 1)
+    return sea + total / count, sea
+
+
+def _listify(obj):
+    """Tuples (as shapely's ``mapping`` writes coordinates) to lists, for a GeoJSON dict that equals its JSON."""
+    if isinstance(obj, (list, tuple)):
+        return [_listify(o) for o in obj]
+    if isinstance(obj, dict):
+        return {k: _listify(v) for k, v in obj.items()}
+    return obj
+
+
+def montreal_election() -> dict:
+    """The 2013 Montreal mayoral election as a FeatureCollection: 58 districts with the votes of
+    :data:`MONTREAL_CANDIDATES` and ``total`` as properties (from the data that plotly ships; needs the ``geo``
+    extra: ``pip install rfmap[geo]``)."""
+    try:
+        import plotly.data
+    except ImportError as e:
+        raise ImportError("the Montreal election data come with plotly: pip install 'rfmap[geo]'") from e
+    gj = plotly.data.election_geojson()
+    table = plotly.data.election()
+    rows = {int(r["district_id"]): r for r in table.to_dict("records")}  # district names differ in spelling
+    feats = []
+    for f in gj["features"]:
+        r = rows[int(f["id"])]
+        props = {"district": f["properties"]["district"], "winner": str(r["winner"]),
+                 **{k: int(r[k]) for k in (*MONTREAL_CANDIDATES, "total")}}
+        feats.append({"type": "Feature", "id": f.get("id"), "properties": props, "geometry": f["geometry"]})
+    return {"type": "FeatureCollection", "features": feats}

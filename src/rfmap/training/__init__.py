@@ -1,0 +1,19 @@
+r"""Data-free training of a surrogate (paper Sec. 5), single-process or data-parallel, on the CPU or a GPU.
+
+One concept per module: :mod:`~rfmap.training.data` draws the batches (sample ``i`` of step ``t`` seeded by
+``(seed, t, i)``, on a random grid side in ``n_range``) in a thread or in worker processes;
+:mod:`~rfmap.training.averaging` keeps an exponential moving average of the weights (``--ema``);
+:mod:`~rfmap.training.state` holds the run's state, its checkpoint and the lineage of warm starts (``--init``);
+:mod:`~rfmap.training.loop` runs the steps, validates, chooses and writes the shipped weights; and
+:mod:`~rfmap.training.cli` is ``rfmap train`` (also ``python -m rfmap.train``).
+"""
+from ..device import resolve_device
+from .averaging import WeightAverage
+from .cli import build_parser, main, run
+from .data import draw_step, single_blas_thread_env, step_size_n
+from .loop import history, report_paper_fields, train, validate
+from .state import TrainState, load_init, machine, memory_format, sha256
+
+__all__ = ["train", "validate", "report_paper_fields", "resolve_device", "load_init", "main", "TrainState",
+           "WeightAverage", "memory_format", "draw_step", "history", "build_parser", "run", "single_blas_thread_env",
+           "step_size_n", "machine", "sha256"]

@@ -1,0 +1,170 @@
+"""``rfmap train`` (also ``python -m rfmap.train``): the command line of training.
+
+``rfmap train --config NAME [--preset ci|full|paper] [--device auto|cpu|cuda] [--init MODEL|FILE] [--resume]`` trains
+the named configuration of :mod:`rfmap.config`.  Data-parallel: ``torchrun --nproc_per_node=K -m rfmap.train --config
+NAME ...`` runs K processes (gloo on CPU, NCCL on GPU); K processes with batch ``B`` train the same model as one
+process with batch ``K*B``.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import sys
+
+import torch
+
+from ..config import PRESETS, TrainConfig, config_names, get_config
+from ..device import resolve_device
+from ..surrogate import Surrogate
+from .loop import train
+from .state import load_init
+
+__all__ = ["build_parser", "run", "main"]
+
+
+def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
+    p = parser or argparse.ArgumentParser(prog="rfmap train", description="Train a surrogate from a named config.")
+    p.add_argument("--config", required=True, help=f"one of: {', '.join(config_names())}")
+    p.add_argument("--preset", choices=list(PRESETS), default=None,
+                   help="ci (seconds), full (the shipped CPU runs) or paper (the paper's hyperparameters); "
+                        "default: $RFMAP_SCALE or full")
+    p.add_argument("--out", default=None, help="output directory (default runs/CONFIG)")
+    p.add_argument("--resume", action="store_true", help="continue from OUT/checkpoint.pt")
+    p.add_argument("--finish", action="store_true",
+                   help="with --resume: train no further; end the run from its checkpoint (final validation, best "
+                        "validated state, weight file), e.g. after stopping it early")
+    p.add_argument("--init", default=None, metavar="MODEL|FILE",
+                   help="start from a shipped model or a .safetensors file (fresh optimiser and schedule)")
+    p.add_argument("--device", default="cpu", help="auto, cpu (default) or cuda; CUDA trains under bf16 autocast")
+    p.add_argument("--steps", type=int, default=None, help="override the number of steps")
+    p.add_argument("--batch", type=int, default=None, help="override the per-process batch size")
+    p.add_argument("--time-limit", type=float, default=None, help="override the wall-time limit (s; 0: none)")
+    p.add_argument("--lr", type=float, default=None,
+                   help="override the peak learning rate (e.g. lower for a gentle warm restart with --init)")
+    p.add_argument("--ema", type=float, default=None, metavar="DECAY",
+                   help="keep an exponential moving average of the weights with this decay (e.g. 0.999); validation, "
+                        "checkpoint choice and the shipped file use it (0: off, the default)")
+    p.add_argument("--threads", type=int, default=None,
+                   help="torch CPU threads per process (also with --device cuda: validation runs on a CPU copy)")
+    p.add_argument("--workers", type=int, default=None, help="batch-drawing worker processes (0: a thread)")
+    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--teacher", default=None, metavar="flow|diffusion|none",
+                   help="density configs: a classical solver's map of a share of each batch's fields as a supervised "
+                        "target beside the data-free losses (rfmap.teacher; default: the config's, none)")
+    p.add_argument("--teacher-share", type=float, default=None, help="share of each batch with a target (0, 1]")
+    p.add_argument("--teacher-weight", type=float, default=None, help="weight of the teacher's displacement loss")
+    p.add_argument("--base", type=int, default=None, help="override the U-Net's base width (channels)")
+    p.add_argument("--depth", type=int, default=None, help="override the U-Net's number of levels")
+    p.add_argument("--snapshot-every", type=int, default=None, metavar="K",
+                   help="write the weights every K steps to OUT/snapshots/ (self-contained files for rfmap validate)")
+    p.add_argument("--no-validate", action="store_true",
+                   help="no validation during or after the run (e.g. on an accelerator); score the snapshots "
+                        "afterwards with rfmap validate")
+    p.add_argument("--no-progress", action="store_true")
+    return p
+
+
+def run(args) -> Surrogate:
+    cfg = get_config(args.config, args.preset)
+    over = {k: v for k, v in {"steps": args.steps, "batch": args.batch, "time_limit": args.time_limit,
+                              "threads": args.threads, "seed": args.seed, "workers": args.workers,
+                              "lr": args.lr, "ema": args.ema}.items()
+            if v is not None}
+    for k in ("steps", "batch"):
+        if k in over and over[k] < 1:
+            raise ValueError(f"--{k} must be at least 1, got {over[k]}")
+    if over.get("workers", 0) < 0 or over.get("threads", 0) < 0:
+        raise ValueError("--workers and --threads must not be negative")
+    if "lr" in over and not (math.isfinite(over["lr"]) and over["lr"] > 0):
+        raise ValueError(f"--lr must be a positive number, got {over['lr']}")
+    if "ema" in over and not (math.isfinite(over["ema"]) and 0.0 <= over["ema"] < 1.0):
+        raise ValueError(f"--ema must lie in [0, 1), got {over['ema']}")
+    cfg = cfg.with_overrides(**over, **_structured_overrides(cfg, args))
+    device = resolve_device(args.device)
+    if args.init and args.resume:
+        raise ValueError("--init and --resume exclude each other (a resumed run keeps its own lineage)")
+    if args.init:
+        load_init(args.init, cfg)  # validate before any output is written
+    world = int(os.environ.get("WORLD_SIZE", "1"))
+    if world > 1 and not torch.distributed.is_initialized():
+        backend = "nccl" if device.type == "cuda" else "gloo"
+        if device.type == "cuda":
+            torch.cuda.set_device(int(os.environ.get("LOCAL_RANK", "0")))
+            device = torch.device("cuda", torch.cuda.current_device())
+        torch.distributed.init_process_group(backend)
+    try:
+        return train(cfg, args.out, resume=args.resume, init=args.init, device=device,
+                     progress=not args.no_progress, command=_command_line(args), finish=args.finish)
+    finally:
+        if world > 1 and torch.distributed.is_initialized():
+            torch.distributed.destroy_process_group()
+
+
+def _structured_overrides(cfg: TrainConfig, args) -> dict:
+    """Overrides of the nested options (teacher, model) and of validation from the command line; ``ValueError``
+    on values out of range."""
+    from dataclasses import replace as _replace
+
+    from ..teacher import TeacherConfig
+
+    over: dict = {}
+    t = {k: v for k, v in {"method": getattr(args, "teacher", None), "share": getattr(args, "teacher_share", None),
+                           "weight": getattr(args, "teacher_weight", None)}.items() if v is not None}
+    if t:
+        over["teacher"] = TeacherConfig(**{**cfg.teacher.__dict__, **t})
+        if over["teacher"].active and cfg.task.kind != "density":
+            raise ValueError(f"--teacher: config {cfg.name!r} maps a Beltrami coefficient; a classical teacher "
+                             "applies to density configs only")
+    m = {k: v for k, v in {"base": getattr(args, "base", None), "depth": getattr(args, "depth", None)}.items()
+         if v is not None}
+    if m:
+        if cfg.model.arch != "unet":
+            raise ValueError("--base and --depth apply to U-Net configs")
+        if any(v < 1 for v in m.values()):
+            raise ValueError(f"--base and --depth must be at least 1, got {m}")
+        over["model"] = _replace(cfg.model, **m)
+    every = getattr(args, "snapshot_every", None)
+    if every is not None:
+        if every < 0:
+            raise ValueError(f"--snapshot-every must not be negative, got {every}")
+        over["snapshot_every"] = every
+    if getattr(args, "no_validate", False):
+        over.update(val_every=0, select_best=False)
+    return over
+
+
+def _command_line(args) -> str:
+    parts = ["rfmap train", f"--config {args.config}"]
+    if args.preset:
+        parts.append(f"--preset {args.preset}")
+    for flag, val in [("--steps", args.steps), ("--batch", args.batch), ("--time-limit", args.time_limit),
+                      ("--threads", args.threads), ("--workers", args.workers), ("--seed", args.seed),
+                      ("--lr", args.lr), ("--ema", args.ema), ("--init", args.init),
+                      ("--teacher", getattr(args, "teacher", None)),
+                      ("--teacher-share", getattr(args, "teacher_share", None)),
+                      ("--teacher-weight", getattr(args, "teacher_weight", None)),
+                      ("--base", getattr(args, "base", None)), ("--depth", getattr(args, "depth", None)),
+                      ("--snapshot-every", getattr(args, "snapshot_every", None))]:
+        if val is not None:
+            parts.append(f"{flag} {val:g}" if isinstance(val, float) else f"{flag} {val}")
+    if args.device and args.device != "cpu":
+        parts.append(f"--device {args.device}")
+    if getattr(args, "no_validate", False):
+        parts.append("--no-validate")
+    if args.resume:
+        parts.append("--resume")
+    if args.finish:
+        parts.append("--finish")
+    return " ".join(parts)
+
+
+def main(argv=None) -> int:
+    """``python -m rfmap.train`` (same options as ``rfmap train``); returns the exit status (2 on bad input)."""
+    args = build_parser().parse_args(argv)
+    try:
+        run(args)
+    except ValueError as e:
+        print(f"rfmap train: error: {e}", file=sys.stderr)
+        return 2
+    return 0
