@@ -202,6 +202,8 @@ def _finish(st: TrainState) -> Surrogate:
     if cfg.select_best and st.best is not None and tuple(st.best["score"]) < score(last["mean"]):
         st.model.load_state_dict({k: v.to(st.device) for k, v in st.best["state"].items()})
         selected = st.best["step"]
+        # the last state's validation stays in the log (its learning curve), then the shipped state's
+        st.log({"step": st.step, "validation": last, "elapsed": round(st.elapsed(), 2), "last": True})
         final = validate(st.cpu_surrogate(), cfg)
     else:
         final = last
