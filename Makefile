@@ -1,8 +1,9 @@
 # rfmap: set-up, tests and the Jupyter Book.
 #   make install     create .venv, install torch (CPU, pinned) and the package with its dev, lab and geo extras, and
 #                    register the project's Jupyter kernel (rfmap) in .venv
-#   make test        unit tests (every notebook through the rfmap kernel from notebooks/, as JupyterLab runs it) and
-#                    the book build (every notebook again, from a temporary directory), all at RFMAP_SCALE=ci
+#   make test        unit tests, every notebook with nbval (through the rfmap kernel, from notebooks/, as
+#                    JupyterLab runs it) and the book build (every notebook again, from a temporary directory), all
+#                    at RFMAP_SCALE=ci
 #   make book        execute the notebooks at full scale and build the HTML book into _build/html
 #   make book-check  screenshot every whole page of the built book; fail on error output or a missing or blank figure
 #   make lab         start JupyterLab in the repository root with the book's environment (RFMAP_SCALE, default full)
@@ -23,6 +24,9 @@ BOOK_FLAGS := -W -n --keep-going --all
 # the Jupyter kernel of .venv; it carries NB_ENV itself, so a chapter opened in any Jupyter front end runs as in the book
 KERNEL := rfmap
 LAB_FLAGS ?=
+# nbval: a cell passes when it runs without error (outputs are not compared); every notebook runs through the project's
+# kernel, which starts in notebooks/; a cell that runs for 20 minutes has hung
+NBVAL_FLAGS := --nbval-lax --nbval-kernel-name $(KERNEL) --nbval-cell-timeout 1200 -p no:cacheprovider
 # Jupyter refuses to run as root unless told to (containers often run as root)
 LAB_ROOT := $(shell [ "$$(id -u)" = 0 ] && echo --allow-root)
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
@@ -41,6 +45,7 @@ $(STAMP): pyproject.toml
 
 test: install
 	RFMAP_SCALE=ci $(BIN)/pytest tests/
+	cd notebooks && $(NB_ENV) RFMAP_SCALE=ci $(CURDIR)/$(BIN)/pytest $(NBVAL_FLAGS) .
 	$(NB_ENV) RFMAP_SCALE=ci $(BIN)/jupyter-book build . $(BOOK_FLAGS)
 
 book: install

@@ -1,18 +1,31 @@
 #!/usr/bin/env python3
 """Check the built HTML book: a full-page screenshot of every page, no error output and no broken figure on any page.
 
-Usage: python scripts/book_check.py [--html _build/html] [--out _build/screenshots] [--no-screenshots]
+Usage: python scripts/book_check.py [--html _build/html] [--out _build/screenshots] [--figures book/figures]
+                                    [--no-screenshots]
 
 Every page listed in _toc.yml must exist under the HTML folder. Each page is scanned for signs of a failed
 notebook or a broken build (traceback or stderr output cells, docutils system messages, unresolved references) and
 for broken figures: an image whose file is missing or cannot be read, or a blank one (every pixel the same, up to a
 standard deviation of BLANK_STD grey levels). Each page is then captured whole, from top to bottom, by headless
-Chromium driven over the DevTools protocol, into the screenshot folder. The exit status is 1 when a page is missing,
-shows an error or a broken figure, or cannot be captured.
+Chromium driven over the DevTools protocol, into the screenshot folder.
+
+Every figure a chapter saves must be on its page. A chapter saves a figure under a label ``fig:...`` (a string
+constant passed to ``rfmap.viz.save_figure`` or to a plotting helper that saves under it), which names the file
+``book/figures/fig-....png``. The chapter's source is read without running it (:func:`figure_source_problems`):
+the cell that saves the figure saves only that one, shows it (``plt.show()``) and displays nothing else, and carries
+the cell metadata ``mystnb.figure`` with the file's name as ``name`` and a caption that opens with "Reproduces
+Fig. n of the paper" (n: the number of the paper's figure with that label) or with "Beyond the paper". In the built
+page (:func:`page_figure_problems`) the figure must then be there: a ``<figure>`` with that id, an image and that
+caption. A figure saved only under a condition that did not hold in the build (its file is absent) is not asked for.
+
+The exit status is 1 when a page is missing, shows an error or a broken figure, lacks a figure its chapter saves, or
+cannot be captured.
 """
 from __future__ import annotations
 
 import argparse
+import ast
 import asyncio
 import base64
 import io
@@ -27,6 +40,7 @@ import tempfile
 import time
 import urllib.request
 from pathlib import Path
+from typing import NamedTuple
 from urllib.parse import unquote, urlparse
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -119,6 +133,183 @@ def scan_html(page: Path) -> list[str]:
         if why:
             problems.append(why)
     return problems
+
+
+# ----------------------------------------------------------------------------------------------- saved figures
+#: a figure label, as the chapters pass it to rfmap.viz.save_figure (or to a helper that saves under it)
+FIG_LABEL = re.compile(r"fig:[A-Za-z0-9_-]+")
+#: how a caption names the figure's counterpart in the paper
+PAPER_CAPTION = "Reproduces Fig. {n} of the paper"
+BEYOND_CAPTION = "Beyond the paper"
+
+
+def figure_stem(label: str) -> str:
+    """The file name (without ``.png``) that :func:`rfmap.viz.save_figure` gives the figure ``label``."""
+    return label.replace(":", "-").replace("_", "-")
+
+
+def paper_figure_numbers(root: Path = ROOT) -> dict[str, int]:
+    """The number of every figure of the paper by its label: the figures of ``src/rfmap/data/figures.json``, which
+    lists the paper's items in the order of the paper, counted from 1."""
+    items = json.loads((root / "src" / "rfmap" / "data" / "figures.json").read_text(encoding="utf-8"))["items"]
+    labels = [it["label"] for it in items if it["label"].startswith("fig:")]
+    return {label: k for k, label in enumerate(labels, start=1)}
+
+
+def expected_caption(label: str, numbers: dict[str, int]) -> str:
+    """How the caption of the figure ``label`` must open."""
+    return PAPER_CAPTION.format(n=numbers[label]) if label in numbers else BEYOND_CAPTION
+
+
+class SavedFigure(NamedTuple):
+    """A figure that a chapter saves: its label, the cell that saves it (index and id), and whether the saving
+    statement runs only under a condition (inside ``if``, a loop, ``try`` or a function)."""
+
+    label: str
+    cell: int
+    cell_id: str
+    conditional: bool
+
+    @property
+    def stem(self) -> str:
+        return figure_stem(self.label)
+
+
+def _call_name(node: ast.Call) -> str:
+    f = node.func
+    return f.attr if isinstance(f, ast.Attribute) else f.id if isinstance(f, ast.Name) else ""
+
+
+def _scan_cell(source: str) -> tuple[list[tuple[str, bool]], list[str], ast.Module | None]:
+    """The figure labels a code cell saves under (with whether each save is conditional), what cannot be checked
+    in it, and its syntax tree (None when it does not parse)."""
+    try:
+        tree = ast.parse(source)
+    except SyntaxError as e:
+        return [], [f"does not parse ({e.msg}, line {e.lineno}), so its figures cannot be checked"], None
+    labels: list[tuple[str, bool]] = []
+    problems: list[str] = []
+
+    def visit(node: ast.AST, conditional: bool):
+        if isinstance(node, ast.Call):
+            if _call_name(node) == "savefig":
+                problems.append("saves a figure with savefig: save it with rfmap.viz.save_figure under a fig: label")
+            for arg in [*node.args, *(k.value for k in node.keywords)]:
+                if isinstance(arg, ast.Constant) and isinstance(arg.value, str) and FIG_LABEL.fullmatch(arg.value):
+                    labels.append((arg.value, conditional))
+                elif (isinstance(arg, ast.JoinedStr) and arg.values and isinstance(arg.values[0], ast.Constant)
+                      and str(arg.values[0].value).startswith("fig:")):
+                    problems.append("saves a figure under a computed label: give the label as a string constant")
+        inner = conditional or isinstance(node, (ast.If, ast.IfExp, ast.For, ast.AsyncFor, ast.While, ast.Try,
+                                                 ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))
+        for child in ast.iter_child_nodes(node):
+            visit(child, inner)
+
+    visit(tree, False)
+    return labels, problems, tree
+
+
+def _cell_source(cell: dict) -> str:
+    src = cell.get("source", "")
+    return src if isinstance(src, str) else "".join(src)
+
+
+def saved_figures(notebook: Path) -> list[SavedFigure]:
+    """Every figure the chapter ``notebook`` saves, read from its source."""
+    nb = json.loads(notebook.read_text(encoding="utf-8"))
+    out = []
+    for i, cell in enumerate(nb["cells"]):
+        if cell["cell_type"] == "code":
+            labels, _, _ = _scan_cell(_cell_source(cell))
+            out += [SavedFigure(label, i, cell.get("id", ""), cond) for label, cond in labels]
+    return out
+
+
+def _shows_only_the_figure(tree: ast.Module) -> str | None:
+    """Why a figure cell does not display its figure, and only its figure, or None."""
+    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call)]
+    if not any(_call_name(c) == "show" and isinstance(c.func, ast.Attribute) and isinstance(c.func.value, ast.Name)
+               and c.func.value.id == "plt" for c in calls):
+        return "does not show its figure with plt.show()"
+    if any(_call_name(c) == "display" for c in calls):
+        return "displays more than its figure (display(...)): move the other output to a cell of its own"
+    last = tree.body[-1] if tree.body else None
+    if isinstance(last, ast.Expr) and not (isinstance(last.value, ast.Call)
+                                           and _call_name(last.value) in ("show", "print", "glue")):
+        return "ends in an expression whose value is displayed beside the figure"
+    return None
+
+
+def figure_source_problems(notebook: Path, numbers: dict[str, int] | None = None) -> list[str]:
+    """What keeps a figure saved by the chapter ``notebook`` from being shown on its page with its caption, read
+    from the source (see the module docstring); an empty list when nothing does."""
+    numbers = paper_figure_numbers() if numbers is None else numbers
+    nb = json.loads(notebook.read_text(encoding="utf-8"))
+    problems = []
+    seen: dict[str, int] = {}
+    for i, cell in enumerate(nb["cells"]):
+        if cell["cell_type"] != "code":
+            continue
+        where = f"{notebook.name}: cell {i} ({cell.get('id', 'no id')})"
+        labels, cell_problems, tree = _scan_cell(_cell_source(cell))
+        problems += [f"{where} {p}" for p in cell_problems]
+        if not labels:
+            if (cell.get("metadata", {}).get("mystnb") or {}).get("figure"):
+                problems.append(f"{where} has figure metadata but saves no figure")
+            continue
+        if len(labels) > 1:
+            problems.append(f"{where} saves {len(labels)} figures ({', '.join(lab for lab, _ in labels)}): one "
+                            "figure per cell, so that each is shown with its own caption")
+            continue
+        label = labels[0][0]
+        stem = figure_stem(label)
+        if stem in seen:
+            problems.append(f"{where} saves {stem}.png, which cell {seen[stem]} saves too")
+        seen[stem] = i
+        why = _shows_only_the_figure(tree)
+        if why:
+            problems.append(f"{where} saves {stem}.png but {why}")
+        fig_meta = (cell.get("metadata", {}).get("mystnb") or {}).get("figure") or {}
+        if fig_meta.get("name") != stem:
+            problems.append(f"{where} saves {stem}.png: its metadata mystnb.figure.name must be {stem!r} "
+                            f"(found {fig_meta.get('name')!r})")
+        want = expected_caption(label, numbers)
+        caption = str(fig_meta.get("caption", ""))
+        if not caption.startswith(want):
+            problems.append(f"{where} saves {stem}.png: its caption (metadata mystnb.figure.caption) must open with "
+                            f"{want!r} (found {caption[:60]!r})")
+    return problems
+
+
+def page_figure_problems(page: Path, saved: list[SavedFigure], numbers: dict[str, int],
+                         figures: Path | None = None) -> list[str]:
+    """Figures of ``saved`` (those of the page's chapter) that the built ``page`` lacks, or shows without an image
+    or without their caption. A figure saved under a condition whose file is absent from ``figures`` was not saved
+    in this build and is not asked for."""
+    text = page.read_text(encoding="utf-8", errors="replace")
+    problems = []
+    for fig in saved:
+        m = re.search(rf'<figure\b[^>]*\bid="{re.escape(fig.stem)}"[^>]*>(.*?)</figure>', text, re.DOTALL)
+        if m is None:
+            if fig.conditional and figures is not None and not (figures / f"{fig.stem}.png").exists():
+                continue
+            problems.append(f"figure {fig.stem}.png, saved by cell {fig.cell} ({fig.cell_id}), is not on the page")
+            continue
+        inner = m.group(1)
+        if not IMG_SRC.search(inner):
+            problems.append(f"figure {fig.stem} is on the page without an image")
+        cap = re.search(r"<figcaption\b.*?</figcaption>", inner, re.DOTALL)
+        caption = " ".join(re.sub(r"<[^>]+>", " ", cap.group(0)).split()) if cap else ""
+        want = expected_caption(fig.label, numbers)
+        if want not in caption:
+            problems.append(f"figure {fig.stem} is on the page without a caption saying {want!r}")
+    return problems
+
+
+def unclaimed_figures(figures: Path, notebooks: list[Path]) -> list[Path]:
+    """PNG files in ``figures`` that no chapter saves (left over from an earlier build, for instance)."""
+    stems = {f.stem for nb in notebooks for f in saved_figures(nb)}
+    return sorted(p for p in figures.glob("*.png") if p.stem not in stems) if figures.is_dir() else []
 
 
 def find_chromium() -> str | None:
@@ -224,6 +415,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--html", type=Path, default=ROOT / "_build" / "html")
     parser.add_argument("--out", type=Path, default=ROOT / "_build" / "screenshots")
+    parser.add_argument("--figures", type=Path,
+                        default=Path(os.environ.get("RFMAP_FIGURES") or ROOT / "book" / "figures"),
+                        help="where the chapters saved their figures (default: $RFMAP_FIGURES, else book/figures)")
     parser.add_argument("--no-screenshots", action="store_true", help="only scan the HTML")
     args = parser.parse_args(argv)
 
@@ -239,13 +433,23 @@ def main(argv: list[str] | None = None) -> int:
         args.out.mkdir(parents=True, exist_ok=True)
 
     failures = 0
+    numbers = paper_figure_numbers()
+    notebooks = []
     for doc in toc_pages():
         page = args.html / f"{doc}.html"
+        source = ROOT / f"{doc}.ipynb"
+        saved = []
+        problems = []
+        if source.exists():
+            notebooks.append(source)
+            saved = saved_figures(source)
+            problems += figure_source_problems(source, numbers)
         if not page.exists():
             print(f"FAIL {doc}: page {page} was not built")
             failures += 1
             continue
-        problems = scan_html(page)
+        problems += scan_html(page)
+        problems += page_figure_problems(page, saved, numbers, args.figures)
         if browser is not None:
             shot = args.out / (doc.replace("/", "__") + ".png")
             err = screenshot(browser, page, shot)
@@ -259,6 +463,8 @@ def main(argv: list[str] | None = None) -> int:
         failures += bool(problems)
         if not problems:
             print(f"ok   {doc}")
+    for p in unclaimed_figures(args.figures, notebooks):
+        print(f"note {os.path.relpath(p, ROOT)}: saved by no chapter (left from an earlier build?)")
     print(f"{failures} page(s) with problems" if failures else "all pages ok")
     return 1 if failures else 0
 

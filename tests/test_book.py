@@ -44,6 +44,13 @@ def _figures_script():
     return mod
 
 
+def _book_check():
+    spec = importlib.util.spec_from_file_location("book_check", ROOT / "scripts" / "book_check.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def _items() -> list[dict]:
     return json.loads((ROOT / "src" / "rfmap" / "data" / "figures.json").read_text(encoding="utf-8"))["items"]
 
@@ -176,10 +183,17 @@ def test_citations_resolve():
 
 # ----------------------------------------------------------------------------------------------- notebooks
 @pytest.mark.parametrize("nb", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
+def test_notebook_opens_with_the_project_kernel(nb):
+    """A chapter names the kernel that `make install` registers, so JupyterLab, nbval and the book build run it
+    with the interpreter and environment of .venv."""
+    spec = json.loads(nb.read_text(encoding="utf-8"))["metadata"]["kernelspec"]
+    assert (spec["name"], spec["display_name"], spec["language"]) == ("rfmap", "Python (rfmap)", "python")
+
+
+@pytest.mark.parametrize("nb", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
 def test_notebook_is_committed_without_outputs(nb):
     """Notebooks are committed without outputs or execution counts: the book and nbval execute them."""
     data = json.loads(nb.read_text(encoding="utf-8"))
-    assert data["metadata"]["kernelspec"]["name"] == "python3"
     for i, cell in enumerate(data["cells"]):
         if cell["cell_type"] != "code":
             continue
@@ -199,6 +213,108 @@ def test_notebook_cells_have_unique_ids(nb):
     bad = [c for c in ids if not re.fullmatch(r"[A-Za-z0-9_-]{1,64}", c)]
     assert not bad, f"{nb.name}: invalid cell ids {bad}"
     assert len(set(ids)) == len(ids), f"{nb.name}: duplicate cell ids"
+
+
+def test_reproduce_page_gives_the_nbval_command_of_make_test():
+    """`make test` runs the notebooks with nbval through the project's kernel (not the test process's interpreter),
+    from notebooks/; the reproduction page shows the same command."""
+    make = (ROOT / "Makefile").read_text(encoding="utf-8")
+    kernel = re.search(r"^KERNEL := (\S+)$", make, re.M).group(1)
+    flags = re.search(r"^NBVAL_FLAGS := (.+)$", make, re.M).group(1).replace("$(KERNEL)", kernel)
+    assert kernel == "rfmap" and "--nbval-lax" in flags and "--nbval-current-env" not in flags
+    assert re.search(r"^\tcd notebooks && .*RFMAP_SCALE=ci \S*pytest \$\(NBVAL_FLAGS\) \.$", make, re.M)
+    assert f"pytest {flags} ." in (ROOT / "book" / "reproduce.md").read_text(encoding="utf-8")
+
+
+# ----------------------------------------------------------------------------------------------- saved figures
+@pytest.mark.parametrize("nb", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
+def test_every_saved_figure_is_shown_with_its_caption(nb):
+    """Every figure a chapter saves is shown where it is made, alone in its cell's output, as a named figure whose
+    caption names its counterpart in the paper (scripts/book_check.py checks the built page the same way)."""
+    problems = _book_check().figure_source_problems(nb)
+    assert not problems, "\n".join(problems)
+
+
+def test_paper_figure_numbers_follow_the_paper():
+    """The captions' "Fig. n" count the paper's figures in the order of figures.json, which is the paper's."""
+    assert [it["label"] for it in _items()] == PAPER_LABELS
+    numbers = _book_check().paper_figure_numbers(ROOT)
+    assert list(numbers) == [label for label in PAPER_LABELS if label.startswith("fig:")]
+    assert numbers["fig:illustration"] == 1 and numbers["fig:3d_resolution_test"] == 13
+
+
+def test_figure_file_names_are_those_of_save_figure(tmp_path, monkeypatch):
+    plt = pytest.importorskip("matplotlib.pyplot")
+    from rfmap.viz import save_figure
+
+    monkeypatch.setenv("RFMAP_FIGURES", str(tmp_path))
+    fig = plt.figure(figsize=(1, 1))
+    try:
+        path = save_figure(fig, "fig:a_b-c")
+    finally:
+        plt.close(fig)
+    assert path == tmp_path / (_book_check().figure_stem("fig:a_b-c") + ".png") and path.exists()
+
+
+def _notebook(tmp_path: Path, *cells) -> Path:
+    """A notebook of code cells given as (source, figure metadata or None)."""
+    nb = {"cells": [{"cell_type": "code", "id": f"c{i}", "metadata": {"mystnb": {"figure": meta}} if meta else {},
+                     "execution_count": None, "outputs": [], "source": src} for i, (src, meta) in enumerate(cells)],
+          "metadata": {}, "nbformat": 4, "nbformat_minor": 5}
+    path = tmp_path / "chapter.ipynb"
+    path.write_text(json.dumps(nb), encoding="utf-8")
+    return path
+
+
+def test_the_figure_check_reads_the_source(tmp_path):
+    check = _book_check()
+    ok = {"name": "fig-bc-sample", "caption": "Reproduces Fig. 2 of the paper: circles."}
+    beyond = {"name": "fig-extra", "caption": "Beyond the paper: a picture."}
+    good = _notebook(tmp_path, ('with style():\n    save_figure(fig, "fig:bc_sample")\n    plt.show()', ok),
+                     ('if x:\n    save_figure(fig, "fig:extra")\n    plt.show()', beyond), ("print(1)", None))
+    assert check.figure_source_problems(good) == []
+    assert [(f.stem, f.conditional) for f in check.saved_figures(good)] == [("fig-bc-sample", False),
+                                                                            ("fig-extra", True)]
+    cases = {
+        "not show": ('save_figure(fig, "fig:bc_sample")', ok),
+        "displays more": ('save_figure(fig, "fig:bc_sample")\nplt.show()\ndisplay(table)', ok),
+        "ends in an expression": ('save_figure(fig, "fig:bc_sample")\nplt.show()\nMarkdown(t)', ok),
+        "saves 2 figures": ('save_figure(f, "fig:bc_sample")\nsave_figure(g, "fig:extra")\nplt.show()', ok),
+        "name must be": ('save_figure(fig, "fig:bc_sample")\nplt.show()', {**ok, "name": "other"}),
+        "Reproduces Fig. 2": ('save_figure(fig, "fig:bc_sample")\nplt.show()', beyond),
+        "Beyond the paper": ('save_figure(fig, "fig:extra")\nplt.show()', ok),
+        "savefig": ('fig.savefig("x.png")\nplt.show()', None),
+        "computed label": ('save_figure(fig, f"fig:{name}")\nplt.show()', None),
+        "saves no figure": ("plt.show()", ok),
+    }
+    for why, cell in cases.items():
+        problems = check.figure_source_problems(_notebook(tmp_path, cell))
+        assert any(why in p for p in problems), (why, problems)
+
+
+def test_the_figure_check_reads_the_built_page(tmp_path):
+    check = _book_check()
+    numbers = {"fig:bc_sample": 2}
+    saved = [check.SavedFigure("fig:bc_sample", 3, "c06", False), check.SavedFigure("fig:extra", 5, "c08", True)]
+    page = tmp_path / "chapter.html"
+
+    def problems(body):
+        page.write_text(f"<html><article>{body}</article></html>", encoding="utf-8")
+        return check.page_figure_problems(page, saved, numbers, tmp_path)
+
+    def figure(stem, caption, img='<img alt="" src="../_images/a.png" />'):
+        return (f'<figure class="align-default" id="{stem}"><div class="cell_output">{img}</div><figcaption><p>'
+                f'<span class="caption-number">Fig. 1 </span><span class="caption-text">{caption}</span></p>'
+                "</figcaption></figure>")
+
+    shown = figure("fig-bc-sample", "Reproduces Fig. 2 of the <em>paper</em>: circles")
+    assert problems(shown) == []  # fig:extra is conditional and its file is absent: not saved in this build
+    (tmp_path / "fig-extra.png").write_bytes(b"")
+    assert problems(shown) == ["figure fig-extra.png, saved by cell 5 (c08), is not on the page"]
+    assert problems(shown + figure("fig-extra", "Beyond the paper: x")) == []
+    assert "without an image" in problems(figure("fig-bc-sample", "Reproduces Fig. 2 of the paper", img=""))[0]
+    assert "without a caption" in problems(figure("fig-bc-sample", "Reproduces Fig. 3 of the paper"))[0]
+    assert "is not on the page" in problems('<img src="../_images/a.png">')[0]
 
 
 # ----------------------------------------------------------------------------------------------- self-containment

@@ -68,16 +68,19 @@ def load_study(name: str) -> dict:
 
 
 def study_table(study: dict):
-    """One row per run: steps and minutes trained, the best and the last validation score, the step of the best,
-    and the families at the best (a :class:`pandas.DataFrame`)."""
+    """One row per run: steps and minutes trained, the score at step 0 (where validated), the best score of the
+    run's own states (after step 0) and its step, the last score, and the families at the best (a
+    :class:`pandas.DataFrame`)."""
     import pandas as pd
 
     rows = []
     for label, r in study["runs"].items():
         if not r["score"]:
             continue
-        i = min(range(len(r["score"])), key=r["score"].__getitem__)
-        rows.append({"run": label, "steps": r["total_steps"], "minutes": r["total_time"] / 60.0,
+        own = [i for i, st in enumerate(r["step"]) if st > 0] or list(range(len(r["score"])))
+        i = min(own, key=r["score"].__getitem__)
+        start = {"score at step 0": r["score"][0]} if r["step"][0] == 0 else {}
+        rows.append({"run": label, "steps": r["total_steps"], "minutes": r["total_time"] / 60.0, **start,
                      "best score": r["score"][i], "at step": r["step"][i], "last score": r["score"][-1],
                      **{f"{k} (best)": v for k, v in r["families"][i].items()},
                      "folded (best)": r["folded_fields"][i]})
@@ -85,15 +88,21 @@ def study_table(study: dict):
 
 
 def study_values(study: dict) -> dict:
-    """The numbers a page quotes from a study: per run (its position ``i`` in the study) ``run{i}_best``,
-    ``run{i}_last``, ``run{i}_steps`` and ``run{i}_minutes``, ``run{i}_label``; ``winner`` (the label of the run with
-    the lowest best score), ``loser``, ``margin`` (the loser's best score over the winner's) and ``minutes``."""
+    """The numbers a page quotes from a study: per run (its position ``i`` in the study) ``run{i}_best`` (the best
+    score of the run's own states, after step 0), ``run{i}_last``, ``run{i}_steps`` and ``run{i}_minutes``,
+    ``run{i}_label``; ``start`` (the score at step 0, where validated: the weights a continued run started from);
+    ``winner`` (the label of the run with the lowest best score), ``loser``, ``margin`` (the loser's best score over
+    the winner's) and ``minutes``."""
     out: dict = {}
     best = {}
     for i, (label, r) in enumerate(study["runs"].items()):
-        out.update({f"run{i}_label": label, f"run{i}_best": min(r["score"]), f"run{i}_last": r["score"][-1],
+        # a run's own states: not the weights it started from (validated at step 0 when it continues others)
+        own = [v for st, v in zip(r["step"], r["score"]) if st > 0] or r["score"]
+        out.update({f"run{i}_label": label, f"run{i}_best": min(own), f"run{i}_last": r["score"][-1],
                     f"run{i}_steps": r["total_steps"], f"run{i}_minutes": r["total_time"] / 60.0})
-        best[label] = min(r["score"])
+        if r["step"] and r["step"][0] == 0:
+            out["start"] = r["score"][0]
+        best[label] = min(own)
     order = sorted(best, key=best.get)
     out.update(winner=order[0], loser=order[-1], margin=best[order[-1]] / best[order[0]],
                minutes=max(r["total_time"] for r in study["runs"].values()) / 60.0)
@@ -201,7 +210,7 @@ def map_gap(sur, n: int, count: int = 4, stream: str = "report"):
 
     from .inputs import preprocess_density
     from .mesh import grid_points
-    from .surrogate import quiet_quality
+    from .finish import quiet_quality
     from .teacher import teacher_map
     from .validation import validation_fields
 
