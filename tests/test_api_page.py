@@ -14,7 +14,11 @@ MODULES = ["rfmap", "rfmap.surrogate", "rfmap.pretrained", "rfmap.result", "rfma
            "rfmap.device", "rfmap.nn", "rfmap.mesh", "rfmap.geometry", "rfmap.experiments", "rfmap.viz", "rfmap.cartogram",
            "rfmap.training", "rfmap.folds", "rfmap.shorten", "rfmap.regions", "rfmap.paper.tables",
            "rfmap.paper.reproduce", "rfmap.paper.generalization", "rfmap.paper.recipes", "rfmap.paper.benchmarks",
-           "rfmap.paper.flow_studies"]
+           "rfmap.paper.flow_studies", "rfmap.finish", "rfmap.finish.report", "rfmap.finish.draft",
+           "rfmap.finish.stages", "rfmap.finish.query", "rfmap.finish.quality", "rfmap.finish.pipeline",
+           "rfmap.viz.figures", "rfmap.viz.meshes", "rfmap.viz.volumes", "rfmap.viz.architecture",
+           "rfmap.viz.training", "rfmap.viz.cartograms", "rfmap.viz.studies", "rfmap.teacher", "rfmap.selection",
+           "rfmap.studies"]
 DIRECTIVE = re.compile(r"^\.\. (auto\w+):: (\S+)\n((?:[ \t]+:[^\n]*\n)*)", re.M)
 
 
