@@ -489,7 +489,7 @@ def test_map_warns_in_one_line_when_the_map_undoes_equalization(tmp_path, capsys
 
 
 def test_map_of_query_points_warns_in_one_line_when_shortened(tmp_path, capsys, tiny_model):
-    """Query points are judged on the working grid (rfmap.surrogate.Surrogate._shorten_query); the CLI's line
+    """Query points are judged on the working grid (rfmap.finish.query.shorten_query); the CLI's line
     then names the grid-only remedy as such."""
     from rfmap.mesh import grid_points
 

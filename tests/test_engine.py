@@ -216,7 +216,7 @@ def test_checkpoint_choice_ships_the_best_validated_state(tmp_path):
     cfg = CFG.with_overrides(steps=12, val_every=3, lr=3e-2)
     sur = T.train(cfg, tmp_path, progress=False)
     recs = [json.loads(x) for x in (tmp_path / "log.jsonl").read_text().splitlines()]
-    vals = [r for r in recs if "validation" in r and not r.get("final")]
+    vals = [r for r in recs if "validation" in r and not r.get("final") and not r.get("last")]
     final = [r for r in recs if r.get("final")][0]
     assert len(vals) == 3
     best = min(score(r["validation"]["mean"]) for r in vals)

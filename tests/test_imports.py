@@ -39,13 +39,17 @@ LAYERS: dict[str, int] = {
     "rfmap.tasks": 2, "rfmap.config": 2, "rfmap.train": 2, "rfmap.training": 2,
     "rfmap.training.data": 2, "rfmap.training.averaging": 2, "rfmap.training.state": 2, "rfmap.training.loop": 2,
     "rfmap.training.cli": 2, "rfmap.refine": 2, "rfmap.surrogate": 2,
+    "rfmap.finish": 2, "rfmap.finish.report": 2, "rfmap.finish.draft": 2, "rfmap.finish.quality": 2,
+    "rfmap.finish.query": 2, "rfmap.finish.stages": 2, "rfmap.finish.pipeline": 2,
     "rfmap.pretrained": 2, "rfmap.repair": 2, "rfmap.repair.dispatch": 2,
     "rfmap.repair.lbs": 2, "rfmap.repair.local": 2, "rfmap.repair.scale": 2, "rfmap.repair.embedding": 2,
     "rfmap.shorten": 2, "rfmap.validation": 2, "rfmap.teacher": 2, "rfmap.selection": 2, "rfmap.hybrid": 2, "rfmap.stress": 2,
     # the paper layer, the applications and plotting, then the command line and the package's front door
-    "rfmap.viz": 3, "rfmap.experiments": 3, "rfmap.paper": 3, "rfmap.paper.tables": 3, "rfmap.paper.reproduce": 3,
+    "rfmap.viz": 3, "rfmap.viz.figures": 3, "rfmap.viz.meshes": 3, "rfmap.viz.volumes": 3, "rfmap.viz.architecture": 3,
+    "rfmap.viz.training": 3, "rfmap.viz.cartograms": 3, "rfmap.viz.studies": 3,
+    "rfmap.experiments": 3, "rfmap.paper": 3, "rfmap.paper.tables": 3, "rfmap.paper.reproduce": 3,
     "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,
-    "rfmap.paper.flow_studies": 3, "rfmap.cartogram": 3, "rfmap.regions": 3, "rfmap.compare": 3, "rfmap.studies": 3,
+    "rfmap.paper.flow_studies": 3, "rfmap.cartogram": 3, "rfmap.regions": 3, "rfmap.projection": 3, "rfmap.compare": 3, "rfmap.studies": 3,
     "rfmap.cli": 4, "rfmap": 4,
 }
 

@@ -583,9 +583,9 @@ def test_query_points_are_shortened_as_their_working_grid_map():
 
 def test_query_shortening_falls_back_to_the_query_mesh(monkeypatch):
     """When the working grid's scale would fold the query mesh, the scale is chosen on the query mesh itself."""
-    import rfmap.surrogate as surmod
+    import rfmap.finish.query as query
 
-    monkeypatch.setattr(surmod, "fold_free", lambda *a, **k: False)  # pretend the working grid's scale folds
+    monkeypatch.setattr(query, "fold_free", lambda *a, **k: False)  # pretend the working grid's scale folds
     with pytest.warns(S.PoorMapWarning):
         q = tiny(head_seed=6).map(bump, 21, points=grid_points(21, 2)[::3], work_n=21)
     rep = q.info["shorten"]

@@ -4,10 +4,11 @@ A contiguous cartogram redraws every region :math:`i` of a map with an area prop
 (population, votes) while keeping neighbours adjacent.  The diffusion cartogram of Gastner & Newman (2004) is the
 density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area) of the region under each point:
 
-1. **Planar frame.**  Longitude/latitude are projected by the equirectangular projection centred on the map,
-   :math:`(x, y) = (\lambda \cos\varphi_0, \varphi)` (areas then agree with the sphere's to
-   :math:`O(\Delta\varphi^2)` across a city or a country), and the map's bounding box is fitted into the unit square
-   leaving a ``margin`` on every side (:class:`PlanarFrame`).
+1. **Planar frame.**  Longitude/latitude are projected to a plane where areas are the Earth's: the Lambert azimuthal
+   equal-area projection centred on the map, or Equal Earth for a world map (:mod:`rfmap.projection`; a map that
+   crosses the antimeridian is centred there).  Long edges are first split along their straight lines in
+   longitude/latitude, so that they bend as the projection bends them.  The map's bounding box is fitted into the
+   unit square leaving a ``margin`` on every side (:class:`PlanarFrame`).
 2. **Density raster.**  Each vertex of the ``N``-grid gets the mean density over its grid cell, measured by
    ``supersample``:sup:`2` point-in-polygon tests per cell (``shapely.contains_xy``).  Outside every region lies
    the sea at the mean density :math:`\sum_i v_i / \sum_i a_i`, as cartogram tools do, so that the land keeps its
@@ -25,12 +26,15 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    area error is below ``tol`` (flow-based cartogram programs stop at 1 %, the default).
 5. **Output.**  Edges longer than a grid cell are first split (``shapely.segmentize``) so that they bend with the
    map; every vertex is mapped, shared borders stay shared, and the polygons are returned in the input's
-   coordinates (the inverse of the planar frame) as a GeoJSON FeatureCollection with the input's properties.
+   coordinates (the inverse of the planar frame), or in the projection's plane (``output="projected"``), as a
+   GeoJSON FeatureCollection with the input's properties.  Its ``"rfmap"`` member says whether the cartogram is
+   within tolerance and valid (:meth:`Cartogram.problems`).
 
 Metrics of the cartogram literature (:func:`cartogram_metrics`): the relative area error
 :math:`|A_i / T_i - 1|` with the target :math:`T_i = (v_i / \sum_j v_j) \sum_j A_j`, its mean and maximum over
 the regions, and a topology check: every mapped polygon is valid and no two regions overlap by more than
-``overlap_tol`` of the total area.
+``overlap_tol`` of the total area.  :meth:`Cartogram.metrics` measures them in an equal-area plane (the frame's, or
+for an equirectangular frame the equal-area projection of the same map).
 
 References
 ----------
@@ -53,8 +57,9 @@ import numpy as np
 import torch
 
 from .mesh import check_grid_memory, check_n, interpolate
-from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, PlanarFrame, _listify, _shapely, _transform, density_grid, \
-    montreal_election, read_regions
+from .projection import PlanarFrame
+from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _feature_name, _listify, _shapely, density_grid, \
+    montreal_election, read_regions, world_countries
 from .solvers import ALIASES
 
 __all__ = [
@@ -70,16 +75,20 @@ __all__ = [
     "compare_cartograms",
     "cartogram_table",
     "montreal_election",
+    "world_countries",
     "MONTREAL_CANDIDATES",
     "DIFFUSION_SETTINGS",
     "DEM_SETTINGS",
     "FLOW_SETTINGS",
     "HYBRID_POLISH",
     "ZERO_FLOOR",
+    "OUTPUTS",
 ]
 
 #: Methods of :func:`cartogram` (``"dem"`` is accepted as another name of ``"diffusion"``, as by the solvers).
 CARTOGRAM_METHODS = ("diffusion", "flow", "surrogate", "hybrid")
+#: The coordinates of :func:`cartogram`'s output: the input's, or the projection's plane.
+OUTPUTS = ("input", "projected")
 
 
 # ----------------------------------------------------------------------------------------------- maps
@@ -122,7 +131,7 @@ def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
         if method == "flow":
             return solve_dem(density, method="flow", boundary="square", **{**FLOW_SETTINGS, **solver_kw})
         return solve_dem(density, boundary="square", **{**DIFFUSION_SETTINGS, **solver_kw})
-    from .surrogate import quiet_quality
+    from .finish import quiet_quality
 
     # the raster's Std(rho~) counts the sea and every region's edge; the cartogram judges a pass by its area errors
     with quiet_quality():
@@ -167,7 +176,8 @@ class Cartogram:
     Attributes
     ----------
     features : list of dict
-        The mapped features, in the input's coordinates, with the input's properties and ids.
+        The mapped features, in the input's coordinates (or the projection's plane: ``output``), with the input's
+        properties and ids.
     regions, mapped : ndarray of shapely geometries, shape (R,)
         The regions before and after mapping, in the unit-square frame.
     values : ndarray, shape (R,)
@@ -183,8 +193,12 @@ class Cartogram:
     map_time : float
         Seconds in the map computations themselves (solver or surrogate) over all iterations.
     info : dict
-        ``iterations``, ``kept`` (the pass whose polygons are returned), ``max_error`` per pass, per-iteration
-        ``results`` (:class:`rfmap.result.MapResult`), ``sea`` density.
+        ``iterations``, ``kept`` (the pass whose polygons are returned), ``max_error`` per pass (in the frame's
+        plane), per-iteration ``results`` (:class:`rfmap.result.MapResult`), ``sea`` density.
+    output : {"input", "projected"}
+        The coordinates of ``features``.
+    tol : float
+        The tolerance on the largest relative area error that :meth:`problems` checks.
     """
 
     features: list
@@ -198,6 +212,9 @@ class Cartogram:
     time: float
     map_time: float
     info: dict = field(default_factory=dict)
+    output: str = "input"
+    tol: float = 0.01
+    _metrics: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     @property
     def areas(self) -> np.ndarray:
@@ -212,16 +229,54 @@ class Cartogram:
 
     @property
     def area_errors(self) -> np.ndarray:
-        r"""Relative area errors :math:`|A_i / T_i - 1|`, shape (R,)."""
-        return np.abs(self.areas / self.target_areas - 1.0)
+        r"""Relative area errors :math:`|A_i / T_i - 1|` in the equal-area plane (as :meth:`metrics`), shape (R,)."""
+        a = _shapely().area(self.frame.equal_area(self.mapped))
+        return np.abs(a / (self.values / self.values.sum() * a.sum()) - 1.0)
 
     def metrics(self, *, overlap_tol: float = 1e-6) -> CartogramMetrics:
-        """Area errors and topology (:func:`cartogram_metrics`)."""
-        return cartogram_metrics(self.mapped, self.values, overlap_tol=overlap_tol)
+        """Area errors and topology (:func:`cartogram_metrics`) in the equal-area plane
+        (:meth:`PlanarFrame.equal_area`: the frame itself unless it is equirectangular)."""
+        if overlap_tol not in self._metrics:
+            self._metrics[overlap_tol] = cartogram_metrics(self.frame.equal_area(self.mapped), self.values,
+                                                           overlap_tol=overlap_tol)
+        return self._metrics[overlap_tol]
+
+    def problems(self, *, overlap_tol: float = 1e-6) -> list[str]:
+        """What keeps the cartogram from being right, one sentence each (empty when it is): a largest area error
+        above :attr:`tol` (:meth:`metrics`), invalid regions, overlapping regions, and, for output in the input's
+        coordinates, regions moved where no longitude/latitude lies (:meth:`PlanarFrame.beyond_domain`)."""
+        m = self.metrics(overlap_tol=overlap_tol)
+        out = []
+        if not m.max_error <= self.tol:
+            out.append(f"the largest area error {m.max_error:.4f} is above the tolerance {self.tol:g} after "
+                       f"{self.info['iterations']} pass(es)")
+        if m.n_invalid:
+            bad = np.flatnonzero(~_shapely().is_valid(self.frame.equal_area(self.mapped)))
+            names = ", ".join(_feature_name(self.features[i], int(i)) for i in bad[:10])
+            out.append(f"{m.n_invalid} invalid region(s): {names}{', ...' if bad.size > 10 else ''}")
+        if m.n_overlapping:
+            out.append(f"{m.n_overlapping} pair(s) of regions overlap (the largest by {m.max_overlap:.2g} of the "
+                       f"total area)")
+        if self.output == "input":
+            far = np.flatnonzero(self.frame.beyond_domain(self.mapped))
+            if far.size:
+                names = ", ".join(_feature_name(self.features[i], int(i)) for i in far[:10])
+                out.append(f"{far.size} region(s) moved beyond the projection's domain, where no longitude/latitude "
+                           f"lies (past a pole or the map's edge): {names}{', ...' if far.size > 10 else ''}; in the "
+                           f"input's coordinates they are drawn at its edge (the projected output keeps them)")
+        return out
 
     def to_geojson(self) -> dict:
-        """The mapped FeatureCollection (input coordinates)."""
-        return {"type": "FeatureCollection", "features": self.features}
+        """The mapped FeatureCollection (in the ``output`` coordinates), with a foreign member ``"rfmap"``:
+        ``status`` (``"ok"``, or ``"failed"`` with the ``problems`` of :meth:`problems`), the largest area error,
+        the passes, the method, ``N``, the ``coordinates`` (:data:`OUTPUTS`) and the PROJ definition of the
+        ``projection``'s plane (``None`` for planar input)."""
+        problems = self.problems()
+        status = {"status": "failed" if problems else "ok", "problems": problems,
+                  "max_error": self.metrics().max_error, "passes": self.info.get("iterations"),
+                  "method": self.method, "n": self.n, "coordinates": self.output,
+                  "projection": self.frame.projection.definition}
+        return {"type": "FeatureCollection", "features": self.features, "rfmap": status}
 
     def save(self, path) -> None:
         """Write the mapped FeatureCollection as GeoJSON, atomically."""
@@ -238,11 +293,15 @@ class Cartogram:
 
     def input_geometries(self) -> np.ndarray:
         """The input regions in the input's coordinates."""
-        return _transform(self.regions, self.frame.inverse)
+        return self.frame.unproject(self.regions)
 
     def output_geometries(self) -> np.ndarray:
         """The mapped regions in the input's coordinates."""
-        return _transform(self.mapped, self.frame.inverse)
+        return self.frame.unproject(self.mapped)
+
+    def projected_geometries(self, *, mapped: bool = True) -> np.ndarray:
+        """The mapped (or, with ``mapped=False``, the input) regions in the projection's plane."""
+        return self.frame.planar(self.mapped if mapped else self.regions)
 
 
 def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: float = 1e-6,
@@ -292,8 +351,8 @@ def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: fl
 # ----------------------------------------------------------------------------------------------- pipeline
 def cartogram(collection, value: str, *, method: str = "diffusion", n: int = 256, tol: float = 0.01,
               max_iterations: int = 10, iterations: int | None = None, margin: float = 0.1,
-              projection: str = "auto", supersample: int = 4, model: str | None = None, surrogate=None,
-              floor: float = ZERO_FLOOR, solver_kw: dict | None = None) -> Cartogram:
+              projection: str = "auto", output: str = "input", supersample: int = 4, model: str | None = None,
+              surrogate=None, floor: float = ZERO_FLOOR, solver_kw: dict | None = None) -> Cartogram:
     r"""Diffusion cartogram of GeoJSON regions sized by one value each (see the module docstring).
 
     Parameters
@@ -317,8 +376,13 @@ def cartogram(collection, value: str, *, method: str = "diffusion", n: int = 256
         A fixed number of passes instead (``tol`` and ``max_iterations`` are then ignored).
     margin : float
         Sea around the map: the map's bounding box is fitted into :math:`[\mathrm{margin}, 1-\mathrm{margin}]^2`.
-    projection : {"auto", "equirectangular", "none"}
-        See :class:`PlanarFrame`.
+    projection : {"auto", "equal-area", "equirectangular", "none"}
+        The plane the cartogram is computed in (:class:`PlanarFrame`, :mod:`rfmap.projection`): ``"auto"`` is
+        ``"equal-area"`` for longitude/latitude input (Lambert azimuthal equal-area centred on the map, Equal Earth
+        for a map wider than 180° of longitude) and ``"none"`` (the coordinates as they are) for planar input.
+    output : {"input", "projected"}
+        The coordinates of the returned features: the input's (the projection inverted), or the projection's plane
+        (metres for the equal-area projections; its PROJ definition is in :meth:`Cartogram.to_geojson`).
     supersample : int
         Point-in-polygon samples per grid cell side (:func:`density_grid`).
     model : str, optional
@@ -340,8 +404,10 @@ def cartogram(collection, value: str, *, method: str = "diffusion", n: int = 256
     Raises
     ------
     ValueError
-        For bad input (one line: see :func:`read_regions`), an unknown method, a surrogate that does not map 2D
-        densities of the square.
+        For bad input (one line: see :func:`read_regions`), an unknown method, projection or output, a surrogate
+        that does not map 2D densities of the square.
+    ImportError
+        For longitude/latitude input in an equal-area projection without pyproj.
     """
     shapely = _shapely()
     method = ALIASES.get(method, method)
@@ -355,21 +421,24 @@ def cartogram(collection, value: str, *, method: str = "diffusion", n: int = 256
         raise ValueError(f"{'iterations' if fixed else 'max_iterations'} must be a positive integer, got {passes!r}")
     if not (isinstance(tol, numbers.Real) and tol >= 0):
         raise ValueError(f"tol must be a number >= 0, got {tol!r}")
+    if output not in OUTPUTS:
+        raise ValueError(f"unknown output {output!r}; choose one of {', '.join(OUTPUTS)}")
     features, geoms, values, floored = read_regions(collection, value, floor=floor)
     if method not in ("diffusion", "flow"):
         surrogate = _square_surrogate(surrogate, model)
 
     t0 = time.perf_counter()
-    frame = PlanarFrame.fit(shapely.get_coordinates(geoms), margin=margin, projection=projection)
-    # edges longer than a grid cell are split, so that they bend with the map (and a border that one neighbour
-    # draws with more vertices than the other still matches it)
-    regions = shapely.segmentize(_transform(geoms, frame.forward), 1.0 / (n - 1))
+    frame = PlanarFrame.fit(geoms, margin=margin, projection=projection)
+    # edges longer than a grid cell are split, so that they bend with the projection and the map (and a border that
+    # one neighbour draws with more vertices than the other still matches it)
+    regions = frame.project(geoms, 1.0 / (n - 1))
     mapped, info, map_time = _passes(regions, values, lambda dens: _grid_map(method, dens, surrogate, solver_kw or {}),
                                      n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol)
     elapsed = time.perf_counter() - t0
-    return Cartogram(features=_mapped_features(features, mapped, frame), regions=regions, mapped=mapped,
-                     values=values, floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time,
-                     info=info)
+    out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
+    return Cartogram(features=_mapped_features(features, out), regions=regions, mapped=mapped, values=values,
+                     floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time, info=info,
+                     output=output, tol=float(tol))
 
 
 def _square_surrogate(surrogate, model: str | None):
@@ -419,12 +488,12 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
                     "sea": sea}, map_time
 
 
-def _mapped_features(features: list, mapped: np.ndarray, frame: PlanarFrame) -> list:
-    """The input features with the mapped polygons (input coordinates) as their geometries."""
+def _mapped_features(features: list, mapped: np.ndarray) -> list:
+    """The input features with the mapped polygons (in the output's coordinates) as their geometries."""
     from shapely.geometry import mapping as to_geojson
 
     out = []
-    for feat, g in zip(features, _transform(mapped, frame.inverse)):
+    for feat, g in zip(features, mapped):
         f = {k: v for k, v in feat.items() if k not in ("geometry", "bbox")}
         f.update(type="Feature", geometry=_listify(to_geojson(g)), properties=dict(feat.get("properties") or {}))
         out.append(f)
@@ -457,7 +526,7 @@ def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogat
     which would otherwise be charged to whichever run comes first.
     """
     if surrogate is not None:
-        from .surrogate import quiet_quality
+        from .finish import quiet_quality
 
         with quiet_quality():  # a uniform density: any movement at all leaves it "less equal"
             surrogate.map(np.ones((surrogate.n_range[0],) * 2), preprocess=False)

@@ -3,8 +3,9 @@
 Subcommands: ``solve`` (classical solvers), ``metrics``, ``map`` (neural surrogates), ``train`` (its parser is
 :mod:`rfmap.training.cli`), ``models``, ``reproduce`` (the paper's tables), ``validate`` (score saved weights on the
 validation stream), ``cartogram`` (GeoJSON regions resized by a value).  Errors in the input print one line and exit
-with status 2; no partial output file is left behind.  A solver's other name (``--method dem`` for ``diffusion``,
-:data:`rfmap.solvers.ALIASES`) is accepted wherever a method is named.
+with status 2; no partial output file is left behind.  A cartogram that misses its tolerance or has an invalid or
+overlapping region is written, flagged, and exits with status 1.  A solver's other name (``--method dem`` for
+``diffusion``, :data:`rfmap.solvers.ALIASES`) is accepted wherever a method is named.
 """
 from __future__ import annotations
 
@@ -132,9 +133,9 @@ def cmd_models(args) -> int:
 
 
 def cmd_map(args) -> int:
-    from .surrogate import Surrogate, models, quiet_quality
-
     from .device import resolve_device
+    from .finish import poor_map_message, quiet_quality
+    from .surrogate import Surrogate, models
 
     device = resolve_device(args.device)  # before any work: an unavailable device is bad input
     sur = Surrogate.pretrained(args.model, device=device) if args.model in models() else \
@@ -162,11 +163,8 @@ def cmd_map(args) -> int:
     if "regrid" in res.info:
         print(regrid_summary(res.info["regrid"]))
     print(repair_summary(res.info.get("repair")))
-    if res.info.get("quality", {}).get("worse") or "shorten" in res.info:
-        from .surrogate import quality_message
-
-        quality = res.info["quality"] if "quality" in res.info else res.info["shorten"]["quality"]  # query points
-        msg = quality_message(quality, "--refine", "--polish", res.info.get("shorten"), grid_only=points is not None)
+    msg = poor_map_message(res.info.report, "--refine", "--polish")
+    if msg is not None:
         print(f"rfmap map: warning: {msg}", file=sys.stderr)
     if "polish" in res.info:
         p = res.info["polish"]
@@ -181,7 +179,8 @@ def cmd_map(args) -> int:
 
 
 def regrid_summary(report: dict) -> str:
-    """One line saying which coarser working grids a folded 3D map was tried on (``rfmap.surrogate.REGRID_DIMS``)."""
+    """One line saying which coarser working grids a folded 3D map was tried on (``rfmap.surrogate.REGRID_DIMS``,
+    :class:`rfmap.finish.RegridReport`)."""
     tried = ", ".join(str(w) for w in report["tried"])
     if report["work_n"] is None:
         return (f"working grid: {report['from']} folded, and so did {tried}; the {report['from']}-grid map is "
@@ -234,11 +233,23 @@ def cmd_validate(args) -> int:
 
 
 def cmd_cartogram(args) -> int:
+    """Exit 0 for a cartogram within tolerance with valid, disjoint regions; 1 for one that is not (written all the
+    same, its ``"rfmap"`` status ``"failed"``: :meth:`rfmap.cartogram.Cartogram.problems`); 2 for bad input."""
     from .cartogram import cartogram
 
     if args.png and not args.png.lower().endswith(".png"):
         raise CLIError(f"--png must name a .png file, got {args.png!r}")
-    carto = cartogram(args.input, args.value, method=args.method, n=args.n, tol=args.tol, model=args.model)
+    if args.max_passes < 1:
+        raise CLIError(f"--max-passes must be at least 1, got {args.max_passes}")
+    folder = os.path.dirname(os.path.abspath(args.out))
+    if not os.path.isdir(folder):
+        raise CLIError(f"cannot write {args.out}: no folder {folder}")
+    try:
+        carto = cartogram(args.input, args.value, method=args.method, n=args.n, tol=args.tol, model=args.model,
+                          max_iterations=args.max_passes, projection=args.projection,
+                          output="projected" if args.projected else "input")
+    except ImportError as e:  # pyproj (or plotly) missing: a setup problem, told in one line
+        raise CLIError(str(e)) from e
     carto.save(args.out)
     if args.png:
         import matplotlib
@@ -252,7 +263,10 @@ def cmd_cartogram(args) -> int:
           f"{carto.info['iterations']} pass(es), {carto.time:.2f} s; {carto.metrics()}")
     if names:
         print(f"zero values floored in {len(names)} region(s): {', '.join(map(str, names))}")
-    return 0
+    problems = carto.problems()
+    for p in problems:
+        print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
+    return 1 if problems else 0
 
 
 def cmd_reproduce(args) -> int:
@@ -351,8 +365,15 @@ def _add_map(sub) -> None:
 def _add_paper_and_cartogram(sub) -> None:
     """``rfmap cartogram`` and ``rfmap reproduce``."""
     from .cartogram import CARTOGRAM_METHODS
+    from .projection import PROJECTIONS
 
-    s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)")
+    s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)",
+                       description="Resize GeoJSON regions by a value. Longitude/latitude are projected to an "
+                                   "equal-area plane first (Lambert azimuthal equal-area centred on the map; Equal "
+                                   "Earth for a map wider than 180 degrees of longitude). Exit status 0: within "
+                                   "tolerance, every region valid and no overlaps; 1: not so (the GeoJSON is written "
+                                   "all the same, its \"rfmap\" member's status \"failed\", and each problem is "
+                                   "printed); 2: bad input (one line, nothing written).")
     s.add_argument("input", help="GeoJSON FeatureCollection of Polygon / MultiPolygon features")
     s.add_argument("--value", required=True, help="the feature property holding each region's value")
     s.add_argument("--method", choices=CARTOGRAM_METHODS, type=_solver_name, default="diffusion",
@@ -361,6 +382,12 @@ def _add_paper_and_cartogram(sub) -> None:
     s.add_argument("--n", type=int, default=256, help="grid side N of the density raster (default 256)")
     s.add_argument("--tol", type=float, default=0.01,
                    help="repeat passes until the largest relative area error is at most this (default 0.01)")
+    s.add_argument("--max-passes", type=int, default=10, help="at most this many passes (default 10)")
+    s.add_argument("--projection", choices=PROJECTIONS, default="auto",
+                   help="the plane of the cartogram: auto (default: equal-area for longitude/latitude, none for "
+                        "planar coordinates), equal-area, equirectangular or none")
+    s.add_argument("--projected", action="store_true",
+                   help="write the cartogram in the projection's plane (metres) instead of the input's coordinates")
     s.add_argument("--model", default=None, help="surrogate for --method surrogate/hybrid (default deq2d-square)")
     s.add_argument("--out", required=True, help="output GeoJSON")
     s.add_argument("--png", default=None, help="also draw the input and the cartogram side by side (.png)")

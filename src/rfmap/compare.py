@@ -22,7 +22,7 @@ from .mesh import jittered_points
 from .paper.generalization import generalization_table
 from .paper.tables import Table
 from .paper_fields import PAPER_N, TEST_FIELDS
-from .surrogate import quiet_quality
+from .finish import quiet_quality
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
            "generalization_tables", "inference_table", "race", "wins"]

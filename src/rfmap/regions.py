@@ -1,9 +1,10 @@
-r"""GeoJSON regions in the unit square: reading and checking them, the planar frame, and their density raster.
+r"""GeoJSON regions in the unit square: reading and checking them, their density raster, and real maps to try.
 
 The input stage of a cartogram (:mod:`rfmap.cartogram`): a FeatureCollection of Polygon / MultiPolygon features with
-a value per region (:func:`read_regions`), fitted into the unit square by an equirectangular projection
-(:class:`PlanarFrame`), and rasterised to the vertex densities of the ``N``-grid with the sea at the mean density
-(:func:`density_grid`).  :func:`montreal_election` is a real map to try it on.
+a value per region (:func:`read_regions`), fitted into the unit square by an equal-area projection
+(:class:`rfmap.projection.PlanarFrame`), and rasterised to the vertex densities of the ``N``-grid with the sea at the
+mean density (:func:`density_grid`).  :func:`montreal_election` (a city) and :func:`world_countries` (the world) are
+real maps to try it on.
 """
 from __future__ import annotations
 
@@ -11,13 +12,15 @@ import json
 import math
 import numbers
 import os
-from dataclasses import dataclass
+from importlib import resources
 
 import numpy as np
 
 from .mesh import check_n
+from .projection import PlanarFrame
 
-__all__ = ["read_regions", "PlanarFrame", "density_grid", "montreal_election", "MONTREAL_CANDIDATES", "ZERO_FLOOR"]
+__all__ = ["read_regions", "PlanarFrame", "density_grid", "montreal_election", "MONTREAL_CANDIDATES", "ZERO_FLOOR",
+           "world_countries"]
 
 
 #: The candidates of the 2013 Montreal mayoral election (vote counts per district in :func:`montreal_election`).
@@ -48,6 +51,9 @@ def _load_collection(collection) -> dict:
                     text = fh.read()
             except OSError as e:
                 raise ValueError(f"cannot read {os.fspath(collection)}: {e.strerror or e}") from e
+            except UnicodeDecodeError as e:
+                raise ValueError(f"cannot read {os.fspath(collection)}: not UTF-8 text ({e.reason} at byte "
+                                 f"{e.start})") from e
         try:
             return json.loads(text)
         except json.JSONDecodeError as e:
@@ -132,55 +138,13 @@ def read_regions(collection, value: str, *, floor: float = ZERO_FLOOR):
 
 
 def _feature_name(feat, k: int) -> str:
-    """``#k`` and, where the feature has one, its id."""
+    """``#k`` and, where the feature has one, its id (else its ``name`` property)."""
     fid = feat.get("id") if isinstance(feat, dict) else None
-    return f"#{k}" + (f" (id {fid})" if fid is not None else "")
-
-
-@dataclass(frozen=True)
-class PlanarFrame:
-    r"""The input coordinates to the unit square and back: :math:`u = s\,(P(x) - c) + (\tfrac12, \tfrac12)`.
-
-    ``P`` is the equirectangular projection :math:`(\lambda\cos\varphi_0, \varphi)` for longitude/latitude input
-    (``cos_lat`` :math:`= \cos\varphi_0`), the identity for planar input (``cos_lat = 1``); ``c`` is the centre of
-    the projected bounding box and ``s`` fits its longer side into :math:`1 - 2\,\mathrm{margin}`.
-    """
-
-    cos_lat: float
-    center: tuple[float, float]
-    scale: float
-
-    @classmethod
-    def fit(cls, coords: np.ndarray, *, margin: float, projection: str = "auto") -> "PlanarFrame":
-        """The frame of points ``coords`` (P, 2); ``projection`` is ``"auto"`` (equirectangular when every point
-        is a longitude/latitude pair), ``"equirectangular"`` or ``"none"``."""
-        if projection not in ("auto", "equirectangular", "none"):
-            raise ValueError(f"unknown projection {projection!r}; choose auto, equirectangular or none")
-        if not 0 <= margin < 0.5:
-            raise ValueError(f"margin must be in [0, 0.5), got {margin!r}")
-        lonlat = bool((np.abs(coords[:, 0]) <= 180).all() and (np.abs(coords[:, 1]) <= 90).all())
-        geographic = projection == "equirectangular" or (projection == "auto" and lonlat)
-        cos_lat = math.cos(math.radians(0.5 * (coords[:, 1].min() + coords[:, 1].max()))) if geographic else 1.0
-        p = coords * np.array([cos_lat, 1.0])
-        lo, hi = p.min(0), p.max(0)
-        side = float((hi - lo).max())
-        if side <= 0:
-            raise ValueError("the regions have no extent")
-        return cls(cos_lat, tuple(0.5 * (lo + hi)), (1.0 - 2.0 * margin) / side)
-
-    def forward(self, coords: np.ndarray) -> np.ndarray:
-        """Input coordinates (P, 2) to the unit square."""
-        return (coords * np.array([self.cos_lat, 1.0]) - np.array(self.center)) * self.scale + 0.5
-
-    def inverse(self, u: np.ndarray) -> np.ndarray:
-        """Unit-square points (P, 2) to input coordinates."""
-        return ((u - 0.5) / self.scale + np.array(self.center)) / np.array([self.cos_lat, 1.0])
-
-
-def _transform(geoms: np.ndarray, fn) -> np.ndarray:
-    """Apply ``fn`` (P, 2) -> (P, 2) to every vertex of every geometry at once."""
-    shapely = _shapely()
-    return shapely.transform(geoms, fn)
+    if fid is not None:
+        return f"#{k} (id {fid})"
+    props = feat.get("properties") if isinstance(feat, dict) else None
+    name = props.get("name") if isinstance(props, dict) else None
+    return f"#{k}" + (f" ({name})" if isinstance(name, str) else "")
 
 
 def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: int = 4) -> tuple[np.ndarray, float]:
@@ -259,3 +223,17 @@ def montreal_election() -> dict:
                  **{k: int(r[k]) for k in (*MONTREAL_CANDIDATES, "total")}}
         feats.append({"type": "Feature", "id": f.get("id"), "properties": props, "geometry": f["geometry"]})
     return {"type": "FeatureCollection", "features": feats}
+
+
+def world_countries() -> dict:
+    """The countries of the world as a FeatureCollection: 177 features with the properties ``name``, ``iso_a3``,
+    ``continent`` and ``pop_est`` (estimated population), as multi-part countries and islands are drawn at the 1:110m
+    scale.
+
+    Natural Earth's 1:110m Admin 0 countries (public domain, https://www.naturalearthdata.com), from the
+    ``naturalearth_lowres`` data set that geopandas 0.14.4 shipped; ``scripts/make_world_geojson.py`` converted it to
+    the package's ``data/naturalearth_lowres.geojson`` (coordinates rounded to 4 decimals).  Longitude/latitude on
+    WGS84; the countries that cross the antimeridian (Russia, Fiji) are split there.
+    """
+    text = resources.files("rfmap").joinpath("data", "naturalearth_lowres.geojson").read_text(encoding="utf-8")
+    return json.loads(text)

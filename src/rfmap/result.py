@@ -48,8 +48,9 @@ class MapResult:
         ``'density'`` or ``'beltrami'``.
     time : float
         Seconds spent computing the map.
-    info : dict
-        Method-specific extras (iterations, ...).
+    info : dict or Mapping
+        Method-specific extras (iterations, ...); for a map finished by the stages of :mod:`rfmap.finish` (every
+        map of :meth:`rfmap.Surrogate.map`), a read-only view of their report (:class:`rfmap.finish.InfoView`).
     """
 
     ref_points: np.ndarray

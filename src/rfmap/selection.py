@@ -13,7 +13,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from .surrogate import Surrogate, quiet_quality
+from .finish import quiet_quality
+from .surrogate import Surrogate
 from .validation import evaluate, family_table, score
 
 __all__ = ["Scored", "weight_files", "score_weights", "ship_best", "scores_table"]

@@ -23,7 +23,7 @@ import math
 import numpy as np
 
 from .mesh import grid_points
-from .surrogate import quiet_quality
+from .finish import quiet_quality
 
 __all__ = ["hard_density", "hard_beltrami", "first_folding", "self_crossing_map"]
 

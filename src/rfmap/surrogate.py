@@ -7,17 +7,17 @@ steps, wall time and final validation metrics.
 Inference (paper Secs. 4.1–4.3): the input field is sampled on a working grid whose side lies in the range the
 model was trained on, encoded as :math:`[x, p(x)]`, and mapped to a displacement :math:`\psi` on that grid;
 :math:`\psi` is interpolated (bi/trilinearly) to the requested points :math:`x_q`, which may form any grid or an
-unstructured cloud, and :math:`u(x_q) = x_q + \mathcal{B}(x_q) \odot (\alpha \odot \psi(x_q))`.
+unstructured cloud, and :math:`u(x_q) = x_q + \mathcal{B}(x_q) \odot (\alpha \odot \psi(x_q))`.  That is the
+prediction; :meth:`Surrogate.map` then finishes the map with the stages of :mod:`rfmap.finish` (regrid, refine,
+repair, polish, judge, shorten), which also report what they did (``MapResult.info``).
 """
 from __future__ import annotations
 
-import contextlib
 import json
-import math
 import os
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -26,25 +26,22 @@ import torch
 
 from ._version import __version__
 from .inputs import check_density, check_mu, preprocess_density, unit_mass
-from .metrics import density_std
-from .mesh import check_n, element_centroids, element_measures, grid_mesh, grid_points, grid_vertex_weights, interpolate, \
-    triangulate, vertex_weights
+from .mesh import check_n, element_centroids, grid_mesh, grid_points, grid_vertex_weights, interpolate, triangulate, \
+    vertex_weights
 from .device import resolve_device
-from .geometry import grid_element_mean, grid_signed_measures
+from .finish import Draft, FinishOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
+    poor_map_message, refine, regrid
+from .finish.quality import QUALITY_MARGIN, PoorMapWarning, density_quality, quality_message, quiet_quality
 from .hybrid import GUARD
 from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
-from .refine import REFINE, RefineResult, beltrami_objective, density_objective, refine_alpha
-from .repair import fold_free, repair_map
-from .shorten import shorten_map
 from .result import MapResult
-from .solvers.flow import F32_MARGIN
 from .symmetry import resolve_symmetry, symmetrized_displacement
 from .tasks import TaskSpec, encode
 
-__all__ = ["Surrogate", "models", "PoorMapWarning", "QUALITY_MARGIN", "quiet_quality", "density_quality",
-           "quality_message", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
+__all__ = ["Surrogate", "MapOptions", "models", "PoorMapWarning", "QUALITY_MARGIN", "quiet_quality",
+           "density_quality", "quality_message", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
 
 #: Dimensions in which a folded network map of a grid (with ``repair``, the default working grid and no query points)
 #: is first evaluated again on coarser working grids, :data:`REGRID_STEP` sides apart down to the bottom of the
@@ -81,85 +78,25 @@ class _Input:
     preprocess: bool = True
 
 
-#: :func:`density_quality` calls a map worse than the input when its Std(rho~_map) exceeds Std(rho~_orig) by more
-#: than this fraction (far above the single-precision measures' error, so that the identity never counts as worse)
-QUALITY_MARGIN = 1e-4
+@dataclass(frozen=True)
+class MapOptions:
+    """The keywords of :meth:`Surrogate.map` and :meth:`Surrogate.map_batch` after the field and the output (each
+    documented there): how the network is evaluated, and how its map is finished (:meth:`finishing`)."""
 
+    refine: bool = False
+    work_n: int | None = None
+    alpha: Sequence[float] | None = None
+    preprocess: bool = True
+    refine_bounds: tuple[float, float] | None = None
+    repair: bool = True
+    polish: bool | float = False
+    guard: bool = GUARD
+    symmetrize: bool | str = False
 
-class PoorMapWarning(RuntimeWarning):
-    """A density map that left the density less equal than it was (:func:`density_quality`); issued by
-    :meth:`Surrogate.map` with the measured numbers and the remedies."""
-
-
-@contextlib.contextmanager
-def quiet_quality():
-    """Silence :class:`PoorMapWarning` inside the block: for code that maps many fields and reports their metrics
-    itself (tables, validation)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", PoorMapWarning)
-        yield
-
-
-def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str, Any]:
-    r"""Whether a density map of the ``N``-grid left the density more equal than it was.
-
-    :math:`\mathrm{Std}(\tilde\rho)` of the element densities (population over measure, normalised to mean 1; as
-    :func:`rfmap.metrics.compute_metrics`) on the reference and on the mapped grid, and the smallest Jacobian
-    determinant (mapped over reference measure).
-
-    Parameters
-    ----------
-    mapped : ndarray, shape (N**d, d)
-        The images of the grid's vertices (:func:`rfmap.mesh.grid_points` order); every reference element has
-        the same measure, so the reference vertices themselves are not needed.
-    density : ndarray, shape (N**d,)
-        Vertex densities.
-    n : int
-        Grid side.
-
-    Returns
-    -------
-    dict
-        ``std_rho_orig``, ``std_rho_map``, ``min_jacobian`` and ``worse``: whether Std(rho~_map) exceeds
-        Std(rho~_orig) by more than the fraction :data:`QUALITY_MARGIN` and 1e-5 (or the map is not finite), i.e.
-        the map undid more than it did.
-    """
-    d = mapped.shape[1]
-    if not np.isfinite(mapped).all():
-        return {"std_rho_orig": float("nan"), "std_rho_map": float("nan"), "min_jacobian": float("nan"),
-                "worse": True}
-    # every element of the N-grid has the same reference measure; the mapped measures in single precision (a quarter
-    # of the time at 3D N = 48) unless an element is too thin for it (as rfmap.solvers.flow.F32_MARGIN)
-    ref_measure = 1.0 / ((n - 1) ** d * math.factorial(d))
-    meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(mapped, dtype=np.float32))[None], n)[0].double()
-    if float(meas.min()) <= F32_MARGIN * ref_measure:
-        meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(mapped, dtype=np.float64))[None], n)[0]
-    mean = grid_element_mean(torch.as_tensor(np.asarray(density, dtype=np.float64)).reshape(1, -1), n, d)[0]
-    orig = float((mean / mean.mean()).std())  # density_std with equal measures
-    new = density_std(mean * ref_measure, meas)
-    return {"std_rho_orig": orig, "std_rho_map": new, "min_jacobian": float(meas.min()) / ref_measure,
-            "worse": bool(not new <= orig * (1.0 + QUALITY_MARGIN) + 1e-5)}  # float32 round-off: ~1e-6
-
-
-def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish: str = "polish=True",
-                    shorten: dict[str, Any] | None = None, *, grid_only: bool = False) -> str:
-    """One line for a density map that left the density less equal than it was (:func:`density_quality`);
-    ``refine`` and ``polish`` name the two remedies (the API's keywords by default, the CLI's flags there), and
-    ``grid_only`` says that the second one maps a grid only (a map at query points).  With ``shorten`` (the report
-    of :func:`rfmap.repair.shorten_map`) the line says that the map was shortened and what it reaches now."""
-    finish = "the flow-based finish, on a grid only" if grid_only else "the flow-based finish"
-    if shorten is not None:
-        before = shorten["std_before"]
-        return (f"the network's map left this density less equal than it was (Std(rho~_map) "
-                f"{'folded' if not math.isfinite(before) else format(before, '.3g')} >= Std(rho~_orig) "
-                f"{quality['std_rho_orig']:.3g}); its displacement was shortened to {shorten['scale']:.3g} of "
-                f"itself (Std(rho~_map) {quality['std_rho_map']:.3g}, smallest Jacobian "
-                f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
-                f"refinement) or {polish} ({finish}) can help")
-    return (f"the network's map leaves this density less equal than it was (Std(rho~_map) "
-            f"{quality['std_rho_map']:.3g} > Std(rho~_orig) {quality['std_rho_orig']:.3g}, smallest Jacobian "
-            f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
-            f"refinement) or {polish} ({finish}) can help")
+    def finishing(self) -> FinishOptions:
+        """The options of the stages after the prediction (:func:`rfmap.finish.finish`); refinement is not among
+        them, since the network's map is refined as it is predicted (every working grid tried is)."""
+        return FinishOptions(repair=self.repair, polish=self.polish, guard=self.guard)
 
 
 def _embedded_meta(path: Path) -> dict | None:
@@ -354,20 +291,20 @@ class Surrogate:
             lin = griddata(pts, vals, g, method="linear")
             near = griddata(pts, vals, g, method="nearest")
             lin = np.where(np.isnan(lin), near, lin)
-            return self._finish(lin.reshape((n,) * d), None, preprocess), n
+            return self._checked(lin.reshape((n,) * d), None, preprocess), n
         if callable(field):
             fn = field.mu if isinstance(field, BeltramiMap) else field
             n = check_n(n or PAPER_N[d])
             vals = np.asarray(fn(grid_points(n, d)))
-            return self._finish(vals.reshape((n,) * d), fn, preprocess), n
+            return self._checked(vals.reshape((n,) * d), fn, preprocess), n
         arr = np.asarray(field)
         if arr.ndim != d or len(set(arr.shape)) != 1:
             raise ValueError(f"a {d}D model needs a field sampled on an N^{d} grid, got an array of shape "
                              f"{arr.shape}")
         check_n(arr.shape[0])
-        return self._finish(arr, None, preprocess), int(n or arr.shape[0])
+        return self._checked(arr, None, preprocess), int(n or arr.shape[0])
 
-    def _finish(self, grid: np.ndarray, fn, preprocess: bool) -> _Input:
+    def _checked(self, grid: np.ndarray, fn, preprocess: bool) -> _Input:
         if self.spec.kind == "density":
             if np.iscomplexobj(grid):
                 raise ValueError("a density model needs a real density field, got complex values")
@@ -389,7 +326,7 @@ class Surrogate:
         d = self.spec.dim
         if inp.fn is not None:  # sample the field itself on the working grid rather than resampling samples
             vals = np.asarray(inp.fn(grid_points(n_work, d))).reshape((n_work,) * d)
-            return self._finish(vals, inp.fn, inp.preprocess).grid
+            return self._checked(vals, inp.fn, inp.preprocess).grid
         src = torch.as_tensor(np.stack([g.real, g.imag]) if np.iscomplexobj(g) else g[None])[None]
         out = interpolate(src.double(), torch.as_tensor(grid_points(n_work, d)))[0].numpy()
         if np.iscomplexobj(g):
@@ -472,15 +409,15 @@ class Surrogate:
             most equal fold-free map between the identity and itself (:func:`rfmap.repair.shorten_map`;
             ``info["shorten"]``), so the delivered map never leaves the density less equal than it was.  A density
             map of query ``points`` is shortened by the scale its working grid's map would be shortened by (the
-            judgement is made there; ``Surrogate._shorten_query``), so that grid and points deliver one map.
-            ``False`` returns the raw network map.
+            judgement is made there; :func:`rfmap.finish.query.shorten_query`), so that grid and points deliver one
+            map.  ``False`` returns the raw network map.
         polish : bool or float
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
-            (``rfmap.hybrid.polish_map``), started from the map of the network's displacement smoothed on the
-            working grid (``rfmap.hybrid.smooth_displacement``, ``rfmap.hybrid.smooth_passes`` passes, edges per
-            ``rfmap.hybrid.SMOOTH_EDGES``, and on a finer output grid ``rfmap.hybrid.OUTPUT_PASSES`` more passes
-            there; all recorded in ``info["polish"]``) where that is fold-free; a number is
-            the tolerance on Std(rho~_map).  ``time`` then covers both stages.  A folded
+            (:func:`rfmap.finish.polish`, :func:`rfmap.hybrid.polish_map`), started from the map of the network's
+            displacement smoothed on the working grid (``rfmap.hybrid.smooth_displacement``,
+            ``rfmap.hybrid.smooth_passes`` passes, edges per ``rfmap.hybrid.SMOOTH_EDGES``, and on a finer output
+            grid ``rfmap.hybrid.OUTPUT_PASSES`` more passes there; all recorded in ``info["polish"]``) where that is
+            fold-free; a number is the tolerance on Std(rho~_map).  ``time`` then covers both stages.  A folded
             network map is not repaired first (``info["repair"]["skipped"]``): the polish then starts cold from the
             identity, and the repair would be thrown away.
         guard : bool
@@ -494,157 +431,93 @@ class Surrogate:
         Returns
         -------
         MapResult
-            ``info`` holds ``alpha``, ``work_n`` (the working grid of the returned map), with refinement the
-            objective before/after, when coarser working grids were tried ``info["regrid"]`` (``from``, ``tried``,
-            ``work_n``: the grid taken or ``None``, ``time``), with ``repair`` the report ``info["repair"]`` (see
-            :func:`rfmap.repair.repair_map`), and with ``polish`` the report
-            ``info["polish"]`` (warm or cold start and both stages' times and metrics).  A density map of the output
-            grid without ``polish`` also carries ``info["quality"]`` (:func:`density_quality`), and when it leaves
-            the density less equal than it was (a field unlike the training fields), or had to be shortened not to,
-            a :class:`PoorMapWarning` names the numbers and the remedies (``refine``, ``polish``;
-            :func:`quiet_quality` silences it).
+            ``info`` is a read-only view (:class:`rfmap.finish.InfoView`) of the typed report of the stages
+            (:class:`rfmap.finish.MapReport`, ``info.report``).  It holds ``alpha``, ``work_n`` (the working grid
+            of the returned map), ``network_time``, ``symmetrize``, with refinement the objective before/after, when
+            coarser working grids were tried ``info["regrid"]`` (``from``, ``tried``, ``work_n``: the grid taken or
+            ``None``, ``time``), with ``repair`` the report ``info["repair"]`` (see :func:`rfmap.repair.repair_map`),
+            and with ``polish`` the report ``info["polish"]`` (warm or cold start and both stages' times and
+            metrics).  A density map of the output grid without ``polish`` also carries ``info["quality"]``
+            (:func:`density_quality`), and when it leaves the density less equal than it was (a field unlike the
+            training fields), or had to be shortened not to, a :class:`PoorMapWarning` names the numbers and the
+            remedies (``refine``, ``polish``; :func:`quiet_quality` silences it).
         """
+        opts = MapOptions(refine=refine, work_n=work_n, alpha=alpha, preprocess=preprocess,
+                          refine_bounds=refine_bounds, repair=repair, polish=polish, guard=guard, symmetrize=symmetrize)
         group = self._symmetry(symmetrize)
         inp, n = self._resolve(field, n, preprocess)
-        return self._map_one(inp, n, points, refine, work_n, alpha, refine_bounds, repair=repair, polish=polish,
-                             guard=guard, regrid=work_n is None, symmetrize=group)
+        return self._map_one(inp, n, points, opts, group)
 
-    def map_batch(self, fields: Sequence, n: int | None = None, **kw) -> list[MapResult]:
-        """Map several fields with one batched network evaluation (same ``n`` for all)."""
-        group = self._symmetry(kw.get("symmetrize", False))
-        inps = [self._resolve(f, n, kw.get("preprocess", True)) for f in fields]
+    def map_batch(self, fields: Sequence, n: int | None = None, points=None, **kw) -> list[MapResult]:
+        """Map several fields with one batched network evaluation (same ``n`` for all); ``kw``: the keywords of
+        :meth:`map` (:class:`MapOptions`)."""
+        opts = MapOptions(**kw)
+        group = self._symmetry(opts.symmetrize)
+        inps = [self._resolve(f, n, opts.preprocess) for f in fields]
         ns = {k for _, k in inps}
         if len(ns) != 1:
             raise ValueError(f"map_batch needs one output size, got {sorted(ns)}")
-        nn_ = ns.pop()
-        nw = kw.get("work_n") or self.work_n(nn_)
+        n_out = ns.pop()
+        nw = opts.work_n or self.work_n(n_out)
         t0 = time.perf_counter()
         grids = np.stack([self._work_grid(i, nw) for i, _ in inps])
         psi = self.displacement(grids, group) if group else self.displacement(grids)
         dt = (time.perf_counter() - t0) / len(inps)
-        return [self._map_one(i, nn_, kw.get("points"), kw.get("refine", False), nw, kw.get("alpha"),
-                              kw.get("refine_bounds"), psi=psi[k:k + 1], net_time=dt,
-                              repair=kw.get("repair", True), polish=kw.get("polish", False),
-                              guard=kw.get("guard", GUARD), regrid=kw.get("work_n") is None, symmetrize=group)
+        return [self._map_one(i, n_out, points, opts, group, (psi[k:k + 1], grids[k], dt))
                 for k, (i, _) in enumerate(inps)]
 
-    def _map_one(self, inp: _Input, n: int, points, refine, work_n, alpha, bounds, psi=None, net_time=None,
-                 repair: bool = True, polish: bool | float = False, guard: bool = GUARD, regrid: bool = False,
-                 symmetrize: str | None = None):
-        """Evaluate the network on the working grid (unless ``psi`` is given), resample its displacement and the
-        input field on the output mesh, apply the stretching vector (refined or given), repair folds, and polish."""
-        if polish is not False:
-            from .hybrid import polish_tolerance
-
-            tol = polish_tolerance(polish)
-            if self.spec.kind != "density" or points is not None:
-                raise ValueError("polish finishes density maps on the output grid; it does not apply to "
-                                 f"{self.spec.kind} maps or to query points")
-        nw = int(work_n or self.work_n(n))
+    def _map_one(self, inp: _Input, n: int, points, opts: MapOptions, group: str | None, given=None) -> MapResult:
+        """Predict, then finish: the network's map of the output mesh (:meth:`_predict`, refined when asked), tried
+        on coarser working grids when it folds (:func:`rfmap.finish.regrid`, :data:`REGRID_DIMS`), then the stages
+        of :func:`rfmap.finish.finish`; a :class:`PoorMapWarning` when the delivered density map is poor.
+        ``given``: the network's output on the default working grid from a batched evaluation (:meth:`_predict`)."""
+        stages = opts.finishing()
+        if stages.polish is not False and (self.spec.kind != "density" or points is not None):
+            raise ValueError("polish finishes density maps on the output grid; it does not apply to "
+                             f"{self.spec.kind} maps or to query points")
+        nw = int(opts.work_n or self.work_n(n))
         if nw < self.model.min_size:
             raise ValueError(f"working grid N={nw} is smaller than this model accepts ({self.model.min_size})")
         ref, elements = self._output_mesh(n, points)
-        ref64 = torch.as_tensor(ref, dtype=torch.float64)
-        fvals = self._field_on(inp, ref, elements, n if points is None else None)
+        grid_n = n if points is None else None
+        mesh = MapResult(ref_points=ref, mapped_points=ref, elements=elements, kind=self.spec.kind,
+                         field=self._field_on(inp, ref, elements, grid_n))
 
-        def network_map(w: int, psi_w):
-            """The network's map of the output mesh from working grid ``w`` (refined or with the given alpha)."""
-            t0 = time.perf_counter()
-            if psi_w is None:
-                grid = self._work_grid(inp, w)[None]
-                psi_w = self.displacement(grid, symmetrize) if symmetrize else self.displacement(grid)
-            t_net = time.perf_counter() - t0 if (net_time is None or w != nw) else net_time
-            t1 = time.perf_counter()
-            psi64_w = self._displacement_at(psi_w, ref, n if points is None and n == w else None)
-            extra: dict[str, Any] = {}
-            a_w = np.ones(self.spec.dim) if alpha is None else np.asarray(alpha, dtype=np.float64)
-            if refine:
-                rr = self._refine(ref64, psi64_w, torch.as_tensor(elements), fvals, n if points is None else None,
-                                  bounds)
-                a_w = rr.alpha
-                extra = dict(refine_objective_start=rr.objective_start, refine_objective=rr.objective,
-                             refine_evaluations=rr.evaluations)
-            mapped_w = apply_displacement(ref64, psi64_w, self.spec.boundary,
-                                          torch.as_tensor(a_w) if (refine or alpha is not None) else None).numpy()
-            return psi_w, mapped_w, a_w, extra, t_net, t_net + time.perf_counter() - t1
+        def predict(w: int, given=None) -> Draft:
+            draft = self._predict(inp, mesh, grid_n, w, opts.alpha, group, given)
+            return refine(draft, opts.refine_bounds) if opts.refine else draft
 
-        psi, mapped, a, extra, t_net, t_map = network_map(nw, psi)
-        info: dict[str, Any] = {"work_n": nw, "network_time": t_net, "symmetrize": symmetrize}
-        if (repair and regrid and polish is False and self.spec.dim in REGRID_DIMS and points is None
-                and self._flipped(mapped, n)):
-            # a folded map: try the network on coarser working grids before any repair (REGRID_DIMS)
-            tried, t5 = [], time.perf_counter()
-            for w in self._regrid_sides(nw):
-                cand = network_map(w, None)
-                tried.append(w)
-                if not self._flipped(cand[1], n) and self._improves(ref, cand[1], elements, fvals):
-                    psi, mapped, a, extra = cand[:4]
-                    info.update(work_n=w, network_time=info["network_time"] + cand[4])
-                    break
-            t_map += time.perf_counter() - t5
-            info["regrid"] = {"from": nw, "tried": tried, "work_n": info["work_n"] if info["work_n"] != nw else None,
-                              "time": time.perf_counter() - t5}
-            nw = info["work_n"]
-        info.update(extra)
-        info["alpha"] = a.tolist()
-        if repair:
-            t3 = time.perf_counter()
-            folded = self._flipped(mapped, n) if polish is not False else 0
-            if folded:
-                # the polish starts cold from the identity on a folded network map (rfmap.hybrid.polish_map), so
-                # a repair, which can cost more than the whole flow, would be thrown away
-                cheap = {"n_flipped": folded}
-                info["repair"] = {"needed": True, "skipped": True, "method": "skipped (the polish starts cold)",
-                                  "n_flipped_before": folded, "n_flipped_after": folded, "affected": 0,
-                                  "time": time.perf_counter() - t3, "metrics_before": cheap,
-                                  "metrics_after": dict(cheap)}
-            else:
-                work = self._working_grid_map(psi, a) if points is not None else None
-                mapped, info["repair"] = self._repair(ref, mapped, elements, fvals, n if points is None else None,
-                                                      work)
-            t_map += time.perf_counter() - t3
-        if polish is not False:
-            from .hybrid import (OUTPUT_PASSES, SMOOTH_EDGES, polish_map, smooth_displacement,
-                                 smooth_grid_displacement, smooth_passes)
+        draft = predict(nw, given)
+        if stages.repair and opts.work_n is None and stages.polish is False and self.spec.dim in REGRID_DIMS:
+            draft = regrid(draft, predict, self._regrid_sides(nw))
+        draft = finish(draft, stages)
+        message = poor_map_message(draft.report)
+        if message is not None:
+            warnings.warn(message, PoorMapWarning, stacklevel=3)
+        return draft.deliver()
 
-            t4 = time.perf_counter()  # the flow starts from the map of the smoothed displacement (rfmap.hybrid)
-            passes = smooth_passes(self.spec.dim, n, nw, self.spec.boundary)
-            edges = SMOOTH_EDGES[self.spec.boundary]
-            psi_s = self._displacement_at(smooth_displacement(psi, passes, edges), ref, n if n == nw else None)
-            out_passes = 0 if n == nw else OUTPUT_PASSES  # the resampling's kinks, smoothed on the output grid
-            if out_passes:
-                psi_s = smooth_grid_displacement(psi_s, n, out_passes, edges)
-            start = apply_displacement(ref64, psi_s, self.spec.boundary, torch.as_tensor(a)).numpy()
-            t_map += time.perf_counter() - t4
-            mapped, info["polish"] = polish_map(ref, mapped, elements, fvals, n=n, boundary=self.spec.boundary,
-                                                tol=tol, stage_time=t_map, start=start, guard=guard)
-            info["polish"].update(smooth_passes=passes, smooth_edges=edges, output_passes=out_passes)
-            t_map += info["polish"]["time"]
-        if self.spec.kind == "density" and points is not None and repair and polish is False:
-            # query points: shortened as the working grid's map would be, so that the delivered map is one map
-            t6 = time.perf_counter()
-            mapped, short, q = self._shorten_query(inp, work, ref, mapped, elements, fvals)
-            t_map += time.perf_counter() - t6
-            if short is not None:
-                info["shorten"] = short
-                warnings.warn(quality_message(q, shorten=short, grid_only=True), PoorMapWarning,
-                              stacklevel=3)
-        if self.spec.kind == "density" and points is None and polish is False:
-            t6 = time.perf_counter()
-            info["quality"] = density_quality(mapped, fvals, n)
-            q = info["quality"]
-            if repair and not q["std_rho_map"] < q["std_rho_orig"]:
-                # less equal than no map at all: the most equal fold-free shortened map (never worse than the
-                # identity; rfmap.repair.shorten_map)
-                mapped, info["shorten"] = shorten_map(ref, mapped, fvals, n, boundary=self.spec.boundary)
-                info["quality"] = density_quality(mapped, fvals, n)
-                info["quality"]["shortened_from"] = q["std_rho_map"]
-            t_map += time.perf_counter() - t6
-            if info["quality"]["worse"] or "shorten" in info:
-                warnings.warn(quality_message(info["quality"], shorten=info.get("shorten")), PoorMapWarning,
-                              stacklevel=3)
-        return MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals,
-                         kind=self.spec.kind, time=t_map, info=info)
+    def _predict(self, inp: _Input, mesh: MapResult, grid_n: int | None, w: int, alpha, group: str | None,
+                 given=None) -> Draft:
+        r"""The network's map of the output ``mesh`` from working grid ``w``: :math:`\psi` on the working grid,
+        resampled at the output vertices (read off when the output is that grid, ``grid_n``), and
+        :math:`u = x + \mathcal{B}(x) \odot (\alpha \odot \psi(x))` with the given ``alpha`` (ones by default).
+        ``given``: ``(psi, input on the working grid, seconds)`` of a batched evaluation, instead of evaluating."""
+        t0 = time.perf_counter()
+        if given is None:
+            grid = self._work_grid(inp, w)
+            psi = self.displacement(grid[None], group) if group else self.displacement(grid[None])
+            t_net = time.perf_counter() - t0
+        else:
+            psi, grid, t_net = given
+        t1 = time.perf_counter()
+        ref = mesh.ref_points
+        psi_out = displacement_at(psi, ref, grid_n if grid_n == w else None)
+        a = np.ones(self.spec.dim) if alpha is None else np.asarray(alpha, dtype=np.float64)
+        mapped = apply_displacement(torch.as_tensor(ref, dtype=torch.float64), psi_out, self.spec.boundary,
+                                    None if alpha is None else torch.as_tensor(a)).numpy()
+        result = replace(mesh, mapped_points=mapped, time=t_net + time.perf_counter() - t1)
+        report = MapReport(network=NetworkReport(w, t_net, group), alpha=a.tolist())
+        return Draft(result, report, self.spec.boundary, grid_n, Prediction(psi, psi_out, grid))
 
     def _regrid_sides(self, nw: int) -> list[int]:
         """The coarser working grids tried on a folded map: ``nw - REGRID_STEP``, ``nw - 2 REGRID_STEP``, ...
@@ -654,86 +527,6 @@ class Surrogate:
         if nw > lo and (not sides or sides[-1] != lo):
             sides.append(lo)
         return sides
-
-    def _improves(self, ref, mapped, elements, fvals) -> bool:
-        """Whether a fold-free map is more equal than the input: Std(rho~_map) < Std(rho~_orig) for a density map
-        (always true for other tasks)."""
-        if self.spec.kind != "density":
-            return True
-        m = MapResult(ref_points=ref, mapped_points=mapped, elements=elements, field=fvals, kind="density",
-                      time=0.0).metrics()
-        return bool(m.std_rho_map < m.std_rho_orig)
-
-    def _flipped(self, mapped: np.ndarray, n: int) -> int:
-        """Number of elements of the output ``N``-grid map with non-positive measure (NaN counts as folded)."""
-        if not np.isfinite(mapped).all():
-            return int(mapped.shape[0])
-        meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(mapped))[None], n)[0]
-        return int((meas <= 0).sum())
-
-    def _working_grid_map(self, psi, alpha) -> tuple[int, np.ndarray, np.ndarray, dict]:
-        """The map of the working grid (the grid of ``psi``, with the stretching vector ``alpha``) made fold-free by
-        :func:`rfmap.repair.repair_map`: ``(side, grid points, repaired map, repair report)``; what a map of query
-        points is interpolated from and judged on."""
-        nw, d = psi.shape[-1], self.spec.dim
-        grid = grid_points(nw, d)
-        u = apply_displacement(torch.as_tensor(grid), self._displacement_at(psi, grid, nw), self.spec.boundary,
-                               torch.as_tensor(alpha)).numpy()
-        u_rep, report = repair_map(grid, u, grid_mesh(nw, d).elements, boundary=self.spec.boundary, grid_n=nw)
-        return nw, grid, u_rep, report
-
-    def _repair(self, ref, mapped, elements, fvals, grid_n, work) -> tuple[np.ndarray, dict]:
-        """:func:`rfmap.repair.repair_map` of the output map; at query points, the working-grid map is repaired
-        first (``work``, :meth:`_working_grid_map`) and its displacement interpolated, then any fold left on the
-        query mesh is repaired there."""
-        kw = {"boundary": self.spec.boundary, "density": fvals if self.spec.kind == "density" else None,
-              "mu": fvals if self.spec.kind == "beltrami" else None}
-        if grid_n is not None:
-            return repair_map(ref, mapped, elements, grid_n=grid_n, **kw)
-        nw, grid, u_rep, grid_report = work
-        d = self.spec.dim
-        n_raw = int((element_measures(mapped, elements) <= 0).sum())
-        if grid_report["needed"]:
-            disp = torch.as_tensor((u_rep - grid).T.reshape(1, d, *([nw] * d)))
-            mapped = ref + interpolate(disp, torch.as_tensor(ref))[0].numpy()
-        out, report = repair_map(ref, mapped, elements, **kw)
-        report.update(needed=report["needed"] or grid_report["needed"], n_flipped_before=n_raw, grid=grid_report)
-        if grid_report["needed"] and report["method"] == "none":
-            report["method"] = "grid " + grid_report["method"]
-        return out, report
-
-    def _shorten_query(self, inp: _Input, work, ref, mapped, elements, fvals):
-        r"""Shorten a density map of query points as its working grid's map would be shortened.
-
-        The delivered map of an output grid is shortened (:func:`rfmap.repair.shorten_map`) when it leaves the
-        density no more equal than it was.  Query points have no grid to judge on, so the judgement is made on the
-        working grid: its repaired map ``work`` (:meth:`_working_grid_map`) and the input density sampled there.
-        When that map is shortened to :math:`u_s = x + s\,(u - x)`, the query map is shortened by the same
-        :math:`s` — the two are then one map, evaluated at different points — unless that folds an element of the
-        query mesh; then the scale is chosen on the query mesh itself (``report["query_mesh"]``).
-
-        Returns
-        -------
-        (mapped, report or None, quality)
-            ``report`` is that of :func:`rfmap.repair.shorten_map` with ``decided_on``, ``work_n``,
-            ``query_mesh`` and ``quality`` (:func:`density_quality` of the working grid's delivered map, with
-            ``shortened_from``), which is also returned.
-        """
-        nw, grid, u, _ = work
-        dens = self._work_grid(inp, nw).reshape(-1)
-        q = density_quality(u, dens, nw)
-        if q["std_rho_map"] < q["std_rho_orig"]:
-            return mapped, None, q
-        u_s, report = shorten_map(grid, u, dens, nw, boundary=self.spec.boundary)
-        q_after = density_quality(u_s, dens, nw)
-        q_after["shortened_from"] = q["std_rho_map"]
-        s = report["scale"]
-        out = ref + s * (mapped - ref)
-        report.update(decided_on="working grid", work_n=nw, query_mesh=False, quality=q_after)
-        if s > 0.0 and not fold_free(out, elements, boundary=self.spec.boundary):
-            out, mesh_report = shorten_map(ref, mapped, fvals, elements=elements, boundary=self.spec.boundary)
-            report.update(query_mesh=True, scale=mesh_report["scale"], query_report=mesh_report)
-        return out, report, q_after
 
     def _output_mesh(self, n: int, points) -> tuple[np.ndarray, np.ndarray]:
         """The output mesh: the ``N``-grid, or a Delaunay triangulation of the query points."""
@@ -745,16 +538,6 @@ class Surrogate:
         if ref.ndim != 2 or ref.shape[1] != d:
             raise ValueError(f"query points must have shape (P, {d}), got {ref.shape}")
         return triangulate(ref)
-
-    @staticmethod
-    def _displacement_at(psi: torch.Tensor, ref: np.ndarray, grid_n: int | None) -> torch.Tensor:
-        r"""The displacement :math:`\psi` (1, d, *grid) at the output vertices, float64 (P, d): read off the
-        working grid when the output is that grid (``grid_n``), else interpolated multilinearly."""
-        if grid_n is not None:
-            psi_q = psi[0].reshape(psi.shape[1], -1).T
-        else:
-            psi_q = interpolate(psi, torch.as_tensor(ref, dtype=torch.float32))[0]
-        return psi_q.double()
 
     def _field_on(self, inp: _Input, ref: np.ndarray, elements: np.ndarray, grid_n: int | None = None) -> np.ndarray:
         r"""The input field on the output mesh: unit-mass vertex densities (n,), or :math:`\mu` per element (m,)
@@ -772,12 +555,3 @@ class Surrogate:
         g = inp.grid
         v = interpolate(torch.as_tensor(np.stack([g.real, g.imag]))[None], torch.as_tensor(cen))[0].numpy()
         return v[:, 0] + 1j * v[:, 1]
-
-    def _refine(self, ref64, psi64, elements, fvals, grid_n: int | None, bounds) -> RefineResult:
-        """Weight refinement (paper Sec. 4.3) of the task's objective, with :data:`rfmap.refine.REFINE`."""
-        if self.spec.kind == "density":
-            obj = density_objective(ref64, psi64, elements, fvals, self.spec.boundary, REFINE.flip_weight,
-                                    grid_n=grid_n)
-        else:
-            obj = beltrami_objective(ref64, psi64, elements, fvals, self.spec.boundary, REFINE.flip_weight)
-        return refine_alpha(obj, self.spec.dim, bounds=bounds or REFINE.bounds, tol=REFINE.tol)

@@ -131,7 +131,7 @@ def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "valid
 
 
 def _held_out_map(sur, field, n: int, repair: bool = False):
-    from .surrogate import quiet_quality  # the metrics say how poor a map is; no warning per field
+    from .finish import quiet_quality  # the metrics say how poor a map is; no warning per field
 
     with quiet_quality():
         return sur.map(field, n, repair=repair)

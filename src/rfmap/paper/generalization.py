@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..paper_fields import PAPER_N, TEST_FIELDS
-from ..surrogate import quiet_quality
+from ..finish import quiet_quality
 from .reproduce import SYM, SYM_REF
 from .tables import Table
 

@@ -15,7 +15,7 @@ import numpy as np
 from ..mesh import grid_mesh
 from ..paper_fields import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
 from ..result import MapResult
-from ..surrogate import quiet_quality
+from ..finish import quiet_quality
 from .tables import Table, format_value, paper_table
 
 __all__ = ["beltrami_table", "beltrami_resolution_table", "population_table", "resolution_table", "reproduce",

@@ -21,7 +21,8 @@ import torch
 from ..config import TrainConfig
 from ..device import resolve_device
 from ..paper_fields import BELTRAMI_MAPS, TEST_FIELDS
-from ..surrogate import Surrogate, quiet_quality
+from ..finish import quiet_quality
+from ..surrogate import Surrogate
 from ..tasks import make_batch, task_loss
 from ..validation import evaluate, family_table, score
 from .data import _loader

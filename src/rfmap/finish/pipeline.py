@@ -1,0 +1,93 @@
+"""The stages composed: what happens to a computed map before it is delivered, for network and classical maps."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..hybrid import GUARD, polish_tolerance
+from ..result import MapResult
+from .draft import Draft
+from .stages import judge, polish, refine, repair, shorten
+
+__all__ = ["FinishOptions", "finish", "finish_map"]
+
+
+@dataclass(frozen=True)
+class FinishOptions:
+    """What happens to a map after it is computed; the keywords of :meth:`rfmap.Surrogate.map` of the same names.
+
+    Attributes
+    ----------
+    refine : bool
+        Weight refinement of the map's displacement (:func:`rfmap.finish.refine`).  A network's map is refined as
+        it is predicted (every working grid that :func:`rfmap.finish.regrid` tries is), not here.
+    refine_bounds : (float, float), optional
+        Search interval of every component of the stretching vector (default :data:`rfmap.refine.REFINE`).
+    repair : bool
+        Make the map fold-free (:func:`rfmap.finish.repair`), and shorten a density map that is still no more equal
+        than its input (:func:`rfmap.finish.shorten`).
+    polish : bool or float
+        Finish a density map of a grid with the flow-based solver (:func:`rfmap.finish.polish`); a number is the
+        tolerance on Std(rho~_map).  A polished map is not judged or shortened: the flow equalizes it.
+    guard : bool
+        With ``polish``: keep the better of the warm and the cold flow (:data:`rfmap.hybrid.GUARD`).
+    """
+
+    refine: bool = False
+    refine_bounds: tuple[float, float] | None = None
+    repair: bool = True
+    polish: bool | float = False
+    guard: bool = GUARD
+
+    def __post_init__(self):
+        if self.polish is not False:
+            polish_tolerance(self.polish)  # a bad value is an error before any work
+
+    @property
+    def tol(self) -> float | None:
+        """The polish's tolerance on Std(rho~_map) (``None``: the solver's default)."""
+        return polish_tolerance(self.polish) if self.polish is not False else None
+
+
+def finish(draft: Draft, options: FinishOptions = FinishOptions()) -> Draft:
+    """The stages after the map is computed: refine, repair, then polish, or for a density map judge and shorten.
+
+    A density map of a grid without ``polish`` is judged (:func:`rfmap.finish.judge`); with ``repair`` a density
+    map of a grid or a network's map of query points is shortened when it is no more equal than its input.
+    """
+    if options.polish is not False and (draft.kind != "density" or draft.grid_n is None):
+        raise ValueError("polish finishes density maps on the output grid; it does not apply to "
+                         f"{draft.kind} maps or to query points")
+    if options.refine:
+        draft = refine(draft, options.refine_bounds)
+    if options.repair:
+        draft = repair(draft, cold_polish=options.polish is not False)
+    if options.polish is not False:
+        return polish(draft, options.tol, options.guard)
+    if draft.kind == "density":
+        if draft.grid_n is not None:
+            draft = judge(draft)
+        if options.repair and (draft.grid_n is not None or draft.prediction is not None):
+            draft = shorten(draft)
+    return draft
+
+
+def finish_map(result: MapResult, options: FinishOptions = FinishOptions(), *, boundary: str | None = None,
+               n: int | None = None) -> MapResult:
+    """Finish a computed map, e.g. a classical solver's (:mod:`rfmap.solvers`), with the stages of :func:`finish`.
+
+    Parameters
+    ----------
+    result : MapResult
+    options : FinishOptions
+    boundary : {"fixed", "square", "free"}, optional
+        The map's boundary condition (default ``result.info["boundary"]``, which the solvers record).
+    n : int, optional
+        The grid side when the mesh is :func:`rfmap.mesh.grid_mesh` ``(N, d)`` (default: recognised).
+
+    Returns
+    -------
+    MapResult
+        ``info``: the solver's own extras and the stages' reports (:class:`rfmap.finish.InfoView`; the typed
+        report is ``info.report``).
+    """
+    return finish(Draft.of(result, boundary, n), options).deliver()

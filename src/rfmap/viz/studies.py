@@ -1,0 +1,114 @@
+"""Plots of the studies' tables and reports: time against accuracy, displacement demand, a column of a table
+against N, and the shortening curve."""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["time_accuracy_figure", "displacement_demand_figure", "table_lines", "shorten_curve"]
+
+
+def time_accuracy_figure(rows: list[dict], *, title: str | None = None):
+    """Std(rho~_map) against wall time, one panel per (dimension, N, boundary), one marker per field and method
+    (rows of :func:`rfmap.paper.benchmarks.time_to_accuracy`); log-log axes."""
+    import matplotlib.pyplot as plt
+
+    cases = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    markers = dict(zip(methods, "osD^v*"))
+    fig, axes = plt.subplots(1, len(cases), figsize=(4.2 * len(cases), 3.8), squeeze=False)
+    for ax, case in zip(axes[0], cases):
+        for k, method in enumerate(methods):
+            rs = [r for r in rows if (r["dim"], r["n"], r["boundary"]) == case and r["method"] == method]
+            if rs:
+                ax.loglog([r["time"] for r in rs], [r["std_rho_map"] for r in rs], markers[method], color=f"C{k}",
+                          label=method, alpha=0.8, mfc="none")
+        ax.set_title(f"{case[0]}D, N = {case[1]}, {case[2]}")
+        ax.set_xlabel("wall time (s)")
+    axes[0, 0].set_ylabel(r"Std($\tilde\rho_{map}$)")
+    axes[0, -1].legend(fontsize=8)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def displacement_demand_figure(records: list[dict], *, title: str | None = None):
+    """Left: the network map's largest displacement (reach) against the classical map's (demand), one marker per
+    field, with the line reach = demand; right: the fraction of the non-uniformity each map leaves,
+    Std(rho~_map) / Std(rho~_orig), against the demand.  The band marks the demand of 90 % of the training draws
+    (records of :func:`rfmap.paper.generalization.displacement_demand`)."""
+    import matplotlib.pyplot as plt
+
+    groups = list(dict.fromkeys(r["group"] for r in records))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10.5, 4.2))
+    train = [r["demand"] for r in records if r["group"] == "training"]
+    if train:
+        p90 = float(np.quantile(train, 0.9))
+        for ax in (a, b):
+            ax.axvspan(0, p90, color="0.9", zorder=0, label="90 % of training draws")
+    for k, g in enumerate(groups):
+        rs = [r for r in records if r["group"] == g]
+        d = [r["demand"] for r in rs]
+        kw = dict(color=f"C{k}", alpha=0.35 if g == "training" else 0.9, ms=4 if g == "training" else 7)
+        a.plot(d, [r["reach"] for r in rs], "o", label=g, **kw)
+        b.plot(d, [r["left_net"] for r in rs], "o", label=f"{g}: ours", **kw)
+        if g != "training":
+            b.plot(d, [r["left_classical"] for r in rs], "x", color=f"C{k}", ms=6)
+    top = max(max(r["demand"] for r in records), max(r["reach"] for r in records)) * 1.05
+    a.plot([0, top], [0, top], "k--", lw=1, label="reach = demand")
+    a.set_xlim(0, top)
+    a.set_ylim(0, top)
+    a.set_xlabel("demand: classical map's largest displacement")
+    a.set_ylabel("reach: network map's largest displacement")
+    a.legend(fontsize=8)
+    b.set_xlim(0, top)
+    b.set_yscale("log")
+    b.set_xlabel("demand: classical map's largest displacement")
+    b.set_ylabel(r"Std($\tilde\rho_{map}$) / Std($\tilde\rho_{orig}$)  (o: ours, x: classical)")
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig
+
+
+def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = True):
+    """One line per ``method`` of an :class:`rfmap.paper.tables.Table` whose cases are numbers (e.g. grid sides):
+    ``column`` against the case; returns the axes."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(5.2, 3.4), layout="constrained")
+    methods = list(dict.fromkeys(m for _, m, _ in table.rows))
+    for k, method in enumerate(methods):
+        pts = sorted((float(c), v[column]) for c, m, v in table.rows if m == method and v.get(column) is not None)
+        if pts:
+            ls = "--" if "native" in method else "-"
+            ax.plot(*zip(*pts), ls, marker="o", ms=3, lw=1.2, color=f"C{k // 2 if len(methods) > 2 else k}",
+                    label=method)
+    if logx:
+        ax.set_xscale("log", base=2)
+    ax.set_yscale("log")
+    ax.set(xlabel="N", ylabel=column)
+    ax.legend(fontsize=8)
+    return ax
+
+
+def shorten_curve(report: dict, ax=None, *, title: str | None = None):
+    r"""Std(rho~) of the shortened maps :math:`u_s = x + s\,(u - x)` against the scale ``s``, from the report of
+    :func:`rfmap.repair.shorten_map` (``info["shorten"]`` of ``Surrogate.map``): the evaluated scales (folded ones
+    marked at the top), the identity's level and the chosen scale; returns the axes."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(5.2, 3.4), layout="constrained")
+    s, j = np.array(report["curve"], dtype=float).T
+    ok = np.isfinite(j)
+    ax.plot(s[ok], j[ok], "o-", ms=3, lw=1.2, color="C0", label=r"fold-free $u_s$")
+    if (~ok).any():
+        top = float(j[ok].max()) if ok.any() else 1.0
+        ax.plot(s[~ok], np.full((~ok).sum(), top), "x", color="C3", label=r"folded $u_s$")
+    ax.axhline(report["std_identity"], color="0.4", ls=":", lw=1, label="identity (no map)")
+    ax.axvline(report["scale"], color="C2", ls="--", lw=1, label=f"chosen s = {report['scale']:.3g}")
+    ax.set(xlabel="scale s of the displacement", ylabel=r"Std($\tilde\rho_{map}$)", title=title)
+    ax.legend(fontsize=8)
+    return ax
