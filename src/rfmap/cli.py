@@ -180,7 +180,7 @@ def cmd_map(args) -> int:
 
 def regrid_summary(report: dict) -> str:
     """One line saying which coarser working grids a folded 3D map was tried on (``rfmap.surrogate.REGRID_DIMS``,
-    :class:`rfmap.finish.RegridReport`)."""
+    :class:`rfmap.finish.report.RegridReport`)."""
     tried = ", ".join(str(w) for w in report["tried"])
     if report["work_n"] is None:
         return (f"working grid: {report['from']} folded, and so did {tried}; the {report['from']}-grid map is "
@@ -190,7 +190,7 @@ def regrid_summary(report: dict) -> str:
 
 
 def repair_summary(report: dict | None) -> str:
-    """One line saying what :func:`rfmap.repair.repair_map` did (or that it was skipped)."""
+    """One line saying what :func:`rfmap.repair.dispatch.repair_map` did (or that it was skipped)."""
     if report is None:
         return "repair: off (raw network output)"
     if not report["needed"]:

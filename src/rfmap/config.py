@@ -66,7 +66,7 @@ class TrainConfig:
     Sobol-jittered sampling.  ``schedule`` is ``'cosine'`` (linear warm-up then cosine decay), ``'step'``
     (decay by ``gamma`` every ``step_size`` steps) or ``'restarts'`` (cosine annealing with warm restarts,
     ``T0``, ``T_mult``).  ``ema`` > 0 keeps an exponential moving average of the weights (Polyak averaging,
-    :class:`rfmap.train.WeightAverage`) with that decay; validation, the checkpoint choice and the shipped file then
+    :class:`rfmap.training.averaging.WeightAverage`) with that decay; validation, the checkpoint choice and the shipped file then
     use the averaged weights (0, the default: the weights as trained).  ``teacher`` (density tasks,
     :class:`rfmap.teacher.TeacherConfig`): a classical solver's map of a share of each batch's fields as a supervised
     target beside the data-free losses (default: none, data-free as in the paper).  ``snapshot_every`` > 0 writes the

@@ -50,7 +50,7 @@ class MapResult:
         Seconds spent computing the map.
     info : dict or Mapping
         Method-specific extras (iterations, ...); for a map finished by the stages of :mod:`rfmap.finish` (every
-        map of :meth:`rfmap.Surrogate.map`), a read-only view of their report (:class:`rfmap.finish.InfoView`).
+        map of :meth:`rfmap.Surrogate.map`), a read-only view of their report (:class:`rfmap.finish.report.InfoView`).
     """
 
     ref_points: np.ndarray

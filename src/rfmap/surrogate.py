@@ -94,7 +94,7 @@ class MapOptions:
     symmetrize: bool | str = False
 
     def finishing(self) -> FinishOptions:
-        """The options of the stages after the prediction (:func:`rfmap.finish.finish`); refinement is not among
+        """The options of the stages after the prediction (:func:`rfmap.finish.pipeline.finish`); refinement is not among
         them, since the network's map is refined as it is predicted (every working grid tried is)."""
         return FinishOptions(repair=self.repair, polish=self.polish, guard=self.guard)
 
@@ -403,17 +403,17 @@ class Surrogate:
         refine_bounds : (float, float), optional
             Search interval of every component of :math:`\\alpha` (default :data:`rfmap.refine.REFINE`).
         repair : bool
-            Make the returned map fold-free (:func:`rfmap.repair.repair_map`, after any refinement); with query
+            Make the returned map fold-free (:func:`rfmap.repair.dispatch.repair_map`, after any refinement); with query
             ``points`` the map of the working grid is repaired first and then interpolated.  A density map of the
             output grid (without ``polish``) that is then still no more equal than the input is shortened to the
-            most equal fold-free map between the identity and itself (:func:`rfmap.repair.shorten_map`;
+            most equal fold-free map between the identity and itself (:func:`rfmap.shorten.shorten_map`;
             ``info["shorten"]``), so the delivered map never leaves the density less equal than it was.  A density
             map of query ``points`` is shortened by the scale its working grid's map would be shortened by (the
             judgement is made there; :func:`rfmap.finish.query.shorten_query`), so that grid and points deliver one
             map.  ``False`` returns the raw network map.
         polish : bool or float
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
-            (:func:`rfmap.finish.polish`, :func:`rfmap.hybrid.polish_map`), started from the map of the network's
+            (:func:`rfmap.finish.stages.polish`, :func:`rfmap.hybrid.polish_map`), started from the map of the network's
             displacement smoothed on the working grid (``rfmap.hybrid.smooth_displacement``,
             ``rfmap.hybrid.smooth_passes`` passes, edges per ``rfmap.hybrid.SMOOTH_EDGES``, and on a finer output
             grid ``rfmap.hybrid.OUTPUT_PASSES`` more passes there; all recorded in ``info["polish"]``) where that is
@@ -431,11 +431,11 @@ class Surrogate:
         Returns
         -------
         MapResult
-            ``info`` is a read-only view (:class:`rfmap.finish.InfoView`) of the typed report of the stages
-            (:class:`rfmap.finish.MapReport`, ``info.report``).  It holds ``alpha``, ``work_n`` (the working grid
+            ``info`` is a read-only view (:class:`rfmap.finish.report.InfoView`) of the typed report of the stages
+            (:class:`rfmap.finish.report.MapReport`, ``info.report``).  It holds ``alpha``, ``work_n`` (the working grid
             of the returned map), ``network_time``, ``symmetrize``, with refinement the objective before/after, when
             coarser working grids were tried ``info["regrid"]`` (``from``, ``tried``, ``work_n``: the grid taken or
-            ``None``, ``time``), with ``repair`` the report ``info["repair"]`` (see :func:`rfmap.repair.repair_map`),
+            ``None``, ``time``), with ``repair`` the report ``info["repair"]`` (see :func:`rfmap.repair.dispatch.repair_map`),
             and with ``polish`` the report ``info["polish"]`` (warm or cold start and both stages' times and
             metrics).  A density map of the output grid without ``polish`` also carries ``info["quality"]``
             (:func:`density_quality`), and when it leaves the density less equal than it was (a field unlike the
@@ -468,8 +468,8 @@ class Surrogate:
 
     def _map_one(self, inp: _Input, n: int, points, opts: MapOptions, group: str | None, given=None) -> MapResult:
         """Predict, then finish: the network's map of the output mesh (:meth:`_predict`, refined when asked), tried
-        on coarser working grids when it folds (:func:`rfmap.finish.regrid`, :data:`REGRID_DIMS`), then the stages
-        of :func:`rfmap.finish.finish`; a :class:`PoorMapWarning` when the delivered density map is poor.
+        on coarser working grids when it folds (:func:`rfmap.finish.stages.regrid`, :data:`REGRID_DIMS`), then the stages
+        of :func:`rfmap.finish.pipeline.finish`; a :class:`PoorMapWarning` when the delivered density map is poor.
         ``given``: the network's output on the default working grid from a batched evaluation (:meth:`_predict`)."""
         stages = opts.finishing()
         if stages.polish is not False and (self.spec.kind != "density" or points is not None):

@@ -36,7 +36,7 @@ on every kind, the ramps included: 0.711 against 0.656).  The raw rule picked ch
 steep ramps folded, not by the maps users receive.  A delivered map can be worse than no map (a repair that
 leaves a steep ramp at Std 2.5 against the identity's 1.0 was seen); in the score it counts as the identity, so that
 one failed repair does not decide the choice as one fold did before.  ``Surrogate.map`` itself now shortens such a
-map towards the identity (:func:`rfmap.repair.shorten_map`), so a delivered map is no worse than the identity and
+map towards the identity (:func:`rfmap.shorten.shorten_map`), so a delivered map is no worse than the identity and
 the cap only guards maps that are not finite.
 """
 from __future__ import annotations

@@ -81,7 +81,7 @@ class WorkingGridMap:
     points, mapped : ndarray, shape (W**d, d)
         The grid's vertices and their repaired images.
     report : dict
-        The report of :func:`rfmap.repair.repair_map`.
+        The report of :func:`rfmap.repair.dispatch.repair_map`.
     """
 
     n: int
@@ -157,7 +157,7 @@ class Draft:
         return replace(self, result=result, report=replace(self.report, **report))
 
     def deliver(self) -> MapResult:
-        """The finished map, with ``info`` the report's read-only view (:class:`rfmap.finish.InfoView`)."""
+        """The finished map, with ``info`` the report's read-only view (:class:`rfmap.finish.report.InfoView`)."""
         return replace(self.result, info=InfoView(self.report, self.result.info))
 
 

@@ -18,15 +18,15 @@ class FinishOptions:
     Attributes
     ----------
     refine : bool
-        Weight refinement of the map's displacement (:func:`rfmap.finish.refine`).  A network's map is refined as
-        it is predicted (every working grid that :func:`rfmap.finish.regrid` tries is), not here.
+        Weight refinement of the map's displacement (:func:`rfmap.finish.stages.refine`).  A network's map is refined as
+        it is predicted (every working grid that :func:`rfmap.finish.stages.regrid` tries is), not here.
     refine_bounds : (float, float), optional
         Search interval of every component of the stretching vector (default :data:`rfmap.refine.REFINE`).
     repair : bool
-        Make the map fold-free (:func:`rfmap.finish.repair`), and shorten a density map that is still no more equal
-        than its input (:func:`rfmap.finish.shorten`).
+        Make the map fold-free (:func:`rfmap.finish.stages.repair`), and shorten a density map that is still no more equal
+        than its input (:func:`rfmap.finish.stages.shorten`).
     polish : bool or float
-        Finish a density map of a grid with the flow-based solver (:func:`rfmap.finish.polish`); a number is the
+        Finish a density map of a grid with the flow-based solver (:func:`rfmap.finish.stages.polish`); a number is the
         tolerance on Std(rho~_map).  A polished map is not judged or shortened: the flow equalizes it.
     guard : bool
         With ``polish``: keep the better of the warm and the cold flow (:data:`rfmap.hybrid.GUARD`).
@@ -51,7 +51,7 @@ class FinishOptions:
 def finish(draft: Draft, options: FinishOptions = FinishOptions()) -> Draft:
     """The stages after the map is computed: refine, repair, then polish, or for a density map judge and shorten.
 
-    A density map of a grid without ``polish`` is judged (:func:`rfmap.finish.judge`); with ``repair`` a density
+    A density map of a grid without ``polish`` is judged (:func:`rfmap.finish.stages.judge`); with ``repair`` a density
     map of a grid or a network's map of query points is shortened when it is no more equal than its input.
     """
     if options.polish is not False and (draft.kind != "density" or draft.grid_n is None):
@@ -87,7 +87,7 @@ def finish_map(result: MapResult, options: FinishOptions = FinishOptions(), *, b
     Returns
     -------
     MapResult
-        ``info``: the solver's own extras and the stages' reports (:class:`rfmap.finish.InfoView`; the typed
+        ``info``: the solver's own extras and the stages' reports (:class:`rfmap.finish.report.InfoView`; the typed
         report is ``info.report``).
     """
     return finish(Draft.of(result, boundary, n), options).deliver()

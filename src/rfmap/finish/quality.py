@@ -30,7 +30,7 @@ QUALITY_MARGIN = 1e-4
 
 class PoorMapWarning(RuntimeWarning):
     """A density map that left the density less equal than it was (:func:`density_quality`); issued by
-    :meth:`rfmap.Surrogate.map` and :func:`rfmap.finish.finish_map` with the measured numbers and the remedies."""
+    :meth:`rfmap.Surrogate.map` and :func:`rfmap.finish.pipeline.finish_map` with the measured numbers and the remedies."""
 
 
 @contextlib.contextmanager
@@ -88,7 +88,7 @@ def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish
     """One line for a density map that left the density less equal than it was (:func:`density_quality`);
     ``refine`` and ``polish`` name the two remedies (the API's keywords by default, the CLI's flags there), and
     ``grid_only`` says that the second one maps a grid only (a map at query points).  With ``shorten`` (the report
-    of :func:`rfmap.repair.shorten_map`) the line says that the map was shortened and what it reaches now."""
+    of :func:`rfmap.shorten.shorten_map`) the line says that the map was shortened and what it reaches now."""
     finish = "the flow-based finish, on a grid only" if grid_only else "the flow-based finish"
     if shorten is not None:
         before = shorten["std_before"]

@@ -26,7 +26,7 @@ __all__ = ["working_grid_map", "repair_query", "shorten_query"]
 
 def working_grid_map(draft: Draft) -> WorkingGridMap:
     r"""The map of the working grid of a network's map, :math:`x + \mathcal{B}(x) \odot (\alpha \odot \psi(x))`
-    with the draft's :math:`\alpha`, made fold-free by :func:`rfmap.repair.repair_map`; ``draft.work_map`` when a
+    with the draft's :math:`\alpha`, made fold-free by :func:`rfmap.repair.dispatch.repair_map`; ``draft.work_map`` when a
     stage made it already."""
     if draft.work_map is not None:
         return draft.work_map
@@ -40,14 +40,14 @@ def working_grid_map(draft: Draft) -> WorkingGridMap:
 
 
 def repair_query(draft: Draft, **kw: Any) -> tuple[np.ndarray, dict[str, Any], WorkingGridMap]:
-    """:func:`rfmap.repair.repair_map` of a network's map of query points: the working grid's map is repaired first
+    """:func:`rfmap.repair.dispatch.repair_map` of a network's map of query points: the working grid's map is repaired first
     (:func:`working_grid_map`) and its displacement interpolated, then any fold left on the query mesh is repaired
-    there.  ``kw``: the keywords of :func:`rfmap.repair.repair_map`.
+    there.  ``kw``: the keywords of :func:`rfmap.repair.dispatch.repair_map`.
 
     Returns
     -------
     (points, report, work)
-        ``report`` as :func:`rfmap.repair.repair_map`'s, with ``grid`` (the working grid's report) and
+        ``report`` as :func:`rfmap.repair.dispatch.repair_map`'s, with ``grid`` (the working grid's report) and
         ``n_flipped_before`` counted on the query mesh.
     """
     res = draft.result
@@ -79,7 +79,7 @@ def shorten_query(draft: Draft) -> tuple[np.ndarray, dict[str, Any] | None]:
     (points, report or None)
         ``report`` (``None`` when the working grid's map is more equal than the input) is that of
         :func:`rfmap.shorten.shorten_map` with ``decided_on``, ``work_n``, ``query_mesh`` and ``quality``
-        (:func:`rfmap.finish.density_quality` of the working grid's delivered map, with ``shortened_from``).
+        (:func:`rfmap.finish.quality.density_quality` of the working grid's delivered map, with ``shortened_from``).
     """
     res = draft.result
     ref, mapped, elements = res.ref_points, res.mapped_points, res.elements

@@ -36,7 +36,7 @@ class NetworkReport:
 
 @dataclass(frozen=True)
 class RegridReport:
-    """The coarser working grids a folded map was tried on (:func:`rfmap.finish.regrid`; ``info["regrid"]``).
+    """The coarser working grids a folded map was tried on (:func:`rfmap.finish.stages.regrid`; ``info["regrid"]``).
 
     Attributes
     ----------
@@ -61,7 +61,7 @@ class RegridReport:
 
 @dataclass(frozen=True)
 class RefineReport:
-    r"""Weight refinement's search for the stretching vector :math:`\alpha` (:func:`rfmap.finish.refine`).
+    r"""Weight refinement's search for the stretching vector :math:`\alpha` (:func:`rfmap.finish.stages.refine`).
 
     Attributes
     ----------
@@ -91,17 +91,17 @@ class MapReport:
         The stretching vector applied to the network's displacement (given, refined, or ones), or found by
         refinement of a classical map's displacement.
     repair : dict, optional
-        The report of :func:`rfmap.repair.repair_map` (with ``skipped`` when the repair gave way to a cold polish;
+        The report of :func:`rfmap.repair.dispatch.repair_map` (with ``skipped`` when the repair gave way to a cold polish;
         at query points with ``grid``, the working grid's report).
     polish : dict, optional
         The report of :func:`rfmap.hybrid.polish_map` (for a network's map with ``smooth_passes``, ``smooth_edges``
         and ``output_passes``).
     quality : dict, optional
-        :func:`rfmap.finish.density_quality` of the delivered map of a grid (with ``shortened_from`` after
+        :func:`rfmap.finish.quality.density_quality` of the delivered map of a grid (with ``shortened_from`` after
         shortening).
     shorten : dict, optional
         The report of :func:`rfmap.shorten.shorten_map` when the map was shortened (at query points with
-        ``decided_on``, ``work_n``, ``query_mesh`` and ``quality``, see :func:`rfmap.finish.shorten`).
+        ``decided_on``, ``work_n``, ``query_mesh`` and ``quality``, see :func:`rfmap.finish.stages.shorten`).
     """
 
     network: NetworkReport | None = None

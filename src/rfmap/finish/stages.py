@@ -1,10 +1,10 @@
-r"""The stages that finish a computed map, each a function from a :class:`~rfmap.finish.Draft` to the next.
+r"""The stages that finish a computed map, each a function from a :class:`~rfmap.finish.draft.Draft` to the next.
 
 * :func:`regrid` -- a folded network map: try the network on other working grids;
 * :func:`refine` -- weight refinement of the stretching vector :math:`\alpha` (paper Sec. 4.3);
-* :func:`repair` -- make the map fold-free (:func:`rfmap.repair.repair_map`);
+* :func:`repair` -- make the map fold-free (:func:`rfmap.repair.dispatch.repair_map`);
 * :func:`polish` -- finish a density map with the flow-based solver (:func:`rfmap.hybrid.polish_map`);
-* :func:`judge` -- is a density map of a grid more equal than its input (:func:`rfmap.finish.density_quality`);
+* :func:`judge` -- is a density map of a grid more equal than its input (:func:`rfmap.finish.quality.density_quality`);
 * :func:`shorten` -- if not, the most equal fold-free map between the identity and it
   (:func:`rfmap.shorten.shorten_map`).
 
@@ -50,7 +50,7 @@ def regrid(draft: Draft, remap: Callable[[int], Draft], sides: Sequence[int]) ->
     Returns
     -------
     Draft
-        With ``report.regrid`` (:class:`rfmap.finish.RegridReport`) when the map was folded.  The network's time
+        With ``report.regrid`` (:class:`rfmap.finish.report.RegridReport`) when the map was folded.  The network's time
         is then that of the draft's and the taken map's evaluations, the map's time the draft's and every try's.
     """
     if draft.grid_n is None or not draft.folded():
@@ -85,7 +85,7 @@ def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
     :math:`\alpha^* = \arg\min_\alpha \mathcal{J}` (:func:`rfmap.refine.refine_alpha`, the objective of the task:
     :func:`rfmap.refine.density_objective` or :func:`rfmap.refine.beltrami_objective`, settings
     :data:`rfmap.refine.REFINE`).  :math:`\psi` is the network's displacement, or a classical map's :math:`u - x`
-    (:meth:`rfmap.finish.Draft.displacement`); a given stretching vector is replaced.
+    (:meth:`rfmap.finish.draft.Draft.displacement`); a given stretching vector is replaced.
 
     Parameters
     ----------
@@ -96,7 +96,7 @@ def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
     Returns
     -------
     Draft
-        With ``report.alpha`` and ``report.refine`` (:class:`rfmap.finish.RefineReport`).
+        With ``report.alpha`` and ``report.refine`` (:class:`rfmap.finish.report.RefineReport`).
     """
     t0 = time.perf_counter()
     res = draft.result
@@ -114,7 +114,7 @@ def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
 
 
 def repair(draft: Draft, *, cold_polish: bool = False) -> Draft:
-    """The map made fold-free by :func:`rfmap.repair.repair_map` (a network's map of query points through its
+    """The map made fold-free by :func:`rfmap.repair.dispatch.repair_map` (a network's map of query points through its
     working grid, :func:`rfmap.finish.query.repair_query`).
 
     Parameters
@@ -200,7 +200,7 @@ def polish(draft: Draft, tol: float | None = None, guard: bool = GUARD) -> Draft
 
 
 def judge(draft: Draft) -> Draft:
-    """Whether a density map of a grid left the density more equal than it was (:func:`rfmap.finish.density_quality`;
+    """Whether a density map of a grid left the density more equal than it was (:func:`rfmap.finish.quality.density_quality`;
     ``report.quality``)."""
     res = draft.result
     if res.kind != "density" or draft.grid_n is None:

@@ -170,7 +170,7 @@ def displacement_demand(sur, count: int = 16, train_count: int = 60, n: int | No
         over demand, the median fraction of the non-uniformity left (Std(rho~_map) / Std(rho~_orig)) by the
         network and by the classical map.  ``records`` holds one dict per field (``group``, ``label``,
         ``demand``, ``reach``, ``left_net``, ``left_classical``, ``n_flipped``) for
-        :func:`rfmap.viz.displacement_demand_figure`.
+        :func:`rfmap.viz.studies.displacement_demand_figure`.
     """
     from ..config import get_config
     from ..inputs import preprocess_density

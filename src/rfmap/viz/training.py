@@ -68,7 +68,7 @@ def _read_log(log_path) -> tuple[list[dict], list[dict]]:
 
 def training_curves(log_path, ax=None):
     """The loss of a training run and each of its terms against the step, from the run's ``log.jsonl``
-    (:func:`rfmap.train.train`); returns the axes."""
+    (:func:`rfmap.training.loop.train`); returns the axes."""
     import matplotlib.pyplot as plt
 
     recs, _ = _read_log(log_path)
