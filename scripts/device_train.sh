@@ -13,7 +13,7 @@
 #
 # Environment (all optional): OUT (default ./device-out), DEVICE (cuda), PRESET (full), THREADS (2), WORKERS (12),
 # SNAPSHOT_EVERY (steps between snapshots, 250), KEEP (snapshots kept per config, 3), TRAIN_ARGS (more options of
-# rfmap train for every config: the default "--base 16 --depth 3" trains a wider and deeper network than the
+# rfmap train for every config: the default "--base 16 --depth 3 --batch 8" trains a wider and deeper network than the
 # shipped 3D ones from scratch (it beat the shipped size at equal time on a CPU, chapter 8); "--init dem3d-cube"
 # continues the shipped weights; "--teacher flow" adds the classical teacher).
 # Bad input (an unknown config, a non-numeric or out-of-range MINUTES) prints one line, exits 2 and writes nothing.
@@ -31,7 +31,7 @@ THREADS=${THREADS:-2}
 WORKERS=${WORKERS:-12}
 SNAPSHOT_EVERY=${SNAPSHOT_EVERY:-250}
 KEEP=${KEEP:-3}
-TRAIN_ARGS=${TRAIN_ARGS:---base 16 --depth 3}
+TRAIN_ARGS=${TRAIN_ARGS:---base 16 --depth 3 --batch 8}
 PY=${PYTHON:-python3}
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 
