@@ -38,6 +38,9 @@ DENSITIES_3D = ["sin-cos-3d", "shell-3d", "octant-3d", "prism-peak-3d", "multi-f
 BELTRAMI = ["T1", "T2", "T3", "T4", "T1-res"]
 METRIC_KEYS = ["std_rho_orig", "std_rho_map", "min_jacobian", "n_flipped", "max_mu", "mean_mu", "mean_dd",
                "mean_dmu"]
+#: (field, boundary) of the classical density solvers' references (diffusion and flow alike)
+DENSITY_CASES = ([(name, "square") for name in DENSITIES_2D] + [(name, "free") for name in DENSITIES_2D[:4]]
+                 + [(name, "square") for name in DENSITIES_3D[:2]] + [(DENSITIES_3D[2], "free")])
 #: The surrogates' raw maps (no fold repair, which post-processes the map and is tested in test_repair.py).
 RAW = {"repair": False}
 #: The frozen tiny networks of ``tests/data`` (written once by ``scripts/make_reference_outputs.py --make-models``)
@@ -159,9 +162,7 @@ def solver_outputs() -> dict[str, np.ndarray]:
                                                                 mu_ref=F.BELTRAMI_MAPS[name].mu(_centroids(N2))))
     res = solve_lbs(F.BELTRAMI_MAPS["T2"].mu, N2, boundary="square")
     out["lbs-square/T2"] = res.mapped_points
-    cases = [(name, "square") for name in DENSITIES_2D] + [(name, "free") for name in DENSITIES_2D[:4]]
-    cases += [(name, "square") for name in DENSITIES_3D[:2]] + [(DENSITIES_3D[2], "free")]
-    for name, boundary in cases:
+    for name, boundary in DENSITY_CASES:
         n = N2 if name in DENSITIES_2D else N3
         res = solve_dem(F.sample_density(name, n), boundary=boundary)
         out[f"dem-{boundary}/{name}"] = res.mapped_points
@@ -175,9 +176,7 @@ def flow_outputs() -> dict[str, np.ndarray]:
     from rfmap.solvers import solve_flow
 
     out = {}
-    cases = [(name, "square") for name in DENSITIES_2D] + [(name, "free") for name in DENSITIES_2D[:4]]
-    cases += [(name, "square") for name in DENSITIES_3D[:2]] + [(DENSITIES_3D[2], "free")]
-    for name, boundary in cases:
+    for name, boundary in DENSITY_CASES:
         n = N2 if name in DENSITIES_2D else N3
         res = solve_flow(F.sample_density(name, n), boundary=boundary)
         out[f"flow-{boundary}/{name}"] = res.mapped_points
