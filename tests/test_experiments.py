@@ -296,3 +296,35 @@ def test_the_classical_solver_is_timed_like_the_surrogate(monkeypatch):
     calls.clear()
     times = iter([0.5, 0.7])
     assert _classical("sin-cos", 11, "square", slow=0.0).time == 0.7 and len(calls) == 2
+
+
+@pytest.mark.parametrize("value, text", [
+    (0.0198912, "0.0199"), (2.432098, "2.43"), (3.814e-05, "3.81 × 10⁻⁵"), (123456.0, "1.23 × 10⁵"), (0.0, "0"),
+    (7, "7"), (None, "—"), (float("nan"), "—"),
+])
+def test_headline_numbers_have_three_significant_digits_and_small_ones_a_power_of_ten(value, text):
+    from rfmap.paper.tables import format_sig
+    assert format_sig(value) == text
+
+
+def test_headline_counts_met_cases_and_leaves_missing_paper_values_out():
+    from rfmap.paper.tables import headline
+    h = headline("t", "Std", {"a": 0.04, "b": 0.06, "c": 0.05}, {"a": 0.05, "b": 0.05}, {"a": 0.01})
+    assert (h.met, h.compared) == (1, 2)
+    md = h.to_markdown()
+    assert "| a | 0.04 | 0.05 | 0.01 | 0.8× | yes |" in md and "| b | 0.06 | 0.05 | — | 1.2× | no |" in md
+    assert "| c | 0.05 | — | — | — | — |" in md
+    higher = headline("t", "speed-up", {"a": 2.0}, {"a": 1.5}, lower_is_better=False)
+    assert higher.met == 1
+
+
+def test_population_headline_counts_as_the_summary():
+    from rfmap.paper.reproduce import population_headline, population_summary
+    t = Table("tab:x", "t", ["std_rho_map", "n_flipped", "speedup", "time"])
+    for f, (o, r, d, p) in {"a": (0.05, 0.04, 0.01, 0.045), "b": (0.06, 0.07, 0.02, 0.05)}.items():
+        for m, v in (("ours", o), ("ours + refinement", r), ("diffusion DEM", d), ("paper", p)):
+            t.add(f, m, {"std_rho_map": v, "n_flipped": 0, "speedup": 2.0, "time": 0.1})
+    h = population_headline(t, ["a", "b"], "t")
+    values, _ = population_summary(t, ["a", "b"])
+    assert h.met == values["met"] == 1
+    assert [r[1] for r in h.rows] == [0.04, 0.06] and [r[3] for r in h.rows] == [0.01, 0.02]

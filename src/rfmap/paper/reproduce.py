@@ -16,10 +16,10 @@ from ..mesh import grid_mesh
 from ..paper_fields import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
 from ..result import MapResult
 from ..finish import quiet_quality
-from .tables import Table, format_value, paper_table
+from .tables import Headline, Table, format_value, headline, paper_table
 
 __all__ = ["beltrami_table", "beltrami_resolution_table", "population_table", "resolution_table", "reproduce",
-           "exact_beltrami_result", "population_summary", "SYM", "SYM_REF"]
+           "exact_beltrami_result", "population_summary", "population_headline", "SYM", "SYM_REF"]
 
 
 def _timed_map(sur, name, n, refine=False, repeats: int = 3, slow: float = 1.0, **kw):
@@ -311,3 +311,18 @@ def population_summary(table: Table, fields) -> tuple[dict, str]:
             speed_sym_min=float(min(v(f, SYM, "speedup") for f in fields)),
         )
     return values, "\n".join(rows)
+
+
+def population_headline(table: Table, fields, title: str, *, symmetrized: bool = False) -> Headline:
+    r"""The headline of a population table: per field the best delivered surrogate
+    :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` (the better of ``ours`` and ``ours + refinement``, and with
+    ``symmetrized`` of the two symmetrized rows too: the ``{f}_best`` and ``{f}_best_sym`` of
+    :func:`population_summary`, so its ``met`` equals that function's ``met`` or ``met_sym``), the paper's value and
+    the classical diffusion DEM's on the same mesh."""
+    methods = ["ours", "ours + refinement"] + ([SYM, SYM_REF] if symmetrized else [])
+    ours = {f: min(table.value(f, m, "std_rho_map") for m in methods) for f in fields}
+    paper = {f: table.value(f, "paper", "std_rho_map") for f in fields}
+    dem = {f: table.value(f, "diffusion DEM", "std_rho_map") for f in fields}
+    label = "ours, best delivered" + (" (symmetrized too)" if symmetrized else "")
+    return headline(title, "Std(ρ̃_map), lower is better", ours, paper, dem, ours_label=label,
+                    classical_label="diffusion DEM")

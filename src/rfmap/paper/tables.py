@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Table", "paper_table", "format_value", "glue_all", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
+__all__ = ["Table", "Headline", "headline", "format_sig", "paper_table", "format_value", "glue_all", "COLUMN_TITLES",
+           "DIGITS", "MAX_COLUMNS"]
 
 
 DATA = Path(__file__).resolve().parent.parent / "data"
@@ -135,6 +136,94 @@ class Table:
         md.write_text(f"{self.title}\n\n{self.to_markdown()}\n")
         cs.write_text(self.to_csv())
         return [md, cs]
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def format_sig(v, digits: int = 3) -> str:
+    """A number for a headline table: ``digits`` significant digits, in scientific notation (``3.81 × 10⁻⁵``) when
+    its magnitude is below 10⁻³ or at least 10⁵; integers exactly; ``None`` or NaN as an em dash."""
+    if v is None:
+        return "—"
+    if isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)):
+        return str(int(v))
+    v = float(v)
+    if not np.isfinite(v):
+        return "—"
+    if v != 0 and not 1e-3 <= abs(v) < 1e5:
+        mantissa, exponent = f"{v:.{digits - 1}e}".split("e")
+        return f"{mantissa} × 10{str(int(exponent)).translate(_SUPERSCRIPT)}"
+    return f"{v:.{digits}g}"
+
+
+@dataclass
+class Headline:
+    """One experiment at a glance: per case the delivered result, the paper's value, the classical solver's and
+    whether the paper's value is met (``ours <= paper`` for a metric where lower is better).
+
+    Build it with :func:`headline`; show it with ``display(Markdown(h.to_markdown()))`` or as the cell's value.
+    """
+
+    title: str
+    metric: str
+    rows: list[tuple[str, float | None, float | None, float | None]]
+    ours_label: str = "ours"
+    classical_label: str = "classical"
+    lower_is_better: bool = True
+
+    def met_of(self, ours, paper) -> bool | None:
+        if ours is None or paper is None:
+            return None
+        return bool(ours <= paper) if self.lower_is_better else bool(ours >= paper)
+
+    @property
+    def met(self) -> int:
+        """How many cases meet the paper's value."""
+        return sum(bool(self.met_of(o, p)) for _, o, p, _ in self.rows)
+
+    @property
+    def compared(self) -> int:
+        """How many cases have a paper value to meet."""
+        return sum(self.met_of(o, p) is not None for _, o, p, _ in self.rows)
+
+    def to_markdown(self) -> str:
+        has_classical = any(c is not None for *_, c in self.rows)
+        head = ["case", f"{self.ours_label}", "paper"] + ([self.classical_label] if has_classical else [])
+        head += [f"{self.ours_label} / paper", "met"]
+        lines = ["| " + " | ".join(h.replace("|", "\\|") for h in head) + " |", "|" + "---|" * len(head)]
+        for case, ours, paper, classical in self.rows:
+            ratio = ours / paper if ours is not None and paper else None
+            met = self.met_of(ours, paper)
+            cells = [case, format_sig(ours), format_sig(paper)] + ([format_sig(classical)] if has_classical else [])
+            cells += ["—" if ratio is None else f"{ratio:.3g}×", "—" if met is None else ("yes" if met else "no")]
+            lines.append("| " + " | ".join(cells) + " |")
+        return f"{self.metric}; met: {self.met} of {self.compared}.\n\n" + "\n".join(lines)
+
+    def _repr_markdown_(self) -> str:
+        return f"**{self.title}**\n\n" + self.to_markdown()
+
+
+def headline(title: str, metric: str, ours: dict, paper: dict | None = None, classical: dict | None = None, *,
+             ours_label: str = "ours", classical_label: str = "classical",
+             lower_is_better: bool = True) -> Headline:
+    """The headline table of an experiment from three mappings ``case -> value`` (the cases are those of ``ours``,
+    in its order; a case missing from ``paper`` or ``classical`` shows an em dash).
+
+    Examples
+    --------
+    >>> h = headline("Square boundary", "Std ρ̃ map", {"ring": 0.041}, {"ring": 0.0488}, {"ring": 0.012})
+    >>> h.met
+    1
+    """
+    paper, classical = paper or {}, classical or {}
+    rows = [(str(c), None if v is None else float(v), _num(paper.get(c)), _num(classical.get(c)))
+            for c, v in ours.items()]
+    return Headline(title, metric, rows, ours_label, classical_label, lower_is_better)
+
+
+def _num(v) -> float | None:
+    return None if v is None else float(v)
 
 
 def glue_all(values: dict, prefix: str) -> None:
