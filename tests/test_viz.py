@@ -55,3 +55,27 @@ def test_vertex_error_panels_show_the_error_of_each_map():
     with pytest.raises(ValueError, match="grid"):
         vertex_error_panels({"ours": shifted}, exact, n=n + 1)
     plt.close(fig)
+
+
+def test_save_figure_refuses_figures_unreadable_in_the_text_column(tmp_path, monkeypatch):
+    import matplotlib.pyplot as plt
+    from rfmap.viz import style
+    from rfmap.viz.figures import MIN_DISPLAY_PT, TEXT_COLUMN_PX, display_font_sizes, save_figure
+
+    monkeypatch.setenv("RFMAP_FIGURES", str(tmp_path))
+    with style():
+        fine, ax = plt.subplots(figsize=(6, 3))
+        ax.plot([0, 1], [0, 1])
+        ax.set_title("readable")
+        scale, texts, width = display_font_sizes(fine)
+        assert width <= TEXT_COLUMN_PX * 1.5 and min(s for _, s in texts) >= MIN_DISPLAY_PT
+        assert save_figure(fine, "fig:fine").is_file()
+        wide, axes = plt.subplots(1, 10, figsize=(40, 3))  # ten panels in a row: 9 pt text shown at about 2.4 pt
+        with pytest.raises(ValueError, match="unreadable"):
+            save_figure(wide, "fig:wide")
+        small, ax = plt.subplots(figsize=(6, 3))
+        ax.set_title("tiny", fontsize=4)
+        with pytest.raises(ValueError, match="tiny"):
+            save_figure(small, "fig:small")
+    plt.close("all")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["fig-fine.png"]

@@ -5,7 +5,8 @@ import os
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure"]
+__all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "display_font_sizes", "MIN_DISPLAY_PT",
+           "TEXT_COLUMN_PX", "MAX_FIGURE_PX"]
 
 
 STYLE = {
@@ -18,6 +19,16 @@ STYLE = {
     "axes.spines.right": False,
     "image.cmap": "viridis",
 }
+
+
+#: width of the book's text column in CSS pixels: a wider image is shown scaled down to it
+TEXT_COLUMN_PX = 720
+
+#: the smallest text a reader should have to read, in points, as the figure is shown in the text column
+MIN_DISPLAY_PT = 9.0
+
+#: the widest saved image, in pixels
+MAX_FIGURE_PX = 2400
 
 
 @contextmanager
@@ -64,8 +75,65 @@ def figures_dir() -> Path:
     return p
 
 
+def display_font_sizes(fig, dpi: float | None = None) -> tuple[float, list[tuple[str, float]], int]:
+    r"""How large the text of ``fig`` appears in the book's text column.
+
+    A saved image ``w`` pixels wide is shown at ``min(w, TEXT_COLUMN_PX)`` CSS pixels, so text of ``s`` points at
+    ``dpi`` appears at :math:`s\,\frac{\mathrm{dpi}}{96}\,\min\bigl(1, \frac{C}{w}\bigr)` points (96 CSS pixels to
+    the inch, 72 points to the inch).
+
+    Returns
+    -------
+    scale : float
+        Displayed points per point of the figure.
+    texts : list of (str, float)
+        Every visible, non-empty text of the figure with its displayed size in points.
+    width : int
+        The saved width in pixels (the tight bounding box when ``savefig.bbox`` is ``"tight"``).
+    """
+    import matplotlib as mpl
+    from matplotlib.text import Text
+
+    if dpi is None:
+        dpi = fig.dpi if mpl.rcParams["savefig.dpi"] == "figure" else mpl.rcParams["savefig.dpi"]
+    dpi = float(dpi)
+    renderer = fig.canvas.get_renderer()
+    inches = (fig.get_tightbbox(renderer).width if mpl.rcParams["savefig.bbox"] == "tight"
+              else fig.get_size_inches()[0])
+    width = int(round(inches * dpi))
+    scale = dpi / 96.0 * min(1.0, TEXT_COLUMN_PX / max(width, 1))
+    texts = [(t.get_text(), t.get_fontsize() * scale) for t in fig.findobj(Text)
+             if t.get_visible() and t.get_text().strip() and _drawn(t, renderer)]
+    return scale, texts, width
+
+
+def _drawn(text, renderer) -> bool:
+    """Whether a text lies inside the figure (tick labels outside an axis' view are kept but never drawn)."""
+    try:
+        box = text.get_window_extent(renderer)
+    except Exception:  # noqa: BLE001
+        return False
+    fig_box = text.figure.bbox
+    return box.width > 0 and box.x1 >= fig_box.x0 - 1 and box.x0 <= fig_box.x1 + 1 and \
+        box.y1 >= fig_box.y0 - 1 and box.y0 <= fig_box.y1 + 1
+
+
 def save_figure(fig, label: str) -> Path:
-    """Save ``fig`` as ``<figures_dir>/<label>.png`` where ``label`` is the paper's label (``fig:x_y`` → ``fig-x-y``)."""
+    """Save ``fig`` as ``<figures_dir>/<label>.png`` where ``label`` is the paper's label (``fig:x_y`` → ``fig-x-y``).
+
+    Raises
+    ------
+    ValueError
+        When the figure would be unreadable in the book: wider than :data:`MAX_FIGURE_PX` pixels, or with text that
+        appears smaller than :data:`MIN_DISPLAY_PT` points in the text column (:func:`display_font_sizes`).  Nothing
+        is written then.
+    """
+    scale, texts, width = display_font_sizes(fig)
+    small = sorted({(round(size, 1), text[:30]) for text, size in texts if size < MIN_DISPLAY_PT - 1e-6})
+    if width > MAX_FIGURE_PX or small:
+        raise ValueError(f"figure {label} is unreadable in the book: {width} px wide (at most {MAX_FIGURE_PX}); "
+                         f"text shown at {scale:.2f} pt per pt" + (f", {len(small)} texts under {MIN_DISPLAY_PT:g} pt, "
+                                                                  f"e.g. {small[:3]}" if small else ""))
     name = label.replace(":", "-").replace("_", "-")
     path = figures_dir() / f"{name}.png"
     fig.savefig(path)
