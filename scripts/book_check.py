@@ -28,12 +28,14 @@ import argparse
 import ast
 import asyncio
 import base64
+import contextlib
 import io
 import json
 import math
 import os
 import re
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -320,95 +322,146 @@ def find_chromium() -> str | None:
     return None
 
 
-async def _capture(port: int, url: str, timeout: float) -> list[bytes]:
-    """Load ``url`` in the browser listening on ``port`` and capture the whole page (DevTools protocol), as PNG
-    tiles from top to bottom."""
-    from tornado.websocket import websocket_connect
+class ChromiumError(RuntimeError):
+    """Chromium did not start."""
 
-    targets = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10).read())
-    ws_url = next(t["webSocketDebuggerUrl"] for t in targets if t.get("type") == "page")
-    conn = await websocket_connect(ws_url, max_message_size=1 << 30)
-    ids = iter(range(1, 1 << 30))
 
-    async def wait_for(pred):
+@contextlib.contextmanager
+def chromium(browser: str, startup: float = 60.0):
+    """Run headless Chromium with a fresh profile and remote debugging; yields its DevTools port, and stops the
+    browser and removes the profile on leaving the block (on error too). Raises ChromiumError when it does not
+    start within ``startup`` seconds."""
+    profile = tempfile.mkdtemp(prefix="rfmap-chromium-")
+    proc = subprocess.Popen([browser, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--remote-debugging-port=0",
+                             "about:blank"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            start_new_session=True)
+    try:
+        port_file = Path(profile) / "DevToolsActivePort"
+        deadline = time.monotonic() + startup
+        while not (port_file.exists() and port_file.read_text().strip()):
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise ChromiumError(f"chromium did not start (exit {proc.poll()}): "
+                                    f"{(proc.stderr.read() if proc.poll() is not None else '').strip()[-500:]}")
+            time.sleep(0.1)
+        yield int(port_file.read_text().split()[0])
+    finally:
+        stop_group(proc)
+        for _ in range(20):  # a helper process may still write into the profile as it exits
+            shutil.rmtree(profile, ignore_errors=True)
+            if not os.path.exists(profile):
+                break
+            time.sleep(0.1)
+
+
+def stop_group(proc: subprocess.Popen):
+    """Stop a process started in a session of its own, with every process it started (Chromium's helpers)."""
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(proc.pid, sig)
+        try:
+            proc.wait(timeout=10)
+            break
+        except subprocess.TimeoutExpired:
+            continue
+
+
+class DevTools:
+    """The first page of the browser listening on ``port``, driven over the DevTools protocol (JSON commands and
+    events on a websocket); every wait gives up after ``timeout`` seconds."""
+
+    def __init__(self, conn, timeout: float):
+        self.conn, self.timeout = conn, timeout
+        self._ids = iter(range(1, 1 << 30))
+
+    @classmethod
+    async def open(cls, port: int, timeout: float) -> "DevTools":
+        from tornado.websocket import websocket_connect
+
+        targets = json.loads(urllib.request.urlopen(f"http://127.0.0.1:{port}/json/list", timeout=10).read())
+        ws_url = next(t["webSocketDebuggerUrl"] for t in targets if t.get("type") == "page")
+        return cls(await websocket_connect(ws_url, max_message_size=1 << 30), timeout)
+
+    async def wait_for(self, pred) -> dict:
+        """The next message for which ``pred(message)`` is true."""
         while True:
-            raw = await asyncio.wait_for(conn.read_message(), timeout)
+            raw = await asyncio.wait_for(self.conn.read_message(), self.timeout)
             if raw is None:
                 raise RuntimeError("the browser closed the connection")
             msg = json.loads(raw)
             if pred(msg):
                 return msg
 
-    async def call(method: str, **params):
-        i = next(ids)
-        conn.write_message(json.dumps({"id": i, "method": method, "params": params}))
-        msg = await wait_for(lambda m: m.get("id") == i)
+    async def call(self, method: str, **params) -> dict:
+        """Send the command ``method`` and return its result."""
+        i = next(self._ids)
+        self.conn.write_message(json.dumps({"id": i, "method": method, "params": params}))
+        msg = await self.wait_for(lambda m: m.get("id") == i)
         if "error" in msg:
             raise RuntimeError(f"{method}: {msg['error']}")
         return msg["result"]
 
-    def metrics(height: int) -> dict:
-        return {"width": WIDTH, "height": height, "deviceScaleFactor": 1, "mobile": False}
+    async def evaluate(self, expression: str):
+        """The value of a JavaScript expression in the page (a promise is awaited)."""
+        result = await self.call("Runtime.evaluate", expression=expression, returnByValue=True, awaitPromise=True)
+        if "exceptionDetails" in result:
+            raise RuntimeError(f"JavaScript error: {result['exceptionDetails'].get('text', '')}")
+        return result["result"].get("value")
 
+    def close(self):
+        self.conn.close()
+
+
+def _metrics(height: int) -> dict:
+    return {"width": WIDTH, "height": height, "deviceScaleFactor": 1, "mobile": False}
+
+
+async def _capture(port: int, url: str, timeout: float) -> list[bytes]:
+    """Load ``url`` in the browser listening on ``port`` and capture the whole page (DevTools protocol), as PNG
+    tiles from top to bottom."""
+    page = await DevTools.open(port, timeout)
     try:
-        await call("Page.enable")
-        await call("Emulation.setDeviceMetricsOverride", **metrics(900))
-        await call("Page.navigate", url=url)
-        await wait_for(lambda m: m.get("method") == "Page.loadEventFired")
+        await page.call("Page.enable")
+        await page.call("Emulation.setDeviceMetricsOverride", **_metrics(900))
+        await page.call("Page.navigate", url=url)
+        await page.wait_for(lambda m: m.get("method") == "Page.loadEventFired")
         # images decoded and fonts (MathJax's included) loaded before the page is measured
-        await call("Runtime.evaluate", awaitPromise=True, expression=(
+        await page.evaluate(
             "Promise.all([document.fonts.ready, ...Array.from(document.images, i => i.decode().catch(() => 0))])"
-            ".then(() => new Promise(r => setTimeout(r, 500)))"))
-        size = (await call("Page.getLayoutMetrics"))["cssContentSize"]
+            ".then(() => new Promise(r => setTimeout(r, 500)))")
+        size = (await page.call("Page.getLayoutMetrics"))["cssContentSize"]
         height = max(1, math.ceil(size["height"]))
-        await call("Emulation.setDeviceMetricsOverride", **metrics(height))
+        await page.call("Emulation.setDeviceMetricsOverride", **_metrics(height))
         tiles = []
         for top in range(0, height, MAX_HEIGHT):
-            shot = await call("Page.captureScreenshot", format="png", captureBeyondViewport=True,
-                              clip={"x": 0, "y": top, "width": WIDTH, "height": min(MAX_HEIGHT, height - top),
-                                    "scale": 1})
+            shot = await page.call("Page.captureScreenshot", format="png", captureBeyondViewport=True,
+                                   clip={"x": 0, "y": top, "width": WIDTH, "height": min(MAX_HEIGHT, height - top),
+                                         "scale": 1})
             tiles.append(base64.b64decode(shot["data"]))
         return tiles
     finally:
-        conn.close()
+        page.close()
 
 
 def screenshot(browser: str, page: Path, out: Path, timeout: float = 120.0) -> str | None:
     """Capture the whole of ``page`` (its full height, not one window) into ``out``; returns an error message or
     None."""
-    profile = tempfile.mkdtemp(prefix="rfmap-chromium-")
-    proc = subprocess.Popen([browser, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--remote-debugging-port=0",
-                             "about:blank"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
-        port_file = Path(profile) / "DevToolsActivePort"
-        deadline = time.monotonic() + 60
-        while not (port_file.exists() and port_file.read_text().strip()):
-            if proc.poll() is not None or time.monotonic() > deadline:
-                return f"chromium did not start (exit {proc.poll()}): {(proc.stderr.read() or '').strip()[-500:]}"
-            time.sleep(0.1)
-        port = int(port_file.read_text().split()[0])
-        try:
+        with chromium(browser) as port:
             tiles = asyncio.run(asyncio.wait_for(_capture(port, page.resolve().as_uri(), timeout), timeout))
-        except (asyncio.TimeoutError, TimeoutError):
-            return f"chromium timed out after {timeout:.0f} s"
-        except (OSError, RuntimeError, StopIteration, KeyError) as e:
-            return f"screenshot failed: {type(e).__name__}: {e}"
-        for old in out.parent.glob(f"{out.stem}-*.png"):  # tiles of an earlier, longer capture
-            old.unlink()
-        for k, png in enumerate(tiles):
-            if png[:8] != b"\x89PNG\r\n\x1a\n":
-                return "no PNG screenshot returned"
-            (out if k == 0 else out.with_name(f"{out.stem}-{k + 1}.png")).write_bytes(png)
-        why = image_problem(tiles[0], out.name)
-        return f"the page renders {why}" if why else None
-    finally:
-        proc.terminate()
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-        shutil.rmtree(profile, ignore_errors=True)
+    except ChromiumError as e:
+        return str(e)
+    except (asyncio.TimeoutError, TimeoutError):
+        return f"chromium timed out after {timeout:.0f} s"
+    except (OSError, RuntimeError, StopIteration, KeyError) as e:
+        return f"screenshot failed: {type(e).__name__}: {e}"
+    for old in out.parent.glob(f"{out.stem}-*.png"):  # tiles of an earlier, longer capture
+        old.unlink()
+    for k, png in enumerate(tiles):
+        if png[:8] != b"\x89PNG\r\n\x1a\n":
+            return "no PNG screenshot returned"
+        (out if k == 0 else out.with_name(f"{out.stem}-{k + 1}.png")).write_bytes(png)
+    why = image_problem(tiles[0], out.name)
+    return f"the page renders {why}" if why else None
 
 
 def main(argv: list[str] | None = None) -> int:
