@@ -300,7 +300,7 @@ def test_the_classical_solver_is_timed_like_the_surrogate(monkeypatch):
 
 @pytest.mark.parametrize("value, text", [
     (0.0198912, "0.0199"), (2.432098, "2.43"), (3.814e-05, "3.81 × 10⁻⁵"), (123456.0, "1.23 × 10⁵"), (0.0, "0"),
-    (7, "7"), (None, "—"), (float("nan"), "—"),
+    (7, "7"), (None, "—"), (float("nan"), "—"), (12345.0, "12,300"), (1234.5, "1,230"), (999.5, "1,000"),
 ])
 def test_headline_numbers_have_three_significant_digits_and_small_ones_a_power_of_ten(value, text):
     from rfmap.paper.tables import format_sig

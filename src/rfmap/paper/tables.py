@@ -31,7 +31,8 @@ COLUMN_TITLES = {
     "reach_ratio": "reach / demand", "left_net": "left, ours", "left_classical": "left, classical",
     "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "ema": "weight average",
     "held_out": "held-out mean", "scored": "held-out maps scored", "folded_maps": "folded held-out maps",
-    "val_n": "held-out N", "mu_ratio": "mean |μ| ratio",
+    "val_n": "held-out N", "mu_ratio": "mean |μ| ratio", "std_ratio": "Std / best classical",
+    "time_ratio": "time / best classical",
 }
 
 
@@ -154,13 +155,17 @@ def format_sig(v, digits: int = 3) -> str:
     if v != 0 and not 1e-3 <= abs(v) < 1e5:
         mantissa, exponent = f"{v:.{digits - 1}e}".split("e")
         return f"{mantissa} × 10{str(int(exponent)).translate(_SUPERSCRIPT)}"
+    rounded = float(f"{v:.{digits}g}")
+    if abs(rounded) >= 10 ** digits:  # 12,345 to three digits: 12,300, never 1.23e+04
+        return f"{rounded:,.0f}"
     return f"{v:.{digits}g}"
 
 
 @dataclass
 class Headline:
     """One experiment at a glance: per case the delivered result, the paper's value, the classical solver's and
-    whether the paper's value is met (``ours <= paper`` for a metric where lower is better).
+    whether the paper's value is met (``ours <= paper`` for a metric where lower is better).  ``paper_label``
+    names that column where the value to meet is a target rather than the paper's.
 
     Build it with :func:`headline`; show it with ``display(Markdown(h.to_markdown()))`` or as the cell's value.
     """
@@ -171,6 +176,7 @@ class Headline:
     ours_label: str = "ours"
     classical_label: str = "classical"
     lower_is_better: bool = True
+    paper_label: str = "paper"
 
     def met_of(self, ours, paper) -> bool | None:
         if ours is None or paper is None:
@@ -189,8 +195,8 @@ class Headline:
 
     def to_markdown(self) -> str:
         has_classical = any(c is not None for *_, c in self.rows)
-        head = ["case", f"{self.ours_label}", "paper"] + ([self.classical_label] if has_classical else [])
-        head += [f"{self.ours_label} / paper", "met"]
+        head = ["case", f"{self.ours_label}", self.paper_label] + ([self.classical_label] if has_classical else [])
+        head += [f"{self.ours_label} / {self.paper_label}", "met"]
         lines = ["| " + " | ".join(h.replace("|", "\\|") for h in head) + " |", "|" + "---|" * len(head)]
         for case, ours, paper, classical in self.rows:
             ratio = ours / paper if ours is not None and paper else None
@@ -206,7 +212,7 @@ class Headline:
 
 def headline(title: str, metric: str, ours: dict, paper: dict | None = None, classical: dict | None = None, *,
              ours_label: str = "ours", classical_label: str = "classical",
-             lower_is_better: bool = True) -> Headline:
+             lower_is_better: bool = True, paper_label: str = "paper") -> Headline:
     """The headline table of an experiment from three mappings ``case -> value`` (the cases are those of ``ours``,
     in its order; a case missing from ``paper`` or ``classical`` shows an em dash).
 
@@ -219,7 +225,7 @@ def headline(title: str, metric: str, ours: dict, paper: dict | None = None, cla
     paper, classical = paper or {}, classical or {}
     rows = [(str(c), None if v is None else float(v), _num(paper.get(c)), _num(classical.get(c)))
             for c, v in ours.items()]
-    return Headline(title, metric, rows, ours_label, classical_label, lower_is_better)
+    return Headline(title, metric, rows, ours_label, classical_label, lower_is_better, paper_label)
 
 
 def _num(v) -> float | None:

@@ -97,6 +97,7 @@ def display_font_sizes(fig, dpi: float | None = None) -> tuple[float, list[tuple
     if dpi is None:
         dpi = fig.dpi if mpl.rcParams["savefig.dpi"] == "figure" else mpl.rcParams["savefig.dpi"]
     dpi = float(dpi)
+    fig.canvas.draw()  # a constrained or tight layout places (and may resize) its texts only when drawn
     renderer = fig.canvas.get_renderer()
     inches = (fig.get_tightbbox(renderer).width if mpl.rcParams["savefig.bbox"] == "tight"
               else fig.get_size_inches()[0])

@@ -4,31 +4,65 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["time_accuracy_figure", "displacement_demand_figure", "table_lines", "shorten_curve"]
+__all__ = ["time_accuracy_figure", "displacement_demand_figure", "table_lines", "shorten_curve", "COLUMN_NAMES",
+           "plain_log_ticks"]
 
 
-def time_accuracy_figure(rows: list[dict], *, title: str | None = None):
-    """Std(rho~_map) against wall time, one panel per (dimension, N, boundary), one marker per field and method
-    (rows of :func:`rfmap.paper.benchmarks.time_to_accuracy`); log-log axes."""
+#: axis names of table columns
+COLUMN_NAMES = {"std_rho_map": r"Std($\tilde\rho_{map}$)", "raw_std": r"raw Std($\tilde\rho_{map}$)"}
+
+
+def plain_log_ticks(axis) -> None:
+    """Label a log ``axis`` (``ax.xaxis`` or ``ax.yaxis``, after plotting) in plain numbers (``0.02``, ``5``,
+    ``1e-05`` when shorter) at 1, 2 and 5 times the powers of ten, or at three values spaced evenly on the log scale
+    where the data span less than a factor of five, with no labels between them, so that labels never overlap."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
+
+    axis.axes.autoscale_view()
+    lo, hi = sorted(abs(v) for v in axis.get_view_interval())
+    if lo > 0 and hi / lo < 5:
+        axis.set_major_locator(FixedLocator(sorted({float(f"{t:.2g}") for t in np.geomspace(lo, hi, 5)[1:-1]})))
+    else:
+        axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0), numticks=12))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def time_accuracy_figure(rows: list[dict], *, title: str | None = None, ncols: int = 2):
+    """Std(rho~_map) against wall time (rows of :func:`rfmap.paper.benchmarks.time_to_accuracy`), log-log axes: one
+    panel per (dimension, N, boundary) in a grid of ``ncols`` columns (3.6 inches each), one marker per field and
+    method, and one legend of the methods, in an empty panel or else below the panels."""
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     cases = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
     methods = list(dict.fromkeys(r["method"] for r in rows))
-    markers = dict(zip(methods, "osD^v*"))
-    fig, axes = plt.subplots(1, len(cases), figsize=(4.2 * len(cases), 3.8), squeeze=False)
-    for ax, case in zip(axes[0], cases):
+    markers = dict(zip(methods, "osD^v*<>ph"))
+    ncols = max(1, min(ncols, len(cases)))
+    nrows = -(-len(cases) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.6 * ncols, 2.9 * nrows + 0.4), layout="constrained",
+                             squeeze=False)
+    for ax, case in zip(axes.flat, cases):
         for k, method in enumerate(methods):
             rs = [r for r in rows if (r["dim"], r["n"], r["boundary"]) == case and r["method"] == method]
             if rs:
                 ax.loglog([r["time"] for r in rs], [r["std_rho_map"] for r in rs], markers[method], color=f"C{k}",
-                          label=method, alpha=0.8, mfc="none")
+                          alpha=0.8, mfc="none")
         ax.set_title(f"{case[0]}D, N = {case[1]}, {case[2]}")
+        plain_log_ticks(ax.xaxis)
+        plain_log_ticks(ax.yaxis)
         ax.set_xlabel("wall time (s)")
-    axes[0, 0].set_ylabel(r"Std($\tilde\rho_{map}$)")
-    axes[0, -1].legend(fontsize=8)
+        ax.set_ylabel(r"Std($\tilde\rho_{map}$)")
+    for ax in list(axes.flat)[len(cases):]:
+        ax.set_axis_off()
+    handles = [Line2D([], [], ls="none", marker=markers[m], color=f"C{k}", mfc="none", label=m)
+               for k, m in enumerate(methods)]
+    if len(cases) < axes.size:  # the legend in the first empty panel
+        list(axes.flat)[len(cases)].legend(handles=handles, loc="center", title="method")
+    else:
+        fig.legend(handles=handles, loc="outside lower center", ncols=min(3, len(methods)))
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
     return fig
 
 
@@ -40,7 +74,7 @@ def displacement_demand_figure(records: list[dict], *, title: str | None = None)
     import matplotlib.pyplot as plt
 
     groups = list(dict.fromkeys(r["group"] for r in records))
-    fig, (a, b) = plt.subplots(1, 2, figsize=(10.5, 4.2))
+    fig, (a, b) = plt.subplots(1, 2, figsize=(7.2, 3.8), layout="constrained")
     train = [r["demand"] for r in records if r["group"] == "training"]
     if train:
         p90 = float(np.quantile(train, 0.9))
@@ -58,16 +92,16 @@ def displacement_demand_figure(records: list[dict], *, title: str | None = None)
     a.plot([0, top], [0, top], "k--", lw=1, label="reach = demand")
     a.set_xlim(0, top)
     a.set_ylim(0, top)
-    a.set_xlabel("demand: classical map's largest displacement")
-    a.set_ylabel("reach: network map's largest displacement")
-    a.legend(fontsize=8)
+    a.set_xlabel("demand: classical map's\nlargest displacement")
+    a.set_ylabel("reach: network map's\nlargest displacement")
+    a.legend()
     b.set_xlim(0, top)
     b.set_yscale("log")
-    b.set_xlabel("demand: classical map's largest displacement")
-    b.set_ylabel(r"Std($\tilde\rho_{map}$) / Std($\tilde\rho_{orig}$)  (o: ours, x: classical)")
+    plain_log_ticks(b.yaxis)
+    b.set_xlabel("demand: classical map's\nlargest displacement")
+    b.set_ylabel(r"Std($\tilde\rho_{map}$) / Std($\tilde\rho_{orig}$)" + "\n(o: ours, x: classical)")
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
     return fig
 
 
@@ -75,6 +109,7 @@ def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = Tru
     """One line per ``method`` of an :class:`rfmap.paper.tables.Table` whose cases are numbers (e.g. grid sides):
     ``column`` against the case; returns the axes."""
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import NullLocator
 
     if ax is None:
         _, ax = plt.subplots(figsize=(5.2, 3.4), layout="constrained")
@@ -87,9 +122,13 @@ def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = Tru
                     label=method)
     if logx:
         ax.set_xscale("log", base=2)
+        ns = sorted({float(c) for c, _, _ in table.rows})
+        ax.set_xticks(ns, [f"{n:g}" for n in ns])
+        ax.xaxis.set_minor_locator(NullLocator())
     ax.set_yscale("log")
-    ax.set(xlabel="N", ylabel=column)
-    ax.legend(fontsize=8)
+    plain_log_ticks(ax.yaxis)
+    ax.set(xlabel="N", ylabel=COLUMN_NAMES.get(column, column))
+    ax.legend()
     return ax
 
 

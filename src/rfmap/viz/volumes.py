@@ -1,4 +1,5 @@
-"""3D maps rendered off screen with PyVista: the volume cut open, lattice slices, and the paper's 3D figures."""
+"""3D maps rendered off screen with PyVista: the volume cut open along a plane, lattice slices, and the paper's 3D
+figures."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,23 +7,46 @@ import numpy as np
 from ..result import setup_pyvista, to_pyvista
 from .figures import save_figure, style
 
-__all__ = ["CAMERA_3D", "render_volume", "render_lattice", "volume_rows"]
+__all__ = ["CAMERA_3D", "CUT_PLANE", "render_volume", "render_lattice", "volume_rows"]
 
 
 #: one camera for every 3D panel (position, focal point, view-up), so that panels can be compared
 CAMERA_3D = [(2.55, -1.45, 1.95), (0.5, 0.5, 0.42), (0.0, 0.0, 1.0)]
 
 
-def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", clip: bool = True,
+#: the cutting plane of :func:`render_volume` (``clip="plane"``): through the cube's centre, its normal towards
+#: :data:`CAMERA_3D`, so that the half facing the camera is cut away and the cut face is seen head on
+CUT_PLANE = ((0.5, 0.5, 0.5), (1.0, -0.6, 0.75))
+
+
+def _cut(grid, clip):
+    """``grid`` cut by a smooth plane (``"plane"``: :data:`CUT_PLANE`) or with the octant nearest the camera cut
+    away (``True`` or ``"octant"``); tetrahedra are split along the cut, so the cut faces are flat."""
+    if clip == "plane":
+        origin, normal = CUT_PLANE
+        return grid.clip(normal=normal, origin=origin, invert=True)
+    if clip:
+        return grid.clip_box([0.5, 1.1, -0.1, 0.5, 0.5, 1.1], invert=True, crinkle=False)
+    return grid
+
+
+def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", clip: bool | str = True,
                   window_size=(420, 420), clim=(0.0, 2.5), cmap="viridis", show_edges: bool = False, camera="iso"):
-    """Render a 3D result off screen and return the image (H, W, 3).  With ``clip`` an octant is cut away so the
-    interior is visible; ``camera`` is a PyVista camera position (``'iso'`` fits the view to the mesh, a fixed
-    one such as :data:`CAMERA_3D` makes several renderings comparable)."""
+    r"""Render a 3D result off screen and return the image (H, W, 3).
+
+    ``scalars`` names an array of :func:`rfmap.result.to_pyvista` (``"rho"`` per element, ``"density"`` at the
+    vertices) or ``"|u - x|"``, the length of the displacement :math:`|u(x) - x|` at the vertices.  ``clip`` cuts
+    the volume open along flat faces: ``True`` (or ``"octant"``) removes the octant nearest the camera, ``"plane"``
+    the half in front of :data:`CUT_PLANE`.  ``camera`` is a PyVista camera position (``'iso'`` fits the view to the
+    mesh, a fixed one such as :data:`CAMERA_3D` makes several renderings comparable).
+    """
     pv = setup_pyvista()
     grid = to_pyvista(result, mapped=mapped)
-    if clip:
-        grid = grid.clip_box([0.5, 1.1, -0.1, 0.5, 0.5, 1.1], invert=True, crinkle=True)
+    if scalars == "|u - x|":
+        grid.point_data[scalars] = np.linalg.norm(np.asarray(grid.point_data["displacement"]), axis=1)
+    grid = _cut(grid, clip)
     pl = pv.Plotter(off_screen=True, window_size=list(window_size))
+    pl.add_mesh(pv.Box(bounds=(0, 1, 0, 1, 0, 1)).outline(), color="gray", line_width=1)
     pl.add_mesh(grid, scalars=scalars, clim=clim, cmap=cmap, show_edges=show_edges, show_scalar_bar=False)
     pl.camera_position = camera
     pl.background_color = "white"
@@ -81,26 +105,40 @@ def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines
 
 
 def volume_rows(results: dict, labels, fig_label: str, *, clim=(0.0, 2.5)):
-    """The paper's 3D figures: per result (keyed by ``labels``) the original lattice and the mapped one on three
-    slices (:func:`render_lattice`) and the mapped volume cut open (:func:`render_volume`), all coloured by
-    :math:`\\tilde\\rho` and seen by one camera (:data:`CAMERA_3D`); saved under ``fig_label``; returns the figure."""
+    r"""The paper's 3D figures, one row per result (keyed by ``labels``): the original lattice and the mapped one on
+    three slices (:func:`render_lattice`), coloured by :math:`\tilde\rho` (of the input on the original mesh, on
+    the mapped mesh for the mapped lattice), and the mapped volume cut by a plane (:func:`render_volume`,
+    ``clip="plane"``), coloured by the length of the displacement :math:`|u(x) - x|` on a scale of its own per row;
+    one camera (:data:`CAMERA_3D`), a colour bar for every colour scale.  Saved under ``fig_label`` (7.2 inches
+    wide, readable in the book's text column); returns the figure."""
     import matplotlib.pyplot as plt
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
-    titles = [r"original lattice, $\tilde\rho$", r"mapped lattice, $\tilde\rho$ on the mapped mesh",
-              r"mapped volume, cut open"]
+    labels = list(labels)
+    titles = ["original lattice", "mapped lattice", "mapped volume, cut"]
     with style():
-        fig, axes = plt.subplots(len(labels), 3, figsize=(10.5, 3.3 * len(labels)), layout="constrained",
+        fig, axes = plt.subplots(len(labels), 3, figsize=(7.2, 2.25 * len(labels) + 0.9), layout="constrained",
                                  squeeze=False)
         for row, key in zip(axes, labels):
             r = results[key]
+            dlim = (0.0, float(np.linalg.norm(np.asarray(r.mapped_points) - np.asarray(r.ref_points), axis=1).max())
+                    or 1.0)
             imgs = [render_lattice(r, mapped=False, clim=clim), render_lattice(r, mapped=True, clim=clim),
-                    render_volume(r, mapped=True, scalars="rho", clim=clim, camera=CAMERA_3D)]
-            for ax, img, t in zip(row, imgs, titles):
+                    render_volume(r, mapped=True, scalars="|u - x|", clim=dlim, cmap="magma", clip="plane",
+                                  camera=CAMERA_3D)]
+            for ax, img in zip(row, imgs):
                 ax.imshow(img)
-                ax.set_title(f"{key}: {t}")
-                ax.axis("off")
-        fig.colorbar(ScalarMappable(Normalize(*clim), "viridis"), ax=axes, shrink=0.5, label=r"$\tilde\rho$")
+                ax.set_xticks([])
+                ax.set_yticks([])
+                for side in ax.spines.values():
+                    side.set_visible(False)
+            row[0].set_ylabel(str(key))
+            fig.colorbar(ScalarMappable(Normalize(*dlim), "magma"), ax=row[2], location="right", shrink=0.8,
+                         label=r"$|u(x) - x|$")
+        for ax, t in zip(axes[0], titles):
+            ax.set_title(t)
+        fig.colorbar(ScalarMappable(Normalize(*clim), "viridis"), ax=axes[:, :2], location="bottom", shrink=0.7,
+                     aspect=30, label=r"$\tilde\rho$ (lattices)")
         save_figure(fig, fig_label)
     return fig

@@ -1,0 +1,104 @@
+"""Figures of the training, 3D and FNO chapters fit the book's text column and say what their numbers are."""
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from rfmap.losses import loss_integrands  # noqa: E402
+from rfmap.studies import example_field, example_text  # noqa: E402
+from rfmap.tasks import TaskSpec, sample_batch  # noqa: E402
+from rfmap.viz import learning_curves, plot_loss_terms, style, time_accuracy_figure  # noqa: E402
+from rfmap.viz.figures import MAX_FIGURE_PX, MIN_DISPLAY_PT, display_font_sizes  # noqa: E402
+from rfmap.viz.training import race_bars  # noqa: E402
+
+
+def _readable(fig):
+    fig.canvas.draw()  # the layout first: the width is that of the saved image
+    _, texts, width = display_font_sizes(fig)
+    assert width <= MAX_FIGURE_PX
+    assert min(size for _, size in texts) >= MIN_DISPLAY_PT - 1e-6, sorted(texts, key=lambda t: t[1])[:3]
+
+
+def test_learning_curves_count_the_whole_chain():
+    """A warm-started run is drawn after its ancestors' steps, and the title gives the chain's share of the paper's
+    budget in whole per cent from 10 % on (never as 4e+02 %)."""
+    meta = {"steps": 300, "cumulative_steps": 4000, "history": {"step": [10, 100, 300], "loss": [1.0, 0.5, 0.2],
+                                                                "validation": [{"step": 300, "std_rho_map": 0.2}]}}
+    with style():
+        fig = learning_curves({"chain": meta, "single": {"steps": 50, "history": {"step": [10, 50],
+                                                                                    "loss": [0.1, 0.05]}}},
+                              {"chain": 1000, "single": 4000})
+        ax = fig.axes[0]
+        assert ax.get_title() == "chain: 4,000 steps,\n400 % of the paper's"
+        assert list(ax.lines[0].get_xdata()) == [3710, 3800, 4000]
+        assert fig.axes[2].lines[0].get_xdata()[0] == 4000  # the validation axis of the first panel
+        assert "1.2 % of the paper's" in fig.axes[1].get_title()
+        _readable(fig)
+    plt.close(fig)
+
+
+def test_a_term_that_vanishes_everywhere_is_said_in_words():
+    spec = TaskSpec("density", 2, "square")
+    batch = sample_batch(spec, seed=0, step=0, indices=range(1), n=9)
+    terms = loss_integrands(batch.ref, batch.ref.clone(), batch.elements, density=batch.density)
+    assert float(terms["fold"].max()) == 0.0  # the identity folds nothing
+    fig, axes = plt.subplots(1, 3)
+    plot_loss_terms(axes, batch.ref, batch.elements, terms, n=9, keys=["density", "fold"])
+    assert [t.get_text() for t in axes[2].texts] == ["0 on every\nelement"]
+    assert not axes[2].collections or all(c.get_array() is None for c in axes[2].collections)
+    plt.close(fig)
+
+
+def test_time_accuracy_figure_is_a_readable_grid():
+    rows = [dict(dim=d, n=n, boundary=b, method=m, time=t, std_rho_map=s)
+            for d, n, b in [(2, 33, "square"), (2, 33, "free"), (3, 16, "square"), (3, 16, "free"), (2, 65, "free")]
+            for m, t, s in [("diffusion", 0.5, 0.01), ("flow", 0.05, 0.012), ("hybrid", 0.02, 0.011)]]
+    with style():
+        fig = time_accuracy_figure(rows)
+        panels = [ax for ax in fig.axes if ax.axison]
+        assert len(panels) == 5 and len({round(ax.get_position().x0, 2) for ax in panels}) == 2  # two columns
+        assert fig.axes[5].get_legend() is not None  # the legend in the empty sixth panel
+        _readable(fig)
+    plt.close(fig)
+
+
+def test_race_bars_show_the_final_metric_and_the_steps():
+    metas = {"U-Net": {"steps": 120, "final_metrics": {"mean": {"std_rho_map": 0.25}}},
+             "FNO": {"steps": 300, "final_metrics": {"mean": {"std_rho_map": 0.5}}}}
+    with style():
+        ax = race_bars(metas)
+        assert [p.get_height() for p in ax.patches] == [0.25, 0.5]
+        labels = [t.get_text() for t in ax.texts]
+        assert labels == ["0.25\n120 steps", "0.5\n300 steps"]
+        _readable(ax.figure)
+    plt.close(ax.figure)
+
+
+def test_the_quoted_example_is_true_to_its_numbers():
+    values = {"a_best": 0.0775, "a_std_paper": 0.0737, "b_best": 0.3, "b_std_paper": 0.1}
+    text = example_text(example_field(values, ["a", "b"]))
+    assert text == "the closest is a: 0.0775, 1.05 times the paper's 0.0737"
+    values["b_best"] = 0.09
+    assert example_text(example_field(values, ["a", "b"])) == "for example b: 0.09 against the paper's 0.1"
+
+
+@pytest.mark.parametrize("clip", ["plane", True])
+def test_render_volume_cuts_along_flat_faces(clip):
+    pytest.importorskip("pyvista")
+    from rfmap.mesh import grid_mesh
+    from rfmap.result import MapResult
+    from rfmap.viz.volumes import _cut
+
+    from rfmap.result import to_pyvista
+
+    mesh = grid_mesh(5, 3)
+    res = MapResult(mesh.points, mesh.points.copy(), mesh.elements, np.ones(len(mesh.points)), kind="density")
+    grid = to_pyvista(res)
+    cut = _cut(grid, clip)
+    assert 0 < cut.volume < grid.volume
+    # a flat cut: the kept volume is exactly that of the half-space (plane) or of the cube less an octant
+    expected = 0.5 if clip == "plane" else 7 / 8
+    assert cut.volume == pytest.approx(expected, abs=1e-9)
