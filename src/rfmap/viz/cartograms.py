@@ -2,11 +2,15 @@
 histograms of the area errors."""
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
-from .figures import save_figure, style
+from .figures import save_figure
 
-__all__ = ["plot_regions", "cartogram_figure", "cartogram_panels", "area_error_histograms"]
+__all__ = ["plot_regions", "cartogram_figure", "cartogram_panels", "area_error_histograms", "column_style",
+           "neighbour_colours", "region_colours", "area_legend", "format_amount", "series_grid", "TEXT_COLUMN_IN",
+           "QUALITATIVE"]
 
 
 def plot_regions(ax, geoms, values=None, *, title: str | None = None, cmap="viridis", vmin=None, vmax=None,
@@ -45,32 +49,179 @@ def plot_regions(ax, geoms, values=None, *, title: str | None = None, cmap="viri
     return coll
 
 
-def cartogram_figure(carto, *, title: str = "", label: str | None = None, path=None):
-    """A cartogram (:class:`rfmap.cartogram.Cartogram`) beside its input map, both in the input's coordinates, every
-    region in the colour of its input density (value per unit area over the mean), so that each can be followed from
-    one map to the other.  Saved under the figure ``label`` (:func:`save_figure`) and/or to ``path``; returns the
-    figure."""
+#: Width (inches) at which a saved figure is shown at its own size in the book's text column; a wider one is
+#: shrunk, so its text is set larger (:func:`column_style`) to stay at least 9 pt when shown.
+TEXT_COLUMN_IN = 7.8
+#: The qualitative palette of regions coloured so that neighbours differ (matplotlib's Set2, then Pastel1).
+QUALITATIVE = ("#66c2a5", "#fc8d62", "#8da0cb", "#e78ac3", "#a6d854", "#ffd92f", "#e5c494", "#b3b3b3",
+               "#fbb4ae", "#b3cde3", "#ccebc5", "#decbe4")
+
+
+def column_style(width: float, *, svg_text: bool = False) -> dict:
+    r"""The book's style (:data:`~rfmap.viz.figures.STYLE`) for a figure ``width`` inches wide: text of
+    :math:`9\,\max(1, w / w_c)` pt with :math:`w_c` = :data:`TEXT_COLUMN_IN`, so that it is at least 9 pt once the
+    figure is fitted to the text column; ``svg_text`` keeps text as text in SVG output."""
+    from .figures import STYLE
+
+    size = 9.0 * max(1.0, width / TEXT_COLUMN_IN)
+    out = {**STYLE, "font.size": size, "axes.titlesize": size, "legend.fontsize": size}
+    if svg_text:
+        out["svg.fonttype"] = "none"
+    return out
+
+
+def neighbour_colours(geoms, palette=QUALITATIVE) -> list:
+    """One colour of ``palette`` per region such that regions that touch differ (greedy, largest region first)."""
+    import shapely
+
+    geoms = np.asarray(geoms, dtype=object)
+    tree = shapely.STRtree(geoms)
+    left, right = tree.query(shapely.buffer(geoms, 0.0), predicate="intersects")
+    nbrs = [set() for _ in geoms]
+    for i, j in zip(left, right):
+        if i != j:
+            nbrs[i].add(int(j))
+            nbrs[j].add(int(i))
+    colour = [-1] * len(geoms)
+    for i in np.argsort(-shapely.area(geoms), kind="stable"):
+        used = {colour[j] for j in nbrs[i]}
+        colour[i] = next(c for c in range(len(palette) + len(used) + 1) if c not in used)
+    return [palette[c % len(palette)] for c in colour]
+
+
+def region_colours(column) -> tuple[list, dict]:
+    """Face colours from a colour column (one entry per region): matplotlib colours as they are, otherwise one
+    colour of :data:`QUALITATIVE` per category (missing entries grey).  Returns the colours and ``{category:
+    colour}`` for a legend (empty for colours given as such)."""
+    from matplotlib.colors import is_color_like
+
+    entries = [None if c is None or c == "" else str(c) for c in column]
+    if all(c is None or is_color_like(c) for c in entries):
+        return [c or "0.85" for c in entries], {}
+    cats = sorted({c for c in entries if c is not None})
+    key = {c: QUALITATIVE[k % len(QUALITATIVE)] for k, c in enumerate(cats)}
+    return [key.get(c, "0.85") for c in entries], key
+
+
+def _nice_amount(x: float) -> float:
+    """The largest 1, 2 or 5 times a power of ten that is at most ``x``."""
+    p = 10.0 ** math.floor(math.log10(x))
+    return max(m * p for m in (1.0, 2.0, 5.0) if m * p <= x * (1 + 1e-12))
+
+
+def format_amount(x: float) -> str:
+    """``5e6`` -> ``"5 million"``, ``2e9`` -> ``"2 billion"``, ``2000`` -> ``"2,000"``."""
+    for scale, word in ((1e12, "trillion"), (1e9, "billion"), (1e6, "million")):
+        if x >= scale:
+            return f"{x / scale:g} {word}"
+    return f"{x:,.0f}" if x >= 1 else f"{x:g}"
+
+
+def area_legend(ax, total_value: float, total_area: float, *, unit: str = "", frac: float = 0.1) -> str:
+    r"""A square in the lower left of ``ax`` whose area stands for a round amount of the value: at the cartogram's
+    scale :math:`\sum_i v_i / \sum_i A_i` per unit area, the amount (1, 2 or 5 times a power of ten) whose square is
+    at most ``frac`` of the axes' width on a side.  Returns the legend's text (``"= 50 million unit"``)."""
+    from matplotlib.patches import Rectangle
+
+    x0, x1 = ax.get_xlim()
+    y0, y1 = ax.get_ylim()
+    side_max = frac * (x1 - x0)
+    amount = _nice_amount(side_max**2 * total_value / total_area)
+    side = math.sqrt(amount * total_area / total_value)
+    px, py = x0 + 0.02 * (x1 - x0), y0 + 0.03 * (y1 - y0)
+    ax.add_patch(Rectangle((px, py), side, side, facecolor="0.35", edgecolor="none"))
+    text = f"= {format_amount(amount)} {unit}".rstrip()
+    ax.annotate(text, (px + side, py + 0.5 * side), xytext=(4, 0), textcoords="offset points", va="center")
+    return text
+
+
+def _draw_labels(ax, geoms, labels, min_share: float) -> None:
+    """Each label at its region's representative point, for regions holding at least ``min_share`` of the area."""
+    import shapely
+
+    a = shapely.area(geoms)
+    pts = shapely.point_on_surface(geoms)
+    for g, p, lab, share in zip(geoms, pts, labels, a / a.sum()):
+        if lab not in (None, "") and share >= min_share:
+            ax.text(p.x, p.y, str(lab), ha="center", va="center", clip_on=True)
+
+
+def cartogram_figure(carto, *, colors=None, labels=None, legend: bool = True, unit: str = "", title: str = "",
+                     label: str | None = None, path=None, width: float = TEXT_COLUMN_IN, label_share: float = 5e-3):
+    """A map and its cartogram (:class:`rfmap.cartogram.Cartogram`) side by side, both in the plane of the
+    cartogram (the equal-area projection for longitude/latitude input), on one scale.
+
+    Parameters
+    ----------
+    carto : Cartogram
+    colors : None, "density" or sequence, optional
+        ``None``: a qualitative palette in which neighbours differ (:func:`neighbour_colours`); ``"density"``: the
+        input density over the mean (value per unit area), with a colour bar; a sequence (one entry per region):
+        colours or categories (:func:`region_colours`; categories get a legend).
+    labels : sequence, optional
+        A text per region, drawn on both maps where a region holds at least ``label_share`` of the area.
+    legend : bool
+        An area legend on the cartogram (:func:`area_legend`): a square whose area stands for a stated amount of
+        the value, in ``unit``.
+    title : str
+        The value's name, for the titles.
+    label, path : optional
+        Save under the figure label (:func:`save_figure`) and/or to ``path`` (``.png``, ``.svg``, ``.pdf``; text
+        stays text in SVG).
+    width : float
+        Inches (text is scaled by :func:`column_style`).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     import matplotlib.pyplot as plt
 
-    before, after = carto.input_geometries(), carto.output_geometries()
-    density = carto.values / np.array([g.area for g in carto.regions])
-    density /= carto.values.sum() / sum(g.area for g in carto.regions)
+    before, after = carto.projected_geometries(mapped=False), carto.projected_geometries()
+    key = {}
+    if isinstance(colors, str) and colors == "density":
+        area = np.array([g.area for g in carto.regions])
+        face = carto.values / area / (carto.values.sum() / area.sum())
+    elif colors is None:
+        face = neighbour_colours(before)
+    else:
+        face, key = region_colours(colors)
     m = carto.metrics()
-    with style():
-        fig, axes = plt.subplots(1, 2, figsize=(11, 5))
-        vmax = float(density.max())
-        plot_regions(axes[0], before, density, title=f"{title} input".strip(), vmin=0.0, vmax=vmax)
-        plot_regions(axes[1], after, density, vmin=0.0, vmax=vmax, colorbar=True, label="input density / mean",
-                     title=f"{title} cartogram ({carto.method}, N = {carto.n}): area error mean {m.mean_error:.3f}, "
-                           f"max {m.max_error:.3f}".strip())
-        b = np.array([g.bounds for g in (*before, *after)])
-        lo, hi = b[:, :2].min(0), b[:, 2:].max(0)
+    svg = path is not None and str(path).lower().endswith(".svg")
+    b = np.array([g.bounds for g in (*before, *after)])
+    lo, hi = b[:, :2].min(0), b[:, 2:].max(0)
+    aspect = (hi - lo)[1] / (hi - lo)[0]
+    stacked = aspect < 0.7  # a wide map (the world): one above the other
+    shape = ((2, 1), (width, 2 * width * aspect * 1.2 + 0.8)) if stacked else ((1, 2), (width, 0.5 * width))
+    with plt.rc_context(column_style(width, svg_text=svg)):
+        fig, axes = plt.subplots(*shape[0], figsize=shape[1], layout="constrained")
+        for ax, geoms, head in ((axes[0], before, "input map"),
+                                (axes[1], after, f"cartogram: max area error {m.max_error:.3f}")):
+            if isinstance(face, np.ndarray):
+                coll = plot_regions(ax, geoms, face, vmin=0.0, vmax=float(np.quantile(face, 0.98)), lw=0.3)
+            else:
+                coll = plot_regions(ax, geoms, lw=0.3, edgecolor="white")
+                coll.set_facecolor(face)
+            ax.set_title(f"{title} {head}".strip() if ax is axes[0] and title else head)
         pad = 0.02 * (hi - lo)
-        for ax in axes:  # one extent and the planar frame's aspect, so that sizes and shapes compare
-            ax.set(xlim=(lo[0] - pad[0], hi[0] + pad[0]), ylim=(lo[1] - pad[1], hi[1] + pad[1]))
-            ax.set_aspect(1.0 / carto.frame.cos_lat)
+        for ax, geoms in zip(axes, (before, after)):
+            ax.set(xlim=(lo[0] - pad[0], hi[0] + pad[0]), ylim=(lo[1] - (0.2 if legend else 0.02) * (hi - lo)[1],
+                                                         hi[1] + pad[1]))
+            ax.set_aspect("equal")
             ax.axis("off")
-        fig.tight_layout()
+            if labels is not None:
+                _draw_labels(ax, geoms, labels, label_share)
+        if legend:
+            area_legend(axes[1], float(carto.values.sum()), float(sum(g.area for g in after)), unit=unit or title)
+        if isinstance(face, np.ndarray):
+            fig.colorbar(coll, ax=axes, fraction=0.03, pad=0.01, label="input density / mean")
+        if key:
+            from matplotlib.patches import Patch
+
+            if any(c is None or c == "" for c in colors):
+                key = {**key, "no data": "0.85"}
+            fig.legend([Patch(color=c) for c in key.values()], list(key), loc="outside lower center",
+                       ncols=min(len(key), 4), frameon=False)
         if label:
             save_figure(fig, label)
         if path:
@@ -78,52 +229,94 @@ def cartogram_figure(carto, *, title: str = "", label: str | None = None, path=N
     return fig
 
 
-def cartogram_panels(cartos: dict, keys, *, label: str | None = None, cols: int = 4):
-    """Cartograms side by side, one panel per key of ``cartos`` (``{key: Cartogram}``, keys as in
+def cartogram_panels(cartos: dict, keys, *, label: str | None = None, cols: int = 3, width: float = TEXT_COLUMN_IN):
+    """Cartograms in a grid of ``cols`` columns, one panel per key of ``cartos`` (``{key: Cartogram}``, keys as in
     :func:`rfmap.cartogram.compare_cartograms`), regions coloured by their input density over the mean, with the
-    input map first; saved under ``label``; returns the figure."""
+    input map first, all in the cartogram's plane; ``width`` inches (text by :func:`column_style`); saved under
+    ``label``; returns the figure."""
     import matplotlib.pyplot as plt
 
     keys = list(keys)
     first = cartos[keys[0]]
     rows = -(-(len(keys) + 1) // cols)
-    with style():
-        fig, axes = plt.subplots(rows, cols, figsize=(3.6 * cols, 3.6 * rows), squeeze=False)
-        panels = [(first.input_geometries(), first, "input map")]
-        panels += [(cartos[k].output_geometries(), cartos[k], " / ".join(map(str, k))) for k in keys]
+    side = width / cols
+    with plt.rc_context(column_style(width)):
+        fig, axes = plt.subplots(rows, cols, figsize=(width, 1.1 * side * rows), squeeze=False, layout="constrained")
+        panels = [(first.projected_geometries(mapped=False), first, "input map")]
+        panels += [(cartos[k].projected_geometries(), cartos[k], " / ".join(map(str, k))) for k in keys]
         for ax, (geoms, c, title) in zip(axes.flat, panels):
             area = np.array([g.area for g in c.regions])
             density = c.values / area / (c.values.sum() / area.sum())
             plot_regions(ax, geoms, density, title=title, vmin=0.0, vmax=float(np.quantile(density, 0.98)), lw=0.2)
-            ax.set_aspect(1.0 / first.frame.cos_lat)
             ax.axis("off")
         for ax in axes.flat[len(panels):]:
             ax.axis("off")
-        fig.tight_layout()
         if label:
             save_figure(fig, label)
     return fig
 
 
-def area_error_histograms(cartos: dict, labels, values, *, label: str | None = None, bins: int = 30):
-    """Histograms of the relative area errors :math:`|A_i/T_i - 1|` (log scale), one panel per value and one colour
-    per method label; ``cartos`` as returned by :func:`rfmap.cartogram.compare_cartograms`; saved under ``label``;
-    returns the figure."""
+def area_error_histograms(cartos: dict, labels, values, *, label: str | None = None, bins: int = 30,
+                          cols: int = 2, width: float = TEXT_COLUMN_IN):
+    """Histograms of the relative area errors :math:`|A_i/T_i - 1|` (log scale), one panel per value in a grid of
+    ``cols`` columns and one colour per method label; ``cartos`` as returned by
+    :func:`rfmap.cartogram.compare_cartograms`; saved under ``label``; returns the figure."""
     import matplotlib.pyplot as plt
 
     values, labels = list(values), list(labels)
     errs = {k: np.maximum(c.area_errors, 1e-6) for k, c in cartos.items()}
     edges = np.logspace(-6, np.log10(max(e.max() for e in errs.values())) + 0.05, bins + 1)
-    with style():
-        fig, axes = plt.subplots(1, len(values), figsize=(3.6 * len(values), 3.0), squeeze=False, sharey=True)
+    rows = -(-len(values) // cols)
+    with plt.rc_context(column_style(width)):
+        fig, axes = plt.subplots(rows, cols, figsize=(width, 2.4 * rows + 0.6), squeeze=False, sharex=True,
+                                 sharey=True, layout="constrained")
         for ax, v in zip(axes.flat, values):
             for lab in labels:
                 ax.hist(errs[v, lab], bins=edges, histtype="step", lw=1.4, label=lab)
             ax.axvline(0.01, color="0.5", ls=":", lw=0.8)
-            ax.set(xscale="log", xlabel=r"$|A_i/T_i - 1|$", title=v)
-        axes.flat[0].set_ylabel("regions")
-        axes.flat[0].legend(loc="upper left", fontsize=7)
-        fig.tight_layout()
+            ax.set(xscale="log", title=v)
+        for ax in axes[-1]:
+            ax.set_xlabel(r"$|A_i/T_i - 1|$")
+        for ax in axes[:, 0]:
+            ax.set_ylabel("regions")
+        for ax in axes.flat[len(values):]:
+            ax.axis("off")
+        handles, names = axes.flat[0].get_legend_handles_labels()
+        fig.legend(handles, names, loc="outside lower center", ncols=min(len(labels), 3), frameon=False)
+        if label:
+            save_figure(fig, label)
+    return fig
+
+
+def series_grid(series, indices, *, titles=None, colors=None, label: str | None = None, cols: int = 2,
+                width: float = TEXT_COLUMN_IN):
+    """Frames of a :class:`rfmap.cartogram_series.CartogramSeries` in a grid of ``cols`` columns, all on one extent
+    and scale, regions in fixed colours (``colors``, one per region, else :func:`neighbour_colours` of the input
+    map), titled by ``titles`` (default: the frames' keys) with each frame's largest area error; saved under
+    ``label``; returns the figure."""
+    import matplotlib.pyplot as plt
+
+    frames = [series.frames[i] for i in indices]
+    titles = list(titles) if titles is not None else [f.key for f in frames]
+    geoms = [f.carto.projected_geometries() for f in frames]
+    face = colors if colors is not None else neighbour_colours(series.frames[0].carto.projected_geometries(
+        mapped=False))
+    b = np.array([g.bounds for gs in geoms for g in gs])
+    lo, hi = b[:, :2].min(0), b[:, 2:].max(0)
+    rows = -(-len(frames) // cols)
+    aspect = (hi - lo)[1] / (hi - lo)[0]
+    with plt.rc_context(column_style(width)):
+        fig, axes = plt.subplots(rows, cols, figsize=(width, rows * (width / cols * aspect + 0.35)), squeeze=False,
+                                 layout="constrained")
+        for ax, g, t, f in zip(axes.flat, geoms, titles, frames):
+            coll = plot_regions(ax, g, lw=0.15)
+            coll.set_facecolor(face)
+            ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]))
+            ax.set_aspect("equal")
+            ax.set_title(f"{t}: max error {f.max_error:.3f}")
+            ax.axis("off")
+        for ax in axes.flat[len(frames):]:
+            ax.axis("off")
         if label:
             save_figure(fig, label)
     return fig
