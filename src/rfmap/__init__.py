@@ -9,9 +9,28 @@ Quick start::
     res = solve_dem(sample_density("sin-cos", 51))      # classical diffusion DEM
     print(res.metrics())
     sur = Surrogate.pretrained(models()[0])               # a shipped neural surrogate
+
+The neural names (:class:`Surrogate`, :func:`models`, :func:`load_or_train`) are imported on first use, so that the
+classical paths (``rfmap cartogram``, :mod:`rfmap.cartogram`) run without loading PyTorch.
 """
 from ._version import __version__
-from .pretrained import load_or_train
-from .surrogate import Surrogate, models
 
 __all__ = ["Surrogate", "models", "load_or_train", "__version__"]
+
+#: where each lazily imported name lives
+_LAZY = {"Surrogate": "surrogate", "models": "surrogate", "load_or_train": "pretrained"}
+
+
+def __getattr__(name: str):
+    """``rfmap.Surrogate``, ``rfmap.models``, ``rfmap.load_or_train``: imported on first access (PEP 562)."""
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))

@@ -10,20 +10,28 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    longitude/latitude, so that they bend as the projection bends them.  The map's bounding box is fitted into the
    unit square leaving a ``margin`` on every side (:class:`PlanarFrame`).
 2. **Density raster.**  Each vertex of the ``N``-grid gets the mean density over its grid cell, measured by
-   ``supersample``:sup:`2` point-in-polygon tests per cell (``shapely.contains_xy``).  Outside every region lies
+   ``supersample``:sup:`2` point samples per cell (found inside or outside by scanlines across the rings,
+   :func:`density_grid`).  Outside every region lies
    the sea at the mean density :math:`\sum_i v_i / \sum_i a_i`, as cartogram tools do, so that the land keeps its
    total area and the coast may move.
-3. **Map.**  The classical diffusion DEM of the unit square (:func:`rfmap.solvers.solve_dem` with
-   ``boundary="square"``: the square's walls are the edge of the sea and stay put), the flow-based DEM of Gastner,
-   Seguy & More (2018) that today's cartogram programs run (``solve_dem(method="flow")``, one flow per pass), or a
+3. **Map.**  The default, ``"flow"``, is the flow-based method of Gastner, Seguy & More (2018) that today's
+   cartogram programs run: the flux of the raster's Poisson problem (walls fixed) carries the distinct polygon
+   vertices themselves from :math:`t = 0` to 1 (:func:`rfmap.solvers.cartoflow.flow_square`, numpy only: no
+   PyTorch is loaded), its density blurred over :data:`FLOW_BLUR` vertex spacings in the first pass and half as much
+   in each next one.  The others map the grid and interpolate its displacement bilinearly at the vertices: the
+   classical diffusion DEM of the unit square (:func:`rfmap.solvers.solve_dem` with ``boundary="square"``), or a
    neural surrogate of the same task (``deq2d-square``) on its working grid, where its output is repaired to be
-   fold-free.  The hybrid resamples the network's map to the ``N``-grid and finishes it there with the flow
-   (``Surrogate.map(polish=...)``, :data:`HYBRID_POLISH`).  The grid map's
-   displacement is interpolated bilinearly at the distinct polygon vertices (:func:`rfmap.mesh.interpolate`).
-4. **Passes.**  A diffusion on an ``N``-grid smears every coastline and border over a grid cell, so small dense
+   fold-free; the hybrid resamples the network's map to the ``N``-grid and finishes it there with the flow
+   (``Surrogate.map(polish=...)``, :data:`HYBRID_POLISH`).
+4. **Passes.**  A map computed on an ``N``-grid smears every coastline and border over a grid cell, so small dense
    regions come out a little small and sparse ones a little large.  The cartogram is therefore computed again from
    the mapped polygons, whose densities are now nearly equal, and the maps are composed, until the largest relative
-   area error is below ``tol`` (flow-based cartogram programs stop at 1 %, the default).
+   area error over the regions holding at least ``min_share`` of the total value (:data:`MIN_SHARE`, 0.01 %) is
+   below ``tol`` (flow-based cartogram programs stop at 1 %, the default).  The smaller regions are mapped as if
+   they held that share and their errors are reported apart.  A pass that gains little doubles the raster's
+   resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  A fold of the
+   output smaller than the overlap tolerance, where the input draws two edges nearly touching, is repaired
+   (:func:`rfmap.cartogram_metrics.repair_folds`).
 5. **Output.**  Edges longer than a grid cell are first split (``shapely.segmentize``) so that they bend with the
    map; every vertex is mapped, shared borders stay shared, and the polygons are returned in the input's
    coordinates (the inverse of the planar frame), or in the projection's plane (``output="projected"``), as a
@@ -32,8 +40,8 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
 
 Metrics of the cartogram literature (:func:`cartogram_metrics`): the relative area error
 :math:`|A_i / T_i - 1|` with the target :math:`T_i = (v_i / \sum_j v_j) \sum_j A_j`, its mean and maximum over
-the regions, and a topology check: every mapped polygon is valid and no two regions overlap by more than
-``overlap_tol`` of the total area.  :meth:`Cartogram.metrics` measures them in an equal-area plane (the frame's, or
+the judged regions (the others' largest error apart), and a topology check: every mapped polygon is valid and no
+two regions overlap by more than ``overlap_tol`` of the total area.  :meth:`Cartogram.metrics` measures them in an equal-area plane (the frame's, or
 for an equirectangular frame the equal-area projection of the same map).
 
 References
@@ -54,12 +62,12 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
-import torch
 
-from .mesh import check_grid_memory, check_n, interpolate
+from .cartogram_metrics import MIN_SHARE, CartogramMetrics, cartogram_metrics, judged, repair_folds
+from .mesh import check_grid_memory, check_n
 from .projection import PlanarFrame
 from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _feature_name, _listify, _shapely, density_grid, \
-    montreal_election, read_regions, world_countries
+    fit_outlines, montreal_election, read_regions, world_countries
 from .solvers import ALIASES
 
 __all__ = [
@@ -83,6 +91,8 @@ __all__ = [
     "HYBRID_POLISH",
     "ZERO_FLOOR",
     "OUTPUTS",
+    "MIN_SHARE",
+    "judged",
 ]
 
 #: Methods of :func:`cartogram` (``"dem"`` is accepted as another name of ``"diffusion"``, as by the solvers).
@@ -105,6 +115,17 @@ DEM_SETTINGS = DIFFUSION_SETTINGS
 #: candidate's votes): largest area error 0.003-0.009 in 4-6 passes and 0.38-0.87 s, against 0.0048-0.0069 in 4-7
 #: passes and 0.40-1.12 s with ``refine=2``; the diffusion DEM reaches 0.0024-0.0077 in 4-6 passes and 1.0-1.5 s.
 FLOW_SETTINGS = {"refine": 1, "tol": 0.0}
+#: (:func:`cartogram`'s ``"flow"`` method no longer runs that solver: it carries the vertices themselves by the
+#: torch-free :func:`rfmap.solvers.cartoflow.flow_square`; these settings serve callers of ``solve_dem`` on a
+#: cartogram's raster.)
+#: A pass that leaves more than this fraction of the previous pass's largest error doubles the raster's resolution
+#: (up to ``max_n``): the regions left are a few cells wide, which a finer raster resolves
+SLOW_PASS = 0.7
+#: The default ``max_n`` of :func:`cartogram`: the finest raster a slow pass may ask for (N = 256 doubles twice)
+MAX_N = 1023
+#: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
+#: coast's jump of density, sampled by the grid, otherwise bends the outline between nearby vertices into folds
+FLOW_BLUR = 1.0
 #: The hybrid's polish tolerance on Std(rho~_map) (``Surrogate.map(polish=...)``): far below any raster's variation, so
 #: that every pass runs its flow, for the reason of :data:`FLOW_SETTINGS`' ``tol=0``.  The polish runs on the
 #: raster's ``N``-grid (the network's map resampled to it): on the network's working grid (96 for ``deq2d-square``)
@@ -116,20 +137,27 @@ HYBRID_POLISH = 1e-9
 def _at_points(res, points: np.ndarray) -> np.ndarray:
     """The grid map ``res`` (a :class:`rfmap.result.MapResult` on the ``N``-grid) at ``points`` (P, 2): its
     displacement interpolated bilinearly."""
+    from .solvers.cartoflow import bilinear
+
+    if not res.info.get("grid", True):  # the flow carried the points themselves
+        return res.mapped_points
     n = math.isqrt(res.ref_points.shape[0])
-    disp = (res.mapped_points - res.ref_points).T.reshape(1, 2, n, n)
-    return points + interpolate(torch.as_tensor(disp), torch.as_tensor(points))[0].numpy()
+    return points + bilinear((res.mapped_points - res.ref_points).reshape(n, n, 2), points)
 
 
 def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
     """The map of the unit square for one pass: the classical diffusion or flow DEM with fixed walls, the
     surrogate's map on its working grid (repaired there, so that it is fold-free before it is interpolated at the
     polygon vertices), or the hybrid's on the raster's ``N``-grid."""
-    if method in ("diffusion", "flow"):
+    if method == "flow":  # torch-free
+        from .solvers.cartoflow import CartoFlowOptions, flow_square
+
+        kw = dict(solver_kw)
+        points = kw.pop("points", None)
+        return flow_square(density, CartoFlowOptions(**kw), points=points)
+    if method == "diffusion":
         from .solvers import solve_dem
 
-        if method == "flow":
-            return solve_dem(density, method="flow", boundary="square", **{**FLOW_SETTINGS, **solver_kw})
         return solve_dem(density, boundary="square", **{**DIFFUSION_SETTINGS, **solver_kw})
     from .finish import quiet_quality
 
@@ -147,28 +175,6 @@ def available_methods(surrogate=None) -> tuple[str, ...]:
 
 
 # ----------------------------------------------------------------------------------------------- result
-@dataclass
-class CartogramMetrics:
-    """Area errors and topology of a cartogram (see :func:`cartogram_metrics`)."""
-
-    mean_error: float
-    max_error: float
-    n_invalid: int
-    max_overlap: float
-    n_overlapping: int
-    overlap_tol: float
-
-    @property
-    def topology_ok(self) -> bool:
-        """Every polygon valid and no pair of regions overlapping by more than ``overlap_tol``."""
-        return self.n_invalid == 0 and self.n_overlapping == 0
-
-    def __str__(self) -> str:
-        topo = "valid, no overlaps" if self.topology_ok else \
-            f"{self.n_invalid} invalid, {self.n_overlapping} overlapping pairs (max {self.max_overlap:.2g})"
-        return f"area error mean {self.mean_error:.4f}, max {self.max_error:.4f}; {topo}"
-
-
 @dataclass
 class Cartogram:
     """A computed cartogram.
@@ -214,7 +220,9 @@ class Cartogram:
     info: dict = field(default_factory=dict)
     output: str = "input"
     tol: float = 0.01
+    min_share: float = 0.0
     _metrics: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _out: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def areas(self) -> np.ndarray:
@@ -238,7 +246,7 @@ class Cartogram:
         (:meth:`PlanarFrame.equal_area`: the frame itself unless it is equirectangular)."""
         if overlap_tol not in self._metrics:
             self._metrics[overlap_tol] = cartogram_metrics(self.frame.equal_area(self.mapped), self.values,
-                                                           overlap_tol=overlap_tol)
+                                                           overlap_tol=overlap_tol, min_share=self.min_share)
         return self._metrics[overlap_tol]
 
     def problems(self, *, overlap_tol: float = 1e-6) -> list[str]:
@@ -268,12 +276,17 @@ class Cartogram:
 
     def to_geojson(self) -> dict:
         """The mapped FeatureCollection (in the ``output`` coordinates), with a foreign member ``"rfmap"``:
-        ``status`` (``"ok"``, or ``"failed"`` with the ``problems`` of :meth:`problems`), the largest area error,
-        the passes, the method, ``N``, the ``coordinates`` (:data:`OUTPUTS`) and the PROJ definition of the
-        ``projection``'s plane (``None`` for planar input)."""
+        ``status`` (``"ok"``, or ``"failed"`` with the ``problems`` of :meth:`problems`), the largest area error
+        (over the judged regions; ``minor``: the share, count and largest error of the others), the ``repaired``
+        regions, the passes, the method, ``N``, the ``coordinates`` (:data:`OUTPUTS`) and the PROJ definition of
+        the ``projection``'s plane (``None`` for planar input)."""
         problems = self.problems()
+        m = self.metrics()
         status = {"status": "failed" if problems else "ok", "problems": problems,
-                  "max_error": self.metrics().max_error, "passes": self.info.get("iterations"),
+                  "max_error": m.max_error, "minor": {"share": self.min_share, "count": m.n_minor,
+                                                      "max_error": m.max_error_minor},
+                  "repaired": [_feature_name(self.features[i], i) for i in self.info.get("repaired", [])],
+                  "passes": self.info.get("iterations"),
                   "method": self.method, "n": self.n, "coordinates": self.output,
                   "projection": self.frame.projection.definition}
         return {"type": "FeatureCollection", "features": self.features, "rfmap": status}
@@ -284,12 +297,25 @@ class Cartogram:
         tmp = f"{path}.part"
         try:
             with open(tmp, "w", encoding="utf-8") as fh:
-                json.dump(self.to_geojson(), fh)
+                self._write(fh)
             os.replace(tmp, path)
         except BaseException:
             if os.path.exists(tmp):
                 os.remove(tmp)
             raise
+
+    def _write(self, fh) -> None:
+        """:meth:`to_geojson` as JSON text; the geometries written by GEOS (``shapely.to_geojson``: the same
+        shortest round-trip numbers, several times faster than ``json``) when the output geometries are at hand."""
+        doc = self.to_geojson()
+        if self._out is None or len(self._out) != len(self.features):
+            json.dump(doc, fh)
+            return
+        fh.write('{"type": "FeatureCollection", "features": [')
+        for k, (feat, geom) in enumerate(zip(self.features, _shapely().to_geojson(self._out))):
+            head = json.dumps({key: v for key, v in feat.items() if key != "geometry"})
+            fh.write(("" if k == 0 else ", ") + head[:-1] + ', "geometry": ' + geom + "}")
+        fh.write('], "rfmap": ' + json.dumps(doc["rfmap"]) + "}")
 
     def input_geometries(self) -> np.ndarray:
         """The input regions in the input's coordinates."""
@@ -304,55 +330,12 @@ class Cartogram:
         return self.frame.planar(self.mapped if mapped else self.regions)
 
 
-def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: float = 1e-6,
-                      topology: bool = True) -> CartogramMetrics:
-    r"""Relative area errors and topology of mapped regions.
-
-    The area error of region :math:`i` is :math:`|A_i / T_i - 1|` with :math:`T_i = (v_i/\sum_j v_j)\sum_j A_j`;
-    a polygon is invalid when shapely says so (self-intersection, a hole outside its shell, ...); two regions
-    overlap when the area of their intersection exceeds ``overlap_tol`` times the total area.
-
-    Parameters
-    ----------
-    mapped : ndarray of shapely geometries, shape (R,)
-    values : ndarray, shape (R,), positive
-    overlap_tol : float
-    topology : bool
-        ``False`` skips the validity and overlap checks (their counts are then reported as zero).
-
-    Returns
-    -------
-    CartogramMetrics
-    """
-    shapely = _shapely()
-    a = shapely.area(mapped)
-    err = np.abs(a / (values / values.sum() * a.sum()) - 1.0)
-    if not topology:
-        return CartogramMetrics(float(err.mean()), float(err.max()), 0, 0.0, 0, overlap_tol)
-    valid = shapely.is_valid(mapped)
-    total = float(a.sum())
-    tree = shapely.STRtree(mapped)
-    left, right = tree.query(mapped, predicate="intersects")
-    keep = left < right
-    left, right = left[keep], right[keep]
-    ok = valid[left] & valid[right]
-    g = np.asarray(mapped)
-    inter = np.zeros(left.size)
-    inter[ok] = shapely.area(shapely.intersection(g[left[ok]], g[right[ok]]))
-    inter[~ok] = np.inf  # an invalid polygon's overlaps are not measurable; it is already counted as invalid
-    rel = inter / total
-    over = rel > overlap_tol
-    measured = rel[np.isfinite(rel)]
-    return CartogramMetrics(mean_error=float(err.mean()), max_error=float(err.max()),
-                            n_invalid=int((~valid).sum()), max_overlap=float(measured.max()) if measured.size else 0.0,
-                            n_overlapping=int((over & ok).sum()), overlap_tol=overlap_tol)
-
-
 # ----------------------------------------------------------------------------------------------- pipeline
-def cartogram(collection, value: str, *, method: str = "diffusion", n: int = 256, tol: float = 0.01,
-              max_iterations: int = 10, iterations: int | None = None, margin: float = 0.1,
+def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol: float = 0.01,
+              max_iterations: int = 30, iterations: int | None = None, margin: float = 0.1,
               projection: str = "auto", output: str = "input", supersample: int = 4, model: str | None = None,
-              surrogate=None, floor: float = ZERO_FLOOR, solver_kw: dict | None = None) -> Cartogram:
+              surrogate=None, floor: float = ZERO_FLOOR, solver_kw: dict | None = None,
+              min_share: float = MIN_SHARE, max_n: int | None = None, points: int | None = None) -> Cartogram:
     r"""Diffusion cartogram of GeoJSON regions sized by one value each (see the module docstring).
 
     Parameters
@@ -363,9 +346,10 @@ def cartogram(collection, value: str, *, method: str = "diffusion", n: int = 256
         The property holding each region's value (numbers :math:`\ge 0`; zeros are floored, see
         :func:`read_regions`).
     method : {"diffusion", "flow", "surrogate", "hybrid"}
-        ``"diffusion"`` (also ``"dem"``): the classical diffusion DEM; ``"flow"``: the classical flow-based DEM
-        (:data:`FLOW_SETTINGS`); ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the surrogate's map
-        finished by the classical flow on the ``N``-grid (``Surrogate.map(polish=HYBRID_POLISH)``).
+        ``"flow"`` (default): the classical flow-based method, which carries the polygons' vertices themselves
+        (:func:`rfmap.solvers.cartoflow.flow_square`; numpy only, no PyTorch); ``"diffusion"`` (also
+        ``"dem"``): the classical diffusion DEM; ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the
+        surrogate's map finished by the classical flow on the ``N``-grid (``Surrogate.map(polish=HYBRID_POLISH)``).
     n : int
         Side ``N`` of the density raster and of the classical solver's grid.
     tol, max_iterations : float, int
@@ -394,12 +378,28 @@ def cartogram(collection, value: str, *, method: str = "diffusion", n: int = 256
     solver_kw : dict, optional
         Keyword arguments of :func:`rfmap.solvers.solve_dem` over :data:`DIFFUSION_SETTINGS` (``"diffusion"``) or
         :data:`FLOW_SETTINGS` (``"flow"``).
+    min_share : float
+        The passes' stopping rule, :meth:`Cartogram.metrics` and the tolerance count only the regions holding at
+        least this share of the total value (default :data:`MIN_SHARE`, 0.01 %: islands of a few people on a world
+        map are left to ``max_iterations``); ``info["max_error"]`` is over those, and the others' errors are
+        reported apart (``CartogramMetrics.max_error_minor``).  The passes map those others as if they held this
+        share, so that none (an uninhabited Antarctica) collapses into a sliver that folds.
+    max_n : int, optional
+        A pass that leaves more than :data:`SLOW_PASS` of the previous pass's largest error (regions down to a few
+        cells: slivers, small islands) doubles the raster's resolution, :math:`N \to 2N - 1`, up to ``max_n``
+        (default the larger of ``n`` and :data:`MAX_N`; ``n`` turns it off); ``info["grids"]`` lists each pass's
+        ``N``.
+    points : int, optional
+        A budget of polygon vertices: the outlines (already split to edges of at most a grid cell) are simplified,
+        shared borders kept (:func:`rfmap.regions.fit_outlines`), or densified to about that many.  Simplifying
+        speeds up large maps and removes detail finer than the grid; it changes the input's areas slightly.
 
     Returns
     -------
     Cartogram
         ``info["max_error"]`` lists the largest relative area error after every pass, ``info["iterations"]`` the
-        passes run and ``info["kept"]`` the pass whose polygons are returned (1-based).
+        passes run, ``info["kept"]`` the pass whose polygons are returned (1-based) and ``info["repaired"]`` the
+        regions whose numerically tiny fold was repaired (:func:`rfmap.cartogram_metrics.repair_folds`).
 
     Raises
     ------
@@ -432,13 +432,29 @@ def cartogram(collection, value: str, *, method: str = "diffusion", n: int = 256
     # edges longer than a grid cell are split, so that they bend with the projection and the map (and a border that
     # one neighbour draws with more vertices than the other still matches it)
     regions = frame.project(geoms, 1.0 / (n - 1))
-    mapped, info, map_time = _passes(regions, values, lambda dens: _grid_map(method, dens, surrogate, solver_kw or {}),
-                                     n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol)
+    if points is not None:  # a budget of vertices: simplified (shared borders kept) or densified to it
+        regions = fit_outlines(regions, points)
+    done = []  # the passes so far
+
+    def grid_map(dens, points):  # the flow carries the polygons' vertices themselves, its density blurred at first
+        kw = solver_kw or {}
+        if method == "flow":
+            blur = FLOW_BLUR * 0.5 ** len(done)
+            kw = {"blur": blur if blur >= 0.25 else 0.0, **kw, "points": points}
+        done.append(1)
+        return _grid_map(method, dens, surrogate, kw)
+
+    mapped, info, map_time = _passes(regions, values, grid_map,
+                                     n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol,
+                                     min_share=min_share, max_n=max_n if max_n is not None else max(n, MAX_N))
+    mapped, info["repaired"] = repair_folds(mapped)
     elapsed = time.perf_counter() - t0
     out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
-    return Cartogram(features=_mapped_features(features, out), regions=regions, mapped=mapped, values=values,
-                     floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time, info=info,
-                     output=output, tol=float(tol))
+    carto = Cartogram(features=_mapped_features(features, out), regions=regions, mapped=mapped, values=values,
+                      floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time, info=info,
+                      output=output, tol=float(tol), min_share=float(min_share))
+    carto._out = out  # the features' geometries as shapely objects, for a fast save
+    return carto
 
 
 def _square_surrogate(surrogate, model: str | None):
@@ -456,7 +472,7 @@ def _square_surrogate(surrogate, model: str | None):
 
 
 def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supersample: int, passes: int,
-            tol: float | None) -> tuple[np.ndarray, dict, float]:
+            tol: float | None, min_share: float = 0.0, max_n: int = 0) -> tuple[np.ndarray, dict, float]:
     """The passes of :func:`cartogram`: each rasterises the current polygons, maps the unit square by
     ``grid_map(density)`` and moves every distinct vertex.  With ``tol`` they stop within tolerance, or at a pass that
     no longer lowers the largest area error, and the polygons of the best pass are returned; without, all ``passes``
@@ -467,16 +483,25 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     uniq, inverse = np.unique(np.round(shapely.get_coordinates(regions), 12), axis=0, return_inverse=True)
     inverse = inverse.reshape(-1)
     current, mapped = uniq, regions
-    results, history, map_time = [], [], 0.0
+    big = judged(values, min_share)  # the regions the stopping rule counts
+    # the others are mapped as if they held the judged share, so that none (an uninhabited Antarctica) collapses into
+    # a sliver that folds; their errors are still measured against their own values
+    weights = np.where(big, values, np.maximum(values, min_share * values.sum()))
+    results, history, grids, map_time = [], [], [], 0.0
     best = None  # (largest area error, polygons, pass) of the best pass so far
     for _ in range(passes):
-        dens, sea = density_grid(mapped, values, n, supersample=supersample)
-        res = grid_map(dens)
+        if (tol is not None and len(history) > 1 and history[-1] > tol and history[-1] > SLOW_PASS * history[-2]
+                and 2 * n - 1 <= max_n):
+            n = 2 * n - 1  # slow progress: regions down to a few cells (slivers, islands); twice the resolution
+        grids.append(n)
+        dens, sea = density_grid(mapped, weights, n, supersample=supersample)
+        res = grid_map(dens, current)
         current = _at_points(res, current)
         map_time += res.time
         results.append(res)
         mapped = shapely.set_coordinates(regions.copy(), current[inverse])
-        history.append(cartogram_metrics(mapped, values, topology=False).max_error)
+        area = shapely.area(mapped)
+        history.append(float(np.abs(area / (values / values.sum() * area.sum()) - 1.0)[big].max()))
         if best is None or history[-1] < best[0]:
             best = (history[-1], mapped, len(results))
         if tol is not None and (history[-1] <= tol or len(history) > 1 and not history[-1] < history[-2]):
@@ -485,7 +510,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     if tol is not None:  # the polygons of the pass with the lowest largest error
         mapped, kept = best[1], best[2]
     return mapped, {"iterations": len(results), "kept": kept, "max_error": history, "results": results,
-                    "sea": sea}, map_time
+                    "sea": sea, "grids": grids}, map_time
 
 
 def _mapped_features(features: list, mapped: np.ndarray) -> list:

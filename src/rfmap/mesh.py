@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import math
 import os
+import sys
 from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import torch
 
-from .geometry import grid_cell_simplices, signed_measures
+# torch (and rfmap.geometry, which needs it) is imported where it is used: the mesh's checks and grids serve
+# the torch-free cartogram path too
 
 __all__ = [
     "Mesh",
@@ -47,6 +48,19 @@ __all__ = [
     "available_memory",
     "BYTES_PER_VERTEX",
 ]
+
+
+def _geometry():
+    """:mod:`rfmap.geometry`, imported on first use (it needs torch)."""
+    from . import geometry
+
+    return geometry
+
+
+def _is_tensor(x) -> bool:
+    """Whether ``x`` is a torch tensor (without importing torch: none exists before torch is loaded)."""
+    torch = sys.modules.get("torch")
+    return torch is not None and isinstance(x, torch.Tensor)
 
 
 def check_dim(dim: int) -> int:
@@ -136,7 +150,7 @@ def _grid_elements(n: int, dim: int) -> np.ndarray:
     cells = np.stack([a.reshape(-1) for a in np.meshgrid(*([np.arange(n - 1)] * dim), indexing="ij")], axis=-1)
     stride = n ** np.arange(dim - 1, -1, -1)
     blocks = [np.stack([((cells + np.array(c)) * stride).sum(-1) for c in corners], axis=-1)
-              for corners in grid_cell_simplices(dim)]
+              for corners in _geometry().grid_cell_simplices(dim)]
     return np.concatenate(blocks, axis=0).astype(np.int64)
 
 
@@ -219,8 +233,8 @@ def grid_size(points, elements) -> int | None:
     """``N`` when ``(points, elements)`` is exactly :func:`grid_mesh` ``(N, d)`` (same vertices, same elements in the
     same order), else ``None``: lets whole-mesh measurements use the strided grid kernels
     (:func:`rfmap.geometry.grid_signed_measures`), an order of magnitude cheaper than gathers on 3D meshes."""
-    pts = points.detach().cpu().numpy() if isinstance(points, torch.Tensor) else np.asarray(points)
-    el = elements.detach().cpu().numpy() if isinstance(elements, torch.Tensor) else np.asarray(elements)
+    pts = points.detach().cpu().numpy() if _is_tensor(points) else np.asarray(points)
+    el = elements.detach().cpu().numpy() if _is_tensor(elements) else np.asarray(elements)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3) or el.ndim != 2 or el.shape[1] != pts.shape[1] + 1:
         return None
     d = pts.shape[1]
@@ -237,6 +251,9 @@ def element_measures(points, elements):
     Accepts numpy arrays or torch tensors (returned in the same kind); see
     :func:`rfmap.geometry.signed_measures`.
     """
+    import torch
+
+    signed_measures = _geometry().signed_measures
     if isinstance(points, torch.Tensor):
         return signed_measures(points, torch.as_tensor(elements, device=points.device))
     return signed_measures(torch.as_tensor(np.asarray(points, dtype=np.float64)),
@@ -275,7 +292,9 @@ def triangulate(points, *, tol: float = 1e-9) -> tuple[np.ndarray, np.ndarray]:
         raise ValueError(f"query points must lie in the unit {'square' if d == 2 else 'cube'}; got "
                          f"coordinates in [{ref.min():.4g}, {ref.max():.4g}]")
     elements = Delaunay(ref).simplices.astype(np.int64)
-    vol = signed_measures(torch.as_tensor(ref), torch.as_tensor(elements)).numpy()
+    import torch
+
+    vol = _geometry().signed_measures(torch.as_tensor(ref), torch.as_tensor(elements)).numpy()
     elements[vol < 0] = elements[vol < 0][:, [1, 0] + list(range(2, d + 1))]
     return ref, elements[np.abs(vol) > 1e-14]
 
@@ -328,6 +347,8 @@ def interpolate(values, points, *, tol: float = 1e-9, check: bool = True):
     -------
     Tensor or ndarray (same kind as ``values``), shape (B, P, C)
     """
+    import torch
+
     is_np = not isinstance(values, torch.Tensor)
     v = torch.as_tensor(values)
     p = torch.as_tensor(points, dtype=v.dtype, device=v.device)

@@ -8,15 +8,16 @@
 
 All return a :class:`rfmap.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name: ``"lbs"``,
 ``"diffusion"`` and ``"flow"`` (``"dem"`` is accepted as another name of ``"diffusion"``, :data:`ALIASES`).
+
+The solvers (which run on torch) are imported on first use (PEP 562), so that importing this package, e.g. for
+:data:`ALIASES` or the torch-free cartogram flow (:mod:`rfmap.solvers.cartoflow`), does not load PyTorch.
 """
 from __future__ import annotations
 
-from typing import Callable
+from typing import TYPE_CHECKING, Callable
 
-from ..result import MapResult
-from .diffusion import solve_dem as solve_diffusion
-from .flow import FlowOptions, solve_flow
-from .lbs import solve_lbs
+if TYPE_CHECKING:
+    from ..result import MapResult
 
 __all__ = ["SOLVERS", "DEM_METHODS", "ALIASES", "get_solver", "solve_lbs", "solve_dem", "solve_diffusion",
            "solve_flow", "FlowOptions"]
@@ -44,20 +45,35 @@ def solve_dem(density, *, method: str = "diffusion", **kwargs) -> MapResult:
     MapResult
     """
     method = ALIASES.get(method, method)
-    if method == "diffusion":
-        return solve_diffusion(density, **kwargs)
-    if method == "flow":
-        return solve_flow(density, **kwargs)
+    if method in DEM_METHODS:
+        return get_solver(method)(density, **kwargs)
     raise ValueError(f"unknown density-equalizing method {method!r}; choose one of {DEM_METHODS}")
 
 
-#: Registry of the classical solvers by name.
-SOLVERS: dict[str, Callable[..., MapResult]] = {"lbs": solve_lbs, "diffusion": solve_diffusion, "flow": solve_flow}
+def __getattr__(name: str):
+    """The solvers, :class:`FlowOptions` and :data:`SOLVERS` (the registry of the classical solvers by name),
+    imported on first access."""
+    if name == "solve_lbs":
+        from .lbs import solve_lbs as value
+    elif name == "solve_diffusion":
+        from .diffusion import solve_dem as value
+    elif name in ("solve_flow", "FlowOptions"):
+        from . import flow
+
+        value = getattr(flow, name)
+    elif name == "SOLVERS":
+        value = {"lbs": __getattr__("solve_lbs"), "diffusion": __getattr__("solve_diffusion"),
+                 "flow": __getattr__("solve_flow")}
+    else:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    globals()[name] = value
+    return value
 
 
 def get_solver(name: str) -> Callable[..., MapResult]:
     """Look up a solver by name (``"lbs"``, ``"diffusion"`` or ``"flow"``, or a name of :data:`ALIASES`);
     ``ValueError`` naming the known solvers otherwise."""
-    if not isinstance(name, str) or ALIASES.get(name, name) not in SOLVERS:
-        raise ValueError(f"unknown solver {name!r}; known solvers: {', '.join(sorted(SOLVERS))}")
-    return SOLVERS[ALIASES.get(name, name)]
+    solvers = __getattr__("SOLVERS") if "SOLVERS" not in globals() else globals()["SOLVERS"]
+    if not isinstance(name, str) or ALIASES.get(name, name) not in solvers:
+        raise ValueError(f"unknown solver {name!r}; known solvers: {', '.join(sorted(solvers))}")
+    return solvers[ALIASES.get(name, name)]

@@ -10,9 +10,9 @@ Poisson equation with it (:func:`poisson_flux`: :func:`half_coefficients`, :func
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
-import torch
 from scipy.fft import dct, dctn, dst
 
 __all__ = ["fft_workers", "cosine_coefficients", "dct1", "half_coefficients", "laplacian_eigenvalues",
@@ -20,7 +20,13 @@ __all__ = ["fft_workers", "cosine_coefficients", "dct1", "half_coefficients", "l
 
 
 def fft_workers() -> int:
-    """Threads for scipy's transforms: the torch thread count the solver runs with."""
+    """Threads for scipy's transforms: the torch thread count the solver runs with, or where torch is not loaded
+    (the torch-free cartogram path) ``scipy.fft``'s current default (``scipy.fft.set_workers``)."""
+    torch = sys.modules.get("torch")
+    if torch is None:
+        from scipy.fft import get_workers
+
+        return get_workers()
     return max(1, torch.get_num_threads())
 
 

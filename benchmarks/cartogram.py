@@ -1,0 +1,181 @@
+"""Whole-command time, peak memory and accuracy of ``rfmap cartogram`` side by side with a reference program.
+
+Runs ``rfmap cartogram`` (flow and diffusion methods) and, with ``--reference PATH`` to the ``cartogram`` binary of
+cartogram-cpp (Gastner, Seguy & More's flow-based method), that program on the same real maps at N = 256 and 512
+with the same 1 % tolerance: Montreal's 2013 election (total votes, :func:`rfmap.regions.montreal_election`), the
+Natural Earth world map by population (:func:`rfmap.regions.world_countries`) and three continental subsets (Africa,
+South America, and an Asia-Pacific set with Russia and Fiji that crosses the antimeridian).  Both programs read the
+same GeoJSON (consecutive repeated points removed, which the reference refuses) and CSV files, written to a work
+folder.
+
+Every command is run ``--repeat`` times as a child process; the table gives the median wall time and the median peak
+resident memory (``/usr/bin/time``'s maximum resident set size), the exit status, and the largest
+and mean relative area error :math:`|A_i/T_i - 1|` measured by :func:`rfmap.cartogram.cartogram_metrics` over the
+regions holding at least :data:`rfmap.cartogram.MIN_SHARE` of the total value (the others' largest error apart), in
+each program's equal-area plane (rfmap writes its projected plane, ``--projected``; the reference writes its own
+equal-area plane), with validity and overlaps.  The ratio column is the median time over the reference's.
+
+Usage::
+
+    python benchmarks/cartogram.py --reference /path/to/cartogram-cpp/cartogram
+    python benchmarks/cartogram.py --maps montreal africa --n 256 --repeat 1 --methods flow
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+#: GNU time, for the peak resident size (``%M``, as ``/usr/bin/time -v`` reports it)
+TIME = "/usr/bin/time"
+MAPS = ("montreal", "world", "africa", "south-america", "asia-pacific")
+#: the Asia-Pacific subset: Russia and Fiji are split at the antimeridian, so the map crosses it
+ASIA_PACIFIC = ("Russia", "Fiji", "New Zealand", "Australia", "Papua New Guinea", "Indonesia", "Japan", "Philippines",
+                "China", "Mongolia", "South Korea", "North Korea", "Taiwan", "Vanuatu", "Solomon Is.", "New Caledonia")
+
+
+def write_inputs(folder: str) -> dict:
+    """GeoJSON + CSV of every map in ``folder``: ``{name: (geojson, csv, id property, value property)}``."""
+    import shapely
+    from shapely.geometry import mapping, shape
+
+    from rfmap.regions import _listify, montreal_election, world_countries
+
+    world = world_countries()["features"]
+    chosen = {
+        "montreal": (montreal_election()["features"], "district", "total"),
+        "world": (world, "name", "pop_est"),
+        "africa": ([f for f in world if f["properties"]["continent"] == "Africa"], "name", "pop_est"),
+        "south-america": ([f for f in world if f["properties"]["continent"] == "South America"], "name", "pop_est"),
+        "asia-pacific": ([f for f in world if f["properties"]["name"] in ASIA_PACIFIC], "name", "pop_est"),
+    }
+    out = {}
+    for name, (feats, key, value) in chosen.items():
+        clean = [{"type": "Feature", "properties": f["properties"],
+                  "geometry": _listify(mapping(shapely.remove_repeated_points(shape(f["geometry"]))))}
+                 for f in feats]
+        gj, table = os.path.join(folder, f"{name}.geojson"), os.path.join(folder, f"{name}.csv")
+        with open(gj, "w", encoding="utf-8") as fh:
+            json.dump({"type": "FeatureCollection", "features": clean}, fh)
+        with open(table, "w", newline="", encoding="utf-8") as fh:
+            w = csv.writer(fh)
+            w.writerow([key, value])
+            w.writerows([f["properties"][key], f["properties"][value]] for f in clean)
+        out[name] = (gj, table, key, value)
+    return out
+
+
+def timed(cmd: list[str], cwd: str) -> tuple[float, float, int]:
+    """Run ``cmd`` under ``/usr/bin/time`` (a small parent, so that the peak resident size is the command's own and
+    not this Python's, which a forked child inherits); return (wall seconds, peak resident MB, exit status)."""
+    report = os.path.join(cwd, "time.txt")
+    t0 = time.perf_counter()
+    code = subprocess.call([TIME, "-f", "%M", "-o", report, *cmd], cwd=cwd, stdout=subprocess.DEVNULL,
+                           stderr=subprocess.DEVNULL)
+    wall = time.perf_counter() - t0
+    with open(report, encoding="utf-8") as fh:
+        kb = float(fh.read().strip().splitlines()[-1])
+    return wall, kb / 1024.0, code
+
+
+def area_errors(path: str, key: str, value: str, values: dict) -> str:
+    """``max / mean (minor max) / topology`` of an output GeoJSON in its own (equal-area) plane."""
+    import shapely
+    from shapely.geometry import shape
+
+    from rfmap.cartogram import MIN_SHARE, cartogram_metrics
+
+    if not os.path.isfile(path):
+        return "no output | | |"
+    with open(path, encoding="utf-8") as fh:
+        feats = json.load(fh)["features"]
+    geoms = np.array([shape(f["geometry"]) if f["geometry"] else shapely.Polygon() for f in feats], dtype=object)
+    v = np.array([float(values[str(f["properties"][key])]) for f in feats])
+    m = cartogram_metrics(geoms, v, min_share=MIN_SHARE)
+    topo = "valid" if m.topology_ok else f"{m.n_invalid} invalid, {m.n_overlapping} overlaps"
+    minor = f"{m.max_error_minor:.3g} ({m.n_minor})" if m.n_minor else "-"
+    return f"{m.max_error:.4f} | {m.mean_error:.4f} | {minor} | {topo}"
+
+
+def commands(args, name: str, files: tuple, n: int, folder: str) -> dict:
+    """The commands to compare for one map and grid: ``{label: (argv, output path)}``."""
+    gj, table, key, value = files
+    rfmap = [sys.executable, "-m", "rfmap.cli", "cartogram"]
+    out = {}
+    for method in args.methods:
+        path = os.path.join(folder, f"{name}-{method}-{n}.geojson")
+        out[f"rfmap {method}"] = ([*rfmap, gj, "--value", value, "--method", method, "--n", str(n), "--projected",
+                                   "--max-passes", str(args.max_passes), "--out", path], path)
+    if args.reference:
+        ref = [os.path.abspath(args.reference), gj, table, "--id", key, "--area", value, "-n", str(n)]
+        if name == "world":
+            ref.append("--world")
+        stem = os.path.splitext(os.path.basename(gj))[0]
+        out["cartogram-cpp"] = (ref, os.path.join(folder, f"{stem}_cartogram.geojson"))
+    return out
+
+
+def bench_map(args, name: str, files: tuple, n: int, folder: str) -> list[str]:
+    """The table rows of one map at one grid size."""
+    gj, table, key, value = files
+    with open(table, encoding="utf-8") as fh:
+        values = {row[key]: row[value] for row in csv.DictReader(fh)}
+    rows, ref_time = [], None
+    runs = commands(args, name, files, n, folder)
+    for label, (cmd, path) in reversed(list(runs.items())):  # the reference first: its time is the ratio's base
+        stats = []
+        for _ in range(args.repeat):
+            if os.path.exists(path):
+                os.remove(path)
+            stats.append(timed(cmd, folder))
+        wall = statistics.median(s[0] for s in stats)
+        rss = statistics.median(s[1] for s in stats)
+        codes = sorted({s[2] for s in stats})
+        if label == "cartogram-cpp":
+            ref_time = wall
+        ratio = f"{wall / ref_time:.2f}" if ref_time else "-"
+        errors = area_errors(path, key, value, values)
+        rows.append(f"| {name} | {n} | {label} | {wall:.2f} | {ratio} | {rss:.0f} | "
+                    f"{','.join(map(str, codes))} | {errors} |")
+        print(rows[-1], flush=True)
+    return rows
+
+
+HEAD = ("| map | N | program | wall [s] | × reference | peak RSS [MB] | exit | max error | mean error | "
+        "minor max (count) | topology |\n|---|---:|---|---:|---:|---:|---|---:|---:|---:|---|")
+
+
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--reference", default=None, help="path to cartogram-cpp's cartogram binary")
+    ap.add_argument("--maps", nargs="+", choices=MAPS, default=list(MAPS))
+    ap.add_argument("--n", type=int, nargs="+", default=[256, 512])
+    ap.add_argument("--methods", nargs="+", choices=("flow", "diffusion"), default=["flow", "diffusion"])
+    ap.add_argument("--repeat", type=int, default=3, help="runs per command (median)")
+    ap.add_argument("--max-passes", type=int, default=30, help="rfmap's --max-passes")
+    ap.add_argument("--workdir", default=None, help="folder for the inputs and outputs (default: a temporary one)")
+    args = ap.parse_args(argv)
+    folder = args.workdir or tempfile.mkdtemp(prefix="rfmap-cartogram-bench-")
+    os.makedirs(folder, exist_ok=True)
+    files = write_inputs(folder)
+    load = os.getloadavg()
+    print(f"machine: {os.cpu_count()} cores, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} at the start; "
+          f"median of {args.repeat} whole commands; tolerance 1 %; errors over regions >= 0.01 % of the total\n")
+    print(HEAD, flush=True)
+    for name in args.maps:
+        for n in args.n:
+            bench_map(args, name, files[name], n, folder)
+    load = os.getloadavg()
+    print(f"\nload average at the end: {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}; outputs in {folder}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,130 @@
+r"""Area errors and topology of cartograms: the metrics of the cartogram literature, judged over the regions that hold
+a given share of the total value, and the repair of numerically tiny folds.
+
+The relative area error of region :math:`i` is :math:`|A_i / T_i - 1|` with the target
+:math:`T_i = (v_i / \sum_j v_j) \sum_j A_j`; its mean and maximum are taken over the regions holding at least
+``min_share`` of the total value (:data:`MIN_SHARE` in :func:`rfmap.cartogram.cartogram`), and the others' largest
+error is reported apart.  The topology check asks that every polygon be valid and that no two regions overlap by more
+than ``overlap_tol`` of the total area.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .regions import _shapely
+
+__all__ = ["CartogramMetrics", "cartogram_metrics", "judged", "repair_folds", "MIN_SHARE", "REPAIR_AREA"]
+
+#: The share of the total value from which a region's area error is judged (stopping rule, :meth:`Cartogram.metrics`,
+#: tolerance): 0.01 %.  Smaller regions (a world map's uninhabited Antarctica, islands of a few thousand people) are
+#: at most a few grid cells, where no raster resolves 1 %; their errors are reported apart (``max_error_minor``).
+MIN_SHARE = 1e-4
+#: The largest change of area (a fraction of the total) by which :func:`repair_folds` fixes an invalid mapped
+#: polygon: the default ``overlap_tol`` of the metrics, below which an overlap of two regions is not counted either
+REPAIR_AREA = 1e-6
+
+
+@dataclass
+class CartogramMetrics:
+    """Area errors and topology of a cartogram (see :func:`cartogram_metrics`)."""
+
+    mean_error: float
+    max_error: float
+    n_invalid: int
+    max_overlap: float
+    n_overlapping: int
+    overlap_tol: float
+    #: regions below the judged share of the total value (:data:`MIN_SHARE`), left out of ``mean_error`` and
+    #: ``max_error`` and reported here
+    n_minor: int = 0
+    max_error_minor: float = 0.0
+
+    @property
+    def topology_ok(self) -> bool:
+        """Every polygon valid and no pair of regions overlapping by more than ``overlap_tol``."""
+        return self.n_invalid == 0 and self.n_overlapping == 0
+
+    def __str__(self) -> str:
+        topo = "valid, no overlaps" if self.topology_ok else \
+            f"{self.n_invalid} invalid, {self.n_overlapping} overlapping pairs (max {self.max_overlap:.2g})"
+        minor = f" ({self.n_minor} region(s) under the judged share: max {self.max_error_minor:.4f})" \
+            if self.n_minor else ""
+        return f"area error mean {self.mean_error:.4f}, max {self.max_error:.4f}{minor}; {topo}"
+
+
+def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: float = 1e-6,
+                      topology: bool = True, min_share: float = 0.0) -> CartogramMetrics:
+    r"""Relative area errors and topology of mapped regions.
+
+    The area error of region :math:`i` is :math:`|A_i / T_i - 1|` with :math:`T_i = (v_i/\sum_j v_j)\sum_j A_j`;
+    a polygon is invalid when shapely says so (self-intersection, a hole outside its shell, ...); two regions
+    overlap when the area of their intersection exceeds ``overlap_tol`` times the total area.
+
+    Parameters
+    ----------
+    mapped : ndarray of shapely geometries, shape (R,)
+    values : ndarray, shape (R,), positive
+    overlap_tol : float
+    topology : bool
+        ``False`` skips the validity and overlap checks (their counts are then reported as zero).
+    min_share : float
+        The mean and largest error are taken over the regions with :math:`v_i \ge` ``min_share`` :math:`\sum_j v_j`;
+        the others are counted in ``n_minor`` and their largest error is ``max_error_minor``.
+
+    Returns
+    -------
+    CartogramMetrics
+    """
+    shapely = _shapely()
+    a = shapely.area(mapped)
+    err = np.abs(a / (values / values.sum() * a.sum()) - 1.0)
+    major = judged(values, min_share)
+    minor = dict(n_minor=int((~major).sum()), max_error_minor=float(err[~major].max()) if (~major).any() else 0.0)
+    err = err[major]
+    if not topology:
+        return CartogramMetrics(float(err.mean()), float(err.max()), 0, 0.0, 0, overlap_tol, **minor)
+    valid = shapely.is_valid(mapped)
+    total = float(a.sum())
+    tree = shapely.STRtree(mapped)
+    left, right = tree.query(mapped, predicate="intersects")
+    keep = left < right
+    left, right = left[keep], right[keep]
+    ok = valid[left] & valid[right]
+    g = np.asarray(mapped)
+    inter = np.zeros(left.size)
+    inter[ok] = shapely.area(shapely.intersection(g[left[ok]], g[right[ok]]))
+    inter[~ok] = np.inf  # an invalid polygon's overlaps are not measurable; it is already counted as invalid
+    rel = inter / total
+    over = rel > overlap_tol
+    measured = rel[np.isfinite(rel)]
+    return CartogramMetrics(mean_error=float(err.mean()), max_error=float(err.max()),
+                            n_invalid=int((~valid).sum()), max_overlap=float(measured.max()) if measured.size else 0.0,
+                            n_overlapping=int((over & ok).sum()), overlap_tol=overlap_tol, **minor)
+
+
+def judged(values: np.ndarray, min_share: float) -> np.ndarray:
+    r"""The regions whose area errors are judged: :math:`v_i \ge` ``min_share`` :math:`\sum_j v_j` (all of them when
+    none is), boolean, shape (R,)."""
+    major = np.asarray(values) >= min_share * float(np.sum(values))
+    return major if major.any() else np.ones_like(major)
+
+
+def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tuple[np.ndarray, list]:
+    """Invalid mapped polygons whose fix (``shapely.make_valid``) changes their area by at most ``max_change`` of the
+    total area replaced by the fix: a crossing of two edges that the input drew nearly touching, which no map of the
+    vertices alone keeps apart.  Returns the polygons and the indices of those fixed; larger folds stay invalid, for
+    :meth:`Cartogram.problems` to report."""
+    shapely = _shapely()
+    bad = np.flatnonzero(~shapely.is_valid(mapped))
+    if not bad.size:
+        return mapped, []
+    fixed = shapely.make_valid(mapped[bad])
+    parts = [shapely.get_parts(g) for g in fixed]  # the polygons of each fix (no stray lines or points)
+    fixed = np.array([shapely.union_all(p[np.isin(shapely.get_type_id(p), (3, 6))]) for p in parts], dtype=object)
+    change = np.abs(shapely.area(fixed) - shapely.area(mapped[bad])) / shapely.area(mapped).sum()
+    ok = (change <= max_change) & shapely.is_valid(fixed) & np.isin(shapely.get_type_id(fixed), (3, 6))
+    out = mapped.copy()
+    out[bad[ok]] = fixed[ok]
+    return out, [int(i) for i in bad[ok]]

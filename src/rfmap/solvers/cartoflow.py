@@ -1,0 +1,322 @@
+r"""The flow-based density-equalizing map of the unit square for cartograms, in numpy alone.
+
+The method is that of :mod:`rfmap.solvers.flow` (Gastner, Seguy & More 2018) with the square's walls fixed: the
+density is interpolated linearly in time, :math:`\rho_t = (1 - t)\rho_0 + t\bar\rho`, the flux
+:math:`-\nabla\phi` of :math:`\Delta\phi = \bar\rho - \rho_0` (no-flux walls) is computed once by cosine transforms
+(:func:`poisson_flux_2d`, type-I DCT/DST on the vertex grid, as :func:`rfmap.solvers.spectral.poisson_flux`), and
+points follow :math:`\dot x = -\nabla\phi(x) / \rho_t(x)` from :math:`t = 0` to :math:`1`.  It is one pass of a
+cartogram (:func:`rfmap.cartogram.cartogram` with ``method="flow"``), which itself repeats passes on the mapped
+polygons, so this module has no passes, residual rasters or free boundary of its own: what it keeps is lean.
+
+* The points carried are a cartogram's distinct polygon vertices (a few thousand, where the grid has
+  :math:`N^2`), so that no grid map is interpolated between them; or, by default, the ``N``-grid's vertices.
+* The flux and the density are three planes of shape (N*N,); the velocity at a point is their bilinear interpolant,
+  evaluated by four gathers per plane and a weighted sum (:func:`bilinear`), in double precision.
+* Time steps are the predictor--corrector (Heun) pair of :mod:`rfmap.solvers.flow`: a step is accepted when
+  :math:`\max|x' - x^*|` is at most ``rtol`` grid spacings and, for the grid, no triangle (each cell cut along its
+  diagonal from :math:`(1, 0)` to :math:`(0, 1)`) has turned over (:func:`min_triangle_area`); otherwise it is
+  retried shorter.  A grid step that falls below :data:`STALL_DT` redoes the pass with the density blurred over 1,
+  2, then 4 vertex spacings (:data:`STALL_BLURS`), as cartogram programs blur sharp edges.
+
+PyTorch is never imported here (the whole cartogram command runs without it), nor ``scipy.fft``, whose import takes
+most of a second: the transforms are real FFTs of ``numpy.fft`` (:func:`poisson_flux_2d`).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "poisson_flux_2d", "bilinear", "min_triangle_area",
+           "STALL_DT"]
+
+#: a pass stalls when the step falls below this (in units of the unit time interval)
+STALL_DT = 1e-9
+#: blur widths (vertex spacings) of the retries of a stalled pass (those of :mod:`rfmap.solvers.flow`)
+STALL_BLURS = (1.0, 2.0, 4.0)
+
+
+@dataclass(frozen=True)
+class CartoFlowOptions:
+    """Options of :func:`flow_square`.
+
+    Attributes
+    ----------
+    rtol : float
+        Step tolerance: the largest predictor--corrector difference, in grid spacings (that of
+        :mod:`rfmap.solvers.flow` in 2D).
+    max_steps : int
+        Most (accepted + rejected) steps; ``RuntimeError`` beyond.
+    blur : float
+        Width (vertex spacings) of a Gaussian blur of the density before the flow; 0 (default) turns it off.
+    """
+
+    rtol: float = 0.2
+    max_steps: int = 10_000
+    blur: float = 0.0
+
+
+@dataclass
+class GridFlow:
+    """The map of the ``N``-grid's vertices by one flow (duck-types the parts of :class:`rfmap.result.MapResult`
+    that a cartogram reads).
+
+    Attributes
+    ----------
+    ref_points, mapped_points : ndarray, shape (N*N, 2)
+        Vertex ``i*N + j`` at :math:`(i, j)/(N-1)` and its image.
+    time : float
+        Seconds.
+    info : dict
+        ``method="flow"``, ``passes=1``, ``steps``, ``rejected``, ``fold_rejections``, ``evaluations``,
+        ``stall_blurs`` (blur widths of redone passes; usually empty), ``n``.
+    """
+
+    ref_points: np.ndarray
+    mapped_points: np.ndarray
+    time: float
+    info: dict = field(default_factory=dict)
+
+
+def bilinear(table: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    r"""Bilinear interpolant of a vertex table at points of the unit square.
+
+    Parameters
+    ----------
+    table : ndarray, shape (N, N, C)
+        ``table[i, j]`` at :math:`(i, j)/(N-1)`.
+    pts : ndarray, shape (P, 2)
+        Points in :math:`[0, 1]^2` (clamped to it).
+
+    Returns
+    -------
+    ndarray, shape (P, C)
+    """
+    n = table.shape[0]
+    return _bilinear_planes(np.ascontiguousarray(np.moveaxis(table, -1, 0)).reshape(table.shape[-1], n * n), n, pts)
+
+
+def _bilinear_planes(planes: np.ndarray, n: int, pts: np.ndarray) -> np.ndarray:
+    """:func:`bilinear` of channel planes (C, N*N): the cell and weights once, then one gather per corner and
+    channel (faster than gathering rows of an interleaved table)."""
+    u = pts * (n - 1)
+    np.clip(u, 0.0, n - 1, out=u)
+    i = np.minimum(u.astype(np.intp), n - 2)
+    u -= i
+    fx, fy = u[:, 0], u[:, 1]
+    gx, gy = 1.0 - fx, 1.0 - fy
+    k = i[:, 0] * n + i[:, 1]
+    corners = ((k, gx * gy), (k + 1, gx * fy), (k + n, fx * gy), (k + n + 1, fx * fy))
+    out = np.empty((len(pts), len(planes)))
+    for c, plane in enumerate(planes):
+        acc = plane[k] * corners[0][1]
+        for idx, w in corners[1:]:
+            acc += plane[idx] * w
+        out[:, c] = acc
+    return out
+
+
+def min_triangle_area(y: np.ndarray) -> float:
+    r"""Twice the smallest signed area among the grid's triangles with vertices at ``y``, shape (N, N, 2): each
+    cell's :math:`(0,0), (1,0), (0,1)` and :math:`(1,0), (1,1), (0,1)` triangles (positive when not turned over)."""
+    p00, p10, p01, p11 = y[:-1, :-1], y[1:, :-1], y[:-1, 1:], y[1:, 1:]
+    ax, ay = p10[..., 0] - p00[..., 0], p10[..., 1] - p00[..., 1]
+    bx, by = p01[..., 0] - p00[..., 0], p01[..., 1] - p00[..., 1]
+    first = (ax * by - ay * bx).min()
+    cx, cy = p11[..., 0] - p10[..., 0], p11[..., 1] - p10[..., 1]
+    dx, dy = p01[..., 0] - p10[..., 0], p01[..., 1] - p10[..., 1]
+    return float(min(first, (cx * dy - cy * dx).min()))
+
+
+def _dct1(x: np.ndarray, axis: int) -> np.ndarray:
+    r"""Unnormalised type-I DCT along ``axis`` (``scipy.fft.dct(x, type=1)``): :math:`y_k = x_0 + (-1)^k x_{M-1} +
+    2\sum_{j=1}^{M-2} x_j \cos(\pi jk/(M-1))`, the real FFT of the even extension (``numpy.fft``, whose import is
+    instant where ``scipy.fft``'s takes most of a second)."""
+    x = np.moveaxis(x, axis, -1)
+    ext = np.concatenate([x, x[..., -2:0:-1]], axis=-1)
+    return np.moveaxis(np.fft.rfft(ext, axis=-1).real, -1, axis)
+
+
+def _dst1(x: np.ndarray, axis: int) -> np.ndarray:
+    r"""Unnormalised type-I DST along ``axis`` (``scipy.fft.dst(x, type=1)``): :math:`y_j = 2\sum_k x_k
+    \sin(\pi (j+1)(k+1)/(K+1))`, minus the imaginary part of the real FFT of the odd extension."""
+    x = np.moveaxis(x, axis, -1)
+    zero = np.zeros(x.shape[:-1] + (1,))
+    ext = np.concatenate([zero, x, zero, -x[..., ::-1]], axis=-1)
+    return np.moveaxis(-np.fft.rfft(ext, axis=-1).imag[..., 1:-1], -1, axis)
+
+
+def poisson_flux_2d(values: np.ndarray) -> np.ndarray:
+    r"""The flux :math:`-\nabla\phi` of :math:`\Delta\phi = \bar\rho - \rho_0` with no-flux walls on the unit
+    square, at the grid nodes: :func:`rfmap.solvers.spectral.poisson_flux` in 2D, by ``numpy.fft``.
+
+    With the half coefficients :math:`b_k = \mathrm{DCT\text{-}I}(\rho_0)_k / (2(M-1))^2 / (\pi^2|k|^2)`
+    (:math:`b_0 = 0`), :math:`-\partial_i\phi` is the cosine synthesis (a type-I DCT) of :math:`b` along the other
+    axis and the sine synthesis (a type-I DST of the interior coefficients times :math:`\pi k_i`) along axis ``i``;
+    it vanishes on the walls normal to axis ``i``.
+
+    Parameters
+    ----------
+    values : ndarray, shape (M, M)
+
+    Returns
+    -------
+    ndarray, shape (2, M, M)
+    """
+    return _flux(_dct1(_dct1(np.asarray(values, dtype=np.float64), 0), 1))
+
+
+def _flux(y: np.ndarray) -> np.ndarray:
+    """:func:`poisson_flux_2d` from the type-I DCT ``y`` (M, M) of the values (consumed)."""
+    m = y.shape[0]
+    k = math.pi * np.arange(m)
+    b = y
+    b /= (2.0 * (m - 1)) ** 2
+    lam = k[:, None] ** 2 + k[None, :] ** 2
+    lam[0, 0] = 1.0
+    b /= lam
+    b[0, 0] = 0.0
+    out = np.zeros((2, m, m))
+    out[0, 1:-1] = _dst1(_dct1(b, 1)[1:-1] * k[1:-1, None], 0)
+    out[1, :, 1:-1] = _dst1(_dct1(b, 0)[:, 1:-1] * k[None, 1:-1], 1)
+    return out
+
+
+def _transforms(dens: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
+    """The density, blurred over ``sigma`` vertex spacings with mirror walls when ``sigma > 0`` (its type-I cosine
+    modes damped by the heat kernel; the mean is kept), and its flux (:func:`poisson_flux_2d`), sharing the
+    forward transform."""
+    m = dens.shape[0]
+    y = _dct1(_dct1(dens, 0), 1)
+    if sigma > 0:
+        g = np.exp(-0.5 * (math.pi * sigma / (m - 1) * np.arange(m)) ** 2)
+        y *= g[:, None] * g[None, :]
+        dens = _dct1(_dct1(y, 0), 1) / (2.0 * (m - 1)) ** 2
+    return dens, _flux(y)
+
+
+class _Stalled(RuntimeError):
+    """Every step, however short, turns a triangle over."""
+
+
+class _Velocity:
+    r""":math:`v(x, t) = -\nabla\phi(x) / ((1-t)\rho_0(x) + t\bar\rho)` of one density on the vertex grid."""
+
+    def __init__(self, dens: np.ndarray, sigma: float = 0.0):
+        dens, flux = _transforms(dens, sigma)  # (N, N), (2, N, N)
+        self.n = dens.shape[0]
+        self.planes = np.concatenate([flux, dens[None]]).reshape(3, -1)  # flux x, flux y, density: (3, N*N)
+        # the box mean of the cosine interpolant: the trapezoidal mean (rfmap.solvers.spectral.box_mean)
+        self.mean = float(np.trapezoid(np.trapezoid(dens, axis=0))) / (self.n - 1) ** 2
+        self.evaluations = 0
+
+    def __call__(self, t: float, pts: np.ndarray) -> np.ndarray:
+        self.evaluations += 1
+        f = _bilinear_planes(self.planes, self.n, pts)
+        rho = f[:, 2:] * (1.0 - t) + t * self.mean
+        return f[:, :2] / rho
+
+
+def _project(p: np.ndarray, n: int) -> np.ndarray:
+    """Clip points (N*N, 2) to the unit square, in place, and keep the wall vertices on their walls."""
+    np.clip(p, 0.0, 1.0, out=p)
+    g = p.reshape(n, n, 2)
+    g[0, :, 0], g[-1, :, 0], g[:, 0, 1], g[:, -1, 1] = 0.0, 1.0, 0.0, 1.0
+    return p
+
+
+def _integrate(vel: _Velocity, y: np.ndarray, n: int, opts: CartoFlowOptions, grid: bool) -> tuple[np.ndarray, dict]:
+    """Heun steps of the flow from t = 0 to 1 (module docstring) of the points ``y`` (P, 2), or with ``grid`` of the
+    ``N``-grid's vertices (walls kept, every step checked for turned-over triangles); ``_Stalled`` when the step
+    collapses."""
+    h = 1.0 / (n - 1)
+    project = (lambda p: _project(p, n)) if grid else (lambda p: np.clip(p, 0.0, 1.0, out=p))
+    t, dt = 0.0, 1e-2
+    accepted = rejected = folds = 0
+    k1 = vel(0.0, y)
+    while t < 1.0:
+        if accepted + rejected >= opts.max_steps:
+            raise RuntimeError(f"flow map did not reach t = 1 in {opts.max_steps} steps (t={t:.4g})")
+        dt = min(dt, 1.0 - t)
+        if dt < STALL_DT:
+            raise _Stalled(f"flow step fell below {STALL_DT:g} at t = {t:.4g} (a collapsing triangle)")
+        y_pred = project(y + dt * k1)
+        k2 = vel(t + dt, y_pred)
+        y_new = project(y + (0.5 * dt) * (k1 + k2))
+        diff = y_new - y_pred
+        err = math.sqrt(float(np.einsum("ij,ij->i", diff, diff).max())) / (opts.rtol * h)
+        folded = grid and err <= 1.0 and min_triangle_area(y_new.reshape(n, n, 2)) <= 0.0
+        if err <= 1.0 and not folded:
+            t = 1.0 if 1.0 - (t + dt) < 1e-12 else t + dt
+            y = y_new
+            accepted += 1
+            if t < 1.0:
+                k1 = vel(t, y)
+            dt *= min(2.0, max(0.3, 0.9 / math.sqrt(max(err, 1e-12))))
+        else:
+            rejected += 1
+            folds += int(folded)
+            dt *= 0.5 if folded else max(0.3, 0.9 / math.sqrt(err))
+    return y, {"steps": accepted, "rejected": rejected, "fold_rejections": folds}
+
+
+def flow_square(density: np.ndarray, options: CartoFlowOptions | None = None, *,
+                points: np.ndarray | None = None) -> GridFlow:
+    r"""One flow-based map of the unit square with fixed walls (see the module docstring).
+
+    Parameters
+    ----------
+    density : ndarray, shape (N, N)
+        Strictly positive vertex densities, ``density[i, j]`` at :math:`(i, j)/(N-1)`.
+    options : CartoFlowOptions, optional
+    points : ndarray, shape (P, 2), optional
+        Points of the unit square to carry by the flow itself (a cartogram's distinct polygon vertices: far fewer
+        than the grid's, and no interpolation of a grid map between them).  Default: the ``N``-grid's vertices,
+        with every step checked for turned-over triangles.
+
+    Returns
+    -------
+    GridFlow
+        The points (or the grid's vertices) and their images; a grid flow that stalls is redone blurred
+        (``info["stall_blurs"]``).
+
+    Raises
+    ------
+    ValueError
+        For a density that is not a square 2D array of positive finite numbers.
+    RuntimeError
+        When the steps run out, or the flow stalls with the density blurred over the widest retry.
+    """
+    t0 = time.perf_counter()
+    opts = options or CartoFlowOptions()
+    dens = np.asarray(density, dtype=np.float64)
+    if dens.ndim != 2 or dens.shape[0] != dens.shape[1] or dens.shape[0] < 3:
+        raise ValueError(f"density must have shape (N, N) with N >= 3, got {dens.shape}")
+    if not (np.isfinite(dens).all() and dens.min() > 0):
+        raise ValueError("density must be finite and strictly positive")
+    n = dens.shape[0]
+    grid = points is None
+    if grid:
+        t = np.linspace(0.0, 1.0, n)
+        ref = np.stack(np.meshgrid(t, t, indexing="ij"), axis=-1).reshape(-1, 2)
+    else:
+        ref = np.asarray(points, dtype=np.float64)
+        if ref.ndim != 2 or ref.shape[1] != 2 or not np.isfinite(ref).all():
+            raise ValueError(f"points must be finite with shape (P, 2), got shape {ref.shape}")
+    blurs, width, evaluations = [], opts.blur, 0
+    while True:
+        vel = _Velocity(dens, width)
+        try:
+            mapped, info = _integrate(vel, np.clip(ref, 0.0, 1.0), n, opts, grid)
+            break
+        except _Stalled as exc:
+            evaluations += vel.evaluations
+            if len(blurs) == len(STALL_BLURS):
+                raise RuntimeError(f"flow map stalled with the density blurred over {width:g} spacings: {exc}") \
+                    from None
+            width = max(width, STALL_BLURS[len(blurs)])
+            blurs.append(width)
+    info.update(method="flow", passes=1, n=n, grid=grid, evaluations=evaluations + vel.evaluations, stall_blurs=blurs)
+    return GridFlow(ref_points=ref, mapped_points=mapped, time=time.perf_counter() - t0, info=info)
