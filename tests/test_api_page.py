@@ -1,29 +1,38 @@
-"""The API reference (book/api.md) documents every public name of the package."""
+"""The API reference (book/api.md and the pages of book/api/) documents every public module and name of the package."""
 import importlib
+import pkgutil
 import re
 from pathlib import Path
 
 import pytest
 
+import rfmap
+
 ROOT = Path(__file__).resolve().parent.parent
-PAGE = ROOT / "book" / "api.md"
-#: the modules whose ``__all__`` the page must cover: the package and the modules a user imports from
-MODULES = ["rfmap", "rfmap.surrogate", "rfmap.pretrained", "rfmap.result", "rfmap.solvers", "rfmap.fields",
-           "rfmap.paper_fields", "rfmap.random_fields", "rfmap.metrics", "rfmap.repair", "rfmap.surface", "rfmap.refine",
-           "rfmap.symmetry", "rfmap.config", "rfmap.train", "rfmap.tasks", "rfmap.losses", "rfmap.validation",
-           "rfmap.device", "rfmap.nn", "rfmap.mesh", "rfmap.geometry", "rfmap.experiments", "rfmap.viz", "rfmap.cartogram",
-           "rfmap.training", "rfmap.folds", "rfmap.shorten", "rfmap.regions", "rfmap.paper.tables",
-           "rfmap.paper.reproduce", "rfmap.paper.generalization", "rfmap.paper.recipes", "rfmap.paper.benchmarks",
-           "rfmap.paper.flow_studies", "rfmap.finish", "rfmap.finish.report", "rfmap.finish.draft",
-           "rfmap.finish.stages", "rfmap.finish.query", "rfmap.finish.quality", "rfmap.finish.pipeline",
-           "rfmap.viz.figures", "rfmap.viz.meshes", "rfmap.viz.volumes", "rfmap.viz.architecture",
-           "rfmap.viz.training", "rfmap.viz.cartograms", "rfmap.viz.studies", "rfmap.teacher", "rfmap.selection",
-           "rfmap.studies"]
-DIRECTIVE = re.compile(r"^\.\. (auto\w+):: (\S+)\n((?:[ \t]+:[^\n]*\n)*)", re.M)
+INDEX = ROOT / "book" / "api.md"
+PAGES = sorted((ROOT / "book" / "api").glob("*.md"))
+#: an autodoc directive, or a hand-written ``py:`` description of a name that has no docstring of its own
+DIRECTIVE = re.compile(r"^\.\. (auto\w+|py:\w+):: (\S+)\n((?:[ \t]+:[^\n]*\n)*)", re.M)
 
 
-def _directives() -> list[tuple[str, str, str]]:
-    return DIRECTIVE.findall(PAGE.read_text(encoding="utf-8"))
+def _public_modules() -> list[str]:
+    """Every module of the package whose dotted name has no part starting with an underscore."""
+    names = ["rfmap"] + [m.name for m in pkgutil.walk_packages(rfmap.__path__, "rfmap.")]
+    return sorted(n for n in names if not any(part.startswith("_") for part in n.split(".")))
+
+
+MODULES = _public_modules()
+
+
+def _directives() -> list[tuple[str, str, str, str]]:
+    """(page, directive, target, options) of every autodoc or ``py:`` directive of the API pages; a target
+    given with a ``:module:`` option is returned with its module."""
+    out = []
+    for page in [INDEX, *PAGES]:
+        for kind, target, options in DIRECTIVE.findall(page.read_text(encoding="utf-8")):
+            module = re.search(r":module:[ \t]*(\S+)", options)
+            out.append((page.name, kind, f"{module.group(1)}.{target}" if module else target, options))
+    return out
 
 
 def _resolve(dotted: str):
@@ -39,39 +48,68 @@ def _resolve(dotted: str):
     raise ImportError(dotted)
 
 
+def _members(options: str, mod) -> list[str]:
+    """The names an ``automodule`` documents: its ``__all__`` for a bare ``:members:``, the listed names for
+    ``:members: a, b``, none without the option."""
+    m = re.search(r":members:[ \t]*(.*)\n", options)
+    if m is None:
+        return []
+    listed = [name.strip() for name in m.group(1).split(",") if name.strip()]
+    return listed or list(mod.__all__)
+
+
 def _documented() -> set[tuple[str, int]]:
-    """(name, id(object)) of everything the page documents: explicit directives, and the ``__all__`` of every
-    ``automodule`` with ``:members:`` (autodoc documents exactly those)."""
+    """(name, id(object)) of everything the pages document: explicit directives, and the members of every
+    ``automodule``."""
     seen = set()
-    for kind, target, options in _directives():
+    for _, kind, target, options in _directives():
         if kind == "automodule":
-            if re.search(r":members:\s*\n", options):
-                mod = importlib.import_module(target)
-                seen |= {(name, id(getattr(mod, name))) for name in mod.__all__}
+            mod = importlib.import_module(target)
+            seen |= {(name, id(getattr(mod, name))) for name in _members(options, mod)}
         else:
             seen.add((target.rsplit(".", 1)[-1], id(_resolve(target))))
     return seen
 
 
-def _public(module: str):
-    mod = importlib.import_module(module)
-    return [(name, getattr(mod, name)) for name in mod.__all__]
+def test_the_package_has_its_modules():
+    assert {"rfmap", "rfmap.surrogate", "rfmap.solvers.flow", "rfmap.paper.tables", "rfmap.cli"} <= set(MODULES)
 
 
-@pytest.mark.parametrize("module", MODULES)
-def test_page_lists_every_public_name(module):
+def test_every_public_module_has_a_page():
+    """Each public module is the target of an ``automodule`` on one API page, exactly once."""
+    targets = [target for _, kind, target, _ in _directives() if kind == "automodule"]
+    missing = [m for m in MODULES if m not in targets]
+    assert not missing, f"no API page documents the modules {missing}"
+    twice = sorted({t for t in targets if targets.count(t) > 1})
+    assert not twice, f"modules documented twice: {twice}"
+
+
+@pytest.mark.parametrize("module", [m for m in MODULES if hasattr(importlib.import_module(m), "__all__")])
+def test_pages_list_every_public_name(module):
     seen = _documented()
-    missing = [name for name, obj in _public(module) if (name, id(obj)) not in seen]
-    assert not missing, f"book/api.md does not document {module}: {missing}"
+    mod = importlib.import_module(module)
+    missing = [name for name in mod.__all__ if (name, id(getattr(mod, name))) not in seen]
+    assert not missing, f"the API pages do not document {module}: {missing}"
 
 
 def test_every_directive_names_an_importable_object():
-    for _, target, _ in _directives():
+    for _, _, target, _ in _directives():
         _resolve(target)
 
 
-def test_page_is_in_the_toc_and_autodoc_is_enabled():
+def test_pages_are_in_the_toc_and_autodoc_is_enabled():
     yaml = pytest.importorskip("yaml")
     cfg = yaml.safe_load((ROOT / "_config.yml").read_text(encoding="utf-8"))
     assert {"sphinx.ext.autodoc", "sphinx.ext.napoleon"} <= set(cfg["sphinx"]["extra_extensions"])
-    assert "file: book/api" in (ROOT / "_toc.yml").read_text(encoding="utf-8")
+    toc = (ROOT / "_toc.yml").read_text(encoding="utf-8")
+    assert "file: book/api\n" in toc
+    missing = [p.stem for p in PAGES if f"file: book/api/{p.stem}\n" not in toc]
+    assert PAGES and not missing, f"API pages missing from _toc.yml: {missing}"
+
+
+def test_no_page_is_the_whole_reference():
+    """The reference is split by module group: no page holds more than a quarter of the directives."""
+    per_page = {}
+    for page, *_ in _directives():
+        per_page[page] = per_page.get(page, 0) + 1
+    assert len(per_page) >= 8 and max(per_page.values()) <= sum(per_page.values()) / 4, per_page

@@ -9,7 +9,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 #: Chapters whose every number in prose is a result of the page: each must come from the notebook (myst_nb.glue)
 GLUED_CHAPTERS = ["04_beltrami_reconstruction", "05_dem_deq_2d", "06_resolution_2d", "07_dem_vs_deq",
-                  "09_bijectivity", "10_fast_classical_and_hybrid", "12_unet_vs_fno"]
+                  "09_bijectivity", "10_fast_classical_and_hybrid", "12_unet_vs_fno", "13_appendix_repair",
+                  "14_appendix_flow"]
 
 #: what a typed result looks like: a decimal number (0.43, 1.0) or a percentage (10 %, 30%)
 TYPED_RESULT = re.compile(r"(?<![\w.])\d+\.\d+(?![\w.])|(?<![\w.])\d+\s?%")

@@ -16,7 +16,7 @@ BOUNDARIES = ("fixed", "square", "free")
 
 def check_input(net: nn.Module, x: Tensor) -> None:
     """Raise a clear ``ValueError`` unless ``x`` fits the displacement network ``net`` (attributes ``dim``,
-    ``n_params``, ``in_channels``, ``min_size``): shape (B, d + m, *S) with d spatial sides >= ``min_size``."""
+    ``n_params``, ``in_channels``, ``min_size``): shape ``(B, d + m, *S)`` with d spatial sides >= ``min_size``."""
     if x.dim() != net.dim + 2:
         raise ValueError(f"a {net.dim}D model expects input of shape (B, C, {', '.join(['N'] * net.dim)}), "
                          f"got {tuple(x.shape)}")

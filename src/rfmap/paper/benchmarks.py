@@ -9,13 +9,22 @@ import numpy as np
 
 from ..hybrid import UNGUARDED
 
-__all__ = ["METHODS", "ROWS", "WARM_MODELS", "compare_methods", "benchmark_fields", "time_to_accuracy", "summarize"]
+__all__ = ["METHODS", "ROWS", "WARM_MODELS", "STD_TOL", "FLOW_TIME", "HYBRID_TIME", "compare_methods",
+           "benchmark_fields", "time_to_accuracy", "summarize", "target_checks", "targets_headline", "summary_table",
+           "hybrid_findings"]
 
 #: The methods compared by :func:`compare_methods`.
 METHODS = ("diffusion", "flow", "surrogate", "surrogate+refine", "hybrid")
 #: The rows of :func:`compare_methods`, in order: the hybrid's run also gives the row of its warm flow alone
 #: (:data:`rfmap.hybrid.UNGUARDED`; where the flow started cold, the hybrid's own row).
 ROWS = METHODS[:-1] + (UNGUARDED, "hybrid")
+
+#: "As accurate": a final Std(rho~_map) at most this factor above the reference solver's.
+STD_TOL = 1.1
+#: The flow-based solver's target: at most this fraction of the diffusion solver's time.
+FLOW_TIME = 0.2
+#: The hybrid's target: at most this fraction of the best classical solver's time.
+HYBRID_TIME = 0.5
 
 
 def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "square",
@@ -135,3 +144,156 @@ def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 row["time_ratio"] = a["time"] / agg[best]["time"]
             out.append(row)
     return out
+
+
+def _pick(summary, case, method):
+    return next(r for r in summary if (r["dim"], r["n"], r["boundary"], r["method"]) == (*case, method))
+
+
+def target_checks(summary: list[dict[str, Any]], cases) -> list[dict[str, Any]]:
+    r"""The speed and accuracy targets per case, from the rows of :func:`summarize`.
+
+    The flow-based solver meets its target when its mean time is at most :data:`FLOW_TIME` times the diffusion
+    solver's and its mean :math:`\mathrm{Std}(\tilde\rho_{map})` at most :data:`STD_TOL` times the diffusion
+    solver's; the hybrid when it is within :data:`HYBRID_TIME` and :data:`STD_TOL` of the best classical solver.
+
+    Parameters
+    ----------
+    summary : list of dict
+        Rows of :func:`summarize` (with the methods ``diffusion``, ``flow`` and ``hybrid``).
+    cases : sequence of (dim, n, boundary)
+
+    Returns
+    -------
+    list of dict
+        One row per case: ``case`` (a label), ``dim``, ``n``, ``boundary``, ``flow_time`` and ``flow_std`` (flow
+        over diffusion), ``hybrid_time`` and ``hybrid_std`` (hybrid over the best classical solver),
+        ``best_classical``, ``flow_met`` and ``hybrid_met``.
+    """
+    out = []
+    for case in cases:
+        flow, diff, hyb = (_pick(summary, tuple(case), m) for m in ("flow", "diffusion", "hybrid"))
+        row = {"case": f"{case[0]}D N = {case[1]} {case[2]}", "dim": case[0], "n": case[1], "boundary": case[2],
+               "flow_time": flow["time"] / diff["time"], "flow_std": flow["std_rho_map"] / diff["std_rho_map"],
+               "hybrid_time": hyb["time_ratio"], "hybrid_std": hyb["std_ratio"],
+               "best_classical": hyb["best_classical"]}
+        row["flow_met"] = bool(row["flow_time"] <= FLOW_TIME and row["flow_std"] <= STD_TOL)
+        row["hybrid_met"] = bool(row["hybrid_time"] <= HYBRID_TIME and row["hybrid_std"] <= STD_TOL)
+        out.append(row)
+    return out
+
+
+def targets_headline(checks: list[dict[str, Any]]):
+    """The targets at a glance: a :class:`~rfmap.paper.tables.Headline` with one row per case and criterion (the
+    measured ratio, its target and whether it is met), from the rows of :func:`target_checks`."""
+    from .tables import headline
+
+    criteria = (("flow_time", "flow time / diffusion", FLOW_TIME), ("flow_std", "flow Std / diffusion", STD_TOL),
+                ("hybrid_time", "hybrid time / best classical", HYBRID_TIME),
+                ("hybrid_std", "hybrid Std / best classical", STD_TOL))
+    ours, target = {}, {}
+    for c in checks:
+        for key, name, limit in criteria:
+            ours[f"{c['case']}: {name}"] = c[key]
+            target[f"{c['case']}: {name}"] = limit
+    return headline("The speed and accuracy targets", "Ratios of the means over each case's fields (target: at most)",
+                    ours, target, ours_label="measured", paper_label="target")
+
+
+def summary_table(summary: list[dict[str, Any]]):
+    """The rows of :func:`summarize` as a :class:`~rfmap.paper.tables.Table`: one case per dimension, grid side
+    and boundary, one row per method, with the mean Std(rho~_map), the mean time, the folds and the ratios to the
+    case's best classical solver."""
+    from .tables import Table
+
+    table = Table("tab:time_to_accuracy", "Time to accuracy: means over each case's fields",
+                  ["std_rho_map", "time", "n_flipped", "std_ratio", "time_ratio"])
+    for r in summary:
+        table.add(f"{r['dim']}D N = {r['n']} {r['boundary']}", r["method"],
+                  {k: r.get(k) for k in table.columns})
+    return table
+
+
+def _ratio_text(v: float) -> str:
+    return f"{v:.3g}"
+
+
+def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]:
+    """The numbers and verdicts that the book's text quotes from a time-to-accuracy run (chapter 10).
+
+    Parameters
+    ----------
+    rows : list of dict
+        Rows of :func:`time_to_accuracy`.
+    targets : dict
+        ``dim -> (dim, n, boundary)``: the case whose numbers the text quotes for each dimension.
+
+    Returns
+    -------
+    dict
+        ``n_methods``, ``method_names``, ``flow_hybrid_flips`` (folds of the flow and the hybrid), the guard's
+        counts ``guard_fields``, ``guard_warm``, ``guard_cold``, ``guard_worse`` and ``guard_text``, the warm flow
+        against the cold one (``warm_vs_cold``, ``warm_vs_cold_verb``), the field on which the flow ends furthest
+        above the diffusion solver in 2D (``flow_rough_field``, ``flow_rough_ratio``), and per dimension ``d``:
+        ``n{d}``, ``flow_speed{d}``, ``flow_std{d}``, ``best{d}``, ``hyb_time{d}``, ``hyb_std{d}``,
+        ``ng_time{d}``, ``ng_std{d}`` (the warm flow alone), ``sur_time{d}``, ``sur_std{d}``, ``sur_verdict{d}``,
+        ``sur_flow_time{d}``, ``hyb_verdict{d}``, ``fastest{d}``, ``most_accurate{d}`` and ``slowest{d}``.
+    """
+    summary = summarize(rows)
+    methods = [m for m in dict.fromkeys(r["method"] for r in rows) if m != UNGUARDED]
+    names = {"surrogate+refine": "surrogate with weight refinement"}
+    by = {(r["dim"], r["n"], r["boundary"], r["field"], r["method"]): r for r in rows}
+    hybrids = [r for r in rows if r["method"] == "hybrid"]
+    warm = [r for r in hybrids if r["start"] == "warm"]
+    worse = [r for r in hybrids
+             if r["std_rho_map"] > by[r["dim"], r["n"], r["boundary"], r["field"], "flow"]["std_rho_map"] * (1 + 1e-9)]
+    out = {"n_methods": len(methods), "method_names": ", ".join(names.get(m, m) for m in methods),
+           "flow_hybrid_flips": sum(r["n_flipped"] for r in summary if r["method"] in ("flow", "hybrid", UNGUARDED)),
+           "guard_fields": len(hybrids), "guard_warm": len(warm),
+           "guard_cold": sum(r["kept"] == "cold" for r in warm), "guard_worse": len(worse),
+           "guard_text": "is never worse than the flow alone on these fields" if not worse else
+           f"ended worse than the flow alone on {len(worse)} fields"}
+    tol = f"{100 * (STD_TOL - 1):.0f} %"
+    for d, case in targets.items():
+        flow, diff, hyb, sur, alone = (_pick(summary, tuple(case), m)
+                                       for m in ("flow", "diffusion", "hybrid", "surrogate", UNGUARDED))
+        pays = hyb["time_ratio"] <= HYBRID_TIME and hyb["std_ratio"] <= STD_TOL
+        trio = {"flow": flow, "surrogate": sur, "hybrid": hyb}
+        out.update({
+            f"n{d}": case[1], f"best{d}": flow["best_classical"],
+            f"flow_speed{d}": _ratio_text(diff["time"] / flow["time"]),
+            f"flow_std{d}": _ratio_text(flow["std_rho_map"] / diff["std_rho_map"]),
+            f"hyb_time{d}": _ratio_text(hyb["time_ratio"]), f"hyb_std{d}": _ratio_text(hyb["std_ratio"]),
+            f"ng_time{d}": _ratio_text(alone["time_ratio"]), f"ng_std{d}": _ratio_text(alone["std_ratio"]),
+            f"sur_time{d}": _ratio_text(sur["time_ratio"]), f"sur_std{d}": _ratio_text(sur["std_ratio"]),
+            f"sur_verdict{d}": "faster" if sur["time_ratio"] < 1 else "slower",
+            f"sur_flow_time{d}": _ratio_text(sur["time"] / flow["time"]),
+            f"hyb_verdict{d}": (f"pays off: it comes within {tol} of the best classical solver's Std in at most "
+                                f"{HYBRID_TIME:g} times its time") if pays else
+            (f"does not pay off: it is not both within {tol} of the best classical solver's Std and at most "
+             f"{HYBRID_TIME:g} times its time"),
+            f"fastest{d}": min(trio, key=lambda m: trio[m]["time"]),
+            f"most_accurate{d}": min(trio, key=lambda m: trio[m]["std_rho_map"]),
+            f"slowest{d}": max(trio, key=lambda m: trio[m]["time"])})
+    ratios = [by[r["dim"], r["n"], r["boundary"], r["field"], UNGUARDED]["std_rho_map"]
+              / by[r["dim"], r["n"], r["boundary"], r["field"], "flow"]["std_rho_map"] for r in warm]
+    wvc = float(np.mean(ratios)) if ratios else float("nan")
+    out["warm_vs_cold"] = _ratio_text(wvc)
+    out["warm_vs_cold_verb"] = ("stays near" if 1 / STD_TOL <= wvc <= STD_TOL else
+                                "ends above" if wvc > STD_TOL else "ends below")
+    out.update(_roughest_field(by, rows, tuple(targets[min(targets)])))
+    return out
+
+
+def _roughest_field(by: dict, rows: list[dict[str, Any]], case: tuple) -> dict[str, Any]:
+    """The field of ``case`` on which the flow's final Std is furthest above the diffusion solver's."""
+    fields = sorted({r["field"] for r in rows if (r["dim"], r["n"], r["boundary"]) == case})
+    over = {f: by[(*case, f, "flow")]["std_rho_map"] / by[(*case, f, "diffusion")]["std_rho_map"] for f in fields}
+    rough = max(over, key=over.get)
+    label = rough
+    if rough.startswith("random-"):  # an unseen field of the report stream: say which kind it is
+        from ..validation import DENSITY_KINDS
+
+        kind = DENSITY_KINDS[int(rough.split("-")[1]) % len(DENSITY_KINDS)]
+        label = f"the unseen random field {rough} (a {kind} field)"
+    return {"flow_rough_field": label, "flow_rough_ratio": _ratio_text(over[rough])}

@@ -9,7 +9,11 @@ import numpy as np
 
 from .benchmarks import benchmark_fields
 
-__all__ = ["sea_blend_study", "residual_floor", "CONVERGENCE_SETTINGS", "flow_convergence", "warm_start_residuals"]
+__all__ = ["sea_blend_study", "SEA_TOL", "residual_floor", "CONVERGENCE_SETTINGS", "flow_convergence",
+           "warm_start_residuals"]
+
+#: A flow "ends higher" than another on a field when its final Std(rho~_map) is more than this factor above.
+SEA_TOL = 1.05
 
 
 def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float = 0.25) -> list[dict[str, Any]]:

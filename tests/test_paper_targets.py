@@ -1,0 +1,52 @@
+"""The time-to-accuracy targets of chapter 10 (rfmap.paper.benchmarks): checks, headline and summary table."""
+import pytest
+
+from rfmap.hybrid import UNGUARDED
+from rfmap.paper.benchmarks import (FLOW_TIME, HYBRID_TIME, STD_TOL, hybrid_findings, summarize, summary_table,
+                                    target_checks, targets_headline)
+
+
+def _rows(flow_time: float, flow_std: float, hybrid_time: float, hybrid_std: float) -> list[dict]:
+    """One field of a 2D and a 3D case; diffusion takes 1 s at Std 0.1 and is the best classical solver."""
+    rows = []
+    for dim, n in ((2, 33), (3, 16)):
+        base = {"field": "f", "dim": dim, "n": n, "boundary": "square", "n_flipped": 0}
+        rows += [dict(base, method="diffusion", std_rho_map=0.1, time=1.0),
+                 dict(base, method="flow", std_rho_map=0.1 * flow_std, time=flow_time),
+                 dict(base, method="surrogate", std_rho_map=0.3, time=0.05),
+                 dict(base, method=UNGUARDED, std_rho_map=0.1 * hybrid_std, time=hybrid_time / 2, start="warm",
+                      kept="warm"),
+                 dict(base, method="hybrid", std_rho_map=0.1 * hybrid_std, time=hybrid_time, start="warm",
+                      kept="warm")]
+    return rows
+
+
+CASES = [(2, 33, "square"), (3, 16, "square")]
+
+
+def test_targets_met_exactly_at_the_limits_and_missed_beyond():
+    ok = target_checks(summarize(_rows(FLOW_TIME, STD_TOL, HYBRID_TIME, STD_TOL)), CASES)
+    assert all(c["flow_met"] and c["hybrid_met"] for c in ok)
+    assert ok[0]["flow_time"] == pytest.approx(FLOW_TIME, rel=1e-12)
+    slow = target_checks(summarize(_rows(1.01 * FLOW_TIME, 1.0, 1.01 * HYBRID_TIME, 1.0)), CASES)
+    assert not any(c["flow_met"] or c["hybrid_met"] for c in slow)
+    rough = target_checks(summarize(_rows(0.1 * FLOW_TIME, 1.01 * STD_TOL, 0.1, 1.0)), CASES)
+    assert [(c["flow_met"], c["hybrid_met"]) for c in rough] == [(False, True)] * 2
+
+
+def test_headline_counts_each_criterion_and_names_the_target_column():
+    h = targets_headline(target_checks(summarize(_rows(0.1, 1.0, 1.0, 1.0)), CASES))
+    assert (h.met, h.compared) == (6, 8)  # per case: flow time and Std met, hybrid Std met, hybrid time missed
+    md = h.to_markdown()
+    assert "| case | measured | target | measured / target | met |" in md
+    assert "| 2D N = 33 square: flow time / diffusion | 0.1 | 0.2 | 0.5× | yes |" in md
+
+
+def test_summary_table_is_one_table_of_every_method_and_findings_quote_the_cases():
+    rows = _rows(0.1, 1.0, 0.4, 1.0)
+    table = summary_table(summarize(rows))
+    lines = table.to_markdown().splitlines()
+    assert len(table.rows) == 2 * 5 and sum(line.startswith("|---") for line in lines) == 1
+    found = hybrid_findings(rows, dict(zip((2, 3), CASES)))
+    assert found["flow_speed2"] == "10" and found["guard_warm"] == 2 and found["guard_worse"] == 0
+    assert found["hyb_verdict3"].startswith("pays off") and found["fastest2"] == "surrogate"
