@@ -7,10 +7,10 @@ import numpy as np
 
 from ..paper_fields import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
-from .reproduce import SYM, SYM_REF
-from .tables import Table
+from .reproduce import METHOD_TITLES, SYM, SYM_REF
+from .tables import COLUMN_TITLES, Table, format_sig
 
-__all__ = ["generalization_table", "distortion_table", "displacement_demand"]
+__all__ = ["generalization_table", "generalization_summary", "distortion_table", "displacement_demand"]
 
 
 @quiet_quality()
@@ -71,7 +71,8 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
                 add(kind, method, m.std_rho_map, m.n_flipped, r.time)
     low = "low-" if low_frequency else ""
     table = Table(f"tab:generalization-{low}{sur.name}",
-                  f"{sur.name}: {count} unseen {'low-frequency ' if low else ''}random fields at N = {n} ({key})",
+                  f"{sur.name}: {count} unseen {'low-frequency ' if low else ''}random fields at N = {n} "
+                  f"({COLUMN_TITLES.get(key, key)})",
                   ["mean", "worst", "n_flipped", "time"])
     kinds = sorted({k for k, _ in rows if k != "all"})
     kinds = kinds + ["all"] if len(kinds) > 1 else ["all"]
@@ -85,6 +86,26 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
                                       "n_flipped": int(sum(x[1] for x in vals)),
                                       "time": float(np.mean([x[2] for x in vals]))})
     return table
+
+
+def generalization_summary(table: Table, column: str = "mean") -> str:
+    """The headline of a :func:`generalization_table` as Markdown: one row per kind of field (and ``all``), one
+    column per method with its ``column`` (the mean metric by default), then the best surrogate value over the
+    classical solver's (below 1: the surrogate is better)."""
+    methods = list(dict.fromkeys(m for _, m, _ in table.rows))
+    classical = next((m for m in methods if m.startswith("classical")), None)
+    ours = [m for m in methods if m != classical]
+    head = ["fields"] + [METHOD_TITLES.get(m, m) for m in ours]
+    head += [METHOD_TITLES.get(classical, classical), "best ours / classical"] if classical else []
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for kind in dict.fromkeys(c for c, _, _ in table.rows):
+        vals = {m: v.get(column) for c, m, v in table.rows if c == kind}
+        cells = [kind] + [format_sig(vals.get(m)) for m in ours]
+        if classical:
+            best, ref = min(vals[m] for m in ours if vals.get(m) is not None), vals.get(classical)
+            cells += [format_sig(ref), f"{best / ref:.3g}×" if ref else "—"]
+        lines.append("| " + " | ".join(cells) + " |")
+    return f"**{table.title}**: {column} per kind of field, lower is better\n\n" + "\n".join(lines)
 
 
 @quiet_quality()

@@ -16,10 +16,11 @@ from ..mesh import grid_mesh
 from ..paper_fields import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
 from ..result import MapResult
 from ..finish import quiet_quality
-from .tables import Headline, Table, format_value, headline, paper_table
+from .tables import COLUMN_TITLES, Headline, Table, format_sig, format_value, headline, paper_table
 
 __all__ = ["beltrami_table", "beltrami_resolution_table", "population_table", "resolution_table", "reproduce",
-           "exact_beltrami_result", "population_summary", "population_headline", "SYM", "SYM_REF"]
+           "exact_beltrami_result", "population_summary", "population_headline", "beltrami_headline",
+           "cases_markdown", "SYM", "SYM_REF", "METHOD_TITLES"]
 
 
 def _timed_map(sur, name, n, refine=False, repeats: int = 3, slow: float = 1.0, **kw):
@@ -318,11 +319,66 @@ def population_headline(table: Table, fields, title: str, *, symmetrized: bool =
     :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` (the better of ``ours`` and ``ours + refinement``, and with
     ``symmetrized`` of the two symmetrized rows too: the ``{f}_best`` and ``{f}_best_sym`` of
     :func:`population_summary`, so its ``met`` equals that function's ``met`` or ``met_sym``), the paper's value and
-    the classical diffusion DEM's on the same mesh."""
-    methods = ["ours", "ours + refinement"] + ([SYM, SYM_REF] if symmetrized else [])
+    the classical diffusion DEM's on the same mesh.  Rows a table lacks are skipped (a :func:`resolution_table`
+    without ``refine`` has only ``ours``)."""
+    present = {m for _, m, _ in table.rows}
+    methods = [m for m in ["ours", "ours + refinement"] + ([SYM, SYM_REF] if symmetrized else []) if m in present]
     ours = {f: min(table.value(f, m, "std_rho_map") for m in methods) for f in fields}
-    paper = {f: table.value(f, "paper", "std_rho_map") for f in fields}
-    dem = {f: table.value(f, "diffusion DEM", "std_rho_map") for f in fields}
+    paper = {f: _maybe(table, f, "paper", "std_rho_map") for f in fields}
+    dem = {f: _maybe(table, f, "diffusion DEM", "std_rho_map") for f in fields}
     label = "ours, best delivered" + (" (symmetrized too)" if symmetrized else "")
     return headline(title, "Std(ρ̃_map), lower is better", ours, paper, dem, ours_label=label,
                     classical_label="diffusion DEM")
+
+
+def beltrami_headline(table: Table, cases, title: str, *, column: str = "mean_dd", paper_column: str | None = None,
+                      symmetrized: bool = False) -> Headline:
+    r"""The headline of a Beltrami table (:func:`beltrami_table`, :func:`beltrami_resolution_table`): per case the
+    best delivered surrogate value of ``column`` (the better of ``ours`` and ``ours + refinement``, with
+    ``symmetrized`` also of the symmetrized rows), the paper's value of ``paper_column`` (default ``column``) and the
+    Linear Beltrami Solver's value on the same mesh; lower is better."""
+    methods = [m for m in ("ours", "ours + refinement") + ((SYM, SYM_REF) if symmetrized else ())
+               if any(mm == m for _, mm, _ in table.rows)]
+    ours = {str(c): min(table.value(str(c), m, column) for m in methods) for c in cases}
+    paper = {str(c): _maybe(table, str(c), "paper", paper_column or column) for c in cases}
+    lbs = {str(c): table.value(str(c), "LBS", column) for c in cases}
+    label = "ours, best delivered" + (" (symmetrized too)" if symmetrized else "")
+    metric = f"{COLUMN_TITLES.get(column, column)}, lower is better"
+    return headline(title, metric, ours, paper, lbs, ours_label=label, classical_label="LBS")
+
+
+def _maybe(table: Table, case: str, method: str, column: str):
+    try:
+        return table.value(case, method, column)
+    except KeyError:
+        return None
+
+
+#: short names of a table's methods, for column heads
+METHOD_TITLES = {"ours": "ours", "ours + refinement": "+ refinement", SYM: "symmetrized",
+                 SYM_REF: "symmetrized + refinement", "diffusion DEM": "diffusion DEM", "LBS": "LBS",
+                 "paper": "paper", "classical (diffusion DEM)": "diffusion DEM", "classical (LBS)": "LBS"}
+
+
+def _cell(v, column: str) -> str:
+    if v is None or isinstance(v, (list, tuple, bool, np.bool_)) or column == "time":
+        return format_value(v, column).replace("(", "").replace(")", "")
+    return f"{float(v):.3g}×" if column == "speedup" else format_sig(v)
+
+
+def cases_markdown(table: Table, case_title: str = "") -> str:
+    """A whole :class:`~rfmap.paper.tables.Table` as Markdown narrow enough for the book's text column: one table
+    per case, with a row per column of ``table`` and a column per method (short names of :data:`METHOD_TITLES`),
+    numbers to three significant digits (:func:`~rfmap.paper.tables.format_sig`), times with their unit."""
+    parts = []
+    for case in dict.fromkeys(c for c, _, _ in table.rows):
+        rows = [(m, v) for c, m, v in table.rows if c == case]
+        head = [f"{case_title} {case}".strip()] + [METHOD_TITLES.get(m, m) for m, _ in rows]
+        lines = ["| " + " | ".join(h.replace("|", "\\|") for h in head) + " |", "|" + "---|" * len(head)]
+        for col in table.columns:
+            if all(v.get(col) is None for _, v in rows):
+                continue
+            cells = [COLUMN_TITLES.get(col, col).replace("|", "\\|")] + [_cell(v.get(col), col) for _, v in rows]
+            lines.append("| " + " | ".join(cells) + " |")
+        parts.append("\n".join(lines))
+    return f"**{table.title}**\n\n" + "\n\n".join(parts)

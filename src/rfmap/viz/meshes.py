@@ -7,7 +7,12 @@ import numpy as np
 from .figures import save_figure, style
 
 __all__ = ["element_rho", "plot_mesh", "plot_slice_outline", "plot_density", "plot_mu", "plot_map_row",
-           "plot_beltrami_row", "vertex_error_panels", "population_figure"]
+           "plot_beltrami_row", "vertex_error_panels", "population_figure", "map_rows_figure", "beltrami_figure",
+           "extreme_figure", "TEXT_WIDTH_IN"]
+
+
+#: width of a figure that fills the book's text column with its 9 pt text shown at 9 pt (``rfmap.viz.figures``)
+TEXT_WIDTH_IN = 7.2
 
 
 def element_rho(result) -> np.ndarray:
@@ -154,15 +159,157 @@ def vertex_error_panels(results: dict, exact, *, n: int, title: str = ""):
     return fig
 
 
-def population_figure(maps: dict, fields, label: str, *, n: int, method: str = "ours+refine"):
-    """The paper's 2D population figure: one :func:`plot_map_row` per field of the maps of
-    :func:`rfmap.paper.reproduce.population_table`, saved under the paper's ``label``; returns the figure."""
+def _frameless(axes) -> None:
+    for ax in np.ravel(axes):
+        for spine in ax.spines.values():
+            spine.set_visible(False)
+
+
+def _grid_side(result) -> int | None:
+    n = int(round(np.sqrt(len(result.ref_points))))
+    return n if n * n == len(result.ref_points) else None
+
+
+def map_rows_figure(results: dict, *, rho_range=(0.0, 2.5), width: float = TEXT_WIDTH_IN, max_lines: int = 20):
+    r"""One row per 2D map of ``results`` (``{row label: MapResult}``): the mapped mesh (at most ``max_lines``
+    grid lines per direction), :math:`\tilde\rho` on the
+    original and on the mapped mesh, and :math:`|\mu|` on the mapped mesh (the paper's Figs. 7-9 without their
+    panel of the original grid).  The two density panels share one colour bar (``rho_range``), the :math:`|\mu|`
+    panels another (0 to the largest :math:`|\mu|`, at most 1), so the rows compare at a glance; the figure is
+    ``width`` inches wide, readable in the book's text column.
+
+    Returns
+    -------
+    matplotlib Figure
+    """
     import matplotlib.pyplot as plt
 
+    k = len(results)
+    fig, axes = plt.subplots(k, 4, figsize=(width, 1.62 * k + 0.75), layout="constrained", squeeze=False)
+    mus = {label: np.abs(r.mu()) for label, r in results.items()}
+    mu_top = max(float(m.max()) for m in mus.values())
+    mu_hi = min(1.0, mu_top) or 1.0
+    rho_top = 0.0
+    for row, (label, r) in zip(axes, results.items()):
+        el = r.elements
+        rho0 = np.asarray(r.field).reshape(-1)[el].mean(1)
+        rho0, rho1 = rho0 / rho0.mean(), element_rho(r)
+        rho_top = max(rho_top, float(rho0.max()), float(rho1.max()))
+        plot_mesh(row[0], r.mapped_points, el, n=_grid_side(r), max_lines=max_lines)
+        row[0].set_ylabel(label)
+        im_rho = plot_density(row[1], r.ref_points, el, rho0, vmin=rho_range[0], vmax=rho_range[1], colorbar=False)
+        plot_density(row[2], r.mapped_points, el, rho1, vmin=rho_range[0], vmax=rho_range[1], colorbar=False)
+        im_mu = plot_density(row[3], r.mapped_points, el, mus[label], vmin=0, vmax=mu_hi, cmap="magma",
+                             colorbar=False)
+    _frameless(axes)
+    for ax, title in zip(axes[0], ["mapped mesh", r"$\tilde\rho$ original", r"$\tilde\rho$ mapped",
+                                   r"$|\mu|$ mapped"]):
+        ax.set_title(title)
+    fig.colorbar(im_rho, ax=axes[:, 1:3].ravel().tolist(), location="bottom", shrink=0.8, aspect=30,
+                 label=r"$\tilde\rho$ (mean 1)", extend="max" if rho_top > rho_range[1] else "neither")
+    fig.colorbar(im_mu, ax=axes[:, 3].tolist(), location="bottom", shrink=0.95, aspect=12,
+                 label=r"$|\mu|$", extend="max" if mu_top > mu_hi else "neither")
+    return fig
+
+
+def population_figure(maps: dict, fields, label: str, *, n: int | None = None, method: str = "ours+refine"):
+    """The paper's 2D population figure: one row of :func:`map_rows_figure` per field of the maps of
+    :func:`rfmap.paper.reproduce.population_table`, saved under the paper's ``label``; returns the figure.
+    (``n`` is read from the maps; the argument is kept for older callers.)"""
     with style():
-        fig, axes = plt.subplots(len(fields), 5, figsize=(14, 2.8 * len(fields)))
-        for row, f in zip(axes, fields):
-            plot_map_row(row, maps[f][method], n=n, label=f)
-        fig.tight_layout()
+        fig = map_rows_figure({f: maps[f][method] for f in fields})
         save_figure(fig, label)
+    return fig
+
+
+def beltrami_figure(rows: dict, *, width: float = TEXT_WIDTH_IN, bins: int = 40, max_lines: int = 20):
+    r"""The paper's reconstruction figures (Figs. 5 and 6), one row per test: the domain coloured by the exact
+    :math:`|\mu|` (one colour bar for all rows), the exact map, the Linear Beltrami Solver's map, the surrogate's
+    map (at most ``max_lines`` grid lines per direction), and the histograms of
+    :math:`|\mu_{\text{exact}} - \mu|` over the triangles for both solvers (log counts).
+
+    Parameters
+    ----------
+    rows : dict
+        ``{row label: (exact, lbs, ours)}`` of :class:`~rfmap.result.MapResult` on one 2D grid per row; ``exact.field``
+        holds the exact coefficient at the triangle centroids (:func:`rfmap.paper.reproduce.exact_beltrami_result`).
+
+    Returns
+    -------
+    matplotlib Figure, ``width`` inches wide
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator, NullFormatter
+
+    k = len(rows)
+    fig, axes = plt.subplots(k, 5, figsize=(width, 1.5 * k + 0.8), layout="constrained", squeeze=False,
+                             gridspec_kw={"width_ratios": [1, 1, 1, 1, 1.3]})
+    mu_hi = max(float(np.abs(e.field).max()) for e, _, _ in rows.values()) or 1.0
+    for ax, (label, (exact, lbs, ours)) in zip(axes, rows.items()):
+        mu_t, n = exact.field, _grid_side(exact)
+        im = plot_density(ax[0], exact.ref_points, exact.elements, np.abs(mu_t), vmin=0, vmax=mu_hi, cmap="magma",
+                          colorbar=False)
+        ax[0].set_ylabel(label)
+        for a, r in zip(ax[1:4], (exact, lbs, ours)):
+            plot_mesh(a, r.mapped_points, r.elements, n=n, max_lines=max_lines)
+        errs = {"LBS": np.abs(mu_t - lbs.mu()), "surrogate": np.abs(mu_t - ours.mu())}
+        hi = max(float(e.max()) for e in errs.values()) or 1.0
+        for (name, e), color in zip(errs.items(), ("tab:blue", "tab:orange")):
+            ax[4].hist(e, bins=bins, range=(0, hi), histtype="step", lw=1.3, color=color, label=name)
+        ax[4].set_yscale("log")
+        ax[4].yaxis.set_minor_formatter(NullFormatter())
+        ax[4].xaxis.set_major_locator(MaxNLocator(2))
+    _frameless(axes[:, :4])
+    for a, title in zip(axes[0], [r"$|\mu|$", "exact map", "LBS", "surrogate", r"$|\mu_{exact}-\mu|$"]):
+        a.set_title(title)
+    fig.colorbar(im, ax=axes[:, 0].tolist(), location="bottom", shrink=0.95, aspect=12, label=r"$|\mu|$")
+    handles, labels = axes[0, 4].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower right", ncols=2, title="error histograms")
+    return fig
+
+
+def extreme_figure(original, maps: dict, *, width: float = TEXT_WIDTH_IN, max_lines: int = 20):
+    r"""The paper's Fig. 10: (a) :math:`\tilde\rho` of a density on the original grid, then each map of ``maps``
+    (``{label: MapResult}``, two of them: (b), (c)), and below, per map, histograms of :math:`\tilde\rho` on the
+    mapped mesh (d, e) and of :math:`|\mu|` (f, g) on shared axes.
+
+    Parameters
+    ----------
+    original : MapResult
+        A map of the density (its ``field``, reference grid and elements are drawn).
+    maps : dict of str to MapResult
+
+    Returns
+    -------
+    matplotlib Figure, ``width`` inches wide
+    """
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(width, 5.2), layout="constrained")
+    top, bottom = fig.subfigures(2, 1, height_ratios=[1.25, 1])
+    ax = top.subplots(1, 1 + len(maps))
+    el = original.elements
+    rho0 = np.asarray(original.field).reshape(-1)[el].mean(1)
+    im = plot_density(ax[0], original.ref_points, el, rho0 / rho0.mean(), title=r"(a) $\tilde\rho$ original",
+                      colorbar=False)
+    top.colorbar(im, ax=ax[0], location="bottom", shrink=0.9, label=r"$\tilde\rho$ (mean 1)")
+    letters = iter("bcdefg")
+    for a, (label, r) in zip(ax[1:], maps.items()):
+        plot_mesh(a, r.mapped_points, el, n=_grid_side(r), max_lines=max_lines, title=f"({next(letters)}) {label} map")
+    _frameless(ax)
+    hax = bottom.subplots(1, 2 * len(maps))
+    hists = [(r"$\tilde\rho$", lambda r: element_rho(r), (0, 3), "tab:green"),
+             (r"$|\mu|$", lambda r: np.abs(r.mu()), (0, 1), "tab:purple")]
+    for j, (name, value, rng, color) in enumerate(hists):
+        for i, (label, r) in enumerate(maps.items()):
+            a = hax[j * len(maps) + i]
+            a.hist(value(r), bins=50, range=rng, color=color)
+            a.set_title(f"({next(letters)}) {name}, {label}")
+            a.set_xlim(*rng)
+            a.set_yticks([])
+        pair = hax[j * len(maps):(j + 1) * len(maps)]
+        top = max(a.get_ylim()[1] for a in pair)  # one count scale per quantity
+        for a in pair:
+            a.set_ylim(0, top)
+    bottom.supylabel("triangles")
     return fig

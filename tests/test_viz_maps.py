@@ -1,0 +1,62 @@
+"""The 2D map figures of the reconstruction, population, resolution and DEM-versus-DEQ chapters fit the book's text
+column, with one colour scale per quantity."""
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from rfmap.mesh import grid_mesh  # noqa: E402
+from rfmap.paper.reproduce import exact_beltrami_result  # noqa: E402
+from rfmap.result import MapResult  # noqa: E402
+from rfmap.viz import beltrami_figure, extreme_figure, map_rows_figure, style  # noqa: E402
+from rfmap.viz.figures import MAX_FIGURE_PX, MIN_DISPLAY_PT, TEXT_COLUMN_PX, display_font_sizes  # noqa: E402
+
+
+def _map(n, amp):
+    """A smooth fold-free map of the n-grid that fixes the boundary, with a density peaked inside."""
+    m = grid_mesh(n, 2)
+    p = m.points
+    mapped = p + amp * np.sin(np.pi * p) * np.sin(2 * np.pi * p[:, ::-1])
+    return MapResult(p, mapped, m.elements, 1 + 3 * np.exp(-((p - 0.4) ** 2).sum(1) / 0.02), kind="density")
+
+
+def _readable(fig):
+    fig.canvas.draw()
+    _, texts, width = display_font_sizes(fig)
+    assert TEXT_COLUMN_PX <= width <= MAX_FIGURE_PX
+    assert min(size for _, size in texts) >= MIN_DISPLAY_PT - 1e-6, sorted(texts, key=lambda t: t[1])[:3]
+
+
+@pytest.mark.parametrize("rows", [1, 4])
+def test_map_rows_figure_shares_one_colour_bar_per_quantity(rows):
+    with style():
+        fig = map_rows_figure({f"f{i}": _map(17, 0.02 * (i + 1)) for i in range(rows)})
+        _readable(fig)
+    bars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    assert len(fig.axes) == 4 * rows + 2 and len(bars) == 2
+    assert sorted(ax.get_xlabel() for ax in bars) == [r"$\tilde\rho$ (mean 1)", r"$|\mu|$"]
+    assert [ax.get_ylabel() for ax in fig.axes[:4 * rows:4]] == [f"f{i}" for i in range(rows)]
+    plt.close(fig)
+
+
+def test_beltrami_figure_draws_a_row_per_case_and_both_error_histograms():
+    rows = {c: (exact_beltrami_result(c, 17), _map(17, 0.01), _map(17, 0.03)) for c in ("T1", "T2")}
+    with style():
+        fig = beltrami_figure(rows)
+        _readable(fig)
+    hist_axes = [ax for ax in fig.axes if ax.get_yscale() == "log"]
+    assert len(hist_axes) == 2 and all(len(ax.patches) == 2 for ax in hist_axes)  # one step outline per solver
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["LBS", "surrogate"]
+    plt.close(fig)
+
+
+def test_extreme_figure_labels_panels_a_to_g():
+    with style():
+        fig = extreme_figure(_map(17, 0.0), {"DEM": _map(17, 0.05), "DEQ": _map(17, 0.02)})
+        _readable(fig)
+    titles = sorted(t for t in (ax.get_title() for ax in fig.axes) if t.startswith("("))
+    assert [t[:3] for t in titles] == [f"({c})" for c in "abcdefg"]
+    plt.close(fig)
