@@ -6,6 +6,14 @@
 #                    at RFMAP_SCALE=ci
 #   make book        execute the notebooks at full scale and build the HTML book into _build/html
 #   make book-check  screenshot every whole page of the built book; fail on error output or a missing or blank figure
+#   make lab-check [NB=05_dem_deq_2d]
+#                    open a chapter in JupyterLab (started by `make lab`) in headless Chromium, screenshot it into
+#                    _build/screenshots; fail unless its kernel is "Python (rfmap)" and jupyterlab-myst renders its MyST
+#   make chapter NB=05_dem_deq_2d [RFMAP_SCALE=ci|full]
+#                    execute one chapter as the book does (rfmap kernel, same environment) into _build/chapters/,
+#                    print its wall time and record it in _build/chapters/NB.time.json
+#   make pages       regenerate the generated book pages (book/figures.md and the scoreboard of book/intro.md from
+#                    src/rfmap/data/figures.json; book/design.md from src/rfmap/data/design.json)
 #   make lab         start JupyterLab in the repository root with the book's environment (RFMAP_SCALE, default full)
 #   make clean       remove build outputs (make distclean also removes .venv)
 
@@ -31,7 +39,7 @@ NBVAL_FLAGS := --nbval-lax --nbval-kernel-name $(KERNEL) --nbval-cell-timeout 12
 LAB_ROOT := $(shell [ "$$(id -u)" = 0 ] && echo --allow-root)
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 
-.PHONY: install test book book-check lab clean distclean
+.PHONY: install test book book-check lab-check chapter pages lab clean distclean
 
 install: $(STAMP)
 
@@ -52,6 +60,23 @@ book: install
 	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter-book build . $(BOOK_FLAGS)
 	@echo "book: open _build/html/index.html"
 
+# one chapter, as the book runs it but from notebooks/ (as JupyterLab does); the executed copy keeps its outputs
+chapter: install
+	@test -n "$(NB)" || { echo "usage: make chapter NB=05_dem_deq_2d [RFMAP_SCALE=ci|full]" >&2; exit 2; }
+	@test -f notebooks/$(NB).ipynb || { echo "no notebook notebooks/$(NB).ipynb" >&2; exit 2; }
+	@mkdir -p _build/chapters
+	@start=$$(date +%s.%N); \
+	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter nbconvert --to notebook --execute notebooks/$(NB).ipynb \
+		--ExecutePreprocessor.kernel_name=$(KERNEL) --ExecutePreprocessor.timeout=1800 \
+		--output-dir _build/chapters --output $(NB).ipynb; \
+	end=$$(date +%s.%N); \
+	$(BIN)/python scripts/chapter_times.py record $(NB) --start "$$start" --end "$$end" \
+		--scale $(RFMAP_SCALE) --out _build/chapters/$(NB).time.json
+
+pages: install
+	$(BIN)/python scripts/make_figures_md.py
+	$(BIN)/python scripts/make_design_md.py
+
 lab: install
 	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter lab --ServerApp.root_dir="$(CURDIR)" \
 		--MappingKernelManager.default_kernel_name=$(KERNEL) $(LAB_ROOT) $(LAB_FLAGS)
@@ -59,6 +84,11 @@ lab: install
 book-check: install
 	command -v chromium >/dev/null 2>&1 || { $(SUDO) apt-get update && $(SUDO) apt-get install -y chromium; }
 	$(BIN)/python scripts/book_check.py --html _build/html --out _build/screenshots
+
+# the check starts `make lab` itself (same environment and kernel), with its own port, token and settings
+lab-check: install
+	command -v chromium >/dev/null 2>&1 || { $(SUDO) apt-get update && $(SUDO) apt-get install -y chromium; }
+	$(BIN)/python scripts/lab_check.py --notebook notebooks/$(or $(NB),05_dem_deq_2d).ipynb --out _build/screenshots
 
 clean:
 	rm -rf _build .pytest_cache .hypothesis

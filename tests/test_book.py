@@ -134,6 +134,158 @@ def test_figures_md_is_up_to_date():
         assert f"`{label}`" in current
 
 
+def test_intro_scoreboard_is_up_to_date():
+    mod = _figures_script()
+    current = (ROOT / "book" / "intro.md").read_text(encoding="utf-8")
+    assert current.count(mod.BEGIN) == 1 and current.count(mod.END) == 1
+    assert current == mod.render_intro(ROOT), "the scoreboard is stale: run python scripts/make_figures_md.py"
+
+
+def _glued_key_patterns(nb: Path) -> list[re.Pattern]:
+    """The keys a notebook glues, as patterns: glue("key", ...) exactly, glue(f"a_{x}", ...) as a_.* (a part may
+    be empty), and glue_all(values, "prefix") as prefix_.+ (rfmap.paper.tables.glue_all)."""
+    source = "\n".join("".join(c["source"]) for c in json.loads(nb.read_text(encoding="utf-8"))["cells"]
+                       if c["cell_type"] == "code")
+    patterns = [re.escape(k) for k in re.findall(r"\bglue\(\s*[\"']([^\"'{}]+)[\"']", source)]
+    fstrings = re.findall(r"\bglue\(\s*f[\"']([^\"']+)[\"']", source)
+    patterns += [re.sub(r"\\\{[^}]*\\\}", ".*", re.escape(k)) for k in fstrings]
+    patterns += [re.escape(p) + "_.+" for p in re.findall(r"\bglue_all\([^,]+,\s*[\"']([^\"']+)[\"']", source)]
+    return [re.compile(p) for p in patterns]
+
+
+def test_every_item_has_a_score_computed_by_its_chapter():
+    """Each item says how it compares with the paper (or that it only illustrates); a score's numbers are glue keys
+    of its notebook, pasted into the book, never typed: no decimal number outside a placeholder."""
+    mod = _figures_script()
+    for it in _items():
+        score = it.get("score")
+        assert score and score.get("kind") in ("score", "illustration", "see"), it["label"]
+        if score["kind"] == "score":
+            assert mod.PLACEHOLDER.search(score["met"]), f"{it['label']}: the met phrase pastes nothing"
+            assert score["criterion"].strip()
+        elif score["kind"] == "see":  # a figure of the maps that a table scores: listed with that table
+            assert score["scored_with"].startswith("tab:") and score["scored_with"] in PAPER_LABELS
+        else:
+            assert score["note"].strip() and "met" not in score
+        for field in ("criterion", "met", "numbers"):
+            typed = mod.PLACEHOLDER.sub("", score.get(field, ""))
+            assert not re.search(r"\d\.\d", typed), f"{it['label']}: typed decimal in {field}: {typed!r}"
+        keys = mod.glue_keys(it)
+        if keys:
+            patterns = _glued_key_patterns(ROOT / it["notebook"])
+            for key in keys:
+                assert any(p.fullmatch(key) for p in patterns), f"{it['label']}: {it['notebook']} glues no {key!r}"
+
+
+def test_scoreboard_pastes_from_the_chapters():
+    mod = _figures_script()
+    row = mod.paste("{sq_met} of 4, {res_std_max:.3g}", "notebooks/05_dem_deq_2d.ipynb")
+    assert row == ("{glue:text}`../notebooks/05_dem_deq_2d.ipynb::sq_met:s` of 4, "
+                   "{glue:text}`../notebooks/05_dem_deq_2d.ipynb::res_std_max:.3g`")
+    assert "\\|" in mod.paste("|Δd| {k}", "notebooks/04_beltrami_reconstruction.ipynb")  # pipes escaped in a table
+
+
+def test_chapter_times_name_existing_chapters():
+    mod = _figures_script()
+    times = mod.load_times(ROOT)
+    assert set(times) <= {"about", "ci", "full"}
+    stems = {nb.stem for nb in NOTEBOOKS}
+    for scale in ("ci", "full"):
+        info = times.get(scale) or {}
+        for stem, seconds in (info.get("seconds") or {}).items():
+            assert stem in stems and seconds > 0, (scale, stem, seconds)
+        if info.get("seconds"):
+            assert info.get("how") and info.get("machine"), f"{scale}: say how and where the times were measured"
+    assert mod._duration(None) == "not measured yet" and mod._duration(90) == "90 s"
+    assert mod._duration(600) == "10.0 min"
+
+
+def test_make_chapter_runs_one_notebook_through_the_kernel():
+    make = (ROOT / "Makefile").read_text(encoding="utf-8")
+    recipe = make[make.index("\nchapter:"):make.index("\npages:")]
+    assert "--ExecutePreprocessor.kernel_name=$(KERNEL)" in recipe and "$(NB_ENV)" in recipe
+    assert "RFMAP_SCALE=$(RFMAP_SCALE)" in recipe and "scripts/chapter_times.py record" in recipe
+    assert "make chapter NB=" in (ROOT / "book" / "reproduce.md").read_text(encoding="utf-8")
+
+
+def test_chapter_times_are_read_from_a_record(tmp_path):
+    spec = importlib.util.spec_from_file_location("chapter_times", ROOT / "scripts" / "chapter_times.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    out = tmp_path / "05_dem_deq_2d.time.json"
+    assert mod.main(["record", "05_dem_deq_2d", "--start", "100.0", "--end", "162.5", "--scale", "ci",
+                     "--out", str(out)]) == 0
+    times, machine = mod.from_chapters(tmp_path, "ci")
+    assert times == {"05_dem_deq_2d": 62.5} and machine
+    assert mod.from_chapters(tmp_path, "full")[0] == {}
+
+
+# ----------------------------------------------------------------------------------------------- design decisions
+def _design_script():
+    spec = importlib.util.spec_from_file_location("make_design_md", ROOT / "scripts" / "make_design_md.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_design_page_is_up_to_date_and_in_the_toc():
+    from rfmap.paper.design import to_markdown
+
+    assert (ROOT / "book" / "design.md").read_text(encoding="utf-8") == to_markdown(), \
+        "book/design.md is stale: run python scripts/make_design_md.py"
+    assert "book/design" in _toc_files()
+    assert _design_script().main(["--check"]) == 0
+
+
+def test_design_values_are_those_in_the_code():
+    """Every constant recorded in design.json holds the recorded value in the code (a changed constant needs new
+    measurements)."""
+    from rfmap.paper.design import current_value, load_decisions, stale_values
+
+    decisions = load_decisions()
+    assert len({d["constant"] for d in decisions}) == len(decisions)
+    for d in decisions:
+        for key in ("module", "value", "what", "criterion", "benchmark"):
+            assert str(d.get(key, "")).strip(), (d["constant"], key)
+    assert sum(current_value(d) is not None for d in decisions) >= 15
+    assert stale_values() == []
+    changed = [{**decisions[0], "value": "(2, 3)"}]
+    assert stale_values(changed) == [(decisions[0]["constant"], "(2, 3)", decisions[0]["value"])]
+
+
+def test_design_record_updates_one_entry(tmp_path):
+    from rfmap.paper.design import DESIGN_PATH, load_decisions, record
+
+    path = tmp_path / "design.json"
+    path.write_text(DESIGN_PATH.read_text(encoding="utf-8"), encoding="utf-8")
+    rows = [{"case": "3D, N = 48", "chosen": "0.70 s", "alternative": "1.10 s"}]
+    assert record("MARGIN", path=path, results=rows, date="2026-11-27")["results"] == rows
+    after = {d["constant"]: d for d in load_decisions(path)}
+    assert after["MARGIN"]["results"] == rows and after["RTOL"] == {d["constant"]: d for d in load_decisions()}["RTOL"]
+    with pytest.raises(KeyError):
+        record("NO_SUCH_CONSTANT", path=path, value="1")
+
+
+def test_design_benchmark_measures_and_records(tmp_path):
+    """benchmarks/design.py at the smallest size: one row per 3D test density and decision, stored with --record."""
+    import subprocess
+    import sys
+
+    from rfmap.paper.design import DESIGN_PATH, load_decisions
+
+    path = tmp_path / "design.json"
+    path.write_text(DESIGN_PATH.read_text(encoding="utf-8"), encoding="utf-8")
+    out = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "design.py"), "--n", "9", "--repeat", "1",
+                          "--record", "--out", str(path)], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    rows = [line for line in out.stdout.splitlines() if line.startswith("| ") and "3D N = 9" in line]
+    assert len(rows) == 8
+    stored = {d["constant"]: d for d in load_decisions(path)}
+    for decision in ("RTOL", "MARGIN"):
+        assert len(stored[decision]["results"]) == 4 and "N = 9" in stored[decision]["data"]
+    assert load_decisions() != load_decisions(path)  # the package's record is untouched
+
+
 # ----------------------------------------------------------------------------------------------- toc and config
 def test_every_toc_file_exists():
     toc = _toc()

@@ -33,10 +33,10 @@ classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flo
    whole flow).  So it does when the warm flow stalls (more than :data:`WARM_STEPS` steps, or a step
    below ``rfmap.solvers.flow.STALL_DT``: a near-degenerate element of :math:`u_0` keeps cutting the fold-free
    step; the warm flow is not retried with a blurred density).
-5. Even a good network map does not guarantee a better finish: on held-out fields the warm flow ends above the cold
-   flow on about half of them, by more than 10 % on a quarter (:data:`GUARD`), and nothing measured before the cold
-   flow predicts which.  The guard therefore runs the cold flow after every warm one and keeps the map with the
-   lower :math:`\mathrm{Std}(\tilde\rho_{\text{map}})`; the report says which (``kept``) and records both.
+5. Even a good network map does not guarantee a better finish: on held-out fields the warm flow often ends above
+   the cold flow, and nothing measured before the cold flow predicts which (:data:`GUARD`; the numbers are on the
+   book's page *Design decisions*).  The guard therefore runs the cold flow after every warm one and keeps the map
+   with the lower :math:`\mathrm{Std}(\tilde\rho_{\text{map}})`; the report says which (``kept``) and records both.
    The polished map is never worse than the flow-based solver's, at the price of that solver's time on top.
 """
 from __future__ import annotations
@@ -58,15 +58,8 @@ __all__ = ["GUARD", "POOR", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOT
 WARM_STEPS = 500
 
 #: The polish's guard (``polish_map(guard=...)``, on by default): after a warm flow, run the cold flow as well and
-#: keep the better map.  On 56 held-out validation fields (2D N = 51 square and free, 12 each; 8 each at 3D N = 48
-#: cube, 2D N = 256 square, 3D N = 32 and 48 free) the warm flow ran on 49 and ended above the cold flow's
-#: Std(rho~_map) on 24, by more than 10 % on 12 (1.11-4.96x: steep ramps in 2D, narrow peaks in 3D, and at 2D N = 256
-#: fields whose resampled network map keeps element-scale kinks).  Nothing known before the cold flow separated those
-#: 12 from the rest: the network's Std over the input's (0.05-0.44 on them, 0.04-0.38 on the others), the share of
-#: the residual the warm flow removed (0.19-0.92 against 0-0.89), or the smooth part of its final residual
-#: (rfmap.metrics.residual_scales) over the element-scale part (0.22-1.83 against 0.11 and up).  A second warm pass
-#: changed none of the losing fields (2D N = 51).  The cold flow costs less than the network and the warm flow
-#: together, so the guard simply runs it.
+#: keep the better map; the warm flow often loses, and nothing measured beforehand predicts when (book: Design
+#: decisions).
 GUARD = True
 
 #: A network map is *poor* when its Std(rho~_map) is above this fraction of the input's Std(rho~_orig).
@@ -74,28 +67,17 @@ POOR = 0.5
 
 
 #: Binomial-filter passes of :func:`smooth_displacement` before a polish, per (dimension, boundary), when the output
-#: grid is the working grid.  Chosen on the held-out validation fields (6-8 per case, never the test fields) by the
-#: mean Std(rho~_map) of the polished map over the cold flow's.  Square: 2D N = 51: 1.04 (raw) -> 1.02 (2 passes)
-#: -> 1.30 (4); 3D N = 48: 1.94 (raw) -> 1.43 (2) -> 1.12 (8) -> 1.12 (16).  Free boundary (linear edges,
-#: :data:`SMOOTH_EDGES`): 2D N = 51: 0.98 (raw) -> 0.92 (2) -> 0.92 (4); 3D N = 32: 1.23 (raw) -> 1.05 (2) -> 1.14 (8).
+#: grid is the working grid: the best polished / cold-flow Std(rho~_map) on validation fields (book: Design decisions).
 SMOOTH_PASSES = {(2, "square"): 2, (3, "square"): 8, (2, "free"): 2, (3, "free"): 2}
 #: Passes per boundary when the map is resampled onto a finer output grid (followed by :data:`OUTPUT_PASSES` on the
-#: output grid).  Square, 2D N = 256 from a 96-grid, with the output passes: 0.963 (4), 0.957 (8), 0.977 (16) over
-#: 7 fields (without them: 1.61 (raw) -> 1.29 (2) -> 1.21 (4) -> 1.19 (8) -> 1.11-1.19 (16)); free, 2D N = 128 from
-#: a 96-grid, without output passes: 0.82 (4) -> 0.97 (16).
+#: output grid), chosen as :data:`SMOOTH_PASSES` (book: Design decisions).
 SMOOTH_PASSES_FINER = {"square": 8, "free": 4}
 #: Passes of the same filter on the output grid, after the smoothed displacement is resampled onto a finer one: the
-#: multilinear resampling puts a kink at every working-grid line, which the working-grid passes cannot remove.
-#: Validation fields, mean polished/cold-flow Std for 0 / 1 / 2 / 4 output passes: 2D N = 256 square (16 working-grid
-#: passes, 7 fields) 1.19 / - / 0.98 / 0.98; 2D N = 256 free (4 passes, 6 fields) 1.24 / 0.94 / 0.93 / 0.93; 2D
-#: N = 128 square (7 fields) 0.994 / 0.992 / 0.993 / 0.996; 3D N = 64 cube from a 48-grid (3 fields) 1.09 / - / 1.08.
+#: multilinear resampling puts a kink at every working-grid line, which the working-grid passes cannot remove
+#: (numbers: book, Design decisions).
 OUTPUT_PASSES = 2
-#: How :func:`smooth_displacement` continues the displacement past the grid's edges, per boundary.  On the square and
-#: cube the boundary mask pins the walls, and replicating the edge values works best (3D N = 48, 8 passes: 1.01
-#: against 1.12 with linear edges, over 8 fields of which 4 start cold); a free boundary moves with the edge values
-#: themselves, and the replicated edge flattens the displacement there into a one-cell layer of wrong element sizes
-#: that no flow removes, so the displacement is continued linearly (2D N = 51 free, 2 passes: 0.92 against 1.01
-#: replicated; 3D N = 32: 1.05 against 1.12).
+#: How :func:`smooth_displacement` continues the displacement past the grid's edges, per boundary: a free boundary
+#: moves with its edge values, which a replicated edge would flatten (book: Design decisions).
 SMOOTH_EDGES = {"square": "replicate", "free": "linear"}
 
 

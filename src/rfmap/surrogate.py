@@ -46,20 +46,10 @@ __all__ = ["Surrogate", "MapOptions", "models", "PoorMapWarning", "QUALITY_MARGI
 #: Dimensions in which a folded network map of a grid (with ``repair``, the default working grid and no query points)
 #: is first evaluated again on coarser working grids, :data:`REGRID_STEP` sides apart down to the bottom of the
 #: training range, taking the first map that is fold-free and more equal than the input (``info["regrid"]``); only
-#: when none is does the repair run on the default grid's map.  The repair guarantees a fold-free map, not a good one:
-#: it shortens the displacement around the folds until every element keeps a twentieth of its measure, and those
-#: elements then carry twenty times the mean density.  On the 16 held-out validation densities of the 3D models at
-#: N = 48 (``rfmap.validation``; never the test fields) all four steep ramps folded on the default 48-grid, and their
-#: repaired maps were less equal than no map at all (mean Std(rho~_map) 1.65 for dem3d-cube and 2.86 for dem3d-free,
-#: against 1.0 to 1.3 for the input), while the same networks mapped every ramp without a fold on a 32- to 44-grid
-#: (0.53 to 0.98 and 0.32 to 0.51); the twelve fields that did not fold keep the default grid.  Over all 16 fields,
-#: mean Std(rho~_map) at N = 48 went from 0.472 to 0.238 (cube) and from 0.748 to 0.137 (free), at N = 64 from 0.446
-#: to 0.249 and from 0.355 to 0.137, and the mean time per map fell by two thirds (no repair).  In 2D the repair
-#: rebuilds the map from its truncated Beltrami coefficient and does better: on 10 folded maps of hard densities
-#: (``rfmap.stress``) of deq2d-square and deq2d-free at N = 51 to 128, coarser grids helped once (0.242 -> 0.240),
-#: did much worse once (0.33 -> 1.42) and cost up to 0.7 s more, so 2D maps go straight to the repair.  An explicit
-#: ``work_n`` is used as given, and with ``polish`` a folded map starts the flow cold at once, as before (a warm start
-#: saves the 3D flow nothing: from the identity it needs only 7 or 8 steps at N = 48).
+#: when none is does the repair run on the default grid's map.  The 3D repair guarantees a fold-free map, not a good
+#: one, while the 2D repair (from the truncated Beltrami coefficient) does better than coarser grids; the numbers are
+#: on the book's page *Design decisions*.  An explicit ``work_n`` is used as given, and with ``polish`` a folded map
+#: starts the flow cold at once.
 REGRID_DIMS = (3,)
 REGRID_STEP = 4
 

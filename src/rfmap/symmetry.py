@@ -147,9 +147,8 @@ def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
 
 
 #: grid points per network evaluation up to which the copies of :func:`symmetrized_displacement` are stacked into
-#: one batch (a single copy larger than this is evaluated alone).  Small grids gain, large ones do not: deq2d-square's
-#: 8 copies on one thread took 41 / 67 / 131 / 212 ms one after another at N = 51 / 64 / 96 / 128 and 25 / 44 / 102 /
-#: 202 ms stacked this way, while all 8 copies in one batch at N = 256 took twice as long as one after another
+#: one batch (a single copy larger than this is evaluated alone): small grids gain, large ones do not (book: Design
+#: decisions)
 BATCH_POINTS = 2**15
 
 

@@ -70,8 +70,8 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     if not np.isfinite(mapped).all():
         return {"std_rho_orig": float("nan"), "std_rho_map": float("nan"), "min_jacobian": float("nan"),
                 "worse": True}
-    # every element of the N-grid has the same reference measure; the mapped measures in single precision (a quarter
-    # of the time at 3D N = 48) unless an element is too thin for it (as rfmap.solvers.flow.F32_MARGIN)
+    # every element of the N-grid has the same reference measure; the mapped measures in single precision (faster;
+    # book: Design decisions) unless an element is too thin for it (as rfmap.solvers.flow.F32_MARGIN)
     ref_measure = 1.0 / ((n - 1) ** d * math.factorial(d))
     meas = grid_signed_measures(torch.from_numpy(np.ascontiguousarray(mapped, dtype=np.float32))[None], n)[0].double()
     if float(meas.min()) <= F32_MARGIN * ref_measure:
