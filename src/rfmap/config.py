@@ -152,25 +152,16 @@ _CI3 = dict(model=ModelConfig(base=4, depth=2), steps=10, batch=1, n_range=(9, 1
 _SHARP2 = RandomDensityConfig(dim=2, p_peak=0.15, p_ramp=0.15)
 #: a third of the training fields as hard as the held-out ramps and peaks (a single steep ramp of height ratio up to
 #: 51 after preprocessing, or a narrow peak, over faint modes; RandomDensityConfig.p_hard), besides the sharp
-#: features of _SHARP2 (the 2D density models).  Models trained without them left the held-out ramps as unequal as
-#: they came (Std 1.0-1.5 in 3D) because no training field was like them (99th percentile of the training fields' Std
-#: 0.42 against the ramps' 1.0-1.34).  The fold penalty starts at det J < 0.02, below the 0.04 that the exact map of
-#: the steepest ramp needs
+#: features of _SHARP2 (the 2D density models): without them no training field is like the held-out ramps, which
+#: the models then leave as unequal as they came (book: Design decisions)
 _HARD2 = RandomDensityConfig(dim=2, p_peak=0.15, p_ramp=0.15, p_hard=0.3)
-#: the 3D models: half that share (at 0.3 the cube model gained on peaks and ramps but its held-out smooth and step
-#: fields stayed at twice the free model's Std)
+#: the 3D models: half that share, which keeps the held-out smooth and step fields equal (book: Design decisions)
 _HARD3 = RandomDensityConfig.for_dim(3, p_peak=0.15, p_ramp=0.15, p_hard=0.15)
-#: a fold penalty that a local fold cannot hide in: the penalty is a mean over all elements, so with the default
-#: weight 10 a fold of a few hundred elements adds about 1e-7 to a density loss of about 2e-3 (measured in training
-#: logs); weight 100 makes it count, and the density term keeps a restoring gradient on collapsed elements
-#: (LossWeights.density_tangent)
+#: a fold penalty that a local fold cannot hide in (the penalty is a mean over all elements; book: Design
+#: decisions), and the density term keeps a restoring gradient on collapsed elements (LossWeights.density_tangent)
 _FOLD_HARD = dict(fold=100.0, fold_threshold=0.02, density_tangent=True)
-#: the free 3D model: a fold penalty ten times stronger again.  Every steep held-out ramp at N = 48 folded in the raw
-#: maps of the models trained with weight 100 (the folds sit on the low-density side, where the exact map's det J is
-#: about 0.2, so they are overshoot, not a map that needs det J near 0), and with the penalty a mean over all
-#: elements a fold of a few hundred tetrahedra of 600,000 barely shows in the loss.  Measured: with weight 1000 the
-#: four held-out ramps at N = 48 still folded at every checkpoint of an 8,816-step run (Surrogate.map handles them at
-#: inference on coarser working grids, rfmap.surrogate.REGRID_DIMS)
+#: the free 3D model: a fold penalty ten times stronger again, against overshooting folds on the low-density side of
+#: steep ramps (book: Design decisions; Surrogate.map handles those left on coarser working grids, REGRID_DIMS)
 _FOLD_HARD3 = dict(fold=1000.0, fold_threshold=0.02, density_tangent=True)
 _HARD_NOTE = ("the random training densities include narrow peaks and steep ramps (15 % of fields each) and, in 30 % "
               "of fields, a single steep ramp (height ratio up to 51 after preprocessing) or narrow peak over faint "
@@ -263,8 +254,8 @@ _FNO_FIELDS_NOTE = ("2D density-equalizing quasi-conformal map (DEQ: density los
                     "each).")
 #: the FNO comparison: deq2d-square's task, losses, fields, schedule and wall-time budget as they were when the FNO
 #: was trained (the U-Net has since moved on to _HARD2 fields and N from 48), with neuraloperator's
-#: FNO in place of the U-Net (16 modes, width 24, 4 layers, 12.5 % padding: 0.67 M real parameters, the U-Net's 0.70 M;
-#: measured 203 ms per forward and backward pass at batch 4, N = 80, against the U-Net's 254 ms)
+#: FNO in place of the U-Net (16 modes, width 24, 4 layers, 12.5 % padding: about the U-Net's parameter count and
+#: step time; book: Design decisions)
 CONFIGS["fno-deq2d-square"] = {
     preset: replace(
         # the loss of deq2d-square when the FNO was trained (fold penalty of weight 10 from det J < 0.02)

@@ -106,27 +106,19 @@ class _Stalled(RuntimeError):
     """A pass cannot advance: every step, however short, turns an element over (a collapsing element)."""
 
 
-#: default step tolerance per dimension (grid spacings).  3D steps cost about ten times 2D ones; measured on the
-#: paper's 3D fields and two unseen ones at N = 48, 0.4 instead of 0.2 takes 15 % less time for a Std(rho~_map) at
-#: most 5 % higher (mean 1 %), while in 2D at N = 256 it would raise Std(rho~_map) by 4 % on average
+#: default step tolerance per dimension (grid spacings): 3D steps cost about ten times 2D ones, so 3D takes a coarser
+#: tolerance for nearly the same Std(rho~_map) (book: Design decisions)
 RTOL = {2: 0.2, 3: 0.4}
 
 
-#: default sea width L of the free boundary per dimension (the box is [-L, 1 + L]^d).  The diffusion solver's 0.5
-#: (the sea as wide as the domain) in 2D; in 3D the transforms of the sea box are most of the flow's time, and
-#: measured at N = 48 on the paper's 3D fields and two unseen ones (one thread), 0.25 instead of 0.5 takes 35-45 %
-#: less time (0.91-1.35 s -> 0.63-0.79 s) for the same Std(rho~_map) (within 2 %), the maps differing by at most
-#: 1.6 grid spacings (0.07-0.43 on all but the octant), less than the flow's own distance from the diffusion map
+#: default sea width L of the free boundary per dimension (the box is [-L, 1 + L]^d): the diffusion solver's 0.5 in
+#: 2D; in 3D the sea box's transforms dominate the time, and a narrower sea gives the same Std (book: Design decisions)
 MARGIN = {2: 0.5, 3: 0.25}
 
 
 #: Sea blend (``solve_flow(stall_blend=...)``) of the first remedy for a stalled first pass of a free boundary's cold
-#: start, tried before the blurred retries (``STALL_BLURS``).  The width was chosen on the validation stream
-#: (``rfmap.validation``, 16 fields at 2D N = 256, the blend applied from the start): mean Std(rho~_map) over the
-#: diffusion solver's 6.34 (no blend), 1.195 (0.125), 1.150 (0.25), 1.151 (0.375), 1.178 (0.5).  On the report stream
-#: (``rfmap.paper.flow_studies.sea_blend_study``, chapter 10) the two of eight fields that stall, steep ramps pressing a
-#: dense coast against the sea, went from 15-27 times diffusion's (blurred retries) to 0.9-1.0 times.  A pass that
-#: does not stall keeps the diffusion solver's sea.
+#: start, tried before the blurred retries (``STALL_BLURS``): the width with the lowest mean Std(rho~_map) on the
+#: validation stream (book: Design decisions).  A pass that does not stall keeps the diffusion solver's sea.
 STALL_BLEND = 0.25
 
 
@@ -147,9 +139,8 @@ class _FlowPass:
         if sigma > 0:
             raster = gaussian_blur(raster, sigma)
         self.mean = box_mean(raster)  # the box mean of the cosine interpolant
-        # the velocity table in single precision: torch's grid_sample is vectorised for float32 only (3D, M = 95:
-        # about 3 ms per evaluation against 38 ms in float64), and a relative error of 1e-7 in the velocity is far
-        # below the step's own tolerance (rtol grid spacings); the positions are integrated in float64
+        # the velocity table in single precision: torch's grid_sample is vectorised for float32 only (book: Design
+        # decisions), and its error is far below the step's tolerance; the positions are integrated in float64
         flux = poisson_flux(raster, dtype=np.float32)
         # channels first, grid axes reversed: grid_sample takes the last point coordinate along the last grid axis
         self.grid = torch.from_numpy(np.concatenate([flux, raster[None].astype(np.float32)]))[None]  # (1, d+1, M..)
@@ -160,7 +151,7 @@ class _FlowPass:
         self.evaluations += 1
         q = torch.from_numpy(y).float().flip(-1).mul_(2.0).sub_(1.0)  # float32 arithmetic: the table's precision
         # grid_sample runs its batch in parallel but one batch entry on one thread: split the points into one
-        # batch entry per thread over the same (expanded, not copied) table; 3D N = 48 on 2 threads: 5.3 -> 2.7 ms
+        # batch entry per thread over the same (expanded, not copied) table (book: Design decisions)
         k, p = max(1, torch.get_num_threads()), len(y)
         rows = -(-p // k)
         if rows * k != p:

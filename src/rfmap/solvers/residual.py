@@ -53,8 +53,8 @@ def lumped_residual(elements: np.ndarray, population: np.ndarray, measure: np.nd
     return mass / vol
 
 
-#: conjugate-gradient iterations of :func:`vertex_residual` (from the lumped residual); with 10, a flow started at
-#: the identity ends within 0.1 % of the cold flow's Std(rho~_map) (measured on smooth and sharp densities, N 17-65)
+#: conjugate-gradient iterations of :func:`vertex_residual` (from the lumped residual): enough for a flow started at
+#: the identity to end where the cold flow does (book: Design decisions)
 RESIDUAL_ITERATIONS = 10
 
 
