@@ -80,8 +80,7 @@ def check_n(n: int, minimum: int = 3) -> int:
 
 
 #: peak memory per grid vertex of the heaviest single-map pipelines, measured (peak resident size above that of the
-#: imported package) and doubled as a margin: 2D Linear Beltrami Solver at N = 512 1.9 KiB, diffusion DEM 0.8 KiB,
-#: surrogate map 0.7 KiB; 3D surrogate map with refinement at N = 64 1.6 KiB, diffusion DEM at N = 48 1.2 KiB
+#: imported package) and doubled as a margin (book: Design decisions)
 BYTES_PER_VERTEX = {2: 4096, 3: 4096}
 
 
