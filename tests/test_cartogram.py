@@ -553,7 +553,8 @@ def test_world_population_cartogram(world):
 
 
 def test_passes_stop_when_the_error_stops_falling_and_the_best_pass_is_kept(monkeypatch):
-    """A pass that does not lower the largest area error ends the loop, and the best pass's polygons are returned."""
+    """A pass that does not lower the largest area error ends the loop (the flow's first such pass turns its
+    acceleration off instead, :func:`rfmap.cartogram_metrics.boost`), and the best pass's polygons are returned."""
     import rfmap.cartogram as C
 
     real, calls = C._grid_map, []
@@ -561,14 +562,14 @@ def test_passes_stop_when_the_error_stops_falling_and_the_best_pass_is_kept(monk
     def worse_second_time(method, density, surrogate, solver_kw):
         res = real(method, density, surrogate, solver_kw)
         calls.append(res)
-        if len(calls) == 2:  # a pass that moves nothing: the largest error stays where it was
+        if len(calls) >= 2:  # passes that move nothing: the largest error stays where it was
             res.mapped_points = res.ref_points.copy()
         return res
 
     monkeypatch.setattr(C, "_grid_map", worse_second_time)
     c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", n=48, tol=1e-9, max_iterations=6)
     hist = c.info["max_error"]
-    assert c.info["iterations"] == len(calls) == 2 and c.info["kept"] == 1 and hist[1] >= hist[0]
+    assert c.info["iterations"] == len(calls) == 3 and c.info["kept"] == 1 and min(hist[1:]) >= hist[0]
     assert c.metrics().max_error == pytest.approx(hist[0], rel=1e-12)  # the first pass's polygons
     calls.clear()
     fixed = cartogram(grid_2x2([1, 1, 1, 5]), "pop", n=48, iterations=3)  # a fixed count runs every pass

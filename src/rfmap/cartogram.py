@@ -29,7 +29,10 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    area error over the regions holding at least ``min_share`` of the total value (:data:`MIN_SHARE`, 0.01 %) is
    below ``tol`` (flow-based cartogram programs stop at 1 %, the default).  The smaller regions are mapped as if
    they held that share and their errors are reported apart.  A pass that gains little doubles the raster's
-   resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  A fold of the
+   resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  Edges that the
+   flow's passes stretched beyond :data:`SPLIT_EDGE` cells are split again before the next pass, and each region's
+   weight is boosted by the share of its error that the last pass left (a secant acceleration of the passes:
+   :func:`rfmap.cartogram_metrics.boost`).  A fold of the
    output smaller than the overlap tolerance, where the input draws two edges nearly touching, is repaired
    (:func:`rfmap.cartogram_metrics.repair_folds`).
 5. **Output.**  Edges longer than a grid cell are first split (``shapely.segmentize``) so that they bend with the
@@ -63,11 +66,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .cartogram_metrics import MIN_SHARE, CartogramMetrics, cartogram_metrics, judged, repair_folds
+from .cartogram_metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, judged, repair_folds
 from .mesh import check_grid_memory, check_n
 from .projection import PlanarFrame
-from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _feature_name, _listify, _shapely, density_grid, \
-    fit_outlines, montreal_election, read_regions, world_countries
+from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edge, \
+    _shapely, density_grid, fit_outlines, montreal_election, read_regions, world_countries
 from .solvers import ALIASES
 
 __all__ = [
@@ -103,17 +106,15 @@ OUTPUTS = ("input", "projected")
 
 # ----------------------------------------------------------------------------------------------- maps
 #: Settings of :func:`rfmap.solvers.solve_dem` for cartograms: the raster already holds cell means, so the velocity
-#: is evaluated on the vertex grid itself (``refine=1``: three times faster than ``refine=2`` and no less accurate
-#: here), and the flow stops when the remaining displacement is below 1 % of a cell.
+#: is evaluated on the vertex grid itself (``refine=1``, book: Design decisions), and the flow stops when the
+#: remaining displacement is below 1 % of a cell.
 DIFFUSION_SETTINGS = {"refine": 1, "tol_end": 1e-2}
 #: :data:`DIFFUSION_SETTINGS` under the name of the method's old spelling
 DEM_SETTINGS = DIFFUSION_SETTINGS
 #: Settings of the flow-based solver (``solve_dem(method="flow")``) for cartograms: one flow per pass, whatever the
 #: density's remaining variation (``tol=0``: the cartogram's passes stop on the area errors, while the solver's own
-#: tolerance on Std(rho~) would skip a pass once the raster is nearly uniform and leave a district at 1-3 % error),
-#: on the vertex grid (``refine=1``).  Montreal's four cartograms at N = 256 (2013 election, total and each
-#: candidate's votes): largest area error 0.003-0.009 in 4-6 passes and 0.38-0.87 s, against 0.0048-0.0069 in 4-7
-#: passes and 0.40-1.12 s with ``refine=2``; the diffusion DEM reaches 0.0024-0.0077 in 4-6 passes and 1.0-1.5 s.
+#: tolerance on Std(rho~) would skip a pass once the raster is nearly uniform), on the vertex grid (``refine=1``;
+#: the numbers are on the book's page Design decisions).
 FLOW_SETTINGS = {"refine": 1, "tol": 0.0}
 #: (:func:`cartogram`'s ``"flow"`` method no longer runs that solver: it carries the vertices themselves by the
 #: torch-free :func:`rfmap.solvers.cartoflow.flow_square`; these settings serve callers of ``solve_dem`` on a
@@ -121,6 +122,10 @@ FLOW_SETTINGS = {"refine": 1, "tol": 0.0}
 #: A pass that leaves more than this fraction of the previous pass's largest error doubles the raster's resolution
 #: (up to ``max_n``): the regions left are a few cells wide, which a finer raster resolves
 SLOW_PASS = 0.7
+#: Between passes, edges longer than this many cells of the pass's raster are split to one cell: a straight edge
+#: between mapped vertices stands for a curve, and where the flow squeezes a fjord or an inlet closed while it
+#: stretches its sides, long chords cross
+SPLIT_EDGE = 1.0
 #: The default ``max_n`` of :func:`cartogram`: the finest raster a slow pass may ask for (N = 256 doubles twice)
 MAX_N = 1023
 #: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
@@ -128,9 +133,8 @@ MAX_N = 1023
 FLOW_BLUR = 1.0
 #: The hybrid's polish tolerance on Std(rho~_map) (``Surrogate.map(polish=...)``): far below any raster's variation, so
 #: that every pass runs its flow, for the reason of :data:`FLOW_SETTINGS`' ``tol=0``.  The polish runs on the
-#: raster's ``N``-grid (the network's map resampled to it): on the network's working grid (96 for ``deq2d-square``)
-#: with the solver's default tolerance, Montreal's total votes at N = 256 stopped at a largest error of 0.027 after 9
-#: passes (Bergeron's votes: 0.063 after 10); on the ``N``-grid, 0.0049-0.0069 in 4-7 passes and 0.67-1.32 s.
+#: raster's ``N``-grid (the network's map resampled to it), where the area errors are judged (book: Design
+#: decisions).
 HYBRID_POLISH = 1e-9
 
 
@@ -392,7 +396,9 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     points : int, optional
         A budget of polygon vertices: the outlines (already split to edges of at most a grid cell) are simplified,
         shared borders kept (:func:`rfmap.regions.fit_outlines`), or densified to about that many.  Simplifying
-        speeds up large maps and removes detail finer than the grid; it changes the input's areas slightly.
+        speeds up large maps and removes detail finer than the grid; it changes the input's areas slightly.  The
+        outlines are then kept to the budget: the flow's stretched edges are not split between passes
+        (:data:`SPLIT_EDGE`).
 
     Returns
     -------
@@ -407,7 +413,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         For bad input (one line: see :func:`read_regions`), an unknown method, projection or output, a surrogate
         that does not map 2D densities of the square.
     ImportError
-        For longitude/latitude input in an equal-area projection without pyproj.
+        For longitude/latitude input centred near a pole in an equal-area projection without pyproj.
     """
     shapely = _shapely()
     method = ALIASES.get(method, method)
@@ -446,7 +452,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
 
     mapped, info, map_time = _passes(regions, values, grid_map,
                                      n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol,
-                                     min_share=min_share, max_n=max_n if max_n is not None else max(n, MAX_N))
+                                     min_share=min_share, max_n=max_n if max_n is not None else max(n, MAX_N),
+                                     split=points is None and method == "flow", accelerate=method == "flow")
     mapped, info["repaired"] = repair_folds(mapped)
     elapsed = time.perf_counter() - t0
     out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
@@ -472,29 +479,39 @@ def _square_surrogate(surrogate, model: str | None):
 
 
 def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supersample: int, passes: int,
-            tol: float | None, min_share: float = 0.0, max_n: int = 0) -> tuple[np.ndarray, dict, float]:
+            tol: float | None, min_share: float = 0.0, max_n: int = 0, split: bool = True,
+            accelerate: bool = False) -> tuple[np.ndarray, dict, float]:
     """The passes of :func:`cartogram`: each rasterises the current polygons, maps the unit square by
     ``grid_map(density)`` and moves every distinct vertex.  With ``tol`` they stop within tolerance, or at a pass that
     no longer lowers the largest area error, and the polygons of the best pass are returned; without, all ``passes``
-    run.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
+    run; with ``split``, edges stretched beyond :data:`SPLIT_EDGE` cells are split between passes, and with
+    ``accelerate`` every region's weight is boosted by its own slow progress
+    (:func:`rfmap.cartogram_metrics.boost`) until a pass fails to lower the largest error.  Returns ``(mapped
+    polygons, info, seconds in grid_map)``."""
     shapely = _shapely()
-    # shared borders: every distinct vertex is mapped once, so that neighbours keep identical edges
-    # (to 1e-12 of the frame: a split border's points, computed from either end, differ in the last bits)
-    uniq, inverse = np.unique(np.round(shapely.get_coordinates(regions), 12), axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    current, mapped = uniq, regions
+    current, inverse = _distinct_vertices(regions)
+    mapped = regions
     big = judged(values, min_share)  # the regions the stopping rule counts
     # the others are mapped as if they held the judged share, so that none (an uninhabited Antarctica) collapses into
     # a sliver that folds; their errors are still measured against their own values
     weights = np.where(big, values, np.maximum(values, min_share * values.sum()))
     results, history, grids, map_time = [], [], [], 0.0
     best = None  # (largest area error, polygons, pass) of the best pass so far
+    log_err, gain = None, np.zeros(len(values))  # the last pass's log area errors and log weight boosts
     for _ in range(passes):
         if (tol is not None and len(history) > 1 and history[-1] > tol and history[-1] > SLOW_PASS * history[-2]
                 and 2 * n - 1 <= max_n):
             n = 2 * n - 1  # slow progress: regions down to a few cells (slivers, islands); twice the resolution
         grids.append(n)
-        dens, sea = density_grid(mapped, weights, n, supersample=supersample)
+        if split and results and _longest_edge(mapped) > SPLIT_EDGE / (n - 1):  # stretched edges: split again
+            regions = shapely.segmentize(mapped, 1.0 / (n - 1))
+            current, inverse = _distinct_vertices(regions)
+        if accelerate:
+            area = shapely.area(mapped)
+            now = np.log(np.maximum(area, 1e-300) / (weights / weights.sum() * area.sum()))
+            gain = boost(now, log_err, gain) if log_err is not None else gain
+            log_err = now
+        dens, sea = density_grid(mapped, weights * np.exp(-gain), n, supersample=supersample)
         res = grid_map(dens, current)
         current = _at_points(res, current)
         map_time += res.time
@@ -505,6 +522,9 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         if best is None or history[-1] < best[0]:
             best = (history[-1], mapped, len(results))
         if tol is not None and (history[-1] <= tol or len(history) > 1 and not history[-1] < history[-2]):
+            if accelerate and history[-1] > tol:  # a boosted pass overshot: plain passes from here on
+                accelerate, gain = False, np.zeros(len(values))
+                continue
             break  # within tolerance, or a pass that no longer lowers the largest error
     kept = len(results)
     if tol is not None:  # the polygons of the pass with the lowest largest error

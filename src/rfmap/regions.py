@@ -282,6 +282,23 @@ def fit_outlines(regions: np.ndarray, points: int, *, steps: int = 20) -> np.nda
     return best if best is not None else make(hi if count > points else lo)
 
 
+def _distinct_vertices(regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct vertices (V, 2) of ``regions`` and the index (K,) of every coordinate among them: each is mapped
+    once, so that neighbours keep identical edges (to 1e-12 of the frame: a split border's points, computed from
+    either end, differ in the last bits)."""
+    uniq, inverse = np.unique(np.round(_shapely().get_coordinates(regions), 12), axis=0, return_inverse=True)
+    return uniq, inverse.reshape(-1)
+
+
+def _longest_edge(regions: np.ndarray) -> float:
+    """The longest edge of any ring of ``regions`` (consecutive coordinates of one ring)."""
+    shapely = _shapely()
+    rings = shapely.get_rings(shapely.get_parts(regions))
+    xy, idx = shapely.get_coordinates(rings, return_index=True)
+    step = np.hypot(*np.diff(xy, axis=0).T)
+    return float(step[idx[1:] == idx[:-1]].max(initial=0.0))
+
+
 def _listify(obj):
     """Tuples (as shapely's ``mapping`` writes coordinates) to lists, for a GeoJSON dict that equals its JSON."""
     if isinstance(obj, (list, tuple)):
