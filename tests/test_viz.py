@@ -79,3 +79,10 @@ def test_save_figure_refuses_figures_unreadable_in_the_text_column(tmp_path, mon
             save_figure(small, "fig:small")
     plt.close("all")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["fig-fine.png"]
+
+
+def test_cartogram_column_width_follows_the_books_text_column():
+    from rfmap.viz.cartograms import TEXT_COLUMN_IN
+    from rfmap.viz.figures import TEXT_COLUMN_PX
+
+    assert TEXT_COLUMN_IN == TEXT_COLUMN_PX / 96

@@ -49,9 +49,10 @@ def plot_regions(ax, geoms, values=None, *, title: str | None = None, cmap="viri
     return coll
 
 
-#: Width (inches) at which a saved figure is shown at its own size in the book's text column; a wider one is
-#: shrunk, so its text is set larger (:func:`column_style`) to stay at least 9 pt when shown.
-TEXT_COLUMN_IN = 7.8
+#: Width (inches) up to which a figure's text keeps at least its own size when shown in the book's text column (the
+#: column's CSS pixels at 96 to the inch, :data:`rfmap.viz.figures.TEXT_COLUMN_PX`); a wider figure is shrunk, so its
+#: text is set larger (:func:`column_style`) to stay at least 9 pt when shown.
+TEXT_COLUMN_IN = 720 / 96
 #: The qualitative palette of regions coloured so that neighbours differ (matplotlib's Set2, then Pastel1).
 QUALITATIVE = ("#66c2a5", "#fc8d62", "#8da0cb", "#e78ac3", "#a6d854", "#ffd92f", "#e5c494", "#b3b3b3",
                "#fbb4ae", "#b3cde3", "#ccebc5", "#decbe4")
