@@ -60,7 +60,6 @@ from __future__ import annotations
 import json
 import math
 import numbers
-import os
 import time
 from dataclasses import dataclass, field
 
@@ -296,17 +295,10 @@ class Cartogram:
         return {"type": "FeatureCollection", "features": self.features, "rfmap": status}
 
     def save(self, path) -> None:
-        """Write the mapped FeatureCollection as GeoJSON, atomically."""
-        path = os.fspath(path)
-        tmp = f"{path}.part"
-        try:
-            with open(tmp, "w", encoding="utf-8") as fh:
-                self._write(fh)
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-            raise
+        """Write the mapped FeatureCollection as GeoJSON, atomically (:func:`rfmap.cartogram_data.atomic_write`)."""
+        from .cartogram_data import atomic_write
+
+        atomic_write(path, self._write)
 
     def _write(self, fh) -> None:
         """:meth:`to_geojson` as JSON text; the geometries written by GEOS (``shapely.to_geojson``: the same

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["Join", "MISSING", "GAPMINDER_YEARS", "read_csv_table", "read_csv_values", "region_ids", "join_values",
-           "write_csv_template", "gapminder_population", "world_population"]
+           "write_csv_template", "gapminder_population", "world_population", "atomic_write"]
 
 #: What :func:`join_values` does with a region that has no row: give it the matched regions' ``"mean"`` density,
 #: ``"drop"`` it from the map, or raise (``"error"``).
@@ -47,18 +47,24 @@ def _id_text(v) -> str | None:
     return str(v).strip()
 
 
-def _atomic_write_text(path, text: str) -> None:
-    """Write ``text`` to ``path`` through a temporary file, so that no partial file is left behind."""
+def atomic_write(path, write, *, newline: str | None = None) -> None:
+    """Call ``write(fh)`` on a text file that replaces ``path`` only once it is complete, so that no partial file is
+    left behind (a failed ``write`` removes it)."""
     path = os.fspath(path)
     tmp = f"{path}.part"
     try:
-        with open(tmp, "w", encoding="utf-8", newline="") as fh:
-            fh.write(text)
+        with open(tmp, "w", encoding="utf-8", newline=newline) as fh:
+            write(fh)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.remove(tmp)
         raise
+
+
+def _atomic_write_text(path, text: str) -> None:
+    """Write ``text`` to ``path`` through :func:`atomic_write`."""
+    atomic_write(path, lambda fh: fh.write(text), newline="")
 
 
 # ----------------------------------------------------------------------------------------------- CSV
