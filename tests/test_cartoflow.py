@@ -170,10 +170,48 @@ def test_fit_outlines_densifies_and_simplifies_to_a_budget_keeping_areas():
         fit_outlines(regions, 3)
 
 
-def test_cartogram_with_a_point_budget():
-    c = cartogram(continent("South America"), "pop_est", n=96, points=3000)
+@pytest.mark.parametrize("fc,value,points", [("South America", "pop_est", 3000), ("montreal", "total", 2000)])
+def test_cartogram_with_a_point_budget(fc, value, points):
+    """A simplified map (Montreal's districts draw their shared borders with vertices that do not match) stays a
+    coverage: within 1 %, every region valid and no two overlapping."""
+    from rfmap.regions import montreal_election
+
+    c = cartogram(montreal_election() if fc == "montreal" else continent(fc), value, n=128, points=points)
     m = c.metrics()
-    assert shapely.get_num_coordinates(c.regions).sum() <= 3000 and m.max_error <= 0.01 and m.topology_ok
+    assert m.max_error <= 0.01 and m.topology_ok, m
+
+
+def test_clean_coverage_makes_shared_borders_match():
+    """Two unit squares whose shared border one draws with a midpoint and the other without (a T-junction), and a
+    third overlapping the second by a sliver: the result is a valid coverage, areas kept but for the sliver, and the
+    second's border with the first now has the midpoint."""
+    from rfmap.regions import clean_coverage
+
+    a = shapely.Polygon([(0, 0), (1, 0), (1, 0.5), (1, 1), (0, 1)])
+    b = shapely.Polygon([(1, 0), (2, 0), (2, 1), (1, 1)])
+    c = shapely.Polygon([(1.999, 0), (3, 0), (3, 1), (1.999, 1)])
+    regions = np.array([a, b, c], dtype=object)
+    assert not shapely.coverage_is_valid(regions)
+    out = clean_coverage(regions)
+    assert shapely.coverage_is_valid(out) and shapely.is_valid(out).all()
+    # the sliver (0.001 of the third's 1.001) went to the first region holding it, the second
+    assert np.allclose(shapely.area(out), [1.0, 1.0, 1.0])
+    assert np.isclose(shapely.area(shapely.union_all(out)), 3.0)
+    assert (1.0, 0.5) in set(map(tuple, shapely.get_coordinates(out[1])))
+
+
+def test_distinct_vertices_merges_pairs_that_straddle_a_rounding_edge():
+    """Points 4e-16 apart on either side of a rounding edge of 12 digits (which rounding would part) are one vertex;
+    points 1e-9 apart stay two."""
+    from rfmap.regions import _distinct_vertices
+
+    x0 = 0.5e-12 + 123456789012 * 1e-12  # half way between two 12-digit numbers
+    lo, hi = x0 - 2e-16, x0 + 2e-16
+    assert np.round(lo, 12) != np.round(hi, 12)  # the pair rounding would part
+    ring = [(lo, 0.5), (0.9, 0.1), (0.9, 0.9), (hi, 0.5 + 1e-17), (0.2, 0.9), (x0 + 1e-9, 0.5)]
+    pts = shapely.MultiPoint(ring)
+    uniq, inverse = _distinct_vertices(np.array([pts], dtype=object))
+    assert len(uniq) == 5 and inverse[0] == inverse[3] and inverse[0] != inverse[5]
 
 
 # ----------------------------------------------------------------------------------------------- real maps

@@ -388,9 +388,11 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     points : int, optional
         A budget of polygon vertices: the outlines (already split to edges of at most a grid cell) are simplified,
         shared borders kept (:func:`rfmap.regions.fit_outlines`), or densified to about that many.  Simplifying
-        speeds up large maps and removes detail finer than the grid; it changes the input's areas slightly.  The
-        outlines are then kept to the budget: the flow's stretched edges are not split between passes
-        (:data:`SPLIT_EDGE`).
+        removes detail finer than the grid (and speeds up maps drawn with far more vertices than the grid resolves);
+        it changes the input's areas slightly.  The budget sets the outlines' detail, not the count of points the
+        flow carries: as for any input, the outlines are then split to edges of at most a grid cell, and edges the
+        flow stretches beyond :data:`SPLIT_EDGE` cells are split again between passes, so that straight edges
+        between distant vertices do not cross.
 
     Returns
     -------
@@ -431,7 +433,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     # one neighbour draws with more vertices than the other still matches it)
     regions = frame.project(geoms, 1.0 / (n - 1))
     if points is not None:  # a budget of vertices: simplified (shared borders kept) or densified to it
-        regions = fit_outlines(regions, points)
+        regions = shapely.segmentize(fit_outlines(regions, points), 1.0 / (n - 1))
     done = []  # the passes so far
 
     def grid_map(dens, points):  # the flow carries the polygons' vertices themselves, its density blurred at first
@@ -445,7 +447,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     mapped, info, map_time = _passes(regions, values, grid_map,
                                      n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol,
                                      min_share=min_share, max_n=max_n if max_n is not None else max(n, MAX_N),
-                                     split=points is None and method == "flow", accelerate=method == "flow")
+                                     split=method == "flow", accelerate=method == "flow")
     mapped, info["repaired"] = repair_folds(mapped)
     elapsed = time.perf_counter() - t0
     out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)

@@ -18,7 +18,7 @@ import numpy as np
 from .mesh import check_n
 from .projection import PlanarFrame
 
-__all__ = ["read_regions", "PlanarFrame", "density_grid", "fit_outlines", "montreal_election", "MONTREAL_CANDIDATES",
+__all__ = ["read_regions", "PlanarFrame", "density_grid", "fit_outlines", "clean_coverage", "montreal_election", "MONTREAL_CANDIDATES",
            "ZERO_FLOOR", "world_countries"]
 
 
@@ -230,12 +230,47 @@ def _scanline_rows(geoms: np.ndarray, weight: np.ndarray, n: int, s: int) -> np.
     return np.cumsum(diff, axis=1)[:, :m]
 
 
+def clean_coverage(regions: np.ndarray) -> np.ndarray:
+    r"""The regions rebuilt as an exact coverage: every shared border drawn by the same vertices on both sides.
+
+    Real maps draw a border twice, once per neighbour, and the two drawings need not match vertex for vertex (a
+    vertex of one lies on an edge of the other, or a hair off it).  Such a map is no coverage in the sense of
+    ``shapely.coverage_is_valid``, and simplifying it border by border opens slivers of overlap.  Here all the
+    outlines are noded together (``shapely.union_all`` of the boundaries), cut into faces
+    (``shapely.polygonize``), and every face goes to the first region that holds it; faces that no region holds
+    (gaps, lakes, the sea) stay out.  Every area changes by no more than the original slivers between neighbours.
+
+    Parameters
+    ----------
+    regions : ndarray of shapely geometries, shape (R,)
+
+    Returns
+    -------
+    ndarray of shapely geometries, shape (R,)
+        Valid polygons (multi-part where needed), without repeated points; a region that holds no face (a
+        degenerate input) is returned as it was.
+    """
+    shapely = _shapely()
+    lines = shapely.union_all(shapely.boundary(regions))
+    faces = shapely.get_parts(shapely.polygonize(shapely.get_parts(lines)))
+    face, region = shapely.STRtree(regions).query(shapely.point_on_surface(faces), predicate="within")
+    order = np.lexsort((region, face))
+    first = np.unique(face[order], return_index=True)[1]
+    owner = np.full(len(faces), -1)
+    owner[face[order][first]] = region[order][first]
+    out = regions.copy()
+    for k in np.unique(owner[owner >= 0]):
+        out[k] = shapely.coverage_union_all(faces[owner == k])
+    return shapely.remove_repeated_points(out)
+
+
 def fit_outlines(regions: np.ndarray, points: int, *, steps: int = 20) -> np.ndarray:
     r"""The region outlines with about ``points`` vertices in all: simplified when they hold more, densified when
     they hold fewer; shared borders stay shared.
 
     Simplification is topology-preserving over the whole coverage (``shapely.coverage_simplify``,
-    Visvalingam–Whyatt: a border shared by two regions is simplified once, for both); densification splits every
+    Visvalingam–Whyatt: a border shared by two regions is simplified once, for both), on the regions made an exact
+    coverage first (:func:`clean_coverage`), so that no two regions overlap afterwards; densification splits every
     edge evenly (``shapely.segmentize``), which keeps every area.  The tolerance or step is found by bisection on
     its logarithm, so the count ends within a few per cent of ``points`` (at most ``points`` when simplifying).
 
@@ -256,13 +291,16 @@ def fit_outlines(regions: np.ndarray, points: int, *, steps: int = 20) -> np.nda
     if isinstance(points, bool) or not isinstance(points, numbers.Integral) or points < 4 * len(regions):
         raise ValueError(f"points must be an integer of at least 4 per region ({4 * len(regions)}), got {points!r}")
     # shared borders split from either end agree only to the last bits: snap them, so the coverage's edges match
-    regions = shapely.set_coordinates(regions.copy(), np.round(shapely.get_coordinates(regions), 12))
+    uniq, inverse = _distinct_vertices(regions)
+    regions = shapely.remove_repeated_points(shapely.set_coordinates(regions.copy(), uniq[inverse]))
     count = int(shapely.get_num_coordinates(regions).sum())
     if count == points:
         return regions
     x0, x1 = shapely.bounds(regions)[:, [0, 2]].min(), shapely.bounds(regions)[:, [1, 3]].max()
     lo, hi = math.log(1e-9 * (x1 - x0) + 1e-300), math.log(abs(x1 - x0) + 1e-300)
     if count > points:
+        regions = clean_coverage(regions)
+
         def make(t):
             return shapely.coverage_simplify(regions, math.exp(t), simplify_boundary=True)
         fits = lambda g: shapely.get_num_coordinates(g).sum() <= points  # noqa: E731  (larger t: fewer points)
@@ -282,12 +320,47 @@ def fit_outlines(regions: np.ndarray, points: int, *, steps: int = 20) -> np.nda
     return best if best is not None else make(hi if count > points else lo)
 
 
-def _distinct_vertices(regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+#: Coordinates (of the unit-square frame) closer than this are one vertex (:func:`_distinct_vertices`)
+MERGE = 1e-12
+
+
+def _grid_groups(xy: np.ndarray, side: float, shift: tuple[float, float]) -> np.ndarray:
+    """Group index (P,) of every point by its cell of a grid of side ``side`` shifted by ``shift`` cells."""
+    k = np.floor(xy / side + np.asarray(shift)).astype(np.int64)
+    order = np.lexsort((k[:, 1], k[:, 0]))
+    ks = k[order]
+    start = np.ones(len(ks), dtype=bool)
+    start[1:] = (ks[1:] != ks[:-1]).any(axis=1)
+    groups = np.empty(len(ks), dtype=np.intp)
+    groups[order] = np.cumsum(start) - 1
+    return groups
+
+
+def _distinct_vertices(regions: np.ndarray, merge: float = MERGE) -> tuple[np.ndarray, np.ndarray]:
     """The distinct vertices (V, 2) of ``regions`` and the index (K,) of every coordinate among them: each is mapped
-    once, so that neighbours keep identical edges (to 1e-12 of the frame: a split border's points, computed from
-    either end, differ in the last bits)."""
-    uniq, inverse = np.unique(np.round(_shapely().get_coordinates(regions), 12), axis=0, return_inverse=True)
-    return uniq, inverse.reshape(-1)
+    once, so that neighbours keep identical edges.
+
+    A border split from either end gives points that agree only to the last bits, and rounding them to a grid
+    would part the rare pair that straddles a cell's edge.  Points are merged instead when they share a cell of any
+    of four grids of side ``merge`` (shifted by half a cell in x, y or both): two points closer than a quarter
+    cell in both coordinates always share one of them.  Merged groups are closed transitively; each keeps its
+    first point."""
+    xy = _shapely().get_coordinates(regions)
+    if len(xy) == 0:
+        return xy, np.zeros(0, dtype=np.intp)
+    grids = [_grid_groups(xy, merge, s) for s in ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5))]
+    label = np.arange(len(xy))
+    while True:
+        new = label
+        for g in grids:
+            low = np.full(g.max() + 1, len(xy))
+            np.minimum.at(low, g, new)
+            new = low[g]
+        if np.array_equal(new, label):
+            break
+        label = new
+    keep, inverse = np.unique(label, return_inverse=True)
+    return xy[keep], inverse.reshape(-1)
 
 
 def _longest_edge(regions: np.ndarray) -> float:
