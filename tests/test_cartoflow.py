@@ -281,3 +281,20 @@ def test_flow_cartogram_command_exit_codes(tmp_path, capsys):
     assert rc == 1 and json.loads(out.read_text())["rfmap"]["status"] == "failed"
     assert main(["cartogram", str(src), "--value", "nope", "--method", "flow", "--out", str(tmp_path / "x.json")]) == 2
     assert not (tmp_path / "x.json").exists()
+
+
+def test_repair_overlaps_cuts_slivers_from_the_region_above_its_target():
+    """Two unit squares overlapping by a sliver of 1e-6 of the total area: the sliver is cut from the one further
+    above its target area, after which the two share a border and keep their other areas; an overlap larger than
+    REPAIR_OVERLAP stays."""
+    from rfmap.cartogram_metrics import REPAIR_OVERLAP, repair_overlaps
+
+    a = shapely.box(0.0, 0.0, 1.0, 1.0)
+    b = shapely.box(1.0 - 2e-6, 0.0, 2.0, 1.0)
+    out, cut = repair_overlaps(np.array([a, b], dtype=object), np.array([1.0, 2.0]))
+    assert cut == [(0, 1)]  # a holds half b's value with about b's area: further above its target
+    assert shapely.area(shapely.intersection(out[0], out[1])) == 0.0
+    assert shapely.area(out[0]) == pytest.approx(1.0 - 2e-6, rel=1e-12) and shapely.area(out[1]) == shapely.area(b)
+    wide = shapely.box(1.0 - 4 * REPAIR_OVERLAP, 0.0, 2.0, 1.0)
+    out, cut = repair_overlaps(np.array([a, wide], dtype=object), np.array([1.0, 2.0]))
+    assert cut == [] and shapely.area(shapely.intersection(out[0], out[1])) > 0

@@ -34,7 +34,8 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    weight is boosted by the share of its error that the last pass left (a secant acceleration of the passes:
    :func:`rfmap.cartogram_metrics.boost`).  A fold of the
    output smaller than the overlap tolerance, where the input draws two edges nearly touching, is repaired
-   (:func:`rfmap.cartogram_metrics.repair_folds`).
+   (:func:`rfmap.cartogram_metrics.repair_folds`), and so is a sliver where two neighbours that the input keeps
+   under a cell apart were pressed into each other (:func:`rfmap.cartogram_metrics.repair_overlaps`).
 5. **Output.**  Edges longer than a grid cell are first split (``shapely.segmentize``) so that they bend with the
    map; every vertex is mapped, shared borders stay shared, and the polygons are returned in the input's
    coordinates (the inverse of the planar frame), or in the projection's plane (``output="projected"``), as a
@@ -65,7 +66,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .cartogram_metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, judged, repair_folds
+from .cartogram_metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, judged, repair_folds, \
+    repair_overlaps
 from .mesh import check_grid_memory, check_n
 from .projection import PlanarFrame
 from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edge, \
@@ -289,6 +291,8 @@ class Cartogram:
                   "max_error": m.max_error, "minor": {"share": self.min_share, "count": m.n_minor,
                                                       "max_error": m.max_error_minor},
                   "repaired": [_feature_name(self.features[i], i) for i in self.info.get("repaired", [])],
+                  "overlaps_cut": [[_feature_name(self.features[i], i), _feature_name(self.features[j], j)]
+                                   for i, j in self.info.get("overlaps_cut", [])],
                   "passes": self.info.get("iterations"),
                   "method": self.method, "n": self.n, "coordinates": self.output,
                   "projection": self.frame.projection.definition}
@@ -399,7 +403,9 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     Cartogram
         ``info["max_error"]`` lists the largest relative area error after every pass, ``info["iterations"]`` the
         passes run, ``info["kept"]`` the pass whose polygons are returned (1-based) and ``info["repaired"]`` the
-        regions whose numerically tiny fold was repaired (:func:`rfmap.cartogram_metrics.repair_folds`).
+        regions whose numerically tiny fold was repaired (:func:`rfmap.cartogram_metrics.repair_folds`),
+        ``info["overlaps_cut"]`` the pairs ``(cut, kept)`` of regions whose sliver of overlap was cut from the first
+        (:func:`rfmap.cartogram_metrics.repair_overlaps`).
 
     Raises
     ------
@@ -449,6 +455,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
                                      min_share=min_share, max_n=max_n if max_n is not None else max(n, MAX_N),
                                      split=method == "flow", accelerate=method == "flow")
     mapped, info["repaired"] = repair_folds(mapped)
+    mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
     elapsed = time.perf_counter() - t0
     out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
     carto = Cartogram(features=_mapped_features(features, out), regions=regions, mapped=mapped, values=values,

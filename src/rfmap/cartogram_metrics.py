@@ -15,8 +15,8 @@ import numpy as np
 
 from .regions import _shapely
 
-__all__ = ["CartogramMetrics", "cartogram_metrics", "judged", "repair_folds", "boost", "MIN_SHARE", "REPAIR_AREA",
-           "BOOST_GAIN", "BOOST_CAP"]
+__all__ = ["CartogramMetrics", "cartogram_metrics", "judged", "repair_folds", "repair_overlaps", "boost", "MIN_SHARE",
+           "REPAIR_AREA", "REPAIR_OVERLAP", "BOOST_GAIN", "BOOST_CAP"]
 
 #: The share of the total value from which a region's area error is judged (stopping rule, :meth:`Cartogram.metrics`,
 #: tolerance): 0.01 %.  Smaller regions (a world map's uninhabited Antarctica, islands of a few thousand people) are
@@ -25,6 +25,10 @@ MIN_SHARE = 1e-4
 #: The largest change of area (a fraction of the total) by which :func:`repair_folds` fixes an invalid mapped
 #: polygon: the default ``overlap_tol`` of the metrics, below which an overlap of two regions is not counted either
 REPAIR_AREA = 1e-6
+#: The largest overlap of two mapped regions (a fraction of the total area) that :func:`repair_overlaps` removes: two
+#: neighbours that the input keeps a fraction of a grid cell apart (a lake, a river drawn as a gap) can be pressed
+#: together by the passes until their straight edges cross by a sliver
+REPAIR_OVERLAP = 1e-5
 #: :func:`boost`: the smallest share of a region's log area error that a pass is taken to remove, and the largest
 #: log weight boost (a factor of :math:`e^{0.3} \approx 1.35`), beyond which the passes begin to fold the polygons
 BOOST_GAIN, BOOST_CAP = 0.4, 0.3
@@ -132,6 +136,45 @@ def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tupl
     out = mapped.copy()
     out[bad[ok]] = fixed[ok]
     return out, [int(i) for i in bad[ok]]
+
+
+def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *,
+                    max_change: float = REPAIR_OVERLAP) -> tuple[np.ndarray, list]:
+    r"""Sliver overlaps of valid mapped regions removed: each overlap of two regions holding at most ``max_change``
+    of the total area (and over a thousandth of :data:`REPAIR_AREA`, below which it is rounding) is cut from the
+    one of the two further above its target area :math:`T_i = (v_i/\sum_j v_j)\sum_j A_j` (``shapely.difference``),
+    so that the two then share a border.  Larger overlaps stay, for :meth:`Cartogram.problems` to report.
+
+    Parameters
+    ----------
+    mapped : ndarray of shapely geometries, shape (R,)
+    values : ndarray, shape (R,)
+
+    Returns
+    -------
+    (ndarray of shapely geometries, list of (int, int))
+        The polygons and the pairs ``(cut, kept)`` whose overlap was cut from the first.
+    """
+    shapely = _shapely()
+    valid = shapely.is_valid(mapped)
+    left, right = shapely.STRtree(mapped).query(mapped, predicate="overlaps")
+    keep = (left < right) & valid[left] & valid[right]
+    left, right = left[keep], right[keep]
+    if not left.size:
+        return mapped, []
+    area = shapely.area(mapped)
+    total = float(area.sum())
+    share = shapely.area(shapely.intersection(mapped[left], mapped[right])) / total
+    excess = np.log(np.maximum(area, 1e-300) / (values / values.sum() * total))
+    out, cut = mapped.copy(), []
+    for k in np.flatnonzero((share > 1e-3 * REPAIR_AREA) & (share <= max_change)):
+        i, j = (left[k], right[k]) if excess[left[k]] >= excess[right[k]] else (right[k], left[k])
+        parts = shapely.get_parts(shapely.difference(out[i], out[j]))
+        g = shapely.union_all(parts[shapely.get_type_id(parts) == 3])
+        if shapely.is_valid(g) and shapely.get_type_id(g) in (3, 6):
+            out[i] = g
+            cut.append((int(i), int(j)))
+    return out, cut
 
 
 def boost(log_err: np.ndarray, last: np.ndarray, gain: np.ndarray) -> np.ndarray:
