@@ -315,6 +315,11 @@ def cmd_cartogram(args) -> int:
           f"{carto.info['iterations']} pass(es), {carto.time:.2f} s; {carto.metrics()}")
     if names:
         print(f"zero values floored in {len(names)} region(s): {', '.join(map(str, names))}")
+    cut = carto.info.get("overlaps_cut", [])
+    if cut:
+        label = [carto.features[i].get("id", f"#{i}") for pair in cut for i in pair]
+        print(f"sliver overlaps cut in {len(cut)} pair(s) of neighbours pressed together: "
+              f"{', '.join(f'{a} / {b}' for a, b in zip(label[::2], label[1::2]))}")
     problems = carto.problems()
     for p in problems:
         print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
@@ -506,7 +511,8 @@ def _add_paper_and_cartogram(sub) -> None:
                    help="repeat passes until the largest relative area error is at most this (default 0.01)")
     s.add_argument("--max-passes", type=int, default=30, help="at most this many passes (default 30)")
     s.add_argument("--points", type=int, default=None, metavar="COUNT",
-                   help="simplify or densify the region outlines to about this many vertices (shared borders kept)")
+                   help="simplify (shared borders kept) or densify the region outlines to about this many "
+                        "vertices, the detail kept; the flow still splits edges to grid cells")
     s.add_argument("--projection", choices=PROJECTIONS, default="auto",
                    help="the plane of the cartogram: auto (default: equal-area for longitude/latitude, none for "
                         "planar coordinates), equal-area, equirectangular or none")
