@@ -144,7 +144,7 @@ SCAN_POINTS = 9
 
 def _rescan(f: Callable[[float], float], bounds: tuple[float, float], tol: float, s: float,
             js: float) -> tuple[float, float]:
-    """Guard a golden-section result ``(s, js)`` against a non-unimodal objective: scan ``f`` at
+    r"""Guard a golden-section result ``(s, js)`` against a non-unimodal objective: scan ``f`` at
     :data:`SCAN_POINTS` geometrically spaced points of ``bounds`` and, where one beats ``js``, search again between
     its neighbours.  (Folded maps make :math:`\mathcal{J}` jagged: when the map at :math:`\alpha = 1` overshoots
     and folds, both first probes can land among folded maps and the search then never reaches the fold-free
