@@ -8,7 +8,9 @@ South America, and an Asia-Pacific set with Russia and Fiji that crosses the ant
 same GeoJSON (consecutive repeated points removed, which the reference refuses) and CSV files, written to a work
 folder.
 
-Every command is run ``--repeat`` times as a child process; the table gives the median wall time and the median peak
+rfmap's modules are byte-compiled first (``compileall``), as pip leaves an installed package, so that no timed command
+compiles them (an editable install run with ``PYTHONDONTWRITEBYTECODE`` set would).  Every command is run
+``--repeat`` times as a child process; the table gives the median wall time and the median peak
 resident memory (``/usr/bin/time``'s maximum resident set size), the exit status, and the largest
 and mean relative area error :math:`|A_i/T_i - 1|` measured by :func:`rfmap.cartogram.cartogram_metrics` over the
 regions holding at least :data:`rfmap.cartogram.MIN_SHARE` of the total value (the others' largest error apart), in
@@ -23,6 +25,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import compileall
 import csv
 import json
 import os
@@ -163,12 +166,18 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--max-passes", type=int, default=30, help="rfmap's --max-passes")
     ap.add_argument("--workdir", default=None, help="folder for the inputs and outputs (default: a temporary one)")
     args = ap.parse_args(argv)
+    # rfmap's modules byte-compiled, as pip leaves an installed package: an editable install run with
+    # PYTHONDONTWRITEBYTECODE would otherwise compile them in every timed command
+    import rfmap
+
+    compileall.compile_dir(os.path.dirname(rfmap.__file__), quiet=1)
     folder = args.workdir or tempfile.mkdtemp(prefix="rfmap-cartogram-bench-")
     os.makedirs(folder, exist_ok=True)
     files = write_inputs(folder)
     load = os.getloadavg()
     print(f"machine: {os.cpu_count()} cores, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} at the start; "
-          f"median of {args.repeat} whole commands; tolerance 1 %; errors over regions >= 0.01 % of the total\n")
+          f"median of {args.repeat} whole commands (rfmap's modules byte-compiled first, as pip installs them); "
+          "tolerance 1 %; errors over regions >= 0.01 % of the total\n")
     print(HEAD, flush=True)
     for name in args.maps:
         for n in args.n:
