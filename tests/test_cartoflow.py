@@ -298,3 +298,27 @@ def test_repair_overlaps_cuts_slivers_from_the_region_above_its_target():
     wide = shapely.box(1.0 - 4 * REPAIR_OVERLAP, 0.0, 2.0, 1.0)
     out, cut = repair_overlaps(np.array([a, wide], dtype=object), np.array([1.0, 2.0]))
     assert cut == [] and shapely.area(shapely.intersection(out[0], out[1])) > 0
+
+
+def test_timeout_stops_the_passes_and_the_command_says_so(tmp_path, capsys):
+    """A time limit already spent lets the first pass run and no other: the best pass is returned, flagged
+    ``timed_out``, and, above the tolerance, named as a problem; the command writes the map flagged and exits 1.
+    Without a limit the same map reaches the tolerance; a limit that is not a positive number is bad input."""
+    from rfmap.cli import main
+
+    fc = squares([1, 50, 2, 400, 3, 7, 1, 90, 5])
+    free = cartogram(fc, "pop", n=48)
+    assert free.info["iterations"] > 1 and not free.info["timed_out"] and not free.problems()
+    c = cartogram(fc, "pop", n=48, timeout=1e-9)
+    assert c.info["iterations"] == 1 and c.info["timed_out"]
+    assert any("time limit" in p for p in c.problems()), c.problems()
+    for bad in (0, -1.0, float("nan"), float("inf"), True, "1"):
+        with pytest.raises(ValueError, match="timeout"):
+            cartogram(fc, "pop", n=48, timeout=bad)
+    src, out = tmp_path / "in.geojson", tmp_path / "out.geojson"
+    src.write_text(json.dumps(fc))
+    rc = main(["cartogram", str(src), "--value", "pop", "--n", "48", "--timeout", "1e-9", "--out", str(out)])
+    err = capsys.readouterr().err
+    assert rc == 1 and "time limit" in err and json.loads(out.read_text())["rfmap"]["status"] == "failed"
+    rc = main(["cartogram", str(src), "--value", "pop", "--timeout", "0", "--out", str(tmp_path / "x.geojson")])
+    assert rc == 2 and "timeout" in capsys.readouterr().err and not (tmp_path / "x.geojson").exists()

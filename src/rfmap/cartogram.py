@@ -9,11 +9,9 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    crosses the antimeridian is centred there).  Long edges are first split along their straight lines in
    longitude/latitude, so that they bend as the projection bends them.  The map's bounding box is fitted into the
    unit square leaving a ``margin`` on every side (:class:`PlanarFrame`).
-2. **Density raster.**  Each vertex of the ``N``-grid gets the mean density over its grid cell, measured by
-   ``supersample``:sup:`2` point samples per cell (found inside or outside by scanlines across the rings,
-   :func:`density_grid`).  Outside every region lies
-   the sea at the mean density :math:`\sum_i v_i / \sum_i a_i`, as cartogram tools do, so that the land keeps its
-   total area and the coast may move.
+2. **Density raster.**  Each vertex of the ``N``-grid gets the mean density over its grid cell from
+   ``supersample``:sup:`2` point samples per cell (scanlines across the rings, :func:`density_grid`).  The sea has
+   the mean density :math:`\sum_i v_i / \sum_i a_i`, as in cartogram tools: the land keeps its area, coasts move.
 3. **Map.**  The default, ``"flow"``, is the flow-based method of Gastner, Seguy & More (2018) that today's
    cartogram programs run: the flux of the raster's Poisson problem (walls fixed) carries the distinct polygon
    vertices themselves from :math:`t = 0` to 1 (:func:`rfmap.solvers.cartoflow.flow_square`, numpy only: no
@@ -32,29 +30,22 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  Edges that the
    flow's passes stretched beyond :data:`SPLIT_EDGE` cells are split again before the next pass, and each region's
    weight is boosted by the share of its error that the last pass left (a secant acceleration of the passes:
-   :func:`rfmap.cartogram_metrics.boost`).  A fold of the
-   output smaller than the overlap tolerance, where the input draws two edges nearly touching, is repaired
-   (:func:`rfmap.cartogram_metrics.repair_folds`), and so is a sliver where two neighbours that the input keeps
-   under a cell apart were pressed into each other (:func:`rfmap.cartogram_metrics.repair_overlaps`).
-5. **Output.**  Edges longer than a grid cell are first split (``shapely.segmentize``) so that they bend with the
-   map; every vertex is mapped, shared borders stay shared, and the polygons are returned in the input's
-   coordinates (the inverse of the planar frame), or in the projection's plane (``output="projected"``), as a
-   GeoJSON FeatureCollection with the input's properties.  Its ``"rfmap"`` member says whether the cartogram is
-   within tolerance and valid (:meth:`Cartogram.problems`).
+   :func:`rfmap.cartogram_metrics.boost`).  A fold smaller than the overlap tolerance, where the input draws two
+   edges nearly touching, is repaired (:func:`rfmap.cartogram_metrics.repair_folds`), and so is a sliver where
+   neighbours under a cell apart in the input were pressed together (:func:`rfmap.cartogram_metrics.repair_overlaps`).
+5. **Output.**  Edges longer than a grid cell are first split so that they bend with the map; every vertex is
+   mapped once (shared borders stay shared); the polygons come back in the input's coordinates or the projection's
+   plane (``output="projected"``) as GeoJSON with the input's properties, its ``"rfmap"`` member saying whether the
+   cartogram is within tolerance and valid (:meth:`Cartogram.problems`).
 
-Metrics of the cartogram literature (:func:`cartogram_metrics`): the relative area error
-:math:`|A_i / T_i - 1|` with the target :math:`T_i = (v_i / \sum_j v_j) \sum_j A_j`, its mean and maximum over
-the judged regions (the others' largest error apart), and a topology check: every mapped polygon is valid and no
-two regions overlap by more than ``overlap_tol`` of the total area.  :meth:`Cartogram.metrics` measures them in an equal-area plane (the frame's, or
-for an equirectangular frame the equal-area projection of the same map).
+Metrics (:func:`cartogram_metrics`, in an equal-area plane): the relative area error :math:`|A_i / T_i - 1|`,
+:math:`T_i = (v_i / \sum_j v_j) \sum_j A_j`, its mean and maximum over the judged regions, and a topology check.
 
 References
 ----------
-M. T. Gastner, M. E. J. Newman, "Diffusion-based method for producing density-equalizing maps",
-Proc. Natl. Acad. Sci. USA 101(20), 7499–7504 (2004).
-
-M. T. Gastner, V. Seguy, P. More, "Fast flow-based algorithm for creating density-equalizing map projections",
-Proc. Natl. Acad. Sci. USA 115(10), E2156–E2164 (2018).
+M. T. Gastner, M. E. J. Newman, "Diffusion-based method for producing density-equalizing maps", PNAS 101, 7499
+(2004); M. T. Gastner, V. Seguy, P. More, "Fast flow-based algorithm for creating density-equalizing map
+projections", PNAS 115, E2156 (2018).
 """
 from __future__ import annotations
 
@@ -262,7 +253,8 @@ class Cartogram:
         out = []
         if not m.max_error <= self.tol:
             out.append(f"the largest area error {m.max_error:.4f} is above the tolerance {self.tol:g} after "
-                       f"{self.info['iterations']} pass(es)")
+                       f"{self.info['iterations']} pass(es)" +
+                       (": the passes stopped at the time limit" if self.info.get("timed_out") else ""))
         if m.n_invalid:
             bad = np.flatnonzero(~_shapely().is_valid(self.frame.equal_area(self.mapped)))
             names = ", ".join(_feature_name(self.features[i], int(i)) for i in bad[:10])
@@ -335,7 +327,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
               max_iterations: int = 30, iterations: int | None = None, margin: float = 0.1,
               projection: str = "auto", output: str = "input", supersample: int = 4, model: str | None = None,
               surrogate=None, floor: float = ZERO_FLOOR, solver_kw: dict | None = None,
-              min_share: float = MIN_SHARE, max_n: int | None = None, points: int | None = None) -> Cartogram:
+              min_share: float = MIN_SHARE, max_n: int | None = None, points: int | None = None,
+              timeout: float | None = None) -> Cartogram:
     r"""Diffusion cartogram of GeoJSON regions sized by one value each (see the module docstring).
 
     Parameters
@@ -397,12 +390,17 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         flow carries: as for any input, the outlines are then split to edges of at most a grid cell, and edges the
         flow stretches beyond :data:`SPLIT_EDGE` cells are split again between passes, so that straight edges
         between distant vertices do not cross.
+    timeout : float, optional
+        Seconds (counted from the parsed input) after which no further pass starts; the best pass so far is
+        returned, with ``info["timed_out"]`` set and, when it is not within ``tol``, a problem that says so
+        (:meth:`Cartogram.problems`).  The first pass always runs.
 
     Returns
     -------
     Cartogram
         ``info["max_error"]`` lists the largest relative area error after every pass, ``info["iterations"]`` the
-        passes run, ``info["kept"]`` the pass whose polygons are returned (1-based) and ``info["repaired"]`` the
+        passes run, ``info["kept"]`` the pass whose polygons are returned (1-based), ``info["timed_out"]`` whether
+        ``timeout`` stopped the passes, ``info["repaired"]`` the
         regions whose numerically tiny fold was repaired (:func:`rfmap.cartogram_metrics.repair_folds`),
         ``info["overlaps_cut"]`` the pairs ``(cut, kept)`` of regions whose sliver of overlap was cut from the first
         (:func:`rfmap.cartogram_metrics.repair_overlaps`).
@@ -427,6 +425,9 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         raise ValueError(f"{'iterations' if fixed else 'max_iterations'} must be a positive integer, got {passes!r}")
     if not (isinstance(tol, numbers.Real) and tol >= 0):
         raise ValueError(f"tol must be a number >= 0, got {tol!r}")
+    if timeout is not None and not (isinstance(timeout, numbers.Real) and not isinstance(timeout, bool)
+                                    and 0 < timeout < math.inf):
+        raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
     if output not in OUTPUTS:
         raise ValueError(f"unknown output {output!r}; choose one of {', '.join(OUTPUTS)}")
     features, geoms, values, floored = read_regions(collection, value, floor=floor)
@@ -453,7 +454,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     mapped, info, map_time = _passes(regions, values, grid_map,
                                      n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol,
                                      min_share=min_share, max_n=max_n if max_n is not None else max(n, MAX_N),
-                                     split=method == "flow", accelerate=method == "flow")
+                                     split=method == "flow", accelerate=method == "flow",
+                                     deadline=None if timeout is None else t0 + timeout)
     mapped, info["repaired"] = repair_folds(mapped)
     mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
     elapsed = time.perf_counter() - t0
@@ -481,14 +483,14 @@ def _square_surrogate(surrogate, model: str | None):
 
 def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supersample: int, passes: int,
             tol: float | None, min_share: float = 0.0, max_n: int = 0, split: bool = True,
-            accelerate: bool = False) -> tuple[np.ndarray, dict, float]:
+            accelerate: bool = False, deadline: float | None = None) -> tuple[np.ndarray, dict, float]:
     """The passes of :func:`cartogram`: each rasterises the current polygons, maps the unit square by
     ``grid_map(density)`` and moves every distinct vertex.  With ``tol`` they stop within tolerance, or at a pass that
     no longer lowers the largest area error, and the polygons of the best pass are returned; without, all ``passes``
     run; with ``split``, edges stretched beyond :data:`SPLIT_EDGE` cells are split between passes, and with
     ``accelerate`` every region's weight is boosted by its own slow progress
-    (:func:`rfmap.cartogram_metrics.boost`) until a pass fails to lower the largest error.  Returns ``(mapped
-    polygons, info, seconds in grid_map)``."""
+    (:func:`rfmap.cartogram_metrics.boost`) until a pass fails to lower the largest error; past ``deadline``
+    (``time.perf_counter``) no further pass starts.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
     shapely = _shapely()
     current, inverse = _distinct_vertices(regions)
     mapped = regions
@@ -499,7 +501,11 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     results, history, grids, map_time = [], [], [], 0.0
     best = None  # (largest area error, polygons, pass) of the best pass so far
     log_err, gain = None, np.zeros(len(values))  # the last pass's log area errors and log weight boosts
+    timed_out = False
     for _ in range(passes):
+        if results and deadline is not None and time.perf_counter() >= deadline:
+            timed_out = True
+            break
         if (tol is not None and len(history) > 1 and history[-1] > tol and history[-1] > SLOW_PASS * history[-2]
                 and 2 * n - 1 <= max_n):
             n = 2 * n - 1  # slow progress: regions down to a few cells (slivers, islands); twice the resolution
@@ -531,7 +537,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     if tol is not None:  # the polygons of the pass with the lowest largest error
         mapped, kept = best[1], best[2]
     return mapped, {"iterations": len(results), "kept": kept, "max_error": history, "results": results,
-                    "sea": sea, "grids": grids}, map_time
+                    "sea": sea, "grids": grids, "timed_out": timed_out}, map_time
 
 
 def _mapped_features(features: list, mapped: np.ndarray) -> list:

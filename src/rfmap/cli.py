@@ -305,7 +305,8 @@ def cmd_cartogram(args) -> int:
     try:
         carto = cartogram(collection, args.value, method=args.method, n=args.n, tol=args.tol, model=args.model,
                           max_iterations=args.max_passes, projection=args.projection,
-                          output="projected" if args.projected else "input", points=args.points)
+                          output="projected" if args.projected else "input", points=args.points,
+                          timeout=args.timeout)
     except ImportError as e:  # pyproj (or plotly) missing: a setup problem, told in one line
         raise CLIError(str(e)) from e
     carto.save(args.out)
@@ -335,7 +336,7 @@ def _cartogram_series(args, collection) -> int:
         raise CLIError("--series runs the classical methods (diffusion or flow)")
     try:
         series = cartogram_series(collection, args.series, method=args.method, n=args.n, tol=args.tol,
-                                  max_iterations=args.max_passes, projection=args.projection)
+                                  max_iterations=args.max_passes, projection=args.projection, timeout=args.timeout)
     except ImportError as e:
         raise CLIError(str(e)) from e
     series.frames[-1].carto.save(args.out)
@@ -510,6 +511,9 @@ def _add_paper_and_cartogram(sub) -> None:
     s.add_argument("--tol", type=float, default=0.01,
                    help="repeat passes until the largest relative area error is at most this (default 0.01)")
     s.add_argument("--max-passes", type=int, default=30, help="at most this many passes (default 30)")
+    s.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
+                   help="start no further pass after this many seconds; the best pass so far is written, and the "
+                        "command exits 1 unless it is within the tolerance")
     s.add_argument("--points", type=int, default=None, metavar="COUNT",
                    help="simplify (shared borders kept) or densify the region outlines to about this many "
                         "vertices, the detail kept; the flow still splits edges to grid cells")

@@ -18,8 +18,8 @@ import numpy as np
 from .mesh import check_n
 from .projection import PlanarFrame
 
-__all__ = ["read_regions", "PlanarFrame", "density_grid", "fit_outlines", "clean_coverage", "montreal_election", "MONTREAL_CANDIDATES",
-           "ZERO_FLOOR", "world_countries"]
+__all__ = ["read_regions", "PlanarFrame", "density_grid", "fit_outlines", "clean_coverage", "montreal_election",
+           "MONTREAL_CANDIDATES", "ZERO_FLOOR", "world_countries"]
 
 
 #: The candidates of the 2013 Montreal mayoral election (vote counts per district in :func:`montreal_election`).
