@@ -42,7 +42,7 @@ ASIA_PACIFIC = ("Russia", "Fiji", "New Zealand", "Australia", "Papua New Guinea"
 # ----------------------------------------------------------------------------------------------- imports
 def test_classical_cartogram_path_never_imports_torch(tmp_path):
     """Importing the package, its command line and the cartogram modules, building the parser, and running a flow
-    cartogram through the command line load no PyTorch; the neural names still import on access."""
+    and a diffusion cartogram through the command line load no PyTorch; the neural names still import on access."""
     src, out = tmp_path / "in.geojson", tmp_path / "out.geojson"
     src.write_text(json.dumps(squares([1, 1, 1, 5])))
     code = f"""
@@ -50,10 +50,11 @@ import sys
 import rfmap, rfmap.cli, rfmap.cartogram, rfmap.regions, rfmap.projection, rfmap.solvers, rfmap.solvers.cartoflow
 rfmap.cli.build_parser()
 assert 'torch' not in sys.modules, 'import'
-rc = rfmap.cli.main(['cartogram', {str(src)!r}, '--value', 'pop', '--method', 'flow', '--n', '32',
-                     '--out', {str(out)!r}])
-assert rc == 0, rc
-assert 'torch' not in sys.modules, 'run'
+for method in ('flow', 'diffusion'):
+    rc = rfmap.cli.main(['cartogram', {str(src)!r}, '--value', 'pop', '--method', method, '--n', '32',
+                         '--out', {str(out)!r}])
+    assert rc == 0, (method, rc)
+    assert 'torch' not in sys.modules, method
 assert 'scipy.fft' not in sys.modules, 'scipy.fft'
 from rfmap import Surrogate
 assert 'torch' in sys.modules and Surrogate.__name__ == 'Surrogate'
@@ -109,6 +110,36 @@ def test_flow_square_equalizes_and_keeps_the_grid_unfolded():
     assert moved[12, 19] < 0.02 and moved.max() > 0.02  # the bump's centre barely moves, its flanks do
     uniform = flow_square(np.full((n, n), 2.0))
     assert np.abs(uniform.mapped_points - uniform.ref_points).max() < 1e-12
+
+
+def test_heat_planes_are_exact_on_cosine_modes_and_the_diffusion_map_equalizes():
+    r"""The diffusing density and its gradient on the vertex grid are exact for a sum of cosine modes
+    (:math:`e^{-\pi^2|k|^2 t}` decay, to 1e-12); a diffusion map of a two-level density keeps the grid unfolded
+    and leaves the mapped density far more uniform than the input."""
+    from rfmap.geometry import grid_min_measure
+    from rfmap.solvers.cartodiffusion import _Heat, diffusion_square
+
+    n, t = 33, 0.01
+    s = np.linspace(0.0, 1.0, n)
+    x, y = np.meshgrid(s, s, indexing="ij")
+    heat = _Heat(2 + np.cos(np.pi * x) + 0.5 * np.cos(2 * np.pi * y))
+    e1, e2 = np.exp(-np.pi ** 2 * t), np.exp(-4 * np.pi ** 2 * t)
+    gx, gy, rho = heat.planes(t).reshape(3, n, n)
+    assert np.abs(rho - (2 + e1 * np.cos(np.pi * x) + 0.5 * e2 * np.cos(2 * np.pi * y))).max() < 1e-12
+    assert np.abs(gx + np.pi * e1 * np.sin(np.pi * x)).max() < 1e-12
+    assert np.abs(gy + np.pi * e2 * np.sin(2 * np.pi * y)).max() < 1e-12
+    dens = np.where(np.hypot(x - 0.4, y - 0.6) < 0.25, 4.0, 1.0)
+    res = diffusion_square(dens)
+    assert res.info["method"] == "diffusion" and res.info["grid"]
+    assert grid_min_measure(res.mapped_points, n) > 0
+    # the mapped area of the dense disc, against its share of the mass (an area-weighted check on cells)
+    cells = (dens[:-1, :-1] + dens[1:, 1:] + dens[1:, :-1] + dens[:-1, 1:]) / 4
+    mapped = res.mapped_points.reshape(n, n, 2)
+    d1, d2 = mapped[1:, 1:] - mapped[:-1, :-1], mapped[:-1, 1:] - mapped[1:, :-1]
+    area = 0.5 * np.abs(d1[..., 0] * d2[..., 1] - d1[..., 1] * d2[..., 0])
+    rel = (cells / cells.sum()) / area
+    before = (cells / cells.sum()) / (1.0 / (n - 1) ** 2)
+    assert rel.std() < 0.25 * before.std()
 
 
 def test_scanline_raster_matches_point_in_polygon_sampling():

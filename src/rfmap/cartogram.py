@@ -97,20 +97,16 @@ OUTPUTS = ("input", "projected")
 
 
 # ----------------------------------------------------------------------------------------------- maps
-#: Settings of :func:`rfmap.solvers.solve_dem` for cartograms: the raster already holds cell means, so the velocity
-#: is evaluated on the vertex grid itself (``refine=1``, book: Design decisions), and the flow stops when the
-#: remaining displacement is below 1 % of a cell.
+#: Settings of :func:`rfmap.solvers.solve_dem` on a cartogram's raster (which holds cell means: ``refine=1``, book:
+#: Design decisions); stop at a remaining displacement of 1 % of a cell (``tol_end``, used by the cartograms' own
+#: torch-free diffusion, :func:`rfmap.solvers.cartodiffusion.diffusion_square`, too).
 DIFFUSION_SETTINGS = {"refine": 1, "tol_end": 1e-2}
 #: :data:`DIFFUSION_SETTINGS` under the name of the method's old spelling
 DEM_SETTINGS = DIFFUSION_SETTINGS
-#: Settings of the flow-based solver (``solve_dem(method="flow")``) for cartograms: one flow per pass, whatever the
-#: density's remaining variation (``tol=0``: the cartogram's passes stop on the area errors, while the solver's own
-#: tolerance on Std(rho~) would skip a pass once the raster is nearly uniform), on the vertex grid (``refine=1``;
-#: the numbers are on the book's page Design decisions).
+#: Settings of ``solve_dem(method="flow")`` on a cartogram's raster: one flow per pass (``tol=0``: passes stop on
+#: area errors), on the vertex grid (``refine=1``; book: Design decisions).  :func:`cartogram` itself carries the
+#: vertices by the torch-free :func:`rfmap.solvers.cartoflow.flow_square`.
 FLOW_SETTINGS = {"refine": 1, "tol": 0.0}
-#: (:func:`cartogram`'s ``"flow"`` method no longer runs that solver: it carries the vertices themselves by the
-#: torch-free :func:`rfmap.solvers.cartoflow.flow_square`; these settings serve callers of ``solve_dem`` on a
-#: cartogram's raster.)
 #: A pass that leaves more than this fraction of the previous pass's largest error doubles the raster's resolution
 #: (up to ``max_n``): the regions left are a few cells wide, which a finer raster resolves
 SLOW_PASS = 0.7
@@ -145,16 +141,17 @@ def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
     """The map of the unit square for one pass: the classical diffusion or flow DEM with fixed walls, the
     surrogate's map on its working grid (repaired there, so that it is fold-free before it is interpolated at the
     polygon vertices), or the hybrid's on the raster's ``N``-grid."""
-    if method == "flow":  # torch-free
+    kw = dict(solver_kw)
+    points = kw.pop("points", None)
+    if method == "flow":  # torch-free, as the diffusion
         from .solvers.cartoflow import CartoFlowOptions, flow_square
 
-        kw = dict(solver_kw)
-        points = kw.pop("points", None)
         return flow_square(density, CartoFlowOptions(**kw), points=points)
     if method == "diffusion":
-        from .solvers import solve_dem
+        from .solvers.cartodiffusion import CartoDiffusionOptions, diffusion_square
 
-        return solve_dem(density, boundary="square", **{**DIFFUSION_SETTINGS, **solver_kw})
+        opts = CartoDiffusionOptions(**{"tol_end": DIFFUSION_SETTINGS["tol_end"], **kw})
+        return diffusion_square(density, opts, points=points)
     from .finish import quiet_quality
 
     # the raster's Std(rho~) counts the sea and every region's edge; the cartogram judges a pass by its area errors
@@ -341,7 +338,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     method : {"diffusion", "flow", "surrogate", "hybrid"}
         ``"flow"`` (default): the classical flow-based method, which carries the polygons' vertices themselves
         (:func:`rfmap.solvers.cartoflow.flow_square`; numpy only, no PyTorch); ``"diffusion"`` (also
-        ``"dem"``): the classical diffusion DEM; ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the
+        ``"dem"``): the classical diffusion DEM, carrying the vertices too
+        (:func:`rfmap.solvers.cartodiffusion.diffusion_square`, numpy only); ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the
         surrogate's map finished by the classical flow on the ``N``-grid (``Surrogate.map(polish=HYBRID_POLISH)``).
     n : int
         Side ``N`` of the density raster and of the classical solver's grid.
@@ -369,8 +367,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     floor : float
         Zero-value floor (:func:`read_regions`).
     solver_kw : dict, optional
-        Keyword arguments of :func:`rfmap.solvers.solve_dem` over :data:`DIFFUSION_SETTINGS` (``"diffusion"``) or
-        :data:`FLOW_SETTINGS` (``"flow"``).
+        Fields of :class:`rfmap.solvers.cartoflow.CartoFlowOptions` (``"flow"``) or
+        :class:`rfmap.solvers.cartodiffusion.CartoDiffusionOptions` (``"diffusion"``).
     min_share : float
         The passes' stopping rule, :meth:`Cartogram.metrics` and the tolerance count only the regions holding at
         least this share of the total value (default :data:`MIN_SHARE`, 0.01 %: islands of a few people on a world
@@ -443,8 +441,10 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         regions = shapely.segmentize(fit_outlines(regions, points), 1.0 / (n - 1))
     done = []  # the passes so far
 
-    def grid_map(dens, points):  # the flow carries the polygons' vertices themselves, its density blurred at first
+    def grid_map(dens, points):  # the classical methods carry the polygons' vertices; the flow blurs at first
         kw = solver_kw or {}
+        if method == "diffusion":
+            kw = {**kw, "points": points}
         if method == "flow":
             blur = FLOW_BLUR * 0.5 ** len(done)
             kw = {"blur": blur if blur >= 0.25 else 0.0, **kw, "points": points}

@@ -1,0 +1,167 @@
+r"""The diffusion density-equalizing map of the unit square for cartograms, in numpy alone.
+
+The method is that of :mod:`rfmap.solvers.diffusion` (Gastner & Newman 2004) with the square's walls fixed: the
+density diffuses, :math:`\partial_t\rho = \Delta\rho` with no-flux walls, and points follow
+:math:`\dot x = -\nabla\rho(x, t) / \rho(x, t)` until the density is nearly uniform.  As in
+:mod:`rfmap.solvers.cartoflow`, it is one pass of a cartogram (:func:`rfmap.cartogram.cartogram` with
+``method="diffusion"``) and carries a cartogram's distinct polygon vertices themselves, or the ``N``-grid's vertices.
+
+* The density's cosine coefficients :math:`c_k` come from one type-I cosine transform of the vertex values
+  (``numpy.fft``, :func:`rfmap.solvers.cartoflow.poisson_flux_2d`'s transforms); at time :math:`t` they are
+  :math:`c_k e^{-\pi^2|k|^2 t}`, and :math:`\rho`, :math:`\partial_x\rho`, :math:`\partial_y\rho` on the vertex grid
+  are their cosine and sine syntheses (five transforms along one axis each).
+* The velocity at a point is the bilinear interpolant of those three planes (:func:`rfmap.solvers.cartoflow.bilinear`).
+* Time steps are predictor--corrector (Heun) pairs: a step is accepted when :math:`\max|x' - x^*|` is at most
+  ``rtol`` grid spacings (for the grid, also when no triangle turned over), the next step scaled by the error.
+  Integration stops when the remaining displacement, estimated as :math:`\max|v| / \pi^2` (the slowest mode decays
+  at rate :math:`\pi^2`), is below ``tol_end`` grid spacings, or at ``t_max``.
+
+PyTorch is never imported here (nor ``scipy.fft``): the classical cartogram methods run without either.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from .cartoflow import GridFlow, _bilinear_planes, _dct1, _dst1, _project, min_triangle_area
+
+__all__ = ["CartoDiffusionOptions", "diffusion_square"]
+
+
+@dataclass(frozen=True)
+class CartoDiffusionOptions:
+    """Options of :func:`diffusion_square`.
+
+    Attributes
+    ----------
+    rtol : float
+        Step tolerance: the largest predictor--corrector difference, in grid spacings.
+    tol_end : float
+        Stop when the estimated remaining displacement is below this many grid spacings.
+    t_max : float
+        Simulated time (box units) at which to stop regardless; the slowest mode has then decayed by
+        :math:`e^{-\pi^2 t_{max}}`.
+    max_steps : int
+        Most (accepted + rejected) steps; ``RuntimeError`` beyond.
+    blur : float
+        Start at :math:`t_0 = (\mathrm{blur}\,h)^2 / 2`, when diffusion has blurred the density over ``blur`` vertex
+        spacings (as cartogram programs blur sharp edges); 0 (default) starts at 0.
+    """
+
+    rtol: float = 0.1
+    tol_end: float = 1e-2
+    t_max: float = 2.0
+    max_steps: int = 10_000
+    blur: float = 0.0
+
+
+class _Heat:
+    r""":math:`\rho(\cdot, t)` and its gradient on the vertex grid, from the cosine coefficients of :math:`\rho_0`."""
+
+    def __init__(self, dens: np.ndarray):
+        m = dens.shape[0]
+        self.n = m
+        self.coef = _dct1(_dct1(dens, 0), 1) / (2.0 * (m - 1)) ** 2  # synthesis: the same transforms
+        self.k = math.pi * np.arange(m)
+        self.rate = self.k ** 2  # per axis: exp(-(k_x^2 + k_y^2) t) = exp(-k_x^2 t) exp(-k_y^2 t)
+        self.evaluations = 0
+
+    def planes(self, t: float) -> np.ndarray:
+        """(3, N*N): :math:`\\partial_x\\rho`, :math:`\\partial_y\\rho`, :math:`\\rho` at time ``t``."""
+        decay = np.exp(-self.rate * t)
+        b = self.coef * decay[:, None] * decay[None, :]
+        m, k = self.n, self.k
+        out = np.zeros((3, m, m))
+        along_y = _dct1(b, 1)  # cosine synthesis along y: shared by rho and its x derivative
+        out[2] = _dct1(along_y, 0)
+        out[0, 1:-1] = -_dst1(along_y[1:-1] * k[1:-1, None], 0)
+        out[1, :, 1:-1] = -_dst1(_dct1(b, 0)[:, 1:-1] * k[None, 1:-1], 1)
+        return out.reshape(3, -1)
+
+    def velocity(self, t: float, pts: np.ndarray) -> np.ndarray:
+        r""":math:`-\nabla\rho/\rho` at points (P, 2)."""
+        self.evaluations += 1
+        f = _bilinear_planes(self.planes(t), self.n, pts)
+        return -f[:, :2] / f[:, 2:]
+
+
+def _integrate(heat: _Heat, y: np.ndarray, t: float, opts: CartoDiffusionOptions, grid: bool) -> tuple:
+    """Heun steps from ``t`` until the remaining displacement is below ``tol_end`` spacings (or ``t_max``)."""
+    n = heat.n
+    h = 1.0 / (n - 1)
+    project = (lambda p: _project(p, n)) if grid else (lambda p: np.clip(p, 0.0, 1.0, out=p))
+    dt = 0.1 * h * h
+    accepted = rejected = folds = 0
+    k1 = heat.velocity(t, y)
+    while t < opts.t_max:
+        if math.sqrt(float(np.einsum("ij,ij->i", k1, k1).max())) / math.pi ** 2 <= opts.tol_end * h:
+            break
+        if accepted + rejected >= opts.max_steps:
+            raise RuntimeError(f"diffusion map did not settle in {opts.max_steps} steps (t={t:.4g})")
+        dt = min(dt, opts.t_max - t)
+        y_pred = project(y + dt * k1)
+        k2 = heat.velocity(t + dt, y_pred)
+        y_new = project(y + (0.5 * dt) * (k1 + k2))
+        diff = y_new - y_pred
+        err = math.sqrt(float(np.einsum("ij,ij->i", diff, diff).max())) / (opts.rtol * h)
+        folded = grid and err <= 1.0 and min_triangle_area(y_new.reshape(n, n, 2)) <= 0.0
+        if err <= 1.0 and not folded:
+            t, y, accepted = t + dt, y_new, accepted + 1
+            k1 = heat.velocity(t, y)
+            dt *= min(2.0, max(0.3, 0.9 / math.sqrt(max(err, 1e-12))))
+        else:
+            rejected, folds = rejected + 1, folds + int(folded)
+            dt *= 0.5 if folded else max(0.3, 0.9 / math.sqrt(err))
+    return y, {"steps": accepted, "rejected": rejected, "fold_rejections": folds, "t_end": t}
+
+
+def diffusion_square(density: np.ndarray, options: CartoDiffusionOptions | None = None, *,
+                     points: np.ndarray | None = None) -> GridFlow:
+    r"""One diffusion map of the unit square with fixed walls (see the module docstring).
+
+    Parameters
+    ----------
+    density : ndarray, shape (N, N)
+        Strictly positive vertex densities, ``density[i, j]`` at :math:`(i, j)/(N-1)`.
+    options : CartoDiffusionOptions, optional
+    points : ndarray, shape (P, 2), optional
+        Points of the unit square to carry (a cartogram's distinct polygon vertices).  Default: the ``N``-grid's
+        vertices, every step checked for turned-over triangles.
+
+    Returns
+    -------
+    GridFlow
+        The points (or the grid's vertices) and their images; ``info`` has ``method="diffusion"``, ``steps``,
+        ``rejected``, ``fold_rejections``, ``evaluations``, ``t_end`` and ``grid``.
+
+    Raises
+    ------
+    ValueError
+        For a density that is not a square 2D array of positive finite numbers, or points not of shape (P, 2).
+    RuntimeError
+        When the steps run out.
+    """
+    t0 = time.perf_counter()
+    opts = options or CartoDiffusionOptions()
+    dens = np.asarray(density, dtype=np.float64)
+    if dens.ndim != 2 or dens.shape[0] != dens.shape[1] or dens.shape[0] < 3:
+        raise ValueError(f"density must have shape (N, N) with N >= 3, got {dens.shape}")
+    if not (np.isfinite(dens).all() and dens.min() > 0):
+        raise ValueError("density must be finite and strictly positive")
+    n = dens.shape[0]
+    grid = points is None
+    if grid:
+        s = np.linspace(0.0, 1.0, n)
+        ref = np.stack(np.meshgrid(s, s, indexing="ij"), axis=-1).reshape(-1, 2)
+    else:
+        ref = np.asarray(points, dtype=np.float64)
+        if ref.ndim != 2 or ref.shape[1] != 2 or not np.isfinite(ref).all():
+            raise ValueError(f"points must be finite with shape (P, 2), got shape {ref.shape}")
+    heat = _Heat(dens)
+    start = 0.5 * (opts.blur / (n - 1)) ** 2
+    mapped, info = _integrate(heat, np.clip(ref, 0.0, 1.0), start, opts, grid)
+    info.update(method="diffusion", passes=1, n=n, grid=grid, evaluations=heat.evaluations)
+    return GridFlow(ref_points=ref, mapped_points=mapped, time=time.perf_counter() - t0, info=info)
