@@ -26,14 +26,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cartoflow import GridFlow, _bilinear_planes, _dct1, _dst1, _project, min_triangle_area
+from .cartoflow import GridFlow, _bilinear_planes, _dct1, _dst1, _project, heun_step, square_inputs
 
 __all__ = ["CartoDiffusionOptions", "diffusion_square"]
 
 
 @dataclass(frozen=True)
 class CartoDiffusionOptions:
-    """Options of :func:`diffusion_square`.
+    r"""Options of :func:`diffusion_square`.
 
     Attributes
     ----------
@@ -102,12 +102,7 @@ def _integrate(heat: _Heat, y: np.ndarray, t: float, opts: CartoDiffusionOptions
         if accepted + rejected >= opts.max_steps:
             raise RuntimeError(f"diffusion map did not settle in {opts.max_steps} steps (t={t:.4g})")
         dt = min(dt, opts.t_max - t)
-        y_pred = project(y + dt * k1)
-        k2 = heat.velocity(t + dt, y_pred)
-        y_new = project(y + (0.5 * dt) * (k1 + k2))
-        diff = y_new - y_pred
-        err = math.sqrt(float(np.einsum("ij,ij->i", diff, diff).max())) / (opts.rtol * h)
-        folded = grid and err <= 1.0 and min_triangle_area(y_new.reshape(n, n, 2)) <= 0.0
+        y_new, err, folded = heun_step(heat.velocity, t, dt, y, k1, project, opts.rtol * h, n if grid else None)
         if err <= 1.0 and not folded:
             t, y, accepted = t + dt, y_new, accepted + 1
             k1 = heat.velocity(t, y)
@@ -146,20 +141,8 @@ def diffusion_square(density: np.ndarray, options: CartoDiffusionOptions | None 
     """
     t0 = time.perf_counter()
     opts = options or CartoDiffusionOptions()
-    dens = np.asarray(density, dtype=np.float64)
-    if dens.ndim != 2 or dens.shape[0] != dens.shape[1] or dens.shape[0] < 3:
-        raise ValueError(f"density must have shape (N, N) with N >= 3, got {dens.shape}")
-    if not (np.isfinite(dens).all() and dens.min() > 0):
-        raise ValueError("density must be finite and strictly positive")
+    dens, ref, grid = square_inputs(density, points)
     n = dens.shape[0]
-    grid = points is None
-    if grid:
-        s = np.linspace(0.0, 1.0, n)
-        ref = np.stack(np.meshgrid(s, s, indexing="ij"), axis=-1).reshape(-1, 2)
-    else:
-        ref = np.asarray(points, dtype=np.float64)
-        if ref.ndim != 2 or ref.shape[1] != 2 or not np.isfinite(ref).all():
-            raise ValueError(f"points must be finite with shape (P, 2), got shape {ref.shape}")
     heat = _Heat(dens)
     start = 0.5 * (opts.blur / (n - 1)) ** 2
     mapped, info = _integrate(heat, np.clip(ref, 0.0, 1.0), start, opts, grid)

@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "poisson_flux_2d", "bilinear", "min_triangle_area",
-           "STALL_DT"]
+           "square_inputs", "heun_step", "STALL_DT"]
 
 #: a pass stalls when the step falls below this (in units of the unit time interval)
 STALL_DT = 1e-9
@@ -227,6 +227,38 @@ def _project(p: np.ndarray, n: int) -> np.ndarray:
     return p
 
 
+def square_inputs(density, points) -> tuple[np.ndarray, np.ndarray, bool]:
+    """The checked inputs of a map of the unit square: the density (N, N) in double precision, the points to carry
+    (P, 2) (the ``N``-grid's vertices, ``i*N + j`` at :math:`(i, j)/(N-1)`, when ``points`` is None) and whether
+    they are the grid's; ``ValueError`` for a density that is not square, finite and positive, or points not (P, 2)."""
+    dens = np.asarray(density, dtype=np.float64)
+    if dens.ndim != 2 or dens.shape[0] != dens.shape[1] or dens.shape[0] < 3:
+        raise ValueError(f"density must have shape (N, N) with N >= 3, got {dens.shape}")
+    if not (np.isfinite(dens).all() and dens.min() > 0):
+        raise ValueError("density must be finite and strictly positive")
+    if points is None:
+        s = np.linspace(0.0, 1.0, dens.shape[0])
+        return dens, np.stack(np.meshgrid(s, s, indexing="ij"), axis=-1).reshape(-1, 2), True
+    ref = np.asarray(points, dtype=np.float64)
+    if ref.ndim != 2 or ref.shape[1] != 2 or not np.isfinite(ref).all():
+        raise ValueError(f"points must be finite with shape (P, 2), got shape {ref.shape}")
+    return dens, ref, False
+
+
+def heun_step(vel, t: float, dt: float, y: np.ndarray, k1: np.ndarray, project, tol: float,
+              grid_n: int | None) -> tuple[np.ndarray, float, bool]:
+    r"""One predictor--corrector (Heun) step of :math:`\dot y = v(t, y)` from ``y`` with ``k1 = v(t, y)``: the new
+    points, the error (largest predictor--corrector difference over ``tol``; the step is accepted when it is at
+    most 1) and, on the ``grid_n``-grid, whether a triangle turned over."""
+    y_pred = project(y + dt * k1)
+    k2 = vel(t + dt, y_pred)
+    y_new = project(y + (0.5 * dt) * (k1 + k2))
+    diff = y_new - y_pred
+    err = math.sqrt(float(np.einsum("ij,ij->i", diff, diff).max())) / tol
+    folded = grid_n is not None and err <= 1.0 and min_triangle_area(y_new.reshape(grid_n, grid_n, 2)) <= 0.0
+    return y_new, err, folded
+
+
 def _integrate(vel: _Velocity, y: np.ndarray, n: int, opts: CartoFlowOptions, grid: bool) -> tuple[np.ndarray, dict]:
     """Heun steps of the flow from t = 0 to 1 (module docstring) of the points ``y`` (P, 2), or with ``grid`` of the
     ``N``-grid's vertices (walls kept, every step checked for turned-over triangles); ``_Stalled`` when the step
@@ -242,12 +274,7 @@ def _integrate(vel: _Velocity, y: np.ndarray, n: int, opts: CartoFlowOptions, gr
         dt = min(dt, 1.0 - t)
         if dt < STALL_DT:
             raise _Stalled(f"flow step fell below {STALL_DT:g} at t = {t:.4g} (a collapsing triangle)")
-        y_pred = project(y + dt * k1)
-        k2 = vel(t + dt, y_pred)
-        y_new = project(y + (0.5 * dt) * (k1 + k2))
-        diff = y_new - y_pred
-        err = math.sqrt(float(np.einsum("ij,ij->i", diff, diff).max())) / (opts.rtol * h)
-        folded = grid and err <= 1.0 and min_triangle_area(y_new.reshape(n, n, 2)) <= 0.0
+        y_new, err, folded = heun_step(vel, t, dt, y, k1, project, opts.rtol * h, n if grid else None)
         if err <= 1.0 and not folded:
             t = 1.0 if 1.0 - (t + dt) < 1e-12 else t + dt
             y = y_new
@@ -291,20 +318,8 @@ def flow_square(density: np.ndarray, options: CartoFlowOptions | None = None, *,
     """
     t0 = time.perf_counter()
     opts = options or CartoFlowOptions()
-    dens = np.asarray(density, dtype=np.float64)
-    if dens.ndim != 2 or dens.shape[0] != dens.shape[1] or dens.shape[0] < 3:
-        raise ValueError(f"density must have shape (N, N) with N >= 3, got {dens.shape}")
-    if not (np.isfinite(dens).all() and dens.min() > 0):
-        raise ValueError("density must be finite and strictly positive")
+    dens, ref, grid = square_inputs(density, points)
     n = dens.shape[0]
-    grid = points is None
-    if grid:
-        t = np.linspace(0.0, 1.0, n)
-        ref = np.stack(np.meshgrid(t, t, indexing="ij"), axis=-1).reshape(-1, 2)
-    else:
-        ref = np.asarray(points, dtype=np.float64)
-        if ref.ndim != 2 or ref.shape[1] != 2 or not np.isfinite(ref).all():
-            raise ValueError(f"points must be finite with shape (P, 2), got shape {ref.shape}")
     blurs, width, evaluations = [], opts.blur, 0
     while True:
         vel = _Velocity(dens, width)
