@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cartoflow import GridFlow, _bilinear_planes, _dct1, _dst1, _project, heun_step, square_inputs
+from .cartoflow import GridFlow, _bilinear_planes, _dct1, _dst1, _project, heun_step, square_inputs, step_factor
 
 __all__ = ["CartoDiffusionOptions", "diffusion_square"]
 
@@ -106,10 +106,9 @@ def _integrate(heat: _Heat, y: np.ndarray, t: float, opts: CartoDiffusionOptions
         if err <= 1.0 and not folded:
             t, y, accepted = t + dt, y_new, accepted + 1
             k1 = heat.velocity(t, y)
-            dt *= min(2.0, max(0.3, 0.9 / math.sqrt(max(err, 1e-12))))
         else:
             rejected, folds = rejected + 1, folds + int(folded)
-            dt *= 0.5 if folded else max(0.3, 0.9 / math.sqrt(err))
+        dt *= step_factor(err, err <= 1.0 and not folded, folded)
     return y, {"steps": accepted, "rejected": rejected, "fold_rejections": folds, "t_end": t}
 
 

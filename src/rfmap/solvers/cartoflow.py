@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 __all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "poisson_flux_2d", "bilinear", "min_triangle_area",
-           "square_inputs", "heun_step", "STALL_DT"]
+           "square_inputs", "heun_step", "step_factor", "STALL_DT"]
 
 #: a pass stalls when the step falls below this (in units of the unit time interval)
 STALL_DT = 1e-9
@@ -259,6 +259,14 @@ def heun_step(vel, t: float, dt: float, y: np.ndarray, k1: np.ndarray, project, 
     return y_new, err, folded
 
 
+def step_factor(err: float, accepted: bool, folded: bool) -> float:
+    """The factor of the next step after a :func:`heun_step` of error ``err``: at most twice as long after an
+    accepted step, shorter after a rejected one (half after a fold)."""
+    if accepted:
+        return min(2.0, max(0.3, 0.9 / math.sqrt(max(err, 1e-12))))
+    return 0.5 if folded else max(0.3, 0.9 / math.sqrt(err))
+
+
 def _integrate(vel: _Velocity, y: np.ndarray, n: int, opts: CartoFlowOptions, grid: bool) -> tuple[np.ndarray, dict]:
     """Heun steps of the flow from t = 0 to 1 (module docstring) of the points ``y`` (P, 2), or with ``grid`` of the
     ``N``-grid's vertices (walls kept, every step checked for turned-over triangles); ``_Stalled`` when the step
@@ -281,11 +289,10 @@ def _integrate(vel: _Velocity, y: np.ndarray, n: int, opts: CartoFlowOptions, gr
             accepted += 1
             if t < 1.0:
                 k1 = vel(t, y)
-            dt *= min(2.0, max(0.3, 0.9 / math.sqrt(max(err, 1e-12))))
         else:
             rejected += 1
             folds += int(folded)
-            dt *= 0.5 if folded else max(0.3, 0.9 / math.sqrt(err))
+        dt *= step_factor(err, err <= 1.0 and not folded, folded)
     return y, {"steps": accepted, "rejected": rejected, "fold_rejections": folds}
 
 
