@@ -83,6 +83,35 @@ def test_numpy_poisson_flux_matches_the_solvers_transform():
     assert np.all(ours[0, [0, -1]] == 0) and np.all(ours[1, :, [0, -1]] == 0)  # no flux through the walls
 
 
+
+def test_cosine_transforms_match_their_sums_along_both_axes():
+    """DCT-I and DST-I of :class:`rfmap.solvers.cosine.CosineTransforms` against their defining sums (to 1e-12 of
+    the largest term), along each axis, twice in a row (the buffers are reused), and shapes refused."""
+    from rfmap.solvers.cosine import CosineTransforms
+
+    m = 9
+    j = np.arange(m)
+    c = 2.0 * np.cos(np.pi * np.outer(j, j) / (m - 1))
+    c[:, 0] /= 2
+    c[:, -1] /= 2  # y_k = x_0 + (-1)^k x_{M-1} + 2 sum_j x_j cos(pi j k / (M-1)): C[k, j]
+    i = np.arange(m - 2)
+    s = 2.0 * np.sin(np.pi * np.outer(i + 1, i + 1) / (m - 1))  # K = M - 2, K + 1 = M - 1
+    rng = np.random.default_rng(5)
+    ct = CosineTransforms(m)
+    for _ in range(2):
+        x, z = rng.normal(size=(m, m)), rng.normal(size=(m, m - 2))
+        tol = 1e-12 * 2 * m * max(np.abs(x).max(), np.abs(z).max())
+        assert np.abs(ct.dct(x, 1) - x @ c.T).max() < tol
+        assert np.abs(ct.dct(x, 0) - c @ x).max() < tol
+        assert np.abs(ct.dst(z, 1) - z @ s.T).max() < tol
+        assert np.abs(ct.dst(z.T, 0) - s @ z.T).max() < tol
+    with pytest.raises(ValueError, match="shape"):
+        ct.dst(x, 1)
+    with pytest.raises(ValueError, match="shape"):
+        ct.dct(np.ones((m, m + 1)), 0)
+    with pytest.raises(ValueError, match="at least 3"):
+        CosineTransforms(2)
+
 def test_bilinear_is_exact_on_bilinear_fields():
     n = 9
     t = np.linspace(0, 1, n)

@@ -141,6 +141,30 @@ def test_metrics_find_overlaps_and_invalid_polygons():
     assert m.topology_ok and m.max_error == pytest.approx(1 / 3) and m.mean_error == pytest.approx(1 / 3)
 
 
+
+def test_overlaps_checks_only_pairs_with_an_unmatched_edge_and_finds_every_kind():
+    """``overlaps`` against the intersection areas of every pair: a coverage whose borders match (no pair), an
+    overlap across a border that matches elsewhere, a region inside another, a duplicate; invalid regions skipped."""
+    from rfmap.cartogram_metrics import overlaps
+
+    tiles = [shapely.box(i, j, i + 1, j + 1) for i in range(3) for j in range(3)]
+    left, right, inter = overlaps(np.array(tiles))
+    assert left.size == 0  # neighbours touch along matched edges only
+    bump = shapely.Polygon([(1, 0), (2, 0), (2, 1), (1, 1), (0.9, 0.5)])  # a sliver into tile 0 (the box (0,0,1,1))
+    inside = shapely.box(4.2, 0.2, 4.4, 0.4)  # within tile 8 moved to (4, 0)
+    bowtie = shapely.Polygon([(0, 0), (3, 3), (3, 0), (0, 3)])  # invalid: overlaps all, counted by n_invalid
+    geoms = np.array([tiles[0], bump, shapely.box(4, 0, 5, 1), inside, tiles[0], bowtie], dtype=object)
+    left, right, inter = overlaps(geoms)
+    found = {(int(i), int(j)): a for i, j, a in zip(left, right, inter)}
+    want = {}
+    for i in range(5):
+        for j in range(i + 1, 5):
+            a = shapely.intersection(geoms[i], geoms[j]).area
+            if a > 0:
+                want[(i, j)] = a
+    assert set(found) == set(want) == {(0, 1), (2, 3), (0, 4), (1, 4)}
+    assert all(found[k] == pytest.approx(want[k], rel=1e-12) for k in want)
+
 # ----------------------------------------------------------------------------------------------- equal-area plane
 def lonlat_box(lon0, lat0, lon1, lat1):
     """A longitude/latitude rectangle with a vertex every 0.1 degree (so that its edges mean the same as straight

@@ -503,3 +503,23 @@ def test_map_of_query_points_warns_in_one_line_when_shortened(tmp_path, capsys, 
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and "shortened to 0 of itself" in lines[0]
     assert "--polish (the flow-based finish, on a grid only)" in lines[0]
+
+
+def test_a_named_subcommand_builds_only_its_parser_and_parses_alike(capsys):
+    """``rfmap cartogram ...`` builds the cartogram parser alone (the others cost more than a small cartogram), with
+    the same result as the whole parser; ``rfmap --help`` and an unknown command still see every sub-command."""
+    from rfmap.cli import COMMANDS, build_parser
+
+    argv = ["cartogram", "map.geojson", "--value", "pop", "--n", "128", "--method", "dem", "--projected"]
+    alone, whole = build_parser("cartogram").parse_args(argv), build_parser().parse_args(argv)
+    assert vars(alone) == vars(whole) and alone.method == "diffusion" and alone.n == 128
+    sub = next(a for a in build_parser("cartogram")._actions if a.dest == "cmd")
+    assert set(sub.choices) == {"cartogram"}
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0
+    listed = capsys.readouterr().out
+    assert all(name in listed for name in COMMANDS)
+    with pytest.raises(SystemExit) as e:
+        main(["no-such-command"])
+    assert e.value.code == 2 and "invalid choice" in capsys.readouterr().err

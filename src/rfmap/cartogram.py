@@ -76,7 +76,6 @@ __all__ = [
     "cartogram_metrics",
     "available_methods",
     "compare_cartograms",
-    "cartogram_table",
     "montreal_election",
     "world_countries",
     "MONTREAL_CANDIDATES",
@@ -174,8 +173,12 @@ class Cartogram:
 
     Attributes
     ----------
+    input_features : list of dict
+        The input's features, as read.
+    geometries : ndarray of shapely geometries, shape (R,)
+        The mapped regions in the ``output`` coordinates (the input's, or the projection's plane).
     features : list of dict
-        The mapped features, in the input's coordinates (or the projection's plane: ``output``), with the input's
+        The mapped features (a property, built on first use): ``geometries`` as GeoJSON with the input's
         properties and ids.
     regions, mapped : ndarray of shapely geometries, shape (R,)
         The regions before and after mapping, in the unit-square frame.
@@ -200,7 +203,8 @@ class Cartogram:
         The tolerance on the largest relative area error that :meth:`problems` checks.
     """
 
-    features: list
+    input_features: list
+    geometries: np.ndarray
     regions: np.ndarray
     mapped: np.ndarray
     values: np.ndarray
@@ -215,7 +219,14 @@ class Cartogram:
     tol: float = 0.01
     min_share: float = 0.0
     _metrics: dict = field(default_factory=dict, init=False, repr=False, compare=False)
-    _out: np.ndarray | None = field(default=None, init=False, repr=False, compare=False)
+    _features: list | None = field(default=None, init=False, repr=False, compare=False)
+
+    @property
+    def features(self) -> list:
+        """The mapped features (see the class docstring)."""
+        if self._features is None:
+            self._features = _mapped_features(self.input_features, self.geometries)
+        return self._features
 
     @property
     def areas(self) -> np.ndarray:
@@ -254,7 +265,7 @@ class Cartogram:
                        (": the passes stopped at the time limit" if self.info.get("timed_out") else ""))
         if m.n_invalid:
             bad = np.flatnonzero(~_shapely().is_valid(self.frame.equal_area(self.mapped)))
-            names = ", ".join(_feature_name(self.features[i], int(i)) for i in bad[:10])
+            names = ", ".join(_feature_name(self.input_features[i], int(i)) for i in bad[:10])
             out.append(f"{m.n_invalid} invalid region(s): {names}{', ...' if bad.size > 10 else ''}")
         if m.n_overlapping:
             out.append(f"{m.n_overlapping} pair(s) of regions overlap (the largest by {m.max_overlap:.2g} of the "
@@ -262,7 +273,7 @@ class Cartogram:
         if self.output == "input":
             far = np.flatnonzero(self.frame.beyond_domain(self.mapped))
             if far.size:
-                names = ", ".join(_feature_name(self.features[i], int(i)) for i in far[:10])
+                names = ", ".join(_feature_name(self.input_features[i], int(i)) for i in far[:10])
                 out.append(f"{far.size} region(s) moved beyond the projection's domain, where no longitude/latitude "
                            f"lies (past a pole or the map's edge): {names}{', ...' if far.size > 10 else ''}; in the "
                            f"input's coordinates they are drawn at its edge (the projected output keeps them)")
@@ -274,18 +285,20 @@ class Cartogram:
         (over the judged regions; ``minor``: the share, count and largest error of the others), the ``repaired``
         regions, the passes, the method, ``N``, the ``coordinates`` (:data:`OUTPUTS`) and the PROJ definition of
         the ``projection``'s plane (``None`` for planar input)."""
-        problems = self.problems()
+        return {"type": "FeatureCollection", "features": self.features, "rfmap": self._status()}
+
+    def _status(self) -> dict:
+        """The ``"rfmap"`` member of :meth:`to_geojson`."""
+        problems, name = self.problems(), lambda i: _feature_name(self.input_features[i], i)
         m = self.metrics()
-        status = {"status": "failed" if problems else "ok", "problems": problems,
-                  "max_error": m.max_error, "minor": {"share": self.min_share, "count": m.n_minor,
-                                                      "max_error": m.max_error_minor},
-                  "repaired": [_feature_name(self.features[i], i) for i in self.info.get("repaired", [])],
-                  "overlaps_cut": [[_feature_name(self.features[i], i), _feature_name(self.features[j], j)]
-                                   for i, j in self.info.get("overlaps_cut", [])],
-                  "passes": self.info.get("iterations"),
-                  "method": self.method, "n": self.n, "coordinates": self.output,
-                  "projection": self.frame.projection.definition}
-        return {"type": "FeatureCollection", "features": self.features, "rfmap": status}
+        return {"status": "failed" if problems else "ok", "problems": problems,
+                "max_error": m.max_error, "minor": {"share": self.min_share, "count": m.n_minor,
+                                                    "max_error": m.max_error_minor},
+                "repaired": [name(i) for i in self.info.get("repaired", [])],
+                "overlaps_cut": [[name(i), name(j)] for i, j in self.info.get("overlaps_cut", [])],
+                "passes": self.info.get("iterations"),
+                "method": self.method, "n": self.n, "coordinates": self.output,
+                "projection": self.frame.projection.definition}
 
     def save(self, path) -> None:
         """Write the mapped FeatureCollection as GeoJSON, atomically (:func:`rfmap.cartogram_data.atomic_write`)."""
@@ -294,17 +307,14 @@ class Cartogram:
         atomic_write(path, self._write)
 
     def _write(self, fh) -> None:
-        """:meth:`to_geojson` as JSON text; the geometries written by GEOS (``shapely.to_geojson``: the same
-        shortest round-trip numbers, several times faster than ``json``) when the output geometries are at hand."""
-        doc = self.to_geojson()
-        if self._out is None or len(self._out) != len(self.features):
-            json.dump(doc, fh)
-            return
+        """:meth:`to_geojson` as JSON text, the geometries written by GEOS (``shapely.to_geojson``: the same
+        shortest round-trip numbers, several times faster than ``json``)."""
         fh.write('{"type": "FeatureCollection", "features": [')
-        for k, (feat, geom) in enumerate(zip(self.features, _shapely().to_geojson(self._out))):
-            head = json.dumps({key: v for key, v in feat.items() if key != "geometry"})
-            fh.write(("" if k == 0 else ", ") + head[:-1] + ', "geometry": ' + geom + "}")
-        fh.write('], "rfmap": ' + json.dumps(doc["rfmap"]) + "}")
+        for k, (feat, geom) in enumerate(zip(self.input_features, _shapely().to_geojson(self.geometries))):
+            head = {key: v for key, v in feat.items() if key not in ("geometry", "bbox")}
+            head.update(type="Feature", properties=dict(feat.get("properties") or {}))
+            fh.write(("" if k == 0 else ", ") + json.dumps(head)[:-1] + ', "geometry": ' + geom + "}")
+        fh.write('], "rfmap": ' + json.dumps(self._status()) + "}")
 
     def input_geometries(self) -> np.ndarray:
         """The input regions in the input's coordinates."""
@@ -460,11 +470,9 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
     elapsed = time.perf_counter() - t0
     out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
-    carto = Cartogram(features=_mapped_features(features, out), regions=regions, mapped=mapped, values=values,
-                      floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time, info=info,
-                      output=output, tol=float(tol), min_share=float(min_share))
-    carto._out = out  # the features' geometries as shapely objects, for a fast save
-    return carto
+    return Cartogram(input_features=features, geometries=out, regions=regions, mapped=mapped, values=values,
+                     floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time, info=info,
+                     output=output, tol=float(tol), min_share=float(min_share))
 
 
 def _square_surrogate(surrogate, model: str | None):
@@ -584,17 +592,4 @@ def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogat
             surrogate.map(np.ones((surrogate.n_range[0],) * 2), preprocess=False)
     return {(v, label): cartogram(collection, v, n=n, surrogate=surrogate, **kw)
             for v in values for label, kw in runs.items()}
-
-
-def cartogram_table(cartos: dict) -> str:
-    """A Markdown table of :func:`compare_cartograms`' results: area errors, topology, passes and seconds."""
-    lines = ["| value | method | N | passes | mean error | max error | topology | time (s) | map time (s) |",
-             "|---|---|---:|---:|---:|---:|---|---:|---:|"]
-    for (v, label), c in cartos.items():
-        m = c.metrics()
-        topo = "valid" if m.topology_ok else f"{m.n_invalid} invalid, {m.n_overlapping} overlaps"
-        lines.append(f"| {v} | {label} | {c.n} | {c.info['iterations']} | {m.mean_error:.4f} | {m.max_error:.4f} | "
-                     f"{topo} | {c.time:.2f} | {c.map_time:.2f} |")
-    return "\n".join(lines)
-
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from .regions import _shapely
 
-__all__ = ["CartogramMetrics", "cartogram_metrics", "judged", "repair_folds", "repair_overlaps", "boost", "MIN_SHARE",
+__all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps", "judged", "repair_folds", "repair_overlaps", "boost", "MIN_SHARE",
            "REPAIR_AREA", "REPAIR_OVERLAP", "BOOST_GAIN", "BOOST_CAP"]
 
 #: The share of the total value from which a region's area error is judged (stopping rule, :meth:`Cartogram.metrics`,
@@ -95,21 +95,30 @@ def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: fl
         return CartogramMetrics(float(err.mean()), float(err.max()), 0, 0.0, 0, overlap_tol, **minor)
     valid = shapely.is_valid(mapped)
     total = float(a.sum())
-    tree = shapely.STRtree(mapped)
-    left, right = tree.query(mapped, predicate="intersects")
-    keep = left < right
-    left, right = left[keep], right[keep]
-    ok = valid[left] & valid[right]
-    g = np.asarray(mapped)
-    inter = np.zeros(left.size)
-    inter[ok] = shapely.area(shapely.intersection(g[left[ok]], g[right[ok]]))
-    inter[~ok] = np.inf  # an invalid polygon's overlaps are not measurable; it is already counted as invalid
-    rel = inter / total
-    over = rel > overlap_tol
-    measured = rel[np.isfinite(rel)]
+    rel = overlaps(mapped, valid)[2] / total  # an invalid polygon's overlaps are not measured: it counts as invalid
     return CartogramMetrics(mean_error=float(err.mean()), max_error=float(err.max()),
-                            n_invalid=int((~valid).sum()), max_overlap=float(measured.max()) if measured.size else 0.0,
-                            n_overlapping=int((over & ok).sum()), overlap_tol=overlap_tol, **minor)
+                            n_invalid=int((~valid).sum()), max_overlap=float(rel.max(initial=0.0)),
+                            n_overlapping=int((rel > overlap_tol).sum()), overlap_tol=overlap_tol, **minor)
+
+
+def overlaps(mapped: np.ndarray, valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The pairs ``i < j`` of valid regions whose interiors overlap, and the areas of their intersections (shapes
+    (K,)).  Regions whose every edge is matched by a neighbour's or meets none (``shapely.coverage_invalid_edges``:
+    a border drawn with the same vertices on both sides, as the cartogram's passes keep it) cannot overlap another
+    such region, so intersections are computed only for the pairs that hold a region with an unmatched edge."""
+    shapely = _shapely()
+    valid = shapely.is_valid(mapped) if valid is None else valid
+    idx = np.flatnonzero(valid)
+    flagged = np.zeros(len(mapped), dtype=bool)
+    if idx.size:
+        flagged[idx] = ~shapely.is_empty(shapely.coverage_invalid_edges(mapped[idx]))
+    left, right = shapely.STRtree(mapped[idx]).query(mapped[idx], predicate="intersects")
+    left, right = idx[left], idx[right]
+    keep = (left < right) & (flagged[left] | flagged[right])
+    left, right = left[keep], right[keep]
+    inter = shapely.area(shapely.intersection(mapped[left], mapped[right])) if left.size else np.zeros(0)
+    pos = inter > 0
+    return left[pos], right[pos], inter[pos]
 
 
 def judged(values: np.ndarray, min_share: float) -> np.ndarray:
@@ -156,15 +165,12 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *,
         The polygons and the pairs ``(cut, kept)`` whose overlap was cut from the first.
     """
     shapely = _shapely()
-    valid = shapely.is_valid(mapped)
-    left, right = shapely.STRtree(mapped).query(mapped, predicate="overlaps")
-    keep = (left < right) & valid[left] & valid[right]
-    left, right = left[keep], right[keep]
+    left, right, inter = overlaps(mapped)
     if not left.size:
         return mapped, []
     area = shapely.area(mapped)
     total = float(area.sum())
-    share = shapely.area(shapely.intersection(mapped[left], mapped[right])) / total
+    share = inter / total
     excess = np.log(np.maximum(area, 1e-300) / (values / values.sum() * total))
     out, cut = mapped.copy(), []
     for k in np.flatnonzero((share > 1e-3 * REPAIR_AREA) & (share <= max_change)):

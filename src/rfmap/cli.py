@@ -15,11 +15,9 @@ import sys
 
 import numpy as np
 
-__all__ = ["main"]
+from .cli_base import CLIError, solver_name
 
-
-class CLIError(Exception):
-    """A user-facing error: printed as one line."""
+__all__ = ["main", "CLIError"]
 
 
 def _load_npy(path: str) -> np.ndarray:
@@ -232,148 +230,6 @@ def cmd_validate(args) -> int:
     return 0
 
 
-def _cartogram_outputs(args) -> list[str]:
-    """The files ``rfmap cartogram`` will write, checked before any work: suffixes and existing folders."""
-    if args.make_csv:
-        outs = [args.make_csv]
-    elif args.out is None:
-        raise CLIError("--out is required (or --make-csv to write a CSV template)")
-    else:
-        outs = [args.out]
-    for opt, suffix in (("png", (".png",)), ("svg", (".svg",)), ("gif", (".gif", ".mp4"))):
-        path = getattr(args, opt)
-        if path and not path.lower().endswith(suffix):
-            raise CLIError(f"--{opt} must name a {' or '.join(suffix)} file, got {path!r}")
-        if path and not args.make_csv:
-            outs.append(path)
-    if args.max_passes < 1:
-        raise CLIError(f"--max-passes must be at least 1, got {args.max_passes}")
-    if (args.color or args.label) and not args.data and not (args.png or args.svg):
-        raise CLIError("--color and --label are for the figures: add --png or --svg")
-    for path in outs:
-        folder = os.path.dirname(os.path.abspath(path))
-        if not os.path.isdir(folder):
-            raise CLIError(f"cannot write {path}: no folder {folder}")
-    return outs
-
-
-def _cartogram_input(args):
-    """The regions of ``rfmap cartogram``: the GeoJSON as it is, or with ``--data`` joined to it
-    (:func:`rfmap.cartogram_data.join_values`); the join's two report lines are printed."""
-    if not args.data:
-        if args.id:
-            raise CLIError("--id needs --data (or --make-csv)")
-        return args.input
-    from .cartogram_data import join_values, read_csv_table, read_csv_values
-
-    if not args.id:
-        raise CLIError("--data needs --id COLUMN (the CSV column that holds the regions' ids)")
-    extra_cols = [c for c in (args.color, args.label) if c]
-    table = read_csv_table(args.data, args.id, extra_cols)
-    extra = {c: {rid: row[c] for rid, row in table.items()} for c in extra_cols}
-    collection = args.input
-    for k, col in enumerate(args.series or [args.value]):
-        join = join_values(collection, read_csv_values(args.data, args.id, col), key=args.id_property or args.id,
-                           value=col, missing=args.missing, extra=extra, projection=args.projection)
-        collection = join.collection
-        if k == 0:
-            for line in join.report():
-                print(line)
-    return collection
-
-
-def cmd_cartogram(args) -> int:
-    """Exit 0 for a cartogram within tolerance with valid, disjoint regions; 1 for one that is not (written all the
-    same, its ``"rfmap"`` status ``"failed"``: :meth:`rfmap.cartogram.Cartogram.problems`); 2 for bad input."""
-    _cartogram_outputs(args)
-    if args.make_csv:
-        from .cartogram_data import write_csv_template
-
-        key, value = args.id_property or args.id or "id", args.value or "value"
-        n = write_csv_template(args.input, args.make_csv, key=key, value=value)
-        print(f"wrote {args.make_csv}: {n} regions, their {key!r} and an empty {value!r} column")
-        return 0
-    if (args.value is None) == (args.series is None):
-        raise CLIError("give one of --value (a cartogram) and --series (a cartogram per value, animated)")
-    if args.gif and not args.series:
-        raise CLIError("--gif needs --series")
-    from .cartogram import cartogram
-
-    collection = _cartogram_input(args)
-    if args.series:
-        return _cartogram_series(args, collection)
-    try:
-        carto = cartogram(collection, args.value, method=args.method, n=args.n, tol=args.tol, model=args.model,
-                          max_iterations=args.max_passes, projection=args.projection,
-                          output="projected" if args.projected else "input", points=args.points,
-                          timeout=args.timeout)
-    except ImportError as e:  # pyproj (or plotly) missing: a setup problem, told in one line
-        raise CLIError(str(e)) from e
-    carto.save(args.out)
-    _cartogram_figures(args, carto)
-    names = [carto.features[i].get("id", f"#{i}") for i in carto.floored]
-    print(f"wrote {args.out}: {len(carto.features)} regions by {args.value!r}, {carto.method}, N = {carto.n}, "
-          f"{carto.info['iterations']} pass(es), {carto.time:.2f} s; {carto.metrics()}")
-    if names:
-        print(f"zero values floored in {len(names)} region(s): {', '.join(map(str, names))}")
-    cut = carto.info.get("overlaps_cut", [])
-    if cut:
-        label = [carto.features[i].get("id", f"#{i}") for pair in cut for i in pair]
-        print(f"sliver overlaps cut in {len(cut)} pair(s) of neighbours pressed together: "
-              f"{', '.join(f'{a} / {b}' for a, b in zip(label[::2], label[1::2]))}")
-    problems = carto.problems()
-    for p in problems:
-        print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
-    return 1 if problems else 0
-
-
-def _cartogram_series(args, collection) -> int:
-    """``--series``: a cartogram per value, each warm-started from the previous
-    (:func:`rfmap.cartogram_series.cartogram_series`); ``--out`` holds the last, ``--gif`` the animation."""
-    from .cartogram_series import cartogram_series, save_animation
-
-    if args.method not in ("diffusion", "flow"):
-        raise CLIError("--series runs the classical methods (diffusion or flow)")
-    try:
-        series = cartogram_series(collection, args.series, method=args.method, n=args.n, tol=args.tol,
-                                  max_iterations=args.max_passes, projection=args.projection, timeout=args.timeout)
-    except ImportError as e:
-        raise CLIError(str(e)) from e
-    series.frames[-1].carto.save(args.out)
-    if args.gif:
-        import matplotlib
-
-        matplotlib.use("Agg")
-        save_animation(series, args.gif)
-    for f in series.frames:
-        print(f"{f.key}: {f.passes} pass(es), {f.seconds:.2f} s, largest area error {f.max_error:.4f}")
-    print(f"wrote {args.out} (the last frame, in the projection's plane)" + (f" and {args.gif}" if args.gif else ""))
-    problems = series.problems()
-    for p in problems:
-        print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
-    return 1 if problems else 0
-
-
-def _cartogram_figures(args, carto) -> None:
-    """``--png`` / ``--svg``: the map and its cartogram side by side (:func:`rfmap.viz.cartogram_figure`)."""
-    if not (args.png or args.svg):
-        return
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from .viz.cartograms import cartogram_figure
-
-    props = [f.get("properties") or {} for f in carto.features]
-    colors = [p.get(args.color) for p in props] if args.color else None
-    labels = [p.get(args.label) for p in props] if args.label else None
-    for path in (args.png, args.svg):
-        if path:
-            fig = cartogram_figure(carto, colors=colors, labels=labels, title=args.value, path=path)
-            plt.close(fig)
-
-
 def cmd_reproduce(args) -> int:
     from .paper.reproduce import reproduce
 
@@ -406,13 +262,6 @@ def _symmetry_arg(text: str):
     if text not in SYMMETRY_GROUPS:
         raise argparse.ArgumentTypeError(f"GROUP must be one of {', '.join(SYMMETRY_GROUPS)}, got {text!r}")
     return text
-
-
-def _solver_name(text: str) -> str:
-    """A method's name, with another name of a solver (:data:`rfmap.solvers.ALIASES`: ``dem``) spelled as the one."""
-    from .solvers import ALIASES
-
-    return ALIASES.get(text, text)
 
 
 def _add_classical(sub) -> None:
@@ -467,68 +316,15 @@ def _add_map(sub) -> None:
     s.set_defaults(func=cmd_map)
 
 
-def _add_paper_and_cartogram(sub) -> None:
-    """``rfmap cartogram`` and ``rfmap reproduce``."""
-    from .cartogram import CARTOGRAM_METHODS
-    from .projection import PROJECTIONS
+def _add_cartogram(sub) -> None:
+    """``rfmap cartogram`` (:mod:`rfmap.cli_cartogram`)."""
+    from .cli_cartogram import add_cartogram_parser
 
-    s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)",
-                       description="Resize GeoJSON regions by a value. Longitude/latitude are projected to an "
-                                   "equal-area plane first (Lambert azimuthal equal-area centred on the map; Equal "
-                                   "Earth for a map wider than 180 degrees of longitude). Exit status 0: within "
-                                   "tolerance, every region valid and no overlaps; 1: not so (the GeoJSON is written "
-                                   "all the same, its \"rfmap\" member's status \"failed\", and each problem is "
-                                   "printed); 2: bad input (one line, nothing written).")
-    s.add_argument("input", help="GeoJSON FeatureCollection of Polygon / MultiPolygon features")
-    s.add_argument("--value", default=None,
-                   help="the feature property holding each region's value (with --data: the CSV column)")
-    s.add_argument("--series", nargs="+", default=None, metavar="VALUE",
-                   help="instead of --value: a cartogram per value in turn (e.g. one per year), each computed from "
-                        "the previous one in the projection's plane; --out writes the last, --gif the animation")
-    s.add_argument("--gif", default=None, help="with --series: write the frames as an animation (.gif, or .mp4)")
-    d = s.add_argument_group("values from a CSV table")
-    d.add_argument("--data", default=None, metavar="FILE.csv",
-                   help="read the values from this CSV, joined to the regions by --id; the regions without a row "
-                        "and the rows without a region are listed, one line each")
-    d.add_argument("--id", default=None, metavar="COLUMN",
-                   help="the CSV column of the regions' ids, matched to the GeoJSON property of the same name "
-                        "(or the feature's id for 'id')")
-    d.add_argument("--id-property", default=None, metavar="NAME",
-                   help="the GeoJSON property to match --id against, where its name differs")
-    d.add_argument("--missing", choices=["mean", "drop", "error"], default="mean",
-                   help="a region without a row: given the mean density of the others (default, as cartogram "
-                        "programs do), dropped, or an error")
-    d.add_argument("--color", default=None, metavar="COLUMN",
-                   help="colour the figures by this column (colours, or categories); default: neighbours differ")
-    d.add_argument("--label", default=None, metavar="COLUMN", help="label the regions of the figures by this column")
-    d.add_argument("--make-csv", default=None, metavar="OUT.csv",
-                   help="only write a CSV template: one row per region with its --id (default: the feature id) and "
-                        "an empty --value column")
-    s.add_argument("--method", choices=CARTOGRAM_METHODS, type=_solver_name, default="flow",
-                   help="classical flow-based method (default, the fastest), classical diffusion (also 'dem'), "
-                        "neural surrogate, or the surrogate polished by the flow")
-    s.add_argument("--n", type=int, default=256, help="grid side N of the density raster (default 256)")
-    s.add_argument("--tol", type=float, default=0.01,
-                   help="repeat passes until the largest relative area error is at most this (default 0.01)")
-    s.add_argument("--max-passes", type=int, default=30, help="at most this many passes (default 30)")
-    s.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
-                   help="start no further pass after this many seconds; the best pass so far is written, and the "
-                        "command exits 1 unless it is within the tolerance")
-    s.add_argument("--points", type=int, default=None, metavar="COUNT",
-                   help="simplify (shared borders kept) or densify the region outlines to about this many "
-                        "vertices, the detail kept; the flow still splits edges to grid cells")
-    s.add_argument("--projection", choices=PROJECTIONS, default="auto",
-                   help="the plane of the cartogram: auto (default: equal-area for longitude/latitude, none for "
-                        "planar coordinates), equal-area, equirectangular or none")
-    s.add_argument("--projected", action="store_true",
-                   help="write the cartogram in the projection's plane (metres) instead of the input's coordinates")
-    s.add_argument("--model", default=None, help="surrogate for --method surrogate/hybrid (default deq2d-square)")
-    s.add_argument("--out", default=None, help="output GeoJSON (required unless --make-csv)")
-    s.add_argument("--png", default=None,
-                   help="also draw the input and the cartogram side by side, with an area legend (.png)")
-    s.add_argument("--svg", default=None, help="the same figure as SVG (.svg)")
-    s.set_defaults(func=cmd_cartogram)
+    add_cartogram_parser(sub)
 
+
+def _add_reproduce(sub) -> None:
+    """``rfmap reproduce``."""
     s = sub.add_parser("reproduce", help="write the paper's tables (Markdown and CSV)")
     s.add_argument("experiment", choices=["beltrami", "dem2d", "dem3d"])
     s.add_argument("--out", default="reproduction", help="output directory")
@@ -539,14 +335,9 @@ def _add_paper_and_cartogram(sub) -> None:
     s.set_defaults(func=cmd_reproduce)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def _add_training(sub) -> None:
+    """``rfmap train``, ``rfmap models`` and ``rfmap validate``."""
     from .lazy_parser import train_parser
-
-    p = argparse.ArgumentParser(prog="rfmap", description="Resolution-free neural surrogates for geometric mapping.")
-    sub = p.add_subparsers(dest="cmd", required=True)
-
-    _add_classical(sub)
-    _add_map(sub)
 
     s = sub.add_parser("train", help="train a surrogate from a named configuration")
     train_parser(s)
@@ -566,12 +357,27 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--no-progress", action="store_true")
     s.set_defaults(func=cmd_validate)
 
-    _add_paper_and_cartogram(sub)
+
+#: the sub-commands, in the order of ``rfmap --help``, and the function that adds each one's parser (some add two)
+COMMANDS = {"solve": _add_classical, "metrics": _add_classical, "map": _add_map, "train": _add_training,
+            "models": _add_training, "validate": _add_training, "cartogram": _add_cartogram,
+            "reproduce": _add_reproduce}
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The ``rfmap`` parser: with every sub-command, or, for a ``command`` of :data:`COMMANDS`, with only the
+    sub-commands that its function adds (building every parser's arguments costs more than a small cartogram)."""
+    p = argparse.ArgumentParser(prog="rfmap", description="Resolution-free neural surrogates for geometric mapping.")
+    sub = p.add_subparsers(dest="cmd", required=True)
+    adders = [COMMANDS[command]] if command in COMMANDS else dict.fromkeys(COMMANDS.values())
+    for add in adders:
+        add(sub)
     return p
 
 
 def main(argv=None) -> int:
-    args = build_parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = build_parser(argv[0] if argv else None).parse_args(argv)
     out = getattr(args, "out", None)
     existed = bool(out) and os.path.isfile(out)
     try:

@@ -61,7 +61,7 @@ def is_lonlat(coords: np.ndarray) -> bool:
 def longitude_arc(lon: np.ndarray) -> tuple[float, float]:
     """The smallest arc of the circle of longitudes that holds every ``lon`` (degrees): its midpoint in
     :math:`[-180, 180)` and its width (the circle less its largest gap between neighbouring longitudes)."""
-    l = np.unique(np.mod(np.asarray(lon, dtype=float) + 180.0, 360.0) - 180.0)
+    l = np.sort(np.mod(np.asarray(lon, dtype=float) + 180.0, 360.0) - 180.0)  # repeats leave gaps of 0
     gaps = np.diff(np.append(l, l[0] + 360.0))
     i = int(np.argmax(gaps))
     span = 360.0 - float(gaps[i])

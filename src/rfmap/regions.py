@@ -259,7 +259,7 @@ def clean_coverage(regions: np.ndarray) -> np.ndarray:
     owner = np.full(len(faces), -1)
     owner[face[order][first]] = region[order][first]
     out = regions.copy()
-    for k in np.unique(owner[owner >= 0]):
+    for k in np.flatnonzero(np.bincount(owner[owner >= 0], minlength=len(regions))):
         out[k] = shapely.coverage_union_all(faces[owner == k])
     return shapely.remove_repeated_points(out)
 

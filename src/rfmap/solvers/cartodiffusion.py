@@ -26,7 +26,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cartoflow import GridFlow, _bilinear_planes, _dct1, _dst1, _project, heun_step, square_inputs, step_factor
+from .cartoflow import GridFlow, _bilinear_planes, _project, heun_step, square_inputs, step_factor
+from .cosine import CosineTransforms
 
 __all__ = ["CartoDiffusionOptions", "diffusion_square"]
 
@@ -64,7 +65,8 @@ class _Heat:
     def __init__(self, dens: np.ndarray):
         m = dens.shape[0]
         self.n = m
-        self.coef = _dct1(_dct1(dens, 0), 1) / (2.0 * (m - 1)) ** 2  # synthesis: the same transforms
+        self.ct = CosineTransforms(m)  # its buffers serve every evaluation
+        self.coef = self.ct.dct(self.ct.dct(dens, 0), 1) / (2.0 * (m - 1)) ** 2  # synthesis: the same transforms
         self.k = math.pi * np.arange(m)
         self.rate = self.k ** 2  # per axis: exp(-(k_x^2 + k_y^2) t) = exp(-k_x^2 t) exp(-k_y^2 t)
         self.evaluations = 0
@@ -73,12 +75,12 @@ class _Heat:
         """(3, N*N): :math:`\\partial_x\\rho`, :math:`\\partial_y\\rho`, :math:`\\rho` at time ``t``."""
         decay = np.exp(-self.rate * t)
         b = self.coef * decay[:, None] * decay[None, :]
-        m, k = self.n, self.k
+        m, k, ct = self.n, self.k, self.ct
         out = np.zeros((3, m, m))
-        along_y = _dct1(b, 1)  # cosine synthesis along y: shared by rho and its x derivative
-        out[2] = _dct1(along_y, 0)
-        out[0, 1:-1] = -_dst1(along_y[1:-1] * k[1:-1, None], 0)
-        out[1, :, 1:-1] = -_dst1(_dct1(b, 0)[:, 1:-1] * k[None, 1:-1], 1)
+        along_y = ct.dct(b, 1)  # cosine synthesis along y: shared by rho and its x derivative
+        out[2] = ct.dct(along_y, 0)
+        out[0, 1:-1] = -ct.dst(along_y[1:-1] * k[1:-1, None], 0)
+        out[1, :, 1:-1] = -ct.dst(ct.dct(b, 0)[:, 1:-1] * k[None, 1:-1], 1)
         return out.reshape(3, -1)
 
     def velocity(self, t: float, pts: np.ndarray) -> np.ndarray:

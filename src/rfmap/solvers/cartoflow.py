@@ -3,7 +3,8 @@ r"""The flow-based density-equalizing map of the unit square for cartograms, in 
 The method is that of :mod:`rfmap.solvers.flow` (Gastner, Seguy & More 2018) with the square's walls fixed: the
 density is interpolated linearly in time, :math:`\rho_t = (1 - t)\rho_0 + t\bar\rho`, the flux
 :math:`-\nabla\phi` of :math:`\Delta\phi = \bar\rho - \rho_0` (no-flux walls) is computed once by cosine transforms
-(:func:`poisson_flux_2d`, type-I DCT/DST on the vertex grid, as :func:`rfmap.solvers.spectral.poisson_flux`), and
+(:func:`poisson_flux_2d`, type-I DCT/DST on the vertex grid, :class:`rfmap.solvers.cosine.CosineTransforms`, as
+:func:`rfmap.solvers.spectral.poisson_flux`), and
 points follow :math:`\dot x = -\nabla\phi(x) / \rho_t(x)` from :math:`t = 0` to :math:`1`.  It is one pass of a
 cartogram (:func:`rfmap.cartogram.cartogram` with ``method="flow"``), which itself repeats passes on the mapped
 polygons, so this module has no passes, residual rasters or free boundary of its own: what it keeps is lean.
@@ -28,6 +29,8 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from .cosine import CosineTransforms
 
 __all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "poisson_flux_2d", "bilinear", "min_triangle_area",
            "square_inputs", "heun_step", "step_factor", "STALL_DT"]
@@ -130,24 +133,6 @@ def min_triangle_area(y: np.ndarray) -> float:
     return float(min(first, (cx * dy - cy * dx).min()))
 
 
-def _dct1(x: np.ndarray, axis: int) -> np.ndarray:
-    r"""Unnormalised type-I DCT along ``axis`` (``scipy.fft.dct(x, type=1)``): :math:`y_k = x_0 + (-1)^k x_{M-1} +
-    2\sum_{j=1}^{M-2} x_j \cos(\pi jk/(M-1))`, the real FFT of the even extension (``numpy.fft``, whose import is
-    instant where ``scipy.fft``'s takes most of a second)."""
-    x = np.moveaxis(x, axis, -1)
-    ext = np.concatenate([x, x[..., -2:0:-1]], axis=-1)
-    return np.moveaxis(np.fft.rfft(ext, axis=-1).real, -1, axis)
-
-
-def _dst1(x: np.ndarray, axis: int) -> np.ndarray:
-    r"""Unnormalised type-I DST along ``axis`` (``scipy.fft.dst(x, type=1)``): :math:`y_j = 2\sum_k x_k
-    \sin(\pi (j+1)(k+1)/(K+1))`, minus the imaginary part of the real FFT of the odd extension."""
-    x = np.moveaxis(x, axis, -1)
-    zero = np.zeros(x.shape[:-1] + (1,))
-    ext = np.concatenate([zero, x, zero, -x[..., ::-1]], axis=-1)
-    return np.moveaxis(-np.fft.rfft(ext, axis=-1).imag[..., 1:-1], -1, axis)
-
-
 def poisson_flux_2d(values: np.ndarray) -> np.ndarray:
     r"""The flux :math:`-\nabla\phi` of :math:`\Delta\phi = \bar\rho - \rho_0` with no-flux walls on the unit
     square, at the grid nodes: :func:`rfmap.solvers.spectral.poisson_flux` in 2D, by ``numpy.fft``.
@@ -165,10 +150,12 @@ def poisson_flux_2d(values: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (2, M, M)
     """
-    return _flux(_dct1(_dct1(np.asarray(values, dtype=np.float64), 0), 1))
+    values = np.asarray(values, dtype=np.float64)
+    ct = CosineTransforms(values.shape[0])
+    return _flux(ct.dct(ct.dct(values, 0), 1), ct)
 
 
-def _flux(y: np.ndarray) -> np.ndarray:
+def _flux(y: np.ndarray, ct: CosineTransforms) -> np.ndarray:
     """:func:`poisson_flux_2d` from the type-I DCT ``y`` (M, M) of the values (consumed)."""
     m = y.shape[0]
     k = math.pi * np.arange(m)
@@ -179,8 +166,8 @@ def _flux(y: np.ndarray) -> np.ndarray:
     b /= lam
     b[0, 0] = 0.0
     out = np.zeros((2, m, m))
-    out[0, 1:-1] = _dst1(_dct1(b, 1)[1:-1] * k[1:-1, None], 0)
-    out[1, :, 1:-1] = _dst1(_dct1(b, 0)[:, 1:-1] * k[None, 1:-1], 1)
+    out[0, 1:-1] = ct.dst(ct.dct(b, 1)[1:-1] * k[1:-1, None], 0)
+    out[1, :, 1:-1] = ct.dst(ct.dct(b, 0)[:, 1:-1] * k[None, 1:-1], 1)
     return out
 
 
@@ -189,12 +176,13 @@ def _transforms(dens: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]
     modes damped by the heat kernel; the mean is kept), and its flux (:func:`poisson_flux_2d`), sharing the
     forward transform."""
     m = dens.shape[0]
-    y = _dct1(_dct1(dens, 0), 1)
+    ct = CosineTransforms(m)
+    y = ct.dct(ct.dct(dens, 0), 1)
     if sigma > 0:
         g = np.exp(-0.5 * (math.pi * sigma / (m - 1) * np.arange(m)) ** 2)
         y *= g[:, None] * g[None, :]
-        dens = _dct1(_dct1(y, 0), 1) / (2.0 * (m - 1)) ** 2
-    return dens, _flux(y)
+        dens = ct.dct(ct.dct(y, 0), 1) / (2.0 * (m - 1)) ** 2
+    return dens, _flux(y, ct)
 
 
 class _Stalled(RuntimeError):
