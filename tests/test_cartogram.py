@@ -331,14 +331,14 @@ def test_bad_options():
 
 
 def test_hybrid_cartogram_is_finished_on_the_raster_grid():
-    """The hybrid's passes map the raster's N-grid (the network's map resampled and finished there by the flow, every
-    pass's flow run: HYBRID_POLISH), so it meets the 1 % tolerance like the classical methods."""
+    """The hybrid's passes map the raster's (N+1)-vertex grid (the network's map resampled and finished there by the
+    flow, every pass's flow run: HYBRID_POLISH), so it meets the 1 % tolerance like the classical methods."""
     from rfmap.cartogram import HYBRID_POLISH
 
     c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="hybrid", n=64)
     m = c.metrics()
     assert m.topology_ok and m.max_error <= 0.01
-    assert all(r.ref_points.shape[0] == 64**2 and "polish" in r.info for r in c.info["results"])
+    assert all(r.ref_points.shape[0] == 65**2 and "polish" in r.info for r in c.info["results"])
     assert 0 < HYBRID_POLISH < 1e-6
 
 
@@ -431,7 +431,7 @@ def test_cli_cartogram_written_areas_take_their_shares(tmp_path, capsys, method,
     ("{oops", [], "not valid GeoJSON"),
     (json.dumps(grid_2x2([1, 1, 1, 5])), ["--value", "votes"], "no property 'votes'"),
     (json.dumps(_with(grid_2x2([1, 1, 1, 5]), 0, pop=-1)), [], "negative"),
-    (json.dumps(grid_2x2([1, 1, 1, 5])), ["--n", 2], "N"),
+    (json.dumps(grid_2x2([1, 1, 1, 5])), ["--n", 1], "N"),
     (json.dumps(grid_2x2([1, 1, 1, 5])), ["--png", "x.jpg"], "--png"),
 ])
 def test_cli_bad_input_exits_2_and_writes_nothing(tmp_path, capsys, content, args, match):

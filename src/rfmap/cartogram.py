@@ -9,7 +9,8 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    crosses the antimeridian is centred there).  Long edges are first split along their straight lines in
    longitude/latitude, so that they bend as the projection bends them.  The map's bounding box is fitted into the
    unit square leaving a ``margin`` on every side (:class:`PlanarFrame`).
-2. **Density raster.**  Each vertex of the ``N``-grid gets the mean density over its grid cell from
+2. **Density raster.**  The unit square is cut into ``N`` by ``N`` cells (as cartogram programs count their grids),
+   and each of the :math:`(N+1)^2` vertices gets the mean density over its own cell of that size from
    ``supersample``:sup:`2` point samples per cell (scanlines across the rings, :func:`density_grid`).  The sea has
    the mean density :math:`\sum_i v_i / \sum_i a_i`, as in cartogram tools: the land keeps its area, coasts move.
 3. **Map.**  The default, ``"flow"``, is the flow-based method of Gastner, Seguy & More (2018) that today's
@@ -19,9 +20,9 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    in each next one.  The others map the grid and interpolate its displacement bilinearly at the vertices: the
    classical diffusion DEM of the unit square (:func:`rfmap.solvers.solve_dem` with ``boundary="square"``), or a
    neural surrogate of the same task (``deq2d-square``) on its working grid, where its output is repaired to be
-   fold-free; the hybrid resamples the network's map to the ``N``-grid and finishes it there with the flow
+   fold-free; the hybrid resamples the network's map to the vertex grid and finishes it there with the flow
    (``Surrogate.map(polish=...)``, :data:`HYBRID_POLISH`).
-4. **Passes.**  A map computed on an ``N``-grid smears every coastline and border over a grid cell, so small dense
+4. **Passes.**  A map computed on a grid smears every coastline and border over a grid cell, so small dense
    regions come out a little small and sparse ones a little large.  The cartogram is therefore computed again from
    the mapped polygons, whose densities are now nearly equal, and the maps are composed, until the largest relative
    area error over the regions holding at least ``min_share`` of the total value (:data:`MIN_SHARE`, 0.01 %) is
@@ -113,8 +114,9 @@ SLOW_PASS = 0.7
 #: between mapped vertices stands for a curve, and where the flow squeezes a fjord or an inlet closed while it
 #: stretches its sides, long chords cross
 SPLIT_EDGE = 1.0
-#: The default ``max_n`` of :func:`cartogram`: the finest raster a slow pass may ask for (N = 256 doubles twice)
-MAX_N = 1023
+#: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for (N = 256
+#: doubles twice)
+MAX_N = 1024
 #: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
 #: coast's jump of density, sampled by the grid, otherwise bends the outline between nearby vertices into folds
 FLOW_BLUR = 1.0
@@ -155,7 +157,7 @@ def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
 
     # the raster's Std(rho~) counts the sea and every region's edge; the cartogram judges a pass by its area errors
     with quiet_quality():
-        if method == "hybrid":  # the network's map resampled to the N-grid and finished there by the flow
+        if method == "hybrid":  # the network's map resampled to the vertex grid and finished there by the flow
             return surrogate.map(density, density.shape[0], preprocess=False, polish=HYBRID_POLISH)
         return surrogate.map(density, surrogate.work_n(density.shape[0]), preprocess=False)
 
@@ -352,7 +354,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         (:func:`rfmap.solvers.cartodiffusion.diffusion_square`, numpy only); ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the
         surrogate's map finished by the classical flow on the ``N``-grid (``Surrogate.map(polish=HYBRID_POLISH)``).
     n : int
-        Side ``N`` of the density raster and of the classical solver's grid.
+        Cells per side ``N`` of the density raster (cartogram-cpp's ``-n``); the maps run on its
+        :math:`(N+1)^2` vertices (FFT lengths :math:`2N`: a power of two is fastest).
     tol, max_iterations : float, int
         Passes are repeated, each from the previous pass's polygons, until the largest relative area error is at
         most ``tol`` (the usual stopping rule of cartogram tools), a pass no longer lowers it, or ``max_iterations``
@@ -386,8 +389,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         reported apart (``CartogramMetrics.max_error_minor``).  The passes map those others as if they held this
         share, so that none (an uninhabited Antarctica) collapses into a sliver that folds.
     max_n : int, optional
-        A pass that leaves more than :data:`SLOW_PASS` of the previous pass's largest error (regions down to a few
-        cells: slivers, small islands) doubles the raster's resolution, :math:`N \to 2N - 1`, up to ``max_n``
+        A pass that lowers the largest error but leaves more than :data:`SLOW_PASS` of it (regions down to a few
+        cells: slivers, small islands) doubles the raster's resolution, :math:`N \to 2N`, up to ``max_n``
         (default the larger of ``n`` and :data:`MAX_N`; ``n`` turns it off); ``info["grids"]`` lists each pass's
         ``N``.
     points : int, optional
@@ -425,8 +428,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     method = ALIASES.get(method, method)
     if method not in CARTOGRAM_METHODS:
         raise ValueError(f"unknown cartogram method {method!r}; choose one of {', '.join(CARTOGRAM_METHODS)}")
-    n = check_n(n)
-    check_grid_memory(n, 2)
+    n = check_n(n, 2)
+    check_grid_memory(n + 1, 2)
     fixed = iterations is not None
     passes = iterations if fixed else max_iterations
     if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 1:
@@ -446,9 +449,9 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     frame = PlanarFrame.fit(geoms, margin=margin, projection=projection)
     # edges longer than a grid cell are split, so that they bend with the projection and the map (and a border that
     # one neighbour draws with more vertices than the other still matches it)
-    regions = frame.project(geoms, 1.0 / (n - 1))
+    regions = frame.project(geoms, 1.0 / n)
     if points is not None:  # a budget of vertices: simplified (shared borders kept) or densified to it
-        regions = shapely.segmentize(fit_outlines(regions, points), 1.0 / (n - 1))
+        regions = shapely.segmentize(fit_outlines(regions, points), 1.0 / n)
     done = []  # the passes so far
 
     def grid_map(dens, points):  # the classical methods carry the polygons' vertices; the flow blurs at first
@@ -498,7 +501,8 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     run; with ``split``, edges stretched beyond :data:`SPLIT_EDGE` cells are split between passes, and with
     ``accelerate`` every region's weight is boosted by its own slow progress
     (:func:`rfmap.cartogram_metrics.boost`) until a pass fails to lower the largest error; past ``deadline``
-    (``time.perf_counter``) no further pass starts.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
+    (``time.perf_counter``) no further pass starts.  ``n`` and ``max_n`` count cells per side; the rasters have
+    ``n + 1`` vertices per side.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
     shapely = _shapely()
     current, inverse = _distinct_vertices(regions)
     mapped = regions
@@ -514,19 +518,19 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         if results and deadline is not None and time.perf_counter() >= deadline:
             timed_out = True
             break
-        if (tol is not None and len(history) > 1 and history[-1] > tol and history[-1] > SLOW_PASS * history[-2]
-                and 2 * n - 1 <= max_n):
-            n = 2 * n - 1  # slow progress: regions down to a few cells (slivers, islands); twice the resolution
+        if (tol is not None and len(history) > 1 and history[-1] > tol
+                and SLOW_PASS * history[-2] < history[-1] < history[-2] and 2 * n <= max_n):
+            n *= 2  # slow progress: regions down to a few cells (slivers, islands); twice the resolution
         grids.append(n)
-        if split and results and _longest_edge(mapped) > SPLIT_EDGE / (n - 1):  # stretched edges: split again
-            regions = shapely.segmentize(mapped, 1.0 / (n - 1))
+        if split and results and _longest_edge(mapped) > SPLIT_EDGE / n:  # stretched edges: split again
+            regions = shapely.segmentize(mapped, 1.0 / n)
             current, inverse = _distinct_vertices(regions)
         if accelerate:
             area = shapely.area(mapped)
             now = np.log(np.maximum(area, 1e-300) / (weights / weights.sum() * area.sum()))
             gain = boost(now, log_err, gain) if log_err is not None else gain
             log_err = now
-        dens, sea = density_grid(mapped, weights * np.exp(-gain), n, supersample=supersample)
+        dens, sea = density_grid(mapped, weights * np.exp(-gain), n + 1, supersample=supersample)
         res = grid_map(dens, current)
         current = _at_points(res, current)
         map_time += res.time
