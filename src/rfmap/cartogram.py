@@ -122,7 +122,7 @@ MAX_N = 1024
 FLOW_BLUR = 1.0
 #: The hybrid's polish tolerance on Std(rho~_map) (``Surrogate.map(polish=...)``): far below any raster's variation, so
 #: that every pass runs its flow, for the reason of :data:`FLOW_SETTINGS`' ``tol=0``.  The polish runs on the
-#: raster's ``N``-grid (the network's map resampled to it), where the area errors are judged (book: Design
+#: raster's vertex grid (the network's map resampled to it), where the area errors are judged (book: Design
 #: decisions).
 HYBRID_POLISH = 1e-9
 
@@ -141,7 +141,7 @@ def _at_points(res, points: np.ndarray) -> np.ndarray:
 def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
     """The map of the unit square for one pass: the classical diffusion or flow DEM with fixed walls, the
     surrogate's map on its working grid (repaired there, so that it is fold-free before it is interpolated at the
-    polygon vertices), or the hybrid's on the raster's ``N``-grid."""
+    polygon vertices), or the hybrid's on the raster's vertex grid."""
     kw = dict(solver_kw)
     points = kw.pop("points", None)
     if method == "flow":  # torch-free, as the diffusion
