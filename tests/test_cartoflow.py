@@ -382,3 +382,29 @@ def test_timeout_stops_the_passes_and_the_command_says_so(tmp_path, capsys):
     assert rc == 1 and "time limit" in err and json.loads(out.read_text())["rfmap"]["status"] == "failed"
     rc = main(["cartogram", str(src), "--value", "pop", "--timeout", "0", "--out", str(tmp_path / "x.geojson")])
     assert rc == 2 and "timeout" in capsys.readouterr().err and not (tmp_path / "x.geojson").exists()
+
+
+@pytest.mark.parametrize("bad", [{"rtol": 0.0}, {"blur": -1.0}, {"first_step": 0.0}, {"first_step": 1.5},
+                                 {"max_steps": 0}, {"rtol": float("nan")}])
+def test_flow_options_refuse_what_cannot_run(bad):
+    from rfmap.solvers.cartoflow import CartoFlowOptions
+
+    with pytest.raises(ValueError, match="CartoFlowOptions need"):
+        CartoFlowOptions(**bad)
+
+
+def test_a_later_pass_takes_few_steps_from_a_whole_first_step():
+    """The first step spans the whole flow and the step control shortens it: a nearly uniform density (a late
+    cartogram pass) is carried in a few steps, to the same points as from a short first step within the step
+    tolerance."""
+    from rfmap.solvers.cartoflow import CartoFlowOptions
+
+    n = 65
+    t = np.linspace(0, 1, n)
+    x, y = np.meshgrid(t, t, indexing="ij")
+    dens = 1.0 + 0.02 * np.cos(np.pi * x) * np.cos(2 * np.pi * y)
+    pts = np.random.default_rng(1).uniform(0.05, 0.95, size=(300, 2))
+    whole = flow_square(dens, points=pts)
+    short = flow_square(dens, CartoFlowOptions(first_step=1e-2), points=pts)
+    assert whole.info["evaluations"] <= 4 < short.info["evaluations"]
+    assert np.abs(whole.mapped_points - short.mapped_points).max() < 0.2 / (n - 1)

@@ -54,11 +54,21 @@ class CartoFlowOptions:
         Most (accepted + rejected) steps; ``RuntimeError`` beyond.
     blur : float
         Width (vertex spacings) of a Gaussian blur of the density before the flow; 0 (default) turns it off.
+    first_step : float
+        Length of the first time step (of the unit interval): by default the whole flow, which the step control
+        shortens as far as needed; a later pass of a cartogram, whose displacements are small, then takes one or two
+        steps instead of doubling its way up from a short one.
     """
 
     rtol: float = 0.2
     max_steps: int = 10_000
     blur: float = 0.0
+    first_step: float = 1.0
+
+    def __post_init__(self):
+        if not (self.rtol > 0 and self.blur >= 0 and 0 < self.first_step <= 1 and self.max_steps >= 1):
+            raise ValueError(f"CartoFlowOptions need rtol > 0, blur >= 0, 0 < first_step <= 1 and max_steps >= 1; "
+                             f"got {self}")
 
 
 @dataclass
@@ -261,7 +271,7 @@ def _integrate(vel: _Velocity, y: np.ndarray, n: int, opts: CartoFlowOptions, gr
     collapses."""
     h = 1.0 / (n - 1)
     project = (lambda p: _project(p, n)) if grid else (lambda p: np.clip(p, 0.0, 1.0, out=p))
-    t, dt = 0.0, 1e-2
+    t, dt = 0.0, opts.first_step
     accepted = rejected = folds = 0
     k1 = vel(0.0, y)
     while t < 1.0:
