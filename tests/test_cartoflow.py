@@ -171,24 +171,31 @@ def test_heat_planes_are_exact_on_cosine_modes_and_the_diffusion_map_equalizes()
     assert rel.std() < 0.25 * before.std()
 
 
-def test_scanline_raster_matches_point_in_polygon_sampling():
-    """density_grid's scanlines give the containment tests' raster: holes, multipolygons, every sample."""
+def test_scanline_raster_matches_the_exact_lengths_on_its_lines():
+    """density_grid measures each scanline exactly: against shapely's intersections of every cell's piece of every
+    line with every region (holes, multipolygons, the boundary cells' halves), to 1e-12."""
     outer = shapely.Polygon([(0.1, 0.1), (0.7, 0.15), (0.6, 0.8), (0.15, 0.6)],
                             [[(0.3, 0.3), (0.4, 0.3), (0.35, 0.45)]])
     multi = shapely.MultiPolygon([shapely.box(0.72, 0.2, 0.9, 0.5), shapely.Polygon([(0.7, 0.6), (0.95, 0.9),
                                                                                       (0.65, 0.92)])])
-    geoms, values, n, s = np.array([outer, multi], dtype=object), np.array([3.0, 7.0]), 21, 4
+    edge = shapely.box(0.0, 0.0, 0.05, 1.0)  # along the square's wall: half cells
+    geoms, values, n, s = np.array([outer, multi, edge], dtype=object), np.array([3.0, 7.0, 0.5]), 21, 4
     dens, sea = density_grid(geoms, values, n, supersample=s)
-    h, m = 1 / (n - 1), n * s
-    t = ((np.arange(m) + 0.5) / s - 0.5) * h
-    xx, yy = np.meshgrid(t, t, indexing="ij")
-    fine = np.full((m, m), sea)
-    for g, v in zip(geoms, values):
-        fine[shapely.contains_xy(g, xx, yy)] = v / g.area
-    inside = (t >= 0) & (t <= 1)
-    w = (inside[:, None] & inside[None, :]).astype(float)
-    want = (fine * w).reshape(n, s, n, s).sum((1, 3)) / w.reshape(n, s, n, s).sum((1, 3))
+    h = 1 / (n - 1)
+    ys = ((np.arange(n * s) + 0.5) / s - 0.5) * h
+    x0 = np.clip((np.arange(n) - 0.5) * h, 0, 1)
+    x1 = np.clip((np.arange(n) + 0.5) * h, 0, 1)
+    want = np.zeros((n, n))
+    for b in range(n):
+        lines = [y for y in ys[b * s:(b + 1) * s] if 0 <= y <= 1]
+        acc = np.zeros(n)
+        for y in lines:
+            seg = shapely.linestrings([[[a, y], [c, y]] for a, c in zip(x0, x1)])
+            inside = shapely.length(shapely.intersection(seg[None, :], geoms[:, None]))  # (R, N)
+            acc += ((values / shapely.area(geoms) - sea)[:, None] * inside).sum(0)
+        want[:, b] = sea + acc / ((x1 - x0) * len(lines))
     assert np.abs(dens - want).max() < 1e-12 * want.max()
+    assert sea == pytest.approx(values.sum() / shapely.area(geoms).sum())
 
 
 # ----------------------------------------------------------------------------------------------- stopping rule

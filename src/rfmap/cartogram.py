@@ -10,8 +10,8 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    longitude/latitude, so that they bend as the projection bends them.  The map's bounding box is fitted into the
    unit square leaving a ``margin`` on every side (:class:`PlanarFrame`).
 2. **Density raster.**  The unit square is cut into ``N`` by ``N`` cells (as cartogram programs count their grids),
-   and each of the :math:`(N+1)^2` vertices gets the mean density over its own cell of that size from
-   ``supersample``:sup:`2` point samples per cell (scanlines across the rings, :func:`density_grid`).  The sea has
+   and each of the :math:`(N+1)^2` vertices gets the mean density over its own cell of that size along
+   ``supersample`` scanlines per cell, each measured exactly across the rings (:func:`density_grid`).  The sea has
    the mean density :math:`\sum_i v_i / \sum_i a_i`, as in cartogram tools: the land keeps its area, coasts move.
 3. **Map.**  The default, ``"flow"``, is the flow-based method of Gastner, Seguy & More (2018) that today's
    cartogram programs run: the flux of the raster's Poisson problem (walls fixed) carries the distinct polygon
@@ -372,7 +372,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         The coordinates of the returned features: the input's (the projection inverted), or the projection's plane
         (metres for the equal-area projections; its PROJ definition is in :meth:`Cartogram.to_geojson`).
     supersample : int
-        Point-in-polygon samples per grid cell side (:func:`density_grid`).
+        Scanlines per grid cell (:func:`density_grid`).
     model : str, optional
         Shipped surrogate for ``"surrogate"`` / ``"hybrid"`` (default ``"deq2d-square"``); ``surrogate`` passes a
         loaded :class:`rfmap.Surrogate` instead.  It must map 2D densities with the square's walls fixed, as the

@@ -151,6 +151,9 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     :math:`\rho = v_i / a_i` inside region :math:`i` and the sea density :math:`\bar\rho = \sum v_i / \sum a_i`
     elsewhere.
 
+    The mean is taken along ``supersample`` horizontal scanlines per cell, each measured exactly: the cell's share of
+    the line that lies in each region (:func:`_scanline_rows`).
+
     Parameters
     ----------
     geoms : ndarray of shapely geometries, shape (R,), inside the unit square
@@ -159,7 +162,7 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
         Grid side ``N``; vertex ``(i, j)`` sits at :math:`(i, j)/(N-1)` and its cell is the square of side
         :math:`h = 1/(N-1)` around it (clipped to the unit square).
     supersample : int
-        Point-in-polygon samples per cell side (``supersample``\ :sup:`2` per cell).
+        Scanlines per cell, at :math:`y = (j - 1/2 + (k + 1/2)/s) h`, :math:`k < s`.
 
     Returns
     -------
@@ -170,32 +173,31 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     shapely = _shapely()
     n = check_n(n)
     s = int(supersample)
+    if s < 1:
+        raise ValueError(f"supersample must be a positive integer, got {supersample!r}")
     areas = shapely.area(geoms)
     rho = values / areas
     sea = float(values.sum() / areas.sum())
-    h = 1.0 / (n - 1)
-    # sample k of vertex i along an axis sits at t_k = (i - 1/2 + (k + 1/2)/s) h = ((f + 1/2)/s - 1/2) h, f = i*s + k
-    m = n * s
-    t = ((np.arange(m) + 0.5) / s - 0.5) * h
-    inside = (t >= 0) & (t <= 1)  # samples of boundary cells beyond the square do not count
-    # excess density (above the sea) summed over each cell row's samples, per sample column: (N, m)
-    rows = _scanline_rows(geoms, rho - sea, n, s)
-    rows[:, ~inside] = 0.0
-    total = np.add.reduceat(rows, np.arange(0, m, s), axis=1).T  # (x cell, y cell)
-    count = np.add.reduceat(inside.astype(float), np.arange(0, m, s))
-    return sea + total / np.outer(count, count), sea
+    # excess density (above the sea) times the covered length, summed over each cell's scanlines: (x cell, y cell)
+    total = _scanline_rows(geoms, rho - sea, n, s).T
+    t = ((np.arange(n * s) + 0.5) / s - 0.5) / (n - 1)  # the scanlines' heights
+    lines = np.add.reduceat(((t >= 0) & (t <= 1)).astype(float), np.arange(0, n * s, s))  # those in the square
+    width = np.ones(n)
+    width[[0, -1]] = 0.5  # the cells' widths within the square, in cells
+    return sea + total / np.outer(width, lines), sea
 
 
 def _scanline_rows(geoms: np.ndarray, weight: np.ndarray, n: int, s: int) -> np.ndarray:
-    r"""Point-in-polygon sampling of :func:`density_grid` by scanlines: ``out[b, f]`` is the sum, over the sample
-    rows of cell row ``b`` that lie in :math:`[0, 1]` and over the regions whose interior holds sample
-    :math:`(t_f, t_r)`, of their ``weight``; shape (N, N s).
+    r"""The scanlines of :func:`density_grid`: ``out[b, c]`` is the sum, over the scanlines of cell row ``b`` that lie
+    in :math:`[0, 1]` and over the regions, of their ``weight`` times the length of the line inside the region and
+    inside cell column ``c`` (within the square), in cell widths; shape (N, N).
 
-    Every ring edge crosses the sample rows :math:`t_r \in [y_0, y_1)` of its height (half-open, so that a vertex on a
-    row counts once); per region and row the crossings, sorted, pair into spans (even-odd rule: holes and the parts
-    of a MultiPolygon come out right), and each span adds its weight to the samples :math:`t_f \in [x_a, x_b)` by a
-    difference array summed along the row.  :math:`O(\text{crossings} + N^2 s)` instead of a containment test per
-    sample.
+    Every ring edge crosses the scanlines :math:`y_r \in [y_0, y_1)` of its height (half-open, so that a vertex on a
+    line counts once); per region and line the crossings, sorted, pair into spans (even-odd rule: holes and the
+    parts of a MultiPolygon come out right).  A span :math:`[X_a, X_b)` (in cell units, clipped to the square) covers
+    the cells from :math:`\lfloor X_a \rfloor` to :math:`\lfloor X_b \rfloor`: a difference array adds 1 to each,
+    and two corrections take off the uncovered parts of the end cells.  :math:`O(\text{crossings} + N^2)` per
+    call.
     """
     shapely = _shapely()
     m = n * s
@@ -208,26 +210,31 @@ def _scanline_rows(geoms: np.ndarray, weight: np.ndarray, n: int, s: int) -> np.
     p0, p1, reg = coords[:-1][same], coords[1:][same], region[:-1][same]
     lo, hi = np.minimum(p0[:, 1], p1[:, 1]), np.maximum(p0[:, 1], p1[:, 1])
 
-    def first_sample(v):  # the smallest f with t_f >= v
+    def first_line(v):  # the smallest r with y_r >= v
         return np.clip(np.ceil(s * (v / h + 0.5) - 0.5), 0, m).astype(np.int64)
 
-    b0, b1 = first_sample(lo), first_sample(hi)
+    b0, b1 = first_line(lo), first_line(hi)
     cnt = b1 - b0
     e = np.repeat(np.arange(len(cnt)), cnt)
-    r = b0[e] + (np.arange(e.size) - np.repeat(np.cumsum(cnt) - cnt, cnt))  # sample row of each crossing
+    r = b0[e] + (np.arange(e.size) - np.repeat(np.cumsum(cnt) - cnt, cnt))  # scanline of each crossing
     ty = ((r + 0.5) / s - 0.5) * h
     a, b = p0[e], p1[e]
     x = a[:, 0] + (ty - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
     order = np.lexsort((x, r, reg[e]))
     x, r, g = x[order], r[order], reg[e][order]
-    xa, xb, r, g = x[0::2], x[1::2], r[0::2], g[0::2]  # every (region, row) holds an even number of crossings
+    xa, xb, r, g = x[0::2], x[1::2], r[0::2], g[0::2]  # every (region, line) holds an even number of crossings
     ty = ((r + 0.5) / s - 0.5) * h
-    keep = (ty >= 0) & (ty <= 1)  # sample rows beyond the square do not count
-    xa, xb, r, g = xa[keep], xb[keep], r[keep], g[keep]
-    cell = (r // s) * (m + 1)
-    diff = np.bincount(np.concatenate([cell + first_sample(xa), cell + first_sample(xb)]),
-                       np.concatenate([weight[g], -weight[g]]), minlength=n * (m + 1)).reshape(n, m + 1)
-    return np.cumsum(diff, axis=1)[:, :m]
+    keep = (ty >= 0) & (ty <= 1)  # scanlines beyond the square do not count
+    # cell units: cell c spans [c, c + 1), the square [1/2, N - 1/2]
+    xa = np.clip(xa[keep] / h + 0.5, 0.5, n - 0.5)
+    xb = np.clip(xb[keep] / h + 0.5, 0.5, n - 0.5)
+    r, w = r[keep], weight[g[keep]]
+    ca, cb = np.minimum(xa.astype(np.int64), n - 1), np.minimum(xb.astype(np.int64), n - 1)
+    row = (r // s) * (n + 1)
+    idx = np.concatenate([row + ca, row + cb])
+    full = np.bincount(idx, np.concatenate([w, -w]), minlength=n * (n + 1)).reshape(n, n + 1)
+    ends = np.bincount(idx, np.concatenate([-w * (xa - ca), w * (xb - cb)]), minlength=n * (n + 1)).reshape(n, n + 1)
+    return (np.cumsum(full, axis=1) + ends)[:, :n]
 
 
 def clean_coverage(regions: np.ndarray) -> np.ndarray:
