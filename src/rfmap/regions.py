@@ -331,16 +331,22 @@ def fit_outlines(regions: np.ndarray, points: int, *, steps: int = 20) -> np.nda
 MERGE = 1e-12
 
 
-def _grid_groups(xy: np.ndarray, side: float, shift: tuple[float, float]) -> np.ndarray:
-    """Group index (P,) of every point by its cell of a grid of side ``side`` shifted by ``shift`` cells."""
-    k = np.floor(xy / side + np.asarray(shift)).astype(np.int64)
-    order = np.lexsort((k[:, 1], k[:, 0]))
-    ks = k[order]
+def _runs(keys: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Group index (P,) of every entry of ``keys`` (complex: sorted by real, then imaginary part) among the distinct
+    keys, numbered in sorted order, and the index of each group's first entry (its smallest index)."""
+    order = np.argsort(keys, kind="stable")
+    ks = keys[order]
     start = np.ones(len(ks), dtype=bool)
-    start[1:] = (ks[1:] != ks[:-1]).any(axis=1)
+    start[1:] = ks[1:] != ks[:-1]
     groups = np.empty(len(ks), dtype=np.intp)
     groups[order] = np.cumsum(start) - 1
-    return groups
+    return groups, order[start]
+
+
+def _grid_groups(xy: np.ndarray, side: float, shift: tuple[float, float]) -> np.ndarray:
+    """Group index (P,) of every point by its cell of a grid of side ``side`` shifted by ``shift`` cells."""
+    k = np.floor(xy / side + np.asarray(shift))  # whole numbers, exact in double precision
+    return _runs(k[:, 0] + 1j * k[:, 1])[0]
 
 
 def _distinct_vertices(regions: np.ndarray, merge: float = MERGE) -> tuple[np.ndarray, np.ndarray]:
@@ -351,12 +357,14 @@ def _distinct_vertices(regions: np.ndarray, merge: float = MERGE) -> tuple[np.nd
     would part the rare pair that straddles a cell's edge.  Points are merged instead when they share a cell of any
     of four grids of side ``merge`` (shifted by half a cell in x, y or both): two points closer than a quarter
     cell in both coordinates always share one of them.  Merged groups are closed transitively; each keeps its
-    first point."""
+    first point.  Repeats of the very same point (most shared borders) are merged first, by one sort."""
     xy = _shapely().get_coordinates(regions)
     if len(xy) == 0:
         return xy, np.zeros(0, dtype=np.intp)
-    grids = [_grid_groups(xy, merge, s) for s in ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5))]
-    label = np.arange(len(xy))
+    exact, first = _runs(xy[:, 0] + 1j * xy[:, 1])
+    pts = xy[first]
+    grids = [_grid_groups(pts, merge, s) for s in ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5))]
+    label = first  # every distinct point's smallest index among its repeats
     while True:
         new = label
         for g in grids:
@@ -366,7 +374,7 @@ def _distinct_vertices(regions: np.ndarray, merge: float = MERGE) -> tuple[np.nd
         if np.array_equal(new, label):
             break
         label = new
-    keep, inverse = np.unique(label, return_inverse=True)
+    keep, inverse = np.unique(label[exact], return_inverse=True)
     return xy[keep], inverse.reshape(-1)
 
 
