@@ -105,10 +105,16 @@ def test_cosine_transforms_match_their_sums_along_both_axes():
         assert np.abs(ct.dct(x, 0) - c @ x).max() < tol
         assert np.abs(ct.dst(z, 1) - z @ s.T).max() < tol
         assert np.abs(ct.dst(z.T, 0) - s @ z.T).max() < tol
+        into = np.empty((m - 2, m))
+        assert ct.dst(z.T, 0, out=into) is into and np.abs(into - s @ z.T).max() < tol
+        into = np.empty((m, m))
+        assert ct.dct(x, 0, out=into) is into and np.abs(into - c @ x).max() < tol
     with pytest.raises(ValueError, match="shape"):
         ct.dst(x, 1)
     with pytest.raises(ValueError, match="shape"):
         ct.dct(np.ones((m, m + 1)), 0)
+    with pytest.raises(ValueError, match="out must have shape"):
+        ct.dct(x, 1, out=np.empty((m, m - 1)))
     with pytest.raises(ValueError, match="at least 3"):
         CosineTransforms(2)
 

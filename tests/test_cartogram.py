@@ -593,8 +593,10 @@ def test_passes_stop_when_the_error_stops_falling_and_the_best_pass_is_kept(monk
     monkeypatch.setattr(C, "_grid_map", worse_second_time)
     c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", n=48, tol=1e-9, max_iterations=6)
     hist = c.info["max_error"]
-    assert c.info["iterations"] == len(calls) == 3 and c.info["kept"] == 1 and min(hist[1:]) >= hist[0]
-    assert c.metrics().max_error == pytest.approx(hist[0], rel=1e-12)  # the first pass's polygons
+    # the passes that move nothing change the areas in their last bits only (edges split): not a gain (GAIN)
+    assert c.info["iterations"] == len(calls) == 3 and np.allclose(hist[1:], hist[0], rtol=C.GAIN, atol=0)
+    assert hist[c.info["kept"] - 1] == min(hist)
+    assert c.metrics().max_error == pytest.approx(min(hist), rel=1e-12)  # the best pass's polygons
     calls.clear()
     fixed = cartogram(grid_2x2([1, 1, 1, 5]), "pop", n=48, iterations=3)  # a fixed count runs every pass
     assert fixed.info["iterations"] == 3 and fixed.info["kept"] == 3

@@ -81,7 +81,6 @@ __all__ = [
     "world_countries",
     "MONTREAL_CANDIDATES",
     "DIFFUSION_SETTINGS",
-    "DEM_SETTINGS",
     "FLOW_SETTINGS",
     "HYBRID_POLISH",
     "ZERO_FLOOR",
@@ -101,8 +100,6 @@ OUTPUTS = ("input", "projected")
 #: Design decisions); stop at a remaining displacement of 1 % of a cell (``tol_end``, used by the cartograms' own
 #: torch-free diffusion, :func:`rfmap.solvers.cartodiffusion.diffusion_square`, too).
 DIFFUSION_SETTINGS = {"refine": 1, "tol_end": 1e-2}
-#: :data:`DIFFUSION_SETTINGS` under the name of the method's old spelling
-DEM_SETTINGS = DIFFUSION_SETTINGS
 #: Settings of ``solve_dem(method="flow")`` on a cartogram's raster: one flow per pass (``tol=0``: passes stop on
 #: area errors), on the vertex grid (``refine=1``; book: Design decisions).  :func:`cartogram` itself carries the
 #: vertices by the torch-free :func:`rfmap.solvers.cartoflow.flow_square`.
@@ -110,12 +107,14 @@ FLOW_SETTINGS = {"refine": 1, "tol": 0.0}
 #: A pass that leaves more than this fraction of the previous pass's largest error doubles the raster's resolution
 #: (up to ``max_n``): the regions left are a few cells wide, which a finer raster resolves
 SLOW_PASS = 0.7
+#: A pass lowers the largest error when it takes off more than this share of it (less is rounding: splitting edges
+#: alone changes the areas in their last bits)
+GAIN = 1e-9
 #: Between passes, edges longer than this many cells of the pass's raster are split to one cell: a straight edge
 #: between mapped vertices stands for a curve, and where the flow squeezes a fjord or an inlet closed while it
 #: stretches its sides, long chords cross
 SPLIT_EDGE = 1.0
-#: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for (N = 256
-#: doubles twice)
+#: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for
 MAX_N = 1024
 #: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
 #: coast's jump of density, sampled by the grid, otherwise bends the outline between nearby vertices into folds
@@ -519,7 +518,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
             timed_out = True
             break
         if (tol is not None and len(history) > 1 and history[-1] > tol
-                and SLOW_PASS * history[-2] < history[-1] < history[-2] and 2 * n <= max_n):
+                and SLOW_PASS * history[-2] < history[-1] < (1 - GAIN) * history[-2] and 2 * n <= max_n):
             n *= 2  # slow progress: regions down to a few cells (slivers, islands); twice the resolution
         grids.append(n)
         if split and results and _longest_edge(mapped) > SPLIT_EDGE / n:  # stretched edges: split again
@@ -540,7 +539,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         history.append(float(np.abs(area / (values / values.sum() * area.sum()) - 1.0)[big].max()))
         if best is None or history[-1] < best[0]:
             best = (history[-1], mapped, len(results))
-        if tol is not None and (history[-1] <= tol or len(history) > 1 and not history[-1] < history[-2]):
+        if tol is not None and (history[-1] <= tol or len(history) > 1 and not history[-1] < (1 - GAIN) * history[-2]):
             if accelerate and history[-1] > tol:  # a boosted pass overshot: plain passes from here on
                 accelerate, gain = False, np.zeros(len(values))
                 continue

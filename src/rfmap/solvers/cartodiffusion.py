@@ -76,11 +76,13 @@ class _Heat:
         decay = np.exp(-self.rate * t)
         b = self.coef * decay[:, None] * decay[None, :]
         m, k, ct = self.n, self.k, self.ct
-        out = np.zeros((3, m, m))
+        out = np.empty((3, m, m))
         along_y = ct.dct(b, 1)  # cosine synthesis along y: shared by rho and its x derivative
-        out[2] = ct.dct(along_y, 0)
-        out[0, 1:-1] = -ct.dst(along_y[1:-1] * k[1:-1, None], 0)
-        out[1, :, 1:-1] = -ct.dst(ct.dct(b, 0)[:, 1:-1] * k[None, 1:-1], 1)
+        ct.dct(along_y, 0, out=out[2])
+        ct.dst(along_y[1:-1] * -k[1:-1, None], 0, out=out[0, 1:-1])
+        ct.dst(ct.dct(b, 0)[:, 1:-1] * -k[None, 1:-1], 1, out=out[1, :, 1:-1])
+        out[0, [0, -1]] = 0.0  # the derivatives across the walls vanish
+        out[1, :, [0, -1]] = 0.0
         return out.reshape(3, -1)
 
     def velocity(self, t: float, pts: np.ndarray) -> np.ndarray:

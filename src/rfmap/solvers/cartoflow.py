@@ -24,6 +24,7 @@ most of a second: the transforms are real FFTs of ``numpy.fft`` (:func:`poisson_
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
 from dataclasses import dataclass, field
@@ -165,34 +166,55 @@ def poisson_flux_2d(values: np.ndarray) -> np.ndarray:
     return _flux(ct.dct(ct.dct(values, 0), 1), ct)
 
 
-def _flux(y: np.ndarray, ct: CosineTransforms) -> np.ndarray:
-    """:func:`poisson_flux_2d` from the type-I DCT ``y`` (M, M) of the values (consumed)."""
+@functools.lru_cache(maxsize=2)
+def _inverse_laplacian(m: int) -> np.ndarray:
+    r""":math:`1 / ((2(M-1))^2 \pi^2 |k|^2)` on the (M, M) cosine modes, 0 for the mean: the DCT-I of the values
+    to the half coefficients :math:`b` of :func:`poisson_flux_2d` (read-only, cached)."""
+    k2 = (math.pi * np.arange(m)) ** 2
+    lam = (k2[:, None] + k2[None, :]) * (2.0 * (m - 1)) ** 2
+    lam[0, 0] = 1.0
+    inv = 1.0 / lam
+    inv[0, 0] = 0.0
+    inv.flags.writeable = False
+    return inv
+
+
+def _flux(y: np.ndarray, ct: CosineTransforms, out: np.ndarray | None = None) -> np.ndarray:
+    """:func:`poisson_flux_2d` (2, M, M) from the type-I DCT ``y`` (M, M) of the values (consumed), written into
+    ``out`` when given."""
     m = y.shape[0]
     k = math.pi * np.arange(m)
     b = y
-    b /= (2.0 * (m - 1)) ** 2
-    lam = k[:, None] ** 2 + k[None, :] ** 2
-    lam[0, 0] = 1.0
-    b /= lam
-    b[0, 0] = 0.0
-    out = np.zeros((2, m, m))
-    out[0, 1:-1] = ct.dst(ct.dct(b, 1)[1:-1] * k[1:-1, None], 0)
-    out[1, :, 1:-1] = ct.dst(ct.dct(b, 0)[:, 1:-1] * k[None, 1:-1], 1)
+    b *= _inverse_laplacian(m)
+    out = np.empty((2, m, m)) if out is None else out
+    c = ct.dct(b, 1)
+    c *= k[:, None]
+    ct.dst(c[1:-1], 0, out=out[0, 1:-1])
+    c = ct.dct(b, 0)
+    c *= k[None, :]
+    ct.dst(c[:, 1:-1], 1, out=out[1, :, 1:-1])
+    out[0, [0, -1]] = 0.0  # no flux through the walls
+    out[1, :, [0, -1]] = 0.0
     return out
 
 
-def _transforms(dens: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray]:
-    """The density, blurred over ``sigma`` vertex spacings with mirror walls when ``sigma > 0`` (its type-I cosine
-    modes damped by the heat kernel; the mean is kept), and its flux (:func:`poisson_flux_2d`), sharing the
-    forward transform."""
+def _transforms(dens: np.ndarray, sigma: float) -> np.ndarray:
+    """The planes (3, N, N) of a flow: its flux (:func:`poisson_flux_2d`) and the density, blurred over ``sigma``
+    vertex spacings with mirror walls when ``sigma > 0`` (its type-I cosine modes damped by the heat kernel; the
+    mean is kept), sharing the forward transform."""
     m = dens.shape[0]
     ct = CosineTransforms(m)
+    planes = np.empty((3, m, m))
     y = ct.dct(ct.dct(dens, 0), 1)
     if sigma > 0:
         g = np.exp(-0.5 * (math.pi * sigma / (m - 1) * np.arange(m)) ** 2)
-        y *= g[:, None] * g[None, :]
-        dens = ct.dct(ct.dct(y, 0), 1) / (2.0 * (m - 1)) ** 2
-    return dens, _flux(y, ct)
+        y *= np.outer(g, g)
+        ct.dct(ct.dct(y, 0), 1, out=planes[2])
+        planes[2] /= (2.0 * (m - 1)) ** 2
+    else:
+        planes[2] = dens
+    _flux(y, ct, out=planes[:2])
+    return planes
 
 
 class _Stalled(RuntimeError):
@@ -203,11 +225,11 @@ class _Velocity:
     r""":math:`v(x, t) = -\nabla\phi(x) / ((1-t)\rho_0(x) + t\bar\rho)` of one density on the vertex grid."""
 
     def __init__(self, dens: np.ndarray, sigma: float = 0.0):
-        dens, flux = _transforms(dens, sigma)  # (N, N), (2, N, N)
+        planes = _transforms(dens, sigma)  # flux x, flux y, density: (3, N, N)
         self.n = dens.shape[0]
-        self.planes = np.concatenate([flux, dens[None]]).reshape(3, -1)  # flux x, flux y, density: (3, N*N)
+        self.planes = planes.reshape(3, -1)
         # the box mean of the cosine interpolant: the trapezoidal mean (rfmap.solvers.spectral.box_mean)
-        self.mean = float(np.trapezoid(np.trapezoid(dens, axis=0))) / (self.n - 1) ** 2
+        self.mean = float(np.trapezoid(np.trapezoid(planes[2], axis=0))) / (self.n - 1) ** 2
         self.evaluations = 0
 
     def __call__(self, t: float, pts: np.ndarray) -> np.ndarray:

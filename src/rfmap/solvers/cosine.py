@@ -55,20 +55,19 @@ class CosineTransforms:
             raise ValueError(f"expected a table of shape {want} transformed along axis {axis}, got {x.shape}")
         return x if axis in (1, -1) else x.T
 
-    def dct(self, x: np.ndarray, axis: int) -> np.ndarray:
-        """DCT-I of ``x`` (M, M) along ``axis`` (0 or 1), shape (M, M)."""
+    def dct(self, x: np.ndarray, axis: int, out: np.ndarray | None = None) -> np.ndarray:
+        """DCT-I of ``x`` (M, M) along ``axis`` (0 or 1), shape (M, M): a fresh array, or written into ``out``."""
         m = self.m
         src = self._rows(x, axis, m)
         ext = self._ext
         ext[:, :m] = src
         ext[:, m:] = src[:, m - 2:0:-1]
         np.fft.rfft(ext, axis=-1, out=self._spec)
-        out = self._spec.real.copy()
-        return out if axis in (1, -1) else out.T
+        return self._result(self._spec.real, axis, out, (m, m))
 
-    def dst(self, x: np.ndarray, axis: int) -> np.ndarray:
+    def dst(self, x: np.ndarray, axis: int, out: np.ndarray | None = None) -> np.ndarray:
         """DST-I of ``x`` along ``axis`` (0 or 1), whose length along that axis is ``M - 2`` (an axis's interior):
-        shape (M - 2, M) for ``axis=0``, (M, M - 2) for ``axis=1``."""
+        shape (M - 2, M) for ``axis=0``, (M, M - 2) for ``axis=1``; a fresh array, or written into ``out``."""
         m = self.m
         src = self._rows(x, axis, m - 2)
         ext = self._ext
@@ -77,5 +76,18 @@ class CosineTransforms:
         ext[:, m - 1] = 0.0
         np.negative(src[:, ::-1], out=ext[:, m:])
         np.fft.rfft(ext, axis=-1, out=self._spec)
-        out = np.negative(self._spec.imag[:, 1:-1])
-        return out if axis in (1, -1) else out.T
+        spec = self._spec.imag[:, 1:-1]
+        np.negative(spec, out=spec)
+        return self._result(spec, axis, out, (m, m - 2))
+
+    @staticmethod
+    def _result(rows: np.ndarray, axis: int, out: np.ndarray | None, shape: tuple[int, int]) -> np.ndarray:
+        """``rows`` (a view of the spectrum buffer, the transformed axis last) as the result along ``axis``."""
+        if out is None:
+            out = rows.copy()
+            return out if axis in (1, -1) else out.T
+        want = shape if axis in (1, -1) else shape[::-1]
+        if out.shape != want:
+            raise ValueError(f"out must have shape {want}, got {out.shape}")
+        np.copyto(out if axis in (1, -1) else out.T, rows)
+        return out
