@@ -213,6 +213,31 @@ def test_entry_point_as_subprocess(tmp_path):
     assert not out.exists()
 
 
+
+@pytest.mark.parametrize("extra, code", [([], 0), (["--max-passes", "1", "--tol", "1e-4"], 1), (["--n", "1"], 2)])
+def test_cartogram_process_exits_at_once_with_its_status_and_whole_files(tmp_path, extra, code):
+    """``rfmap cartogram`` ends its process without the interpreter's teardown (``rfmap.cli.QUICK_EXIT``): the exit
+    status, the printed lines and the written GeoJSON are those of :func:`rfmap.cli.main`."""
+    from rfmap.cli import QUICK_EXIT
+
+    assert "cartogram" in QUICK_EXIT
+    src, out = tmp_path / "in.geojson", tmp_path / "out.geojson"
+    cells = [[[i, j], [i + 1, j], [i + 1, j + 1], [i, j + 1], [i, j]] for i in range(2) for j in range(2)]
+    src.write_text(json.dumps({"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"pop": p}, "geometry": {"type": "Polygon", "coordinates": [c]}}
+        for p, c in zip([1, 1, 1, 5], cells)]}))
+    proc = subprocess.run([sys.executable, "-m", "rfmap.cli", "cartogram", str(src), "--value", "pop", "--n", "32",
+                           "--out", str(out), *extra], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == code, proc.stderr
+    if code == 2:
+        assert proc.stdout == "" and len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
+        return
+    assert proc.stdout.startswith(f"wrote {out}: 4 regions by 'pop', flow")
+    status = json.loads(out.read_text())["rfmap"]
+    assert status["status"] == ("ok" if code == 0 else "failed")
+    assert ("rfmap cartogram: failed:" in proc.stderr) == (code == 1)
+
+
 # ----------------------------------------------------------------------------------------------- models / map
 
 

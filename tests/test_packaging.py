@@ -99,13 +99,13 @@ def test_requirement_parser():
 
 def test_console_script_is_declared():
     scripts = _pyproject()["project"]["scripts"]
-    assert scripts["rfmap"] == "rfmap.cli:main"
+    assert scripts["rfmap"] == "rfmap.cli:entry"
     try:
         dist = metadata.distribution("rfmap")
     except metadata.PackageNotFoundError:
         pytest.skip("rfmap is not installed")
     eps = {ep.name: ep.value for ep in dist.entry_points if ep.group == "console_scripts"}
-    assert eps.get("rfmap") == "rfmap.cli:main"
+    assert eps.get("rfmap") == "rfmap.cli:entry"
 
 
 def test_package_data_declared():
