@@ -324,9 +324,11 @@ def test_boost_aims_each_pass_at_the_whole_error():
     # shares 0.5, 1 and 0.1 -> BOOST_GAIN, -0.2 -> BOOST_GAIN: b = now * (1/share - 1), within the cap
     share = np.array([0.5, 1.0, BOOST_GAIN, BOOST_GAIN, 1.0])
     assert np.allclose(b, np.clip(now * (1 / share - 1), -BOOST_CAP, BOOST_CAP), atol=1e-15)
-    assert b[0] == pytest.approx(0.1) and b[1] == 0 and b[2] == pytest.approx(-0.09 * 1.5) and b[4] == 0
+    assert b[0] == pytest.approx(0.1) and b[1] == 0 and b[4] == 0
+    assert b[2] == pytest.approx(max(-0.09 * (1 / BOOST_GAIN - 1), -BOOST_CAP))
     # the last boost counts as aimed-at error: with b = 0.1 on an error of 0.2, going to 0.1 is a share of 1/3
-    assert boost(np.array([0.1]), np.array([0.2]), np.array([0.1]))[0] == pytest.approx(min(0.1 * 1.5, BOOST_CAP))
+    want = min(0.1 * (1 / max(1 / 3, BOOST_GAIN) - 1), BOOST_CAP)
+    assert boost(np.array([0.1]), np.array([0.2]), np.array([0.1]))[0] == pytest.approx(want)
     assert np.abs(boost(np.array([5.0, -5.0]), np.array([6.0, -6.0]), np.zeros(2))).max() == BOOST_CAP
 
 

@@ -30,8 +30,8 @@ REPAIR_AREA = 1e-6
 #: together by the passes until their straight edges cross by a sliver
 REPAIR_OVERLAP = 1e-5
 #: :func:`boost`: the smallest share of a region's log area error that a pass is taken to remove, and the largest
-#: log weight boost (a factor of :math:`e^{0.3} \approx 1.35`), beyond which the passes begin to fold the polygons
-BOOST_GAIN, BOOST_CAP = 0.4, 0.3
+#: log weight boost (a factor of :math:`e^{0.4} \approx 1.5`); stronger boosts overshoot, and the passes oscillate
+BOOST_GAIN, BOOST_CAP = 0.25, 0.4
 
 
 @dataclass
