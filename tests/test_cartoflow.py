@@ -304,11 +304,13 @@ def test_flow_cartogram_of_real_maps_within_one_percent(name, n):
     assert not c.problems() and c.method == "flow"
 
 
-def test_world_flow_cartogram_splits_stretched_edges():
-    """The world by population at N = 96: Greenland shrinks a hundredfold while the flow squeezes its fjords closed
+@pytest.mark.parametrize("method", ["flow", "diffusion"])
+def test_world_cartogram_splits_stretched_edges(method):
+    """The world by population at N = 96: Greenland shrinks a hundredfold while the map squeezes its fjords closed
     and stretches their sides; the edges stretched beyond :data:`rfmap.cartogram.SPLIT_EDGE` cells are split again
-    between passes, so that no chord crosses its neighbour: every region valid, no overlaps, within 1 %."""
-    c = cartogram(world_countries(), "pop_est", n=96)
+    between passes (both classical methods), so that no chord crosses its neighbour: every region valid, no
+    overlaps, within 1 %."""
+    c = cartogram(world_countries(), "pop_est", n=96, method=method)
     m = c.metrics()
     assert m.max_error <= 0.01 and m.topology_ok, (m, c.info["max_error"])
     # the splits happened: more vertices than the input's (edges of at most a cell of the first raster)

@@ -29,8 +29,8 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    below ``tol`` (flow-based cartogram programs stop at 1 %, the default).  The smaller regions are mapped as if
    they held that share and their errors are reported apart.  A pass that gains little doubles the raster's
    resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  Edges that the
-   flow's passes stretched beyond :data:`SPLIT_EDGE` cells are split again before the next pass, and each region's
-   weight is boosted by the share of its error that the last pass left (a secant acceleration of the passes:
+   classical passes stretched beyond :data:`SPLIT_EDGE` cells are split again before the next pass, and (flow) each
+   region's weight is boosted by the share of its error that the last pass left (a secant acceleration of the passes:
    :func:`rfmap.cartogram_metrics.boost`).  A fold smaller than the overlap tolerance, where the input draws two
    edges nearly touching, is repaired (:func:`rfmap.cartogram_metrics.repair_folds`), and so is a sliver where
    neighbours under a cell apart in the input were pressed together (:func:`rfmap.cartogram_metrics.repair_overlaps`).
@@ -350,8 +350,9 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         ``"flow"`` (default): the classical flow-based method, which carries the polygons' vertices themselves
         (:func:`rfmap.solvers.cartoflow.flow_square`; numpy only, no PyTorch); ``"diffusion"`` (also
         ``"dem"``): the classical diffusion DEM, carrying the vertices too
-        (:func:`rfmap.solvers.cartodiffusion.diffusion_square`, numpy only); ``"surrogate"``: a pretrained neural surrogate; ``"hybrid"``: the
-        surrogate's map finished by the classical flow on the ``N``-grid (``Surrogate.map(polish=HYBRID_POLISH)``).
+        (:func:`rfmap.solvers.cartodiffusion.diffusion_square`, numpy only); ``"surrogate"``: a pretrained neural
+        surrogate; ``"hybrid"``: the surrogate's map finished by the classical flow on the raster's vertex grid
+        (``Surrogate.map(polish=HYBRID_POLISH)``).
     n : int
         Cells per side ``N`` of the density raster (cartogram-cpp's ``-n``); the maps run on its
         :math:`(N+1)^2` vertices (FFT lengths :math:`2N`: a power of two is fastest).
@@ -398,7 +399,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         removes detail finer than the grid (and speeds up maps drawn with far more vertices than the grid resolves);
         it changes the input's areas slightly.  The budget sets the outlines' detail, not the count of points the
         flow carries: as for any input, the outlines are then split to edges of at most a grid cell, and edges the
-        flow stretches beyond :data:`SPLIT_EDGE` cells are split again between passes, so that straight edges
+        classical methods stretch beyond :data:`SPLIT_EDGE` cells are split again between passes, so that straight edges
         between distant vertices do not cross.
     timeout : float, optional
         Seconds (counted from the parsed input) after which no further pass starts; the best pass so far is
@@ -466,7 +467,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     mapped, info, map_time = _passes(regions, values, grid_map,
                                      n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol,
                                      min_share=min_share, max_n=max_n if max_n is not None else max(n, MAX_N),
-                                     split=method == "flow", accelerate=method == "flow",
+                                     split=method in ("flow", "diffusion"), accelerate=method == "flow",
                                      deadline=None if timeout is None else t0 + timeout)
     mapped, info["repaired"] = repair_folds(mapped)
     mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
