@@ -33,7 +33,8 @@ LAYERS: dict[str, int] = {
     # classical solvers, the network, the losses
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1, "rfmap.solvers.flow": 1,
     "rfmap.solvers.spectral": 1, "rfmap.solvers.raster": 1, "rfmap.solvers.cartoflow": 1,
-    "rfmap.solvers.cartodiffusion": 1, "rfmap.solvers.cosine": 1, "rfmap.solvers.locate": 1, "rfmap.solvers.residual": 1,
+    "rfmap.solvers.cartodiffusion": 1, "rfmap.solvers.cosine": 1, "rfmap.solvers.locate": 1,
+    "rfmap.solvers.residual": 1,
     "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.nn.fno": 1, "rfmap.nn.registry": 1,
     "rfmap.losses": 1, "rfmap.symmetry": 1,
     # tasks, training, refinement, inference, post-processing, plotting
@@ -52,7 +53,8 @@ LAYERS: dict[str, int] = {
     "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,
     "rfmap.paper.flow_studies": 3, "rfmap.paper.design": 3, "rfmap.paper.cartograms": 3, "rfmap.cartogram": 3,
     "rfmap.cartogram_data": 3, "rfmap.cartogram_series": 3, "rfmap.cartogram_metrics": 3, "rfmap.regions": 3, "rfmap.projection": 3, "rfmap.compare": 3, "rfmap.studies": 3,
-    "rfmap.cli": 4, "rfmap.cli_base": 4, "rfmap.cli_cartogram": 4, "rfmap.lazy_parser": 4, "rfmap": 4,
+    "rfmap.cli": 4, "rfmap.cli_base": 4, "rfmap.cli_cartogram": 4, "rfmap.lazy_parser": 4,
+    "rfmap": 4,
 }
 
 CORE = ("rfmap.mesh", "rfmap.geometry", "rfmap.fields", "rfmap.metrics")

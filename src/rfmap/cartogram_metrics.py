@@ -15,7 +15,8 @@ import numpy as np
 
 from .regions import _shapely
 
-__all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps", "judged", "repair_folds", "repair_overlaps", "boost", "MIN_SHARE",
+__all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps",
+           "judged", "repair_folds", "repair_overlaps", "boost", "MIN_SHARE",
            "REPAIR_AREA", "REPAIR_OVERLAP", "BOOST_GAIN", "BOOST_CAP"]
 
 #: The share of the total value from which a region's area error is judged (stopping rule, :meth:`Cartogram.metrics`,

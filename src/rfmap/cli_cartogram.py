@@ -195,7 +195,8 @@ def add_cartogram_parser(sub) -> None:
     s.add_argument("--method", choices=CARTOGRAM_METHODS, type=solver_name, default="flow",
                    help="classical flow-based method (default, the fastest), classical diffusion (also 'dem'), "
                         "neural surrogate, or the surrogate polished by the flow")
-    s.add_argument("--n", type=int, default=256, help="cells per side N of the density raster, as cartogram-cpp's -n (default 256)")
+    s.add_argument("--n", type=int, default=256,
+                   help="cells per side N of the density raster, as cartogram-cpp's -n (default 256)")
     s.add_argument("--tol", type=float, default=0.01,
                    help="repeat passes until the largest relative area error is at most this (default 0.01)")
     s.add_argument("--max-passes", type=int, default=30, help="at most this many passes (default 30)")
