@@ -6,10 +6,10 @@
 #                    at RFMAP_SCALE=ci
 #   make book        execute the notebooks at full scale and build the HTML book into _build/html
 #   make book-check  screenshot every whole page of the built book; fail on error output or a missing or blank figure
-#   make lab-check [NB=05_dem_deq_2d]
+#   make lab-check [NB=06_dem_deq_2d]
 #                    open a chapter in JupyterLab (started by `make lab`) in headless Chromium, screenshot it into
 #                    _build/screenshots; fail unless its kernel is "Python (rfmap)" and jupyterlab-myst renders its MyST
-#   make chapter NB=05_dem_deq_2d [RFMAP_SCALE=ci|full]
+#   make chapter NB=06_dem_deq_2d [RFMAP_SCALE=ci|full]
 #                    execute one chapter as the book does (rfmap kernel, same environment) into _build/chapters/,
 #                    print its wall time and record it in _build/chapters/NB.time.json
 #   make pages       regenerate the generated book pages (book/figures.md and the scoreboard of book/intro.md from
@@ -62,7 +62,7 @@ book: install
 
 # one chapter, as the book runs it but from notebooks/ (as JupyterLab does); the executed copy keeps its outputs
 chapter: install
-	@test -n "$(NB)" || { echo "usage: make chapter NB=05_dem_deq_2d [RFMAP_SCALE=ci|full]" >&2; exit 2; }
+	@test -n "$(NB)" || { echo "usage: make chapter NB=06_dem_deq_2d [RFMAP_SCALE=ci|full]" >&2; exit 2; }
 	@test -f notebooks/$(NB).ipynb || { echo "no notebook notebooks/$(NB).ipynb" >&2; exit 2; }
 	@mkdir -p _build/chapters
 	@start=$$(date +%s.%N); \
@@ -88,7 +88,7 @@ book-check: install
 # the check starts `make lab` itself (same environment and kernel), with its own port, token and settings
 lab-check: install
 	command -v chromium >/dev/null 2>&1 || { $(SUDO) apt-get update && $(SUDO) apt-get install -y chromium; }
-	$(BIN)/python scripts/lab_check.py --notebook notebooks/$(or $(NB),05_dem_deq_2d).ipynb --out _build/screenshots
+	$(BIN)/python scripts/lab_check.py --notebook notebooks/$(or $(NB),06_dem_deq_2d).ipynb --out _build/screenshots
 
 clean:
 	rm -rf _build .pytest_cache .hypothesis

@@ -14,7 +14,7 @@
 # Environment (all optional): OUT (default ./device-out), DEVICE (cuda), PRESET (full), THREADS (2), WORKERS (12),
 # SNAPSHOT_EVERY (steps between snapshots, 250), KEEP (snapshots kept per config, 3), TRAIN_ARGS (more options of
 # rfmap train for every config: the default "--base 16 --depth 3 --batch 8" trains a wider and deeper network than the
-# shipped 3D ones from scratch (it beat the shipped size at equal time on a CPU, chapter 8); "--init dem3d-cube"
+# shipped 3D ones from scratch (it beat the shipped size at equal time on a CPU, chapter 9); "--init dem3d-cube"
 # continues the shipped weights; "--teacher flow" adds the classical teacher).
 # Bad input (an unknown config, a non-numeric or out-of-range MINUTES) prints one line, exits 2 and writes nothing.
 set -euo pipefail

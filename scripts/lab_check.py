@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Open a chapter in JupyterLab, as `make lab` starts it, and check that it uses the project's kernel and renders MyST.
 
-Usage: python scripts/lab_check.py [--notebook notebooks/05_dem_deq_2d.ipynb ...] [--all] [--out _build/screenshots]
+Usage: python scripts/lab_check.py [--notebook notebooks/06_dem_deq_2d.ipynb ...] [--all] [--out _build/screenshots]
                                    [--timeout 180] [--startup 300]
 
 JupyterLab is started by ``make lab`` itself (the environment of the book, the default kernel ``rfmap``, the
@@ -383,7 +383,7 @@ def run_checks(notebooks: list[Path], out: Path, timeout: float, startup: float)
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--notebook", type=Path, action="append",
-                        help="a chapter to open (repeatable; default notebooks/05_dem_deq_2d.ipynb)")
+                        help="a chapter to open (repeatable; default notebooks/06_dem_deq_2d.ipynb)")
     parser.add_argument("--all", action="store_true", help="open every chapter of notebooks/")
     parser.add_argument("--out", type=Path, default=ROOT / "_build" / "screenshots")
     parser.add_argument("--timeout", type=float, default=180.0, help="seconds a chapter may take to open")
@@ -391,7 +391,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     notebooks = sorted((ROOT / "notebooks").glob("*.ipynb")) if args.all else \
-        [p.resolve() for p in args.notebook or [ROOT / "notebooks" / "05_dem_deq_2d.ipynb"]]
+        [p.resolve() for p in args.notebook or [ROOT / "notebooks" / "06_dem_deq_2d.ipynb"]]
     for nb in notebooks:
         if not nb.is_file() or not nb.is_relative_to(ROOT):
             print(f"FAIL {nb}: not a notebook of this repository", file=sys.stderr)

@@ -179,10 +179,10 @@ def test_every_item_has_a_score_computed_by_its_chapter():
 
 def test_scoreboard_pastes_from_the_chapters():
     mod = _figures_script()
-    row = mod.paste("{sq_met} of 4, {res_std_max:.3g}", "notebooks/05_dem_deq_2d.ipynb")
-    assert row == ("{glue:text}`../notebooks/05_dem_deq_2d.ipynb::sq_met:s` of 4, "
-                   "{glue:text}`../notebooks/05_dem_deq_2d.ipynb::res_std_max:.3g`")
-    assert "\\|" in mod.paste("|Δd| {k}", "notebooks/04_beltrami_reconstruction.ipynb")  # pipes escaped in a table
+    row = mod.paste("{sq_met} of 4, {res_std_max:.3g}", "notebooks/06_dem_deq_2d.ipynb")
+    assert row == ("{glue:text}`../notebooks/06_dem_deq_2d.ipynb::sq_met:s` of 4, "
+                   "{glue:text}`../notebooks/06_dem_deq_2d.ipynb::res_std_max:.3g`")
+    assert "\\|" in mod.paste("|Δd| {k}", "notebooks/05_beltrami_reconstruction.ipynb")  # pipes escaped in a table
 
 
 def test_chapter_times_name_existing_chapters():
@@ -212,11 +212,11 @@ def test_chapter_times_are_read_from_a_record(tmp_path):
     spec = importlib.util.spec_from_file_location("chapter_times", ROOT / "scripts" / "chapter_times.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
-    out = tmp_path / "05_dem_deq_2d.time.json"
-    assert mod.main(["record", "05_dem_deq_2d", "--start", "100.0", "--end", "162.5", "--scale", "ci",
+    out = tmp_path / "06_dem_deq_2d.time.json"
+    assert mod.main(["record", "06_dem_deq_2d", "--start", "100.0", "--end", "162.5", "--scale", "ci",
                      "--out", str(out)]) == 0
     times, machine = mod.from_chapters(tmp_path, "ci")
-    assert times == {"05_dem_deq_2d": 62.5} and machine
+    assert times == {"06_dem_deq_2d": 62.5} and machine
     assert mod.from_chapters(tmp_path, "full")[0] == {}
 
 

@@ -100,7 +100,7 @@ def test_chapter_names_no_paths_of_its_own(nb_path):
 
 # ------------------------------------------------------------------ scripts/lab_check.py, without a browser
 LAB_CELL = ROOT / "tests" / "data" / "lab_markdown_cell.html"
-# the roles of the saved cell (notebooks/05_dem_deq_2d.ipynb, cell 0), as its source has them
+# the roles of the saved cell (notebooks/06_dem_deq_2d.ipynb, cell 0), as its source has them
 LAB_CELL_SOURCE = ("shrink {cite:p}`gastner2004diffusion`, $\\lambda$ = {glue:text}`lam`, close to conformal "
                    "{cite:p}`lyu2024bijective`; the {ref}`metrics box of chapter 2 <metrics>`; Std$(\\tilde\\rho_{"
                    "\\text{map}})$")

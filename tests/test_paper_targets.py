@@ -1,4 +1,4 @@
-"""The time-to-accuracy targets of chapter 10 (rfmap.paper.benchmarks): checks, headline and summary table."""
+"""The time-to-accuracy targets of chapter 11 (rfmap.paper.benchmarks): checks, headline and summary table."""
 import pytest
 
 from rfmap.hybrid import UNGUARDED

@@ -219,7 +219,7 @@ def _ratio_text(v: float) -> str:
 
 
 def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]:
-    """The numbers and verdicts that the book's text quotes from a time-to-accuracy run (chapter 10).
+    """The numbers and verdicts that the book's text quotes from a time-to-accuracy run (chapter 11).
 
     Parameters
     ----------
