@@ -98,6 +98,23 @@ def cmd_metrics(args) -> int:
     return 0
 
 
+def _model_meta(surrogate_cls, name: str) -> tuple[dict, str | None]:
+    """A shipped model's metadata, and the extra it needs where its architecture's package is not installed (the
+    FNO without ``neuraloperator``: then the metadata is read from its JSON file, the model not built)."""
+    try:
+        return surrogate_cls.pretrained(name).meta, None
+    except ImportError:
+        import json
+
+        from .surrogate import WEIGHTS_DIR
+
+        meta = json.loads((WEIGHTS_DIR / f"{name}.json").read_text())
+        arch = (meta.get("model") or {}).get("arch", "unet")
+        if arch != "fno":
+            raise
+        return meta, "fno"
+
+
 def cmd_models(args) -> int:
     from .surrogate import Surrogate, models
 
@@ -105,11 +122,13 @@ def cmd_models(args) -> int:
     if not names:
         print("no pretrained models are shipped")
     for name in names:
-        meta = Surrogate.pretrained(name).meta
+        meta, needs = _model_meta(Surrogate, name)
         t = meta.get("task", {})
         if not args.lineage:
             print(f"{name:16s} {t.get('kind', '?'):9s} {t.get('dim', '?')}D {t.get('boundary', '?'):7s} "
-                  f"steps={meta.get('steps')} wall={meta.get('wall_time')}s  {meta.get('description', '')}")
+                  f"steps={meta.get('steps')} wall={meta.get('wall_time')}s  " +
+                  (f"[needs rfmap[{needs}]: pip install 'rfmap[{needs}]'] " if needs else "") +
+                  f"{meta.get('description', '')}")
             continue
         runs = list(meta.get("lineage", [])) + [meta]
         total_steps = meta.get("cumulative_steps", meta.get("steps"))
