@@ -1,6 +1,6 @@
 """Inference and training-step times of the surrogates against N, next to the classical solver on the same field.
 
-    python benchmarks/inference.py [--model NAME ...] [--threads T] [--quick]
+    python benchmarks/inference.py [--model NAME ...] [--threads T] [--quick | --smoke]
 
 Prints Markdown tables. The surrogate's time (the result's own ``time``) covers encoding, the network, building the
 map on the output grid and the fold check (and repair, where needed); the classical time is one solve of the same
@@ -70,7 +70,7 @@ def inference_rows(name: str, ns, repeats: int):
               f"{t_cl / t_sur:.1f} | {t_cl / t_tr:.1f} | {t_cl / t_sym:.1f} |")
 
 
-def train_step_rows(names, repeats: int):
+def train_step_rows(names, repeats: int, smoke: bool = False):
     print("\n### one training step of the `full` presets\n")
     print("| config | batch | N | data (s) | step (s) |")
     print("|---|---|---|---|---|")
@@ -80,11 +80,12 @@ def train_step_rows(names, repeats: int):
 
         model = MultiResUNet(cfg.task.dim, cfg.task.n_params, cfg.model.base, cfg.model.depth)
         opt = torch.optim.AdamW(model.parameters(), lr=1e-4)
-        n = int(np.mean(cfg.n_range))
+        n = get_config(name, "ci").n_range[0] if smoke else int(np.mean(cfg.n_range))
+        batch = 1 if smoke else cfg.batch
         tds, tss = [], []
         for i in range(repeats + 1):
             t0 = time.perf_counter()
-            b = sample_batch(cfg.task, seed=0, step=i, indices=range(cfg.batch), n=n, jitter=cfg.jitter)
+            b = sample_batch(cfg.task, seed=0, step=i, indices=range(batch), n=n, jitter=cfg.jitter)
             t1 = time.perf_counter()
             loss, _ = task_loss(cfg.task, b, model(b.inputs), cfg.loss)
             opt.zero_grad()
@@ -95,7 +96,7 @@ def train_step_rows(names, repeats: int):
             if i:
                 tds.append(t1 - t0)
                 tss.append(t2 - t1)
-        print(f"| {name} | {cfg.batch} | {n} | {min(tds):.3f} | {min(tss):.3f} |")
+        print(f"| {name} | {batch} | {n} | {min(tds):.3f} | {min(tss):.3f} |")
 
 
 def main():
@@ -103,17 +104,19 @@ def main():
     p.add_argument("--model", nargs="*", default=["beltrami2d", "deq2d-square", "dem3d-cube"])
     p.add_argument("--threads", type=int, default=None)
     p.add_argument("--quick", action="store_true", help="fewer sizes and repeats")
+    p.add_argument("--smoke", action="store_true", help="the smallest run: one size (the ci preset's smallest), "
+                   "one repeat, batch 1")
     a = p.parse_args()
     if a.threads:
         torch.set_num_threads(a.threads)
     print(f"torch threads: {torch.get_num_threads()}")
-    reps = 3 if a.quick else 7
+    reps = 1 if a.smoke else 3 if a.quick else 7
     for name in a.model:
         dim = get_config(name, "full").task.dim
         ns = ((32, 51, 64, 128, 256) if not a.quick else (51, 128)) if dim == 2 else \
             ((32, 48, 64) if not a.quick else (32, 48))
-        inference_rows(name, ns, reps)
-    train_step_rows(a.model, reps)
+        inference_rows(name, (get_config(name, "ci").n_range[0],) if a.smoke else ns, reps)
+    train_step_rows(a.model, reps, a.smoke)
 
 
 if __name__ == "__main__":

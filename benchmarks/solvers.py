@@ -10,6 +10,7 @@ Usage::
 
     python benchmarks/solvers.py            # full sweep (3D up to N=64; a few minutes on 2 cores)
     python benchmarks/solvers.py --quick    # stops at N=128 (2D) and N=32 (3D)
+    python benchmarks/solvers.py --smoke    # one small size (N=17 in 2D, N=9 in 3D), one run each
     python benchmarks/solvers.py --targets --threads 1
 """
 from __future__ import annotations
@@ -58,6 +59,7 @@ DEM_HEAD = ("| density | boundary | N | time [s] | Std(ρ̃) orig | Std(ρ̃) ma
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="stop at N=128 in 2D and N=32 in 3D")
+    ap.add_argument("--smoke", action="store_true", help="one small size (N=17 in 2D, N=9 in 3D), one run each")
     ap.add_argument("--targets", action="store_true", help="also print the acceptance-target table")
     ap.add_argument("--no-sweep", action="store_true", help="skip the N sweep (with --targets)")
     ap.add_argument("--repeat", type=int, default=3, help="best-of repeats for runs under one second")
@@ -67,8 +69,10 @@ def main(argv: list[str] | None = None) -> None:
 
     print(f"<!-- {platform.processor() or platform.machine()}, torch threads {torch.get_num_threads()}, "
           f"numpy {np.__version__}, torch {torch.__version__}; time = best of {args.repeat} below 1 s -->\n")
-    n2 = [32, 64, 128] if args.quick else [32, 64, 128, 256]
-    n3 = [32] if args.quick else [32, 48, 64]
+    if args.smoke:
+        args.repeat = 1
+    n2 = [17] if args.smoke else [32, 64, 128] if args.quick else [32, 64, 128, 256]
+    n3 = [9] if args.smoke else [32] if args.quick else [32, 48, 64]
 
     def rep(n: int, dim: int) -> int:
         return args.repeat if (dim == 2 and n <= 128) else 1

@@ -2,6 +2,7 @@
 
     python benchmarks/train_step.py [--json] [--device cpu|cuda|auto] [--steps 20] [--warmup 5]
                                     [--configs beltrami2d deq2d-square dem3d-cube] [--threads T] [--workers W]
+    python benchmarks/train_step.py --smoke     # one step of batch 1 at the ``ci`` preset's smallest side
 
 Each configuration runs its ``full`` preset (threads and batch workers as the preset sets them unless overridden)
 at a fixed grid side: batch 4 at N = 80 in 2D, batch 2 at N = 48 in 3D.  A step is timed from asking the loader
@@ -32,10 +33,10 @@ DEFAULT_THREADS = torch.get_num_threads()
 
 
 def measure(name: str, device: torch.device, steps: int, warmup: int, threads: int | None,
-            workers: int | None) -> dict:
+            workers: int | None, smoke: bool = False) -> dict:
     torch.set_num_threads(DEFAULT_THREADS)  # a preset without a thread count gets torch's default
     cfg = get_config(name, "full")
-    batch, n = SIZES[cfg.task.dim]
+    batch, n = (1, get_config(name, "ci").n_range[0]) if smoke else SIZES[cfg.task.dim]
     over = {"batch": batch, "n_range": (n, n), "steps": warmup + steps, "time_limit": 0.0}
     if threads is not None:
         over["threads"] = threads
@@ -49,8 +50,8 @@ def measure(name: str, device: torch.device, steps: int, warmup: int, threads: i
         try:
             for step in range(cfg.steps):
                 t0 = time.perf_counter()
-                nn, pts, par = loader.get(step)
-                _train_step(st, nn, pts, par)
+                side, pts, par, targets = loader.get(step)
+                _train_step(st, side, pts, par, targets)
                 if device.type == "cuda":
                     torch.cuda.synchronize()
                 times.append(time.perf_counter() - t0)
@@ -69,7 +70,11 @@ def main(argv=None) -> int:
     p.add_argument("--threads", type=int, default=None)
     p.add_argument("--workers", type=int, default=None)
     p.add_argument("--configs", nargs="+", default=["beltrami2d", "deq2d-square", "dem3d-cube"])
+    p.add_argument("--smoke", action="store_true",
+                   help="the smallest run: one step, no warm-up, batch 1 at the ci preset's smallest side")
     args = p.parse_args(argv)
+    if args.smoke:
+        args.steps, args.warmup = 1, 0
     try:
         device = resolve_device(args.device)
     except ValueError as e:
@@ -77,7 +82,7 @@ def main(argv=None) -> int:
         return 2
     out = {}
     for name in args.configs:
-        out[name] = measure(name, device, args.steps, args.warmup, args.threads, args.workers)
+        out[name] = measure(name, device, args.steps, args.warmup, args.threads, args.workers, args.smoke)
         if not args.json:
             r = out[name]
             print(f"{name:14s} {r['ms_per_step']:8.1f} ms/step  batch {r['batch']}, N = {r['n']}, {r['device']}, "
