@@ -166,8 +166,8 @@ def cmd_map(args) -> int:
     if args.no_guard and polish is False:
         raise CLIError("--no-guard only applies with --polish")
     with quiet_quality():  # a poor map is reported below, in one line
-        res = sur.map(field, args.n, points, refine=args.refine, repair=not args.no_repair, polish=polish,
-                      guard=not args.no_guard, symmetrize=args.symmetrize)
+        res = sur.map(field, args.n, points, refine=args.refine, native=args.native, repair=not args.no_repair,
+                      polish=polish, guard=not args.no_guard, symmetrize=args.symmetrize)
     res.save(args.out)
     if args.vtk:
         res.to_vtk(args.vtk)
@@ -241,7 +241,8 @@ def cmd_validate(args) -> int:
     sizes = tuple(args.n) if args.n else None
     if sizes and min(sizes) < 3:
         raise CLIError(f"--n must be at least 3, got {min(sizes)}")
-    scored = score_weights(args.weights, count=args.count, sizes=sizes, progress=not args.no_progress)
+    scored = score_weights(args.weights, count=args.count, sizes=sizes, native=True if args.native else None,
+                           progress=not args.no_progress)
     print(scores_table(scored))
     if args.ship:
         w, j = ship_best(scored, args.ship, args.name)
@@ -318,6 +319,9 @@ def _add_map(sub) -> None:
     s.add_argument("--n", type=int, default=None, help="output grid side N")
     s.add_argument("--points", default=None, help=".npy array (P, d) of query points")
     s.add_argument("--refine", action="store_true", help="apply weight refinement")
+    s.add_argument("--native", action="store_true",
+                   help="run the network on the requested grid itself (the paper's method), not on a working grid "
+                        "inside its training range")
     s.add_argument("--no-repair", action="store_true",
                    help="return the raw network map, without removing folded elements or shortening a map that "
                         "leaves the density less equal than it was")
@@ -371,6 +375,8 @@ def _add_training(sub) -> None:
     s.add_argument("weights", nargs="+", help=".safetensors files or folders of them (e.g. OUT/snapshots)")
     s.add_argument("--count", type=int, default=None, help="validation fields (default: the config's)")
     s.add_argument("--n", type=int, nargs="+", default=None, help="grid sides (default: the config's)")
+    s.add_argument("--native", action="store_true",
+                   help="run each network on the validation grids themselves (default: the config's val_native)")
     s.add_argument("--ship", default=None, metavar="DIR", help="write the best as DIR/NAME.safetensors + .json")
     s.add_argument("--name", default=None, help="file name of the shipped weights (default: the config's name)")
     s.add_argument("--no-progress", action="store_true")

@@ -20,6 +20,8 @@ from .teacher import TeacherConfig
 __all__ = ["TrainConfig", "ModelConfig", "CONFIGS", "PRESETS", "get_config", "config_names", "scale"]
 
 PRESETS = ("ci", "full", "paper")
+#: how the training grid side of a step is drawn from ``n_range`` (:func:`rfmap.training.data.step_size_n`)
+N_SAMPLINGS = ("uniform", "log")
 #: the presets ``RFMAP_SCALE`` may name
 SCALES = ("ci", "full")
 
@@ -73,8 +75,16 @@ class TrainConfig:
     weights every that many steps to ``OUT/snapshots/`` (single self-contained files, scored afterwards by
     ``rfmap validate``).  ``val_repair``: score the held-out maps as
     ``Surrogate.map`` delivers them (a folded network map regridded or repaired; :func:`rfmap.validation.evaluate`)
-    instead of the raw network output.  A run started with ``init`` validates its parent at step 0, so that the
-    parent competes with every checkpoint.
+    instead of the raw network output; ``val_native``: run the network on the validation grid itself
+    (``Surrogate.map(..., native=True)``) instead of a working grid inside ``n_range``.  A run started with
+    ``init`` validates its parent at step 0, so that the parent competes with every checkpoint.
+
+    Training grid sides: ``n_sampling`` ``'uniform'`` (every side in ``n_range`` equally often) or ``'log'``
+    (log-uniform: every octave of sizes equally often, a curriculum across the sizes the paper tests).
+    ``batch_points`` > 0 sets each step's batch to about that many grid points,
+    :math:`B(N) = \mathrm{clip}(\mathrm{round}(P / N^d), 1, \mathtt{batch})`, so that a step costs about the same
+    at every size (0: always ``batch``).  ``grow`` (with ``init``): the parent network is widened to ``model.base``
+    channels by a function-preserving growth (:func:`rfmap.nn.grow.grow_unet`) before training.
     """
 
     name: str
@@ -84,6 +94,9 @@ class TrainConfig:
     steps: int = 2000
     batch: int = 8
     n_range: tuple[int, int] = (64, 96)
+    n_sampling: str = "uniform"
+    batch_points: int = 0
+    grow: bool = False
     jitter: float = 0.2
     lr: float = 1e-3
     weight_decay: float = 1e-4
@@ -107,6 +120,7 @@ class TrainConfig:
     val_sizes: tuple[int, ...] = ()
     val_count: int = 16
     val_repair: bool = False
+    val_native: bool = False
     teacher: TeacherConfig = TeacherConfig()
     snapshot_every: int = 0
     select_best: bool = True
@@ -125,6 +139,13 @@ class TrainConfig:
         return tuple(self.val_sizes) or (self.val_n,)
 
     def __post_init__(self):
+        if self.n_sampling not in N_SAMPLINGS:
+            raise ValueError(f"n_sampling must be one of {N_SAMPLINGS}, got {self.n_sampling!r}")
+        lo, hi = self.n_range
+        if not 2 <= lo <= hi:
+            raise ValueError(f"n_range must be (lo, hi) with 2 <= lo <= hi, got {tuple(self.n_range)}")
+        if self.batch_points < 0:
+            raise ValueError(f"batch_points must not be negative, got {self.batch_points}")
         if self.teacher.active and self.task.kind != "density":
             raise ValueError(f"config {self.name!r} maps a Beltrami coefficient: a classical teacher applies to "
                              "density configs only")

@@ -55,16 +55,19 @@ def weight_files(paths) -> list[Path]:
     return out
 
 
-def _val_settings(meta: dict, count: int | None, sizes: tuple[int, ...] | None) -> tuple[tuple[int, ...], int, bool]:
+def _val_settings(meta: dict, count: int | None, sizes: tuple[int, ...] | None,
+                  native: bool | None = None) -> tuple[tuple[int, ...], int, bool, bool]:
     cfg = meta.get("config") or {}
     ns = tuple(sizes or cfg.get("val_sizes") or ()) or (int(cfg.get("val_n", 51)),)
-    return ns, int(count or cfg.get("val_count", 16)), bool(cfg.get("val_repair", False))
+    nat = bool(cfg.get("val_native", False)) if native is None else bool(native)
+    return ns, int(count or cfg.get("val_count", 16)), bool(cfg.get("val_repair", False)), nat
 
 
 def score_weights(paths, *, count: int | None = None, sizes: tuple[int, ...] | None = None,
-                  progress: bool = True) -> list[Scored]:
+                  native: bool | None = None, progress: bool = True) -> list[Scored]:
     """Load and score every weight file of ``paths`` on its configuration's validation set (``count`` fields at grid
-    sides ``sizes`` override it); all files must solve the same task.  Returns them best first."""
+    sides ``sizes`` override it; ``native`` True/False overrides whether the network runs on each validation grid
+    itself, :func:`rfmap.validation.evaluate`); all files must solve the same task.  Returns them best first."""
     files = weight_files(paths)
     surs = [Surrogate.load(p) for p in files]
     specs = {s.spec for s in surs}
@@ -78,8 +81,8 @@ def score_weights(paths, *, count: int | None = None, sizes: tuple[int, ...] | N
     scored = []
     with quiet_quality():
         for path, sur in it:
-            ns, k, repair = _val_settings(sur.meta, count, sizes)
-            v = evaluate(sur, ns, k, repair=repair)
+            ns, k, repair, nat = _val_settings(sur.meta, count, sizes, native)
+            v = evaluate(sur, ns, k, repair=repair, native=nat)
             scored.append(Scored(path, sur, v, score(v["mean"])))
     return sorted(scored, key=lambda s: s.key)
 

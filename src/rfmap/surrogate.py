@@ -75,6 +75,7 @@ class MapOptions:
 
     refine: bool = False
     work_n: int | None = None
+    native: bool = False
     alpha: Sequence[float] | None = None
     preprocess: bool = True
     refine_bounds: tuple[float, float] | None = None
@@ -364,7 +365,7 @@ class Surrogate:
         return self._forward(x).float().cpu()
 
     def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
-            alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None,
+            native: bool = False, alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None,
             repair: bool = True, polish: bool | float = False, guard: bool = GUARD,
             symmetrize: bool | str = False) -> MapResult:
         """Map one field.
@@ -385,6 +386,10 @@ class Surrogate:
             Working grid side of the network (default :meth:`work_n`; then, in 3D and without ``polish``, a folded
             map is first tried on coarser working grids, :data:`REGRID_DIMS`).  Given explicitly, it is used as
             given.
+        native : bool
+            Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried): the
+            paper's method, which evaluates the one network on whatever grid the field comes on.  Excludes
+            ``work_n``.
         alpha : sequence of d floats, optional
             A fixed stretching vector (ignored when ``refine``).
         preprocess : bool
@@ -432,7 +437,7 @@ class Surrogate:
             training fields), or had to be shortened not to, a :class:`PoorMapWarning` names the numbers and the
             remedies (``refine``, ``polish``; :func:`quiet_quality` silences it).
         """
-        opts = MapOptions(refine=refine, work_n=work_n, alpha=alpha, preprocess=preprocess,
+        opts = MapOptions(refine=refine, work_n=work_n, native=native, alpha=alpha, preprocess=preprocess,
                           refine_bounds=refine_bounds, repair=repair, polish=polish, guard=guard, symmetrize=symmetrize)
         group = self._symmetry(symmetrize)
         inp, n = self._resolve(field, n, preprocess)
@@ -448,7 +453,7 @@ class Surrogate:
         if len(ns) != 1:
             raise ValueError(f"map_batch needs one output size, got {sorted(ns)}")
         n_out = ns.pop()
-        nw = opts.work_n or self.work_n(n_out)
+        nw = self._working_side(n_out, opts)
         t0 = time.perf_counter()
         grids = np.stack([self._work_grid(i, nw) for i, _ in inps])
         psi = self.displacement(grids, group) if group else self.displacement(grids)
@@ -465,7 +470,7 @@ class Surrogate:
         if stages.polish is not False and (self.spec.kind != "density" or points is not None):
             raise ValueError("polish finishes density maps on the output grid; it does not apply to "
                              f"{self.spec.kind} maps or to query points")
-        nw = int(opts.work_n or self.work_n(n))
+        nw = self._working_side(n, opts)
         if nw < self.model.min_size:
             raise ValueError(f"working grid N={nw} is smaller than this model accepts ({self.model.min_size})")
         ref, elements = self._output_mesh(n, points)
@@ -478,7 +483,8 @@ class Surrogate:
             return refine(draft, opts.refine_bounds) if opts.refine else draft
 
         draft = predict(nw, given)
-        if stages.repair and opts.work_n is None and stages.polish is False and self.spec.dim in REGRID_DIMS:
+        if (stages.repair and opts.work_n is None and not opts.native and stages.polish is False
+                and self.spec.dim in REGRID_DIMS):
             draft = regrid(draft, predict, self._regrid_sides(nw))
         draft = finish(draft, stages)
         message = poor_map_message(draft.report)
@@ -508,6 +514,16 @@ class Surrogate:
         result = replace(mesh, mapped_points=mapped, time=t_net + time.perf_counter() - t1)
         report = MapReport(network=NetworkReport(w, t_net, group), alpha=a.tolist())
         return Draft(result, report, self.spec.boundary, grid_n, Prediction(psi, psi_out, grid))
+
+    def _working_side(self, n: int, opts: MapOptions) -> int:
+        """The network's grid side for an output of side ``n``: ``n`` itself with ``native``, else ``work_n``
+        as given, else :meth:`work_n`."""
+        if opts.native:
+            if opts.work_n is not None and int(opts.work_n) != int(n):
+                raise ValueError(f"native runs the network on the requested grid N={n}; work_n={opts.work_n} "
+                                 "contradicts it")
+            return int(n)
+        return int(opts.work_n or self.work_n(n))
 
     def _regrid_sides(self, nw: int) -> list[int]:
         """The coarser working grids tried on a folded map: ``nw - REGRID_STEP``, ``nw - 2 REGRID_STEP``, ...

@@ -130,11 +130,11 @@ def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "valid
     return [_density_field(j, DENSITY_KINDS[j % len(DENSITY_KINDS)], dim, stream) for j in range(count)]
 
 
-def _held_out_map(sur, field, n: int, repair: bool = False):
+def _held_out_map(sur, field, n: int, repair: bool = False, native: bool = False):
     from .finish import quiet_quality  # the metrics say how poor a map is; no warning per field
 
     with quiet_quality():
-        return sur.map(field, n, repair=repair)
+        return sur.map(field, n, repair=repair, native=native)
 
 
 def _raw_folded(info: dict) -> bool:
@@ -143,10 +143,12 @@ def _raw_folded(info: dict) -> bool:
     return "regrid" in info or bool(info.get("repair", {}).get("needed", False))
 
 
-def evaluate(sur, ns, count: int = 16, *, repair: bool = False) -> dict:
+def evaluate(sur, ns, count: int = 16, *, repair: bool = False, native: bool = False) -> dict:
     """Metrics of surrogate ``sur`` on the validation set at every grid side in ``ns``: of the raw network output
     (no refinement or repair; the default), or with ``repair`` of the map as ``Surrogate.map`` returns it by
-    default (a folded network map tried on coarser working grids, then repaired: the map a user gets).
+    default (a folded network map tried on coarser working grids, then repaired: the map a user gets).  With
+    ``native`` the network runs on each validation grid itself (``Surrogate.map(..., native=True)``), not on a
+    working grid inside its training range.
 
     Returns
     -------
@@ -172,7 +174,7 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False) -> dict:
     relative: dict[str, list[float]] = {}
     for n in ns:
         for vf in fields:
-            r = _held_out_map(sur, vf.field, int(n), repair)
+            r = _held_out_map(sur, vf.field, int(n), repair, native)
             if spec.kind == "beltrami":
                 exact = vf.exact(r.ref_points)
                 m = r.metrics(exact_points=exact)
@@ -206,6 +208,8 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False) -> dict:
         out["mean"].update(families=fam, family_score=float(np.mean(list(fam.values()))))
     if repair:
         out["mean"].update(path="repaired", raw_folded_fields=raw_folded)
+    if native:
+        out["mean"]["native"] = True
     return out
 
 

@@ -56,6 +56,20 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--teacher-weight", type=float, default=None, help="weight of the teacher's displacement loss")
     p.add_argument("--base", type=int, default=None, help="override the U-Net's base width (channels)")
     p.add_argument("--depth", type=int, default=None, help="override the U-Net's number of levels")
+    p.add_argument("--grow", type=int, default=None, metavar="BASE",
+                   help="with --init: widen the parent U-Net to BASE channels by a function-preserving growth "
+                        "(rfmap.nn.grow; a multiple of the parent's base) and train from there")
+    p.add_argument("--n-range", type=int, nargs=2, default=None, metavar=("LO", "HI"),
+                   help="override the training grid sides (e.g. 24 64 in 3D, 32 256 in 2D)")
+    p.add_argument("--n-sampling", choices=["uniform", "log"], default=None,
+                   help="how each step's grid side is drawn from the range (log: every octave equally often)")
+    p.add_argument("--batch-points", type=int, default=None, metavar="P",
+                   help="each step's batch holds about P grid points (at most --batch), so steps cost alike at "
+                        "every size (0: always --batch)")
+    p.add_argument("--val-sizes", type=int, nargs="+", default=None, metavar="N",
+                   help="override the validation grid sides (e.g. the extremes of the range)")
+    p.add_argument("--val-native", action="store_true",
+                   help="validate with the network on each validation grid itself (Surrogate.map(native=True))")
     p.add_argument("--snapshot-every", type=int, default=None, metavar="K",
                    help="write the weights every K steps to OUT/snapshots/ (self-contained files for rfmap validate)")
     p.add_argument("--no-validate", action="store_true",
@@ -116,8 +130,16 @@ def _structured_overrides(cfg: TrainConfig, args) -> dict:
         if over["teacher"].active and cfg.task.kind != "density":
             raise ValueError(f"--teacher: config {cfg.name!r} maps a Beltrami coefficient; a classical teacher "
                              "applies to density configs only")
-    m = {k: v for k, v in {"base": getattr(args, "base", None), "depth": getattr(args, "depth", None)}.items()
-         if v is not None}
+    over.update(_size_overrides(args))
+    grow = getattr(args, "grow", None)
+    if grow is not None:
+        if not getattr(args, "init", None):
+            raise ValueError("--grow widens the network of --init; give the parent with --init")
+        if getattr(args, "base", None) is not None and args.base != grow:
+            raise ValueError(f"--grow {grow} and --base {args.base} disagree")
+        over["grow"] = True
+    m = {k: v for k, v in {"base": grow if grow is not None else getattr(args, "base", None),
+                           "depth": getattr(args, "depth", None)}.items() if v is not None}
     if m:
         if cfg.model.arch != "unet":
             raise ValueError("--base and --depth apply to U-Net configs")
@@ -134,6 +156,33 @@ def _structured_overrides(cfg: TrainConfig, args) -> dict:
     return over
 
 
+def _size_overrides(args) -> dict:
+    """The training and validation grid sides of the command line (``--n-range``, ``--n-sampling``,
+    ``--batch-points``, ``--val-sizes``, ``--val-native``); ``ValueError`` on values out of range."""
+    over: dict = {}
+    rng = getattr(args, "n_range", None)
+    if rng is not None:
+        lo, hi = rng
+        if not 3 <= lo <= hi:
+            raise ValueError(f"--n-range must be LO HI with 3 <= LO <= HI, got {lo} {hi}")
+        over["n_range"] = (lo, hi)
+    if getattr(args, "n_sampling", None):
+        over["n_sampling"] = args.n_sampling
+    bp = getattr(args, "batch_points", None)
+    if bp is not None:
+        if bp < 0:
+            raise ValueError(f"--batch-points must not be negative, got {bp}")
+        over["batch_points"] = bp
+    vs = getattr(args, "val_sizes", None)
+    if vs:
+        if min(vs) < 3:
+            raise ValueError(f"--val-sizes must be at least 3, got {min(vs)}")
+        over["val_sizes"] = tuple(vs)
+    if getattr(args, "val_native", False):
+        over["val_native"] = True
+    return over
+
+
 def _command_line(args) -> str:
     parts = ["rfmap train", f"--config {args.config}"]
     if args.preset:
@@ -145,11 +194,19 @@ def _command_line(args) -> str:
                       ("--teacher-share", getattr(args, "teacher_share", None)),
                       ("--teacher-weight", getattr(args, "teacher_weight", None)),
                       ("--base", getattr(args, "base", None)), ("--depth", getattr(args, "depth", None)),
+                      ("--grow", getattr(args, "grow", None)),
+                      ("--n-range", " ".join(map(str, args.n_range)) if getattr(args, "n_range", None) else None),
+                      ("--n-sampling", getattr(args, "n_sampling", None)),
+                      ("--batch-points", getattr(args, "batch_points", None)),
+                      ("--val-sizes", " ".join(map(str, args.val_sizes)) if getattr(args, "val_sizes", None)
+                       else None),
                       ("--snapshot-every", getattr(args, "snapshot_every", None))]:
         if val is not None:
             parts.append(f"{flag} {val:g}" if isinstance(val, float) else f"{flag} {val}")
     if args.device and args.device != "cpu":
         parts.append(f"--device {args.device}")
+    if getattr(args, "val_native", False):
+        parts.append("--val-native")
     if getattr(args, "no_validate", False):
         parts.append("--no-validate")
     if args.resume:

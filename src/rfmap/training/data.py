@@ -16,13 +16,25 @@ import torch
 from ..config import TrainConfig
 from ..tasks import draw_samples
 
-__all__ = ["step_size_n", "draw_step", "single_blas_thread_env"]
+__all__ = ["step_size_n", "step_batch", "draw_step", "single_blas_thread_env"]
 
 
 def step_size_n(cfg: TrainConfig, step: int) -> int:
-    """Training grid side of step ``step`` (uniform in ``n_range``, the same on every rank)."""
+    r"""Training grid side of step ``step``, the same on every rank: uniform in ``n_range``, or with
+    ``n_sampling='log'`` log-uniform, :math:`N = \lfloor \exp U(\log lo, \log(hi + 1)) \rfloor`."""
     lo, hi = cfg.n_range
-    return int(np.random.default_rng([cfg.seed, step, 2**31]).integers(lo, hi + 1))
+    rng = np.random.default_rng([cfg.seed, step, 2**31])
+    if cfg.n_sampling == "log":
+        return int(min(hi, np.floor(np.exp(rng.uniform(np.log(lo), np.log(hi + 1))))))
+    return int(rng.integers(lo, hi + 1))
+
+
+def step_batch(cfg: TrainConfig, n: int) -> int:
+    r"""Per-rank batch of a step on the ``N``-grid: ``batch``, or with ``batch_points`` > 0
+    :math:`\mathrm{clip}(\mathrm{round}(P / N^d), 1, \mathtt{batch})` (about the same cost at every size)."""
+    if cfg.batch_points <= 0:
+        return cfg.batch
+    return int(np.clip(round(cfg.batch_points / n ** cfg.task.dim), 1, cfg.batch))
 
 
 def draw_step(cfg: TrainConfig, step: int, rank: int = 0) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None]:
@@ -30,7 +42,8 @@ def draw_step(cfg: TrainConfig, step: int, rank: int = 0) -> tuple[int, np.ndarr
     the configuration, the step and the rank); ``targets`` are the teacher's maps (:mod:`rfmap.teacher`, NaN where
     a sample has none), ``None`` without a teacher."""
     n = step_size_n(cfg, step)
-    drawn = draw_samples(cfg.task, seed=cfg.seed, step=step, indices=range(rank * cfg.batch, (rank + 1) * cfg.batch),
+    b = step_batch(cfg, n)
+    drawn = draw_samples(cfg.task, seed=cfg.seed, step=step, indices=range(rank * b, (rank + 1) * b),
                          n=n, jitter=cfg.jitter, density_cfg=cfg.density_field, beltrami_cfg=cfg.beltrami_field,
                          beltrami_source=cfg.beltrami_source, teacher=cfg.teacher)
     return (n, *drawn) if len(drawn) == 3 else (n, *drawn, None)

@@ -33,7 +33,7 @@ __all__ = ["train", "validate", "report_paper_fields", "history"]
 
 def validate(sur: Surrogate, cfg: TrainConfig) -> dict:
     """Metrics on the held-out random fields (:func:`rfmap.validation.evaluate`) at ``cfg.val_ns``."""
-    return evaluate(sur, cfg.val_ns, cfg.val_count, repair=cfg.val_repair)
+    return evaluate(sur, cfg.val_ns, cfg.val_count, repair=cfg.val_repair, native=cfg.val_native)
 
 
 @quiet_quality()

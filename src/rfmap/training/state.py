@@ -21,6 +21,7 @@ import torch
 
 from .._version import __version__
 from ..config import TrainConfig
+from ..nn.grow import check_growth, grow_unet
 from ..nn.registry import build_model
 from ..surrogate import Surrogate, models
 from ..tasks import TaskSpec
@@ -108,9 +109,18 @@ def load_init(source: str, cfg: TrainConfig) -> tuple[Surrogate, dict]:
     if parent.spec != cfg.task:
         raise ValueError(f"--init {source!r} was trained for {parent.spec}, but config {cfg.name!r} is {cfg.task}")
     want = cfg.model.kwargs(cfg.task.dim, cfg.task.n_params)
-    if parent.model.kwargs() != want:
-        raise ValueError(f"--init {source!r} has architecture {parent.model.kwargs()}, config {cfg.name!r} "
-                         f"expects {want}")
+    have = parent.model.kwargs()
+    if cfg.grow:
+        same = {k: v for k, v in have.items() if k != "base"} == {k: v for k, v in want.items() if k != "base"}
+        if not same:
+            raise ValueError(f"--grow: --init {source!r} has architecture {have}; growth only widens it to "
+                             f"{want}")
+        try:
+            check_growth(parent.model, int(want["base"]))
+        except ValueError as e:
+            raise ValueError(f"--grow: --init {source!r}: {e}") from e
+    elif have != want:
+        raise ValueError(f"--init {source!r} has architecture {have}, config {cfg.name!r} expects {want}")
     meta = parent.meta
     record = {"name": meta.get("name", path.stem), "file": path.name, "sha256": sha256(path),
               "preset": meta.get("preset"), "command": meta.get("command"), "steps": int(meta.get("steps", 0)),
@@ -119,6 +129,8 @@ def load_init(source: str, cfg: TrainConfig) -> tuple[Surrogate, dict]:
               "cumulative_wall_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0)))}
     if meta.get("resumed"):
         record["resumed"] = list(meta["resumed"])
+    if cfg.grow:
+        record["grown"] = {"from": have, "to": want, "method": "rfmap.nn.grow.grow_unet", "seed": cfg.seed}
     return parent, record
 
 
@@ -213,10 +225,13 @@ def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool
     torch.manual_seed(cfg.seed)
     spec = cfg.task
     lineage: list = []
+    if cfg.grow and not init and not resume:
+        raise ValueError("--grow widens the network of --init; give the parent with --init")
     model = build_model(cfg.model.kwargs(spec.dim, spec.n_params))
     if init:
         parent, record = load_init(init, cfg)
-        model.load_state_dict(parent.model.state_dict())
+        source = grow_unet(parent.model, cfg.model.base, seed=cfg.seed) if cfg.grow else parent.model
+        model.load_state_dict(source.state_dict())
         lineage = list(parent.meta.get("lineage", [])) + [record]
     model = model.to(device, memory_format=memory_format(spec.dim))
     net = model
