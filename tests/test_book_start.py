@@ -1,0 +1,72 @@
+"""The reader's way in: the landing page's quick start runs as written, and every chapter ends with exercises."""
+import json
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+INTRO = ROOT / "book" / "intro.md"
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9][0-9]_*.ipynb"))
+#: the heading of the last cell of every chapter
+TRY_IT = "## Try it"
+
+
+def quick_start_blocks(text: str) -> list[tuple[str, str]]:
+    """The fenced blocks of the intro's *Quick start* section, as (language, code), in order."""
+    m = re.search(r"^## Quick start\n(.*?)(?=^## )", text, re.S | re.M)
+    assert m, "book/intro.md has no '## Quick start' section"
+    return [(lang, code) for lang, code in re.findall(r"^```(\w+)\n(.*?)^```", m.group(1), re.S | re.M)]
+
+
+def test_quick_start_has_install_map_and_training():
+    blocks = quick_start_blocks(INTRO.read_text(encoding="utf-8"))
+    code = "\n".join(c for _, c in blocks)
+    assert "make install" in code and "Surrogate.pretrained(" in code and "--preset ci" in code
+    python = [c for lang, c in blocks if lang == "python"]
+    # one map in five lines: imports, the map, its metrics
+    assert len([ln for ln in python[0].splitlines() if ln.strip()]) <= 7
+
+
+def test_quick_start_runs_as_written(tmp_path):
+    """Every command of the quick start but the installation and the shell's activation, run in order in an empty
+    directory with the project's environment: the training writes the weights that the last block loads."""
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1",
+               PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}")
+    for lang, code in quick_start_blocks(INTRO.read_text(encoding="utf-8")):
+        if lang == "python":
+            proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env, capture_output=True,
+                                  text=True, timeout=600)
+            assert proc.returncode == 0, proc.stderr[-2000:]
+            assert "std_rho_map=" in proc.stdout
+            continue
+        for line in code.splitlines():
+            if not line.strip() or line.startswith(("make ", "source ")):
+                continue
+            proc = subprocess.run(shlex.split(line), cwd=tmp_path, env=env, capture_output=True, text=True,
+                                  timeout=600)
+            assert proc.returncode == 0, f"{line}: {proc.stderr[-2000:]}"
+    assert (tmp_path / "runs" / "quick" / "deq2d-square.safetensors").exists()
+
+
+def test_code_blocks_of_the_pages_fit_88_columns():
+    long = []
+    for page in sorted((ROOT / "book").rglob("*.md")):
+        text = page.read_text(encoding="utf-8")
+        for block in re.findall(r"^```\w*\n(.*?)^```", text, re.S | re.M):
+            long += [f"{page.relative_to(ROOT)}: {ln!r}" for ln in block.splitlines() if len(ln) > 88]
+    assert not long, "code lines longer than 88 characters:\n" + "\n".join(long)
+
+
+@pytest.mark.parametrize("nb", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_chapter_ends_with_try_it(nb):
+    """The last cell is a Markdown cell '## Try it' with one to three exercises (a numbered list)."""
+    cells = json.loads(nb.read_text(encoding="utf-8"))["cells"]
+    last = "".join(cells[-1]["source"])
+    assert cells[-1]["cell_type"] == "markdown" and last.startswith(TRY_IT), f"{nb.name} ends without '{TRY_IT}'"
+    items = re.findall(r"^\d+\. ", last, re.M)
+    assert 1 <= len(items) <= 3, f"{nb.name}: {len(items)} exercises"
