@@ -1,34 +1,57 @@
-r"""Tasks: what a surrogate maps from, how its inputs are encoded, and how training batches are drawn.
+r"""What every task shares: the specification, the registry of task kinds, the encoding, batches and the loss.
 
-A task couples the input field (a density, or a Beltrami coefficient), the boundary condition and the losses.
-The input encoding (paper Sec. 4.1) stacks the vertex coordinates and the parameter channels,
-:math:`\mathcal{U} = [x_1, \dots, x_d, p_1, \dots, p_m]`, as a ``(B, d+m, *S)`` tensor in grid order:
+A *task* is what a surrogate computes: from an input field (a density, a Beltrami coefficient, ...) a map of the
+unit square or cube.  Each kind of task is a class derived from :class:`Task` in a module of its own
+(:mod:`rfmap.tasks.density`, :mod:`rfmap.tasks.beltrami`) and registered by :func:`register_task`; it owns its
+input encoding, its random training fields, its loss terms, its refinement objective, its validation record, its
+metric names, its classical reference solver and the checks of its input.  Everything else asks the task
+(``spec.task``), so a new kind of map is one new module.
 
-* density tasks (m = 1): the channel is :math:`\log p` of the unit-mass density, a discretisation-consistent
-  normalisation (mass :math:`\int p = 1` on every grid);
-* Beltrami tasks (m = 2): the channels are :math:`\mathrm{Re}\,\mu` and :math:`\mathrm{Im}\,\mu` at the vertices.
+The input encoding (paper Sec. 4.1) stacks the vertex coordinates and the task's parameter channels,
+:math:`\mathcal{U} = [x_1, \dots, x_d, p_1, \dots, p_m]`, as a ``(B, d+m, *S)`` tensor in grid order.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import lru_cache
+from typing import Any, Callable, ClassVar
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from . import losses as L
-from .geometry import grid_element_mean, grid_signed_measures, signed_measures
-from .fields import (RandomBeltramiConfig, RandomDensity, RandomDensityConfig, RandomMap, RandomBeltrami,
-                     jittered_points, preprocess_density, vertex_weights)
-from .mesh import grid_mesh, grid_points, interpolate
-from .nn.model import BOUNDARIES, apply_displacement
-from .teacher import TeacherConfig, teacher_indices, teacher_loss, teacher_map, teacher_targets
+from .. import losses as L
+from ..geometry import grid_signed_measures, signed_measures
+from ..mesh import grid_mesh
+from ..nn.model import BOUNDARIES, apply_displacement
+from ..random_fields import RandomBeltramiConfig, RandomDensityConfig
+from ..teacher import TeacherConfig, teacher_indices, teacher_loss
 
-__all__ = ["TaskSpec", "Batch", "encode", "grid_elements", "draw_samples", "make_batch", "sample_batch", "task_loss",
-           "KINDS"]
+__all__ = ["Task", "TaskSpec", "SampleOptions", "Batch", "LossWeights", "register_task", "get_task", "kinds",
+           "encode", "grid_elements", "draw_samples", "make_batch", "sample_batch", "task_loss"]
 
-KINDS = ("density", "beltrami")
+_TASKS: dict[str, "Task"] = {}
+
+
+def register_task(cls: type["Task"]) -> type["Task"]:
+    """Class decorator: register a :class:`Task` subclass under its ``kind`` (one instance serves every spec)."""
+    if not getattr(cls, "kind", None):
+        raise ValueError(f"task class {cls.__name__} has no kind")
+    _TASKS[cls.kind] = cls()
+    return cls
+
+
+def kinds() -> tuple[str, ...]:
+    """The registered task kinds, in order of registration."""
+    return tuple(_TASKS)
+
+
+def get_task(kind: str) -> "Task":
+    """The task registered under ``kind``; ``ValueError`` naming the known kinds otherwise."""
+    try:
+        return _TASKS[kind]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown task kind {kind!r}; expected one of {kinds()}") from None
 
 
 @dataclass(frozen=True)
@@ -38,9 +61,10 @@ class TaskSpec:
     Attributes
     ----------
     kind : str
-        ``'density'`` (DEM / DEQ) or ``'beltrami'`` (reconstruction of a map from its Beltrami coefficient).
+        A registered task kind (:func:`kinds`): ``'density'`` (DEM / DEQ), ``'beltrami'`` (reconstruction of a map
+        from its Beltrami coefficient), ...
     dim : int
-        2 or 3 (Beltrami tasks are 2D).
+        2 or 3 (each task says which it supports, ``Task.dims``).
     boundary : str
         ``'square'`` (sliding walls), ``'fixed'`` (identity on the boundary) or ``'free'``.
     """
@@ -50,53 +74,55 @@ class TaskSpec:
     boundary: str = "square"
 
     def __post_init__(self):
-        if self.kind not in KINDS:
-            raise ValueError(f"unknown task kind {self.kind!r}; expected one of {KINDS}")
+        task = get_task(self.kind)
         if self.dim not in (2, 3):
             raise ValueError(f"dimension must be 2 or 3, got {self.dim}")
-        if self.kind == "beltrami" and self.dim != 2:
-            raise ValueError("Beltrami tasks are two-dimensional")
+        if self.dim not in task.dims:
+            raise ValueError(f"{task.title} tasks are {' or '.join(f'{d}D' for d in task.dims)}, not {self.dim}D")
         if self.boundary not in BOUNDARIES:
             raise ValueError(f"unknown boundary {self.boundary!r}; expected one of {BOUNDARIES}")
 
     @property
+    def task(self) -> "Task":
+        """The registered :class:`Task` of this kind."""
+        return get_task(self.kind)
+
+    @property
     def n_params(self) -> int:
-        return 1 if self.kind == "density" else 2
+        """Number of parameter channels of the encoding."""
+        return self.task.n_params(self.dim)
 
     def to_dict(self) -> dict:
         return {"kind": self.kind, "dim": self.dim, "boundary": self.boundary}
 
 
-@lru_cache(maxsize=64)
-def grid_elements(n: int, dim: int) -> Tensor:
-    """Elements of the ``N``-grid mesh as a LongTensor (cached)."""
-    return torch.as_tensor(grid_mesh(n, dim).elements)
+@dataclass(frozen=True)
+class SampleOptions:
+    """How random training fields are drawn; each task reads the entries that concern it.
 
-
-def encode(points: Tensor, params: Tensor, spec: TaskSpec, n: int) -> Tensor:
-    r"""Stack coordinates and parameter channels into the network input.
-
-    Parameters
+    Attributes
     ----------
-    points : Tensor, shape (B, N**d, d)
-        Vertex positions in grid order (regular or jittered).
-    params : Tensor, shape (B, N**d) real (density, already unit mass) or complex (Beltrami coefficient)
-    n : int
-        Grid side ``N``.
-
-    Returns
-    -------
-    Tensor, shape (B, d + m, N, ..., N)
+    jitter : float
+        Strength of the Sobol jitter of the vertices (0: the regular grid).
+    density : RandomDensityConfig, optional
+        Random densities (default ``RandomDensityConfig.for_dim(d)``).
+    beltrami : RandomBeltramiConfig, optional
+        Random Beltrami coefficients or maps.
+    beltrami_source : str
+        ``'map'`` (the exact coefficient of a random map) or ``'mu'`` (a random coefficient).
+    teacher : TeacherConfig, optional
+        A classical teacher's maps as targets (tasks with ``Task.teacher``).
     """
-    B, P, d = points.shape
-    if P != n**d:
-        raise ValueError(f"{P} points do not form an N={n} grid in {d}D")
-    if spec.kind == "density":
-        ch = torch.log(params).unsqueeze(-1)
-    else:
-        ch = torch.stack([params.real, params.imag], -1)
-    x = torch.cat([points, ch.to(points.dtype)], -1)  # (B, P, d+m)
-    return x.transpose(1, 2).reshape(B, d + spec.n_params, *([n] * d)).contiguous()
+
+    jitter: float = 0.2
+    density: RandomDensityConfig | None = None
+    beltrami: RandomBeltramiConfig | None = None
+    beltrami_source: str = "map"
+    teacher: TeacherConfig | None = None
+
+    @property
+    def teaching(self) -> bool:
+        return self.teacher is not None and self.teacher.active
 
 
 @dataclass
@@ -110,6 +136,8 @@ class Batch:
     elements : LongTensor, shape (m, d+1)
     density : Tensor, shape (B, n) — density tasks
     mu_target : complex Tensor, shape (B, m) — Beltrami tasks: target per triangle
+    extra : dict
+        What else a task's loss needs (tensors move with the batch), e.g. a teacher's ``target``.
     """
 
     inputs: Tensor
@@ -137,114 +165,6 @@ class Batch:
                      mv(self.mu_target), {**extra, "grid_elements": self.on_grid})
 
 
-def _grad_magnitude(values: np.ndarray, n: int, dim: int) -> np.ndarray:
-    g = np.gradient(values.reshape((n,) * dim))
-    return np.sqrt(sum(gi**2 for gi in g)).reshape(-1)
-
-
-def _density_sample(rng, n, dim, cfg: RandomDensityConfig, jitter: float, elements_np):
-    """``(points, unit-mass density at the points, raw field on the regular grid)`` of one training sample."""
-    fld = RandomDensity(rng, cfg)
-    grid_vals = fld.on_grid(n)
-    if jitter > 0:
-        pts = jittered_points(n, dim, rng, grad_magnitude=_grad_magnitude(grid_vals, n, dim), strength=jitter)
-        raw = fld(pts)
-        w = vertex_weights(pts, elements_np)
-        p = preprocess_density(raw, weights=w)
-    else:
-        pts = grid_points(n, dim)
-        p = preprocess_density(grid_vals.reshape((n,) * dim)).reshape(-1)
-    return pts, p, grid_vals.reshape((n,) * dim)
-
-
-def _beltrami_sample(rng, n, cfg: RandomBeltramiConfig, jitter: float, source: str):
-    gen = RandomMap(rng, cfg) if source == "map" else RandomBeltrami(rng, cfg)
-    if jitter > 0:
-        probe_n = 33
-        probe = grid_mesh(probe_n, 2).points
-        g = _grad_magnitude(np.abs(gen.mu_grid(probe_n) if source == "map" else gen(probe)), probe_n, 2)
-        g_n = interpolate(g.reshape(1, 1, probe_n, probe_n), grid_points(n, 2))[0, :, 0]
-        pts = jittered_points(n, 2, rng, grad_magnitude=g_n, strength=jitter)
-        mu = gen.mu(pts) if source == "map" else gen(pts)
-    else:
-        pts = grid_points(n, 2)
-        mu = gen.mu_grid(n) if source == "map" else gen(pts)
-    return pts, mu
-
-
-def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
-                 density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
-                 beltrami_source: str = "map", teacher: TeacherConfig | None = None):
-    """The raw arrays of training samples ``indices`` of step ``step`` on an ``N``-grid (numpy only, so that a
-    worker process can draw them and send them to the training process).
-
-    Sample ``i`` of step ``t`` is generated from ``np.random.default_rng([seed, t, i])`` only, so a batch split
-    across processes (data-parallel training) or drawn by worker processes reproduces the single-process batch
-    exactly.
-
-    With an active ``teacher`` (density tasks, :mod:`rfmap.teacher`), the first
-    ``teacher_indices(len(indices), teacher.share)`` samples also get the classical map of their field as a target.
-
-    Returns
-    -------
-    points : ndarray, shape (B, N**d, d), float64
-    params : ndarray, shape (B, N**d), the unit-mass density (float64) or the Beltrami coefficient (complex128)
-    targets : ndarray, shape (B, N**d, d), float64 — only with an active ``teacher``: the teacher's map at the
-        sample's vertices, NaN for samples without a target (beyond the share, or the solver failed)
-    """
-    indices = list(indices)
-    el_np = grid_elements(n, spec.dim).numpy() if spec.kind == "density" and jitter > 0 else None
-    teach = teacher is not None and teacher.active
-    if teach and spec.kind != "density":
-        raise ValueError("a classical teacher applies to density tasks only")
-    n_teach = teacher_indices(len(indices), teacher.share) if teach else 0
-    pts_l, par_l, tgt_l = [], [], []
-    for k, i in enumerate(indices):
-        rng = np.random.default_rng([seed, step, int(i)])
-        if spec.kind == "density":
-            cfg = density_cfg or RandomDensityConfig.for_dim(spec.dim)
-            pts, par, raw_grid = _density_sample(rng, n, spec.dim, cfg, jitter, el_np)
-            if teach:
-                mapped = teacher_map(raw_grid, spec.boundary, teacher.method) if k < n_teach else None
-                tgt_l.append(np.full_like(pts, np.nan) if mapped is None else teacher_targets(pts, n, mapped))
-        else:
-            pts, par = _beltrami_sample(rng, n, beltrami_cfg or RandomBeltramiConfig(), jitter, beltrami_source)
-        pts_l.append(pts)
-        par_l.append(par)
-    if teach:
-        return np.stack(pts_l), np.stack(par_l), np.stack(tgt_l)
-    return np.stack(pts_l), np.stack(par_l)
-
-
-def make_batch(spec: TaskSpec, points: np.ndarray, params: np.ndarray, n: int,
-               targets: np.ndarray | None = None) -> Batch:
-    """Tensors of a training batch from the arrays of :func:`draw_samples` (float32 / complex64); ``targets``
-    (a teacher's maps, NaN rows for samples without one) become ``extra["target"]`` and ``extra["target_mask"]``."""
-    elements = grid_elements(n, spec.dim)
-    ref = torch.as_tensor(points, dtype=torch.float32)
-    par = torch.as_tensor(params)
-    par = par.to(torch.complex64) if par.is_complex() else par.float()
-    inputs = encode(ref, par, spec, n)
-    if spec.kind == "density":
-        extra = {}
-        if targets is not None:
-            mask = np.isfinite(targets).all(axis=(1, 2))
-            extra = {"target": torch.as_tensor(np.where(mask[:, None, None], targets, points), dtype=torch.float32),
-                     "target_mask": torch.as_tensor(mask)}
-        return Batch(inputs, ref, elements, n, density=par, extra=extra)
-    return Batch(inputs, ref, elements, n, mu_target=par[:, elements].mean(-1))
-
-
-def sample_batch(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
-                 density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
-                 beltrami_source: str = "map") -> Batch:
-    """Draw the training samples ``indices`` of step ``step`` on an ``N``-grid (:func:`draw_samples` then
-    :func:`make_batch`)."""
-    pts, par = draw_samples(spec, seed=seed, step=step, indices=indices, n=n, jitter=jitter,
-                            density_cfg=density_cfg, beltrami_cfg=beltrami_cfg, beltrami_source=beltrami_source)
-    return make_batch(spec, pts, par, n)
-
-
 @dataclass(frozen=True)
 class LossWeights:
     """Weights of the loss terms.
@@ -270,37 +190,244 @@ class LossWeights:
     density_tangent: bool = False
 
 
+@dataclass
+class MappedBatch:
+    """A batch and the network's map of it, as a task's loss sees them.
+
+    Attributes
+    ----------
+    batch : Batch
+    mapped : Tensor, shape (B, n, d)
+        The mapped vertices :math:`u = x + \\mathcal{B}(x) \\odot \\psi(x)`.
+    measures : dict
+        ``ref_meas`` and ``meas``: the signed element measures before and after, shape (B, m) (strided on a grid).
+    spec : TaskSpec
+    """
+
+    batch: Batch
+    mapped: Tensor
+    measures: dict
+    spec: TaskSpec
+
+
+class Task:
+    """A kind of map a surrogate learns; subclasses are registered with :func:`register_task`.
+
+    Class attributes
+    ----------------
+    kind : str
+        The registry key, stored in ``TaskSpec.kind``, ``MapResult.kind`` and the weights' metadata.
+    title : str
+        The kind in words, for messages.
+    dims : tuple of int
+        The dimensions the task supports.
+    score_metric : str
+        The validation's primary metric (a key of :class:`rfmap.metrics.MapMetrics`), lower is better.
+    metric_names : tuple of str
+        The entries of one validation record (:meth:`validation_record`).
+    loss_terms : tuple of str
+        The names of the task's own loss terms (the fold penalty and a teacher's term are common to all).
+    teacher : bool
+        Whether a classical teacher (:mod:`rfmap.teacher`) applies.
+    equalizes : bool
+        Whether the map equalizes a density: then a map is judged against doing nothing, shortened when it is no
+        better, and may be polished by the flow-based solver (:mod:`rfmap.finish`).
+    """
+
+    kind: ClassVar[str] = ""
+    title: ClassVar[str] = ""
+    dims: ClassVar[tuple[int, ...]] = (2, 3)
+    score_metric: ClassVar[str] = ""
+    metric_names: ClassVar[tuple[str, ...]] = ()
+    loss_terms: ClassVar[tuple[str, ...]] = ()
+    teacher: ClassVar[bool] = False
+    equalizes: ClassVar[bool] = False
+
+    # ------------------------------------------------------------------ encoding and input
+    def n_params(self, dim: int) -> int:
+        """Number of parameter channels ``m`` of the encoding in ``dim`` dimensions."""
+        raise NotImplementedError
+
+    def channels(self, params: Tensor) -> Tensor:
+        """The parameter channels of the encoding, shape (B, P, m), from the parameters at the P vertices."""
+        raise NotImplementedError
+
+    def check_field(self, grid: np.ndarray, preprocess: bool = True) -> np.ndarray:
+        """A user's field sampled on a grid, checked and normalised as the network expects it (``ValueError`` on
+        bad input)."""
+        raise NotImplementedError
+
+    def resampled(self, grid: np.ndarray) -> np.ndarray:
+        """A checked field after interpolation to another grid (e.g. unit mass restored); default unchanged."""
+        return grid
+
+    def sample_named(self, field: Any) -> Callable:
+        """The function of points that samples a named field object of this kind (default the object itself)."""
+        return field
+
+    # ------------------------------------------------------------------ training
+    def draw(self, rng: np.random.Generator, spec: TaskSpec, n: int, options: SampleOptions,
+             teach: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """One random training sample: ``(points (N**d, d), params (N**d, ...), target or None)``; ``teach``:
+        draw the teacher's map as the target (``NaN`` rows where it has none)."""
+        raise NotImplementedError
+
+    def batch(self, spec: TaskSpec, inputs: Tensor, ref: Tensor, params: Tensor, n: int,
+              targets: np.ndarray | None) -> Batch:
+        """The :class:`Batch` of drawn samples (``params`` as tensors, ``targets`` a teacher's maps or ``None``)."""
+        raise NotImplementedError
+
+    def loss(self, mb: MappedBatch, weights: LossWeights) -> tuple[Tensor, dict[str, Tensor]]:
+        """The task's own loss terms of a mapped batch: ``(weighted total, {term: value})``."""
+        raise NotImplementedError
+
+    # ------------------------------------------------------------------ maps
+    def refine_objective(self, ref: Tensor, psi: Tensor, elements: Tensor, field: np.ndarray, boundary: str,
+                         grid_n: int | None) -> Callable[[np.ndarray], float]:
+        r"""The weight refinement's objective :math:`\mathcal{J}(\alpha)` (paper Sec. 4.3)."""
+        raise NotImplementedError
+
+    def metric_inputs(self, field: np.ndarray) -> dict:
+        """The keywords ``density`` and ``mu`` of :func:`rfmap.repair.dispatch.repair_map` for a map of ``field``."""
+        return {"density": None, "mu": None}
+
+    def reference(self, field: np.ndarray, n: int, boundary: str):
+        """The classical reference solver's map (:class:`rfmap.result.MapResult`) of a field on the ``N``-grid
+        (``None`` when the task has none)."""
+        return None
+
+    # ------------------------------------------------------------------ validation
+    def validation_fields(self, dim: int, count: int, stream: str, low_frequency: bool = False) -> list:
+        """The fixed held-out fields (``ValidationField``) of the task."""
+        raise NotImplementedError
+
+    def validation_record(self, result, vf) -> tuple[dict, float, float]:
+        """``(record, value, baseline)`` of one validation map: the metrics named by :attr:`metric_names`, the
+        value of :attr:`score_metric`, and that of doing nothing (the identity map)."""
+        raise NotImplementedError
+
+
+def grad_magnitude(values: np.ndarray, n: int, dim: int) -> np.ndarray:
+    """:math:`|\nabla v|` of values on the ``N``-grid by central differences, flattened (N**d,): where the
+    Sobol jitter of the vertices concentrates them."""
+    g = np.gradient(values.reshape((n,) * dim))
+    return np.sqrt(sum(gi**2 for gi in g)).reshape(-1)
+
+
+@lru_cache(maxsize=64)
+def grid_elements(n: int, dim: int) -> Tensor:
+    """Elements of the ``N``-grid mesh as a LongTensor (cached)."""
+    return torch.as_tensor(grid_mesh(n, dim).elements)
+
+
+def encode(points: Tensor, params: Tensor, spec: TaskSpec, n: int) -> Tensor:
+    r"""Stack coordinates and parameter channels into the network input.
+
+    Parameters
+    ----------
+    points : Tensor, shape (B, N**d, d)
+        Vertex positions in grid order (regular or jittered).
+    params : Tensor, shape (B, N**d, ...)
+        The task's parameters at the vertices (a unit-mass density, a complex Beltrami coefficient, ...).
+    n : int
+        Grid side ``N``.
+
+    Returns
+    -------
+    Tensor, shape (B, d + m, N, ..., N)
+    """
+    B, P, d = points.shape
+    if P != n**d:
+        raise ValueError(f"{P} points do not form an N={n} grid in {d}D")
+    ch = spec.task.channels(params)
+    x = torch.cat([points, ch.to(points.dtype)], -1)  # (B, P, d+m)
+    return x.transpose(1, 2).reshape(B, d + spec.n_params, *([n] * d)).contiguous()
+
+
+def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
+                 density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
+                 beltrami_source: str = "map", teacher: TeacherConfig | None = None):
+    """The raw arrays of training samples ``indices`` of step ``step`` on an ``N``-grid (numpy only, so that a
+    worker process can draw them and send them to the training process); the task draws each sample
+    (:meth:`Task.draw`, options :class:`SampleOptions`).
+
+    Sample ``i`` of step ``t`` is generated from ``np.random.default_rng([seed, t, i])`` only, so a batch split
+    across processes (data-parallel training) or drawn by worker processes reproduces the single-process batch
+    exactly.
+
+    With an active ``teacher`` (tasks with ``Task.teacher``, :mod:`rfmap.teacher`), the first
+    ``teacher_indices(len(indices), teacher.share)`` samples also get the classical map of their field as a target.
+
+    Returns
+    -------
+    points : ndarray, shape (B, N**d, d), float64
+    params : ndarray, shape (B, N**d, ...), e.g. the unit-mass density (float64) or the Beltrami coefficient
+        (complex128)
+    targets : ndarray, shape (B, N**d, d), float64 — only with an active ``teacher``: the teacher's map at the
+        sample's vertices, NaN for samples without a target (beyond the share, or the solver failed)
+    """
+    task = spec.task
+    options = SampleOptions(jitter, density_cfg, beltrami_cfg, beltrami_source, teacher)
+    indices = list(indices)
+    if options.teaching and not task.teacher:
+        raise ValueError(f"a classical teacher does not apply to {task.title} tasks")
+    n_teach = teacher_indices(len(indices), teacher.share) if options.teaching else 0
+    pts_l, par_l, tgt_l = [], [], []
+    for k, i in enumerate(indices):
+        rng = np.random.default_rng([seed, step, int(i)])
+        pts, par, tgt = task.draw(rng, spec, n, options, k < n_teach)
+        pts_l.append(pts)
+        par_l.append(par)
+        tgt_l.append(tgt)
+    if options.teaching:
+        return np.stack(pts_l), np.stack(par_l), np.stack(tgt_l)
+    return np.stack(pts_l), np.stack(par_l)
+
+
+def make_batch(spec: TaskSpec, points: np.ndarray, params: np.ndarray, n: int,
+               targets: np.ndarray | None = None) -> Batch:
+    """Tensors of a training batch from the arrays of :func:`draw_samples` (float32 / complex64); ``targets``
+    (a teacher's maps, NaN rows for samples without one) become ``extra["target"]`` and ``extra["target_mask"]``."""
+    ref = torch.as_tensor(points, dtype=torch.float32)
+    par = torch.as_tensor(params)
+    par = par.to(torch.complex64) if par.is_complex() else par.float()
+    inputs = encode(ref, par, spec, n)
+    return spec.task.batch(spec, inputs, ref, par, n, targets)
+
+
+def teacher_extra(points: np.ndarray, targets: np.ndarray | None) -> dict:
+    """``extra`` entries of a batch with a teacher's maps: ``target`` (the sample's own points where it has none)
+    and ``target_mask``."""
+    if targets is None:
+        return {}
+    mask = np.isfinite(targets).all(axis=(1, 2))
+    return {"target": torch.as_tensor(np.where(mask[:, None, None], targets, points), dtype=torch.float32),
+            "target_mask": torch.as_tensor(mask)}
+
+
+def sample_batch(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
+                 density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
+                 beltrami_source: str = "map") -> Batch:
+    """Draw the training samples ``indices`` of step ``step`` on an ``N``-grid (:func:`draw_samples` then
+    :func:`make_batch`)."""
+    pts, par = draw_samples(spec, seed=seed, step=step, indices=indices, n=n, jitter=jitter,
+                            density_cfg=density_cfg, beltrami_cfg=beltrami_cfg, beltrami_source=beltrami_source)
+    return make_batch(spec, pts, par, n)
+
+
 def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights,
               teacher_weight: float = 0.0) -> tuple[Tensor, dict]:
-    """Total loss and its parts for network output ``psi`` of shape ``(B, d, *S)``; ``teacher_weight`` > 0 adds
-    the supervised term :func:`rfmap.teacher.teacher_loss` where the batch carries targets."""
+    """Total loss and its parts for network output ``psi`` of shape ``(B, d, *S)``: the task's own terms
+    (:meth:`Task.loss`), the fold penalty, and with ``teacher_weight`` > 0 the supervised term
+    :func:`rfmap.teacher.teacher_loss` where the batch carries targets."""
     B, d = psi.shape[:2]
     disp = psi.reshape(B, d, -1).transpose(1, 2)
     mapped = apply_displacement(batch.ref, disp, spec.boundary)
-    dim = batch.ref.shape[-1]
     if batch.on_grid:  # the elements are those of the N-grid mesh: strided fast path
-        ref_meas = grid_signed_measures(batch.ref, batch.n)
-        meas = grid_signed_measures(mapped, batch.n)
-        elem_density = None if batch.density is None else grid_element_mean(batch.density, batch.n, dim)
+        mk = {"ref_meas": grid_signed_measures(batch.ref, batch.n), "meas": grid_signed_measures(mapped, batch.n)}
     else:
-        ref_meas = signed_measures(batch.ref, batch.elements)
-        meas = signed_measures(mapped, batch.elements)
-        elem_density = None
-    mk = {"ref_meas": ref_meas, "meas": meas}
-    parts: dict[str, Tensor] = {}
-    if spec.kind == "beltrami":
-        parts["beltrami"] = L.beltrami_loss(batch.ref, mapped, batch.elements, batch.mu_target)
-        total = parts["beltrami"]
-    else:
-        parts["density"] = L.density_loss(batch.ref, mapped, batch.elements, batch.density, elem_density=elem_density,
-                                          tangent=weights.density_tangent, **mk)
-        total = parts["density"]
-        if weights.beltrami and d == 2:
-            parts["mu2"] = L.beltrami_energy(batch.ref, mapped, batch.elements)
-            total = total + weights.beltrami * parts["mu2"]
-        if spec.boundary == "free" and weights.area:
-            parts["area"] = L.area_penalty(batch.ref, mapped, batch.elements, **mk)
-            total = total + weights.area * parts["area"]
+        mk = {"ref_meas": signed_measures(batch.ref, batch.elements), "meas": signed_measures(mapped, batch.elements)}
+    total, parts = spec.task.loss(MappedBatch(batch, mapped, mk, spec), weights)
     if weights.fold:
         parts["fold"] = L.fold_penalty(batch.ref, mapped, batch.elements, weights.fold_threshold, **mk)
         total = total + weights.fold * parts["fold"]
