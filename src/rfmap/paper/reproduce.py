@@ -20,7 +20,7 @@ from .tables import COLUMN_TITLES, Headline, Table, format_sig, format_value, he
 
 __all__ = ["beltrami_table", "beltrami_resolution_table", "population_table", "resolution_table", "reproduce",
            "exact_beltrami_result", "population_summary", "population_headline", "beltrami_headline",
-           "cases_markdown", "SYM", "SYM_REF", "METHOD_TITLES"]
+           "cases_markdown", "SYM", "SYM_REF", "METHOD_TITLES", "beltrami_values", "density_values"]
 
 
 def _timed_map(sur, name, n, refine=False, repeats: int = 3, slow: float = 1.0, **kw):
@@ -45,7 +45,11 @@ def exact_beltrami_result(name: str, n: int) -> MapResult:
                      kind="beltrami")
 
 
-def _beltrami_metrics(res: MapResult, name: str) -> dict:
+def beltrami_values(res: MapResult, name: str) -> dict:
+    r"""The paper's columns of a reconstruction of the Beltrami test map ``name``: ``time``, ``mean_dd`` (mean
+    vertex distance to the exact map), ``mean_dmu`` (mean :math:`|\mu - \mu_{\text{exact}}|` at the triangle
+    centroids), ``mean_dmu_pl`` (against the coefficient of the exact map's piecewise-linear interpolant),
+    ``n_flipped`` and ``min_jacobian``."""
     exact = MapResult(res.ref_points, BELTRAMI_MAPS[name](res.ref_points), res.elements, res.field, "beltrami")
     m = res.metrics(exact_points=exact.mapped_points,
                     mu_ref=sample_mu(name, points=res.ref_points, elements=res.elements))
@@ -73,7 +77,7 @@ def _beltrami_rows(sur, table: Table, cases: list[tuple[str, str, int]], paper: 
     for case, name, n in cases:
         ours = _timed_map(sur, name, n)
         lbs = _lbs(name, n)
-        mo, ml = _beltrami_metrics(ours, name), _beltrami_metrics(lbs, name)
+        mo, ml = beltrami_values(ours, name), beltrami_values(lbs, name)
         mo["speedup"] = ml["time"] / mo["time"]
         table.add(case, "ours", mo)
         results[case] = {"ours": ours, "lbs": lbs, "exact": exact_beltrami_result(name, n)}
@@ -82,7 +86,7 @@ def _beltrami_rows(sur, table: Table, cases: list[tuple[str, str, int]], paper: 
             """A further surrogate row: refined (the paper's weight refinement, Sec. 4.3, as in the density
             tables) and/or symmetrized."""
             res = results[case][key] = _timed_map(sur, name, n, **kw)
-            values = _beltrami_metrics(res, name)
+            values = beltrami_values(res, name)
             values["speedup"] = ml["time"] / values["time"]
             if kw.get("refine"):
                 values["alpha"] = res.info["alpha"]
@@ -120,7 +124,9 @@ def beltrami_resolution_table(sur, ns=(48, 64, 80, 96), name: str = "T1-res", re
     return _beltrami_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(t.label), refine, symmetrize)
 
 
-def _density_values(res: MapResult, with_mu: bool) -> dict:
+def density_values(res: MapResult, with_mu: bool) -> dict:
+    """The paper's columns of a density map: ``time``, ``std_rho_orig``, ``std_rho_map``, ``min_jacobian``,
+    ``n_flipped`` and, ``with_mu`` (2D), ``max_mu`` and ``mean_mu``."""
     m = res.metrics()
     out = {"time": res.time, "std_rho_orig": m.std_rho_orig, "std_rho_map": m.std_rho_map,
            "min_jacobian": m.min_jacobian, "n_flipped": m.n_flipped}
@@ -148,23 +154,23 @@ def _density_rows(sur, table, cases, paper, refine, boundary, classical=True, sy
     with_mu = sur.spec.dim == 2
     for case, name, n in cases:
         ours = _timed_map(sur, name, n)
-        vo = _density_values(ours, with_mu)
+        vo = density_values(ours, with_mu)
         entry = {"ours": ours}
         if refine:
             ref = sur.map(name, n, refine=True)
-            vr = _density_values(ref, with_mu)
+            vr = density_values(ref, with_mu)
             vr["alpha"] = ref.info["alpha"]
             entry["ours+refine"] = ref
         sym_rows: dict[str, dict] = {}
         if symmetrize:
             sym = entry["ours+sym"] = _timed_map(sur, name, n, symmetrize=symmetrize)
-            sym_rows[SYM] = _density_values(sym, with_mu)
+            sym_rows[SYM] = density_values(sym, with_mu)
             if refine:
                 sref = entry["ours+sym+refine"] = sur.map(name, n, refine=True, symmetrize=symmetrize)
-                sym_rows[SYM_REF] = {**_density_values(sref, with_mu), "alpha": sref.info["alpha"]}
+                sym_rows[SYM_REF] = {**density_values(sref, with_mu), "alpha": sref.info["alpha"]}
         if classical:
             cl = _classical(name, n, boundary)
-            vc = _density_values(cl, with_mu)
+            vc = density_values(cl, with_mu)
             vo["speedup"] = cl.time / ours.time
             if symmetrize:
                 sym_rows[SYM]["speedup"] = cl.time / entry["ours+sym"].time

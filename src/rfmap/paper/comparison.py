@@ -1,0 +1,451 @@
+r"""The paper's tables as four-way comparisons, with one criterion.
+
+Every row of a paper table is a *case* (a test field, or a grid side) and every scored column a *metric* where
+lower is better.  For each case this module puts four values side by side:
+
+``paper``
+    the published value (``data/paper_tables.json``);
+``native`` -- the paper's method
+    the network run on the requested grid itself, then the paper's weight refinement (Sec. 4.3), nothing else:
+    ``Surrogate.map(field, n, refine=True, work_n=n, repair=False)``;
+``delivered``
+    what the project returns by default with its options on: the network on its working grid (the requested side
+    clipped to the training range, the displacement interpolated), averaged over the symmetries of the square or
+    cube, refined, and repaired where it folds: ``Surrogate.map(field, n, refine=True, symmetrize=True)``;
+``classical``
+    the fastest classical solver of the project on the same mesh: the flow-based density-equalizing map
+    (``solve_dem(..., method="flow")``) or the Linear Beltrami Solver.
+
+A case *meets* the paper when the paper's method is at most the paper's value: :math:`v_{\text{native}} \le
+v_{\text{paper}}`.  Times are kept beside the accuracies (the fastest of a few runs after a warm-up); the paper's
+were measured on a GPU, so only the ratios measured in one run compare.
+"""
+from __future__ import annotations
+
+import csv
+import io
+import time
+from decimal import Decimal
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..finish import quiet_quality
+from ..paper_fields import DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
+from ..result import MapResult
+from .reproduce import beltrami_values, density_values, exact_beltrami_result
+from .tables import paper_table
+
+__all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
+           "timed", "compare_density", "compare_beltrami", "population_comparison", "resolution_comparison",
+           "beltrami_comparison", "beltrami_resolution_comparison", "PAPER_METHOD", "DELIVERED"]
+
+#: The four columns of a comparison, in order.
+METHODS = ("paper", "native", "delivered", "classical")
+
+#: Keywords of :meth:`rfmap.Surrogate.map` for the paper's method (``work_n`` is the requested side).
+PAPER_METHOD = {"refine": True, "repair": False}
+#: Keywords of :meth:`rfmap.Surrogate.map` for the delivered map.
+DELIVERED = {"refine": True, "symmetrize": True}
+
+#: How a metric or a quantity of the tables is named in the book.
+METRIC_TITLES = {"std_rho_map": "Std(ρ̃_map)", "std_rho_orig": "Std(ρ̃_orig)", "mean_mu": "mean |μ|",
+                 "max_mu": "max |μ|", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
+                 "mean_dmu_pl": "mean |Δμ| vs PL", "min_jacobian": "min det J", "n_flipped": "flips",
+                 "time": "time", "network_time": "network time", "work_n": "network grid", "alpha": "α",
+                 "mu_ratio": "mean |μ|, DEQ / DEM"}
+
+#: significant digits of every number of the comparison tables and the scoreboard
+DIGITS = 4
+
+
+def format_number(v, digits: int = DIGITS) -> str:
+    """One number format for every table of the comparisons: ``digits`` significant digits in positional notation
+    (``0.08254``, ``0.00003810``, ``1234``), integers exactly, ``None`` or NaN as an em dash.
+
+    Examples
+    --------
+    >>> format_number(0.0825411), format_number(3.8104e-05), format_number(7)
+    ('0.08254', '0.00003810', '7')
+    """
+    if v is None:
+        return "—"
+    if isinstance(v, (bool, np.bool_)):
+        return "yes" if v else "no"
+    if isinstance(v, (int, np.integer)):
+        return str(int(v))
+    v = float(v)
+    if not np.isfinite(v):
+        return "—"
+    return format(Decimal(f"{v:.{digits - 1}e}"), "f")
+
+
+def format_time(seconds) -> str:
+    """A time with its unit and three significant digits: ``12.3 ms``, ``2.43 s``; ``None`` as an em dash."""
+    if seconds is None:
+        return "—"
+    s = float(seconds)
+    return f"{s * 1e3:.3g} ms" if s < 1 else f"{s:.3g} s"
+
+
+def _met(native, paper) -> bool | None:
+    if native is None or paper is None:
+        return None
+    return bool(native <= paper)
+
+
+def score_row(paper, native, delivered, classical) -> dict[str, str]:
+    """The four values of one scoreboard cell and its verdict, as the book pastes them: each number by
+    :func:`format_number`, ``met`` ``yes`` / ``no`` (``—`` without a paper value)."""
+    met = _met(native, paper)
+    return {"paper": format_number(paper), "native": format_number(native), "delivered": format_number(delivered),
+            "classical": format_number(classical), "met": "—" if met is None else ("yes" if met else "no")}
+
+
+def timed(run: Callable[[], MapResult], warm: Callable[[], object] | None = None, repeats: int = 3,
+          slow: float = 1.0) -> MapResult:
+    """The fastest of ``repeats`` runs of ``run`` (by the result's own ``time``) after one untimed ``warm`` call
+    (default: ``run`` itself); a single run when the first took more than ``slow`` seconds (the spread of repeated
+    timings is then far below the digits quoted)."""
+    (warm or run)()
+    t0 = time.perf_counter()
+    first = run()
+    if time.perf_counter() - t0 > slow:
+        return first
+    return min([first] + [run() for _ in range(repeats - 1)], key=lambda r: r.time)
+
+
+@dataclass(frozen=True)
+class Case:
+    """One row of a paper table: ``name`` as the paper labels it (a field, or a grid side as text), the ``field`` to
+    map and the grid side ``n`` actually run (smaller than the paper's at ``ci`` scale)."""
+
+    name: str
+    field: str
+    n: int
+
+    def title(self, prefix: str = "") -> str:
+        """The row's label; a case run on another grid than the paper's says so."""
+        text = f"{prefix}{self.name}"
+        if self.name.isdigit() and int(self.name) != self.n:
+            text += f" (run at {self.n})"
+        return text
+
+
+@dataclass
+class Comparison:
+    """A paper table as a four-way comparison (module docstring).
+
+    Attributes
+    ----------
+    label : str
+        The paper's table (``tab:...``).
+    title : str
+    metrics : list of str
+        The scored metrics (lower is better), keys of :data:`METRIC_TITLES`.
+    cases : list of Case
+    classical : str
+        The classical solver's name for column heads.
+    values : dict
+        ``{(case name, method): {quantity: value}}`` for every method of :data:`METHODS`.
+    maps : dict
+        ``{case name: {"native" | "delivered" | "classical" | "exact": MapResult}}``, for the figures.
+    case_prefix : str
+        Prefix of the row labels (``"N = "`` for grid sides).
+    """
+
+    label: str
+    title: str
+    metrics: list[str]
+    cases: list[Case]
+    classical: str
+    values: dict = field(default_factory=dict)
+    maps: dict = field(default_factory=dict)
+    case_prefix: str = ""
+
+    def value(self, case: str, method: str, quantity: str):
+        """One value; ``None`` where it was not measured (the paper's of a quantity it does not report)."""
+        return self.values.get((str(case), method), {}).get(quantity)
+
+    def met(self, case: str, metric: str) -> bool | None:
+        """Whether the paper's method is at most the paper's value (``None`` without a paper value)."""
+        return _met(self.value(case, "native", metric), self.value(case, "paper", metric))
+
+    def count(self, metric: str, test: Callable[[str], bool | None] | None = None) -> tuple[int, int]:
+        """``(k, m)``: the cases where ``test(case)`` holds (default: :meth:`met`) among the ``m`` it decides."""
+        test = test or (lambda c: self.met(c, metric))
+        verdicts = [test(c.name) for c in self.cases]
+        return sum(bool(v) for v in verdicts), sum(v is not None for v in verdicts)
+
+    def classical_better(self, metric: str) -> tuple[int, int]:
+        """``(k, m)``: the cases where the classical solver's value is below the paper's method's."""
+        def test(c):
+            a, b = self.value(c, "classical", metric), self.value(c, "native", metric)
+            return None if a is None or b is None else a < b
+        return self.count(metric, test)
+
+    def mean(self, method: str, metric: str) -> float | None:
+        """The mean of a method's values of ``metric`` over the cases (``None`` if any is missing)."""
+        vals = [self.value(c.name, method, metric) for c in self.cases]
+        return None if any(v is None for v in vals) else float(np.mean(vals))
+
+    def speed(self, method: str = "native") -> dict[str, float]:
+        """Per case the classical solver's time over ``method``'s (above 1: ``method`` is faster)."""
+        return {c.name: self.value(c.name, "classical", "time") / self.value(c.name, method, "time")
+                for c in self.cases}
+
+    def median_time(self, method: str, quantity: str = "time") -> float | None:
+        """The median over the cases of a method's ``time`` (or ``network_time``), in seconds."""
+        vals = [self.value(c.name, method, quantity) for c in self.cases]
+        return None if any(v is None for v in vals) else float(np.median(vals))
+
+    def speed_sentence(self, metric: str) -> str:
+        """The speed of the paper's method and of the delivered map against the classical solver, on the same
+        cases in the same run, with the accuracy of each in ``metric`` (means over the cases)."""
+        tc, tn, td = (self.median_time(m) for m in ("classical", "native", "delivered"))
+        tnet = self.median_time("native", "network_time")
+        ratio = float(np.median([1 / s for s in self.speed("native").values()]))
+        kc, mc = self.classical_better(metric)
+        acc = {m: format_number(self.mean(m, metric)) for m in ("classical", "native", "delivered")}
+        return (f"On this machine the {self.classical} takes a median {format_time(tc)} per case; the paper's method "
+                f"takes {format_time(tn)} (the network alone {format_time(tnet)}), {ratio:.3g} times the "
+                f"{self.classical}'s time, and the delivered map {format_time(td)}. The {self.classical} is also the "
+                f"more accurate on {kc} of {mc} cases: averaged over the cases, {METRIC_TITLES[metric]} is "
+                f"{acc['classical']} for the {self.classical}, {acc['native']} for the paper's method and "
+                f"{acc['delivered']} delivered.")
+
+    def score_values(self) -> dict[str, str]:
+        """The numbers the scoreboard pastes, as formatted text: for every metric ``{metric}_{col}`` (the mean over
+        the cases of each column of :data:`METHODS`), ``{metric}_met`` and ``{metric}_classical_better``
+        (``"k of m"``), and per case ``{metric}_{case}_{col}`` and ``{metric}_{case}_met``."""
+        out: dict[str, str] = {}
+        for metric in self.metrics:
+            row = score_row(*(self.mean(m, metric) for m in METHODS))
+            out.update({f"{metric}_{k}": v for k, v in row.items() if k != "met"})
+            out[f"{metric}_met"] = "{} of {}".format(*self.count(metric))
+            out[f"{metric}_classical_better"] = "{} of {}".format(*self.classical_better(metric))
+            for c in self.cases:
+                row = score_row(*(self.value(c.name, m, metric) for m in METHODS))
+                out.update({f"{metric}_{c.name}_{k}": v for k, v in row.items()})
+        return out
+
+    def heads(self) -> list[str]:
+        return ["paper", "paper's method", "delivered", self.classical]
+
+    def to_markdown(self) -> str:
+        """The table in the paper's shape: one block of rows per case (the scored metrics, then the time), a column
+        per method of :data:`METHODS` and the verdict; every number by :func:`format_number`."""
+        head = ["case" if not self.case_prefix else "N", "quantity"] + self.heads() + ["met"]
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for c in self.cases:
+            for i, q in enumerate(self.metrics + ["time"]):
+                cells = [c.title() if i == 0 else "", METRIC_TITLES[q].replace("|", "\\|")]
+                if q == "time":
+                    cells += [format_time(self.value(c.name, m, q)) for m in METHODS] + [""]
+                else:
+                    met = self.met(c.name, q)
+                    cells += [format_number(self.value(c.name, m, q)) for m in METHODS]
+                    cells.append("—" if met is None else ("yes" if met else "no"))
+                lines.append("| " + " | ".join(cells) + " |")
+        return "\n".join(lines)
+
+    def verdict(self) -> str:
+        """One sentence per metric: how many cases meet the paper (criterion named), and how many the classical
+        solver maps more accurately than the paper's method."""
+        parts = []
+        for metric in self.metrics:
+            k, m = self.count(metric)
+            kc, mc = self.classical_better(metric)
+            parts.append(f"{METRIC_TITLES[metric]}: the paper's method is at most the paper's value on {k} of {m} "
+                         f"cases; the {self.classical} is more accurate than the paper's method on {kc} of {mc}.")
+        return " ".join(parts)
+
+    def full_quantities(self) -> list[str]:
+        present = {q for v in self.values.values() for q in v}
+        order = ["time", "network_time", "std_rho_orig", "std_rho_map", "mean_dd", "mean_dmu", "mean_dmu_pl",
+                 "min_jacobian", "n_flipped", "max_mu", "mean_mu", "work_n", "alpha"]
+        return [q for q in order if q in present]
+
+    def full_markdown(self) -> str:
+        """Every quantity measured, one row per case and method (the paper's columns as columns)."""
+        qs = self.full_quantities()
+        head = ["case", "method"] + [METRIC_TITLES[q].replace("|", "\\|") for q in qs]
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for c in self.cases:
+            for m, title in zip(METHODS, self.heads()):
+                vals = self.values.get((c.name, m))
+                if not vals:
+                    continue
+                cells = [c.title(self.case_prefix), title]
+                for q in qs:
+                    v = vals.get(q)
+                    if q in ("time", "network_time"):
+                        cells.append(format_time(v))
+                    elif isinstance(v, (list, tuple)):
+                        cells.append(", ".join(f"{float(a):.3g}" for a in v))
+                    else:
+                        cells.append(format_number(v))
+                lines.append("| " + " | ".join(cells) + " |")
+        return "\n".join(lines)
+
+    def to_csv(self) -> str:
+        """Every value, one row per case and method; times in seconds, numbers by :func:`format_number`."""
+        qs = self.full_quantities()
+        buf = io.StringIO()
+        w = csv.writer(buf)
+        w.writerow(["case", "n", "method"] + qs)
+        for c in self.cases:
+            for m in METHODS:
+                vals = self.values.get((c.name, m))
+                if vals:
+                    w.writerow([c.name, c.n, m] + [_csv_cell(vals.get(q)) for q in qs])
+        return buf.getvalue()
+
+    def save(self, out_dir) -> list[Path]:
+        """Write ``<label>.md`` (the title, the paper-shaped table and the full one) and ``<label>.csv``."""
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        stem = self.label.replace(":", "-").replace("_", "-")
+        md, cs = out / f"{stem}.md", out / f"{stem}.csv"
+        md.write_text(f"{self.title}\n\n{self.to_markdown()}\n\n{self.full_markdown()}\n", encoding="utf-8")
+        cs.write_text(self.to_csv(), encoding="utf-8")
+        return [md, cs]
+
+    def _repr_markdown_(self) -> str:
+        return f"**{self.title}**\n\n{self.to_markdown()}"
+
+
+def _csv_cell(v) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, (list, tuple)):
+        return " ".join(f"{float(a):.6g}" for a in v)
+    return str(int(v)) if isinstance(v, (int, np.integer)) else f"{float(v):.6g}"
+
+
+# ------------------------------------------------------------------------------------------------- the runners
+def _network_values(res: MapResult, values: dict) -> dict:
+    info = res.info
+    return {**values, "network_time": info.get("network_time"), "work_n": info.get("work_n"),
+            "alpha": info.get("alpha")}
+
+
+def _native_side(sur, n: int) -> int:
+    """The paper's method runs the network on the requested side (at least the model's smallest grid)."""
+    return max(int(n), int(sur.model.min_size))
+
+
+def _surrogate_maps(sur, field_, n: int) -> tuple[MapResult, MapResult]:
+    """The paper's method and the delivered map of one field, timed (:func:`timed`)."""
+    w = _native_side(sur, n)
+    native = timed(lambda: sur.map(field_, n, work_n=w, **PAPER_METHOD),
+                   warm=lambda: sur.map(field_, n, work_n=w, repair=False))
+    delivered = timed(lambda: sur.map(field_, n, **DELIVERED), warm=lambda: sur.map(field_, n, repair=False))
+    return native, delivered
+
+
+@quiet_quality()
+def compare_density(sur, cases: list[Case], label: str, title: str, *, case_prefix: str = "") -> Comparison:
+    """A density table (``tab:population_test``, ``_fb``, ``tab:resolution_test`` and the 3D ones) as a
+    :class:`Comparison`: per case the paper's method, the delivered map and the flow-based solver with the
+    surrogate's boundary, and the paper's row.  Scored: Std(ρ̃_map), and in 2D mean |μ|.
+
+    Parameters
+    ----------
+    sur : rfmap.Surrogate
+        A density surrogate.
+    cases : list of Case
+    label, title : str
+    case_prefix : str
+    """
+    from ..solvers import solve_dem
+
+    dim, boundary = sur.spec.dim, ("free" if sur.spec.boundary == "free" else "square")
+    with_mu = dim == 2
+    cmp = Comparison(label, title, ["std_rho_map"] + (["mean_mu"] if with_mu else []), list(cases),
+                     "flow solver", case_prefix=case_prefix)
+    paper = paper_table(label)["rows"]
+    for c in cases:
+        native, delivered = _surrogate_maps(sur, c.field, c.n)
+        dens = DENSITIES[c.field].sample(c.n)
+        flow = timed(lambda: solve_dem(dens, method="flow", boundary=boundary))
+        cmp.values[(c.name, "native")] = _network_values(native, density_values(native, with_mu))
+        cmp.values[(c.name, "delivered")] = _network_values(delivered, density_values(delivered, with_mu))
+        cmp.values[(c.name, "classical")] = density_values(flow, with_mu)
+        if c.name in paper:
+            cmp.values[(c.name, "paper")] = dict(paper[c.name])
+        cmp.maps[c.name] = {"native": native, "delivered": delivered, "classical": flow}
+    return cmp
+
+
+def compare_beltrami(sur, cases: list[Case], label: str, title: str, *, case_prefix: str = "") -> Comparison:
+    """A Beltrami table (``tab:reconstruction_results_mu``, ``_res``) as a :class:`Comparison`: per case the
+    paper's method, the delivered map, the Linear Beltrami Solver and the paper's row.  Scored: mean |Δd| and mean
+    |Δμ| (against the analytic coefficient at the triangle centroids)."""
+    from ..solvers import solve_lbs
+
+    cmp = Comparison(label, title, ["mean_dd", "mean_dmu"], list(cases), "LBS", case_prefix=case_prefix)
+    paper = paper_table(label)["rows"]
+    for c in cases:
+        native, delivered = _surrogate_maps(sur, c.field, c.n)
+        mu = sample_mu(c.field, c.n)
+        lbs = timed(lambda: solve_lbs(mu, c.n))
+        for method, res in (("native", native), ("delivered", delivered)):
+            cmp.values[(c.name, method)] = _network_values(res, beltrami_values(res, c.field))
+        cmp.values[(c.name, "classical")] = beltrami_values(lbs, c.field)
+        if c.name in paper:
+            cmp.values[(c.name, "paper")] = dict(paper[c.name])
+        cmp.maps[c.name] = {"native": native, "delivered": delivered, "classical": lbs,
+                            "exact": exact_beltrami_result(c.field, c.n)}
+    return cmp
+
+
+# ----------------------------------------------------------------------------------------- the paper's tables
+def _label(dim: int, boundary: str, kind: str) -> str:
+    stem = {"population": "population_test", "resolution": "resolution_test"}[kind]
+    return ("tab:" if dim == 2 else "tab:3d_") + stem + ("_fb" if boundary == "free" else "")
+
+
+def population_comparison(sur, n: int | None = None, fields=None) -> Comparison:
+    """Tables 4, 5, 7 and 8 of the paper (by the surrogate's dimension and boundary) on the ``n``-grid (default
+    the paper's: 51 in 2D, 48 in 3D)."""
+    d, b = sur.spec.dim, sur.spec.boundary
+    n = n or PAPER_N[d]
+    fields = list(fields or TEST_FIELDS["density", d])
+    where = "free boundary" if b == "free" else ("square boundary" if d == 2 else "cube boundary")
+    return compare_density(sur, [Case(f, f, n) for f in fields], _label(d, b, "population"),
+                           f"{d}D population tests, {where}, N = {n}, model {sur.name}")
+
+
+def resolution_comparison(sur, ns: dict | None = None) -> Comparison:
+    """Tables 6 and 9 of the paper: the multi-frequency density at the paper's grid sides; ``ns`` maps each
+    paper side to the side run (default: the paper's own)."""
+    d = sur.spec.dim
+    paper_ns = (32, 64, 128, 256) if d == 2 else (32, 40, 56, 64)
+    ns = ns or {k: k for k in paper_ns}
+    if set(ns) != set(paper_ns):
+        raise ValueError(f"ns must map the paper's sides {paper_ns} to the sides run, got {sorted(ns)}")
+    name = "multi-freq" if d == 2 else "multi-freq-3d"
+    return compare_density(sur, [Case(str(k), name, int(ns[k])) for k in paper_ns], _label(d, "square", "resolution"),
+                           f"{d}D resolution test, multi-frequency density, model {sur.name}", case_prefix="N = ")
+
+
+def beltrami_comparison(sur, n: int = PAPER_N[2]) -> Comparison:
+    """Table 2 of the paper: the test maps T1–T4 on the ``n``-grid."""
+    return compare_beltrami(sur, [Case(t, t, n) for t in TEST_FIELDS["beltrami", 2]], "tab:reconstruction_results_mu",
+                            f"Reconstruction from Beltrami coefficients, N = {n}, model {sur.name}")
+
+
+def beltrami_resolution_comparison(sur, ns: dict | None = None) -> Comparison:
+    """Table 3 of the paper: T1 with a = 0.06, b = 0.04 at the paper's grid sides (``ns`` as in
+    :func:`resolution_comparison`)."""
+    paper_ns = (48, 64, 80, 96)
+    ns = ns or {k: k for k in paper_ns}
+    if set(ns) != set(paper_ns):
+        raise ValueError(f"ns must map the paper's sides {paper_ns} to the sides run, got {sorted(ns)}")
+    return compare_beltrami(sur, [Case(str(k), "T1-res", int(ns[k])) for k in paper_ns],
+                            "tab:reconstruction_results_res",
+                            f"Reconstruction of T1 (a = 0.06, b = 0.04) per grid side, model {sur.name}",
+                            case_prefix="N = ")

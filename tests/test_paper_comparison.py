@@ -1,0 +1,123 @@
+"""The four-way comparisons of the paper's tables (rfmap.paper.comparison): one criterion, one number format, the
+scoreboard's keys, and the runners on untrained models (the identity map, whose errors are known exactly)."""
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from rfmap.paper.comparison import (Case, Comparison, beltrami_comparison, compare_density, format_number,
+                                    format_time, resolution_comparison, score_row, timed)
+from rfmap.result import MapResult
+from rfmap.surrogate import Surrogate
+from rfmap.tasks import TaskSpec
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.mark.parametrize("value, text", [
+    (0.0825411, "0.08254"), (0.0297, "0.02970"), (3.8104e-05, "0.00003810"), (1234.5, "1234"), (12000.0, "12000"),
+    (-0.0123456, "-0.01235"), (7, "7"), (np.int64(3), "3"), (None, "—"), (float("nan"), "—"), (True, "yes"),
+])
+def test_one_number_format_of_four_significant_digits(value, text):
+    assert format_number(value) == text
+
+
+def test_times_carry_their_unit():
+    assert (format_time(0.0123456), format_time(2.4321), format_time(None)) == ("12.3 ms", "2.43 s", "—")
+
+
+def _comparison() -> Comparison:
+    """Two fields; the paper's method meets the paper on the first only, the classical solver beats it on both."""
+    cases = [Case("a", "sin-cos", 9), Case("b", "ring", 9)]
+    c = Comparison("tab:population_test", "t", ["std_rho_map"], cases, "flow solver")
+    for name, (paper, native, delivered, classical) in {"a": (0.08, 0.05, 0.04, 0.01),
+                                                        "b": (0.04, 0.06, 0.05, 0.02)}.items():
+        for method, v in zip(("paper", "native", "delivered", "classical"), (paper, native, delivered, classical)):
+            c.values[(name, method)] = {"std_rho_map": v, "time": 0.01 if method != "native" else 0.02}
+    return c
+
+
+def test_met_is_the_paper_method_at_most_the_paper():
+    c = _comparison()
+    assert (c.met("a", "std_rho_map"), c.met("b", "std_rho_map")) == (True, False)
+    assert c.count("std_rho_map") == (1, 2) and c.classical_better("std_rho_map") == (2, 2)
+    assert c.mean("paper", "std_rho_map") == pytest.approx(0.06)
+    assert c.speed() == {"a": pytest.approx(0.5), "b": pytest.approx(0.5)}
+    v = c.score_values()
+    assert v["std_rho_map_met"] == "1 of 2" and v["std_rho_map_classical_better"] == "2 of 2"
+    assert v["std_rho_map_paper"] == "0.06000" and v["std_rho_map_b_met"] == "no"
+    assert "1 of 2" in c.verdict() and "flow solver is more accurate than the paper's method on 2 of 2" in c.verdict()
+    assert score_row(None, 0.1, 0.1, 0.1)["met"] == "—"
+
+
+def test_table_is_shaped_like_the_paper_one_block_per_case():
+    lines = _comparison().to_markdown().splitlines()
+    assert lines[0] == "| case | quantity | paper | paper's method | delivered | flow solver | met |"
+    assert lines[2] == "| a | Std(ρ̃_map) | 0.08000 | 0.05000 | 0.04000 | 0.01000 | yes |"
+    assert lines[3] == "|  | time | 10 ms | 20 ms | 10 ms | 10 ms |  |"
+    assert len(lines) == 2 + 2 * 2
+
+
+def test_score_values_are_the_keys_the_scoreboard_pastes():
+    """The chapter glues comparison.score_values() under the item's prefix: the keys are exactly those that
+    scripts/make_figures_md.py pastes for it."""
+    spec = importlib.util.spec_from_file_location("make_figures_md", ROOT / "scripts" / "make_figures_md.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    items = json.loads((ROOT / "src" / "rfmap" / "data" / "figures.json").read_text(encoding="utf-8"))["items"]
+    item = next(it for it in items if it["label"] == "tab:population_test")
+    score = item["score"]
+    cases = [Case(f, f, 9) for f in score["cases"]]
+    c = Comparison(item["label"], "t", list(score["metrics"]), cases, "flow solver")
+    for case in cases:
+        for method in ("paper", "native", "delivered", "classical"):
+            c.values[(case.name, method)] = {m: 0.1 for m in score["metrics"]}
+    summary, per_case = mod.score_keys(item)
+    assert {f"{score['key']}_{k}" for k in c.score_values()} == set(summary) | set(per_case)
+
+
+def test_timed_keeps_the_fastest_run_after_a_warm_up():
+    times = iter([5.0, 3.0, 1.0, 2.0])
+    calls = []
+
+    def run():
+        calls.append(1)
+        return MapResult(np.zeros((1, 2)), np.zeros((1, 2)), np.zeros((0, 3), int), np.ones(1), time=next(times))
+
+    assert timed(run).time == 1.0 and len(calls) == 4  # warm-up, then three timed runs
+
+
+def test_density_comparison_of_an_untrained_model():
+    """An untrained surrogate is the identity: its Std(ρ̃_map) is the input's, the flow solver's is far lower, and
+    the paper's method ran on the requested grid while the delivered map used the working grid."""
+    sur = Surrogate.untrained(TaskSpec("density", 2, "square"), base=4, depth=2, name="tiny", n_range=[17, 17])
+    c = compare_density(sur, [Case("sin-cos", "sin-cos", 13)], "tab:population_test", "t")
+    ours = c.value("sin-cos", "native", "std_rho_map")
+    assert ours == pytest.approx(c.value("sin-cos", "native", "std_rho_orig"), rel=1e-6)
+    assert c.value("sin-cos", "classical", "std_rho_map") < 0.5 * ours
+    assert c.value("sin-cos", "native", "work_n") == 13 and c.value("sin-cos", "delivered", "work_n") == 17
+    assert c.maps["sin-cos"]["delivered"].info["symmetrize"] == "full"
+    assert c.value("sin-cos", "paper", "std_rho_map") == pytest.approx(0.082541)
+    assert c.metrics == ["std_rho_map", "mean_mu"] and c.met("sin-cos", "std_rho_map") is False
+
+
+def test_beltrami_comparison_of_an_untrained_model():
+    sur = Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, name="tiny")
+    c = beltrami_comparison(sur, n=13)
+    exact = c.maps["T1"]["exact"]
+    expected = float(np.linalg.norm(exact.mapped_points - exact.ref_points, axis=1).mean())
+    assert c.value("T1", "native", "mean_dd") == pytest.approx(expected, rel=1e-6)
+    assert c.value("T1", "classical", "mean_dd") < 0.1 * expected and c.classical == "LBS"
+    assert [case.name for case in c.cases] == ["T1", "T2", "T3", "T4"]
+
+
+def test_resolution_comparison_keys_the_rows_by_the_paper_sides():
+    sur = Surrogate.untrained(TaskSpec("density", 2, "square"), base=4, depth=2, name="tiny", n_range=[9, 17])
+    with pytest.raises(ValueError, match="paper's sides"):
+        resolution_comparison(sur, {32: 9})
+    c = resolution_comparison(sur, {32: 9, 64: 11, 128: 13, 256: 17})
+    assert [case.name for case in c.cases] == ["32", "64", "128", "256"]
+    assert c.cases[0].title() == "32 (run at 9)" and c.value("32", "native", "work_n") == 9
+    assert c.value("256", "paper", "std_rho_map") == pytest.approx(0.134581)
