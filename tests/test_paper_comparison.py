@@ -48,7 +48,7 @@ def test_met_is_the_paper_method_at_most_the_paper():
     v = c.score_values()
     assert v["std_rho_map_met"] == "1 of 2" and v["std_rho_map_classical_better"] == "2 of 2"
     assert v["std_rho_map_paper"] == "0.06000" and v["std_rho_map_b_met"] == "no"
-    assert "1 of 2" in c.verdict() and "flow solver is more accurate than the paper's method on 2 of 2" in c.verdict()
+    assert "1 of 2" in c.verdict() and "flow solver does better than the paper's method on 2 of 2" in c.verdict()
     assert score_row(None, 0.1, 0.1, 0.1)["met"] == "—"
 
 
