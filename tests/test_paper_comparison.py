@@ -121,3 +121,13 @@ def test_resolution_comparison_keys_the_rows_by_the_paper_sides():
     assert [case.name for case in c.cases] == ["32", "64", "128", "256"]
     assert c.cases[0].title() == "32 (run at 9)" and c.value("32", "native", "work_n") == 9
     assert c.value("256", "paper", "std_rho_map") == pytest.approx(0.134581)
+
+
+def test_native_lesson_names_the_sides_where_the_native_map_is_worse():
+    c = _comparison()
+    for name, (wn, wd) in {"a": (9, 9), "b": (64, 48)}.items():
+        c.values[(name, "native")]["work_n"], c.values[(name, "delivered")]["work_n"] = wn, wd
+    assert "(N = b)" in c.native_lesson() and "accurate only near" in c.native_lesson()  # 0.06 > 1.1 * 0.05
+    assert "within 1.3 times" in c.native_lesson(tol=1.3)
+    c.values[("b", "native")]["work_n"] = 48
+    assert "same grid at every side" in c.native_lesson()

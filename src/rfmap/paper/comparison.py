@@ -222,6 +222,26 @@ class Comparison:
                 f"{acc['classical']} for the {self.classical}, {acc['native']} for the paper's method and "
                 f"{acc['delivered']} delivered.")
 
+    def native_lesson(self, metric: str = "std_rho_map", tol: float = 1.1) -> str:
+        """A sentence on the cases where the paper's method runs the network on another grid than the delivered
+        map (outside the training range): whether there its ``metric`` is more than ``tol`` times the delivered
+        map's."""
+        outside = [c.name for c in self.cases
+                   if self.value(c.name, "native", "work_n") != self.value(c.name, "delivered", "work_n")]
+        if not outside:
+            return "The paper's method and the delivered map run the network on the same grid at every side."
+        worse = [c for c in outside
+                 if self.value(c, "native", metric) > tol * self.value(c, "delivered", metric)]
+        sides = ", ".join(worse)
+        if worse:
+            return (f"Outside the training range (N = {sides}) the network run natively, as the paper runs it, "
+                    f"leaves {METRIC_TITLES[metric]} more than {tol:g} times that of the delivered map, which runs "
+                    "it on the working grid and interpolates: the one network accepts every grid, but it is "
+                    "accurate only near the grids it was trained on.")
+        return (f"Outside the training range (N = {', '.join(outside)}) the network run natively, as the paper "
+                f"runs it, leaves {METRIC_TITLES[metric]} within {tol:g} times that of the delivered map, which "
+                "runs it on the working grid and interpolates.")
+
     def score_values(self) -> dict[str, str]:
         """The numbers the scoreboard pastes, as formatted text: for every metric ``{metric}_{col}`` (the mean over
         the cases of each column of :data:`METHODS`), ``{metric}_met`` and ``{metric}_classical_better``
