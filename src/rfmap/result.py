@@ -13,7 +13,12 @@ import torch
 from .geometry import beltrami_coefficient, signed_measures
 from .metrics import MapMetrics, compute_metrics, element_population
 
-__all__ = ["MapResult", "save_npz_atomic", "load_result", "to_pyvista", "setup_pyvista"]
+__all__ = ["MapResult", "save_npz_atomic", "load_result", "to_pyvista", "setup_pyvista", "DENSITY_FIELD_KINDS"]
+
+#: The kinds of map whose ``field`` is a vertex density, so that the density metrics (Std(rho~)) and the VTK export's
+#: ``density`` and ``rho`` apply: the kind the density solvers write, and every registered task that equalizes a
+#: density (:func:`rfmap.tasks.register_task` adds it).
+DENSITY_FIELD_KINDS: set[str] = {"density"}
 
 
 def save_npz_atomic(path, **arrays) -> None:
@@ -87,7 +92,7 @@ class MapResult:
 
     def metrics(self, *, exact_points=None, mu_ref=None) -> MapMetrics:
         """Metrics in the paper's conventions (see :func:`rfmap.metrics.compute_metrics`)."""
-        density = self.field.reshape(-1) if self.kind == "density" else None
+        density = self.field.reshape(-1) if self.kind in DENSITY_FIELD_KINDS else None
         return compute_metrics(self.ref_points, self.mapped_points, self.elements, density=density,
                                exact_points=exact_points, mu_ref=mu_ref, time=self.time)
 
@@ -136,7 +141,7 @@ def to_pyvista(result, *, mapped: bool = True):
     grid = pv.UnstructuredGrid(cells, np.full(len(el), celltype, dtype=np.uint8), pts)
     disp = result.mapped_points - result.ref_points
     grid.point_data["displacement"] = np.column_stack([disp, np.zeros(len(disp))]) if d == 2 else disp
-    if result.kind == "density":
+    if result.kind in DENSITY_FIELD_KINDS:
         grid.point_data["density"] = result.field.reshape(-1)
         grid.cell_data["rho"] = result.rho() if mapped else result.field.reshape(-1)[el].mean(1) / \
             result.field.reshape(-1)[el].mean(1).mean()

@@ -24,6 +24,7 @@ import numpy as np
 
 from .mesh import grid_points
 from .finish import quiet_quality
+from .tasks import DensityTask
 
 __all__ = ["hard_density", "hard_beltrami", "first_folding", "self_crossing_map"]
 
@@ -82,7 +83,7 @@ def first_folding(sur, n: int, *, seed: int = 0, tries: int = 50) -> tuple[int, 
     dim = sur.spec.dim
     for s in range(seed, seed + tries):
         rng = np.random.default_rng(s)
-        if sur.spec.kind == "density":
+        if isinstance(sur.spec.task, DensityTask):
             field = hard_density(rng, n, dim)
             raw = sur.map(field, n, preprocess=False, repair=False)
         else:

@@ -41,93 +41,25 @@ the cap only guards maps that are not finite.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Callable
-
 import numpy as np
 
-from .random_fields import RandomBeltramiConfig, RandomDensity, RandomDensityConfig, RandomMap
+from .tasks import get_task
+from .tasks.density import DENSITY_KINDS
+from .tasks.heldout import STREAMS, VALIDATION_SEED, ValidationField
 
 __all__ = ["VALIDATION_SEED", "STREAMS", "ValidationField", "validation_fields", "evaluate", "score", "DENSITY_KINDS",
            "family", "family_table"]
 
-#: first word of every validation seed (training seeds have three words, so the streams never coincide)
-VALIDATION_SEED = 20_250_917
-
-DENSITY_KINDS = ("smooth", "steps", "peak", "ramp")
-
-
-@dataclass(frozen=True)
-class ValidationField:
-    """One validation field: a label, the raw field on points (P, d), and for Beltrami fields the exact map."""
-
-    label: str
-    field: Callable[[np.ndarray], np.ndarray]
-    exact: Callable[[np.ndarray], np.ndarray] | None = None
-
-
-#: the streams of held-out fields: 0 validates (and chooses checkpoints) during training, 1 is the report set of the
-#: book's generalization tables, used for nothing else
-STREAMS = {"validation": 0, "report": 1}
-
-
-def _rng(j: int, stream: str) -> np.random.Generator:
-    if stream not in STREAMS:
-        raise ValueError(f"unknown stream {stream!r}; expected one of {tuple(STREAMS)}")
-    return np.random.default_rng([VALIDATION_SEED + STREAMS[stream], j])
-
-
-def _density_field(j: int, kind: str, dim: int, stream: str = "validation") -> ValidationField:
-    rng = _rng(j, stream)
-    base = RandomDensityConfig.for_dim(dim)
-    if kind == "smooth":
-        f = RandomDensity(rng, replace(base, p_step=0.0, p_patch=0.0, p_noise=0.0))
-    elif kind == "steps":
-        f = RandomDensity(rng, replace(base, p_step=1.0, p_patch=1.0, p_noise=0.0))
-    elif kind == "peak":
-        c = rng.uniform(0.2, 0.8, dim)
-        width = rng.uniform(0.03, 0.08)
-        height = float(np.exp(rng.uniform(np.log(1.0), np.log(8.0))))
-        tilt = rng.uniform(-0.3, 0.3, dim)
-
-        def f(x, c=c, w=width, h=height, tilt=tilt):
-            x = np.asarray(x, dtype=np.float64)
-            return 1.0 + (x - 0.5) @ tilt + h * np.exp(-((x - c) ** 2).sum(-1) / (2 * w**2))
-    elif kind == "ramp":
-        normal = rng.normal(size=dim)
-        normal /= np.linalg.norm(normal)
-        offset = float(normal @ rng.uniform(0.3, 0.7, dim))
-        width = rng.uniform(0.01, 0.05)
-        contrast = rng.uniform(2.0, 5.0)
-
-        def f(x, nrm=normal, o=offset, w=width, k=contrast):
-            x = np.asarray(x, dtype=np.float64)
-            return 1.0 + 0.5 * (k - 1.0) * (1.0 + np.tanh((x @ nrm - o) / w))
-    else:
-        raise ValueError(f"unknown validation kind {kind!r}; expected one of {DENSITY_KINDS}")
-    return ValidationField(f"{kind}-{j}", f)
-
-
-def _beltrami_field(j: int, count: int, stream: str = "validation", low: bool = False) -> ValidationField:
-    rng = _rng(j, stream)
-    level = 0.1 + 0.75 * j / max(1, count - 1)
-    m = RandomMap(rng, RandomBeltramiConfig(sup=(level, level), low=1.0 if low else 0.0))
-    return ValidationField(f"{'low-' if low else ''}map-{j}", m.mu, exact=m)
-
 
 def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "validation",
                       low_frequency: bool = False) -> list[ValidationField]:
-    """The fixed held-out set of a task: ``count`` fields (the density kinds in turn).  ``stream='validation'``
-    is the set used during training; ``stream='report'`` another set of the same kinds, used only to report
-    generalization.  ``low_frequency`` (Beltrami only): random maps of 1-4 slow modes instead
-    (``RandomBeltramiConfig.low_modes``, ``low_freq``; labels ``low-map-j``)."""
+    """The fixed held-out set of a task (:meth:`rfmap.tasks.Task.validation_fields`): ``count`` fields (the density
+    families in turn).  ``stream='validation'`` is the set used during training; ``stream='report'`` another set of
+    the same kinds, used only to report generalization.  ``low_frequency`` (Beltrami only): random maps of 1-4 slow
+    modes instead (``RandomBeltramiConfig.low_modes``, ``low_freq``; labels ``low-map-j``)."""
     if count < 1:
         raise ValueError(f"the validation set needs at least one field, got {count}")
-    if low_frequency and kind != "beltrami":
-        raise ValueError("low_frequency applies to Beltrami validation maps only")
-    if kind == "beltrami":
-        return [_beltrami_field(j, count, stream, low_frequency) for j in range(count)]
-    return [_density_field(j, DENSITY_KINDS[j % len(DENSITY_KINDS)], dim, stream) for j in range(count)]
+    return get_task(kind).validation_fields(dim, count, stream, low_frequency)
 
 
 def _held_out_map(sur, field, n: int, repair: bool = False, native: bool = False):
@@ -167,7 +99,7 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False, native: bool = F
         ``raw_folded`` (the network's own map was folded) and ``"mean"`` gains ``"path": "repaired"``
         and ``raw_folded_fields``.
     """
-    spec = sur.spec
+    spec, task = sur.spec, sur.spec.task
     fields = validation_fields(spec.kind, spec.dim, count)
     out: dict = {}
     primary, capped, penalized, flips, folded, min_j, raw_folded = [], [], [], 0, 0, np.inf, 0
@@ -175,35 +107,25 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False, native: bool = F
     for n in ns:
         for vf in fields:
             r = _held_out_map(sur, vf.field, int(n), repair, native)
-            if spec.kind == "beltrami":
-                exact = vf.exact(r.ref_points)
-                m = r.metrics(exact_points=exact)
-                rec = {"mean_dd": m.mean_dd, "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian}
-                value = m.mean_dd
-                baseline = float(np.linalg.norm(r.ref_points - exact, axis=1).mean())
-            else:
-                m = r.metrics()
-                rec = {"std_rho_map": m.std_rho_map, "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian}
-                value, baseline = m.std_rho_map, m.std_rho_orig
+            rec, value, baseline = task.validation_record(r, vf)
             # a map with non-finite points (a diverged network) is no map either: counted as folded
-            broken = bool(m.n_flipped) or not np.isfinite(value)
+            broken = bool(rec["n_flipped"]) or not np.isfinite(value)
             primary.append(value)
             capped.append(min(value, baseline) if broken else value)
             # delivered maps are fold-free; one that leaves the field less equal than it was (a repair can) is
             # worth no more than no map
             penalized.append(baseline if broken else (min(value, baseline) if repair else value))
             relative.setdefault(family(vf.label), []).append(penalized[-1] / baseline if baseline > 0 else 1.0)
-            flips += int(m.n_flipped)
+            flips += int(rec["n_flipped"])
             folded += int(broken)
-            min_j = min(min_j, float(m.min_jacobian))
+            min_j = min(min_j, float(rec["min_jacobian"]))
             if repair:
                 rec["raw_folded"] = _raw_folded(r.info)
                 raw_folded += int(rec["raw_folded"])
             out[f"{vf.label}@{n}"] = rec
-    key = "mean_dd" if spec.kind == "beltrami" else "std_rho_map"
-    out["mean"] = {key: float(np.mean(primary)), "n_flipped": flips, "min_jacobian": min_j,
+    out["mean"] = {task.score_metric: float(np.mean(primary)), "n_flipped": flips, "min_jacobian": min_j,
                    "folded_fields": folded, "capped": float(np.mean(capped)), "penalized": float(np.mean(penalized))}
-    if spec.kind == "density":
+    if task.equalizes:  # every field counts relative to doing nothing: a score by field family
         fam = {k: float(np.mean(v)) for k, v in relative.items()}
         out["mean"].update(families=fam, family_score=float(np.mean(list(fam.values()))))
     if repair:

@@ -17,6 +17,7 @@ import torch
 from ..geometry import grid_signed_measures
 from ..mesh import grid_mesh, grid_points, interpolate
 from ..result import MapResult
+from ..tasks import get_task
 from .report import InfoView, MapReport
 
 __all__ = ["Draft", "Prediction", "WorkingGridMap", "displacement_at"]
@@ -129,6 +130,11 @@ class Draft:
     @property
     def kind(self) -> str:
         return self.result.kind
+
+    @property
+    def task(self):
+        """The :class:`rfmap.tasks.Task` of the map's kind."""
+        return get_task(self.result.kind)
 
     def displacement(self) -> tuple[torch.Tensor, str]:
         r"""The displacement a stretching vector scales, float64 (P, d), and the boundary of the mask that

@@ -54,7 +54,7 @@ def finish(draft: Draft, options: FinishOptions = FinishOptions()) -> Draft:
     A density map of a grid without ``polish`` is judged (:func:`rfmap.finish.stages.judge`); with ``repair`` a density
     map of a grid or a network's map of query points is shortened when it is no more equal than its input.
     """
-    if options.polish is not False and (draft.kind != "density" or draft.grid_n is None):
+    if options.polish is not False and (not draft.task.equalizes or draft.grid_n is None):
         raise ValueError("polish finishes density maps on the output grid; it does not apply to "
                          f"{draft.kind} maps or to query points")
     if options.refine:
@@ -63,7 +63,7 @@ def finish(draft: Draft, options: FinishOptions = FinishOptions()) -> Draft:
         draft = repair(draft, cold_polish=options.polish is not False)
     if options.polish is not False:
         return polish(draft, options.tol, options.guard)
-    if draft.kind == "density":
+    if draft.task.equalizes:
         if draft.grid_n is not None:
             draft = judge(draft)
         if options.repair and (draft.grid_n is not None or draft.prediction is not None):

@@ -22,7 +22,7 @@ import torch
 from ..hybrid import GUARD, OUTPUT_PASSES, SMOOTH_EDGES, polish_map, smooth_displacement, \
     smooth_grid_displacement, smooth_passes
 from ..nn.model import apply_displacement
-from ..refine import REFINE, beltrami_objective, density_objective, refine_alpha
+from ..refine import REFINE, refine_alpha
 from ..repair import repair_map
 from ..shorten import shorten_map
 from .draft import Draft, displacement_at
@@ -73,8 +73,8 @@ def regrid(draft: Draft, remap: Callable[[int], Draft], sides: Sequence[int]) ->
 
 def _improves(draft: Draft) -> bool:
     """Whether a fold-free map is more equal than the input: Std(rho~_map) < Std(rho~_orig) for a density map
-    (always true for other tasks)."""
-    if draft.kind != "density":
+    (always true for tasks that do not equalize a density)."""
+    if not draft.task.equalizes:
         return True
     m = draft.result.metrics()
     return bool(m.std_rho_map < m.std_rho_orig)
@@ -82,9 +82,8 @@ def _improves(draft: Draft) -> bool:
 
 def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
     r"""Weight refinement (paper Sec. 4.3): the map :math:`x + \mathcal{B}(x) \odot (\alpha^* \odot \psi(x))` with
-    :math:`\alpha^* = \arg\min_\alpha \mathcal{J}` (:func:`rfmap.refine.refine_alpha`, the objective of the task:
-    :func:`rfmap.refine.density_objective` or :func:`rfmap.refine.beltrami_objective`, settings
-    :data:`rfmap.refine.REFINE`).  :math:`\psi` is the network's displacement, or a classical map's :math:`u - x`
+    :math:`\alpha^* = \arg\min_\alpha \mathcal{J}` (:func:`rfmap.refine.refine_alpha`, the objective of the task,
+    :meth:`rfmap.tasks.Task.refine_objective`, settings :data:`rfmap.refine.REFINE`).  :math:`\psi` is the network's displacement, or a classical map's :math:`u - x`
     (:meth:`rfmap.finish.draft.Draft.displacement`); a given stretching vector is replaced.
 
     Parameters
@@ -103,10 +102,7 @@ def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
     ref64 = torch.as_tensor(res.ref_points, dtype=torch.float64)
     psi64, mask = draft.displacement()
     elements = torch.as_tensor(res.elements)
-    if res.kind == "density":
-        obj = density_objective(ref64, psi64, elements, res.field, mask, REFINE.flip_weight, grid_n=draft.grid_n)
-    else:
-        obj = beltrami_objective(ref64, psi64, elements, res.field, mask, REFINE.flip_weight)
+    obj = draft.task.refine_objective(ref64, psi64, elements, res.field, mask, draft.grid_n)
     rr = refine_alpha(obj, res.dim, bounds=bounds or REFINE.bounds, tol=REFINE.tol)
     mapped = apply_displacement(ref64, psi64, mask, torch.as_tensor(rr.alpha)).numpy()
     return draft.then(mapped, time.perf_counter() - t0, alpha=rr.alpha.tolist(),
@@ -140,8 +136,7 @@ def repair(draft: Draft, *, cold_polish: bool = False) -> Draft:
                                 "time": time.perf_counter() - t0, "metrics_before": cheap,
                                 "metrics_after": dict(cheap)}
     else:
-        kw = {"boundary": draft.boundary, "density": res.field if res.kind == "density" else None,
-              "mu": res.field if res.kind == "beltrami" else None}
+        kw = {"boundary": draft.boundary, **draft.task.metric_inputs(res.field)}
         if draft.grid_n is not None:
             mapped, report = repair_map(res.ref_points, res.mapped_points, res.elements, grid_n=draft.grid_n, **kw)
         elif draft.prediction is not None:
@@ -174,7 +169,7 @@ def polish(draft: Draft, tol: float | None = None, guard: bool = GUARD) -> Draft
         With ``report.polish``; the map's time covers the map so far and the polish.
     """
     res, n = draft.result, draft.grid_n
-    if res.kind != "density" or n is None:
+    if not draft.task.equalizes or n is None:
         raise ValueError("polish finishes density maps on the output grid; it does not apply to "
                          f"{res.kind} maps or to query points")
     t0 = time.perf_counter()
@@ -203,7 +198,7 @@ def judge(draft: Draft) -> Draft:
     """Whether a density map of a grid left the density more equal than it was (:func:`rfmap.finish.quality.density_quality`;
     ``report.quality``)."""
     res = draft.result
-    if res.kind != "density" or draft.grid_n is None:
+    if not draft.task.equalizes or draft.grid_n is None:
         raise ValueError("judge needs a density map of a grid")
     t0 = time.perf_counter()
     quality = density_quality(res.mapped_points, res.field, draft.grid_n)
@@ -224,7 +219,7 @@ def shorten(draft: Draft) -> Draft:
         With ``report.shorten`` when the map was shortened.
     """
     res = draft.result
-    if res.kind != "density" or (draft.grid_n is None and draft.prediction is None):
+    if not draft.task.equalizes or (draft.grid_n is None and draft.prediction is None):
         raise ValueError("shorten needs a density map of a grid, or a network's map of query points")
     t0 = time.perf_counter()
     if draft.grid_n is None:

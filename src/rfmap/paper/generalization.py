@@ -7,6 +7,7 @@ import numpy as np
 
 from ..paper_fields import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
+from ..tasks import BeltramiTask, DensityTask
 from .reproduce import METHOD_TITLES, SYM, SYM_REF
 from .tables import COLUMN_TITLES, Table, format_sig
 
@@ -39,7 +40,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     spec = sur.spec
     n = int(n or PAPER_N[spec.dim])
     fields = validation_fields(spec.kind, spec.dim, count, stream="report", low_frequency=low_frequency)
-    key = "mean_dd" if spec.kind == "beltrami" else "std_rho_map"
+    key = spec.task.score_metric
     rows: dict[tuple[str, str], list[tuple[float, int, float]]] = {}
 
     def add(kind, method, value, flips, t):
@@ -55,7 +56,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
             variants.append(("ours + refinement", sur.map(vf.field, n, refine=True)))
         if symmetrize:
             variants.append((SYM_REF if refine else SYM, sur.map(vf.field, n, refine=refine, symmetrize=symmetrize)))
-        if spec.kind == "beltrami":
+        if isinstance(spec.task, BeltramiTask):
             if classical:
                 variants.append(("classical (LBS)", solve_lbs(vf.field, n)))
             for method, r in variants:
@@ -140,7 +141,7 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
     if not surs:
         raise ValueError("distortion_table needs at least one model")
     for label, sur in surs.items():
-        if sur.spec.kind != "density" or sur.spec.dim != 2:
+        if not isinstance(sur.spec.task, DensityTask) or sur.spec.dim != 2:
             raise ValueError(f"{label}: distortion_table compares 2D density models, got {sur.spec.kind} "
                              f"{sur.spec.dim}D")
     n = int(n or PAPER_N[2])
@@ -202,7 +203,7 @@ def displacement_demand(sur, count: int = 16, train_count: int = 60, n: int | No
     from ..validation import validation_fields
 
     spec = sur.spec
-    if spec.kind != "density":
+    if not isinstance(spec.task, DensityTask):
         raise ValueError(f"displacement_demand needs a density model, got a {spec.kind} model")
     n = int(n or PAPER_N[spec.dim])
     shape = (n,) * spec.dim

@@ -24,6 +24,7 @@ from .. import losses as L
 from ..geometry import grid_signed_measures, signed_measures
 from ..mesh import grid_mesh
 from ..nn.model import BOUNDARIES, apply_displacement
+from ..result import DENSITY_FIELD_KINDS
 from ..random_fields import RandomBeltramiConfig, RandomDensityConfig
 from ..teacher import TeacherConfig, teacher_indices, teacher_loss
 
@@ -38,6 +39,8 @@ def register_task(cls: type["Task"]) -> type["Task"]:
     if not getattr(cls, "kind", None):
         raise ValueError(f"task class {cls.__name__} has no kind")
     _TASKS[cls.kind] = cls()
+    if cls.equalizes:  # its maps' field is a vertex density: the density metrics apply
+        DENSITY_FIELD_KINDS.add(cls.kind)
     return cls
 
 
