@@ -131,3 +131,15 @@ def test_native_lesson_names_the_sides_where_the_native_map_is_worse():
     assert "within 1.3 times" in c.native_lesson(tol=1.3)
     c.values[("b", "native")]["work_n"] = 48
     assert "same grid at every side" in c.native_lesson()
+
+
+def test_models_compared_on_one_density_share_the_flow_map():
+    from rfmap.paper.comparison import compare_models
+
+    models = {name: Surrogate.untrained(TaskSpec("density", 2, "square"), base=4, depth=2, name=name,
+                                        n_range=[13, 13]) for name in ("DEM", "DEQ")}
+    c = compare_models(models, "ring", 13, "fig:extreme_comparison", "t")
+    assert [case.name for case in c.cases] == ["DEM", "DEQ"]
+    assert c.maps["DEM"]["classical"] is c.maps["DEQ"]["classical"]
+    assert c.value("DEM", "native", "std_rho_map") == pytest.approx(c.value("DEM", "native", "std_rho_orig"))
+    assert c.met("DEM", "std_rho_map") is None and c.count("mean_mu") == (0, 0)

@@ -39,8 +39,9 @@ from .reproduce import beltrami_values, density_values, exact_beltrami_result
 from .tables import paper_table
 
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
-           "timed", "compare_density", "compare_beltrami", "population_comparison", "resolution_comparison",
-           "beltrami_comparison", "beltrami_resolution_comparison", "PAPER_METHOD", "DELIVERED"]
+           "timed", "compare_density", "compare_beltrami", "compare_models", "population_comparison",
+           "resolution_comparison", "beltrami_comparison", "beltrami_resolution_comparison", "PAPER_METHOD",
+           "DELIVERED"]
 
 #: The four columns of a comparison, in order.
 METHODS = ("paper", "native", "delivered", "classical")
@@ -425,6 +426,39 @@ def compare_beltrami(sur, cases: list[Case], label: str, title: str, *, case_pre
             cmp.values[(c.name, "paper")] = dict(paper[c.name])
         cmp.maps[c.name] = {"native": native, "delivered": delivered, "classical": lbs,
                             "exact": exact_beltrami_result(c.field, c.n)}
+    return cmp
+
+
+@quiet_quality()
+def compare_models(models: dict, field, n: int, label: str, title: str) -> Comparison:
+    """One density mapped by several density surrogates with one boundary, the cases named by the keys of
+    ``models`` (the paper's Fig. 10: the DEM and the DEQ model), each by the paper's method and delivered, beside
+    the flow solver's map of the same density (the same in every case).  Scored: Std(ρ̃_map) and mean |μ|; there
+    is no paper row.
+
+    Parameters
+    ----------
+    models : dict of str to rfmap.Surrogate
+    field : str or callable
+        A built-in density or a callable on points (P, 2), as :meth:`rfmap.Surrogate.map` takes it.
+    n : int
+    label, title : str
+    """
+    from ..solvers import solve_dem
+
+    name = field if isinstance(field, str) else getattr(field, "__name__", "field")
+    cmp = Comparison(label, title, ["std_rho_map", "mean_mu"], [Case(k, name, n) for k in models], "flow solver")
+    flow = None
+    for key, sur in models.items():
+        native, delivered = _surrogate_maps(sur, field, n)
+        if flow is None:
+            dens = np.asarray(native.field).reshape((n,) * sur.spec.dim)
+            boundary = "free" if sur.spec.boundary == "free" else "square"
+            flow = timed(lambda: solve_dem(dens, method="flow", boundary=boundary))
+        cmp.values[(key, "native")] = _network_values(native, density_values(native, True))
+        cmp.values[(key, "delivered")] = _network_values(delivered, density_values(delivered, True))
+        cmp.values[(key, "classical")] = density_values(flow, True)
+        cmp.maps[key] = {"native": native, "delivered": delivered, "classical": flow}
     return cmp
 
 

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from .tables import Table
 
-__all__ = ["training_fields_text", "recipe_table"]
+__all__ = ["training_fields_text", "recipe_table", "recipe_differences", "differences_text"]
 
 
 def training_fields_text(config: dict) -> str:
@@ -56,3 +56,36 @@ def recipe_table(surs: dict) -> Table:
             "folded_maps": (int(val["raw_folded_fields"]) if "raw_folded_fields" in val else
                             int(val["folded_fields"]) if "folded_fields" in val else None)})
     return t
+
+
+#: settings of a stored training configuration that name or time a run rather than shape what it learns
+RUN_SETTINGS = ("name", "description", "seed", "steps", "time_limit", "out", "init")
+#: how :func:`differences_text` names a setting
+SETTING_NAMES = {"loss.beltrami": "Beltrami weight λ", "lr": "peak learning rate", "ema": "weight average decay",
+                 "loss.fold": "fold penalty", "n_range": "training grid sides", "batch": "batch"}
+
+
+def recipe_differences(a: dict, b: dict, prefix: str = "") -> list[tuple[str, object, object]]:
+    """The settings in which two stored training configurations (``meta["config"]``) differ, as ``(dotted key,
+    value in a, value in b)``, nested sections flattened, the settings of :data:`RUN_SETTINGS` left out."""
+    out = []
+    for key in sorted(set(a) | set(b)):
+        if key in RUN_SETTINGS:
+            continue
+        va, vb = a.get(key), b.get(key)
+        if isinstance(va, dict) and isinstance(vb, dict):
+            out += recipe_differences(va, vb, f"{prefix}{key}.")
+        elif va != vb:
+            out.append((f"{prefix}{key}", va, vb))
+    return out
+
+
+def differences_text(metas: dict) -> str:
+    """How two shipped models' training differs, in words, from their metadata (``{name: meta}``): every setting of
+    :func:`recipe_differences` and the cumulative steps over each model's warm restarts."""
+    (na, ma), (nb, mb) = metas.items()
+    parts = [f"{SETTING_NAMES.get(k, k)} ({'none' if x is None else x} against {'none' if y is None else y})"
+             for k, x, y in recipe_differences(ma.get("config") or {}, mb.get("config") or {})]
+    steps = [int(m.get("cumulative_steps", m.get("steps", 0))) for m in (ma, mb)]
+    parts.append(f"training steps ({steps[0]:,} against {steps[1]:,})")
+    return f"`{na}` and `{nb}` differ in " + ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + parts[-1]
