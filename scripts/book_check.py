@@ -5,7 +5,8 @@ Usage: python scripts/book_check.py [--html _build/html] [--out _build/screensho
                                     [--no-screenshots]
 
 Every page listed in _toc.yml must exist under the HTML folder. Each page is scanned for signs of a failed
-notebook or a broken build (traceback or stderr output cells, docutils system messages, unresolved references) and
+notebook or a broken build (traceback or stderr output cells, docutils system messages, unresolved references), for
+paths of the machine that built it (a printed ``PosixPath``, the repository's folder, a temporary file), and
 for broken figures: an image whose file is missing or cannot be read, or a blank one (every pixel the same, up to a
 standard deviation of BLANK_STD grey levels). Each page is then captured whole, from top to bottom, by headless
 Chromium driven over the DevTools protocol, into the screenshot folder.
@@ -67,6 +68,18 @@ ERROR_MARKERS = [
 IMG_SRC = re.compile(r'<img\b[^>]*\bsrc="([^"]+)"', re.IGNORECASE)
 
 
+def machine_path_markers(root: Path = ROOT) -> list[tuple[re.Pattern, str]]:
+    """(pattern, what it means) of a path of the machine that built the book: a printed ``pathlib`` path, the
+    repository's folder, the home folder, or a temporary file. A page shows paths relative to the project."""
+    home = os.path.expanduser("~")
+    markers = [(re.compile(r"\b(?:Posix|Windows)Path\("), "a printed pathlib path"),
+               (re.compile(re.escape(str(root.resolve())) + r"\b"), "the repository's folder on this machine"),
+               (re.compile(re.escape(tempfile.gettempdir()) + r"/tmp[\w.-]{6,}"), "a temporary file's path")]
+    if len(home) > 1 and not str(root.resolve()).startswith(home):
+        markers.append((re.compile(re.escape(home) + "/"), "the home folder of this machine"))
+    return markers
+
+
 def toc_pages(root: Path = ROOT) -> list[str]:
     """Document paths (no suffix) of _toc.yml, in reading order."""
     import yaml
@@ -124,6 +137,10 @@ def scan_html(page: Path) -> list[str]:
     if m:
         body = m.group(0)
     problems = [f"{why} ({pat.pattern})" for pat, why in ERROR_MARKERS if pat.search(body)]
+    for pat, why in machine_path_markers():
+        m = pat.search(body)
+        if m:
+            problems.append(f"{why}: {body[m.start():m.end() + 40]!r}")
     for src in IMG_SRC.findall(body):
         if urlparse(src).scheme in ("http", "https"):
             continue

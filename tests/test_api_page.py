@@ -113,3 +113,75 @@ def test_no_page_is_the_whole_reference():
     for page, *_ in _directives():
         per_page[page] = per_page.get(page, 0) + 1
     assert len(per_page) >= 8 and max(per_page.values()) <= sum(per_page.values()) / 4, per_page
+
+
+# ------------------------------------------------------------------------------------------- examples and values
+def _examples(page: Path) -> list[tuple[str, str]]:
+    """(language, code) of the fenced blocks of a page's *Example* section."""
+    m = re.search(r"^## Example\n(.*?)(?=^## )", page.read_text(encoding="utf-8"), re.S | re.M)
+    return re.findall(r"^```(\w+)\n(.*?)^```", m.group(1), re.S | re.M) if m else []
+
+
+def test_every_page_has_an_example():
+    missing = [p.name for p in PAGES if not _examples(p)]
+    assert not missing, f"API pages without an '## Example' code block: {missing}"
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[p.stem for p in PAGES])
+def test_examples_run_as_written(page, tmp_path):
+    """Each example runs in an empty directory with the project's environment: Python blocks as scripts, shell
+    blocks line by line (a line ending in a backslash continues)."""
+    import os
+    import shlex
+    import subprocess
+    import sys
+
+    env = dict(os.environ, OMP_NUM_THREADS="1", MKL_NUM_THREADS="1", MPLBACKEND="Agg",
+               PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ.get('PATH', '')}")
+    for lang, code in _examples(page):
+        if lang == "python":
+            commands = [[sys.executable, "-c", code]]
+        else:
+            commands = [shlex.split(line) for line in code.replace("\\\n", " ").splitlines()
+                        if line.strip() and not line.lstrip().startswith("#")]
+        for cmd in commands:
+            proc = subprocess.run(cmd, cwd=tmp_path, env=env, capture_output=True, text=True, timeout=600)
+            assert proc.returncode == 0, f"{page.name}: {cmd[:3]}: {proc.stderr[-2000:]}"
+
+
+def _attr_docs(module: str) -> set[str]:
+    from sphinx.pycode import ModuleAnalyzer
+
+    return {name for (_, name) in ModuleAnalyzer.for_module(module).find_attr_docs()}
+
+
+def test_explicit_data_has_its_own_description():
+    """``autodata`` of a constant without a ``#:`` comment shows its type's docstring ("int([x]) -> integer"):
+    such a constant gets a ``py:data`` directive with a description instead."""
+    bare = []
+    for page, kind, target, _ in _directives():
+        if kind == "autodata":
+            module, name = target.rsplit(".", 1)
+            if name not in _attr_docs(module):
+                bare.append(f"{page}: {target}")
+    assert not bare, f"autodata without a '#:' comment in the source: {bare}"
+
+
+def test_no_machine_path_in_documented_values():
+    """A documented constant whose value is a path on this machine is shown without its value (``:no-value:``)."""
+    shown = []
+    for page, kind, target, options in _directives():
+        if kind == "automodule":
+            mod = importlib.import_module(target)
+            documented = _attr_docs(target)
+            excluded = re.search(r":exclude-members:[ \t]*(.*)\n", options)
+            excluded = {n.strip() for n in excluded.group(1).split(",")} if excluded else set()
+            names = [n for n in _members(options, mod) if n in documented and n not in excluded]
+            values = [(f"{target}.{n}", getattr(mod, n)) for n in names]
+        elif kind == "autodata" and ":no-value:" not in options:
+            values = [(target, _resolve(target))]
+        else:
+            continue
+        shown += [f"{page}: {name}" for name, v in values
+                  if isinstance(v, Path) or str(ROOT) in repr(v) or "PosixPath" in repr(v)]
+    assert not shown, f"values that print a path of this machine: {shown}"

@@ -66,6 +66,24 @@ def test_inline_images_are_checked_too(book_check, tmp_path):
     assert [p.split(" ")[0:2] for p in book_check.scan_html(page)] == [["blank", "image"]]
 
 
+@pytest.mark.parametrize("shown, why", [
+    ("[PosixPath('/srv/x/book/figures/tab-a.md')]", "a printed pathlib path"),
+    ("{root}/src/rfmap/data/design.json", "the repository's folder"),
+    ("wrote {tmp}/tmpab12cd_x/cartogram.geojson", "a temporary file's path"),
+])
+def test_machine_paths_are_reported(book_check, tmp_path, shown, why):
+    import tempfile
+
+    text = shown.format(root=book_check.ROOT.resolve(), tmp=tempfile.gettempdir())
+    problems = book_check.scan_html(_page(tmp_path, f"<pre>{text}</pre>"))
+    assert len(problems) == 1 and problems[0].startswith(why)
+
+
+def test_relative_paths_pass(book_check, tmp_path):
+    page = _page(tmp_path, "<p>book/figures/tab-a.md, src/rfmap/data/design.json, wrote cartogram.geojson</p>")
+    assert book_check.scan_html(page) == []
+
+
 def test_images_outside_the_article_are_ignored(book_check, tmp_path):
     assert book_check.scan_html(_page(tmp_path, "<p>no figures</p>")) == []
 
