@@ -7,14 +7,43 @@ Shapes: ``ref`` and ``mapped`` are (B, n, d) vertex positions, ``elements`` is (
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import torch
 from torch import Tensor
 from torch.nn import functional as F
 
 from .geometry import beltrami_coefficient, signed_measures
 
-__all__ = ["weighted_mean", "beltrami_loss", "density_loss", "beltrami_energy", "fold_penalty", "area_penalty",
+__all__ = ["Measures", "weighted_mean", "beltrami_loss", "density_loss", "beltrami_energy", "fold_penalty", "area_penalty",
            "element_density", "loss_integrands"]
+
+
+@dataclass(frozen=True)
+class Measures:
+    """Element quantities of a batch computed once and shared by the loss terms; each one missing is computed from
+    the mesh.
+
+    Attributes
+    ----------
+    ref, mapped : Tensor, shape (B, m), optional
+        Signed element measures before and after the map (e.g. by :func:`rfmap.geometry.grid_signed_measures` on a
+        grid mesh).
+    density : Tensor, shape (B, m), optional
+        The mean vertex density of every element.
+    """
+
+    ref: Tensor | None = None
+    mapped: Tensor | None = None
+    density: Tensor | None = None
+
+    def measures(self, ref: Tensor, mapped: Tensor, elements: Tensor) -> tuple[Tensor, Tensor]:
+        """The reference and mapped measures, computed where not given."""
+        return (signed_measures(ref, elements) if self.ref is None else self.ref,
+                signed_measures(mapped, elements) if self.mapped is None else self.mapped)
+
+
+NONE = Measures()
 
 
 def weighted_mean(values: Tensor, weights: Tensor) -> Tensor:
@@ -35,17 +64,15 @@ def beltrami_loss(ref: Tensor, mapped: Tensor, elements: Tensor, mu_target: Tens
     return weighted_mean((mu - mu_target).abs() ** 2, area)
 
 
-def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, *,
-                    ref_meas: Tensor | None = None, meas: Tensor | None = None,
-                    elem_density: Tensor | None = None, tangent: bool = False) -> tuple[Tensor, Tensor]:
+def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, *, pre: Measures = NONE,
+                    tangent: bool = False) -> tuple[Tensor, Tensor]:
     r"""Relative density :math:`\tilde\rho_i = (p_i / A_i) / (P / A)` on the mapped mesh, and reference measures.
 
     :math:`p_i` is the population of element :math:`i` (mean vertex density times reference measure),
     :math:`A_i` its mapped measure (floored at 1% of the reference measure, so the density and its gradient stay
     bounded when an element degenerates), :math:`P` and :math:`A` the totals.
 
-    ``ref_meas``, ``meas`` (B, m) and ``elem_density`` (B, m, the mean vertex density of each element) may be
-    passed precomputed (e.g. by :func:`rfmap.geometry.grid_signed_measures` on a grid mesh).
+    The measures and the elements' mean densities may be passed precomputed (``pre``, :class:`Measures`).
 
     With ``tangent=True`` the density below the floor :math:`a_0 = 0.01\,|T_i|` continues along its tangent,
     :math:`p_i/a_0\,(2 - A_i/a_0)`, instead of staying at :math:`p_i/a_0`: a collapsed or flipped element then
@@ -56,9 +83,8 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
     -------
     (rho_tilde, ref_measure) : Tensors, shape (B, m)
     """
-    ref_meas = signed_measures(ref, elements) if ref_meas is None else ref_meas
-    meas = signed_measures(mapped, elements) if meas is None else meas
-    elem_density = density[:, elements].mean(-1) if elem_density is None else elem_density
+    ref_meas, meas = pre.measures(ref, mapped, elements)
+    elem_density = density[:, elements].mean(-1) if pre.density is None else pre.density
     pop = elem_density * ref_meas
     # guard: an element shrunk below 1% of its reference measure (or flipped) counts as 1% (the fold penalty
     # handles it); this keeps the density and its gradient bounded
@@ -71,8 +97,7 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
 
 
 def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, beta: float = 1.0, *,
-                 ref_meas: Tensor | None = None, meas: Tensor | None = None,
-                 elem_density: Tensor | None = None, tangent: bool = False) -> Tensor:
+                 pre: Measures = NONE, tangent: bool = False) -> Tensor:
     r"""Density-equalizing loss :math:`\int_\Omega L(p_i/A_i - P/A)` with smooth-L1 :math:`L` (paper Sec. 5.2).
 
     The difference is taken relative to the mean density :math:`P/A`, i.e. :math:`L(\tilde\rho_i - 1)`; this
@@ -83,11 +108,12 @@ def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor,
     ----------
     density : Tensor, shape (B, n)
         Vertex densities.
+    pre : Measures
+        Precomputed measures and element densities.
     tangent : bool
         Continue the density below its floor along the tangent (see :func:`element_density`).
     """
-    rho, w = element_density(ref, mapped, elements, density, ref_meas=ref_meas, meas=meas,
-                             elem_density=elem_density, tangent=tangent)
+    rho, w = element_density(ref, mapped, elements, density, pre=pre, tangent=tangent)
     err = F.smooth_l1_loss(rho, torch.ones_like(rho), reduction="none", beta=beta)
     return weighted_mean(err, w)
 
@@ -98,19 +124,16 @@ def beltrami_energy(ref: Tensor, mapped: Tensor, elements: Tensor) -> Tensor:
 
 
 def fold_penalty(ref: Tensor, mapped: Tensor, elements: Tensor, threshold: float = 0.02, *,
-                 ref_meas: Tensor | None = None, meas: Tensor | None = None) -> Tensor:
+                 pre: Measures = NONE) -> Tensor:
     r"""Fold penalty :math:`\int_\Omega \mathrm{relu}(\tau - \det J)` that keeps elements away from flipping."""
-    ref_meas = signed_measures(ref, elements) if ref_meas is None else ref_meas
-    meas = signed_measures(mapped, elements) if meas is None else meas
+    ref_meas, meas = pre.measures(ref, mapped, elements)
     det = meas / ref_meas
     return weighted_mean(torch.relu(threshold - det), ref_meas)
 
 
-def area_penalty(ref: Tensor, mapped: Tensor, elements: Tensor, *, ref_meas: Tensor | None = None,
-                 meas: Tensor | None = None) -> Tensor:
+def area_penalty(ref: Tensor, mapped: Tensor, elements: Tensor, *, pre: Measures = NONE) -> Tensor:
     r"""Free-boundary area constraint :math:`(|u(\Omega)| / |\Omega| - 1)^2`."""
-    ref_meas = signed_measures(ref, elements) if ref_meas is None else ref_meas
-    meas = signed_measures(mapped, elements) if meas is None else meas
+    ref_meas, meas = pre.measures(ref, mapped, elements)
     ratio = meas.sum(-1) / ref_meas.sum(-1)
     return ((ratio - 1) ** 2).mean()
 
@@ -135,7 +158,7 @@ def loss_integrands(ref: Tensor, mapped: Tensor, elements: Tensor, *, density: T
     meas = signed_measures(mapped, elements)
     out = {"weight": ref_meas}
     if density is not None:
-        rho, _ = element_density(ref, mapped, elements, density, ref_meas=ref_meas, meas=meas)
+        rho, _ = element_density(ref, mapped, elements, density, pre=Measures(ref_meas, meas))
         out["density"] = F.smooth_l1_loss(rho, torch.ones_like(rho), reduction="none", beta=beta)
     if ref.shape[-1] == 2:
         mu = beltrami_coefficient(ref, mapped, elements)

@@ -202,14 +202,14 @@ class MappedBatch:
     batch : Batch
     mapped : Tensor, shape (B, n, d)
         The mapped vertices :math:`u = x + \\mathcal{B}(x) \\odot \\psi(x)`.
-    measures : dict
-        ``ref_meas`` and ``meas``: the signed element measures before and after, shape (B, m) (strided on a grid).
+    measures : rfmap.losses.Measures
+        The signed element measures before and after, shape (B, m) (strided on a grid).
     spec : TaskSpec
     """
 
     batch: Batch
     mapped: Tensor
-    measures: dict
+    measures: L.Measures
     spec: TaskSpec
 
 
@@ -427,12 +427,12 @@ def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights,
     disp = psi.reshape(B, d, -1).transpose(1, 2)
     mapped = apply_displacement(batch.ref, disp, spec.boundary)
     if batch.on_grid:  # the elements are those of the N-grid mesh: strided fast path
-        mk = {"ref_meas": grid_signed_measures(batch.ref, batch.n), "meas": grid_signed_measures(mapped, batch.n)}
+        pre = L.Measures(grid_signed_measures(batch.ref, batch.n), grid_signed_measures(mapped, batch.n))
     else:
-        mk = {"ref_meas": signed_measures(batch.ref, batch.elements), "meas": signed_measures(mapped, batch.elements)}
-    total, parts = spec.task.loss(MappedBatch(batch, mapped, mk, spec), weights)
+        pre = L.Measures(signed_measures(batch.ref, batch.elements), signed_measures(mapped, batch.elements))
+    total, parts = spec.task.loss(MappedBatch(batch, mapped, pre, spec), weights)
     if weights.fold:
-        parts["fold"] = L.fold_penalty(batch.ref, mapped, batch.elements, weights.fold_threshold, **mk)
+        parts["fold"] = L.fold_penalty(batch.ref, mapped, batch.elements, weights.fold_threshold, pre=pre)
         total = total + weights.fold * parts["fold"]
     if teacher_weight and "target" in batch.extra:
         parts["teacher"] = teacher_loss(mapped, batch.extra["target"], batch.ref, batch.extra["target_mask"],

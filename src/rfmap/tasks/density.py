@@ -100,16 +100,17 @@ class DensityTask(Task):
                      extra=teacher_extra(ref.numpy(), targets))
 
     def loss(self, mb: MappedBatch, weights: LossWeights):
-        b, mapped, mk = mb.batch, mb.mapped, mb.measures
-        elem_density = grid_element_mean(b.density, b.n, b.ref.shape[-1]) if b.on_grid else None
-        parts = {"density": L.density_loss(b.ref, mapped, b.elements, b.density, elem_density=elem_density,
-                                           tangent=weights.density_tangent, **mk)}
+        b, mapped, pre = mb.batch, mb.mapped, mb.measures
+        if b.on_grid:
+            pre = replace(pre, density=grid_element_mean(b.density, b.n, b.ref.shape[-1]))
+        parts = {"density": L.density_loss(b.ref, mapped, b.elements, b.density, pre=pre,
+                                           tangent=weights.density_tangent)}
         total = parts["density"]
         if weights.beltrami and mb.spec.dim == 2:
             parts["mu2"] = L.beltrami_energy(b.ref, mapped, b.elements)
             total = total + weights.beltrami * parts["mu2"]
         if mb.spec.boundary == "free" and weights.area:
-            parts["area"] = L.area_penalty(b.ref, mapped, b.elements, **mk)
+            parts["area"] = L.area_penalty(b.ref, mapped, b.elements, pre=mb.measures)
             total = total + weights.area * parts["area"]
         return total, parts
 
