@@ -20,7 +20,7 @@ if TYPE_CHECKING:
     from ..result import MapResult
 
 __all__ = ["SOLVERS", "DEM_METHODS", "ALIASES", "get_solver", "solve_lbs", "solve_dem", "solve_diffusion",
-           "solve_flow", "FlowOptions"]
+           "solve_flow", "FlowOptions", "DiffusionOptions"]
 
 #: Density-equalizing methods of :func:`solve_dem`.
 DEM_METHODS = ("diffusion", "flow")
@@ -51,12 +51,14 @@ def solve_dem(density, *, method: str = "diffusion", **kwargs) -> MapResult:
 
 
 def __getattr__(name: str):
-    """The solvers, :class:`FlowOptions` and :data:`SOLVERS` (the registry of the classical solvers by name),
+    """The solvers, their options (:class:`FlowOptions`, :class:`DiffusionOptions`) and :data:`SOLVERS` (the registry of the classical solvers by name),
     imported on first access."""
     if name == "solve_lbs":
         from .lbs import solve_lbs as value
     elif name == "solve_diffusion":
         from .diffusion import solve_dem as value
+    elif name == "DiffusionOptions":
+        from .diffusion import DiffusionOptions as value
     elif name in ("solve_flow", "FlowOptions"):
         from . import flow
 

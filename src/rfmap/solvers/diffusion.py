@@ -62,6 +62,7 @@ from __future__ import annotations
 import math
 import numbers
 import time
+from dataclasses import dataclass, replace
 
 import numpy as np
 import torch
@@ -75,6 +76,7 @@ from .spectral import cosine_coefficients, fft_workers
 
 __all__ = [
     "solve_dem",
+    "DiffusionOptions",
     "CosineDiffusion",
     "cosine_coefficients",
     "p1_upsample",
@@ -285,35 +287,15 @@ def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol
     return y, info
 
 
-def solve_dem(
-    density,
-    *,
-    boundary: str = "square",
-    progress: bool = False,
-    rtol: float = 1e-2,
-    tol_end: float = 1e-4,
-    refine: int = 2,
-    margin: float = 0.5,
-    max_steps: int = 10_000,
-    num_threads: int | None = None,
-    fold_guard: bool = True,
-) -> MapResult:
-    r"""Diffusion density-equalizing map (Gastner & Newman 2004) of the unit square or cube.
+@dataclass(frozen=True)
+class DiffusionOptions:
+    r"""The options of :func:`solve_dem` with their defaults: a call names only those that differ.
 
-    Every vertex :math:`x` of the ``N``-grid follows :math:`\dot x = -\nabla\rho(x,t)/\rho(x,t)` where
-    :math:`\rho` solves :math:`\partial_t\rho = \Delta\rho` with no-flux walls, started from the
-    piecewise-linear interpolant of the vertex densities (see the module docstring for the numerical method).
-
-    Parameters
+    Attributes
     ----------
-    density : ndarray, shape (N, N) or (N, N, N)
-        Preprocessed vertex densities on the ``N``-grid (strictly positive, finite; unit mass is the convention,
-        any positive scale works).  The dimension is ``density.ndim``; ``N >= 3``.
     boundary : {"square", "free"}
         ``"square"``: the walls of the unit square/cube are fixed, boundary vertices slide along them, corners stay.
         ``"free"``: the domain floats in a sea of its mean density inside :math:`[-L, 1+L]^d`; all vertices move.
-    progress : bool
-        Show a ``tqdm`` progress bar over simulated time.
     rtol : float
         Bound on the local error of one time step (max over vertices of the Euclidean error estimate), relative to
         the grid spacing :math:`h`.  The default 1e-2 keeps the final positions within about :math:`0.01\,h` of a
@@ -340,7 +322,50 @@ def solve_dem(
         (``FOLD_STOP`` rejections) it is redone from a blurred start (``FOLD_BLURS``, see the module docstring), and
         if it still folds with the widest blur the integration stops at its last fold-free state
         (``info["fold_stop"]`` gives that time).  ``False`` integrates the vertex trajectories regardless.
+    """
 
+    boundary: str = "square"
+    rtol: float = 1e-2
+    tol_end: float = 1e-4
+    refine: int = 2
+    margin: float = 0.5
+    max_steps: int = 10_000
+    num_threads: int | None = None
+    fold_guard: bool = True
+
+    def check(self) -> None:
+        """``ValueError`` for an unknown boundary or a non-positive ``rtol``/``tol_end``/``margin``/``refine``."""
+        if self.boundary not in DEM_BOUNDARIES:
+            raise ValueError(f"unknown boundary {self.boundary!r} for the diffusion solver; choose one of "
+                             f"{DEM_BOUNDARIES}")
+        for name in ("rtol", "tol_end", "margin"):
+            val = getattr(self, name)
+            if isinstance(val, bool) or not isinstance(val, numbers.Real) or not math.isfinite(val) or val <= 0:
+                raise ValueError(f"{name} must be a positive finite number, got {val!r}")
+        r = self.refine
+        if isinstance(r, bool) or not isinstance(r, (int, np.integer)) or r < 1:
+            raise ValueError(f"refine must be a positive integer, got {r!r}")
+
+
+def solve_dem(density, options: DiffusionOptions | None = None, *, progress: bool = False, **kwargs) -> MapResult:
+    r"""Diffusion density-equalizing map (Gastner & Newman 2004) of the unit square or cube.
+
+    Every vertex :math:`x` of the ``N``-grid follows :math:`\dot x = -\nabla\rho(x,t)/\rho(x,t)` where
+    :math:`\rho` solves :math:`\partial_t\rho = \Delta\rho` with no-flux walls, started from the
+    piecewise-linear interpolant of the vertex densities (see the module docstring for the numerical method).
+
+    Parameters
+    ----------
+    density : ndarray, shape (N, N) or (N, N, N)
+        Preprocessed vertex densities on the ``N``-grid (strictly positive, finite; unit mass is the convention,
+        any positive scale works).  The dimension is ``density.ndim``; ``N >= 3``.
+    options : DiffusionOptions, optional
+        The solver's options (:class:`DiffusionOptions`: ``boundary``, ``rtol``, ``tol_end``, ``refine``,
+        ``margin``, ``max_steps``, ``num_threads``, ``fold_guard``); its defaults when ``None``.
+    progress : bool
+        Show a ``tqdm`` progress bar over simulated time.
+    **kwargs
+        Fields of :class:`DiffusionOptions` that replace those of ``options`` (``solve_dem(d, boundary="free")``).
     Returns
     -------
     MapResult
@@ -359,14 +384,10 @@ def solve_dem(
         non-positive values, an unknown ``boundary``, or non-positive ``rtol``/``tol_end``/``refine``/``margin``.
     """
     t_start = time.perf_counter()
-    if boundary not in DEM_BOUNDARIES:
-        raise ValueError(f"unknown boundary {boundary!r} for the diffusion solver; choose one of {DEM_BOUNDARIES}")
+    opts = replace(options or DiffusionOptions(), **kwargs)
+    opts.check()
+    boundary, refine = opts.boundary, opts.refine
     dens = check_grid_density(density)
-    for name, val in (("rtol", rtol), ("tol_end", tol_end), ("margin", margin)):
-        if isinstance(val, bool) or not isinstance(val, numbers.Real) or not math.isfinite(val) or val <= 0:
-            raise ValueError(f"{name} must be a positive finite number, got {val!r}")
-    if isinstance(refine, bool) or not isinstance(refine, (int, np.integer)) or refine < 1:
-        raise ValueError(f"refine must be a positive integer, got {refine!r}")
     d, n = dens.ndim, dens.shape[0]
     mesh = grid_mesh(n, d)
     ref = mesh.points
@@ -376,7 +397,7 @@ def solve_dem(
         pad, scale = 0, 1.0
         fine = p1_upsample(dens, int(refine))
     else:
-        pad = max(1, int(round(margin * (n - 1))))
+        pad = max(1, int(round(opts.margin * (n - 1))))
         fine, sea = balanced_sea(dens, pad, int(refine))  # sea close to the mean density
         if not sea > 0:
             raise RuntimeError(f"could not balance the sea density (got {sea:.4g})")
@@ -401,7 +422,7 @@ def solve_dem(
     def positive(p: np.ndarray) -> bool:
         return grid_min_measure(p, n) > 0.0
 
-    threads = num_threads if num_threads is not None else (1 if d == 2 else None)
+    threads = opts.num_threads if opts.num_threads is not None else (1 if d == 2 else None)
     with torch_threads(threads):
         field = CosineDiffusion(fine)
         blurs: list[float] = []
@@ -409,9 +430,9 @@ def solve_dem(
             # a retry starts the vertices moving at t0 = (sigma h)^2 / 2, when diffusion has blurred the density
             # with a Gaussian of width sigma vertex spacings (as cartogram programs blur sharp inputs)
             t0 = 0.0 if retry == 0 else 0.5 * (FOLD_BLURS[retry - 1] / (nb - 1)) ** 2
-            y, info = _integrate(field, y0.copy(), project, h=1.0 / (nb - 1), rtol=float(rtol),
-                                 tol_end=float(tol_end), max_steps=int(max_steps), progress=progress,
-                                 label=f"DEM {d}D N={n}", positive=positive if fold_guard else None, t0=t0)
+            y, info = _integrate(field, y0.copy(), project, h=1.0 / (nb - 1), rtol=float(opts.rtol),
+                                 tol_end=float(opts.tol_end), max_steps=int(opts.max_steps), progress=progress,
+                                 label=f"DEM {d}D N={n}", positive=positive if opts.fold_guard else None, t0=t0)
             if info["fold_stop"] is None or retry == len(FOLD_BLURS):
                 break
             blurs.append(FOLD_BLURS[retry])
