@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import math
 import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -52,12 +53,12 @@ from .geometry import grid_element_mean, grid_signed_measures
 from .metrics import density_std
 
 __all__ = ["GUARD", "POOR", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER", "OUTPUT_PASSES",
-           "polish_map", "polish_tolerance", "smooth_displacement", "smooth_grid_displacement", "smooth_passes"]
+           "PolishOptions", "polish_map", "polish_tolerance", "smooth_displacement", "smooth_grid_displacement", "smooth_passes"]
 
 #: Most time steps of a warm flow before it is abandoned for a cold start.
 WARM_STEPS = 500
 
-#: The polish's guard (``polish_map(guard=...)``, on by default): after a warm flow, run the cold flow as well and
+#: The polish's guard (``PolishOptions.guard``, on by default): after a warm flow, run the cold flow as well and
 #: keep the better map; the warm flow often loses, and nothing measured beforehand predicts when (book: Design
 #: decisions).
 GUARD = True
@@ -192,39 +193,50 @@ def _fits(points: np.ndarray, elements: np.ndarray, boundary: str, n: int) -> bo
                 and (grid_signed_measures(torch.from_numpy(np.ascontiguousarray(points))[None], n) > 0).all())
 
 
-def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, density: np.ndarray, *, n: int,
-               boundary: str, tol: float | None = None, poor: float = POOR, stage_time: float = 0.0,
-               start: np.ndarray | None = None, guard: bool = GUARD,
-               progress: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
+@dataclass(frozen=True)
+class PolishOptions:
+    r"""How :func:`polish_map` finishes a map.
+
+    Attributes
+    ----------
+    tol : float, optional
+        Stopping tolerance on :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` (default: the solver's).
+    guard : bool
+        After a warm flow, also run the cold flow from the identity and keep whichever map has the lower
+        :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` (:data:`GUARD` explains why no cheaper test will do), so that
+        the result is never worse than the flow-based solver alone; ``False`` returns the warm flow's map.
+    poor : float
+        Start cold when Std(rho~_map) of :math:`u_0` exceeds ``poor`` times Std(rho~_orig).
+    progress : bool
+        Progress bar of the flow.
+    """
+
+    tol: float | None = None
+    guard: bool = GUARD
+    poor: float = POOR
+    progress: bool = False
+
+
+def polish_map(result, *, n: int, boundary: str, options: PolishOptions = PolishOptions(), stage_time: float = 0.0,
+               start: np.ndarray | None = None) -> tuple[np.ndarray, dict[str, Any]]:
     r"""Finish the map ``ref -> mapped`` of the ``N``-grid with the flow-based solver.
 
     Parameters
     ----------
-    ref, mapped : ndarray, shape (N**d, d)
-        The grid's vertices and the network's map :math:`u_0` of them.
-    elements : ndarray, shape (m, d+1)
-        The elements of :func:`rfmap.mesh.grid_mesh` ``(N, d)``.
-    density : ndarray, shape (N**d,)
-        Vertex densities (unit mass).
+    result : MapResult
+        The network's map :math:`u_0` of the grid: ``ref_points`` and ``mapped_points`` (N**d, d), ``elements`` of
+        :func:`rfmap.mesh.grid_mesh` ``(N, d)`` and ``field`` the vertex densities (N**d,, unit mass).
     n : int
         Grid side ``N``.
     boundary : {"square", "free"}
-    tol : float, optional
-        Stopping tolerance on :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` (default: the solver's).
-    poor : float
-        Start cold when Std(rho~_map) of :math:`u_0` exceeds ``poor`` times Std(rho~_orig).
+    options : PolishOptions
+        Tolerance, guard, what counts as a poor start, progress bar.
     stage_time : float
         Seconds already spent computing :math:`u_0` (recorded in the report).
     start : ndarray, shape (N**d, d), optional
         The map the warm flow starts from instead of ``mapped`` when it is fold-free and stays in the box (a
         smoothed :math:`u_0`, see the module docstring); whether and why ``mapped`` is good enough to start warm is
         still judged on ``mapped``.
-    guard : bool
-        After a warm flow, also run the cold flow from the identity and keep whichever map has the lower
-        :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` (:data:`GUARD` explains why no cheaper test will do), so that
-        the result is never worse than the flow-based solver alone; ``False`` returns the warm flow's map.
-    progress : bool
-        Progress bar of the flow.
 
     Returns
     -------
@@ -240,6 +252,8 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
     from .solvers.flow import solve_flow
 
     t0 = time.perf_counter()
+    ref, mapped, elements, density = result.ref_points, result.mapped_points, result.elements, result.field
+    tol, poor, guard, progress = options.tol, options.poor, options.guard, options.progress
     d = ref.shape[1]
     if boundary not in ("square", "free"):
         raise ValueError(f"polishing needs a density map with boundary 'square' or 'free', got {boundary!r}")
@@ -286,6 +300,6 @@ def polish_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, densit
     return res.mapped_points, report
 
 
-#: The row of the hybrid's warm flow alone, as ``polish_map(guard=False)`` would have returned it, beside the
+#: The row of the hybrid's warm flow alone, as ``polish_map`` without its guard would have returned it, beside the
 #: guarded polish (``rfmap.paper.benchmarks.compare_methods``).
 UNGUARDED = "hybrid (no guard)"

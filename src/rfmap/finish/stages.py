@@ -19,7 +19,7 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 
-from ..hybrid import GUARD, OUTPUT_PASSES, SMOOTH_EDGES, polish_map, smooth_displacement, \
+from ..hybrid import GUARD, OUTPUT_PASSES, SMOOTH_EDGES, PolishOptions, polish_map, smooth_displacement, \
     smooth_grid_displacement, smooth_passes
 from ..nn.model import apply_displacement
 from ..refine import REFINE, refine_alpha
@@ -188,8 +188,8 @@ def polish(draft: Draft, tol: float | None = None, guard: bool = GUARD) -> Draft
                                    alpha).numpy()
         smoothing = dict(smooth_passes=passes, smooth_edges=edges, output_passes=out_passes)
     before = res.time + time.perf_counter() - t0
-    mapped, report = polish_map(res.ref_points, res.mapped_points, res.elements, res.field, n=n,
-                                boundary=draft.boundary, tol=tol, stage_time=before, start=start, guard=guard)
+    mapped, report = polish_map(res, n=n, boundary=draft.boundary, options=PolishOptions(tol, guard),
+                                stage_time=before, start=start)
     report.update(smoothing)
     return draft.then(mapped, before - res.time + report["time"], polish=report)
 
