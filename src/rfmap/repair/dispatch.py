@@ -39,7 +39,7 @@ def _metrics(ref, pts, elements, density, mu_ref) -> dict:
 
 def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, boundary: str,
                grid_n: int | None = None, density: np.ndarray | None = None, mu: np.ndarray | None = None,
-               delta: float = DELTA, method: str = "auto") -> tuple[np.ndarray, dict[str, Any]]:
+               method: str = "auto") -> tuple[np.ndarray, dict[str, Any]]:
     r"""Return a fold-free version of the map ``ref -> mapped`` and a report of what was done.
 
     Parameters
@@ -55,13 +55,12 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         Vertex densities, for the density metrics in the report.
     mu : complex ndarray (m,), optional
         Target Beltrami coefficient, for ``mean_dmu`` in the report.
-    delta : float
-        Truncation margin, :math:`|\mu| \le 1 - \delta`.
     method : {"auto", "local", "lbs", "scale"}
         ``local``: :func:`local_lbs_repair`, falling back to ``lbs`` when no patch ends fold-free; ``lbs``:
         :func:`lbs_repair` on the whole grid; ``scale``: :func:`scale_repair`.  Any of them ends with
         :func:`scale_repair` if its result is still folded.  ``auto``: ``local`` for 2D grid meshes, ``scale``
-        otherwise.
+        otherwise.  The LBS repairs truncate :math:`|\mu| \le 1 - \delta` with :math:`\delta` =
+        :data:`rfmap.repair.lbs.DELTA`.
 
     Returns
     -------
@@ -108,7 +107,7 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     if method == "local":
         if not (d == 2 and grid_n):
             raise ValueError("the local LBS repair needs a 2D grid mesh (grid_n)")
-        local = local_lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, delta)
+        local = local_lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, DELTA)
         if local is not None:
             out, capped = local
             affected = int(capped.sum())
@@ -117,7 +116,7 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     if method == "lbs":
         if not (d == 2 and grid_n):
             raise ValueError("the LBS repair needs a 2D grid mesh (grid_n)")
-        out, capped = lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, delta)
+        out, capped = lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, DELTA)
         affected = int(capped.sum())
     if method == "scale" or not fold_free(out, el, grid_n=grid_n, boundary=boundary):
         out, info = scale_repair(ref, out, el, boundary=boundary)
