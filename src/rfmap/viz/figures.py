@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import os
 from contextlib import contextmanager
+from dataclasses import dataclass, replace
 from pathlib import Path
 
-__all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "display_font_sizes", "MIN_DISPLAY_PT",
+__all__ = ["ColorScale", "color_scale", "STYLE", "style", "repository_root", "figures_dir", "save_figure", "display_font_sizes", "MIN_DISPLAY_PT",
            "TEXT_COLUMN_PX", "MAX_FIGURE_PX"]
 
 
@@ -29,6 +30,27 @@ MIN_DISPLAY_PT = 9.0
 
 #: the widest saved image, in pixels
 MAX_FIGURE_PX = 2400
+
+
+@dataclass(frozen=True)
+class ColorScale:
+    """How values map to colours: the limits (``None``: the data's own) and the colormap."""
+
+    vmin: float | None = None
+    vmax: float | None = None
+    cmap: str = "viridis"
+
+    @property
+    def clim(self) -> tuple[float | None, float | None]:
+        return (self.vmin, self.vmax)
+
+
+def color_scale(scale: ColorScale | None = None, **kw) -> ColorScale:
+    """``scale`` (default :class:`ColorScale`) with the fields given as keywords replaced: ``vmin``, ``vmax``,
+    ``cmap``, or ``clim=(vmin, vmax)``; ``TypeError`` for any other keyword."""
+    if "clim" in kw:
+        kw["vmin"], kw["vmax"] = kw.pop("clim")
+    return replace(scale or ColorScale(), **kw)
 
 
 @contextmanager

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .figures import save_figure, style
+from .figures import ColorScale, color_scale, save_figure, style
 
 __all__ = ["element_rho", "plot_mesh", "plot_slice_outline", "plot_density", "plot_mu", "plot_map_row",
            "plot_beltrami_row", "vertex_error_panels", "population_figure", "map_rows_figure", "beltrami_figure",
@@ -65,10 +65,13 @@ def plot_slice_outline(ax, points, n: int, k: int | None = None, *, title: str |
         ax.set_title(title)
 
 
-def plot_density(ax, points, elements, values, *, title=None, vmin=None, vmax=None, cmap="viridis", colorbar=True):
-    """Per-element (length m) or per-vertex (length n) values on a 2D mesh."""
+def plot_density(ax, points, elements, values, *, title=None, colorbar=True, scale: ColorScale | None = None, **kw):
+    """Per-element (length m) or per-vertex (length n) values on a 2D mesh, coloured by ``scale``
+    (:class:`rfmap.viz.figures.ColorScale`; its fields ``vmin``, ``vmax``, ``cmap`` may be given as keywords)."""
     import matplotlib.pyplot as plt
 
+    sc = color_scale(scale, **kw)
+    vmin, vmax, cmap = sc.vmin, sc.vmax, sc.cmap
     values = np.asarray(values)
     if values.shape[0] == len(elements):
         im = ax.tripcolor(points[:, 0], points[:, 1], elements, facecolors=values, vmin=vmin, vmax=vmax, cmap=cmap)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..result import setup_pyvista, to_pyvista
-from .figures import save_figure, style
+from .figures import ColorScale, color_scale, save_figure, style
 
 __all__ = ["CAMERA_3D", "CUT_PLANE", "render_volume", "render_lattice", "volume_rows"]
 
@@ -30,16 +30,24 @@ def _cut(grid, clip):
     return grid
 
 
+#: the colour scale of :func:`render_volume` and :func:`render_lattice` (:math:`\tilde\rho` from 0 to 2.5)
+RHO_SCALE = ColorScale(0.0, 2.5)
+
+
 def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", clip: bool | str = True,
-                  window_size=(420, 420), clim=(0.0, 2.5), cmap="viridis", show_edges: bool = False, camera="iso"):
+                  window_size=(420, 420), show_edges: bool = False, camera="iso", scale: ColorScale = RHO_SCALE, **kw):
     r"""Render a 3D result off screen and return the image (H, W, 3).
 
     ``scalars`` names an array of :func:`rfmap.result.to_pyvista` (``"rho"`` per element, ``"density"`` at the
     vertices) or ``"|u - x|"``, the length of the displacement :math:`|u(x) - x|` at the vertices.  ``clip`` cuts
     the volume open along flat faces: ``True`` (or ``"octant"``) removes the octant nearest the camera, ``"plane"``
     the half in front of :data:`CUT_PLANE`.  ``camera`` is a PyVista camera position (``'iso'`` fits the view to the
-    mesh, a fixed one such as :data:`CAMERA_3D` makes several renderings comparable).
+    mesh, a fixed one such as :data:`CAMERA_3D` makes several renderings comparable).  ``scale``
+    (:class:`rfmap.viz.figures.ColorScale`, default :data:`RHO_SCALE`) colours the scalars; its fields may be given as
+    keywords (``clim=(lo, hi)``, ``cmap=...``).
     """
+    sc = color_scale(scale, **kw)
+    clim, cmap = sc.clim, sc.cmap
     pv = setup_pyvista()
     grid = to_pyvista(result, mapped=mapped)
     if scalars == "|u - x|":
@@ -69,12 +77,14 @@ def _vertex_rho(result, mapped: bool) -> np.ndarray:
     return total / np.maximum(np.bincount(el.ravel(), minlength=n_pts), 1)
 
 
-def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines: int = 13, clim=(0.0, 2.5),
-                   cmap="viridis", window_size=(420, 420), camera=CAMERA_3D, line_width: float = 2.0):
+def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines: int = 13, window_size=(420, 420),
+                   camera=CAMERA_3D, line_width: float = 2.0, scale: ColorScale = RHO_SCALE, **kw):
     """Render the grid lines of a 3D grid result on a few horizontal slices (:math:`x_3` = ``slices`` in the
     reference cube) off screen, coloured by :math:`\\tilde\\rho` at the vertices, inside the outline of the unit
     cube; returns the image (H, W, 3).  The original lattice (``mapped=False``) is drawn flat; the mapped one shows
-    where the map moves each slice."""
+    where the map moves each slice.  ``scale`` as in :func:`render_volume`."""
+    sc = color_scale(scale, **kw)
+    clim, cmap = sc.clim, sc.cmap
     pv = setup_pyvista()
     n = round(len(result.ref_points) ** (1 / 3))
     if n**3 != len(result.ref_points):
