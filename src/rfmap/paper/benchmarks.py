@@ -197,7 +197,7 @@ def targets_headline(checks: list[dict[str, Any]]):
             ours[f"{c['case']}: {name}"] = c[key]
             target[f"{c['case']}: {name}"] = limit
     return headline("The speed and accuracy targets", "Ratios of the means over each case's fields (target: at most)",
-                    ours, target, ours_label="measured", paper_label="target")
+                    ours, target, labels={"ours": "measured", "paper": "target"})
 
 
 def summary_table(summary: list[dict[str, Any]]):

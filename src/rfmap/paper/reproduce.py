@@ -333,8 +333,8 @@ def population_headline(table: Table, fields, title: str, *, symmetrized: bool =
     paper = {f: _maybe(table, f, "paper", "std_rho_map") for f in fields}
     dem = {f: _maybe(table, f, "diffusion DEM", "std_rho_map") for f in fields}
     label = "ours, best delivered" + (" (symmetrized too)" if symmetrized else "")
-    return headline(title, "Std(ρ̃_map), lower is better", ours, paper, dem, ours_label=label,
-                    classical_label="diffusion DEM")
+    return headline(title, "Std(ρ̃_map), lower is better", ours, paper, dem,
+                    labels={"ours": label, "classical": "diffusion DEM"})
 
 
 def beltrami_headline(table: Table, cases, title: str, *, column: str = "mean_dd", paper_column: str | None = None,
@@ -350,7 +350,7 @@ def beltrami_headline(table: Table, cases, title: str, *, column: str = "mean_dd
     lbs = {str(c): table.value(str(c), "LBS", column) for c in cases}
     label = "ours, best delivered" + (" (symmetrized too)" if symmetrized else "")
     metric = f"{COLUMN_TITLES.get(column, column)}, lower is better"
-    return headline(title, metric, ours, paper, lbs, ours_label=label, classical_label="LBS")
+    return headline(title, metric, ours, paper, lbs, labels={"ours": label, "classical": "LBS"})
 
 
 def _maybe(table: Table, case: str, method: str, column: str):

@@ -211,10 +211,11 @@ class Headline:
 
 
 def headline(title: str, metric: str, ours: dict, paper: dict | None = None, classical: dict | None = None, *,
-             ours_label: str = "ours", classical_label: str = "classical",
-             lower_is_better: bool = True, paper_label: str = "paper") -> Headline:
+             labels: dict[str, str] | None = None, lower_is_better: bool = True) -> Headline:
     """The headline table of an experiment from three mappings ``case -> value`` (the cases are those of ``ours``,
-    in its order; a case missing from ``paper`` or ``classical`` shows an em dash).
+    in its order; a case missing from ``paper`` or ``classical`` shows an em dash).  ``labels`` names the columns
+    where they differ from ``{"ours": "ours", "paper": "paper", "classical": "classical"}`` (e.g. ``{"paper":
+    "target"}`` where the value to meet is a target).
 
     Examples
     --------
@@ -225,7 +226,11 @@ def headline(title: str, metric: str, ours: dict, paper: dict | None = None, cla
     paper, classical = paper or {}, classical or {}
     rows = [(str(c), None if v is None else float(v), _num(paper.get(c)), _num(classical.get(c)))
             for c, v in ours.items()]
-    return Headline(title, metric, rows, ours_label, classical_label, lower_is_better, paper_label)
+    names = {"ours": "ours", "paper": "paper", "classical": "classical", **(labels or {})}
+    unknown = set(names) - {"ours", "paper", "classical"}
+    if unknown:
+        raise ValueError(f"unknown headline columns {sorted(unknown)}; expected ours, paper, classical")
+    return Headline(title, metric, rows, names["ours"], names["classical"], lower_is_better, names["paper"])
 
 
 def _num(v) -> float | None:
