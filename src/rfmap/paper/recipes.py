@@ -1,6 +1,7 @@
 r"""How the shipped models were trained, from their metadata: the training fields in words and the recipe table."""
 from __future__ import annotations
 
+from ..tasks import BeltramiTask, get_task
 from .tables import Table
 
 __all__ = ["training_fields_text", "recipe_table", "recipe_differences", "differences_text"]
@@ -10,7 +11,7 @@ def training_fields_text(config: dict) -> str:
     """The random training fields of a stored training configuration (``meta["config"]``) in words: the paper's
     smooth modes with steps and patches, plus the sharp features (narrow peaks, steep ramps) where drawn; for Beltrami
     models the share of low-frequency maps where drawn."""
-    if config["task"]["kind"] == "beltrami":
+    if isinstance(get_task(config["task"]["kind"]), BeltramiTask):
         low = (config.get("beltrami_field") or {}).get("low", 0.0)
         return "random boundary-fixing maps" + (f", low-frequency {100 * low:.0f} %" if low else "")
     dens = config.get("density_field") or {}
