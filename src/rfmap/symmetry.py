@@ -40,12 +40,8 @@ __all__ = ["Symmetry", "SYMMETRY_GROUPS", "DEFAULT_SYMMETRY", "symmetries", "tra
 #: the sets of symmetries offered: ``flips`` (every combination of axis reflections, 2^d), ``permutations`` (every
 #: order of the axes, d!), ``cyclic`` (the d cyclic orders of the axes), ``full`` (all 2^d d! symmetries)
 SYMMETRY_GROUPS = ("flips", "permutations", "cyclic", "full")
-#: the set used by ``symmetrize=True``, per dimension, chosen on the 16 held-out validation fields (never the paper's
-#: test fields): in 2D all 8 symmetries (deq2d-square, mean Std(rho~_map) at N = 51 / 128: plain 0.0674 / 0.0745,
-#: the 2 axis orders 0.0637 / 0.0621, the 4 reflections 0.0639 / 0.0582, all 8 0.0620 / 0.0546); in 3D the 3 cyclic
-#: axis orders (dem3d-cube, smooth, step and peak fields at N = 48 / 32: plain 0.0792 / 0.0872, cyclic 0.0670 /
-#: 0.0705, all 6 orders 0.0671 / 0.0703, the 8 reflections 0.0686 / 0.0718; raw maps of the 4 steep ramps folded
-#: at N = 48: 4, 2, 1, 0)
+#: the set used by ``symmetrize=True``, per dimension, chosen on the held-out validation fields: all 8 symmetries in
+#: 2D, the 3 cyclic axis orders in 3D (book: Design decisions)
 DEFAULT_SYMMETRY = {2: "full", 3: "cyclic"}
 
 

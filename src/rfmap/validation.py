@@ -17,27 +17,16 @@ The set mixes kinds, sharp ones included, so that folds show up during training:
 
 The score of a density model is the mean over field families of each family's mean Std(rho~_map) relative to
 the field's own Std(rho~_orig) (:func:`score`; the per-family values are ``families`` in the summary), with every
-folded map counted as the identity map (ratio 1).  The plain and penalized means over fields are kept in the
-summary: the eight steep ramps of the 3D set, whose Std is several times the other fields', dominated them and chose
-checkpoints by how the ramps were repaired.  The score of a Beltrami model is the mean vertex distance
-(``mean_dd``) with every folded map counted as the identity map, i.e. as no map at all (``penalized``): a fold costs the model
-everything it gained on that field, and no more.  (Ranking every folded model below every fold-free one, the rule
-of the first runs, preferred a model that folds nothing because it hardly moves: it chose checkpoints whose mean
-over the other fields was 40 % worse, for one folded ramp at a grid side outside the training range, a fold that
-the inference-time repair, ``rfmap.repair``, removes anyway.)
+folded map counted as the identity map (ratio 1); the plain and penalized means over fields are kept in the summary.
+The score of a Beltrami model is the mean vertex distance (``mean_dd``) with every folded map counted as the
+identity map, i.e. as no map at all (``penalized``): a fold costs the model everything it gained on that field, and
+no more.
 
 With ``evaluate(..., repair=True)`` (``TrainConfig.val_repair``, the 3D models) the maps scored are those that
 ``Surrogate.map`` returns by default: a folded network map is first tried on coarser working grids and then
-repaired, so a steep ramp that the network folds at N = 48 counts with the fold-free map a user would get rather
-than as the identity.  Measured on the 3D cube model's validation set (mean Std over 16 fields at N = 32 and 48),
-the average weights of a run at step 1,000 against those at step 7,000: raw and penalized 0.2590 against 0.2915
-(2 against 5 folded ramps: the raw rule prefers step 1,000), delivered 0.2317 against 0.2132 (step 7,000 is better
-on every kind, the ramps included: 0.711 against 0.656).  The raw rule picked checkpoints by how many of the
-steep ramps folded, not by the maps users receive.  A delivered map can be worse than no map (a repair that
-leaves a steep ramp at Std 2.5 against the identity's 1.0 was seen); in the score it counts as the identity, so that
-one failed repair does not decide the choice as one fold did before.  ``Surrogate.map`` itself now shortens such a
-map towards the identity (:func:`rfmap.shorten.shorten_map`), so a delivered map is no worse than the identity and
-the cap only guards maps that are not finite.
+repaired, so a steep ramp that the network folds counts with the fold-free map a user would get rather than as the
+identity.  A delivered map that is worse than no map counts as the identity.  Why these rules, with the
+measurements: the book's page *Design decisions*.
 """
 from __future__ import annotations
 
