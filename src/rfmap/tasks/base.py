@@ -22,7 +22,7 @@ from torch import Tensor
 
 from .. import losses as L
 from ..geometry import grid_signed_measures, signed_measures
-from ..mesh import grid_mesh
+from ..mesh import grid_mesh, grid_points
 from ..nn.model import BOUNDARIES, apply_displacement
 from ..result import DENSITY_FIELD_KINDS
 from ..random_fields import RandomBeltramiConfig, RandomDensityConfig
@@ -235,6 +235,8 @@ class Task:
     equalizes : bool
         Whether the map equalizes a density: then a map is judged against doing nothing, shortened when it is no
         better, and may be polished by the flow-based solver (:mod:`rfmap.finish`).
+    methods : tuple of str
+        The classical solvers of :mod:`rfmap.solvers` that compute this kind of map (``rfmap solve --method``).
     """
 
     kind: ClassVar[str] = ""
@@ -245,6 +247,7 @@ class Task:
     loss_terms: ClassVar[tuple[str, ...]] = ()
     teacher: ClassVar[bool] = False
     equalizes: ClassVar[bool] = False
+    methods: ClassVar[tuple[str, ...]] = ()
 
     # ------------------------------------------------------------------ encoding and input
     def n_params(self, dim: int) -> int:
@@ -267,6 +270,12 @@ class Task:
     def sample_named(self, field: Any) -> Callable:
         """The function of points that samples a named field object of this kind (default the object itself)."""
         return field
+
+    def field_on_mesh(self, grid: np.ndarray, fn: Callable | None, ref: np.ndarray, elements: np.ndarray,
+                      grid_n: int | None) -> np.ndarray:
+        """The input field on an output mesh, as a map's ``MapResult.field``: from the exact evaluator ``fn``
+        when there is one, else interpolated from the checked ``grid`` (``grid_n``: the mesh is the ``N``-grid)."""
+        raise NotImplementedError
 
     # ------------------------------------------------------------------ training
     def draw(self, rng: np.random.Generator, spec: TaskSpec, n: int, options: SampleOptions,
@@ -294,10 +303,37 @@ class Task:
         """The keywords ``density`` and ``mu`` of :func:`rfmap.repair.dispatch.repair_map` for a map of ``field``."""
         return {"density": None, "mu": None}
 
-    def reference(self, field: np.ndarray, n: int, boundary: str):
-        """The classical reference solver's map (:class:`rfmap.result.MapResult`) of a field on the ``N``-grid
-        (``None`` when the task has none)."""
-        return None
+    def reference(self, grid: np.ndarray, boundary: str | None = None):
+        """The classical reference solver's map (:class:`rfmap.result.MapResult`, the first of :attr:`methods`)
+        of a user's field on the ``N``-grid's vertices."""
+        if not self.methods:
+            raise ValueError(f"{self.title} tasks have no classical solver")
+        return self.solve(self.solver_input(grid), grid.shape[0], self.methods[0], boundary)
+
+    def solve(self, values: np.ndarray, n: int, method: str, boundary: str | None, progress: bool = False):
+        """A classical map (``method`` one of :attr:`methods`) on the ``N``-grid of the solver's input ``values``
+        (:meth:`solver_input`, :meth:`solver_sample`), as ``rfmap solve`` computes it; ``boundary`` ``None``: the
+        task's default."""
+        raise ValueError(f"{self.title} tasks have no classical solver")
+
+    def solver_input(self, grid: np.ndarray) -> np.ndarray:
+        """A user's field on the ``N``-grid's vertices checked and prepared for :meth:`solve` (``ValueError``
+        otherwise)."""
+        return self.check_field(grid)
+
+    def solver_sample(self, field: Any, n: int) -> np.ndarray:
+        """The solver's input of a named field of this kind on the ``N``-grid."""
+        return self.solver_input(np.asarray(self.sample_named(field)(grid_points(n, field.dim))).reshape(
+            (n,) * field.dim))
+
+    def test_fields(self, dim: int) -> tuple[str, ...]:
+        """The paper's test fields of this kind in ``dim`` dimensions (reported after training, never used to select
+        a model); none by default."""
+        return ()
+
+    def test_record(self, result, name: str) -> dict:
+        """The metrics of a map of the paper's test field ``name``."""
+        raise NotImplementedError
 
     # ------------------------------------------------------------------ validation
     def validation_fields(self, dim: int, count: int, stream: str, low_frequency: bool = False) -> list:

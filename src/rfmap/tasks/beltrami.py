@@ -42,6 +42,7 @@ class BeltramiTask(Task):
     score_metric = "mean_dd"
     metric_names = ("mean_dd", "n_flipped", "min_jacobian")
     loss_terms = ("beltrami",)
+    methods = ("lbs",)
 
     def n_params(self, dim: int) -> int:
         return 2
@@ -100,13 +101,34 @@ class BeltramiTask(Task):
     def metric_inputs(self, field: np.ndarray) -> dict:
         return {"density": None, "mu": field}
 
-    def reference(self, field: np.ndarray, n: int, boundary: str):
-        """The LBS map of the coefficient on the ``N``-grid's vertices (the mean of the three vertex values on
-        every triangle: the P1 interpolant's mean, so :math:`|\\mu| < 1` stays)."""
+    def solver_input(self, grid: np.ndarray) -> np.ndarray:
+        """:math:`\mu` per triangle from a 2D coefficient on the grid's vertices: the mean of the three vertex
+        values on every triangle (the P1 interpolant's mean, so :math:`|\mu| < 1` stays)."""
+        if grid.ndim != 2:
+            raise ValueError(f"method lbs needs a 2D Beltrami coefficient, shape (N, N); got shape {grid.shape}")
+        return check_mu(grid, name="the Beltrami coefficient").reshape(-1)[square_triangles(grid.shape[0])].mean(1)
+
+    def solver_sample(self, field, n: int) -> np.ndarray:
+        from ..paper_fields import sample_mu
+
+        return sample_mu(field.name, n)
+
+    def solve(self, values: np.ndarray, n: int, method: str, boundary: str | None, progress: bool = False):
         from ..solvers import solve_lbs
 
-        mu = check_mu(field, name="the Beltrami coefficient").reshape(-1)[square_triangles(n)].mean(1)
-        return solve_lbs(mu, n, boundary=boundary)
+        return solve_lbs(values, n, boundary="fixed" if boundary in (None, "fixed") else boundary)
+
+    def test_fields(self, dim: int) -> tuple[str, ...]:
+        from ..paper_fields import TEST_FIELDS
+
+        return TEST_FIELDS[self.kind, dim]
+
+    def test_record(self, result, name: str) -> dict:
+        from ..paper_fields import BELTRAMI_MAPS
+
+        m = result.metrics(exact_points=BELTRAMI_MAPS[name](result.ref_points), mu_ref=result.field)
+        return {"mean_dd": m.mean_dd, "mean_dmu": m.mean_dmu, "n_flipped": m.n_flipped,
+                "min_jacobian": m.min_jacobian}
 
     # ------------------------------------------------------------------ validation
     def validation_fields(self, dim: int, count: int, stream: str, low_frequency: bool = False) -> list:

@@ -49,6 +49,7 @@ class DensityTask(Task):
     loss_terms = ("density", "mu2", "area")
     teacher = True
     equalizes = True
+    methods = ("diffusion", "dem", "flow")
 
     def n_params(self, dim: int) -> int:
         return 1
@@ -121,10 +122,28 @@ class DensityTask(Task):
     def metric_inputs(self, field: np.ndarray) -> dict:
         return {"density": field, "mu": None}
 
-    def reference(self, field: np.ndarray, n: int, boundary: str):
+    def solver_input(self, grid: np.ndarray) -> np.ndarray:
+        """A real density, preprocessed as ``rfmap map`` does (minimum shifted to 0.1, unit mass)."""
+        if np.iscomplexobj(grid):
+            raise ValueError("a density solver needs a real density, got complex values")
+        return preprocess_density(grid)
+
+    def solver_sample(self, field, n: int) -> np.ndarray:
+        return field.sample(n)
+
+    def solve(self, values: np.ndarray, n: int, method: str, boundary: str | None, progress: bool = False):
         from ..solvers import solve_dem
 
-        return solve_dem(field, boundary=boundary)
+        return solve_dem(values, method=method, boundary=boundary or "square", progress=progress)
+
+    def test_fields(self, dim: int) -> tuple[str, ...]:
+        from ..paper_fields import TEST_FIELDS
+
+        return TEST_FIELDS[self.kind, dim]
+
+    def test_record(self, result, name: str) -> dict:
+        m = result.metrics()
+        return {"std_rho_map": m.std_rho_map, "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian}
 
     # ------------------------------------------------------------------ validation
     def validation_fields(self, dim: int, count: int, stream: str, low_frequency: bool = False) -> list:
