@@ -26,7 +26,7 @@ def _random_parent(dim: int, n_params: int, base: int, depth: int, seed: int = 0
     net = MultiResUNet(dim, n_params, base, depth)
     with torch.no_grad():
         for p in net.parameters():
-            p.normal_(0.0, 0.1)
+            p.normal_(0.0, 0.2)
     return net.eval()
 
 
@@ -40,8 +40,9 @@ def test_grown_network_maps_every_field_as_its_parent(dim, n_params, base, depth
     x = torch.randn(3, parent.in_channels, *([side] * dim))
     with torch.no_grad():
         a, b = parent(x), child(x)
-    assert a.abs().max() > 0.1  # a non-trivial function
-    assert torch.allclose(a, b, atol=TOL, rtol=0)
+    assert a.std() > 1e-3  # a non-trivial function
+    # to 1e-5 of the output's scale (random weights give outputs far from a displacement's O(0.1))
+    assert (a - b).abs().max() <= TOL * max(1.0, float(a.abs().max()))
 
 
 @pytest.mark.parametrize("name,new", [("dem3d-cube", 16), ("deq2d-square", 32), ("beltrami2d", 32)])
@@ -69,7 +70,8 @@ def test_copies_diverge_under_training():
     opt.step()
     w = child.lift.lift[0].weight.detach()
     twin = int(np.flatnonzero(src == src[0])[1])
-    assert not torch.allclose(w[0], w[twin])
+    d0, d1 = w[0] - first[0], w[twin] - first[twin]
+    assert d0.abs().max() > 0 and (d0 - d1).abs().max() > 0.05 * d0.abs().max()
 
 
 def test_copy_map_keeps_groups_whole():
@@ -103,8 +105,8 @@ def test_batch_points_keep_the_cost_per_step():
         replace(cfg, n_sampling="cubic")
 
 
-def _train(*args: str, tmp_path) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "rfmap.cli", "train", "--preset", "ci", "--no-progress", *args],
+def _train(*args: str, tmp_path, preset: str = "ci") -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "rfmap.cli", "train", "--preset", preset, "--no-progress", *args],
                           capture_output=True, text=True, cwd=tmp_path, env={**__import__("os").environ,
                                                                               "OMP_NUM_THREADS": "1"})
 
@@ -117,7 +119,7 @@ def _train(*args: str, tmp_path) -> subprocess.CompletedProcess:
 ])
 def test_grow_on_an_incompatible_parent_is_one_line_and_exit_2(tmp_path, args, match):
     out = tmp_path / "out"
-    r = _train(*args, "--out", str(out), tmp_path=tmp_path)
+    r = _train(*args, "--out", str(out), tmp_path=tmp_path, preset="full")  # the shipped parents' architecture
     assert r.returncode == 2, r.stderr
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and match in lines[0], r.stderr
@@ -161,4 +163,7 @@ def test_cli_map_native(tmp_path):
     assert r.returncode == 0, r.stderr
     from rfmap.result import load_result
 
-    assert load_result(out).info["work_n"] == 41
+    sur = Surrogate.pretrained("deq2d-square")
+    native = sur.map("ring", 41, native=True, repair=False).mapped_points
+    assert np.allclose(load_result(out).mapped_points, native, atol=1e-12)
+    assert not np.allclose(sur.map("ring", 41, repair=False).mapped_points, native)  # 41 is below the range

@@ -28,8 +28,8 @@ def test_metadata_records_provenance(name):
     # of its validation (held-out fields, sizes, checkpoint choice), some of which postdate older weights
     stored = dict(meta["config"])
     expected = cfg.to_dict()
-    for key in ("threads", "time_limit", "workers", "val_sizes", "val_count", "val_repair", "select_best",
-                "val_every", "ckpt_every", "val_n"):
+    for key in ("threads", "time_limit", "workers", "val_sizes", "val_count", "val_repair", "val_native",
+                "select_best", "val_every", "ckpt_every", "val_n"):
         stored.pop(key, None)
         expected.pop(key, None)
     # model fields added after the weights were made (the FNO's) take their defaults, which leave a U-Net unchanged
@@ -50,6 +50,10 @@ def test_metadata_records_provenance(name):
     # the classical teacher and snapshots, added later: runs before them were data-free and wrote none
     stored.setdefault("teacher", {"method": "none", "share": 0.5, "weight": 0.1})
     stored.setdefault("snapshot_every", 0)
+    # the size curriculum and growth, added later: runs before them drew sides uniformly at a fixed batch, ungrown
+    stored.setdefault("n_sampling", "uniform")
+    stored.setdefault("batch_points", 0)
+    stored.setdefault("grow", False)
     # overrides given on the recorded command line (e.g. --steps for a warm restart) are what it says they are
     words = meta.get("command", "").split()
     for flag, key, kind in (("--steps", "steps", int), ("--batch", "batch", int), ("--seed", "seed", int),
@@ -57,6 +61,18 @@ def test_metadata_records_provenance(name):
         if flag in words:
             assert stored[key] == kind(words[words.index(flag) + 1])
             expected[key] = stored[key]
+    for flag, key in (("--n-sampling", "n_sampling"), ("--batch-points", "batch_points")):
+        if flag in words:
+            assert str(stored[key]) == words[words.index(flag) + 1]
+            expected[key] = stored[key]
+    if "--n-range" in words:
+        i = words.index("--n-range")
+        assert stored["n_range"] == [int(words[i + 1]), int(words[i + 2])]
+        expected["n_range"] = stored["n_range"]
+    if "--grow" in words:  # a grown network: the base it was widened to, and its parent in the lineage
+        assert stored["grow"] and stored["model"]["base"] == int(words[words.index("--grow") + 1])
+        expected["grow"], expected["model"] = True, stored["model"]
+        assert any("grown" in rec for rec in meta["lineage"])
     assert stored == expected
     assert meta["preset"] == "full"
     assert meta["steps"] > 0 and 0 < meta["wall_time"] <= 9000  # one run of at most 150 minutes
