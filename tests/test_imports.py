@@ -53,6 +53,7 @@ LAYERS: dict[str, int] = {
     "rfmap.experiments": 3, "rfmap.paper": 3, "rfmap.paper.tables": 3, "rfmap.paper.reproduce": 3,
     "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,
     "rfmap.paper.flow_studies": 3, "rfmap.paper.design": 3, "rfmap.paper.cartograms": 3, "rfmap.paper.comparison": 3,
+    "rfmap.paper.ablations": 3,
     "rfmap.cartogram": 3,
     "rfmap.cartogram_data": 3, "rfmap.cartogram_series": 3, "rfmap.cartogram_metrics": 3, "rfmap.regions": 3, "rfmap.projection": 3, "rfmap.compare": 3, "rfmap.studies": 3,
     "rfmap.cli": 4, "rfmap.cli_base": 4, "rfmap.cli_cartogram": 4, "rfmap.lazy_parser": 4,

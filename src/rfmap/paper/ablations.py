@@ -1,0 +1,84 @@
+r"""What weight refinement does to the paper's test cases: the network run natively with :math:`\alpha = 1` against
+the same map refined (the paper's method, Sec. 4.3).
+
+Refinement minimises an objective over the stretching vector :math:`\alpha` (the model's training loss on the map:
+the density loss, with the Beltrami energy for a DEQ model, or the Beltrami residual), starting from
+:math:`\alpha = 1`; it never returns a larger objective than :math:`\alpha = 1`.  The paper's tables score other
+numbers (Std(ρ̃_map), mean |Δd|), which refinement may raise: :func:`refinement_study` measures both.
+"""
+from __future__ import annotations
+
+from ..finish import quiet_quality
+from .comparison import format_number
+from .reproduce import beltrami_values, density_values
+from .tables import Table
+
+__all__ = ["refinement_study", "refinement_summary", "refinement_markdown"]
+
+
+@quiet_quality()
+def refinement_study(sur, fields, n: int, title: str = "") -> Table:
+    r"""Per field, the network on the ``n``-grid itself (``work_n=n``, no repair) with :math:`\alpha = 1` and refined:
+    the table's metric (``std_rho_map`` for a density model, ``mean_dd`` for a Beltrami model), the refinement
+    objective at :math:`\alpha = 1` and at the refined :math:`\alpha`, and :math:`\alpha`.
+
+    Parameters
+    ----------
+    sur : rfmap.Surrogate
+    fields : sequence of str
+        Built-in fields of the surrogate's kind and dimension.
+    n : int
+    title : str
+
+    Returns
+    -------
+    Table
+        Rows ``(field, "α = 1")`` and ``(field, "refined")`` with columns ``metric``, ``objective`` and ``alpha``.
+    """
+    density = sur.spec.kind == "density"
+    metric = "std_rho_map" if density else "mean_dd"
+    t = Table("tab:refinement", title or f"Weight refinement on the {sur.name} test fields, N = {n}",
+              ["metric", "objective", "alpha"])
+    w = max(int(n), int(sur.model.min_size))
+    for f in fields:
+        raw = sur.map(f, n, work_n=w, repair=False)
+        ref = sur.map(f, n, work_n=w, repair=False, refine=True)
+        for label, res in (("α = 1", raw), ("refined", ref)):
+            values = density_values(res, sur.spec.dim == 2) if density else beltrami_values(res, f)
+            objective = ref.info["refine_objective_start" if label == "α = 1" else "refine_objective"]
+            t.add(f, label, {"metric": values[metric], "objective": float(objective),
+                             "alpha": list(res.info["alpha"])})
+    return t
+
+
+def refinement_summary(table: Table) -> dict:
+    """Counts over the fields of a :func:`refinement_study`: ``fields``, ``objective_lowered`` (refinement lowered its
+    objective, or kept it: never raised), ``metric_lowered`` and ``metric_raised`` (the table's metric), and the
+    ``worst`` field (largest rise of the metric, relative) with its two values as text."""
+    fields = list(dict.fromkeys(c for c, _, _ in table.rows))
+    out = {"fields": len(fields), "objective_lowered": 0, "metric_lowered": 0, "metric_raised": 0}
+    worst, rise = None, 0.0
+    for f in fields:
+        a, r = (table.value(f, m, "metric") for m in ("α = 1", "refined"))
+        oa, o = (table.value(f, m, "objective") for m in ("α = 1", "refined"))
+        out["objective_lowered"] += int(o <= oa)
+        out["metric_lowered"] += int(r < a)
+        out["metric_raised"] += int(r > a)
+        if a > 0 and r / a - 1 > rise:
+            worst, rise = f, r / a - 1
+    out["worst"] = "none" if worst is None else (
+        f"{worst}, from {format_number(table.value(worst, 'α = 1', 'metric'))} to "
+        f"{format_number(table.value(worst, 'refined', 'metric'))}")
+    return out
+
+
+def refinement_markdown(studies: dict) -> str:
+    """One row per model of ``{name: refinement_study(...)}``: the fields, on how many refinement did not raise its
+    objective, lowered and raised the table's metric, and the largest rise (:func:`refinement_summary`)."""
+    head = ["model", "fields", "objective not raised", "metric lowered", "metric raised", "largest rise"]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for name, table in studies.items():
+        s = refinement_summary(table)
+        lines.append(f"| {name} | {s['fields']} | {s['objective_lowered']} | {s['metric_lowered']} | "
+                     f"{s['metric_raised']} | {s['worst']} |")
+    return "\n".join(lines)
