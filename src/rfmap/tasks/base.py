@@ -12,7 +12,7 @@ The input encoding (paper Sec. 4.1) stacks the vertex coordinates and the task's
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import lru_cache
 from typing import Any, Callable, ClassVar
 
@@ -107,9 +107,9 @@ class SampleOptions:
     ----------
     jitter : float
         Strength of the Sobol jitter of the vertices (0: the regular grid).
-    density : RandomDensityConfig, optional
+    density_cfg : RandomDensityConfig, optional
         Random densities (default ``RandomDensityConfig.for_dim(d)``).
-    beltrami : RandomBeltramiConfig, optional
+    beltrami_cfg : RandomBeltramiConfig, optional
         Random Beltrami coefficients or maps.
     beltrami_source : str
         ``'map'`` (the exact coefficient of a random map) or ``'mu'`` (a random coefficient).
@@ -118,8 +118,8 @@ class SampleOptions:
     """
 
     jitter: float = 0.2
-    density: RandomDensityConfig | None = None
-    beltrami: RandomBeltramiConfig | None = None
+    density_cfg: RandomDensityConfig | None = None
+    beltrami_cfg: RandomBeltramiConfig | None = None
     beltrami_source: str = "map"
     teacher: TeacherConfig | None = None
 
@@ -383,12 +383,12 @@ def encode(points: Tensor, params: Tensor, spec: TaskSpec, n: int) -> Tensor:
     return x.transpose(1, 2).reshape(B, d + spec.n_params, *([n] * d)).contiguous()
 
 
-def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
-                 density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
-                 beltrami_source: str = "map", teacher: TeacherConfig | None = None):
+def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, options: SampleOptions | None = None,
+                 **kw):
     """The raw arrays of training samples ``indices`` of step ``step`` on an ``N``-grid (numpy only, so that a
     worker process can draw them and send them to the training process); the task draws each sample
-    (:meth:`Task.draw`, options :class:`SampleOptions`).
+    (:meth:`Task.draw`) as ``options`` say (:class:`SampleOptions`, whose fields may be given as keywords:
+    ``jitter``, ``density_cfg``, ``beltrami_cfg``, ``beltrami_source``, ``teacher``).
 
     Sample ``i`` of step ``t`` is generated from ``np.random.default_rng([seed, t, i])`` only, so a batch split
     across processes (data-parallel training) or drawn by worker processes reproduces the single-process batch
@@ -406,11 +406,11 @@ def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitte
         sample's vertices, NaN for samples without a target (beyond the share, or the solver failed)
     """
     task = spec.task
-    options = SampleOptions(jitter, density_cfg, beltrami_cfg, beltrami_source, teacher)
+    options = replace(options or SampleOptions(), **kw)
     indices = list(indices)
     if options.teaching and not task.teacher:
         raise ValueError(f"a classical teacher does not apply to {task.title} tasks")
-    n_teach = teacher_indices(len(indices), teacher.share) if options.teaching else 0
+    n_teach = teacher_indices(len(indices), options.teacher.share) if options.teaching else 0
     pts_l, par_l, tgt_l = [], [], []
     for k, i in enumerate(indices):
         rng = np.random.default_rng([seed, step, int(i)])
@@ -444,13 +444,11 @@ def teacher_extra(points: np.ndarray, targets: np.ndarray | None) -> dict:
             "target_mask": torch.as_tensor(mask)}
 
 
-def sample_batch(spec: TaskSpec, *, seed: int, step: int, indices, n: int, jitter: float = 0.2,
-                 density_cfg: RandomDensityConfig | None = None, beltrami_cfg: RandomBeltramiConfig | None = None,
-                 beltrami_source: str = "map") -> Batch:
+def sample_batch(spec: TaskSpec, *, seed: int, step: int, indices, n: int, options: SampleOptions | None = None,
+                 **kw) -> Batch:
     """Draw the training samples ``indices`` of step ``step`` on an ``N``-grid (:func:`draw_samples` then
-    :func:`make_batch`)."""
-    pts, par = draw_samples(spec, seed=seed, step=step, indices=indices, n=n, jitter=jitter,
-                            density_cfg=density_cfg, beltrami_cfg=beltrami_cfg, beltrami_source=beltrami_source)
+    :func:`make_batch`; no teacher)."""
+    pts, par = draw_samples(spec, seed=seed, step=step, indices=indices, n=n, options=options, **kw)[:2]
     return make_batch(spec, pts, par, n)
 
 

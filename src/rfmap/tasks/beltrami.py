@@ -71,7 +71,7 @@ class BeltramiTask(Task):
     # ------------------------------------------------------------------ training
     def draw(self, rng, spec: TaskSpec, n: int, options: SampleOptions, teach: bool):
         """The coefficient of a random map (``options.beltrami_source == 'map'``) or a random coefficient."""
-        cfg = options.beltrami or RandomBeltramiConfig()
+        cfg = options.beltrami_cfg or RandomBeltramiConfig()
         from_map = options.beltrami_source == "map"
         gen = RandomMap(rng, cfg) if from_map else RandomBeltrami(rng, cfg)
         if options.jitter > 0:

@@ -79,7 +79,7 @@ class DensityTask(Task):
     def draw(self, rng, spec: TaskSpec, n: int, options: SampleOptions, teach: bool):
         """A random density (``options.density``) at jittered vertices; with ``teach`` the teacher's map."""
         dim = spec.dim
-        fld = RandomDensity(rng, options.density or RandomDensityConfig.for_dim(dim))
+        fld = RandomDensity(rng, options.density_cfg or RandomDensityConfig.for_dim(dim))
         grid_vals = fld.on_grid(n)
         if options.jitter > 0:
             pts = jittered_points(n, dim, rng, grad_magnitude=grad_magnitude(grid_vals, n, dim),
