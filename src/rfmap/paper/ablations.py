@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from ..finish import quiet_quality
 from .comparison import format_number
-from .reproduce import beltrami_values, density_values
 from .tables import Table
 
 __all__ = ["refinement_study", "refinement_summary", "refinement_markdown"]
@@ -19,7 +18,8 @@ __all__ = ["refinement_study", "refinement_summary", "refinement_markdown"]
 @quiet_quality()
 def refinement_study(sur, fields, n: int, title: str = "") -> Table:
     r"""Per field, the network on the ``n``-grid itself (``work_n=n``, no repair) with :math:`\alpha = 1` and refined:
-    the table's metric (``std_rho_map`` for a density model, ``mean_dd`` for a Beltrami model), the refinement
+    the table's metric (the task's ``score_metric``: ``std_rho_map`` of a density model, ``mean_dd`` of a Beltrami
+    model, :meth:`rfmap.tasks.Task.test_record`), the refinement
     objective at :math:`\alpha = 1` and at the refined :math:`\alpha`, and :math:`\alpha`.
 
     Parameters
@@ -35,8 +35,8 @@ def refinement_study(sur, fields, n: int, title: str = "") -> Table:
     Table
         Rows ``(field, "α = 1")`` and ``(field, "refined")`` with columns ``metric``, ``objective`` and ``alpha``.
     """
-    density = sur.spec.kind == "density"
-    metric = "std_rho_map" if density else "mean_dd"
+    task = sur.spec.task
+    metric = task.score_metric
     t = Table("tab:refinement", title or f"Weight refinement on the {sur.name} test fields, N = {n}",
               ["metric", "objective", "alpha"])
     w = max(int(n), int(sur.model.min_size))
@@ -44,7 +44,7 @@ def refinement_study(sur, fields, n: int, title: str = "") -> Table:
         raw = sur.map(f, n, work_n=w, repair=False)
         ref = sur.map(f, n, work_n=w, repair=False, refine=True)
         for label, res in (("α = 1", raw), ("refined", ref)):
-            values = density_values(res, sur.spec.dim == 2) if density else beltrami_values(res, f)
+            values = task.test_record(res, f)
             objective = ref.info["refine_objective_start" if label == "α = 1" else "refine_objective"]
             t.add(f, label, {"metric": values[metric], "objective": float(objective),
                              "alpha": list(res.info["alpha"])})
