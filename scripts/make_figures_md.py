@@ -82,49 +82,147 @@ def paste(template: str, notebook: str) -> str:
     return PLACEHOLDER.sub(role, _cell(template))
 
 
+#: the columns of a scoreboard row, in order: the glue key suffix of each and its head
+COLUMNS = [("paper", "Paper"), ("native", "Ours: the paper's method"), ("delivered", "Ours: delivered"),
+           ("classical", "Classical solver")]
+
+
+def score_keys(item: dict) -> tuple[list[str], list[str]]:
+    """The glue keys of a scored item (``"kind": "score"``): the summary keys of each metric (``{key}_{metric}_
+    {col}`` for every column, ``_met`` and ``_classical_better``) and the per-case keys (``{key}_{metric}_{case}_
+    {col}``, ``_met``).  The chapter glues them all with ``glue_all(comparison.score_values(), key)``."""
+    score = item["score"]
+    cols = [c for c, _ in COLUMNS]
+    summary, per_case = [], []
+    for metric in score["metrics"]:
+        summary += [f"{score['key']}_{metric}_{c}" for c in cols + ["met", "classical_better"]]
+        per_case += [f"{score['key']}_{metric}_{case}_{c}" for case in score.get("cases", []) for c in cols + ["met"]]
+    return summary, per_case
+
+
 def glue_keys(item: dict) -> list[str]:
     """The glue keys an item's score pastes from its notebook."""
     score = item.get("score") or {}
-    return [m.group(1) for field in ("criterion", "met", "numbers") for m in PLACEHOLDER.finditer(score.get(field, ""))]
+    if score.get("kind") != "score":
+        return [m.group(1) for m in PLACEHOLDER.finditer(score.get("numbers", ""))]
+    summary, per_case = score_keys(item)
+    return summary + per_case
+
+
+def paper_numbers(items: list[dict]) -> dict[str, str]:
+    """``{label: "Table 4"}`` and ``{label: "Fig. 7"}``: the paper's numbering, counted in the order of
+    figures.json, which lists the paper's tables and figures in the order of the paper."""
+    out, count = {}, {"tab": 0, "fig": 0}
+    for it in items:
+        kind = it["label"].split(":")[0]
+        count[kind] += 1
+        out[it["label"]] = f"{'Table' if kind == 'tab' else 'Fig.'} {count[kind]}"
+    return out
+
+
+def _chapter_link(item: dict, root: Path, in_toc: set[str], text: str) -> str:
+    """``text`` linked from a page in book/ to the item's notebook (plain when the notebook is not in the book)."""
+    nb = Path(item["notebook"])
+    if (root / nb).exists() and nb.with_suffix("").as_posix() in in_toc:
+        return f"[{text}]({posixpath.relpath(nb.as_posix(), 'book')})"
+    return text
 
 
 def _chapter_cell(item: dict, root: Path, in_toc: set[str], short: bool = False) -> str:
     """A link from a page in book/ to the item's notebook (code when the notebook is not part of the book); with
     ``short``, named by its number (``05``) or page name (``intro``)."""
     nb = Path(item["notebook"])
-    doc = nb.with_suffix("").as_posix()
     name = nb.stem.split("_")[0] if short else nb.stem
-    if (root / nb).exists() and doc in in_toc:
-        target = posixpath.relpath(nb.as_posix(), "book")
-        return f"[{name}]({target})"
-    return f"`{name}`"
+    linked = _chapter_link(item, root, in_toc, name)
+    return linked if linked != name else f"`{name}`"
 
 
-def scoreboard(root: Path = ROOT) -> str:
-    """The results at a glance: one row per table or stand-alone figure (a figure that shows the maps of a table,
-    ``"kind": "see"``, is listed with that table), its chapter, the criterion, how often the paper's numbers are met
-    and our key numbers, all pasted from the chapters."""
-    items = load_items(root)
+def _scored(items: list[dict]) -> tuple[list[dict], dict[str, list[str]]]:
+    """The scored items, and for each the labels of the figures scored with it."""
     shown_with: dict[str, list[str]] = {}
     for it in items:
         if (it.get("score") or {}).get("kind") == "see":
             shown_with.setdefault(it["score"]["scored_with"], []).append(it["label"])
-    lines = ["| Paper item (chapter) | Criterion: ours against the paper | Met | Our numbers |",
-             "| --- | --- | --- | --- |"]
-    for it in items:
-        score = it.get("score") or {}
-        if score.get("kind") == "see":
-            continue
-        nb = it["notebook"]
-        labels = ", ".join(f"`{label}`" for label in [it["label"], *shown_with.get(it["label"], [])])
-        chapter = _chapter_cell(it, root, toc_documents(root), short=True)
-        if score.get("kind") == "score":
-            criterion, met = paste(score["criterion"], nb), paste(score["met"], nb)
-        else:
-            criterion, met = _cell(score.get("note", "no pass/fail")), "—"
-        numbers = paste(score["numbers"], nb) if score.get("numbers") else "—"
-        lines.append(f"| {labels} ({chapter}) | {criterion} | {met} | {numbers} |")
-    return "\n".join(lines) + "\n"
+    return [it for it in items if (it.get("score") or {}).get("kind") == "score"], shown_with
+
+
+def _footnotes(scored: list[dict]) -> tuple[dict[str, str], list[str]]:
+    """A footnote reference per scored item with footnotes, and the definitions."""
+    refs, defs = {}, []
+    for it in scored:
+        notes = it["score"].get("footnotes", [])
+        refs[it["label"]] = "".join(f"[^{it['score']['key']}-{k}]" for k in range(1, len(notes) + 1))
+        defs += [f"[^{it['score']['key']}-{k}]: {note}" for k, note in enumerate(notes, start=1)]
+    return refs, defs
+
+
+#: the criterion of every scoreboard, stated once above it
+CRITERION = (
+    "**Criterion.** A case is *met* when the paper's method, run by this project, is at most the paper's value: "
+    "the network evaluated on the requested grid itself, then the paper's weight refinement, and nothing else "
+    "(`Surrogate.map(field, n, refine=True, work_n=n, repair=False)`). Every metric scored is one where lower is "
+    "better. Beside it: the map the project delivers with its options on (the network on its working grid, "
+    "averaged over the symmetries of the square or cube, refined, and repaired or shortened where needed: "
+    "`Surrogate.map(field, n, refine=True, symmetrize=True)`), and the fastest classical solver of the project on the "
+    "same mesh (the flow-based density-equalizing map, or the Linear Beltrami Solver). Times are not scored: the "
+    "paper's were measured on a GPU, and each chapter sets the network's time beside the classical solver's, "
+    "measured on the same CPU in the same run."
+)
+
+
+def scoreboard(root: Path = ROOT) -> str:
+    """The results at a glance, one screen: one row per paper table (or scored figure) and metric, the means over
+    the paper's cases of the four columns, how many cases meet the paper and how many the classical solver maps
+    more accurately, all pasted from the chapters; caveats as footnotes."""
+    items = load_items(root)
+    numbers, in_toc = paper_numbers(items), toc_documents(root)
+    scored, shown_with = _scored(items)
+    refs, defs = _footnotes(scored)
+    head = ["Paper item", "Metric"] + [h for _, h in COLUMNS] + ["Met"]
+    lines = [CRITERION + " Values are means over the paper's cases (four test fields, or four grid sides); *met* "
+             "counts the cases that meet the paper, and *better on* those where the classical solver is more "
+             "accurate than the paper's method.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for it in scored:
+        score, nb = it["score"], it["notebook"]
+        name = " · ".join([numbers[it["label"]]] + [numbers[f] for f in shown_with.get(it["label"], [])])
+        item = f"{_chapter_link(it, root, in_toc, name)}: {_cell(it['short'])}{refs[it['label']]}"
+        for i, (metric, title) in enumerate(score["metrics"].items()):
+            k = f"{score['key']}_{metric}"
+            cells = [item if i == 0 else "", _cell(title)] + [paste(f"{{{k}_{c}}}", nb) for c, _ in COLUMNS[:3]]
+            better = f" (better on {{{k}_classical_better}})" if score.get("cases") else ""
+            cells.append(paste(f"{{{k}_classical}}{better}", nb))
+            cells.append(paste(f"{{{k}_met}}", nb))
+            lines.append("| " + " | ".join(cells) + " |")
+    others = [numbers[it["label"]] for it in items if (it.get("score") or {}).get("kind") == "illustration"]
+    others = sorted(others, key=lambda s: (s.startswith("Fig"), int(s.split()[-1])))
+    lines += ["", f"{', '.join(others)} illustrate the method and are not scored; {{doc}}`figures` lists every "
+              "item with the chapter that makes it, and the full scoreboard, case by case."]
+    return "\n".join(lines + [""] + defs) + "\n"
+
+
+def full_scoreboard(root: Path = ROOT) -> str:
+    """The scoreboard case by case: one row per paper table (or scored figure), metric and case."""
+    items = load_items(root)
+    numbers, in_toc = paper_numbers(items), toc_documents(root)
+    scored, _ = _scored(items)
+    refs, defs = _footnotes(scored)
+    head = ["Paper item", "Case", "Metric"] + [h for _, h in COLUMNS] + ["Met"]
+    lines = [CRITERION, "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for it in scored:
+        score, nb = it["score"], it["notebook"]
+        item = f"{_chapter_link(it, root, in_toc, numbers[it['label']])}{refs[it['label']]}"
+        cases = score.get("cases") or [None]
+        first = True
+        for case in cases:
+            for metric, title in score["metrics"].items():
+                k = f"{score['key']}_{metric}" + (f"_{case}" if case else "")
+                label = "—" if case is None else (f"N = {case}" if case.isdigit() else case)
+                cells = [item if first else "", label, _cell(title)]
+                cells += [paste(f"{{{k}_{c}}}", nb) for c, _ in COLUMNS] + [paste(f"{{{k}_met}}", nb)]
+                lines.append("| " + " | ".join(cells) + " |")
+                first = False
+    return "\n".join(lines + [""] + defs) + "\n"
 
 
 def load_times(root: Path = ROOT) -> dict:
@@ -175,39 +273,36 @@ def render(root: Path = ROOT) -> str:
     items = load_items(root)
     in_toc = toc_documents(root)
     n_produced = sum(status(it, root) == "produced" for it in items)
+    numbers = paper_numbers(items)
     lines = [
         f"<!-- Generated by scripts/make_figures_md.py from {SOURCE.as_posix()}: edit the JSON, then rerun. -->",
         "",
         "# Figures and tables of the paper",
         "",
-        "Every figure and table of the paper, listed by its LaTeX label, with the notebook of this book that "
-        "regenerates it (in `notebooks/`) and the file that notebook writes (in `book/figures/`, when the book is "
+        "Every figure and table of the paper, numbered as in the paper, with the chapter of this book that "
+        "regenerates it (in `notebooks/`) and the file that chapter writes (in `book/figures/`, when the book is "
         "built). A row is *produced* when its notebook is part of the repository.",
         "",
-        "## Results at a glance",
+        "## The scoreboard, case by case",
         "",
-        "For each item, the criterion on which our result is compared with the paper's, how often the paper's "
-        "number is met, and our key numbers. *Met* counts the cases where the network's map, the better of the "
-        "unrefined and the refined one (the paper's tables report both), is at least as good as the paper's "
-        "number, unless the criterion names one of them; symmetrization averages the network over the "
-        "symmetries of the square or cube. Every entry is pasted from the chapter that computes it, executed in "
-        "the same build as this page, at the build's scale (`RFMAP_SCALE`): at `ci` scale the numbers only show "
-        "that the code runs, and the comparisons per grid size are made at `full` scale only. A figure of the "
-        "maps that a table scores is listed with that table; figures that only illustrate say so.",
+        "Every number is pasted from the chapter that computes it, executed in the same build as this page and at "
+        "its scale (`RFMAP_SCALE`): at `ci` scale tiny models run on small grids, the numbers only show that the "
+        "code runs, and a grid side the chapter runs in place of the paper's is named in the chapter's table. The "
+        "introduction shows the same scoreboard in one screen, as means over the cases.",
         "",
-        scoreboard(root).rstrip("\n"),
+        full_scoreboard(root).rstrip("\n"),
         "",
         "## Index",
         "",
         f"{n_produced} of {len(items)} items are produced.",
         "",
-        "| Label | What it shows | Notebook | File | Status |",
-        "| --- | --- | --- | --- | --- |",
+        "| Item | Label | What it shows | Chapter | File | Status |",
+        "| --- | --- | --- | --- | --- | --- |",
     ]
     for it in items:
         nb_cell = _chapter_cell(it, root, in_toc)
         out = f"`{Path(it['output']).name}`" if it.get("output") else "—"
-        lines.append(f"| `{it['label']}` | {_cell(it['description'])} | {nb_cell} | {out} | "
+        lines.append(f"| {numbers[it['label']]} | `{it['label']}` | {_cell(it['description'])} | {nb_cell} | {out} | "
                      f"{_cell(status(it, root))} |")
     lines += [
         "",

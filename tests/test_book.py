@@ -154,27 +154,58 @@ def _glued_key_patterns(nb: Path) -> list[re.Pattern]:
 
 
 def test_every_item_has_a_score_computed_by_its_chapter():
-    """Each item says how it compares with the paper (or that it only illustrates); a score's numbers are glue keys
-    of its notebook, pasted into the book, never typed: no decimal number outside a placeholder."""
+    """Each item says how it compares with the paper (or that it only illustrates); a scored item names its glue
+    prefix, metrics and the paper's cases, and its chapter glues every key the scoreboards paste: numbers are
+    never typed, in the notes neither."""
     mod = _figures_script()
+    prefixes = []
     for it in _items():
         score = it.get("score")
         assert score and score.get("kind") in ("score", "illustration", "see"), it["label"]
         if score["kind"] == "score":
-            assert mod.PLACEHOLDER.search(score["met"]), f"{it['label']}: the met phrase pastes nothing"
-            assert score["criterion"].strip()
+            assert re.fullmatch(r"[tf]\d+", score["key"]) and score["metrics"] and it["short"].strip(), it["label"]
+            assert all(isinstance(c, str) and c for c in score["cases"]), it["label"]
+            prefixes.append(score["key"])
+            texts = [it["short"], *score["footnotes"], *score["metrics"].values()]
         elif score["kind"] == "see":  # a figure of the maps that a table scores: listed with that table
             assert score["scored_with"].startswith("tab:") and score["scored_with"] in PAPER_LABELS
+            texts = []
         else:
             assert score["note"].strip() and "met" not in score
-        for field in ("criterion", "met", "numbers"):
-            typed = mod.PLACEHOLDER.sub("", score.get(field, ""))
-            assert not re.search(r"\d\.\d", typed), f"{it['label']}: typed decimal in {field}: {typed!r}"
+            texts = [score["note"]]
+        for text in texts:
+            assert not re.search(r"\d\.\d", text), f"{it['label']}: typed decimal in {text!r}"
         keys = mod.glue_keys(it)
         if keys:
             patterns = _glued_key_patterns(ROOT / it["notebook"])
             for key in keys:
                 assert any(p.fullmatch(key) for p in patterns), f"{it['label']}: {it['notebook']} glues no {key!r}"
+    assert len(prefixes) == len(set(prefixes)) == 9
+
+
+def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
+    """Items are named by their number in the paper (counted in the paper's order), never by a LaTeX label; the
+    intro's scoreboard has one row per scored table or figure and metric, under one stated criterion."""
+    mod = _figures_script()
+    numbers = mod.paper_numbers(_items())
+    assert numbers["tab:overview"] == "Table 1" and numbers["tab:population_test"] == "Table 4"
+    assert numbers["tab:3d_resolution_test"] == "Table 9" and numbers["fig:3d_resolution_test"] == "Fig. 13"
+    board = mod.scoreboard(ROOT)
+    assert "tab:" not in board and "fig:" not in board
+    assert "[Table 4 · Fig. 7](../notebooks/" in board
+    rows = [line for line in board.splitlines() if line.startswith("| ")]
+    n_metrics = sum(len(it["score"]["metrics"]) for it in _items() if it["score"]["kind"] == "score")
+    assert len(rows) == 1 + n_metrics <= 16
+    assert board.count("**Criterion.**") == 1 and "is at most the paper's value" in board
+    head = rows[0]
+    for col in ("Paper", "the paper's method", "delivered", "Classical solver", "Met"):
+        assert col in head
+    full = mod.full_scoreboard(ROOT)
+    assert "t4_std_rho_map_rect-peak_native" in full and "t9_std_rho_map_64_met" in full
+    for it in _items():
+        for k in range(1, len(it["score"].get("footnotes", [])) + 1):  # every caveat is referenced and defined
+            ref = f"[^{it['score']['key']}-{k}]"
+            assert board.count(ref) == 2 and full.count(ref) == 2, ref
 
 
 def test_scoreboard_pastes_from_the_chapters():
