@@ -12,10 +12,11 @@
 #   rfmap validate /work/.device/.../dem3d-cube --ship runs/device      # score on the validation stream, ship best
 #
 # Environment (all optional): OUT (default ./device-out), DEVICE (cuda), PRESET (full), THREADS (2), WORKERS (12),
-# SNAPSHOT_EVERY (steps between snapshots, 250), KEEP (snapshots kept per config, 3), TRAIN_ARGS (more options of
-# rfmap train for every config: the default "--base 16 --depth 3 --batch 8" trains a wider and deeper network than the
-# shipped 3D ones from scratch (it beat the shipped size at equal time on a CPU, chapter 9); "--init dem3d-cube"
-# continues the shipped weights; "--teacher flow" adds the classical teacher).
+# SNAPSHOT_EVERY (steps between snapshots, 250), KEEP (snapshots kept per config, 3), TRAIN_ARGS (options of
+# rfmap train for every config; by default each config continues its shipped network, widened twofold by the
+# function-preserving growth, on the size curriculum: 3D "--init CONFIG --grow 16 --n-range 24 64 --n-sampling log
+# --batch-points 442368 --batch 16", 2D "--init CONFIG --grow 32 --n-range 32 256 --n-sampling log --batch-points
+# 82944 --batch 32", both with "--lr 0.0002 --ema 0.999"; "--teacher flow" adds the classical teacher).
 # Bad input (an unknown config, a non-numeric or out-of-range MINUTES) prints one line, exits 2 and writes nothing.
 set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
@@ -31,7 +32,7 @@ THREADS=${THREADS:-2}
 WORKERS=${WORKERS:-12}
 SNAPSHOT_EVERY=${SNAPSHOT_EVERY:-250}
 KEEP=${KEEP:-3}
-TRAIN_ARGS=${TRAIN_ARGS:---base 16 --depth 3 --batch 8}
+TRAIN_ARGS=${TRAIN_ARGS:-}
 PY=${PYTHON:-python3}
 export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 
@@ -60,12 +61,20 @@ EOF
 PER=$("$PY" -c "print(max(5, int(($MINUTES * 60 - 20 * ${#CONFIGS[@]}) / ${#CONFIGS[@]})))")
 WORK=$(mktemp -d)
 mkdir -p "$OUT"
+# the default options of a config: its shipped network grown twofold, on the size curriculum of its dimension
+default_args() {
+    case "$1" in
+        *3d*) echo "--init $1 --grow 16 --n-range 24 64 --n-sampling log --batch-points 442368 --batch 16 --lr 0.0002 --ema 0.999" ;;
+        *) echo "--init $1 --grow 32 --n-range 32 256 --n-sampling log --batch-points 82944 --batch 32 --lr 0.0002 --ema 0.999" ;;
+    esac
+}
 for cfg in "${CONFIGS[@]}"; do
-    echo "== $cfg: $PER s on $DEVICE, $TRAIN_ARGS"
+    ARGS=${TRAIN_ARGS:-$(default_args "$cfg")}
+    echo "== $cfg: $PER s on $DEVICE, $ARGS"
     # shellcheck disable=SC2086  # TRAIN_ARGS is a list of options
     "$PY" -m rfmap.train --config "$cfg" --preset "$PRESET" --device "$DEVICE" --threads "$THREADS" \
         --workers "$WORKERS" --time-limit "$PER" --steps 1000000 --no-validate --snapshot-every "$SNAPSHOT_EVERY" \
-        --out "$WORK/$cfg" --no-progress $TRAIN_ARGS || echo "== $cfg: training failed (exit $?)"
+        --out "$WORK/$cfg" --no-progress $ARGS || echo "== $cfg: training failed (exit $?)"
     mkdir -p "$OUT/$cfg"
     cp "$WORK/$cfg/log.jsonl" "$OUT/$cfg/" 2>/dev/null || true
     if [ -d "$WORK/$cfg/snapshots" ]; then
