@@ -140,6 +140,10 @@ def cmd_models(args) -> int:
                   f"{float(run.get('wall_time', 0.0)) / 60:.0f} min" + (f", sha256 {sha[:12]}" if sha else ""))
             for again in run.get("resumed") or []:  # continued after an interruption, or ended with --finish
                 print(f"     then {again}")
+            if run.get("grown"):  # the next run started from these weights widened (rfmap.nn.grow)
+                g = run["grown"]
+                print(f"     then widened from base {g['from'].get('base')} to {g['to'].get('base')} "
+                      "(function-preserving growth, rfmap.nn.grow)")
     if args.lineage and names:
         print("In a chain, '--init NAME' continues from the weights the run before it wrote: pass that run's "
               "runs/NAME/NAME.safetensors to --init to repeat the chain. A run with a --time-limit stops on the clock "
