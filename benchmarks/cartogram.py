@@ -4,7 +4,9 @@ Runs ``rfmap cartogram`` (flow and diffusion methods) and, with ``--reference PA
 cartogram-cpp (Gastner, Seguy & More's flow-based method), that program on the same real maps at N = 256 and 512
 with the same 1 % tolerance: Montreal's 2013 election (total votes, :func:`rfmap.regions.montreal_election`), the
 Natural Earth world map by population (:func:`rfmap.regions.world_countries`) and three continental subsets (Africa,
-South America, and an Asia-Pacific set with Russia and Fiji that crosses the antimeridian).  Both programs read the
+South America, and an Asia-Pacific set with Russia and Fiji that crosses the antimeridian), and two synthetic hard
+maps (:mod:`rfmap.cartogram_synthetic`): the contiguous United States cut into 3,100 counties of very different
+sizes (``counties``) and Russia cut into 80 subdivisions across the antimeridian (``russia``).  Both programs read the
 same GeoJSON (consecutive repeated points removed, which the reference refuses) and CSV files, written to a work
 folder.
 
@@ -39,7 +41,7 @@ import numpy as np
 
 #: GNU time, for the peak resident size (``%M``, as ``/usr/bin/time -v`` reports it)
 TIME = "/usr/bin/time"
-MAPS = ("montreal", "world", "africa", "south-america", "asia-pacific")
+MAPS = ("montreal", "world", "africa", "south-america", "asia-pacific", "counties", "russia")
 #: the Asia-Pacific subset: Russia and Fiji are split at the antimeridian, so the map crosses it
 ASIA_PACIFIC = ("Russia", "Fiji", "New Zealand", "Australia", "Papua New Guinea", "Indonesia", "Japan", "Philippines",
                 "China", "Mongolia", "South Korea", "North Korea", "Taiwan", "Vanuatu", "Solomon Is.", "New Caledonia")
@@ -50,6 +52,7 @@ def write_inputs(folder: str) -> dict:
     import shapely
     from shapely.geometry import mapping, shape
 
+    from rfmap.cartogram_synthetic import synthetic_counties, synthetic_subdivisions
     from rfmap.regions import _listify, montreal_election, world_countries
 
     world = world_countries()["features"]
@@ -59,6 +62,8 @@ def write_inputs(folder: str) -> dict:
         "africa": ([f for f in world if f["properties"]["continent"] == "Africa"], "name", "pop_est"),
         "south-america": ([f for f in world if f["properties"]["continent"] == "South America"], "name", "pop_est"),
         "asia-pacific": ([f for f in world if f["properties"]["name"] in ASIA_PACIFIC], "name", "pop_est"),
+        "counties": (synthetic_counties()["features"], "id", "value"),
+        "russia": (synthetic_subdivisions()["features"], "id", "value"),
     }
     out = {}
     for name, (feats, key, value) in chosen.items():

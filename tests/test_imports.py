@@ -55,7 +55,9 @@ LAYERS: dict[str, int] = {
     "rfmap.paper.flow_studies": 3, "rfmap.paper.design": 3, "rfmap.paper.cartograms": 3, "rfmap.paper.comparison": 3,
     "rfmap.paper.ablations": 3,
     "rfmap.cartogram": 3,
-    "rfmap.cartogram_data": 3, "rfmap.cartogram_series": 3, "rfmap.cartogram_metrics": 3, "rfmap.regions": 3, "rfmap.projection": 3, "rfmap.compare": 3, "rfmap.studies": 3,
+    "rfmap.cartogram_data": 3, "rfmap.cartogram_series": 3, "rfmap.cartogram_metrics": 3,
+    "rfmap.cartogram_synthetic": 3, "rfmap.cartogram_output": 3,
+    "rfmap.regions": 3, "rfmap.projection": 3, "rfmap.compare": 3, "rfmap.studies": 3,
     "rfmap.cli": 4, "rfmap.cli_base": 4, "rfmap.cli_cartogram": 4, "rfmap.lazy_parser": 4,
     "rfmap": 4,
 }

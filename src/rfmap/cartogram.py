@@ -50,7 +50,6 @@ projections", PNAS 115, E2156 (2018).
 """
 from __future__ import annotations
 
-import json
 import math
 import numbers
 import time
@@ -58,9 +57,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .cartogram_metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, judged, repair_folds, \
-    repair_overlaps
+from .cartogram_metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, judged, pass_weights, \
+    repair_folds, repair_overlaps
 from .mesh import check_grid_memory, check_n
+from .cartogram_output import OUTPUTS, choose_output, crs_member, mapped_features, write_geojson
 from .projection import PlanarFrame
 from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edge, \
     _shapely, density_grid, fit_outlines, montreal_election, read_regions, world_countries
@@ -91,8 +91,6 @@ __all__ = [
 
 #: Methods of :func:`cartogram` (``"dem"`` is accepted as another name of ``"diffusion"``, as by the solvers).
 CARTOGRAM_METHODS = ("diffusion", "flow", "surrogate", "hybrid")
-#: The coordinates of :func:`cartogram`'s output: the input's, or the projection's plane.
-OUTPUTS = ("input", "projected")
 
 
 # ----------------------------------------------------------------------------------------------- maps
@@ -197,9 +195,10 @@ class Cartogram:
         Seconds in the map computations themselves (solver or surrogate) over all iterations.
     info : dict
         ``iterations``, ``kept`` (the pass whose polygons are returned), ``max_error`` per pass (in the frame's
-        plane), per-iteration ``results`` (:class:`rfmap.result.MapResult`), ``sea`` density.
+        plane), per-iteration ``results`` (:class:`rfmap.result.MapResult`), ``sea`` density, ``beyond_domain``
+        (the regions that left the input's domain, for ``output="auto"``).
     output : {"input", "projected"}
-        The coordinates of ``features``.
+        The coordinates of ``features`` (:mod:`rfmap.cartogram_output`).
     tol : float
         The tolerance on the largest relative area error that :meth:`problems` checks.
     """
@@ -226,7 +225,7 @@ class Cartogram:
     def features(self) -> list:
         """The mapped features (see the class docstring)."""
         if self._features is None:
-            self._features = _mapped_features(self.input_features, self.geometries)
+            self._features = mapped_features(self.input_features, self.geometries)
         return self._features
 
     @property
@@ -284,9 +283,13 @@ class Cartogram:
         """The mapped FeatureCollection (in the ``output`` coordinates), with a foreign member ``"rfmap"``:
         ``status`` (``"ok"``, or ``"failed"`` with the ``problems`` of :meth:`problems`), the largest area error
         (over the judged regions; ``minor``: the share, count and largest error of the others), the ``repaired``
-        regions, the passes, the method, ``N``, the ``coordinates`` (:data:`OUTPUTS`) and the PROJ definition of
-        the ``projection``'s plane (``None`` for planar input)."""
-        return {"type": "FeatureCollection", "features": self.features, "rfmap": self._status()}
+        regions, the passes, the method, ``N``, the ``coordinates`` (``"input"`` or ``"projected"``), the regions
+        that left the input's domain (``beyond_domain``, for which ``output="auto"`` chose the plane) and the PROJ
+        definition of the ``projection``'s plane (``None`` for planar input); in the plane, the ``"crs"`` member
+        names it too (:func:`rfmap.cartogram_output.crs_member`)."""
+        crs = crs_member(self.frame, self.output)
+        return {"type": "FeatureCollection", **({"crs": crs} if crs else {}), "features": self.features,
+                "rfmap": self._status()}
 
     def _status(self) -> dict:
         """The ``"rfmap"`` member of :meth:`to_geojson`."""
@@ -299,23 +302,15 @@ class Cartogram:
                 "overlaps_cut": [[name(i), name(j)] for i, j in self.info.get("overlaps_cut", [])],
                 "passes": self.info.get("iterations"),
                 "method": self.method, "n": self.n, "coordinates": self.output,
+                "beyond_domain": [name(i) for i in self.info.get("beyond_domain", [])],
                 "projection": self.frame.projection.definition}
 
     def save(self, path) -> None:
         """Write the mapped FeatureCollection as GeoJSON, atomically (:func:`rfmap.cartogram_data.atomic_write`)."""
         from .cartogram_data import atomic_write
 
-        atomic_write(path, self._write)
-
-    def _write(self, fh) -> None:
-        """:meth:`to_geojson` as JSON text, the geometries written by GEOS (``shapely.to_geojson``: the same
-        shortest round-trip numbers, several times faster than ``json``)."""
-        fh.write('{"type": "FeatureCollection", "features": [')
-        for k, (feat, geom) in enumerate(zip(self.input_features, _shapely().to_geojson(self.geometries))):
-            head = {key: v for key, v in feat.items() if key not in ("geometry", "bbox")}
-            head.update(type="Feature", properties=dict(feat.get("properties") or {}))
-            fh.write(("" if k == 0 else ", ") + json.dumps(head)[:-1] + ', "geometry": ' + geom + "}")
-        fh.write('], "rfmap": ' + json.dumps(self._status()) + "}")
+        atomic_write(path, lambda fh: write_geojson(fh, self.input_features, self.geometries, self._status(),
+                                                    crs_member(self.frame, self.output)))
 
     def input_geometries(self) -> np.ndarray:
         """The input regions in the input's coordinates."""
@@ -333,7 +328,7 @@ class Cartogram:
 # ----------------------------------------------------------------------------------------------- pipeline
 def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol: float = 0.01,
               max_iterations: int = 30, iterations: int | None = None, margin: float = 0.1,
-              projection: str = "auto", output: str = "input", supersample: int = 4, model: str | None = None,
+              projection: str = "auto", output: str = "auto", supersample: int = 4, model: str | None = None,
               surrogate=None, floor: float = ZERO_FLOOR, solver_kw: dict | None = None,
               min_share: float = MIN_SHARE, max_n: int | None = None, points: int | None = None,
               timeout: float | None = None) -> Cartogram:
@@ -368,9 +363,11 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         The plane the cartogram is computed in (:class:`PlanarFrame`, :mod:`rfmap.projection`): ``"auto"`` is
         ``"equal-area"`` for longitude/latitude input (Lambert azimuthal equal-area centred on the map, Equal Earth
         for a map wider than 180° of longitude) and ``"none"`` (the coordinates as they are) for planar input.
-    output : {"input", "projected"}
+    output : {"auto", "input", "projected"}
         The coordinates of the returned features: the input's (the projection inverted), or the projection's plane
-        (metres for the equal-area projections; its PROJ definition is in :meth:`Cartogram.to_geojson`).
+        (metres for the equal-area projections; its PROJ definition is in :meth:`Cartogram.to_geojson`); ``"auto"``
+        (default) is the input's unless a region left their domain (past a pole, beyond the far side of the Lambert
+        disc), then the plane (:func:`rfmap.cartogram_output.choose_output`).
     supersample : int
         Scanlines per grid cell (:func:`density_grid`).
     model : str, optional
@@ -386,7 +383,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         The passes' stopping rule, :meth:`Cartogram.metrics` and the tolerance count only the regions holding at
         least this share of the total value (default :data:`MIN_SHARE`, 0.01 %: islands of a few people on a world
         map are left to ``max_iterations``); ``info["max_error"]`` is over those, and the others' errors are
-        reported apart (``CartogramMetrics.max_error_minor``).  The passes map those others as if they held this
+        reported apart (``CartogramMetrics.max_error_minor``).  The passes raise those others towards this
         share, so that none (an uninhabited Antarctica) collapses into a sliver that folds.
     max_n : int, optional
         A pass that lowers the largest error but leaves more than :data:`SLOW_PASS` of it (regions down to a few
@@ -472,6 +469,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     mapped, info["repaired"] = repair_folds(mapped)
     mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
     elapsed = time.perf_counter() - t0
+    output, info["beyond_domain"] = choose_output(frame, mapped, output)
     out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
     return Cartogram(input_features=features, geometries=out, regions=regions, mapped=mapped, values=values,
                      floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time, info=info,
@@ -507,9 +505,9 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     current, inverse = _distinct_vertices(regions)
     mapped = regions
     big = judged(values, min_share)  # the regions the stopping rule counts
-    # the others are mapped as if they held the judged share, so that none (an uninhabited Antarctica) collapses into
-    # a sliver that folds; their errors are still measured against their own values
-    weights = np.where(big, values, np.maximum(values, min_share * values.sum()))
+    # the others are raised towards the judged share, so that none collapses into a sliver that folds; their errors
+    # are still measured against their own values
+    weights = pass_weights(values, min_share)
     results, history, grids, map_time = [], [], [], 0.0
     best = None  # (largest area error, polygons, pass) of the best pass so far
     log_err, gain = None, np.zeros(len(values))  # the last pass's log area errors and log weight boosts
@@ -550,18 +548,6 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         mapped, kept = best[1], best[2]
     return mapped, {"iterations": len(results), "kept": kept, "max_error": history, "results": results,
                     "sea": sea, "grids": grids, "timed_out": timed_out}, map_time
-
-
-def _mapped_features(features: list, mapped: np.ndarray) -> list:
-    """The input features with the mapped polygons (in the output's coordinates) as their geometries."""
-    from shapely.geometry import mapping as to_geojson
-
-    out = []
-    for feat, g in zip(features, mapped):
-        f = {k: v for k, v in feat.items() if k not in ("geometry", "bbox")}
-        f.update(type="Feature", geometry=_listify(to_geojson(g)), properties=dict(feat.get("properties") or {}))
-        out.append(f)
-    return out
 
 
 def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogate=None) -> dict:

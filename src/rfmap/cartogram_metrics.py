@@ -15,14 +15,17 @@ import numpy as np
 
 from .regions import _shapely
 
-__all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps",
-           "judged", "repair_folds", "repair_overlaps", "boost", "MIN_SHARE",
-           "REPAIR_AREA", "REPAIR_OVERLAP", "BOOST_GAIN", "BOOST_CAP"]
+__all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps", "judged", "pass_weights", "repair_folds",
+           "repair_overlaps", "boost", "MIN_SHARE", "MINOR_BUDGET", "SPLITS", "SPLIT_COST", "REPAIR_AREA",
+           "REPAIR_OVERLAP", "BOOST_GAIN", "BOOST_CAP"]
 
 #: The share of the total value from which a region's area error is judged (stopping rule, :meth:`Cartogram.metrics`,
 #: tolerance): 0.01 %.  Smaller regions (a world map's uninhabited Antarctica, islands of a few thousand people) are
 #: at most a few grid cells, where no raster resolves 1 %; their errors are reported apart (``max_error_minor``).
 MIN_SHARE = 1e-4
+#: The most that :func:`pass_weights` adds to the total value by raising the regions under the judged share (a share
+#: of it): every judged region comes out smaller by about this share, so it must stay well below a tolerance of 1 %
+MINOR_BUDGET = 1e-3
 #: The largest change of area (a fraction of the total) by which :func:`repair_folds` fixes an invalid mapped
 #: polygon: the default ``overlap_tol`` of the metrics, below which an overlap of two regions is not counted either
 REPAIR_AREA = 1e-6
@@ -129,6 +132,38 @@ def judged(values: np.ndarray, min_share: float) -> np.ndarray:
     return major if major.any() else np.ones_like(major)
 
 
+def pass_weights(values: np.ndarray, min_share: float, budget: float = MINOR_BUDGET) -> np.ndarray:
+    r"""The weights by which a cartogram's passes map the regions: the judged regions' values (:func:`judged`), the
+    others' raised to a floor :math:`f`, so that none (an uninhabited Antarctica) collapses into a sliver that folds.
+
+    The floor is the judged share, :math:`f = ` ``min_share`` :math:`\sum_j v_j`, unless raising the others to it
+    adds more than ``budget`` :math:`\sum_j v_j` in all (a county map holds a thousand regions under 0.01 %); then
+    :math:`f` is the floor that adds exactly that, :math:`\sum_{i 
+otin J} \max(0, f - v_i) = ` ``budget``
+    :math:`\sum_j v_j`.  Every judged region's target share is then off by at most ``budget``.
+
+    Parameters
+    ----------
+    values : ndarray, shape (R,), positive
+    min_share, budget : float
+
+    Returns
+    -------
+    ndarray, shape (R,)
+    """
+    values = np.asarray(values, dtype=float)
+    big = judged(values, min_share)
+    total = float(values.sum())
+    floor = min_share * total
+    minor = np.sort(values[~big])
+    if minor.size and np.maximum(floor - minor, 0.0).sum() > budget * total:
+        # the added value is piecewise linear and increasing in f: find the piece that holds the budget
+        added = np.arange(1, minor.size + 1) * minor - np.cumsum(minor)  # added when f = minor[k]
+        k = int(np.searchsorted(added, budget * total, side="right"))  # f lies in [minor[k-1], minor[k])
+        floor = (budget * total + minor[:k].sum()) / k
+    return np.where(big, values, np.maximum(values, floor))
+
+
 def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tuple[np.ndarray, list]:
     """Invalid mapped polygons whose fix (``shapely.make_valid``) changes their area by at most ``max_change`` of the
     total area replaced by the fix: a crossing of two edges that the input drew nearly touching, which no map of the
@@ -151,9 +186,13 @@ def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tupl
 def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *,
                     max_change: float = REPAIR_OVERLAP) -> tuple[np.ndarray, list]:
     r"""Sliver overlaps of valid mapped regions removed: each overlap of two regions holding at most ``max_change``
-    of the total area (and over a thousandth of :data:`REPAIR_AREA`, below which it is rounding) is cut from the
-    one of the two further above its target area :math:`T_i = (v_i/\sum_j v_j)\sum_j A_j` (``shapely.difference``),
-    so that the two then share a border.  Larger overlaps stay, for :meth:`Cartogram.problems` to report.
+    of the total area (and over a thousandth of :data:`REPAIR_AREA`, below which it is rounding) is shared out
+    between the two (``shapely.difference``), so that the two then share a border: the first gives up the share
+    :math:`f \in` :data:`SPLITS` of it (the part on one side of a line across the overlap) and the second the rest,
+    with :math:`f` the share that keeps the larger of their relative area errors :math:`|A_i / T_i - 1|` (target
+    :math:`T_i = (v_i/\sum_j v_j)\sum_j A_j`) lowest; the whole overlap goes to one of them unless that costs more
+    than :data:`SPLIT_COST`.  So a cut never takes a small region off its target where its neighbour can spare the
+    sliver.  Larger overlaps stay, for :meth:`Cartogram.problems` to report.
 
     Parameters
     ----------
@@ -163,7 +202,7 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *,
     Returns
     -------
     (ndarray of shapely geometries, list of (int, int))
-        The polygons and the pairs ``(cut, kept)`` whose overlap was cut from the first.
+        The polygons and the pairs ``(cut, kept)``: the first gave up the larger share of their overlap.
     """
     shapely = _shapely()
     left, right, inter = overlaps(mapped)
@@ -172,16 +211,75 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *,
     area = shapely.area(mapped)
     total = float(area.sum())
     share = inter / total
-    excess = np.log(np.maximum(area, 1e-300) / (values / values.sum() * total))
+    target = values / values.sum() * total
     out, cut = mapped.copy(), []
     for k in np.flatnonzero((share > 1e-3 * REPAIR_AREA) & (share <= max_change)):
-        i, j = (left[k], right[k]) if excess[left[k]] >= excess[right[k]] else (right[k], left[k])
-        parts = shapely.get_parts(shapely.difference(out[i], out[j]))
-        g = shapely.union_all(parts[shapely.get_type_id(parts) == 3])
-        if shapely.is_valid(g) and shapely.get_type_id(g) in (3, 6):
-            out[i] = g
-            cut.append((int(i), int(j)))
+        a, b = left[k], right[k]
+        # the share f of the overlap that a gives up (b gives up the rest): the one that keeps both errors lowest,
+        # the whole overlap from one of them unless that costs more than SPLIT_COST
+        err = {f: max(abs((area[a] - f * inter[k]) / target[a] - 1.0),
+                      abs((area[b] - (1.0 - f) * inter[k]) / target[b] - 1.0)) for f in SPLITS}
+        f = min(err, key=err.get)
+        whole = min((0.0, 1.0), key=err.get)
+        f = whole if err[whole] <= err[f] + SPLIT_COST else f
+        new = _cut_overlap(out[a], out[b], f)
+        if new is not None:
+            out[a], out[b] = new
+            area[[a, b]] = shapely.area(new)
+            cut.append((int(a), int(b)) if f >= 0.5 else (int(b), int(a)))
     return out, cut
+
+
+#: The shares of an overlap that :func:`repair_overlaps` may cut from the first of its two regions, and the increase of
+#: the larger relative area error of the two below which the whole overlap is cut from one of them
+SPLITS, SPLIT_COST = tuple(np.linspace(0.0, 1.0, 11)), 1e-3
+
+
+def _polygons(g):
+    """The polygonal parts of ``g`` as one (Multi)Polygon."""
+    shapely = _shapely()
+    parts = shapely.get_parts(g)
+    return shapely.union_all(parts[shapely.get_type_id(parts) == 3])
+
+
+def _cut_overlap(a, b, f: float):
+    """Regions ``a`` and ``b`` with their overlap shared out: ``a`` gives up the share ``f`` of it (by area, the part
+    on one side of a line across the overlap's long axis) and ``b`` the rest; ``None`` when a result is not a valid
+    (Multi)Polygon."""
+    shapely = _shapely()
+    if f >= 1.0:
+        pieces = (_polygons(shapely.difference(a, b)), b)
+    elif f <= 0.0:
+        pieces = (a, _polygons(shapely.difference(b, a)))
+    else:
+        inter = shapely.intersection(a, b)
+        first = _area_split(inter, f)
+        pieces = (_polygons(shapely.difference(a, first)),
+                  _polygons(shapely.difference(b, shapely.difference(inter, first))))
+    ok = all(shapely.is_valid(g) and not shapely.is_empty(g) and shapely.get_type_id(g) in (3, 6) for g in pieces)
+    return pieces if ok else None
+
+
+def _area_split(g, f: float, steps: int = 16):
+    """The part of ``g`` on the low side of a line across its long axis (that of its minimum rotated rectangle) that
+    holds the share ``f`` of its area (bisection on the line's position)."""
+    shapely = _shapely()
+    rect = shapely.get_coordinates(shapely.minimum_rotated_rectangle(g))[:4]
+    e1, e2 = rect[1] - rect[0], rect[2] - rect[1]
+    axis = e1 if np.hypot(*e1) >= np.hypot(*e2) else e2
+    axis = axis / np.hypot(*axis)
+    normal = np.array([-axis[1], axis[0]])
+    t = shapely.get_coordinates(g) @ axis
+    lo, hi, total = float(t.min()), float(t.max()), shapely.area(g)
+    reach = float(np.abs(shapely.get_coordinates(g) @ normal).max()) + 1.0
+    part = None
+    for _ in range(steps):
+        mid = 0.5 * (lo + hi)
+        half = shapely.Polygon([axis * (t.min() - 1.0) + normal * s for s in (-reach, reach)] +
+                               [axis * mid + normal * s for s in (reach, -reach)])
+        part = _polygons(shapely.intersection(g, half))
+        lo, hi = (mid, hi) if shapely.area(part) < f * total else (lo, mid)
+    return part
 
 
 def boost(log_err: np.ndarray, last: np.ndarray, gain: np.ndarray) -> np.ndarray:

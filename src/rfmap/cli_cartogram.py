@@ -27,6 +27,8 @@ def _cartogram_outputs(args) -> list[str]:
             raise CLIError(f"--{opt} must name a {' or '.join(suffix)} file, got {path!r}")
         if path and not args.make_csv:
             outs.append(path)
+    if args.projected and args.lonlat:
+        raise CLIError("--projected and --lonlat exclude each other")
     if args.max_passes < 1:
         raise CLIError(f"--max-passes must be at least 1, got {args.max_passes}")
     if (args.color or args.label) and not args.data and not (args.png or args.svg):
@@ -86,7 +88,8 @@ def cmd_cartogram(args) -> int:
     try:
         carto = cartogram(collection, args.value, method=args.method, n=args.n, tol=args.tol, model=args.model,
                           max_iterations=args.max_passes, projection=args.projection,
-                          output="projected" if args.projected else "input", points=args.points,
+                          output="projected" if args.projected else "input" if args.lonlat else "auto",
+                          points=args.points,
                           timeout=args.timeout)
     except ImportError as e:  # pyproj (or plotly) missing: a setup problem, told in one line
         raise CLIError(str(e)) from e
@@ -95,6 +98,10 @@ def cmd_cartogram(args) -> int:
     names = [carto.input_features[i].get("id", f"#{i}") for i in carto.floored]
     print(f"wrote {args.out}: {len(carto.input_features)} regions by {args.value!r}, {carto.method}, N = {carto.n}, "
           f"{carto.info['iterations']} pass(es), {carto.time:.2f} s; {carto.metrics()}")
+    far = carto.info.get("beyond_domain", [])
+    if far:
+        print(f"written in the projection's plane ({carto.frame.projection.definition}; the GeoJSON's \"crs\" "
+              f"member): {len(far)} region(s) left the longitude/latitude domain (use --lonlat to force it)")
     if names:
         print(f"zero values floored in {len(names)} region(s): {', '.join(map(str, names))}")
     cut = carto.info.get("overlaps_cut", [])
@@ -210,7 +217,12 @@ def add_cartogram_parser(sub) -> None:
                    help="the plane of the cartogram: auto (default: equal-area for longitude/latitude, none for "
                         "planar coordinates), equal-area, equirectangular or none")
     s.add_argument("--projected", action="store_true",
-                   help="write the cartogram in the projection's plane (metres) instead of the input's coordinates")
+                   help="write the cartogram in the projection's plane (metres) instead of the input's coordinates "
+                        "(by default the plane is chosen only when a region left the longitude/latitude domain, "
+                        "and the output says so)")
+    s.add_argument("--lonlat", action="store_true",
+                   help="write longitude/latitude even when a region left their domain (it is then drawn at the "
+                        "domain's edge, and the command exits 1)")
     s.add_argument("--model", default=None, help="surrogate for --method surrogate/hybrid (default deq2d-square)")
     s.add_argument("--out", default=None, help="output GeoJSON (required unless --make-csv)")
     s.add_argument("--png", default=None,

@@ -152,7 +152,12 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     elsewhere.
 
     The mean is taken along ``supersample`` horizontal scanlines per cell, each measured exactly: the cell's share of
-    the line that lies in each region (:func:`_scanline_rows`).
+    the line that lies in each region (:func:`_scanline_rows`).  Where regions overlap (a border that two neighbours
+    draw apart, a fold), a cell's covered shares :math:`c_i` sum to more than the share of the cell they cover;
+    there the cell takes the mean density of its regions, :math:`\sum_i ho_i c_i / \sum_i c_i`, over at most the
+    whole cell (:math:`\min(1, \sum_i c_i)`) and the sea over the rest, so that every density is positive (the plain
+    sum :math:`arho + \sum_i (ho_i - arho) c_i` counts an overlap twice, and two sparse regions overlapping
+    over a cell would make it negative).
 
     Parameters
     ----------
@@ -178,19 +183,30 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     areas = shapely.area(geoms)
     rho = values / areas
     sea = float(values.sum() / areas.sum())
-    # excess density (above the sea) times the covered length, summed over each cell's scanlines: (x cell, y cell)
-    total = _scanline_rows(geoms, rho - sea, n, s).T
+    # excess density (above the sea), density and 1 times the covered length, summed over each cell's scanlines
+    excess, mass, cover = (t.T for t in _scanline_rows(geoms, (rho - sea, rho, np.ones_like(rho)), n, s))
     t = ((np.arange(n * s) + 0.5) / s - 0.5) / (n - 1)  # the scanlines' heights
     lines = np.add.reduceat(((t >= 0) & (t <= 1)).astype(float), np.arange(0, n * s, s))  # those in the square
     width = np.ones(n)
     width[[0, -1]] = 0.5  # the cells' widths within the square, in cells
-    return sea + total / np.outer(width, lines), sea
+    size = np.outer(width, lines)
+    dens = sea + excess / size
+    cover /= size
+    over = cover > 1.0 + OVERLAP_COVER  # overlapping regions: their mean density over the cell
+    dens[over] = mass[over] / (cover[over] * size[over])
+    return dens, sea
 
 
-def _scanline_rows(geoms: np.ndarray, weight: np.ndarray, n: int, s: int) -> np.ndarray:
-    r"""The scanlines of :func:`density_grid`: ``out[b, c]`` is the sum, over the scanlines of cell row ``b`` that lie
-    in :math:`[0, 1]` and over the regions, of their ``weight`` times the length of the line inside the region and
-    inside cell column ``c`` (within the square), in cell widths; shape (N, N).
+#: A cell whose regions' covered shares sum to more than ``1 + OVERLAP_COVER`` holds an overlap (:func:`density_grid`);
+#: below, the sum is 1 up to rounding on the borders that neighbours share
+OVERLAP_COVER = 1e-9
+
+
+def _scanline_rows(geoms: np.ndarray, weights: tuple, n: int, s: int) -> list[np.ndarray]:
+    r"""The scanlines of :func:`density_grid`: for every array ``weight`` (R,) of ``weights``, ``out[b, c]`` is the
+    sum, over the scanlines of cell row ``b`` that lie in :math:`[0, 1]` and over the regions, of their ``weight``
+    times the length of the line inside the region and inside cell column ``c`` (within the square), in cell widths;
+    a list of arrays of shape (N, N).
 
     Every ring edge crosses the scanlines :math:`y_r \in [y_0, y_1)` of its height (half-open, so that a vertex on a
     line counts once); per region and line the crossings, sorted, pair into spans (even-odd rule: holes and the
@@ -228,13 +244,18 @@ def _scanline_rows(geoms: np.ndarray, weight: np.ndarray, n: int, s: int) -> np.
     # cell units: cell c spans [c, c + 1), the square [1/2, N - 1/2]
     xa = np.clip(xa[keep] / h + 0.5, 0.5, n - 0.5)
     xb = np.clip(xb[keep] / h + 0.5, 0.5, n - 0.5)
-    r, w = r[keep], weight[g[keep]]
+    r, g = r[keep], g[keep]
     ca, cb = np.minimum(xa.astype(np.int64), n - 1), np.minimum(xb.astype(np.int64), n - 1)
     row = (r // s) * (n + 1)
     idx = np.concatenate([row + ca, row + cb])
-    full = np.bincount(idx, np.concatenate([w, -w]), minlength=n * (n + 1)).reshape(n, n + 1)
-    ends = np.bincount(idx, np.concatenate([-w * (xa - ca), w * (xb - cb)]), minlength=n * (n + 1)).reshape(n, n + 1)
-    return (np.cumsum(full, axis=1) + ends)[:, :n]
+    out = []
+    for weight in weights:
+        w = weight[g]
+        full = np.bincount(idx, np.concatenate([w, -w]), minlength=n * (n + 1)).reshape(n, n + 1)
+        ends = np.bincount(idx, np.concatenate([-w * (xa - ca), w * (xb - cb)]),
+                           minlength=n * (n + 1)).reshape(n, n + 1)
+        out.append((np.cumsum(full, axis=1) + ends)[:, :n])
+    return out
 
 
 def clean_coverage(regions: np.ndarray) -> np.ndarray:

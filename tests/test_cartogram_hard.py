@@ -1,0 +1,170 @@
+"""Cartograms on hard maps (issue: thousands of small regions, regions that overlap in the input, a country across
+the antimeridian, the world in its plane): synthetic maps of :mod:`rfmap.cartogram_synthetic`."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import shapely
+from shapely.geometry import shape
+
+from rfmap.cartogram import cartogram, density_grid
+from rfmap.cartogram_metrics import MINOR_BUDGET, judged, pass_weights
+from rfmap.cartogram_synthetic import synthetic_counties, synthetic_subdivisions
+from rfmap.regions import read_regions
+
+
+@pytest.fixture(scope="module")
+def counties():
+    return synthetic_counties()
+
+
+@pytest.fixture(scope="module")
+def sliver_counties():
+    return synthetic_counties(slivers=True)
+
+
+def _geoms(fc):
+    return np.array([shape(f["geometry"]) for f in fc["features"]], dtype=object)
+
+
+def test_synthetic_counties_are_thousands_of_regions_of_very_different_sizes(counties):
+    g = _geoms(counties)
+    area = shapely.area(g)
+    values = np.array([f["properties"]["value"] for f in counties["features"]])
+    assert len(g) >= 3000
+    assert area.max() / area.min() > 1e4  # county-like: sizes over orders of magnitude
+    assert (values > 0).all() and (values / area).max() / (values / area).min() > 1e4
+    assert shapely.is_valid(g).all()
+    assert shapely.coverage_is_valid(g)  # neighbours share their borders vertex for vertex
+
+
+def test_overlapping_sparse_regions_keep_the_raster_positive():
+    # two sparse squares drawn over each other (a border drawn twice, an enclave without its hole) beside a dense one
+    geoms = np.array([shapely.box(0.1, 0.1, 0.6, 0.6), shapely.box(0.2, 0.2, 0.7, 0.7), shapely.box(0.7, 0.1, 0.9, 0.3)])
+    values = np.array([1.0, 1.0, 1000.0])
+    dens, sea = density_grid(geoms, values, 41)
+    assert np.isfinite(dens).all() and dens.min() > 0
+    rho = values / shapely.area(geoms)
+    # inside the overlap the density is the two regions' mean, outside each one its own
+    assert dens[16, 16] == pytest.approx(rho[:2].mean())
+    assert dens[8, 8] == pytest.approx(rho[0])
+    # the plain sum sea + sum_i (rho_i - sea) c_i, which the raster keeps where nothing overlaps, is negative there
+    assert sea + (rho[0] - sea) + (rho[1] - sea) < 0
+
+
+def test_the_raster_is_the_plain_sum_where_regions_do_not_overlap(counties):
+    from rfmap.regions import OVERLAP_COVER, _scanline_rows
+
+    _, geoms, values, _ = read_regions(counties, "value")
+    unit = shapely.transform(geoms, lambda p: (p - [-125.0, 24.0]) / 60.0 * 0.8 + 0.1)
+    n, s = 129, 4
+    dens, sea = density_grid(unit, values, n, supersample=s)
+    rho = values / shapely.area(unit)
+    excess, cover = (t.T for t in _scanline_rows(unit, (rho - sea, np.ones_like(rho)), n, s))
+    t = ((np.arange(n * s) + 0.5) / s - 0.5) / (n - 1)
+    lines = np.add.reduceat(((t >= 0) & (t <= 1)).astype(float), np.arange(0, n * s, s))
+    width = np.full(n, 1.0)
+    width[[0, -1]] = 0.5
+    size = np.outer(width, lines)
+    assert (cover / size).max() <= 1.0 + OVERLAP_COVER  # a coverage: nothing counted twice
+    assert np.array_equal(dens, sea + excess / size)
+    assert dens.min() > 0
+
+
+def test_a_county_map_with_overlapping_borders_is_not_refused(sliver_counties):
+    from rfmap.cartogram_metrics import overlaps
+
+    _, geoms, values, _ = read_regions(sliver_counties, "value")
+    left, right, inter = overlaps(geoms)
+    assert (inter / np.minimum(shapely.area(geoms[left]), shapely.area(geoms[right])) > 0.01).sum() > 10
+    c = cartogram(sliver_counties, "value", iterations=3)  # was: "density must be finite and strictly positive"
+    assert len(c.mapped) == len(geoms)
+    assert c.info["max_error"][-1] < 0.5 * c.info["max_error"][0]
+
+
+def test_regions_under_the_judged_share_are_raised_within_a_budget(counties):
+    values = np.array([f["properties"]["value"] for f in counties["features"]])
+    w = pass_weights(values, 1e-4)
+    big = judged(values, 1e-4)
+    assert (~big).sum() > 500  # a county map holds many small regions
+    assert (w[big] == values[big]).all() and (w >= values).all()
+    assert (w - values).sum() == pytest.approx(MINOR_BUDGET * values.sum(), rel=1e-9)
+    # a map with few small regions raises them to the judged share itself
+    few = np.array([1e6, 2e6, 10.0])
+    assert pass_weights(few, 1e-4)[2] == pytest.approx(1e-4 * few.sum())
+
+
+def test_county_map_cartogram_passes_reach_the_tolerance(counties):
+    c = cartogram(counties, "value", output="projected")
+    assert min(c.info["max_error"]) <= 0.01  # the passes (before any sliver overlap is cut)
+    m = c.metrics()
+    assert m.n_invalid == 0 and m.n_overlapping == 0
+    assert m.mean_error < 0.005
+
+
+# ----------------------------------------------------------------------------------------------- the world
+@pytest.fixture(scope="module")
+def world_file(tmp_path_factory):
+    import json
+
+    from rfmap.regions import world_countries
+
+    path = tmp_path_factory.mktemp("world") / "world.geojson"
+    path.write_text(json.dumps(world_countries()))
+    return path
+
+
+def _run_cli(*args):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "rfmap.cli", "cartogram", *map(str, args)], capture_output=True,
+                          text=True, timeout=900)
+
+
+def test_the_world_by_default_is_written_in_its_plane_and_exits_0(world_file, tmp_path):
+    """The world by population leaves the longitude/latitude domain (Russia past the edge of Equal Earth): the
+    default writes it in the plane, says so in the output's "crs" and "rfmap" members, and exits 0; --lonlat forces
+    longitude/latitude, where the regions are drawn at the domain's edge, and exits 1."""
+    import json
+
+    pytest.importorskip("pyproj")
+    out = tmp_path / "world-out.geojson"
+    proc = _run_cli(world_file, "--value", "pop_est", "--out", out)
+    assert proc.returncode == 0, proc.stderr
+    assert "projection's plane" in proc.stdout and "Traceback" not in proc.stderr
+    doc = json.loads(out.read_text())
+    status = doc["rfmap"]
+    assert status["status"] == "ok" and status["coordinates"] == "projected" and status["max_error"] <= 0.01
+    assert any("Russia" in r for r in status["beyond_domain"])
+    assert doc["crs"]["properties"]["name"] == status["projection"] and "+proj=eqearth" in status["projection"]
+    xy = shapely.get_coordinates(np.array([shape(f["geometry"]) for f in doc["features"]]))
+    assert np.abs(xy).max() > 1e6  # metres, not degrees
+    forced = tmp_path / "world-lonlat.geojson"
+    proc = _run_cli(world_file, "--value", "pop_est", "--out", forced, "--lonlat")
+    assert proc.returncode == 1 and "beyond the projection's domain" in proc.stderr
+    assert json.loads(forced.read_text())["rfmap"]["coordinates"] == "input"
+
+
+def test_a_cartogram_within_the_domain_stays_in_longitude_latitude():
+    from rfmap.regions import world_countries
+
+    africa = {"type": "FeatureCollection", "features": [f for f in world_countries()["features"]
+                                                        if f["properties"]["continent"] == "Africa"]}
+    c = cartogram(africa, "pop_est", n=64, iterations=2)
+    assert c.output == "input" and c.info["beyond_domain"] == []
+    assert "crs" not in c.to_geojson() and np.abs(shapely.get_coordinates(c.geometries)).max() <= 180
+
+
+def test_subdivisions_across_the_antimeridian_stay_disjoint():
+    """Russia cut into 80 subdivisions, those across 180° split there: the cartogram meets the tolerance with every
+    region valid and no pair overlapping, in longitude/latitude too (a regression test on a clean coverage; maps
+    whose input borders overlap are not covered)."""
+    fc = synthetic_subdivisions()
+    xy = shapely.get_coordinates(_geoms(fc))
+    assert xy[:, 0].min() < -170 and xy[:, 0].max() > 170  # the map crosses the antimeridian
+    c = cartogram(fc, "value", output="input")
+    m = c.metrics()
+    assert m.max_error <= 0.01 and m.n_invalid == 0 and m.n_overlapping == 0, m
+    assert not c.problems()
+    assert shapely.is_valid(c.geometries).all()  # in longitude/latitude as well
