@@ -35,7 +35,7 @@ LAYERS: dict[str, int] = {
     "rfmap.solvers.spectral": 1, "rfmap.solvers.raster": 1, "rfmap.solvers.cartoflow": 1,
     "rfmap.solvers.cartodiffusion": 1, "rfmap.solvers.cosine": 1, "rfmap.solvers.locate": 1,
     "rfmap.solvers.residual": 1,
-    "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.nn.fno": 1, "rfmap.nn.registry": 1,
+    "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.nn.grow": 1, "rfmap.nn.fno": 1, "rfmap.nn.registry": 1,
     "rfmap.losses": 1, "rfmap.symmetry": 1,
     # tasks, training, refinement, inference, post-processing, plotting
     "rfmap.tasks": 2, "rfmap.tasks.base": 2, "rfmap.tasks.heldout": 2, "rfmap.tasks.density": 2,
