@@ -43,39 +43,23 @@ def _grid_field_file(args) -> tuple[np.ndarray, int]:
 
 
 def cmd_solve(args) -> int:
-    from .inputs import check_mu, preprocess_density
-    from .mesh import square_triangles
-    from .paper_fields import BELTRAMI_MAPS, DENSITIES, get_field, sample_mu
-    from .solvers import solve_dem, solve_lbs
+    from .paper_fields import field_names, get_field
+    from .tasks import get_task, kinds
 
+    # the task whose classical solver the method is: it checks and prepares the field and solves
+    task = next(get_task(k) for k in kinds() if args.method in get_task(k).methods)
     if args.field_file:
         arr, n = _grid_field_file(args)
-        if args.method == "lbs":
-            if arr.ndim != 2:
-                raise CLIError(f"method lbs needs a 2D Beltrami coefficient, shape (N, N); got shape {arr.shape}")
-            # the mean of the three vertex values on every triangle: the P1 interpolant's mean (|mu| < 1 stays)
-            mu = check_mu(arr, name="the Beltrami coefficient").reshape(-1)[square_triangles(n)].mean(1)
-        else:
-            if np.iscomplexobj(arr):
-                raise CLIError(f"method {args.method} needs a real density; {args.field_file} is complex")
-            density = preprocess_density(arr)  # as rfmap map does: minimum shifted to 0.1, unit mass
+        values = task.solver_input(arr)  # a density as rfmap map preprocesses it, mu per triangle, ...
     else:
         if args.n is None:
             raise CLIError("--n is required with --field (with --field-file the array's side gives N)")
         f, n = get_field(args.field), args.n
-        if args.method == "lbs" and f.kind != "beltrami":
-            raise CLIError(f"method lbs needs a Beltrami test map ({', '.join(BELTRAMI_MAPS)}), got {args.field!r}")
-        if args.method != "lbs" and f.kind != "density":
-            raise CLIError(f"method {args.method} needs a density ({', '.join(DENSITIES)}), got {args.field!r}")
-        if args.method == "lbs":
-            mu = sample_mu(f.name, n)
-        else:
-            density = f.sample(n)
-    if args.method == "lbs":
-        res = solve_lbs(mu, n, boundary="fixed" if args.boundary in (None, "fixed") else args.boundary)
-    else:
-        res = solve_dem(density, method="flow" if args.method == "flow" else "diffusion",
-                        boundary=args.boundary or "square", progress=not args.quiet)
+        if f.kind != task.kind:
+            raise CLIError(f"method {args.method} needs a {task.title} field ({', '.join(field_names(task.kind))}), "
+                           f"got {args.field!r}")
+        values = task.solver_sample(f, n)
+    res = task.solve(values, n, args.method, args.boundary, progress=not args.quiet)
     res.save(args.out)
     if not args.quiet:
         print(f"wrote {args.out}: {res.metrics()}")

@@ -146,9 +146,9 @@ class TrainConfig:
             raise ValueError(f"n_range must be (lo, hi) with 2 <= lo <= hi, got {tuple(self.n_range)}")
         if self.batch_points < 0:
             raise ValueError(f"batch_points must not be negative, got {self.batch_points}")
-        if self.teacher.active and self.task.kind != "density":
-            raise ValueError(f"config {self.name!r} maps a Beltrami coefficient: a classical teacher applies to "
-                             "density configs only")
+        if self.teacher.active and not self.task.task.teacher:
+            raise ValueError(f"config {self.name!r} maps a {self.task.task.title} field: a classical teacher applies "
+                             "to density configs only")
 
     def with_overrides(self, **kw) -> "TrainConfig":
         return replace(self, **kw)

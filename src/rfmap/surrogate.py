@@ -25,9 +25,7 @@ import numpy as np
 import torch
 
 from ._version import __version__
-from .inputs import check_density, check_mu, preprocess_density, unit_mass
-from .mesh import check_n, element_centroids, grid_mesh, grid_points, grid_vertex_weights, interpolate, triangulate, \
-    vertex_weights
+from .mesh import check_n, grid_mesh, grid_points, interpolate, triangulate
 from .device import resolve_device
 from .finish import Draft, FinishOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
     poor_map_message, refine, regrid
@@ -284,7 +282,7 @@ class Surrogate:
             lin = np.where(np.isnan(lin), near, lin)
             return self._checked(lin.reshape((n,) * d), None, preprocess), n
         if callable(field):
-            fn = field.mu if isinstance(field, BeltramiMap) else field
+            fn = self.spec.task.sample_named(field) if isinstance(field, (DensityField, BeltramiMap)) else field
             n = check_n(n or PAPER_N[d])
             vals = np.asarray(fn(grid_points(n, d)))
             return self._checked(vals.reshape((n,) * d), fn, preprocess), n
@@ -296,19 +294,8 @@ class Surrogate:
         return self._checked(arr, None, preprocess), int(n or arr.shape[0])
 
     def _checked(self, grid: np.ndarray, fn, preprocess: bool) -> _Input:
-        if self.spec.kind == "density":
-            if np.iscomplexobj(grid):
-                raise ValueError("a density model needs a real density field, got complex values")
-            grid = self._unit_mass(grid, preprocess)
-        else:
-            if not np.iscomplexobj(grid) and self.spec.kind == "beltrami":
-                grid = grid.astype(np.complex128)
-            grid = check_mu(grid, name="Beltrami coefficient")
-        return _Input(grid, fn, preprocess)
-
-    @staticmethod
-    def _unit_mass(grid, preprocess):
-        return preprocess_density(grid) if preprocess else unit_mass(check_density(grid))
+        """The field on a grid as the task checks and normalises it (:meth:`rfmap.tasks.Task.check_field`)."""
+        return _Input(self.spec.task.check_field(grid, preprocess), fn, preprocess)
 
     def _work_grid(self, inp: _Input, n_work: int) -> np.ndarray:
         g = inp.grid
@@ -322,7 +309,7 @@ class Surrogate:
         out = interpolate(src.double(), torch.as_tensor(grid_points(n_work, d)))[0].numpy()
         if np.iscomplexobj(g):
             return (out[:, 0] + 1j * out[:, 1]).reshape((n_work,) * d)
-        return self._unit_mass(out[:, 0].reshape((n_work,) * d), False)
+        return self.spec.task.resampled(out[:, 0].reshape((n_work,) * d))
 
     # ------------------------------------------------------------------ inference
     def _symmetry(self, symmetrize) -> str | None:
@@ -467,7 +454,7 @@ class Surrogate:
         of :func:`rfmap.finish.pipeline.finish`; a :class:`PoorMapWarning` when the delivered density map is poor.
         ``given``: the network's output on the default working grid from a batched evaluation (:meth:`_predict`)."""
         stages = opts.finishing()
-        if stages.polish is not False and (self.spec.kind != "density" or points is not None):
+        if stages.polish is not False and (not self.spec.task.equalizes or points is not None):
             raise ValueError("polish finishes density maps on the output grid; it does not apply to "
                              f"{self.spec.kind} maps or to query points")
         nw = self._working_side(n, opts)
@@ -546,18 +533,7 @@ class Surrogate:
         return triangulate(ref)
 
     def _field_on(self, inp: _Input, ref: np.ndarray, elements: np.ndarray, grid_n: int | None = None) -> np.ndarray:
-        r"""The input field on the output mesh: unit-mass vertex densities (n,), or :math:`\mu` per element (m,)
-        at the centroids; from the exact evaluator when there is one, else interpolated from the input grid.
-        ``grid_n``: the output mesh is the ``N``-grid (its quadrature weights are cached)."""
-        if self.spec.kind == "density":
-            w = grid_vertex_weights(grid_n, self.spec.dim) if grid_n else vertex_weights(ref, elements)
-            if inp.fn is not None:
-                return preprocess_density(np.asarray(inp.fn(ref), dtype=np.float64), weights=w)
-            src = torch.as_tensor(inp.grid)[None, None]
-            return unit_mass(interpolate(src, torch.as_tensor(ref))[0, :, 0].numpy(), w)
-        cen = element_centroids(ref, elements)
-        if inp.fn is not None:
-            return np.asarray(inp.fn(cen))
-        g = inp.grid
-        v = interpolate(torch.as_tensor(np.stack([g.real, g.imag]))[None], torch.as_tensor(cen))[0].numpy()
-        return v[:, 0] + 1j * v[:, 1]
+        r"""The input field on the output mesh (:meth:`rfmap.tasks.Task.field_on_mesh`: unit-mass vertex densities
+        (n,), or :math:`\mu` per element (m,) at the centroids, ...); from the exact evaluator when there is one,
+        else interpolated from the input grid.  ``grid_n``: the output mesh is the ``N``-grid."""
+        return self.spec.task.field_on_mesh(inp.grid, inp.fn, ref, elements, grid_n)

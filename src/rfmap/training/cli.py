@@ -127,9 +127,9 @@ def _structured_overrides(cfg: TrainConfig, args) -> dict:
                            "weight": getattr(args, "teacher_weight", None)}.items() if v is not None}
     if t:
         over["teacher"] = TeacherConfig(**{**cfg.teacher.__dict__, **t})
-        if over["teacher"].active and cfg.task.kind != "density":
-            raise ValueError(f"--teacher: config {cfg.name!r} maps a Beltrami coefficient; a classical teacher "
-                             "applies to density configs only")
+        if over["teacher"].active and not cfg.task.task.teacher:
+            raise ValueError(f"--teacher: config {cfg.name!r} maps a {cfg.task.task.title} field; a classical "
+                             "teacher applies to density configs only")
     over.update(_size_overrides(args))
     grow = getattr(args, "grow", None)
     if grow is not None:

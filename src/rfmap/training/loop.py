@@ -20,7 +20,6 @@ import torch
 
 from ..config import TrainConfig
 from ..device import resolve_device
-from ..paper_fields import BELTRAMI_MAPS, TEST_FIELDS
 from ..finish import quiet_quality
 from ..surrogate import Surrogate
 from ..tasks import make_batch, task_loss
@@ -38,20 +37,18 @@ def validate(sur: Surrogate, cfg: TrainConfig) -> dict:
 
 @quiet_quality()
 def report_paper_fields(sur: Surrogate, n: int, fields: list[str] | None = None) -> dict:
-    """Metrics on the paper's test fields at grid side ``n`` (a report; never used to select a model)."""
-    fields = fields or TEST_FIELDS[(sur.spec.kind, sur.spec.dim)]
+    """Metrics on the paper's test fields at grid side ``n`` (a report; never used to select a model): the task's
+    test fields (:meth:`rfmap.tasks.Task.test_fields`) and records (:meth:`rfmap.tasks.Task.test_record`); empty
+    for a task without test fields."""
+    task = sur.spec.task
+    fields = fields or task.test_fields(sur.spec.dim)
     out: dict = {}
     vals = []
     for name in fields:
-        r = sur.map(name, n, repair=False)
-        if sur.spec.kind == "beltrami":
-            m = r.metrics(exact_points=BELTRAMI_MAPS[name](r.ref_points), mu_ref=r.field)
-            vals.append({"mean_dd": m.mean_dd, "mean_dmu": m.mean_dmu, "n_flipped": m.n_flipped,
-                         "min_jacobian": m.min_jacobian})
-        else:
-            m = r.metrics()
-            vals.append({"std_rho_map": m.std_rho_map, "n_flipped": m.n_flipped, "min_jacobian": m.min_jacobian})
+        vals.append(task.test_record(sur.map(name, n, repair=False), name))
         out[name] = vals[-1]
+    if not vals:
+        return out
     summary = {}
     for k in vals[0]:
         arr = [v[k] for v in vals]
