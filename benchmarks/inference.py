@@ -10,7 +10,7 @@ surrogate.
 operations and parameters without Python's per-module overhead; tracing a shape, about 0.2 s, happens once in the
 warm-up call and is not in the median), what a user mapping many fields of one size gets.
 ``symmetrized`` is the traced map averaged over the domain's symmetries (``symmetrize=True``: 8 network
-evaluations in 2D, 3 in 3D; ``rfmap.symmetry``).
+evaluations in 2D, 3 in 3D; ``rfmap.nn.symmetry``).
 Models that are not shipped are replaced by an untrained network of the ``full`` preset's size (same cost).
 """
 from __future__ import annotations
@@ -21,7 +21,7 @@ import time
 import numpy as np
 import torch
 
-from rfmap.config import get_config
+from rfmap.training.config import get_config
 from rfmap.fields import BELTRAMI_MAPS, DENSITIES
 from rfmap.mesh import grid_mesh
 from rfmap.solvers import solve_dem, solve_lbs

@@ -1,8 +1,8 @@
-"""Bijectivity of the shipped surrogates on hard random fields, before and after :func:`rfmap.repair.repair_map`.
+"""Bijectivity of the shipped surrogates on hard random fields, before and after :func:`rfmap.finish.repair.repair_map`.
 
     python benchmarks/repair.py [--fields K] [--fields-3d K] [--models NAME ...]
 
-Fields come from :mod:`rfmap.stress` (sharp peaks, steps, ramps, near-zero regions with p_min/p_max down to 1e-3,
+Fields come from :mod:`rfmap.fields.hard` (sharp peaks, steps, ramps, near-zero regions with p_min/p_max down to 1e-3,
 mapped without the paper's shift; Beltrami coefficients with |mu| up to 0.95), spread evenly over the grid sides
 from the model's smallest training side to 256 (2D) or 64 (3D).  For every model and N the table gives: fields,
 fields with any folded element in the raw output and their total of folded elements, folded elements after repair
@@ -19,9 +19,9 @@ import numpy as np
 import torch
 
 from rfmap.mesh import grid_mesh
-from rfmap.repair import repair_map
+from rfmap.finish.repair import repair_map
 from rfmap.solvers import solve_dem, solve_lbs
-from rfmap.stress import hard_beltrami, hard_density
+from rfmap.fields.hard import hard_beltrami, hard_density
 from rfmap.surrogate import Surrogate, quiet_quality
 
 MODELS_2D = ["deq2d-square", "deq2d-free", "beltrami2d"]

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from rfmap.config import get_config
-from rfmap.device import resolve_device
+from rfmap.training.config import get_config
+from rfmap.core.device import resolve_device
 from rfmap.training.data import _loader
 from rfmap.training.loop import _train_step
 from rfmap.training.state import _build_state

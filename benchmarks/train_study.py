@@ -1,5 +1,5 @@
 """Train runs of one configuration that differ in one option side by side for the same wall time, and store their
-validation curves (``rfmap.studies``) for the book.
+validation curves (``rfmap.training.records``) for the book.
 
 Every run starts at once with one torch thread and one batch worker, so that they share the machine alike; the
 comparison is at equal wall time (a run with a teacher takes fewer steps).  Each variant is a label and the options
@@ -21,7 +21,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from rfmap.studies import collect, study_table
+from rfmap.training.records import collect, study_table
 
 
 def main(argv=None) -> int:

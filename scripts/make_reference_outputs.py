@@ -58,7 +58,7 @@ def make_tiny_models(data_dir: Path = TESTS / "data") -> list[Path]:
     import torch
 
     import rfmap.train as T
-    from rfmap.config import get_config
+    from rfmap.training.config import get_config
     from rfmap.surrogate import Surrogate
 
     written = []

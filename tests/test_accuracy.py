@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import pytest
 
-from rfmap.paper_fields import BELTRAMI_MAPS, TEST_FIELDS
+from rfmap.fields.paper import BELTRAMI_MAPS, TEST_FIELDS
 from rfmap.surrogate import Surrogate, models, quiet_quality
 
 #: How much worse than measured a shipped model may map a test field before the test fails.

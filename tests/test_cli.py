@@ -16,7 +16,7 @@ import torch
 
 from rfmap.cli import main
 from rfmap.nn import MultiResUNet
-from rfmap.result import load_result
+from rfmap.core.result import load_result
 from rfmap.surrogate import Surrogate, quiet_quality
 from rfmap.tasks import TaskSpec
 
@@ -124,8 +124,8 @@ def test_solve_bad_input(tmp_path, capsys, args, match):
 def test_solve_field_file_density_is_the_named_fields_map(tmp_path, capsys, method):
     """A raw density from a .npy file is preprocessed as the named fields are, so the raw values of sin-cos give the
     same map as --field sin-cos (and N comes from the array)."""
-    from rfmap.paper_fields import get_field
-    from rfmap.result import load_result
+    from rfmap.fields.paper import get_field
+    from rfmap.core.result import load_result
 
     raw = get_field("sin-cos").sample(17, preprocess=False)
     f = tmp_path / "density.npy"
@@ -142,7 +142,7 @@ def test_solve_field_file_density_is_the_named_fields_map(tmp_path, capsys, meth
 def test_solve_field_file_beltrami(tmp_path, capsys):
     """A complex Beltrami coefficient at the vertices (averaged over each triangle) gives T1's map closely."""
     from rfmap.mesh import grid_points
-    from rfmap.paper_fields import BELTRAMI_MAPS
+    from rfmap.fields.paper import BELTRAMI_MAPS
 
     n = 33
     mu = BELTRAMI_MAPS["T1"].mu(grid_points(n, 2)).reshape(n, n)

@@ -1,4 +1,4 @@
-"""The training engine (:mod:`rfmap.train`, :mod:`rfmap.validation`, :mod:`rfmap.device`): reproducibility, batch
+"""The training engine (:mod:`rfmap.train`, :mod:`rfmap.training.validation`, :mod:`rfmap.core.device`): reproducibility, batch
 workers, warm restarts with lineage, the held-out validation and checkpoint choice, devices, the paper presets, and
 bad input on the command line (one line, exit 2, nothing written)."""
 from __future__ import annotations
@@ -14,13 +14,13 @@ import torch
 import rfmap.train as T
 import rfmap.training.state as TS
 from rfmap.cli import main as cli_main
-from rfmap.config import CONFIGS, get_config
-from rfmap.device import resolve_device
-from rfmap.random_fields import RandomMap, RandomBeltramiConfig
+from rfmap.training.config import CONFIGS, get_config
+from rfmap.core.device import resolve_device
+from rfmap.fields.random import RandomMap, RandomBeltramiConfig
 from rfmap.surrogate import WEIGHTS_DIR, Surrogate
 from rfmap.mesh import grid_points
 from rfmap.tasks import draw_samples
-from rfmap.validation import VALIDATION_SEED, evaluate, score, validation_fields
+from rfmap.training.validation import VALIDATION_SEED, evaluate, score, validation_fields
 
 CFG = get_config("deq2d-square", "ci").with_overrides(threads=1)
 
@@ -244,7 +244,7 @@ def test_score_counts_a_folded_map_as_the_identity(monkeypatch):
     nothing."""
     from types import SimpleNamespace
 
-    import rfmap.validation as V
+    import rfmap.training.validation as V
     from rfmap.surrogate import Surrogate
 
     sur = Surrogate.untrained(get_config("deq2d-square", "ci").task, base=4, depth=2, n_range=[17, 25])

@@ -173,7 +173,7 @@ def test_generalization_table_compares_with_the_classical_solver_on_unseen_field
     their input variation, and the report set is not the validation set that chooses checkpoints."""
     from rfmap import load_or_train
     from rfmap.experiments import generalization_table
-    from rfmap.validation import validation_fields
+    from rfmap.training.validation import validation_fields
 
     sur = load_or_train("deq2d-square", "ci")
     t = generalization_table(sur, count=4, n=17, refine=False, symmetrize=True)
@@ -210,7 +210,7 @@ def test_displacement_demand_of_an_identity_network():
 def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     """The recipe table states each model's training fields, fold penalty, learning rate, budget and recorded
     validation exactly as its metadata holds them."""
-    from rfmap.config import get_config
+    from rfmap.training.config import get_config
     from rfmap.experiments import recipe_table, training_fields_text
 
     cfg = get_config("deq2d-square", "full").with_overrides(lr=2e-4).to_dict()

@@ -31,7 +31,7 @@ from rfmap.fields import (
 )
 from rfmap.geometry import beltrami_coefficient, signed_measures
 from rfmap.mesh import grid_mesh, grid_points
-from rfmap.metrics import compute_metrics
+from rfmap.core.metrics import compute_metrics
 
 # Std(rho~_orig) of the test densities as published in the paper's tables (tab:population_test,
 # tab:resolution_test, tab:3d_population_test): the input statistic, independent of any map.
@@ -150,7 +150,7 @@ def test_preprocess_density_is_shift_invariant_and_accepts_weights():
 
 
 def test_population_of_a_preprocessed_density_is_one():
-    from rfmap.metrics import element_population
+    from rfmap.core.metrics import element_population
 
     mesh = grid_mesh(13, 2)
     pop = element_population(mesh.points, mesh.elements, sample_density("exp-log", 13).reshape(-1))

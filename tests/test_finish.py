@@ -12,8 +12,8 @@ from rfmap.finish import Draft, FinishOptions, InfoView, MapReport, NetworkRepor
     regrid, repair, shorten
 from rfmap.mesh import grid_mesh
 from rfmap.nn import MultiResUNet
-from rfmap.paper_fields import sample_density
-from rfmap.result import MapResult
+from rfmap.fields.paper import sample_density
+from rfmap.core.result import MapResult
 from rfmap.solvers import solve_dem
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from rfmap import compare
-from rfmap.config import ModelConfig, get_config
+from rfmap.training.config import ModelConfig, get_config
 from rfmap.experiments import Table
 from rfmap.nn import FNONet, MultiResUNet, build_model, fno_available, from_tensor_state, tensor_state
 from rfmap.surrogate import Surrogate

@@ -11,7 +11,7 @@ import pytest
 import torch
 
 from rfmap import Surrogate
-from rfmap.config import get_config
+from rfmap.training.config import get_config
 from rfmap.nn.grow import check_growth, copy_map, grow_unet
 from rfmap.nn.model import MultiResUNet
 from rfmap.training.data import step_batch, step_size_n
@@ -161,7 +161,7 @@ def test_cli_map_native(tmp_path):
     r = subprocess.run([sys.executable, "-m", "rfmap.cli", "map", "--model", "deq2d-square", "--field", "ring",
                         "--n", "41", "--native", "--no-repair", "--out", str(out)], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    from rfmap.result import load_result
+    from rfmap.core.result import load_result
 
     sur = Surrogate.pretrained("deq2d-square")
     native = sur.map("ring", 41, native=True, repair=False).mapped_points

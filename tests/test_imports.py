@@ -27,26 +27,26 @@ import rfmap
 #: Layer of every module, lowest first.  A module may import from its own layer or a lower one.
 LAYERS: dict[str, int] = {
     # core
-    "rfmap._version": 0, "rfmap.device": 0, "rfmap.geometry": 0, "rfmap.mesh": 0, "rfmap.inputs": 0, "rfmap.paper_fields": 0,
-    "rfmap.random_fields": 0, "rfmap.fields": 0, "rfmap.metrics": 0, "rfmap.result": 0,
-    "rfmap.surface": 0, "rfmap.folds": 0,
+    "rfmap._version": 0, "rfmap.core.device": 0, "rfmap.geometry": 0, "rfmap.mesh": 0, "rfmap.inputs": 0, "rfmap.fields.paper": 0,
+    "rfmap.fields.random": 0, "rfmap.fields": 0, "rfmap.core.metrics": 0, "rfmap.core.result": 0,
+    "rfmap.core.surface": 0, "rfmap.core.folds": 0,
     # classical solvers, the network, the losses
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1, "rfmap.solvers.flow": 1,
     "rfmap.solvers.spectral": 1, "rfmap.solvers.raster": 1, "rfmap.solvers.cartoflow": 1,
     "rfmap.solvers.cartodiffusion": 1, "rfmap.solvers.cosine": 1, "rfmap.solvers.locate": 1,
     "rfmap.solvers.residual": 1,
     "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.nn.grow": 1, "rfmap.nn.fno": 1, "rfmap.nn.registry": 1,
-    "rfmap.losses": 1, "rfmap.symmetry": 1,
+    "rfmap.tasks.losses": 1, "rfmap.nn.symmetry": 1,
     # tasks, training, refinement, inference, post-processing, plotting
     "rfmap.tasks": 2, "rfmap.tasks.base": 2, "rfmap.tasks.heldout": 2, "rfmap.tasks.density": 2,
-    "rfmap.tasks.beltrami": 2, "rfmap.config": 2, "rfmap.train": 2, "rfmap.training": 2,
+    "rfmap.tasks.beltrami": 2, "rfmap.training.config": 2, "rfmap.train": 2, "rfmap.training": 2,
     "rfmap.training.data": 2, "rfmap.training.averaging": 2, "rfmap.training.state": 2, "rfmap.training.loop": 2,
-    "rfmap.training.cli": 2, "rfmap.refine": 2, "rfmap.surrogate": 2,
+    "rfmap.training.cli": 2, "rfmap.finish.refine": 2, "rfmap.surrogate": 2,
     "rfmap.finish": 2, "rfmap.finish.report": 2, "rfmap.finish.draft": 2, "rfmap.finish.quality": 2,
     "rfmap.finish.query": 2, "rfmap.finish.stages": 2, "rfmap.finish.pipeline": 2,
-    "rfmap.pretrained": 2, "rfmap.repair": 2, "rfmap.repair.dispatch": 2,
-    "rfmap.repair.lbs": 2, "rfmap.repair.local": 2, "rfmap.repair.scale": 2, "rfmap.repair.embedding": 2,
-    "rfmap.shorten": 2, "rfmap.validation": 2, "rfmap.teacher": 2, "rfmap.selection": 2, "rfmap.hybrid": 2, "rfmap.stress": 2,
+    "rfmap.pretrained": 2, "rfmap.finish.repair": 2, "rfmap.finish.repair.dispatch": 2,
+    "rfmap.finish.repair.lbs": 2, "rfmap.finish.repair.local": 2, "rfmap.finish.repair.scale": 2, "rfmap.finish.repair.embedding": 2,
+    "rfmap.finish.shorten": 2, "rfmap.training.validation": 2, "rfmap.tasks.teacher": 2, "rfmap.training.selection": 2, "rfmap.finish.polish": 2, "rfmap.fields.hard": 2,
     # the paper layer, the applications and plotting, then the command line and the package's front door
     "rfmap.viz": 3, "rfmap.viz.figures": 3, "rfmap.viz.meshes": 3, "rfmap.viz.volumes": 3, "rfmap.viz.architecture": 3,
     "rfmap.viz.training": 3, "rfmap.viz.cartograms": 3, "rfmap.viz.studies": 3,
@@ -57,12 +57,12 @@ LAYERS: dict[str, int] = {
     "rfmap.cartogram": 3,
     "rfmap.cartogram_data": 3, "rfmap.cartogram_series": 3, "rfmap.cartogram_metrics": 3,
     "rfmap.cartogram_synthetic": 3, "rfmap.cartogram_output": 3,
-    "rfmap.regions": 3, "rfmap.projection": 3, "rfmap.compare": 3, "rfmap.studies": 3,
+    "rfmap.regions": 3, "rfmap.projection": 3, "rfmap.paper.compare": 3, "rfmap.training.records": 3,
     "rfmap.cli": 4, "rfmap.cli_base": 4, "rfmap.cli_cartogram": 4, "rfmap.lazy_parser": 4,
     "rfmap": 4,
 }
 
-CORE = ("rfmap.mesh", "rfmap.geometry", "rfmap.fields", "rfmap.metrics")
+CORE = ("rfmap.mesh", "rfmap.geometry", "rfmap.fields", "rfmap.core.metrics")
 ABOVE_CORE = ("rfmap.nn", "rfmap.tasks", "rfmap.train", "rfmap.training", "rfmap.surrogate", "rfmap.experiments",
               "rfmap.paper", "rfmap.cli")
 
@@ -187,7 +187,7 @@ def _reachable(graph, start: str) -> set[str]:
 def test_the_walk_finds_the_package(graph):
     assert {"rfmap.mesh", "rfmap.surrogate", "rfmap.train", "rfmap.solvers.diffusion", "rfmap.nn.model"} <= set(graph)
     assert "rfmap.geometry" in graph["rfmap.mesh"]
-    assert "rfmap.losses" in graph["rfmap.tasks.base"]  # "from .. import losses": a submodule imported by name
+    assert "rfmap.tasks.losses" in graph["rfmap.tasks.base"]  # "from .. import losses": a submodule imported by name
     assert "rfmap.solvers.lbs" in graph["rfmap.solvers"]
 
 
@@ -230,7 +230,7 @@ def test_no_import_cycle(graph):
 
 
 def test_the_call_walk_finds_calls(calls):
-    assert "rfmap.surrogate" in calls["rfmap.validation"]  # evaluate(sur, ...) calls sur.map
+    assert "rfmap.surrogate" in calls["rfmap.training.validation"]  # evaluate(sur, ...) calls sur.map
     assert "rfmap.surrogate" in calls["rfmap.paper.benchmarks"]  # compare_methods calls surrogate.map
 
 
@@ -259,7 +259,7 @@ def test_calls_point_down_the_layers(calls):
 
 def test_inference_does_not_depend_on_training(depends):
     reach = _reachable(depends, "rfmap.surrogate")
-    assert not {m for m in reach if m.startswith(("rfmap.train", "rfmap.pretrained", "rfmap.config"))}, sorted(reach)
+    assert not {m for m in reach if m.startswith(("rfmap.train", "rfmap.pretrained", "rfmap.training.config"))}, sorted(reach)
 
 
 @pytest.mark.parametrize("core", CORE)

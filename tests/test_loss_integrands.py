@@ -1,4 +1,4 @@
-"""rfmap.losses.loss_integrands: the loss terms element by element integrate to the losses of training."""
+"""rfmap.tasks.losses.loss_integrands: the loss terms element by element integrate to the losses of training."""
 import pytest
 import torch
 

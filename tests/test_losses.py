@@ -1,4 +1,4 @@
-"""Tests of the data-free training losses (:mod:`rfmap.losses`): exact values for identity, affine and scaled maps,
+"""Tests of the data-free training losses (:mod:`rfmap.tasks.losses`): exact values for identity, affine and scaled maps,
 the invariances the paper relies on, finiteness of values and gradients, and independence of the resolution."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Map quality metrics in the paper's conventions (rfmap.metrics) and the MapResult container (rfmap.result)."""
+"""Map quality metrics in the paper's conventions (rfmap.core.metrics) and the MapResult container (rfmap.core.result)."""
 import json
 import math
 
@@ -9,8 +9,8 @@ import torch
 from rfmap.fields import BELTRAMI_MAPS, sample_density
 from rfmap.geometry import signed_measures
 from rfmap.mesh import grid_mesh
-from rfmap.metrics import MapMetrics, compute_metrics, density_std, element_population
-from rfmap.result import MapResult, load_result
+from rfmap.core.metrics import MapMetrics, compute_metrics, density_std, element_population
+from rfmap.core.result import MapResult, load_result
 
 MESH = grid_mesh(11, 2)
 
@@ -204,7 +204,7 @@ def test_grid_fast_path_equals_the_general_path(dim, n):
 
 # ----------------------------------------------------------------------------------------------- residual scales
 def test_residual_scales_split_a_smooth_residual_from_element_noise():
-    from rfmap.metrics import residual_scales
+    from rfmap.core.metrics import residual_scales
     from rfmap.mesh import grid_mesh
 
     m = grid_mesh(41, 2)
@@ -251,7 +251,7 @@ def _wall_fields(d: int, n: int):
 def test_rotational_share_of_exact_fields(d, n):
     """0 for a gradient (to round-off), 1 for a divergence-free field, 0 for the identity, the exact L2 ratio
     ||r|| / ||g + r|| for a sum (the two parts are orthogonal), and independent of the displacement's size."""
-    from rfmap.metrics import rotational_share
+    from rfmap.core.metrics import rotational_share
 
     x, g, r, g2, r2 = _wall_fields(d, n)
     assert rotational_share(x, x + 0.01 * g) < 1e-12
@@ -266,7 +266,7 @@ def test_rotational_share_keeps_nodal_gradients_of_the_highest_cosine():
     """The gradient of cos(pi (N-1) x) cos(pi y) has the nodal samples (0, -pi cos(pi (N-1) x) sin(pi y)): kept
     whole, as a gradient."""
     from rfmap.mesh import grid_points
-    from rfmap.metrics import rotational_share
+    from rfmap.core.metrics import rotational_share
 
     n = 17
     x = grid_points(n, 2)
@@ -276,7 +276,7 @@ def test_rotational_share_keeps_nodal_gradients_of_the_highest_cosine():
 
 def test_rotational_share_refuses_bad_maps():
     from rfmap.mesh import grid_points
-    from rfmap.metrics import rotational_share
+    from rfmap.core.metrics import rotational_share
 
     x = grid_points(9, 2)
     with pytest.raises(ValueError, match="walls"):

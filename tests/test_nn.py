@@ -230,7 +230,7 @@ def test_map_at_fixed_work_grid_is_consistent_across_output_resolutions():
 
 def test_native_resolutions_agree_loosely():
     """The network evaluated natively at two similar resolutions (33 and 35), compared on the 17-grid (raw maps:
-    delivered ones of this random network would fall back towards the identity, ``rfmap.repair.shorten_map``).
+    delivered ones of this random network would fall back towards the identity, ``rfmap.finish.repair.shorten_map``).
 
     Tolerance reasoning: convolutions act on grid indices, so a feature at a physical point depends on the grid
     spacing h, and zero padding creates boundary layers a few cells wide whose physical width scales with h.

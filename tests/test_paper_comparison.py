@@ -9,7 +9,7 @@ import pytest
 
 from rfmap.paper.comparison import (Case, Comparison, beltrami_comparison, compare_density, format_number,
                                     format_time, resolution_comparison, score_row, timed)
-from rfmap.result import MapResult
+from rfmap.core.result import MapResult
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
 

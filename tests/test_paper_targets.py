@@ -1,7 +1,7 @@
 """The time-to-accuracy targets of chapter 11 (rfmap.paper.benchmarks): checks, headline and summary table."""
 import pytest
 
-from rfmap.hybrid import UNGUARDED
+from rfmap.finish.polish import UNGUARDED
 from rfmap.paper.benchmarks import (FLOW_TIME, HYBRID_TIME, STD_TOL, hybrid_findings, summarize, summary_table,
                                     target_checks, targets_headline)
 

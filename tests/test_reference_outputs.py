@@ -49,7 +49,7 @@ SURROGATES = {"tiny-beltrami2d": ["T1", "T3"], "tiny-deq2d-square": ["sin-cos", 
               "tiny-deq2d-free": ["rect-peak"], "tiny-dem3d-cube": ["sin-cos-3d"],
               "tiny-dem3d-free": ["octant-3d", "sin-cos-3d"]}
 #: A network map good enough for the polish to start warm (Std(rho~_map) 0.48 of the input's, below
-#: ``rfmap.hybrid.POOR``); polished without the guard, which would keep the cold flow's map here.
+#: ``rfmap.finish.polish.POOR``); polished without the guard, which would keep the cold flow's map here.
 WARM_POLISH = ("tiny-dem3d-free", "sin-cos-3d")
 #: The stretching factor of the overshooting maps, by task: three (density) or eight (Beltrami) times the network's
 #: displacement folds them, so the default path repairs them and (density) shortens them.

@@ -1,4 +1,4 @@
-"""Tests of weight refinement (:mod:`rfmap.refine`): the golden-section search, the guarantee that refinement never
+"""Tests of weight refinement (:mod:`rfmap.finish.refine`): the golden-section search, the guarantee that refinement never
 increases the objective, and that the refined map keeps its boundary condition."""
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ from hypothesis import strategies as st
 
 from rfmap.geometry import jacobian_determinants
 from rfmap.mesh import element_measures
-from rfmap.metrics import compute_metrics
+from rfmap.core.metrics import compute_metrics
 from rfmap.nn import MultiResUNet
-from rfmap.refine import density_objective, golden_section, refine_alpha
+from rfmap.finish.refine import density_objective, golden_section, refine_alpha
 from rfmap.surrogate import Surrogate, quiet_quality
 from rfmap.tasks import TaskSpec
 
@@ -219,10 +219,10 @@ def test_density_objective_equals_direct_evaluation(dim, boundary, grid):
     """The objective evaluates the measures as a polynomial in alpha; they must equal the measures of the mapped
     mesh to 1e-13 of the largest for any alpha, including ones that fold elements, and the objective must follow (to
     1e-9 relative: Std(rho) divides by measures near zero on folding maps, which amplifies rounding)."""
-    from rfmap.refine import _measure_coefficients, _measures_at
+    from rfmap.finish.refine import _measure_coefficients, _measures_at
     from rfmap.geometry import signed_measures
     from rfmap.mesh import grid_mesh
-    from rfmap.metrics import density_std, element_population
+    from rfmap.core.metrics import density_std, element_population
     from rfmap.nn.model import apply_displacement
 
     n = 9 if dim == 2 else 6
@@ -248,7 +248,7 @@ def test_beltrami_objective_equals_direct_evaluation():
     from rfmap.geometry import beltrami_coefficient
     from rfmap.mesh import grid_mesh
     from rfmap.nn.model import apply_displacement
-    from rfmap.refine import beltrami_objective
+    from rfmap.finish.refine import beltrami_objective
 
     n = 11
     mesh = grid_mesh(n, 2)

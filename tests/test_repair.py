@@ -1,4 +1,4 @@
-"""Tests of :mod:`rfmap.repair`: hand-built folded maps in 2D and 3D come back fold-free with their boundary
+"""Tests of :mod:`rfmap.finish.repair`: hand-built folded maps in 2D and 3D come back fold-free with their boundary
 condition, unfolded maps come back untouched, and the surrogate never returns a folded map."""
 from __future__ import annotations
 
@@ -11,9 +11,9 @@ import torch
 from rfmap.geometry import beltrami_coefficient
 from rfmap.mesh import element_measures, grid_mesh
 from rfmap.nn import MultiResUNet
-from rfmap.repair import (DELTA, LOCAL_RINGS, boundary_crossings, boundary_loop, cap_mu, grid_min_measure,
+from rfmap.finish.repair import (DELTA, LOCAL_RINGS, boundary_crossings, boundary_loop, cap_mu, grid_min_measure,
                           lbs_repair, local_lbs_repair, repair_map, scale_repair, vertex_classes)
-from rfmap.stress import hard_beltrami, hard_density
+from rfmap.fields.hard import hard_beltrami, hard_density
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
 
@@ -255,7 +255,7 @@ def test_colored_sweeps_shorten_fewer_vertices_than_simultaneous_ones(monkeypatc
     """Raising the scales one vertex class at a time (Gauss-Seidel) reverts only the vertex that failed, not its
     element's neighbours: on the inverted bump of test_3d_inverted_region_repaired it leaves fewer vertices
     shortened than raising all at once (Jacobi), and both are fold-free."""
-    import rfmap.repair.scale as R
+    import rfmap.finish.repair.scale as R
 
     n = 11
     mesh = grid_mesh(n, 3)
@@ -369,8 +369,8 @@ def test_bad_input_rejected(field, kw, spec):
 def test_fast_path_does_no_repair_work(monkeypatch):
     """Nothing folded: only the fold check runs (no LBS solve, no displacement scaling) and the map is returned
     bit for bit.  What the check costs against the surrogate's own time is measured by benchmarks/repair.py."""
-    import rfmap.repair.dispatch as R
-    import rfmap.repair.lbs as RL
+    import rfmap.finish.repair.dispatch as R
+    import rfmap.finish.repair.lbs as RL
     import rfmap.solvers.lbs as lbs
 
     spec = TaskSpec("density", 3, "square")
@@ -411,8 +411,8 @@ def test_cli_repair_line_and_bad_input(tmp_path, capsys):
 
 def test_colored_sweeps_recover_a_fold_free_target():
     """A fold-free target whose straight path from the identity dips below the thresholds (the bent cube of
-    rfmap.stress): every round first tries all raises at once, so the target comes back whole."""
-    from rfmap.stress import self_crossing_map
+    rfmap.fields.hard): every round first tries all raises at once, so the target comes back whole."""
+    from rfmap.fields.hard import self_crossing_map
 
     ref, u, el = self_crossing_map(9, 1.3)
     out, info = scale_repair(ref, u, el, boundary="square")
@@ -422,7 +422,7 @@ def test_colored_sweeps_recover_a_fold_free_target():
 
 def test_det_coefficients_match_direct_determinants():
     """sum_k c_k s^k equals det(E_x + s E_d) at any s (2D and 3D, random elements)."""
-    from rfmap.repair import _det, _det_coefficients, _edges
+    from rfmap.finish.repair import _det, _det_coefficients, _edges
     rng = np.random.default_rng(3)
     for d in (2, 3):
         pts, disp = rng.normal(size=(40, d)), rng.normal(size=(40, d))
@@ -437,7 +437,7 @@ def test_det_coefficients_match_direct_determinants():
 def test_bernstein_test_is_sufficient_and_tighter_than_the_coefficient_bound():
     """All-positive Bernstein coefficients imply positivity on [0, 1] (checked on a dense sampling); the cubic
     1 - 1.5 s + s^2 + 0 s^3 (minimum 0.4375) passes, though its power coefficients fail the triangle bound."""
-    from rfmap.repair import _bernstein
+    from rfmap.finish.repair import _bernstein
     rng = np.random.default_rng(4)
     c = rng.normal(size=(2000, 4)) + np.array([1.5, 0, 0, 0])
     s = np.linspace(0, 1, 401)
@@ -452,7 +452,7 @@ def test_scale_repair_cost_follows_the_folded_region():
     """A single folded tetrahedron on a 3D N = 24 grid: the repair is local (a local start, few vertices
     shortened, everything else exactly as the input) and fold-free."""
     from rfmap.mesh import grid_mesh
-    from rfmap.repair import _measures, scale_repair
+    from rfmap.finish.repair import _measures, scale_repair
     n = 24
     mesh = grid_mesh(n, 3)
     pts = mesh.points + 0.002 * np.sin(7 * mesh.points[:, [1, 2, 0]])
@@ -480,7 +480,7 @@ def _ramp_and_its_map(n: int, dim: int, boundary: str):
 
 @pytest.mark.parametrize("dim, n, boundary", [(2, 17, "square"), (2, 17, "free"), (3, 9, "square")])
 def test_shorten_map_finds_the_scale_of_an_overshooting_map(dim, n, boundary):
-    from rfmap.repair import fold_free, shorten_map
+    from rfmap.finish.repair import fold_free, shorten_map
     from rfmap.surrogate import density_quality
 
     ref, good, dens = _ramp_and_its_map(n, dim, boundary)
@@ -499,7 +499,7 @@ def test_shorten_map_finds_the_scale_of_an_overshooting_map(dim, n, boundary):
 
 
 def test_shorten_map_of_a_folded_map_is_fold_free_and_no_worse_than_the_identity():
-    from rfmap.repair import fold_free, shorten_map
+    from rfmap.finish.repair import fold_free, shorten_map
     from rfmap.surrogate import density_quality
 
     n = 17
@@ -513,7 +513,7 @@ def test_shorten_map_of_a_folded_map_is_fold_free_and_no_worse_than_the_identity
 
 
 def test_shorten_map_keeps_a_good_map_and_refuses_bad_input():
-    from rfmap.repair import shorten_map
+    from rfmap.finish.repair import shorten_map
 
     n = 17
     ref, good, dens = _ramp_and_its_map(n, 2, "square")
@@ -529,7 +529,7 @@ def test_shorten_map_keeps_a_good_map_and_refuses_bad_input():
 def test_shorten_map_on_a_general_mesh_matches_the_grid_path(dim, n, boundary):
     """Given the grid's elements instead of its side, shorten_map takes the general-mesh path (measures and fold
     checks per element) and must choose the same scale and map; bad combinations are refused."""
-    from rfmap.repair import shorten_map
+    from rfmap.finish.repair import shorten_map
 
     ref, good, dens = _ramp_and_its_map(n, dim, boundary)
     over = ref + 1.6 * (good - ref)

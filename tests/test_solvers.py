@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 from rfmap.fields import BELTRAMI_MAPS, preprocess_density, sample_density
 from rfmap.geometry import beltrami_coefficient
 from rfmap.mesh import element_measures, grid_mesh
-from rfmap.result import MapResult
+from rfmap.core.result import MapResult
 from rfmap.solvers import SOLVERS, get_solver, solve_dem, solve_lbs
 from rfmap.solvers.diffusion import CosineDiffusion, cosine_coefficients, p1_upsample
 from rfmap.solvers.lbs import _Factor, assemble_stiffness, beltrami_matrices, grid_dissection_order
@@ -364,7 +364,7 @@ def test_dem_stays_fold_free_on_a_density_sharper_than_the_mesh(boundary):
     """A hard density (sharp peaks beside near-zero regions, p_min/p_max down to 1e-3) folds the vertex
     trajectories of the plain integration; with the fold guard (the default) the flow is redone from a blurred
     start and the map is fold-free, and on these fields also more equal than the folded one."""
-    from rfmap.stress import hard_density
+    from rfmap.fields.hard import hard_density
 
     p = hard_density(np.random.default_rng(31), 33, 2)
     plain = solve_dem(p, boundary=boundary, fold_guard=False)

@@ -1,7 +1,7 @@
-"""Tests of the flow-based density-equalizing map (rfmap.solvers.flow) and of the neural warm start (rfmap.hybrid).
+"""Tests of the flow-based density-equalizing map (rfmap.solvers.flow) and of the neural warm start (rfmap.finish.polish).
 
 Exact answers: the Poisson flux against direct cosine sums, uniform density -> identity, exact rasterization of a
-mesh; agreement with the diffusion solver (its fixed point); no folded element on the hard fields of rfmap.stress;
+mesh; agreement with the diffusion solver (its fixed point); no folded element on the hard fields of rfmap.fields.hard;
 input validation.
 """
 from __future__ import annotations
@@ -18,7 +18,7 @@ from rfmap.solvers.diffusion import cosine_coefficients
 from rfmap.solvers.flow import F32_MARGIN, _turned_over, gaussian_blur, lumped_residual, poisson_flux, \
     rasterize_elements, vertex_residual
 from rfmap.solvers.residual import _measures
-from rfmap.stress import hard_density
+from rfmap.fields.hard import hard_density
 
 
 def wall_checks(res) -> None:
@@ -260,7 +260,7 @@ def test_sea_blend_tames_a_dense_coast():
     map about 6 times above the diffusion map's Std(rho~_map) at N = 65; a blended sea brings it within 2 times,
     fold-free, and records its width, and so does the default, whose stalled first pass is redone with it."""
     from rfmap.inputs import preprocess_density
-    from rfmap.validation import validation_fields
+    from rfmap.training.validation import validation_fields
 
     vf = next(f for f in validation_fields("density", 2, 16) if f.label == "ramp-3")
     dens = preprocess_density(vf.field(grid_mesh(65, 2).points).reshape(65, 65))
@@ -390,7 +390,7 @@ def test_warm_start_residuals_rows():
     is refused."""
     from rfmap import Surrogate
     from rfmap.experiments import warm_start_residuals
-    from rfmap.paper_fields import sample_density
+    from rfmap.fields.paper import sample_density
 
     rows = warm_start_residuals(Surrogate.pretrained("deq2d-square"), "sin-cos", (17, 33))
     methods = ("cold flow", "flow from the identity, warm-start route", "network", "flow from the network", "polish")
@@ -456,7 +456,7 @@ def test_polish_warm_start_finishes_the_network_map():
     assert m.n_flipped == 0 and m.std_rho_map == pytest.approx(st["polish"]["std_rho_map"])
     assert m.std_rho_map < 0.5 * st["surrogate"]["std_rho_map"]
     assert res.time == pytest.approx(st["surrogate"]["time"] + p["time"])
-    # the guard ran the cold flow too and kept the better of the two maps (rfmap.hybrid.GUARD)
+    # the guard ran the cold flow too and kept the better of the two maps (rfmap.finish.polish.GUARD)
     assert p["guard"] and set(st) == {"surrogate", "warm", "cold", "polish"}
     best = min(("warm", "cold"), key=lambda k: st[k]["std_rho_map"])
     assert p["kept"] == best and st["polish"]["std_rho_map"] == st[best]["std_rho_map"]
@@ -469,7 +469,7 @@ def test_compare_methods_rows_and_summary():
     """The hybrid's run gives two rows, the guarded hybrid and its warm flow alone (timed without the cold flow);
     the guarded hybrid is never worse than the flow, and the summary's ratios are against the best classical row."""
     from rfmap.experiments import summarize
-    from rfmap.hybrid import UNGUARDED
+    from rfmap.finish.polish import UNGUARDED
     from rfmap.paper.benchmarks import compare_methods
     from rfmap.surrogate import Surrogate
 
@@ -536,8 +536,8 @@ def test_polish_starts_from_the_smoothed_network_map():
 def test_polish_summary_equals_compute_metrics(d, n):
     """The polish report's metrics (grid kernels, no Beltrami coefficient) are those of compute_metrics, on a
     curved map and on a folded one."""
-    from rfmap.hybrid import _Summary
-    from rfmap.metrics import compute_metrics
+    from rfmap.finish.polish import _Summary
+    from rfmap.core.metrics import compute_metrics
 
     mesh, y = _bent_mesh(n, d)
     dens = np.random.default_rng(1).uniform(0.5, 2.0, len(y))
@@ -569,7 +569,7 @@ def test_polish_of_a_free_boundary_map_smooths_with_linear_edges():
 
 
 def test_smooth_passes_per_dimension_and_above_the_working_grid():
-    from rfmap.hybrid import SMOOTH_PASSES, SMOOTH_PASSES_FINER, smooth_passes
+    from rfmap.finish.polish import SMOOTH_PASSES, SMOOTH_PASSES_FINER, smooth_passes
 
     assert smooth_passes(2, 51, 51) == SMOOTH_PASSES[2, "square"] and smooth_passes(3, 48, 48) == 8
     assert smooth_passes(3, 32, 32, "free") == SMOOTH_PASSES[3, "free"] == 2
@@ -585,7 +585,7 @@ def test_smooth_grid_displacement_is_the_grid_filter_at_the_vertices(d, edges):
     the grid mode of one axis is removed in the interior, a constant is kept, and a wrong vertex count is refused."""
     import torch
 
-    from rfmap.hybrid import smooth_displacement, smooth_grid_displacement
+    from rfmap.finish.polish import smooth_displacement, smooth_grid_displacement
     from rfmap.mesh import grid_points
 
     n = 9
@@ -604,9 +604,9 @@ def test_smooth_grid_displacement_is_the_grid_filter_at_the_vertices(d, edges):
 
 def test_polish_above_the_working_grid_smooths_on_the_output_grid():
     """Above the working grid the start is smoothed on the working grid and again on the output grid
-    (rfmap.hybrid.OUTPUT_PASSES); the warm flow ends fold-free and within 10 % of the cold flow (sin-cos, N = 121
+    (rfmap.finish.polish.OUTPUT_PASSES); the warm flow ends fold-free and within 10 % of the cold flow (sin-cos, N = 121
     from a 96-grid)."""
-    from rfmap.hybrid import OUTPUT_PASSES, SMOOTH_PASSES_FINER
+    from rfmap.finish.polish import OUTPUT_PASSES, SMOOTH_PASSES_FINER
     from rfmap.surrogate import Surrogate
 
     sur = Surrogate.pretrained("deq2d-square")
@@ -626,7 +626,7 @@ def test_smooth_displacement_keeps_constants_and_removes_the_grid_mode(d):
     alternation to zero in the interior, and keeps the shape."""
     import torch
 
-    from rfmap.hybrid import smooth_displacement
+    from rfmap.finish.polish import smooth_displacement
 
     n = 12
     axes = torch.meshgrid(*[torch.arange(n, dtype=torch.float64)] * d, indexing="ij")

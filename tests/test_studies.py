@@ -1,4 +1,4 @@
-"""Tests of :mod:`rfmap.studies`: study files from training logs, budgets over a chain, the quoted example."""
+"""Tests of :mod:`rfmap.training.records`: study files from training logs, budgets over a chain, the quoted example."""
 from __future__ import annotations
 
 import json

@@ -1,12 +1,12 @@
-"""Boundary surfaces of tetrahedral meshes and their self-intersections (rfmap.surface), and the 3D free-boundary
+"""Boundary surfaces of tetrahedral meshes and their self-intersections (rfmap.core.surface), and the 3D free-boundary
 repair that keeps the surface embedded."""
 import numpy as np
 import pytest
 
 from rfmap.mesh import grid_mesh
-from rfmap.repair import fold_free, repair_map
-from rfmap.stress import first_folding, self_crossing_map
-from rfmap.surface import boundary_faces, grid_boundary_faces, grid_surface_intersections, surface_intersections
+from rfmap.finish.repair import fold_free, repair_map
+from rfmap.fields.hard import first_folding, self_crossing_map
+from rfmap.core.surface import boundary_faces, grid_boundary_faces, grid_surface_intersections, surface_intersections
 
 
 @pytest.mark.parametrize("n", [2, 5, 9])
@@ -115,7 +115,7 @@ def test_wrapped_cube_is_fold_free_but_not_embedded_and_gets_repaired():
 
 def test_first_folding_returns_the_first_seed_whose_raw_map_folds():
     from rfmap import Surrogate
-    from rfmap.stress import hard_density
+    from rfmap.fields.hard import hard_density
 
     sur = Surrogate.pretrained("deq2d-square")
     seed, field = first_folding(sur, 48, seed=0, tries=40)

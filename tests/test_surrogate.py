@@ -391,7 +391,7 @@ def test_density_objective_grid_path_equals_the_element_path(dim, n, boundary):
     """The refinement objective on a grid mesh gives the same value through the strided measures, for several
     stretching vectors, including one that folds the map (fold penalty active)."""
     from rfmap.mesh import grid_mesh
-    from rfmap.refine import density_objective
+    from rfmap.finish.refine import density_objective
 
     mesh = grid_mesh(n, dim)
     ref = torch.as_tensor(mesh.points)
@@ -498,7 +498,7 @@ def test_with_polish_a_folded_3d_map_starts_cold_without_trying_coarser_grids():
 @pytest.mark.parametrize("n, d", [(21, 2), (9, 3)])
 def test_density_quality_matches_the_metrics(n, d):
     from rfmap.mesh import grid_mesh
-    from rfmap.result import MapResult
+    from rfmap.core.result import MapResult
 
     ref = grid_points(n, d)
     rng = np.random.default_rng(0)
@@ -517,7 +517,7 @@ def test_density_quality_matches_the_metrics(n, d):
 
 def test_density_quality_of_thin_and_broken_maps():
     from rfmap.mesh import grid_mesh
-    from rfmap.result import MapResult
+    from rfmap.core.result import MapResult
 
     n = 11
     ref = grid_points(n, 2)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.symmetry import (DEFAULT_SYMMETRY, SYMMETRY_GROUPS, Symmetry, resolve_symmetry, restore_displacement,
+from rfmap.nn.symmetry import (DEFAULT_SYMMETRY, SYMMETRY_GROUPS, Symmetry, resolve_symmetry, restore_displacement,
                             symmetries, symmetrized_displacement, transform_grid)
 
 
@@ -154,7 +154,7 @@ def test_beltrami_coefficient_transforms_as_the_conjugated_map():
     (to 1e-12)."""
     from rfmap.geometry import beltrami_from_jacobian
     from rfmap.mesh import grid_points
-    from rfmap.random_fields import RandomBeltramiConfig, RandomMap
+    from rfmap.fields.random import RandomBeltramiConfig, RandomMap
 
     n = 11
     f = RandomMap(np.random.default_rng(4), RandomBeltramiConfig(sup=(0.5, 0.5), modes=(3, 3)))

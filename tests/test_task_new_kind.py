@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.config import CONFIGS, get_config
+from rfmap.training.config import CONFIGS, get_config
 from rfmap.mesh import grid_points, interpolate
 from rfmap.tasks import Batch, Task, TaskSpec, ValidationField, get_task, grid_elements, kinds, register_task
 from rfmap.tasks.base import _TASKS
@@ -115,7 +115,7 @@ def test_the_built_in_kinds_are_tasks():
 
 def test_a_new_kind_trains_and_maps(shift_kind, tmp_path):
     from rfmap.cli import main
-    from rfmap.result import load_result
+    from rfmap.core.result import load_result
     from rfmap.training import train
 
     assert "shift" in kinds() and get_config("shift2d", "ci") is shift_kind

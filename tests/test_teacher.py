@@ -1,5 +1,5 @@
-"""Tests of the classical teacher (:mod:`rfmap.teacher`), the per-family validation score, training snapshots,
-``rfmap validate`` (:mod:`rfmap.selection`) and the accelerator script ``scripts/device_train.sh`` at CI scale."""
+"""Tests of the classical teacher (:mod:`rfmap.tasks.teacher`), the per-family validation score, training snapshots,
+``rfmap validate`` (:mod:`rfmap.training.selection`) and the accelerator script ``scripts/device_train.sh`` at CI scale."""
 from __future__ import annotations
 
 import json
@@ -13,12 +13,12 @@ import pytest
 import torch
 
 from rfmap.cli import main
-from rfmap.config import get_config
+from rfmap.training.config import get_config
 from rfmap.geometry import signed_measures
 from rfmap.mesh import grid_mesh, grid_points
 from rfmap.tasks import draw_samples, make_batch, task_loss
-from rfmap.teacher import TeacherConfig, teacher_loss, teacher_map, teacher_targets
-from rfmap.validation import family, score
+from rfmap.tasks.teacher import TeacherConfig, teacher_loss, teacher_map, teacher_targets
+from rfmap.training.validation import family, score
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -15,12 +15,12 @@ from safetensors.torch import load_file
 
 import rfmap.train as T
 import rfmap.training.state as TS
-from rfmap.config import get_config
+from rfmap.training.config import get_config
 from rfmap.nn import build_model
-from rfmap.paper_fields import TEST_FIELDS
+from rfmap.fields.paper import TEST_FIELDS
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import sample_batch, task_loss
-from rfmap.validation import validation_fields
+from rfmap.training.validation import validation_fields
 
 CFG = get_config("deq2d-square", "ci")
 
@@ -215,7 +215,7 @@ def test_resume_after_the_time_limit_trains_nothing(tmp_path, fake_clock):
 def test_resume_rescores_the_kept_best_state_by_the_current_rule(tmp_path):
     """A checkpoint keeps its best validated state with the score of the rule it was written under; a resumed run
     recomputes that score from the stored summary, so later checkpoints are compared by one rule."""
-    from rfmap.validation import score
+    from rfmap.training.validation import score
 
     cfg = CFG.with_overrides(steps=4, val_every=2, ckpt_every=2)
     T.train(cfg, tmp_path, progress=False)

@@ -10,7 +10,7 @@ import pytest  # noqa: E402
 
 from rfmap.mesh import grid_mesh  # noqa: E402
 from rfmap.paper.reproduce import exact_beltrami_result  # noqa: E402
-from rfmap.result import MapResult  # noqa: E402
+from rfmap.core.result import MapResult  # noqa: E402
 from rfmap.viz import beltrami_figure, extreme_figure, map_rows_figure, style  # noqa: E402
 from rfmap.viz.figures import MAX_FIGURE_PX, MIN_DISPLAY_PT, TEXT_COLUMN_PX, display_font_sizes  # noqa: E402
 

@@ -7,8 +7,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from rfmap.losses import loss_integrands  # noqa: E402
-from rfmap.studies import example_field, example_text  # noqa: E402
+from rfmap.tasks.losses import loss_integrands  # noqa: E402
+from rfmap.training.records import example_field, example_text  # noqa: E402
 from rfmap.tasks import TaskSpec, sample_batch  # noqa: E402
 from rfmap.viz import learning_curves, plot_loss_terms, style, time_accuracy_figure  # noqa: E402
 from rfmap.viz.figures import MAX_FIGURE_PX, MIN_DISPLAY_PT, display_font_sizes  # noqa: E402
@@ -23,21 +23,42 @@ def _readable(fig):
 
 
 def test_learning_curves_count_the_whole_chain():
-    """A warm-started run is drawn after its ancestors' steps, and the title gives the chain's share of the paper's
-    budget in whole per cent from 10 % on (never as 4e+02 %)."""
+    """A warm-started run is drawn after its ancestors' steps, on an axis that spans the stored steps (the earlier
+    runs named in its label, not drawn as an empty stretch), one axis per quantity (no twin axes); the title gives
+    the chain's share of the paper's budget in whole per cent from 10 % on (never as 4e+02 %)."""
     meta = {"steps": 300, "cumulative_steps": 4000, "history": {"step": [10, 100, 300], "loss": [1.0, 0.5, 0.2],
                                                                 "validation": [{"step": 300, "std_rho_map": 0.2}]}}
     with style():
         fig = learning_curves({"chain": meta, "single": {"steps": 50, "history": {"step": [10, 50],
                                                                                     "loss": [0.1, 0.05]}}},
                               {"chain": 1000, "single": 4000})
-        ax = fig.axes[0]
-        assert ax.get_title() == "chain: 4,000 steps,\n400 % of the paper's"
-        assert list(ax.lines[0].get_xdata()) == [3710, 3800, 4000]
-        assert fig.axes[2].lines[0].get_xdata()[0] == 4000  # the validation axis of the first panel
-        assert "1.2 % of the paper's" in fig.axes[1].get_title()
+        loss, val = fig.axes[0], fig.axes[1]
+        assert loss.get_title() == "chain: 4,000 steps,\n400 % of the paper's"
+        assert list(loss.lines[0].get_xdata()) == [3710, 3800, 4000]
+        lo, hi = loss.get_xlim()
+        assert 3600 < lo < 3710 and 4000 < hi < 4100 and "3,700" in loss.get_xlabel()
+        assert val.lines[0].get_xdata()[0] == 4000 and "Std" in val.get_ylabel()
+        assert "1.2 % of the paper's" in fig.axes[2].get_title()
+        assert all(len(ax.get_shared_x_axes().get_siblings(ax)) == 1 for ax in fig.axes)  # no twins
         _readable(fig)
     plt.close(fig)
+
+
+def test_validation_against_time_spans_the_stored_run():
+    """Curves start at zero, in the wall time of the stored run; the earlier runs of a chain are in the legend."""
+    from rfmap.viz import validation_vs_time
+
+    def meta(elapsed, total):
+        return {"wall_time": elapsed[-1], "cumulative_wall_time": total,
+                "history": {"validation": [{"elapsed": e, "std_rho_map": 0.3 / (1 + i)} for i, e in enumerate(elapsed)]}}
+
+    with style():
+        ax = validation_vs_time({"A": meta([60.0, 600.0], 36600.0), "B": meta([30.0, 1200.0], 1200.0)})
+        assert ax.get_xlim()[0] == 0 and ax.get_xlim()[1] < 25  # minutes of the stored runs, not 600
+        labels = [t.get_text() for t in ax.get_legend().get_texts()]
+        assert labels == ["A (after 600 min of earlier runs)", "B"]
+        _readable(ax.figure)
+    plt.close(ax.figure)
 
 
 def test_a_term_that_vanishes_everywhere_is_said_in_words():
@@ -89,10 +110,10 @@ def test_the_quoted_example_is_true_to_its_numbers():
 def test_render_volume_cuts_along_flat_faces(clip):
     pytest.importorskip("pyvista")
     from rfmap.mesh import grid_mesh
-    from rfmap.result import MapResult
+    from rfmap.core.result import MapResult
     from rfmap.viz.volumes import _cut
 
-    from rfmap.result import to_pyvista
+    from rfmap.core.result import to_pyvista
 
     mesh = grid_mesh(5, 3)
     res = MapResult(mesh.points, mesh.points.copy(), mesh.elements, np.ones(len(mesh.points)), kind="density")

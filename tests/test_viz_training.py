@@ -6,7 +6,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import torch  # noqa: E402
 
-from rfmap.losses import loss_integrands  # noqa: E402
+from rfmap.tasks.losses import loss_integrands  # noqa: E402
 from rfmap.tasks import TaskSpec, sample_batch  # noqa: E402
 from rfmap.viz import learning_curves, plot_batch, plot_loss_terms  # noqa: E402
 
@@ -17,12 +17,38 @@ def test_learning_curves_mark_the_budget_and_tolerate_old_metadata():
                                                "validation": [{"step": 100, "std_rho_map": 0.3},
                                                               {"step": 300, "std_rho_map": 0.2}]}},
              "old": {"steps": 50, "history": {"step": [10, 50], "loss": [0.1, 0.05], "validation": []}}}
-    fig = learning_curves(metas, {"new": 1000, "old": 4000}, ncols=2)
-    axes = fig.axes
-    assert "30 % of the paper's" in axes[0].get_title() and "1.2 % of the paper's" in axes[1].get_title()
-    budget_lines = [ln for ln in axes[0].lines if ln.get_linestyle() == "--"]
-    assert budget_lines and budget_lines[0].get_xdata()[0] == 1000
-    assert len(axes) == 3  # two panels and one validation axis (the old metadata has none)
+    fig = learning_curves(metas, {"new": 250, "old": 4000})
+    loss_new, val_new, loss_old, val_old = fig.axes
+    assert "120 % of the paper's" in loss_new.get_title() and "1.2 % of the paper's" in loss_old.get_title()
+    # the paper's budget (250 steps) falls inside the stored steps of "new": dashed on both of its panels
+    for ax in (loss_new, val_new):
+        dashed = [ln for ln in ax.lines if ln.get_linestyle() == "--"]
+        assert dashed and dashed[0].get_xdata()[0] == 250
+    # ... and outside those of "old" (4,000 against 10-50): no line, the axis stays on the data
+    assert not [ln for ln in loss_old.lines if ln.get_linestyle() == "--"]
+    assert loss_old.get_xlim()[1] < 100
+    assert not val_old.axison  # the old metadata has no validation: said in words, no empty axes
+    plt.close(fig)
+
+
+def test_training_curves_give_every_quantity_its_own_axis(tmp_path):
+    """One panel per quantity, each on a linear axis from zero with its own range (no log axis reaching down to
+    round-off), the step axis spanning the logged steps; a term that is zero throughout says so."""
+    import json
+
+    from rfmap.viz import training_curves
+
+    log = tmp_path / "log.jsonl"
+    recs = [{"step": s, "loss": 1.0 / s, "density": 0.9 / s, "mu2": 1e-15 * s, "fold": 0.0} for s in range(5, 51, 5)]
+    log.write_text("\n".join(json.dumps(r) for r in recs) + "\n")
+    fig = training_curves(log)
+    panels = [ax for ax in fig.axes if ax.axison]
+    assert [ax.get_title() for ax in panels][0] == "total loss" and len(panels) == 4
+    for ax in panels:
+        assert ax.get_yscale() == "linear" and ax.get_ylim()[0] == 0
+        assert ax.get_xlim() == (5.0, 50.0)
+    assert panels[2].get_ylim()[1] < 1e-12  # the tiny term on its own range
+    assert any("0 at every step" in t.get_text() for t in panels[3].texts)
     plt.close(fig)
 
 

@@ -5,10 +5,10 @@ from dataclasses import asdict
 import numpy as np
 import pytest
 
-from rfmap.config import ModelConfig, get_config
-from rfmap.paper_fields import BELTRAMI_MAPS
+from rfmap.training.config import ModelConfig, get_config
+from rfmap.fields.paper import BELTRAMI_MAPS
 from rfmap.surrogate import WEIGHTS_DIR, Surrogate, models
-from rfmap.random_fields import RandomBeltramiConfig, RandomDensityConfig
+from rfmap.fields.random import RandomBeltramiConfig, RandomDensityConfig
 from rfmap.tasks import LossWeights
 
 SHIPPED = models()

@@ -43,7 +43,7 @@ def _grid_field_file(args) -> tuple[np.ndarray, int]:
 
 
 def cmd_solve(args) -> int:
-    from .paper_fields import field_names, get_field
+    from .fields.paper import field_names, get_field
     from .tasks import get_task, kinds
 
     # the task whose classical solver the method is: it checks and prepares the field and solves
@@ -67,8 +67,8 @@ def cmd_solve(args) -> int:
 
 
 def cmd_metrics(args) -> int:
-    from .paper_fields import BELTRAMI_MAPS, sample_mu
-    from .result import load_result
+    from .fields.paper import BELTRAMI_MAPS, sample_mu
+    from .core.result import load_result
 
     res = load_result(args.file)
     m = res.metrics()
@@ -138,7 +138,7 @@ def cmd_models(args) -> int:
 
 
 def cmd_map(args) -> int:
-    from .device import resolve_device
+    from .core.device import resolve_device
     from .finish import poor_map_message, quiet_quality
     from .surrogate import Surrogate, models
 
@@ -161,7 +161,7 @@ def cmd_map(args) -> int:
         res.to_vtk(args.vtk)
     print(f"wrote {args.out}: {res.metrics()}")
     if res.info.get("symmetrize"):
-        from .symmetry import symmetries
+        from .nn.symmetry import symmetries
 
         group = res.info["symmetrize"]
         print(f"symmetrized: the network's mean over {len(symmetries(sur.spec.dim, group))} symmetries ({group})")
@@ -195,7 +195,7 @@ def regrid_summary(report: dict) -> str:
 
 
 def repair_summary(report: dict | None) -> str:
-    """One line saying what :func:`rfmap.repair.dispatch.repair_map` did (or that it was skipped)."""
+    """One line saying what :func:`rfmap.finish.repair.dispatch.repair_map` did (or that it was skipped)."""
     if report is None:
         return "repair: off (raw network output)"
     if not report["needed"]:
@@ -222,7 +222,7 @@ def cmd_train(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from .selection import score_weights, scores_table, ship_best
+    from .training.selection import score_weights, scores_table, ship_best
 
     if args.count is not None and args.count < 1:
         raise CLIError(f"--count must be at least 1, got {args.count}")
@@ -241,7 +241,7 @@ def cmd_validate(args) -> int:
 def cmd_reproduce(args) -> int:
     from .paper.reproduce import reproduce
 
-    from .device import resolve_device
+    from .core.device import resolve_device
 
     device = resolve_device(args.device)  # before any work: a bad device is one line and exit 2
     for path in reproduce(args.experiment, args.out, refine=not args.no_refine, device=device,
@@ -264,8 +264,8 @@ def _polish_arg(text: str):
 
 
 def _symmetry_arg(text: str):
-    """``--symmetrize [GROUP]``: a group name of :data:`rfmap.symmetry.SYMMETRY_GROUPS`."""
-    from .symmetry import SYMMETRY_GROUPS
+    """``--symmetrize [GROUP]``: a group name of :data:`rfmap.nn.symmetry.SYMMETRY_GROUPS`."""
+    from .nn.symmetry import SYMMETRY_GROUPS
 
     if text not in SYMMETRY_GROUPS:
         raise argparse.ArgumentTypeError(f"GROUP must be one of {', '.join(SYMMETRY_GROUPS)}, got {text!r}")

@@ -8,7 +8,7 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-from .config import get_config, scale
+from .training.config import get_config, scale
 from .surrogate import Surrogate
 
 __all__ = ["load_or_train"]
@@ -18,7 +18,7 @@ def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progres
     """The model a chapter of the book uses: the shipped weights at ``full`` scale; at ``ci`` scale a tiny model
     trained on the spot with the named config's ``ci`` preset (seconds; cached in the temporary directory and
     reused while the configuration is unchanged), so every notebook runs end to end on a laptop CPU.
-    ``preset`` defaults to :func:`rfmap.config.scale`."""
+    ``preset`` defaults to :func:`rfmap.training.config.scale`."""
     preset = preset or scale()
     if preset == "full":
         return Surrogate.pretrained(name)

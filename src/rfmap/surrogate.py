@@ -26,16 +26,16 @@ import torch
 
 from ._version import __version__
 from .mesh import check_n, grid_mesh, grid_points, interpolate, triangulate
-from .device import resolve_device
+from .core.device import resolve_device
 from .finish import Draft, FinishOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
     poor_map_message, refine, regrid
 from .finish.quality import QUALITY_MARGIN, PoorMapWarning, density_quality, quality_message, quiet_quality
-from .hybrid import GUARD
+from .finish.polish import GUARD
 from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
-from .paper_fields import PAPER_N, BeltramiMap, DensityField, get_field
-from .result import MapResult
-from .symmetry import resolve_symmetry, symmetrized_displacement
+from .fields.paper import PAPER_N, BeltramiMap, DensityField, get_field
+from .core.result import MapResult
+from .nn.symmetry import resolve_symmetry, symmetrized_displacement
 from .tasks import TaskSpec, encode
 
 __all__ = ["Surrogate", "MapOptions", "models", "PoorMapWarning", "QUALITY_MARGIN", "quiet_quality",
@@ -313,7 +313,7 @@ class Surrogate:
 
     # ------------------------------------------------------------------ inference
     def _symmetry(self, symmetrize) -> str | None:
-        """The symmetry group of a ``symmetrize`` argument (:mod:`rfmap.symmetry`)."""
+        """The symmetry group of a ``symmetrize`` argument (:mod:`rfmap.nn.symmetry`)."""
         return resolve_symmetry(symmetrize, self.spec.dim)
 
     def work_n(self, n: int) -> int:
@@ -330,8 +330,8 @@ class Surrogate:
         grids : array, shape (B, N, ..., N), real density (unit mass) or complex Beltrami coefficient
         symmetrize : bool or str
             The mean of the network's output over symmetries of the square or cube
-            (:func:`rfmap.symmetry.symmetrized_displacement`; ``True`` the dimension's
-            :data:`rfmap.symmetry.DEFAULT_SYMMETRY`, or a group of :data:`rfmap.symmetry.SYMMETRY_GROUPS`), one
+            (:func:`rfmap.nn.symmetry.symmetrized_displacement`; ``True`` the dimension's
+            :data:`rfmap.nn.symmetry.DEFAULT_SYMMETRY`, or a group of :data:`rfmap.nn.symmetry.SYMMETRY_GROUPS`), one
             network evaluation per symmetry.
 
         Returns
@@ -383,31 +383,31 @@ class Surrogate:
             Apply the paper's density preprocessing (shift to minimum 0.1, unit mass) to raw values; with
             ``False`` a positive density is only scaled to unit mass.
         refine_bounds : (float, float), optional
-            Search interval of every component of :math:`\\alpha` (default :data:`rfmap.refine.REFINE`).
+            Search interval of every component of :math:`\\alpha` (default :data:`rfmap.finish.refine.REFINE`).
         repair : bool
-            Make the returned map fold-free (:func:`rfmap.repair.dispatch.repair_map`, after any refinement); with query
+            Make the returned map fold-free (:func:`rfmap.finish.repair.dispatch.repair_map`, after any refinement); with query
             ``points`` the map of the working grid is repaired first and then interpolated.  A density map of the
             output grid (without ``polish``) that is then still no more equal than the input is shortened to the
-            most equal fold-free map between the identity and itself (:func:`rfmap.shorten.shorten_map`;
+            most equal fold-free map between the identity and itself (:func:`rfmap.finish.shorten.shorten_map`;
             ``info["shorten"]``), so the delivered map never leaves the density less equal than it was.  A density
             map of query ``points`` is shortened by the scale its working grid's map would be shortened by (the
             judgement is made there; :func:`rfmap.finish.query.shorten_query`), so that grid and points deliver one
             map.  ``False`` returns the raw network map.
         polish : bool or float
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
-            (:func:`rfmap.finish.stages.polish`, :func:`rfmap.hybrid.polish_map`), started from the map of the network's
-            displacement smoothed on the working grid (``rfmap.hybrid.smooth_displacement``,
-            ``rfmap.hybrid.smooth_passes`` passes, edges per ``rfmap.hybrid.SMOOTH_EDGES``, and on a finer output
-            grid ``rfmap.hybrid.OUTPUT_PASSES`` more passes there; all recorded in ``info["polish"]``) where that is
+            (:func:`rfmap.finish.stages.polish`, :func:`rfmap.finish.polish.polish_map`), started from the map of the network's
+            displacement smoothed on the working grid (``rfmap.finish.polish.smooth_displacement``,
+            ``rfmap.finish.polish.smooth_passes`` passes, edges per ``rfmap.finish.polish.SMOOTH_EDGES``, and on a finer output
+            grid ``rfmap.finish.polish.OUTPUT_PASSES`` more passes there; all recorded in ``info["polish"]``) where that is
             fold-free; a number is the tolerance on Std(rho~_map).  ``time`` then covers both stages.  A folded
             network map is not repaired first (``info["repair"]["skipped"]``): the polish then starts cold from the
             identity, and the repair would be thrown away.
         guard : bool
             With ``polish``: after a warm flow also run the cold flow and keep the better map
-            (``rfmap.hybrid.GUARD``), so that the result is never worse than the flow-based solver alone.
+            (``rfmap.finish.polish.GUARD``), so that the result is never worse than the flow-based solver alone.
         symmetrize : bool or str
             Average the network's displacement over symmetries of the square or cube
-            (:mod:`rfmap.symmetry`: ``True`` for :data:`rfmap.symmetry.DEFAULT_SYMMETRY`, 8 evaluations in 2D and 3
+            (:mod:`rfmap.nn.symmetry`: ``True`` for :data:`rfmap.nn.symmetry.DEFAULT_SYMMETRY`, 8 evaluations in 2D and 3
             in 3D, or a group name), before everything else; ``info["symmetrize"]`` records the group.
 
         Returns
@@ -417,7 +417,7 @@ class Surrogate:
             (:class:`rfmap.finish.report.MapReport`, ``info.report``).  It holds ``alpha``, ``work_n`` (the working grid
             of the returned map), ``network_time``, ``symmetrize``, with refinement the objective before/after, when
             coarser working grids were tried ``info["regrid"]`` (``from``, ``tried``, ``work_n``: the grid taken or
-            ``None``, ``time``), with ``repair`` the report ``info["repair"]`` (see :func:`rfmap.repair.dispatch.repair_map`),
+            ``None``, ``time``), with ``repair`` the report ``info["repair"]`` (see :func:`rfmap.finish.repair.dispatch.repair_map`),
             and with ``polish`` the report ``info["polish"]`` (warm or cold start and both stages' times and
             metrics).  A density map of the output grid without ``polish`` also carries ``info["quality"]``
             (:func:`density_quality`), and when it leaves the density less equal than it was (a field unlike the

@@ -1,7 +1,7 @@
 r"""Data-free training of a surrogate (paper Sec. 5), single-process or data-parallel, on the CPU or a GPU.
 
 ``rfmap train --config NAME [--preset ci|full|paper] [--device auto|cpu|cuda] [--init MODEL|FILE] [--resume]``
-(also ``python -m rfmap.train``) trains the named configuration of :mod:`rfmap.config`.  Every step draws a fresh
+(also ``python -m rfmap.train``) trains the named configuration of :mod:`rfmap.training.config`.  Every step draws a fresh
 batch of random fields (sample ``i`` of step ``t`` is seeded by ``(seed, t, i)``) on a random grid size in
 ``n_range``, with Sobol-jittered vertices.  With ``workers >= 1`` the batches are drawn ahead of the step by
 worker processes; the batches, hence the weights, are the same for any number of workers.
@@ -10,7 +10,7 @@ Data-parallel: ``torchrun --nproc_per_node=K -m rfmap.train --config NAME ...`` 
 NCCL on GPU); rank ``r`` draws samples ``r*B .. (r+1)*B - 1`` of each step, so K processes with batch ``B`` train
 the same model as one process with batch ``K*B``.
 
-Validation and the choice of the shipped checkpoint use the held-out random fields of :mod:`rfmap.validation`
+Validation and the choice of the shipped checkpoint use the held-out random fields of :mod:`rfmap.training.validation`
 (seeds training never draws); the paper's test fields are evaluated once at the end as a report.
 
 3D networks train in the ``channels_last_3d`` memory format (:func:`memory_format`): the same model and the same
@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import sys
 
-from .device import resolve_device
+from .core.device import resolve_device
 from .training import (TrainState, WeightAverage, build_parser, draw_step, history, load_init, main,
                        memory_format, report_paper_fields, run, single_blas_thread_env, train, validate)
 

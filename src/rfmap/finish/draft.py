@@ -16,7 +16,7 @@ import torch
 
 from ..geometry import grid_signed_measures
 from ..mesh import grid_mesh, grid_points, interpolate
-from ..result import MapResult
+from ..core.result import MapResult
 from ..tasks import get_task
 from .report import InfoView, MapReport
 
@@ -82,7 +82,7 @@ class WorkingGridMap:
     points, mapped : ndarray, shape (W**d, d)
         The grid's vertices and their repaired images.
     report : dict
-        The report of :func:`rfmap.repair.dispatch.repair_map`.
+        The report of :func:`rfmap.finish.repair.dispatch.repair_map`.
     """
 
     n: int

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..hybrid import GUARD, polish_tolerance
-from ..result import MapResult
+from .polish import GUARD, polish_tolerance
+from ..core.result import MapResult
 from .draft import Draft
 from .stages import judge, polish, refine, repair, shorten
 
@@ -21,7 +21,7 @@ class FinishOptions:
         Weight refinement of the map's displacement (:func:`rfmap.finish.stages.refine`).  A network's map is refined as
         it is predicted (every working grid that :func:`rfmap.finish.stages.regrid` tries is), not here.
     refine_bounds : (float, float), optional
-        Search interval of every component of the stretching vector (default :data:`rfmap.refine.REFINE`).
+        Search interval of every component of the stretching vector (default :data:`rfmap.finish.refine.REFINE`).
     repair : bool
         Make the map fold-free (:func:`rfmap.finish.stages.repair`), and shorten a density map that is still no more equal
         than its input (:func:`rfmap.finish.stages.shorten`).
@@ -29,7 +29,7 @@ class FinishOptions:
         Finish a density map of a grid with the flow-based solver (:func:`rfmap.finish.stages.polish`); a number is the
         tolerance on Std(rho~_map).  A polished map is not judged or shortened: the flow equalizes it.
     guard : bool
-        With ``polish``: keep the better of the warm and the cold flow (:data:`rfmap.hybrid.GUARD`).
+        With ``polish``: keep the better of the warm and the cold flow (:data:`rfmap.finish.polish.GUARD`).
     """
 
     refine: bool = False

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from ..geometry import grid_element_mean, grid_signed_measures
-from ..metrics import density_std
+from ..core.metrics import density_std
 from ..solvers.flow import F32_MARGIN
 from .report import MapReport
 
@@ -46,7 +46,7 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     r"""Whether a density map of the ``N``-grid left the density more equal than it was.
 
     :math:`\mathrm{Std}(\tilde\rho)` of the element densities (population over measure, normalised to mean 1; as
-    :func:`rfmap.metrics.compute_metrics`) on the reference and on the mapped grid, and the smallest Jacobian
+    :func:`rfmap.core.metrics.compute_metrics`) on the reference and on the mapped grid, and the smallest Jacobian
     determinant (mapped over reference measure).
 
     Parameters
@@ -88,7 +88,7 @@ def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish
     """One line for a density map that left the density less equal than it was (:func:`density_quality`);
     ``refine`` and ``polish`` name the two remedies (the API's keywords by default, the CLI's flags there), and
     ``grid_only`` says that the second one maps a grid only (a map at query points).  With ``shorten`` (the report
-    of :func:`rfmap.shorten.shorten_map`) the line says that the map was shortened and what it reaches now."""
+    of :func:`rfmap.finish.shorten.shorten_map`) the line says that the map was shortened and what it reaches now."""
     finish = "the flow-based finish, on a grid only" if grid_only else "the flow-based finish"
     if shorten is not None:
         before = shorten["std_before"]

@@ -13,11 +13,11 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..folds import fold_free
+from ..core.folds import fold_free
 from ..mesh import element_measures, grid_mesh, grid_points, interpolate
 from ..nn.model import apply_displacement
-from ..repair import repair_map
-from ..shorten import shorten_map
+from .repair import repair_map
+from .shorten import shorten_map
 from .draft import Draft, WorkingGridMap, displacement_at
 from .quality import density_quality
 
@@ -26,7 +26,7 @@ __all__ = ["working_grid_map", "repair_query", "shorten_query"]
 
 def working_grid_map(draft: Draft) -> WorkingGridMap:
     r"""The map of the working grid of a network's map, :math:`x + \mathcal{B}(x) \odot (\alpha \odot \psi(x))`
-    with the draft's :math:`\alpha`, made fold-free by :func:`rfmap.repair.dispatch.repair_map`; ``draft.work_map`` when a
+    with the draft's :math:`\alpha`, made fold-free by :func:`rfmap.finish.repair.dispatch.repair_map`; ``draft.work_map`` when a
     stage made it already."""
     if draft.work_map is not None:
         return draft.work_map
@@ -40,14 +40,14 @@ def working_grid_map(draft: Draft) -> WorkingGridMap:
 
 
 def repair_query(draft: Draft, **kw: Any) -> tuple[np.ndarray, dict[str, Any], WorkingGridMap]:
-    """:func:`rfmap.repair.dispatch.repair_map` of a network's map of query points: the working grid's map is repaired first
+    """:func:`rfmap.finish.repair.dispatch.repair_map` of a network's map of query points: the working grid's map is repaired first
     (:func:`working_grid_map`) and its displacement interpolated, then any fold left on the query mesh is repaired
-    there.  ``kw``: the keywords of :func:`rfmap.repair.dispatch.repair_map`.
+    there.  ``kw``: the keywords of :func:`rfmap.finish.repair.dispatch.repair_map`.
 
     Returns
     -------
     (points, report, work)
-        ``report`` as :func:`rfmap.repair.dispatch.repair_map`'s, with ``grid`` (the working grid's report) and
+        ``report`` as :func:`rfmap.finish.repair.dispatch.repair_map`'s, with ``grid`` (the working grid's report) and
         ``n_flipped_before`` counted on the query mesh.
     """
     res = draft.result
@@ -68,7 +68,7 @@ def repair_query(draft: Draft, **kw: Any) -> tuple[np.ndarray, dict[str, Any], W
 def shorten_query(draft: Draft) -> tuple[np.ndarray, dict[str, Any] | None]:
     r"""Shorten a network's density map of query points as its working grid's map would be shortened.
 
-    The delivered map of an output grid is shortened (:func:`rfmap.shorten.shorten_map`) when it leaves the density
+    The delivered map of an output grid is shortened (:func:`rfmap.finish.shorten.shorten_map`) when it leaves the density
     no more equal than it was.  Query points have no grid to judge on, so the judgement is made on the working grid:
     its repaired map (:func:`working_grid_map`) and the input density there.  When that map is shortened to
     :math:`u_s = x + s\,(u - x)`, the query map is shortened by the same :math:`s` unless that folds an element of
@@ -78,7 +78,7 @@ def shorten_query(draft: Draft) -> tuple[np.ndarray, dict[str, Any] | None]:
     -------
     (points, report or None)
         ``report`` (``None`` when the working grid's map is more equal than the input) is that of
-        :func:`rfmap.shorten.shorten_map` with ``decided_on``, ``work_n``, ``query_mesh`` and ``quality``
+        :func:`rfmap.finish.shorten.shorten_map` with ``decided_on``, ``work_n``, ``query_mesh`` and ``quality``
         (:func:`rfmap.finish.quality.density_quality` of the working grid's delivered map, with ``shortened_from``).
     """
     res = draft.result

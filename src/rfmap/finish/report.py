@@ -26,7 +26,7 @@ class NetworkReport:
     time : float
         Seconds of network evaluation (``info["network_time"]``).
     symmetrize : str or None
-        The symmetry group the displacement was averaged over (:mod:`rfmap.symmetry`; ``info["symmetrize"]``).
+        The symmetry group the displacement was averaged over (:mod:`rfmap.nn.symmetry`; ``info["symmetrize"]``).
     """
 
     work_n: int
@@ -91,16 +91,16 @@ class MapReport:
         The stretching vector applied to the network's displacement (given, refined, or ones), or found by
         refinement of a classical map's displacement.
     repair : dict, optional
-        The report of :func:`rfmap.repair.dispatch.repair_map` (with ``skipped`` when the repair gave way to a cold polish;
+        The report of :func:`rfmap.finish.repair.dispatch.repair_map` (with ``skipped`` when the repair gave way to a cold polish;
         at query points with ``grid``, the working grid's report).
     polish : dict, optional
-        The report of :func:`rfmap.hybrid.polish_map` (for a network's map with ``smooth_passes``, ``smooth_edges``
+        The report of :func:`rfmap.finish.polish.polish_map` (for a network's map with ``smooth_passes``, ``smooth_edges``
         and ``output_passes``).
     quality : dict, optional
         :func:`rfmap.finish.quality.density_quality` of the delivered map of a grid (with ``shortened_from`` after
         shortening).
     shorten : dict, optional
-        The report of :func:`rfmap.shorten.shorten_map` when the map was shortened (at query points with
+        The report of :func:`rfmap.finish.shorten.shorten_map` when the map was shortened (at query points with
         ``decided_on``, ``work_n``, ``query_mesh`` and ``quality``, see :func:`rfmap.finish.stages.shorten`).
     """
 

@@ -2,11 +2,11 @@ r"""The stages that finish a computed map, each a function from a :class:`~rfmap
 
 * :func:`regrid` -- a folded network map: try the network on other working grids;
 * :func:`refine` -- weight refinement of the stretching vector :math:`\alpha` (paper Sec. 4.3);
-* :func:`repair` -- make the map fold-free (:func:`rfmap.repair.dispatch.repair_map`);
-* :func:`polish` -- finish a density map with the flow-based solver (:func:`rfmap.hybrid.polish_map`);
+* :func:`repair` -- make the map fold-free (:func:`rfmap.finish.repair.dispatch.repair_map`);
+* :func:`polish` -- finish a density map with the flow-based solver (:func:`rfmap.finish.polish.polish_map`);
 * :func:`judge` -- is a density map of a grid more equal than its input (:func:`rfmap.finish.quality.density_quality`);
 * :func:`shorten` -- if not, the most equal fold-free map between the identity and it
-  (:func:`rfmap.shorten.shorten_map`).
+  (:func:`rfmap.finish.shorten.shorten_map`).
 
 Every stage adds its seconds to ``draft.result.time`` and its report to ``draft.report``.
 """
@@ -19,12 +19,12 @@ from typing import Callable, Sequence
 import numpy as np
 import torch
 
-from ..hybrid import GUARD, OUTPUT_PASSES, SMOOTH_EDGES, PolishOptions, polish_map, smooth_displacement, \
+from .polish import GUARD, OUTPUT_PASSES, SMOOTH_EDGES, PolishOptions, polish_map, smooth_displacement, \
     smooth_grid_displacement, smooth_passes
 from ..nn.model import apply_displacement
-from ..refine import REFINE, refine_alpha
-from ..repair import repair_map
-from ..shorten import shorten_map
+from .refine import REFINE, refine_alpha
+from .repair import repair_map
+from .shorten import shorten_map
 from .draft import Draft, displacement_at
 from .quality import density_quality
 from .query import repair_query, shorten_query
@@ -82,8 +82,8 @@ def _improves(draft: Draft) -> bool:
 
 def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
     r"""Weight refinement (paper Sec. 4.3): the map :math:`x + \mathcal{B}(x) \odot (\alpha^* \odot \psi(x))` with
-    :math:`\alpha^* = \arg\min_\alpha \mathcal{J}` (:func:`rfmap.refine.refine_alpha`, the objective of the task,
-    :meth:`rfmap.tasks.Task.refine_objective`, settings :data:`rfmap.refine.REFINE`).  :math:`\psi` is the network's displacement, or a classical map's :math:`u - x`
+    :math:`\alpha^* = \arg\min_\alpha \mathcal{J}` (:func:`rfmap.finish.refine.refine_alpha`, the objective of the task,
+    :meth:`rfmap.tasks.Task.refine_objective`, settings :data:`rfmap.finish.refine.REFINE`).  :math:`\psi` is the network's displacement, or a classical map's :math:`u - x`
     (:meth:`rfmap.finish.draft.Draft.displacement`); a given stretching vector is replaced.
 
     Parameters
@@ -110,7 +110,7 @@ def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
 
 
 def repair(draft: Draft, *, cold_polish: bool = False) -> Draft:
-    """The map made fold-free by :func:`rfmap.repair.dispatch.repair_map` (a network's map of query points through its
+    """The map made fold-free by :func:`rfmap.finish.repair.dispatch.repair_map` (a network's map of query points through its
     working grid, :func:`rfmap.finish.query.repair_query`).
 
     Parameters
@@ -118,7 +118,7 @@ def repair(draft: Draft, *, cold_polish: bool = False) -> Draft:
     draft : Draft
     cold_polish : bool
         A polish follows: a folded map of a grid is then left as it is (``report.repair["skipped"]``), since the
-        polish starts cold from the identity on a folded map (:func:`rfmap.hybrid.polish_map`) and a repair, which
+        polish starts cold from the identity on a folded map (:func:`rfmap.finish.polish.polish_map`) and a repair, which
         can cost more than the whole flow, would be thrown away.
 
     Returns
@@ -147,11 +147,11 @@ def repair(draft: Draft, *, cold_polish: bool = False) -> Draft:
 
 
 def polish(draft: Draft, tol: float | None = None, guard: bool = GUARD) -> Draft:
-    """A density map of a grid finished by the flow-based solver (:func:`rfmap.hybrid.polish_map`).
+    """A density map of a grid finished by the flow-based solver (:func:`rfmap.finish.polish.polish_map`).
 
     A network's map starts the flow from the map of its displacement smoothed on the working grid
-    (:func:`rfmap.hybrid.smooth_displacement`, :func:`rfmap.hybrid.smooth_passes` passes, edges per
-    :data:`rfmap.hybrid.SMOOTH_EDGES`, and on a finer output grid :data:`rfmap.hybrid.OUTPUT_PASSES` more passes
+    (:func:`rfmap.finish.polish.smooth_displacement`, :func:`rfmap.finish.polish.smooth_passes` passes, edges per
+    :data:`rfmap.finish.polish.SMOOTH_EDGES`, and on a finer output grid :data:`rfmap.finish.polish.OUTPUT_PASSES` more passes
     there; all recorded in the report) where that is fold-free.
 
     Parameters
@@ -159,9 +159,9 @@ def polish(draft: Draft, tol: float | None = None, guard: bool = GUARD) -> Draft
     draft : Draft
         A density map of the ``N``-grid.
     tol : float, optional
-        The flow's tolerance on Std(rho~_map) (:func:`rfmap.hybrid.polish_tolerance`).
+        The flow's tolerance on Std(rho~_map) (:func:`rfmap.finish.polish.polish_tolerance`).
     guard : bool
-        After a warm flow also run the cold flow and keep the better map (:data:`rfmap.hybrid.GUARD`).
+        After a warm flow also run the cold flow and keep the better map (:data:`rfmap.finish.polish.GUARD`).
 
     Returns
     -------
@@ -175,7 +175,7 @@ def polish(draft: Draft, tol: float | None = None, guard: bool = GUARD) -> Draft
     t0 = time.perf_counter()
     start, smoothing = None, {}
     pred = draft.prediction
-    if pred is not None:  # the flow starts from the map of the smoothed displacement (rfmap.hybrid)
+    if pred is not None:  # the flow starts from the map of the smoothed displacement (rfmap.finish.polish)
         nw = pred.work_n
         passes = smooth_passes(res.dim, n, nw, draft.boundary)
         edges = SMOOTH_EDGES[draft.boundary]
@@ -207,7 +207,7 @@ def judge(draft: Draft) -> Draft:
 
 def shorten(draft: Draft) -> Draft:
     """A density map that is no more equal than its input shortened to the most equal fold-free map between the
-    identity and itself (:func:`rfmap.shorten.shorten_map`), so that it is never worse than no map at all.
+    identity and itself (:func:`rfmap.finish.shorten.shorten_map`), so that it is never worse than no map at all.
 
     A map of a grid is judged there (``report.quality``, by :func:`judge` when it ran) and judged again after the
     shortening (with ``shortened_from``).  A network's map of query points is judged on its working grid and

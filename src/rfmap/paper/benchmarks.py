@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from ..hybrid import UNGUARDED
+from ..finish.polish import UNGUARDED
 
 __all__ = ["METHODS", "ROWS", "WARM_MODELS", "STD_TOL", "FLOW_TIME", "HYBRID_TIME", "compare_methods",
            "benchmark_fields", "time_to_accuracy", "summarize", "target_checks", "targets_headline", "summary_table",
@@ -16,7 +16,7 @@ __all__ = ["METHODS", "ROWS", "WARM_MODELS", "STD_TOL", "FLOW_TIME", "HYBRID_TIM
 #: The methods compared by :func:`compare_methods`.
 METHODS = ("diffusion", "flow", "surrogate", "surrogate+refine", "hybrid")
 #: The rows of :func:`compare_methods`, in order: the hybrid's run also gives the row of its warm flow alone
-#: (:data:`rfmap.hybrid.UNGUARDED`; where the flow started cold, the hybrid's own row).
+#: (:data:`rfmap.finish.polish.UNGUARDED`; where the flow started cold, the hybrid's own row).
 ROWS = METHODS[:-1] + (UNGUARDED, "hybrid")
 
 #: "As accurate": a final Std(rho~_map) at most this factor above the reference solver's.
@@ -46,7 +46,7 @@ def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "squ
     list of dict
         One row per method: ``method``, ``std_rho_map``, ``n_flipped``, ``time`` (s, the result's own ``time``) and,
         for the hybrid, ``start`` (warm or cold) and ``kept`` (the map the guard kept); the hybrid's run adds the
-        row :data:`rfmap.hybrid.UNGUARDED` before its own: its warm flow's map, timed without the guard's cold flow.
+        row :data:`rfmap.finish.polish.UNGUARDED` before its own: its warm flow's map, timed without the guard's cold flow.
     """
     from ..solvers import solve_dem
 
@@ -84,11 +84,11 @@ WARM_MODELS = {(2, "square"): "dem2d-square", (2, "free"): "deq2d-free", (3, "sq
 
 def benchmark_fields(dim: int, n: int, *, paper: bool = True, random: int = 0) -> list[tuple[str, np.ndarray]]:
     """Labelled densities on the ``N``-grid: the paper's test fields and ``random`` unseen random fields (the
-    ``report`` stream of :func:`rfmap.validation.validation_fields`), preprocessed as the paper does."""
+    ``report`` stream of :func:`rfmap.training.validation.validation_fields`), preprocessed as the paper does."""
     from ..inputs import preprocess_density
     from ..mesh import grid_points
-    from ..paper_fields import TEST_FIELDS, sample_density
-    from ..validation import validation_fields
+    from ..fields.paper import TEST_FIELDS, sample_density
+    from ..training.validation import validation_fields
 
     out = [(name, sample_density(name, n)) for name in TEST_FIELDS[("density", dim)]] if paper else []
     if random:
@@ -292,7 +292,7 @@ def _roughest_field(by: dict, rows: list[dict[str, Any]], case: tuple) -> dict[s
     rough = max(over, key=over.get)
     label = rough
     if rough.startswith("random-"):  # an unseen field of the report stream: say which kind it is
-        from ..validation import DENSITY_KINDS
+        from ..training.validation import DENSITY_KINDS
 
         kind = DENSITY_KINDS[int(rough.split("-")[1]) % len(DENSITY_KINDS)]
         label = f"the unseen random field {rough} (a {kind} field)"

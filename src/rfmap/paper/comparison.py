@@ -33,8 +33,8 @@ from typing import Callable
 import numpy as np
 
 from ..finish import quiet_quality
-from ..paper_fields import DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
-from ..result import MapResult
+from ..fields.paper import DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
+from ..core.result import MapResult
 from .reproduce import beltrami_values, density_values, exact_beltrami_result
 from .tables import paper_table
 

@@ -20,7 +20,7 @@ SEA_TOL = 1.05
 def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float = 0.25) -> list[dict[str, Any]]:
     r"""The free boundary's flow with the diffusion solver's sea and with a blended one, beside the diffusion solver.
 
-    On ``count`` unseen random fields of the ``report`` stream (:func:`rfmap.validation.validation_fields`: smooth,
+    On ``count`` unseen random fields of the ``report`` stream (:func:`rfmap.training.validation.validation_fields`: smooth,
     steps, peak and ramp in turn, preprocessed) the diffusion solver and the flow-based solver run with
     ``boundary="free"``; the flow three times (``rfmap.solvers.flow.solve_flow``): with the sea that jumps to its
     level at the coast (the diffusion solver's) and only blurred retries after a stall (``stall_blend=0``); as by
@@ -41,7 +41,7 @@ def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float 
     from ..mesh import grid_points
     from ..solvers import solve_dem
     from ..solvers.flow import solve_flow
-    from ..validation import validation_fields
+    from ..training.validation import validation_fields
 
     pts = grid_points(n, dim)
     rows = []
@@ -68,7 +68,7 @@ def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: s
 
     For every ``N`` the paper's test density ``density_name`` is mapped by the diffusion solver, by the flow-based
     solver, and by one more flow pass started from the flow's map (``solve_flow(start=...)``, the residual density
-    located exactly on the raster).  Each result is split by :func:`rfmap.metrics.residual_scales` into the
+    located exactly on the raster).  Each result is split by :func:`rfmap.core.metrics.residual_scales` into the
     residual's smooth part (what a further flow can act on) and its element-scale part.
 
     Returns
@@ -78,8 +78,8 @@ def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: s
         ``std`` (= Std(rho~_map)), ``smooth``, ``element_fraction``, ``time`` (s; the second pass alone) and
         ``n_flipped``.  The second pass's own map is reported, even where it is worse than its start.
     """
-    from ..metrics import residual_scales
-    from ..paper_fields import sample_density
+    from ..core.metrics import residual_scales
+    from ..fields.paper import sample_density
     from ..solvers import solve_dem
     from ..solvers.flow import solve_flow
 
@@ -120,10 +120,10 @@ def flow_convergence(dim: int = 2, n: int = 256, boundary: str = "square", *, ra
         ``"default"``), ``std_ratio`` and ``time_ratio`` (flow over diffusion, same field, same process),
         ``steps``, ``n_flipped``, and the diffusion solver's ``std_diffusion`` and ``time_diffusion`` (s).  With
         ``boundary="square"`` also ``rotation`` and ``rotation_diffusion``: the share of the flow's and of the
-        diffusion solver's displacement that is not a gradient (:func:`rfmap.metrics.rotational_share`; ``None``
+        diffusion solver's displacement that is not a gradient (:func:`rfmap.core.metrics.rotational_share`; ``None``
         for a free boundary, whose walls move).
     """
-    from ..metrics import rotational_share
+    from ..core.metrics import rotational_share
     from ..solvers import solve_dem
     from ..solvers.flow import solve_flow
 
@@ -156,11 +156,11 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
     * ``"network"``: the surrogate's map ``sur.map(density_name, N)``;
     * ``"flow from the network"``: one flow pass from the network's map, ``NaN`` where it stalls;
     * ``"polish"``: ``sur.map(density_name, N, polish=True, guard=False)``, whose flow starts from the map of the
-      network's smoothed displacement (``rfmap.hybrid.smooth_displacement``, and above the working grid
-      ``rfmap.hybrid.smooth_grid_displacement`` on the output grid), ``NaN`` where it starts cold.
+      network's smoothed displacement (``rfmap.finish.polish.smooth_displacement``, and above the working grid
+      ``rfmap.finish.polish.smooth_grid_displacement`` on the output grid), ``NaN`` where it starts cold.
 
     The two identity rows differ only in how the density reaches the raster, so their ratio is the cost of the
-    warm-start route itself; the network row's element-scale share (:func:`rfmap.metrics.residual_scales`) is the
+    warm-start route itself; the network row's element-scale share (:func:`rfmap.core.metrics.residual_scales`) is the
     part of its residual that no flow can act on, and the last row shows how much of it the smoothing removes.
     ``sur`` must be a 2D or 3D density surrogate with a square boundary.
 
@@ -170,8 +170,8 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
         One row per ``N`` and map: ``n``, ``method``, ``std``, ``smooth``, ``element_fraction``, ``time`` (s).
     """
     from ..mesh import grid_mesh
-    from ..metrics import residual_scales
-    from ..paper_fields import sample_density
+    from ..core.metrics import residual_scales
+    from ..fields.paper import sample_density
     from ..solvers.flow import solve_flow
 
     if not isinstance(sur.spec.task, DensityTask) or sur.spec.boundary != "square":

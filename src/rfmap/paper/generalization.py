@@ -1,11 +1,11 @@
 r"""Beyond the paper's test fields: the surrogates on unseen random fields (the ``report`` stream of
-:mod:`rfmap.validation`), their angular distortion, and how far the fields ask a map to move its points.
+:mod:`rfmap.training.validation`), their angular distortion, and how far the fields ask a map to move its points.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from ..paper_fields import PAPER_N, TEST_FIELDS
+from ..fields.paper import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
 from ..tasks import BeltramiTask, DensityTask
 from .reproduce import METHOD_TITLES, SYM, SYM_REF
@@ -19,7 +19,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
                          classical: bool = True, low_frequency: bool = False,
                          symmetrize: bool | str = False) -> Table:
     """Surrogate against the classical solver on ``count`` seeded random fields that training never drew (the
-    ``report`` stream of :mod:`rfmap.validation`, used for nothing else), on the same ``N``-grid.
+    ``report`` stream of :mod:`rfmap.training.validation`, used for nothing else), on the same ``N``-grid.
 
     Density models: Std(rho~_map) of the raw network map, of the map with weight refinement (and what
     ``Surrogate.map`` does by default about folds: coarser working grids in 3D, then the repair), and of the
@@ -35,7 +35,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     from ..inputs import preprocess_density
     from ..mesh import grid_points
     from ..solvers import solve_dem, solve_lbs
-    from ..validation import validation_fields
+    from ..training.validation import validation_fields
 
     spec = sur.spec
     n = int(n or PAPER_N[spec.dim])
@@ -112,7 +112,7 @@ def generalization_summary(table: Table, column: str = "mean") -> str:
 @quiet_quality()
 def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table:
     r"""Density equalization against angular distortion of several 2D density models on the same ``count`` unseen
-    random fields (the ``report`` stream of :mod:`rfmap.validation`), raw network maps on the ``N``-grid.
+    random fields (the ``report`` stream of :mod:`rfmap.training.validation`), raw network maps on the ``N``-grid.
 
     For each model and each kind of field (and ``all``): the mean, median and worst Std(rho~_map), the mean over fields
     of the mean :math:`|\mu|` over triangles, the largest :math:`|\mu|`, the smallest Jacobian and the flipped
@@ -136,7 +136,7 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
         ``tab:distortion``: rows ``(kind, label)``, columns ``std_rho_map`` (the mean), ``median``, ``worst``,
         ``mean_mu``, ``max_mu``, ``min_jacobian``, ``n_flipped``, ``mu_ratio``.
     """
-    from ..validation import validation_fields
+    from ..training.validation import validation_fields
 
     if not surs:
         raise ValueError("distortion_table needs at least one model")
@@ -194,13 +194,13 @@ def displacement_demand(sur, count: int = 16, train_count: int = 60, n: int | No
         ``demand``, ``reach``, ``left_net``, ``left_classical``, ``n_flipped``) for
         :func:`rfmap.viz.studies.displacement_demand_figure`.
     """
-    from ..config import get_config
+    from ..training.config import get_config
     from ..inputs import preprocess_density
     from ..mesh import grid_points
-    from ..paper_fields import sample_density
+    from ..fields.paper import sample_density
     from ..solvers import solve_dem
     from ..tasks import draw_samples
-    from ..validation import validation_fields
+    from ..training.validation import validation_fields
 
     spec = sur.spec
     if not isinstance(spec.task, DensityTask):

@@ -34,7 +34,7 @@ def recipe_table(surs: dict) -> Table:
     of training (grid sides; the selection score, i.e. the mean metric with every folded map counted as the identity
     map, where recorded, else the capped or the plain mean; which maps were scored: ``raw`` network output or the maps
     as ``Surrogate.map`` ``delivered`` them, a folded map regridded or repaired (``TrainConfig.val_repair``); how many
-    held-out maps the network itself folded; :func:`rfmap.validation.evaluate`).  Older weights were validated on
+    held-out maps the network itself folded; :func:`rfmap.training.validation.evaluate`).  Older weights were validated on
     fewer sides, so their numbers are not comparable with those of later runs."""
     t = Table("tab:recipes", "How the models were trained",
               ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "scored", "folded_maps"])

@@ -13,8 +13,8 @@ from pathlib import Path
 import numpy as np
 
 from ..mesh import grid_mesh
-from ..paper_fields import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
-from ..result import MapResult
+from ..fields.paper import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
+from ..core.result import MapResult
 from ..finish import quiet_quality
 from .tables import COLUMN_TITLES, Headline, Table, format_sig, format_value, headline, paper_table
 
@@ -67,7 +67,7 @@ def _lbs(name: str, n: int) -> MapResult:
     return min((solve_lbs(mu, n) for _ in range(3)), key=lambda r: r.time)
 
 
-#: row names of the symmetrized network (``symmetrize`` of the tables; :mod:`rfmap.symmetry`)
+#: row names of the symmetrized network (``symmetrize`` of the tables; :mod:`rfmap.nn.symmetry`)
 SYM, SYM_REF = "ours, symmetrized", "ours, symmetrized + refinement"
 
 
@@ -192,7 +192,7 @@ def population_table(sur, fields=None, n: int | None = None, refine: bool = True
                      symmetrize: bool | str = False):
     """tab:population_test(_fb) / tab:3d_population_test(_fb): the four population tests.  ``symmetrize`` adds
     the rows of the network averaged over symmetries of the domain (:data:`SYM`, with ``refine`` also
-    :data:`SYM_REF`; :mod:`rfmap.symmetry`).  The surrogate and the classical solver are timed alike: after an
+    :data:`SYM_REF`; :mod:`rfmap.nn.symmetry`).  The surrogate and the classical solver are timed alike: after an
     untimed warm-up, the fastest of three runs (one run where the warm-up took more than a second); ``speedup`` is
     the classical time over the row's."""
     d, b = sur.spec.dim, sur.spec.boundary
@@ -227,7 +227,7 @@ def reproduce(experiment: str, out_dir, *, refine: bool = True, device="cpu",
               symmetrize: bool | str = False) -> list[Path]:
     """Write the tables of one experiment (``beltrami``, ``dem2d``, ``dem3d``) as Markdown and CSV; the networks
     run on ``device`` (``'cpu'``, ``'cuda'`` or ``'auto'``), the classical solvers on the CPU.  ``symmetrize`` adds
-    the rows of the networks averaged over symmetries of the domain (:mod:`rfmap.symmetry`)."""
+    the rows of the networks averaged over symmetries of the domain (:mod:`rfmap.nn.symmetry`)."""
     from ..surrogate import Surrogate, models
 
     def need(name):

@@ -6,7 +6,7 @@
   2004, ``rfmap.solvers.diffusion``) or, with ``method="flow"``, the flow-based method (Gastner, Seguy & More
   2018, :func:`solve_flow`).
 
-All return a :class:`rfmap.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name: ``"lbs"``,
+All return a :class:`rfmap.core.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name: ``"lbs"``,
 ``"diffusion"`` and ``"flow"`` (``"dem"`` is accepted as another name of ``"diffusion"``, :data:`ALIASES`).
 
 The solvers (which run on torch) are imported on first use (PEP 562), so that importing this package, e.g. for
@@ -17,7 +17,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Callable
 
 if TYPE_CHECKING:
-    from ..result import MapResult
+    from ..core.result import MapResult
 
 __all__ = ["SOLVERS", "DEM_METHODS", "ALIASES", "get_solver", "solve_lbs", "solve_dem", "solve_diffusion",
            "solve_flow", "FlowOptions", "DiffusionOptions"]

@@ -12,7 +12,7 @@ density tends to its mean; the vertex positions at :math:`t \to \infty` define t
 Numerical method:
 
 1. **Initial density.**  The piecewise-linear (P1) interpolant of the vertex values on the simplicial mesh of
-   :func:`rfmap.mesh.grid_mesh` -- the density whose element integrals :mod:`rfmap.metrics` uses -- is sampled on a
+   :func:`rfmap.mesh.grid_mesh` -- the density whose element integrals :mod:`rfmap.core.metrics` uses -- is sampled on a
    grid ``refine`` times finer, with :math:`M = \text{refine}\,(N-1) + 1` points per side (:func:`p1_upsample`).
    Starting from the P1 rather than the cosine interpolant of the vertex values avoids Gibbs ringing at steep
    features and lowers the final :math:`\mathrm{Std}(\tilde\rho)` markedly (e.g. 0.041 → 0.026 on rect-peak at
@@ -67,10 +67,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from ..device import torch_threads
+from ..core.device import torch_threads
 from ..geometry import grid_min_measure
 from ..mesh import grid_mesh, interpolate
-from ..result import MapResult
+from ..core.result import MapResult
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
 from .spectral import cosine_coefficients, fft_workers
 

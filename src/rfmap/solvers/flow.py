@@ -52,13 +52,13 @@ corners stay); ``"free"`` embeds the square in :math:`[-L, 1+L]^d` filled with a
 domain keeps its measure (``rfmap.solvers.raster.balanced_sea``), and later passes fill the sea with the domain's mean
 residual density.  The flow's velocity :math:`-\nabla\phi/\rho_t` carries the density's jumps into the map, and a steep
 jump from a dense coast to the sea can squeeze a coastal element to zero measure: on held-out fields with a steep ramp
-against the coast (``rfmap.validation``) the pass stalls, its blurred retries (below) leave much of the density
+against the coast (``rfmap.training.validation``) the pass stalls, its blurred retries (below) leave much of the density
 unequalized, and the flow ends 9-24 times above the diffusion solver's Std(rho~_map) at 2D N = 256 and 4-5 times at 3D
 N = 48.  A stalled first pass of a free boundary is therefore first redone with a sea that starts at the coast's own
 density and blends to its level (``stall_blend``); ``sea_blend`` asks for that sea from the start (see ``solve_flow``).
 
 The same passes finish any fold-free starting map (``start``): the first pass then flows the residual density of
-the starting map.  :mod:`rfmap.hybrid` uses this to polish a neural surrogate's map.
+the starting map.  :mod:`rfmap.finish.polish` uses this to polish a neural surrogate's map.
 
 References
 ----------
@@ -75,10 +75,10 @@ from dataclasses import dataclass, replace
 import numpy as np
 import torch
 
-from ..device import torch_threads
+from ..core.device import torch_threads
 from ..geometry import grid_element_mean, grid_min_measure, grid_signed_measures
 from ..mesh import grid_mesh
-from ..result import MapResult
+from ..core.result import MapResult
 from .locate import rasterize_elements
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
 from .residual import lumped_residual, residual_density, vertex_residual

@@ -41,7 +41,7 @@ import scipy.sparse.linalg as spla
 
 from ..inputs import check_mu
 from ..mesh import Mesh, check_n, element_centroids, grid_mesh
-from ..result import MapResult
+from ..core.result import MapResult
 
 __all__ = ["solve_lbs", "beltrami_matrices", "p1_gradients", "assemble_stiffness", "LBS_BOUNDARIES"]
 

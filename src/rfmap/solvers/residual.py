@@ -25,7 +25,7 @@ def residual_density(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, 
     r"""Density that a map leaves on its image: :math:`\tilde\rho_e = \text{population}_e / |T(e)|`, shape (e,).
 
     The population is the exact integral of the P1 vertex density over the reference element (mean vertex value
-    times measure, as in :mod:`rfmap.metrics`); :math:`|T(e)|` is the signed measure of the mapped element.
+    times measure, as in :mod:`rfmap.core.metrics`); :math:`|T(e)|` is the signed measure of the mapped element.
     """
     return density[elements].mean(1) * _measures(ref, elements) / _measures(mapped, elements)
 

@@ -20,13 +20,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from .. import losses as L
+from . import losses as L
 from ..geometry import grid_signed_measures, signed_measures
 from ..mesh import grid_mesh, grid_points
 from ..nn.model import BOUNDARIES, apply_displacement
-from ..result import DENSITY_FIELD_KINDS
-from ..random_fields import RandomBeltramiConfig, RandomDensityConfig
-from ..teacher import TeacherConfig, teacher_indices, teacher_loss
+from ..core.result import DENSITY_FIELD_KINDS
+from ..fields.random import RandomBeltramiConfig, RandomDensityConfig
+from .teacher import TeacherConfig, teacher_indices, teacher_loss
 
 __all__ = ["Task", "TaskSpec", "SampleOptions", "Batch", "LossWeights", "register_task", "get_task", "kinds",
            "encode", "grid_elements", "draw_samples", "make_batch", "sample_batch", "task_loss"]
@@ -182,7 +182,7 @@ class LossWeights:
         Free boundary: weight of the area constraint.
     density_tangent : bool
         Below the 1 % floor of an element's mapped measure, continue its density along the tangent instead of
-        clamping it (:func:`rfmap.losses.element_density`), so that collapsed and flipped elements keep a
+        clamping it (:func:`rfmap.tasks.losses.element_density`), so that collapsed and flipped elements keep a
         restoring gradient from the density term. ``False`` (the clamp) is what the shipped models used.
     """
 
@@ -202,7 +202,7 @@ class MappedBatch:
     batch : Batch
     mapped : Tensor, shape (B, n, d)
         The mapped vertices :math:`u = x + \\mathcal{B}(x) \\odot \\psi(x)`.
-    measures : rfmap.losses.Measures
+    measures : rfmap.tasks.losses.Measures
         The signed element measures before and after, shape (B, m) (strided on a grid).
     spec : TaskSpec
     """
@@ -225,13 +225,13 @@ class Task:
     dims : tuple of int
         The dimensions the task supports.
     score_metric : str
-        The validation's primary metric (a key of :class:`rfmap.metrics.MapMetrics`), lower is better.
+        The validation's primary metric (a key of :class:`rfmap.core.metrics.MapMetrics`), lower is better.
     metric_names : tuple of str
         The entries of one validation record (:meth:`validation_record`).
     loss_terms : tuple of str
         The names of the task's own loss terms (the fold penalty and a teacher's term are common to all).
     teacher : bool
-        Whether a classical teacher (:mod:`rfmap.teacher`) applies.
+        Whether a classical teacher (:mod:`rfmap.tasks.teacher`) applies.
     equalizes : bool
         Whether the map equalizes a density: then a map is judged against doing nothing, shortened when it is no
         better, and may be polished by the flow-based solver (:mod:`rfmap.finish`).
@@ -300,11 +300,11 @@ class Task:
         raise NotImplementedError
 
     def metric_inputs(self, field: np.ndarray) -> dict:
-        """The keywords ``density`` and ``mu`` of :func:`rfmap.repair.dispatch.repair_map` for a map of ``field``."""
+        """The keywords ``density`` and ``mu`` of :func:`rfmap.finish.repair.dispatch.repair_map` for a map of ``field``."""
         return {"density": None, "mu": None}
 
     def reference(self, grid: np.ndarray, boundary: str | None = None):
-        """The classical reference solver's map (:class:`rfmap.result.MapResult`, the first of :attr:`methods`)
+        """The classical reference solver's map (:class:`rfmap.core.result.MapResult`, the first of :attr:`methods`)
         of a user's field on the ``N``-grid's vertices."""
         if not self.methods:
             raise ValueError(f"{self.title} tasks have no classical solver")
@@ -394,7 +394,7 @@ def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, optio
     across processes (data-parallel training) or drawn by worker processes reproduces the single-process batch
     exactly.
 
-    With an active ``teacher`` (tasks with ``Task.teacher``, :mod:`rfmap.teacher`), the first
+    With an active ``teacher`` (tasks with ``Task.teacher``, :mod:`rfmap.tasks.teacher`), the first
     ``teacher_indices(len(indices), teacher.share)`` samples also get the classical map of their field as a target.
 
     Returns
@@ -456,7 +456,7 @@ def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights,
               teacher_weight: float = 0.0) -> tuple[Tensor, dict]:
     """Total loss and its parts for network output ``psi`` of shape ``(B, d, *S)``: the task's own terms
     (:meth:`Task.loss`), the fold penalty, and with ``teacher_weight`` > 0 the supervised term
-    :func:`rfmap.teacher.teacher_loss` where the batch carries targets."""
+    :func:`rfmap.tasks.teacher.teacher_loss` where the batch carries targets."""
     B, d = psi.shape[:2]
     disp = psi.reshape(B, d, -1).transpose(1, 2)
     mapped = apply_displacement(batch.ref, disp, spec.boundary)

@@ -2,11 +2,11 @@ r"""The Beltrami task: the quasi-conformal map of the unit square with a prescri
 Sec. 5.1).
 
 * encoding (m = 2): the channels are :math:`\mathrm{Re}\,\mu` and :math:`\mathrm{Im}\,\mu` at the vertices;
-* training fields: the exact coefficient of a random boundary-fixing map (:class:`rfmap.random_fields.RandomMap`),
-  or a random coefficient (:class:`rfmap.random_fields.RandomBeltrami`), at Sobol-jittered vertices;
-* loss: :math:`\int_\Omega |\mu(u) - \mu_{\text{in}}|^2` (:func:`rfmap.losses.beltrami_loss`);
+* training fields: the exact coefficient of a random boundary-fixing map (:class:`rfmap.fields.random.RandomMap`),
+  or a random coefficient (:class:`rfmap.fields.random.RandomBeltrami`), at Sobol-jittered vertices;
+* loss: :math:`\int_\Omega |\mu(u) - \mu_{\text{in}}|^2` (:func:`rfmap.tasks.losses.beltrami_loss`);
 * refinement objective: :math:`\mathrm{mean}|\mu(u_\alpha) - \mu_{\text{in}}| + \lambda\,\#\text{flipped}/m`
-  (:func:`rfmap.refine.beltrami_objective`);
+  (:func:`rfmap.finish.refine.beltrami_objective`);
 * validation: the mean vertex distance to the exact map of held-out random maps, at sup-norm levels of
   :math:`|\mu|` spread over [0.1, 0.85] (a low-frequency set of 1-4 slow modes serves reports only);
 * reference solver: the Linear Beltrami Solver (:func:`rfmap.solvers.solve_lbs`).
@@ -17,11 +17,11 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from .. import losses as L
+from . import losses as L
 from ..inputs import check_mu
 from ..mesh import element_centroids, grid_mesh, grid_points, interpolate, jittered_points, square_triangles
-from ..random_fields import RandomBeltrami, RandomBeltramiConfig, RandomMap
-from ..refine import REFINE, beltrami_objective
+from ..fields.random import RandomBeltrami, RandomBeltramiConfig, RandomMap
+from ..finish.refine import REFINE, beltrami_objective
 from .base import Batch, LossWeights, MappedBatch, SampleOptions, Task, TaskSpec, grad_magnitude, grid_elements, \
     register_task
 from .heldout import ValidationField, held_out_rng
@@ -109,7 +109,7 @@ class BeltramiTask(Task):
         return check_mu(grid, name="the Beltrami coefficient").reshape(-1)[square_triangles(grid.shape[0])].mean(1)
 
     def solver_sample(self, field, n: int) -> np.ndarray:
-        from ..paper_fields import sample_mu
+        from ..fields.paper import sample_mu
 
         return sample_mu(field.name, n)
 
@@ -119,12 +119,12 @@ class BeltramiTask(Task):
         return solve_lbs(values, n, boundary="fixed" if boundary in (None, "fixed") else boundary)
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
-        from ..paper_fields import TEST_FIELDS
+        from ..fields.paper import TEST_FIELDS
 
         return TEST_FIELDS[self.kind, dim]
 
     def test_record(self, result, name: str) -> dict:
-        from ..paper_fields import BELTRAMI_MAPS
+        from ..fields.paper import BELTRAMI_MAPS
 
         m = result.metrics(exact_points=BELTRAMI_MAPS[name](result.ref_points), mu_ref=result.field)
         return {"mean_dd": m.mean_dd, "mean_dmu": m.mean_dmu, "n_flipped": m.n_flipped,

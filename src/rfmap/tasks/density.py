@@ -2,12 +2,12 @@ r"""The density task: a density-equalizing map (DEM, DEQ) of the unit square or 
 
 * encoding (m = 1): the channel is :math:`\log p` of the unit-mass density, a discretisation-consistent
   normalisation (mass :math:`\int p = 1` on every grid);
-* training fields: random densities (:class:`rfmap.random_fields.RandomDensity`) at Sobol-jittered vertices, with a
-  classical teacher's map as an optional target (:mod:`rfmap.teacher`);
+* training fields: random densities (:class:`rfmap.fields.random.RandomDensity`) at Sobol-jittered vertices, with a
+  classical teacher's map as an optional target (:mod:`rfmap.tasks.teacher`);
 * loss: the density mismatch :math:`L(\tilde\rho - 1)`, with :math:`\lambda \int |\mu|^2` for DEQ in 2D and the
   area constraint on a free boundary;
 * refinement objective: :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m`
-  (:func:`rfmap.refine.density_objective`);
+  (:func:`rfmap.finish.refine.density_objective`);
 * validation: Std(rho~_map) on four families of held-out densities, relative to the field's own Std(rho~_orig);
 * reference solver: the diffusion method (:func:`rfmap.solvers.solve_dem`).
 """
@@ -19,13 +19,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from .. import losses as L
+from . import losses as L
 from ..geometry import grid_element_mean
 from ..inputs import check_density, preprocess_density, unit_mass
 from ..mesh import grid_points, grid_vertex_weights, interpolate, jittered_points, vertex_weights
-from ..random_fields import RandomDensity, RandomDensityConfig
-from ..refine import REFINE, density_objective
-from ..teacher import teacher_map, teacher_targets
+from ..fields.random import RandomDensity, RandomDensityConfig
+from ..finish.refine import REFINE, density_objective
+from .teacher import teacher_map, teacher_targets
 from .base import Batch, LossWeights, MappedBatch, SampleOptions, Task, TaskSpec, grad_magnitude, grid_elements, \
     register_task, teacher_extra
 from .heldout import ValidationField, held_out_rng
@@ -137,7 +137,7 @@ class DensityTask(Task):
         return solve_dem(values, method=method, boundary=boundary or "square", progress=progress)
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
-        from ..paper_fields import TEST_FIELDS
+        from ..fields.paper import TEST_FIELDS
 
         return TEST_FIELDS[self.kind, dim]
 

@@ -7,7 +7,7 @@ One concept per module: :mod:`~rfmap.training.data` draws the batches (sample ``
 :mod:`~rfmap.training.loop` runs the steps, validates, chooses and writes the shipped weights; and
 :mod:`~rfmap.training.cli` is ``rfmap train`` (also ``python -m rfmap.train``).
 """
-from ..device import resolve_device
+from ..core.device import resolve_device
 from .averaging import WeightAverage
 from .cli import build_parser, main, run
 from .data import draw_step, single_blas_thread_env, step_size_n

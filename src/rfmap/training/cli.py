@@ -1,7 +1,7 @@
 """``rfmap train`` (also ``python -m rfmap.train``): the command line of training.
 
 ``rfmap train --config NAME [--preset ci|full|paper] [--device auto|cpu|cuda] [--init MODEL|FILE] [--resume]`` trains
-the named configuration of :mod:`rfmap.config`.  Data-parallel: ``torchrun --nproc_per_node=K -m rfmap.train --config
+the named configuration of :mod:`rfmap.training.config`.  Data-parallel: ``torchrun --nproc_per_node=K -m rfmap.train --config
 NAME ...`` runs K processes (gloo on CPU, NCCL on GPU); K processes with batch ``B`` train the same model as one
 process with batch ``K*B``.
 """
@@ -14,8 +14,8 @@ import sys
 
 import torch
 
-from ..config import PRESETS, TrainConfig, config_names, get_config
-from ..device import resolve_device
+from .config import PRESETS, TrainConfig, config_names, get_config
+from ..core.device import resolve_device
 from ..surrogate import Surrogate
 from .loop import train
 from .state import load_init
@@ -51,7 +51,7 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--seed", type=int, default=None)
     p.add_argument("--teacher", default=None, metavar="flow|diffusion|none",
                    help="density configs: a classical solver's map of a share of each batch's fields as a supervised "
-                        "target beside the data-free losses (rfmap.teacher; default: the config's, none)")
+                        "target beside the data-free losses (rfmap.tasks.teacher; default: the config's, none)")
     p.add_argument("--teacher-share", type=float, default=None, help="share of each batch with a target (0, 1]")
     p.add_argument("--teacher-weight", type=float, default=None, help="weight of the teacher's displacement loss")
     p.add_argument("--base", type=int, default=None, help="override the U-Net's base width (channels)")
@@ -120,7 +120,7 @@ def _structured_overrides(cfg: TrainConfig, args) -> dict:
     on values out of range."""
     from dataclasses import replace as _replace
 
-    from ..teacher import TeacherConfig
+    from ..tasks.teacher import TeacherConfig
 
     over: dict = {}
     t = {k: v for k, v in {"method": getattr(args, "teacher", None), "share": getattr(args, "teacher_share", None),

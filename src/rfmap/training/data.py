@@ -13,7 +13,7 @@ import os
 import numpy as np
 import torch
 
-from ..config import TrainConfig
+from .config import TrainConfig
 from ..tasks import draw_samples
 
 __all__ = ["step_size_n", "step_batch", "draw_step", "single_blas_thread_env"]
@@ -39,7 +39,7 @@ def step_batch(cfg: TrainConfig, n: int) -> int:
 
 def draw_step(cfg: TrainConfig, step: int, rank: int = 0) -> tuple[int, np.ndarray, np.ndarray, np.ndarray | None]:
     """The raw arrays of rank ``rank``'s share of step ``step``: ``(n, points, params, targets)`` (a pure function of
-    the configuration, the step and the rank); ``targets`` are the teacher's maps (:mod:`rfmap.teacher`, NaN where
+    the configuration, the step and the rank); ``targets`` are the teacher's maps (:mod:`rfmap.tasks.teacher`, NaN where
     a sample has none), ``None`` without a teacher."""
     n = step_size_n(cfg, step)
     b = step_batch(cfg, n)

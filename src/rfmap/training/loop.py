@@ -1,6 +1,6 @@
 r"""The training loop (paper Sec. 5): steps on fresh random batches, validation and the choice of the shipped weights.
 
-Validation and the choice of the shipped checkpoint use the held-out random fields of :mod:`rfmap.validation` (seeds
+Validation and the choice of the shipped checkpoint use the held-out random fields of :mod:`rfmap.training.validation` (seeds
 training never draws); the paper's test fields are evaluated once at the end as a report
 (:func:`report_paper_fields`).  With ``cfg.ema`` > 0 (:class:`~rfmap.training.averaging.WeightAverage`) validation,
 the choice and the shipped file use the averaged weights.
@@ -18,12 +18,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..config import TrainConfig
-from ..device import resolve_device
+from .config import TrainConfig
+from ..core.device import resolve_device
 from ..finish import quiet_quality
 from ..surrogate import Surrogate
 from ..tasks import make_batch, task_loss
-from ..validation import evaluate, family_table, score
+from .validation import evaluate, family_table, score
 from .data import _loader
 from .state import TrainState, _build_state, _dist_info, memory_format
 
@@ -31,7 +31,7 @@ __all__ = ["train", "validate", "report_paper_fields", "history"]
 
 
 def validate(sur: Surrogate, cfg: TrainConfig) -> dict:
-    """Metrics on the held-out random fields (:func:`rfmap.validation.evaluate`) at ``cfg.val_ns``."""
+    """Metrics on the held-out random fields (:func:`rfmap.training.validation.evaluate`) at ``cfg.val_ns``."""
     return evaluate(sur, cfg.val_ns, cfg.val_count, repair=cfg.val_repair, native=cfg.val_native)
 
 

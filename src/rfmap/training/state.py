@@ -20,12 +20,12 @@ from typing import Callable
 import torch
 
 from .._version import __version__
-from ..config import TrainConfig
+from .config import TrainConfig
 from ..nn.grow import check_growth, grow_unet
 from ..nn.registry import build_model
 from ..surrogate import Surrogate, models
 from ..tasks import TaskSpec
-from ..validation import score
+from .validation import score
 from .averaging import WeightAverage
 
 __all__ = ["TrainState", "memory_format", "machine", "sha256", "load_init"]
@@ -264,7 +264,7 @@ def _build_state(cfg: TrainConfig, out: Path, device: torch.device, resume: bool
         if state.get("best"):
             st.best = {k: json.loads(v) for k, v in state["best"].items()}
             st.best["state"] = state["best_state"]
-            # the best state is compared with later ones by the current rule (rfmap.validation.score)
+            # the best state is compared with later ones by the current rule (rfmap.training.validation.score)
             st.best["score"] = list(score(st.best["summary"]))
     elif rank == 0 and (out / "log.jsonl").exists():
         (out / "log.jsonl").unlink()

@@ -4,11 +4,11 @@ One module per kind of figure: :mod:`~rfmap.viz.figures` (the style and where fi
 :mod:`~rfmap.viz.meshes` (2D maps), :mod:`~rfmap.viz.volumes` (3D maps), :mod:`~rfmap.viz.architecture` (the
 network), :mod:`~rfmap.viz.training` (batches, loss terms, learning curves), :mod:`~rfmap.viz.cartograms` and
 :mod:`~rfmap.viz.studies` (the studies' tables and reports).  Every name is importable from :mod:`rfmap.viz`,
-with :func:`rfmap.result.to_pyvista` and :func:`rfmap.result.setup_pyvista`.
+with :func:`rfmap.core.result.to_pyvista` and :func:`rfmap.core.result.setup_pyvista`.
 """
 from __future__ import annotations
 
-from ..result import setup_pyvista, to_pyvista
+from ..core.result import setup_pyvista, to_pyvista
 from .architecture import architecture_diagram
 from .cartograms import area_error_histograms, cartogram_figure, cartogram_panels, plot_regions
 from .figures import STYLE, figures_dir, repository_root, save_figure, style

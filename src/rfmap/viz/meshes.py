@@ -17,7 +17,7 @@ TEXT_WIDTH_IN = 7.2
 
 def element_rho(result) -> np.ndarray:
     """Per-element density :math:`\\tilde\\rho` on the mapped mesh (population / mapped measure, mean 1); the
-    same as :meth:`rfmap.result.MapResult.rho`."""
+    same as :meth:`rfmap.core.result.MapResult.rho`."""
     return result.rho()
 
 
@@ -234,7 +234,7 @@ def beltrami_figure(rows: dict, *, width: float = TEXT_WIDTH_IN, bins: int = 40,
     Parameters
     ----------
     rows : dict
-        ``{row label: (exact, lbs, ours)}`` of :class:`~rfmap.result.MapResult` on one 2D grid per row; ``exact.field``
+        ``{row label: (exact, lbs, ours)}`` of :class:`~rfmap.core.result.MapResult` on one 2D grid per row; ``exact.field``
         holds the exact coefficient at the triangle centroids (:func:`rfmap.paper.reproduce.exact_beltrami_result`).
 
     Returns

@@ -134,7 +134,7 @@ def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = Tru
 
 def shorten_curve(report: dict, ax=None, *, title: str | None = None):
     r"""Std(rho~) of the shortened maps :math:`u_s = x + s\,(u - x)` against the scale ``s``, from the report of
-    :func:`rfmap.shorten.shorten_map` (``info["shorten"]`` of ``Surrogate.map``): the evaluated scales (folded ones
+    :func:`rfmap.finish.shorten.shorten_map` (``info["shorten"]`` of ``Surrogate.map``): the evaluated scales (folded ones
     marked at the top), the identity's level and the chosen scale; returns the axes."""
     import matplotlib.pyplot as plt
 

@@ -10,7 +10,7 @@ __all__ = ["LOSS_TERMS", "VAL_NAMES", "plot_batch", "plot_loss_terms", "training
            "validation_vs_time", "race_bars"]
 
 
-#: the loss terms of training (keys of :func:`rfmap.tasks.task_loss` and :func:`rfmap.losses.loss_integrands`)
+#: the loss terms of training (keys of :func:`rfmap.tasks.task_loss` and :func:`rfmap.tasks.losses.loss_integrands`)
 LOSS_TERMS = {"density": r"density mismatch $L(\tilde\rho - 1)$", "mu2": r"Beltrami energy $|\mu|^2$",
               "beltrami": r"$\mu$ mismatch $|\mu(u) - \mu_{in}|^2$", "fold": r"fold penalty relu$(\tau - \det J)$",
               "area": "area constraint"}
@@ -33,7 +33,7 @@ def plot_batch(axes, batch, *, title: str = "sample"):
 
 def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: int | None = None,
                     keys=None):
-    """One sample's map and its loss terms element by element (:func:`rfmap.losses.loss_integrands`) on the
+    """One sample's map and its loss terms element by element (:func:`rfmap.tasks.losses.loss_integrands`) on the
     mapped mesh: ``axes[0]`` the mapped grid, then one panel per key of ``keys`` (default: every element-wise term
     present), titled with the term's value (its weighted mean, as in training)."""
     import torch
@@ -80,27 +80,38 @@ def _read_log(log_path) -> tuple[list[dict], list[dict]]:
     return steps, vals
 
 
-def training_curves(log_path, ax=None):
+def training_curves(log_path, fig=None, *, ncols: int = 2):
     """The loss of a training run and each of its terms against the step, from the run's ``log.jsonl``
-    (:func:`rfmap.training.loop.train`); a term is not drawn at steps where it is zero (log axis), and one that is
-    zero throughout says so in the legend; returns the axes."""
+    (:func:`rfmap.training.loop.train`): one panel per quantity (the total loss first), each with a linear axis from
+    zero and its own range, the step axis spanning the logged steps; a term that is zero at every step says so in
+    its panel. ``ncols`` panels per row; returns the figure."""
     import matplotlib.pyplot as plt
     from matplotlib.ticker import MaxNLocator
 
     recs, _ = _read_log(log_path)
-    if ax is None:
-        _, ax = plt.subplots(figsize=(6, 3.4), layout="constrained")
-    steps = [r["step"] for r in recs]
-    ax.semilogy(steps, [r["loss"] for r in recs], "k-", lw=1.6, label="total loss")
-    for key, label in LOSS_TERMS.items():
-        if recs and key in recs[0]:
-            vals = np.array([r[key] for r in recs], dtype=float)
-            vals[vals <= 0] = np.nan  # a log axis has no zero: a step where the term vanishes leaves a gap
-            ax.semilogy(steps, vals, lw=1, label=label + (" (0 at every step)" if np.isnan(vals).all() else ""))
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    ax.set(xlabel="step", ylabel="loss (batch)")
-    ax.legend(fontsize=8)
-    return ax
+    keys = [k for k in LOSS_TERMS if recs and k in recs[0]]
+    quantities = [("loss", "total loss")] + [(k, LOSS_TERMS[k]) for k in keys]
+    ncols = max(1, min(ncols, len(quantities)))
+    nrows = -(-len(quantities) // ncols)
+    if fig is None:
+        fig = plt.figure(figsize=(7.2, 2.2 * nrows + 0.4), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False, sharex=True)
+    steps = np.array([r["step"] for r in recs], dtype=float)
+    for ax, (key, label) in zip(axes.flat, quantities):
+        vals = np.array([r[key] for r in recs], dtype=float)
+        ax.plot(steps, vals, color="k" if key == "loss" else "tab:blue", lw=1.2)
+        ax.set_title(label)
+        ax.set_ylim(0, float(vals.max()) * 1.08 if len(vals) and vals.max() > 0 else 1.0)
+        if not len(vals) or float(vals.max()) <= 0:
+            ax.text(0.5, 0.5, "0 at every step", transform=ax.transAxes, ha="center", va="center")
+        if len(steps):
+            ax.set_xlim(steps.min(), max(steps.max(), steps.min() + 1))
+        ax.xaxis.set_major_locator(MaxNLocator(5, integer=True))
+    for ax in axes[-1]:
+        ax.set_xlabel("step")
+    for ax in list(axes.flat)[len(quantities):]:
+        ax.set_axis_off()
+    return fig
 
 
 def _val_key(val: list[dict]) -> str | None:
@@ -116,59 +127,69 @@ def _percent(x: float) -> str:
     return f"{x:.0f} %" if x >= 10 else f"{x:.2g} %"
 
 
-def learning_curves(metas: dict, budgets: dict, *, ncols: int = 2):
-    r"""The learning curves of trained models from their metadata (``Surrogate.meta``), one panel per model: the
-    running mean of the loss (log scale) and the mean held-out validation metric (right axis, log scale) of the
-    model's last run, against the step counted over its whole ``--init`` chain (linear axis; the grey band holds the
-    ``cumulative_steps - steps`` steps of its ancestors, whose curves are not stored), with the paper's budget of
-    steps (``budgets[name]``) dashed.  The title gives the chain's steps and their share of the paper's, as the
-    training chapter's budget table counts them.  ``ncols`` panels per row, 3.6 inches each; returns the figure."""
-    import matplotlib.pyplot as plt
+def _chain_axis(ax, xs, offset: int, budget: int):
+    """Fit the step axis to the stored steps ``xs`` (counted over the whole chain); mark the paper's budget when it
+    falls inside."""
     from matplotlib.ticker import FuncFormatter, MaxNLocator
+
+    lo, hi = (min(xs), max(xs)) if xs else (offset, offset + 1)
+    pad = 0.03 * max(hi - lo, 1)
+    ax.set_xlim(lo - pad, hi + pad)
+    if lo - pad <= budget <= hi + pad:
+        ax.axvline(budget, color="tab:red", ls="--", lw=1)
+        ax.text(budget, 0.97, " paper ", color="tab:red", va="top", ha="left", transform=ax.get_xaxis_transform())
+    ax.xaxis.set_major_locator(MaxNLocator(4))
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1e3:g}k" if abs(x) >= 1e3 else f"{x:g}"))
+    ax.set_xlabel("step of the chain" + (f" (0 to {offset:,}: earlier runs)" if offset else ""))
+
+
+def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1):
+    r"""The learning curves of trained models from their metadata (``Surrogate.meta``): for each model one panel
+    for the running mean of the loss and one for the mean held-out validation metric of its last run (log scales),
+    against the step counted over its whole ``--init`` chain. The step axis spans the stored steps: the
+    ``cumulative_steps - steps`` steps of the earlier runs, whose curves are not stored, are named in its label,
+    and the paper's budget of steps (``budgets[name]``) is dashed where it falls inside. The loss panel's title
+    gives the chain's steps and their share of the paper's, as the training chapter's budget table counts them.
+    ``ncols`` models per row (two panels each), 7.2 inches wide in all; returns the figure."""
+    import matplotlib.pyplot as plt
 
     names = list(metas)
     ncols = max(1, min(ncols, len(names)))
     nrows = -(-len(names) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(3.6 * ncols, 2.8 * nrows), layout="constrained", squeeze=False)
-    for ax, name in zip(axes.flat, names):
+    fig, axes = plt.subplots(nrows, 2 * ncols, figsize=(7.2, 2.3 * nrows + 0.2), layout="constrained",
+                             squeeze=False)
+    for k, name in enumerate(names):
+        ax, ax_val = axes[k // ncols, 2 * (k % ncols)], axes[k // ncols, 2 * (k % ncols) + 1]
         meta, budget = metas[name], budgets[name]
         hist = meta.get("history", {})
         last = int(meta.get("steps", hist["step"][-1] if hist.get("step") else 0))
         total = int(meta.get("cumulative_steps", last))
         offset = max(0, total - last)
-        right = max(budget, total) * 1.05
-        if offset:
-            ax.axvspan(0, offset, color="0.92", lw=0)
-            ax.text(offset / 2, 0.04, "earlier\nruns", ha="center", va="bottom", color="0.35",
-                    transform=ax.get_xaxis_transform(), clip_on=True)
-        ax.semilogy([s + offset for s in hist.get("step", [])], hist.get("loss", []), color="tab:blue", lw=1.2)
-        ax.axvline(budget, color="tab:red", ls="--", lw=1)
-        left_half = budget < right / 2
-        ax.text(budget, 0.97, f" paper: {budget:,} " if left_half else f"paper: {budget:,} ", color="tab:red",
-                va="top", ha="left" if left_half else "right", transform=ax.get_xaxis_transform(), clip_on=True)
+        xs = [s + offset for s in hist.get("step", [])]
+        ax.semilogy(xs, hist.get("loss", []), color="tab:blue", lw=1.2)
         plain_log_ticks(ax.yaxis)
         ax.set_title(f"{name}: {total:,} steps,\n{_percent(100 * total / budget)} of the paper's")
-        ax.set_xlim(0, right)
-        ax.xaxis.set_major_locator(MaxNLocator(4))
-        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1e3:g}k" if x else "0"))
-        ax.set_xlabel("step (whole chain)")
-        ax.set_ylabel("loss (running mean)", color="tab:blue")
+        ax.set_ylabel("loss (running mean)")
+        _chain_axis(ax, xs, offset, budget)
         val = hist.get("validation", [])
         key = _val_key(val)
         if key:
-            ax2 = ax.twinx()
-            ax2.semilogy([v["step"] + offset for v in val], [v[key] for v in val], "o-", color="tab:orange", ms=3,
-                         lw=1)
-            plain_log_ticks(ax2.yaxis)
-            ax2.set_ylabel(f"held-out {VAL_NAMES[key]}", color="tab:orange")
-            ax2.spines["right"].set_visible(True)
-    for ax in list(axes.flat)[len(names):]:
+            vx = [v["step"] + offset for v in val]
+            ax_val.semilogy(vx, [v[key] for v in val], "o-", color="tab:orange", ms=3, lw=1)
+            plain_log_ticks(ax_val.yaxis)
+            ax_val.set_ylabel(f"held-out {VAL_NAMES[key]}")
+            ax_val.set_title("validation")
+            _chain_axis(ax_val, vx, offset, budget)
+        else:
+            ax_val.set_axis_off()
+            ax_val.text(0.5, 0.5, "no validation\nstored", transform=ax_val.transAxes, ha="center", va="center")
+    for ax in list(axes.flat)[2 * len(names):]:
         ax.set_axis_off()
     return fig
 
 
 def race_bars(metas: dict, ax=None, *, key: str = "std_rho_map"):
-    """The outcome of a race of models trained for the same wall time (:func:`rfmap.compare.race`), one bar per
+    """The outcome of a race of models trained for the same wall time (:func:`rfmap.paper.compare.race`), one bar per
     model: the held-out validation metric ``key`` of its final weights (``meta["final_metrics"]["mean"]``), labelled
     with the steps it made; returns the axes."""
     import matplotlib.pyplot as plt
@@ -185,9 +206,11 @@ def race_bars(metas: dict, ax=None, *, key: str = "std_rho_map"):
 
 
 def validation_vs_time(metas: dict, ax=None, *, key: str | None = None):
-    """The mean held-out validation metric of each model against its training wall time (minutes, cumulative
-    over ``--init`` chains), from the metadata histories (``Surrogate.meta``); ``key`` defaults to the metric the
-    histories share (``std_rho_map`` for densities, ``mean_dd`` for Beltrami maps); log y axis; returns the axes."""
+    """The mean held-out validation metric of each model against the wall time of its last run (minutes), from the
+    metadata histories (``Surrogate.meta``); the minutes of the earlier runs of an ``--init`` chain, whose curves are
+    not stored, are given in the legend, so that every curve starts at zero and the axis spans the data. ``key``
+    defaults to the metric the histories share (``std_rho_map`` for densities, ``mean_dd`` for Beltrami maps); log y
+    axis (linear when the values span less than a factor of 3); returns the axes."""
     import matplotlib.pyplot as plt
 
     if key is None:
@@ -199,14 +222,16 @@ def validation_vs_time(metas: dict, ax=None, *, key: str | None = None):
         val = [v for v in meta.get("history", {}).get("validation", []) if v.get("elapsed") is not None and key in v]
         if not val:
             continue
-        offset = float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) - float(meta.get("wall_time", 0.0))
-        t = [(offset + v["elapsed"]) / 60 for v in val]
-        ax.semilogy(t, [v[key] for v in val], "o-", color=f"C{k}", ms=3, lw=1.2, label=name)
-        if offset > 0:
-            ax.axvline(offset / 60, color=f"C{k}", ls=":", lw=0.8)
+        earlier = float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) - float(meta.get("wall_time", 0.0))
+        label = f"{name} (after {earlier / 60:,.0f} min of earlier runs)" if earlier >= 30 else name
+        ax.semilogy([v["elapsed"] / 60 for v in val], [v[key] for v in val], "o-", color=f"C{k}", ms=3, lw=1.2,
+                    label=label)
     ys = [y for line in ax.get_lines() for y in line.get_ydata()]
     if ys and max(ys) < 3 * min(ys):  # a narrow range reads better on a linear axis
         ax.set_yscale("linear")
-    ax.set(xlabel="training wall time (min)", ylabel=f"held-out mean {VAL_NAMES.get(key, key)}")
+    else:
+        plain_log_ticks(ax.yaxis)
+    ax.set_xlim(left=0)
+    ax.set(xlabel="wall time of the last run (min)", ylabel=f"held-out mean {VAL_NAMES.get(key, key)}")
     ax.legend()
     return ax

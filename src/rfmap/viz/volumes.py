@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..result import setup_pyvista, to_pyvista
+from ..core.result import setup_pyvista, to_pyvista
 from .figures import ColorScale, color_scale, save_figure, style
 
 __all__ = ["CAMERA_3D", "CUT_PLANE", "render_volume", "render_lattice", "volume_rows"]
@@ -30,6 +30,9 @@ def _cut(grid, clip):
     return grid
 
 
+#: the width of the grid lines drawn by :func:`render_lattice` (pixels)
+LATTICE_LINE_WIDTH = 2.0
+
 #: the colour scale of :func:`render_volume` and :func:`render_lattice` (:math:`\tilde\rho` from 0 to 2.5)
 RHO_SCALE = ColorScale(0.0, 2.5)
 
@@ -38,7 +41,7 @@ def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", c
                   window_size=(420, 420), show_edges: bool = False, camera="iso", scale: ColorScale = RHO_SCALE, **kw):
     r"""Render a 3D result off screen and return the image (H, W, 3).
 
-    ``scalars`` names an array of :func:`rfmap.result.to_pyvista` (``"rho"`` per element, ``"density"`` at the
+    ``scalars`` names an array of :func:`rfmap.core.result.to_pyvista` (``"rho"`` per element, ``"density"`` at the
     vertices) or ``"|u - x|"``, the length of the displacement :math:`|u(x) - x|` at the vertices.  ``clip`` cuts
     the volume open along flat faces: ``True`` (or ``"octant"``) removes the octant nearest the camera, ``"plane"``
     the half in front of :data:`CUT_PLANE`.  ``camera`` is a PyVista camera position (``'iso'`` fits the view to the
@@ -78,11 +81,12 @@ def _vertex_rho(result, mapped: bool) -> np.ndarray:
 
 
 def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines: int = 13, window_size=(420, 420),
-                   camera=CAMERA_3D, line_width: float = 2.0, scale: ColorScale = RHO_SCALE, **kw):
+                   camera=CAMERA_3D, scale: ColorScale = RHO_SCALE, carried: bool = False, **kw):
     """Render the grid lines of a 3D grid result on a few horizontal slices (:math:`x_3` = ``slices`` in the
     reference cube) off screen, coloured by :math:`\\tilde\\rho` at the vertices, inside the outline of the unit
     cube; returns the image (H, W, 3).  The original lattice (``mapped=False``) is drawn flat; the mapped one shows
-    where the map moves each slice.  ``scale`` as in :func:`render_volume`."""
+    where the map moves each slice, coloured by the density left on the mapped mesh, or with ``carried`` by the
+    input's normalised density carried along with the vertices.  ``scale`` as in :func:`render_volume`."""
     sc = color_scale(scale, **kw)
     clim, cmap = sc.clim, sc.cmap
     pv = setup_pyvista()
@@ -90,7 +94,7 @@ def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines
     if n**3 != len(result.ref_points):
         raise ValueError("render_lattice needs a result on an N x N x N grid")
     pts = np.asarray(result.mapped_points if mapped else result.ref_points, dtype=np.float64).reshape(n, n, n, 3)
-    rho = _vertex_rho(result, mapped).reshape(n, n, n)
+    rho = _vertex_rho(result, mapped and not carried).reshape(n, n, n)
     idx = sorted({int(round(s * (n - 1))) for s in slices})
     keep = sorted({int(round(t)) for t in np.linspace(0, n - 1, min(lines, n))})
     polys, scal = [], []
@@ -106,7 +110,8 @@ def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines
     mesh.point_data["rho"] = np.concatenate(scal)
     pl = pv.Plotter(off_screen=True, window_size=list(window_size))
     pl.add_mesh(pv.Box(bounds=(0, 1, 0, 1, 0, 1)).outline(), color="gray", line_width=1)
-    pl.add_mesh(mesh, scalars="rho", clim=clim, cmap=cmap, line_width=line_width, show_scalar_bar=False)
+    pl.add_mesh(mesh, scalars="rho", clim=clim, cmap=cmap, line_width=LATTICE_LINE_WIDTH,
+                show_scalar_bar=False)
     pl.camera_position = camera
     pl.background_color = "white"
     img = pl.screenshot(return_img=True)

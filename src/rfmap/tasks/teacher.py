@@ -15,7 +15,7 @@ nearly uniform fields, whose maps hardly move, from dominating the term.
 The targets are computed in the batch workers from the field's values on the regular ``N``-grid
 (:func:`teacher_map`) and carried to the sample's (jittered) vertices by multilinear interpolation of the
 displacement (:func:`teacher_targets`).  With a free boundary the classical map lives in a sea and need not keep the
-domain's area, while the network is asked to (``rfmap.losses.area_penalty``): its target is the classical map scaled
+domain's area, while the network is asked to (``rfmap.tasks.losses.area_penalty``): its target is the classical map scaled
 about its centroid to the domain's measure (equalization is invariant under scaling).
 """
 from __future__ import annotations
@@ -26,9 +26,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from .fields import preprocess_density
-from .mesh import interpolate
-from .solvers import ALIASES
+from ..fields import preprocess_density
+from ..mesh import interpolate
+from ..solvers import ALIASES
 
 __all__ = ["TeacherConfig", "TEACHER_METHODS", "teacher_map", "teacher_targets", "teacher_indices", "teacher_loss"]
 
@@ -91,7 +91,7 @@ def teacher_map(raw_grid: np.ndarray, boundary: str, method: str) -> np.ndarray 
         Mapped vertices in grid order (for ``"free"`` scaled about their centroid to the domain's measure);
         ``None`` when the solver fails or its map folds (the sample then trains without a target).
     """
-    from .solvers import solve_dem  # solvers import torch-free modules only; kept local for worker start-up
+    from ..solvers import solve_dem  # solvers import torch-free modules only; kept local for worker start-up
 
     dens = preprocess_density(np.asarray(raw_grid, dtype=np.float64))
     try:
@@ -103,7 +103,7 @@ def teacher_map(raw_grid: np.ndarray, boundary: str, method: str) -> np.ndarray 
         return None
     mapped = np.asarray(r.mapped_points, dtype=np.float64)
     if boundary == "free":
-        from .geometry import signed_measures
+        from ..geometry import signed_measures
 
         el = torch.as_tensor(r.elements)
         area = float(signed_measures(torch.as_tensor(mapped), el).sum())

@@ -3,18 +3,18 @@ r"""Choosing among saved weights after training: ``rfmap validate``.
 A run on a lent accelerator does not validate while it trains (``rfmap train --no-validate --snapshot-every K``);
 it writes self-contained snapshots (weights with their metadata in the file's header,
 ``Surrogate.save(..., embed=True)``).  Back on a CPU, :func:`score_weights` scores each on the held-out validation
-stream of its own configuration (:func:`rfmap.validation.evaluate` at the configuration's ``val_ns``,
+stream of its own configuration (:func:`rfmap.training.validation.evaluate` at the configuration's ``val_ns``,
 ``val_count`` and ``val_repair``) and :func:`ship_best` writes the best one as a shipped pair ``NAME.safetensors`` +
 ``NAME.json`` whose metadata records the validation, the file it was chosen from and its rivals.  The choice uses
-:func:`rfmap.validation.score`, never the paper's test fields.
+:func:`rfmap.training.validation.score`, never the paper's test fields.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
 
-from .finish import quiet_quality
-from .surrogate import Surrogate
+from ..finish import quiet_quality
+from ..surrogate import Surrogate
 from .validation import evaluate, family_table, score
 
 __all__ = ["Scored", "weight_files", "score_weights", "ship_best", "scores_table"]
@@ -67,7 +67,7 @@ def score_weights(paths, *, count: int | None = None, sizes: tuple[int, ...] | N
                   native: bool | None = None, progress: bool = True) -> list[Scored]:
     """Load and score every weight file of ``paths`` on its configuration's validation set (``count`` fields at grid
     sides ``sizes`` override it; ``native`` True/False overrides whether the network runs on each validation grid
-    itself, :func:`rfmap.validation.evaluate`); all files must solve the same task.  Returns them best first."""
+    itself, :func:`rfmap.training.validation.evaluate`); all files must solve the same task.  Returns them best first."""
     files = weight_files(paths)
     surs = [Surrogate.load(p) for p in files]
     specs = {s.spec for s in surs}

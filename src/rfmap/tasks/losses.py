@@ -13,7 +13,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
-from .geometry import beltrami_coefficient, signed_measures
+from ..geometry import beltrami_coefficient, signed_measures
 
 __all__ = ["Measures", "weighted_mean", "beltrami_loss", "density_loss", "beltrami_energy", "fold_penalty", "area_penalty",
            "element_density", "loss_integrands"]

@@ -13,9 +13,9 @@ import json
 import os
 from dataclasses import asdict, dataclass, field, replace
 
-from .fields import RandomBeltramiConfig, RandomDensityConfig
-from .tasks import LossWeights, TaskSpec
-from .teacher import TeacherConfig
+from ..fields import RandomBeltramiConfig, RandomDensityConfig
+from ..tasks import LossWeights, TaskSpec
+from ..tasks.teacher import TeacherConfig
 
 __all__ = ["TrainConfig", "ModelConfig", "CONFIGS", "PRESETS", "get_config", "config_names", "scale"]
 
@@ -70,11 +70,11 @@ class TrainConfig:
     ``T0``, ``T_mult``).  ``ema`` > 0 keeps an exponential moving average of the weights (Polyak averaging,
     :class:`rfmap.training.averaging.WeightAverage`) with that decay; validation, the checkpoint choice and the shipped file then
     use the averaged weights (0, the default: the weights as trained).  ``teacher`` (density tasks,
-    :class:`rfmap.teacher.TeacherConfig`): a classical solver's map of a share of each batch's fields as a supervised
+    :class:`rfmap.tasks.teacher.TeacherConfig`): a classical solver's map of a share of each batch's fields as a supervised
     target beside the data-free losses (default: none, data-free as in the paper).  ``snapshot_every`` > 0 writes the
     weights every that many steps to ``OUT/snapshots/`` (single self-contained files, scored afterwards by
     ``rfmap validate``).  ``val_repair``: score the held-out maps as
-    ``Surrogate.map`` delivers them (a folded network map regridded or repaired; :func:`rfmap.validation.evaluate`)
+    ``Surrogate.map`` delivers them (a folded network map regridded or repaired; :func:`rfmap.training.validation.evaluate`)
     instead of the raw network output; ``val_native``: run the network on the validation grid itself
     (``Surrogate.map(..., native=True)``) instead of a working grid inside ``n_range``.  A run started with
     ``init`` validates its parent at step 0, so that the parent competes with every checkpoint.
@@ -195,7 +195,7 @@ _HARD3_NOTE = ("The random training densities include narrow peaks and steep ram
 _N48_NOTE = " Trained at N in [48, 96], so that the paper's 51-point grid runs at its own size."
 #: validation of the 2D and 3D full presets: 16 held-out random fields at these grid sides
 _VAL2 = dict(val_sizes=(51, 128), val_count=16)
-#: (3D: scored on the maps as Surrogate.map delivers them, a folded map regridded or repaired; see rfmap.validation)
+#: (3D: scored on the maps as Surrogate.map delivers them, a folded map regridded or repaired; see rfmap.training.validation)
 _VAL3 = dict(val_sizes=(32, 48), val_count=16, val_repair=True)
 _PAPER_2D = dict(steps=12000, batch=8, lr=1e-5, weight_decay=1e-5, schedule="step", step_size=200, gamma=0.5,
                  warmup=0, n_range=(64, 96), clip=1.0)

@@ -22,9 +22,9 @@ import math
 
 import numpy as np
 
-from .mesh import grid_points
-from .finish import quiet_quality
-from .tasks import DensityTask
+from ..mesh import grid_points
+from ..finish import quiet_quality
+from ..tasks import DensityTask
 
 __all__ = ["hard_density", "hard_beltrami", "first_folding", "self_crossing_map"]
 
@@ -106,7 +106,7 @@ def self_crossing_map(n: int, turns: float = 1.3) -> tuple[np.ndarray, np.ndarra
     (ref, mapped, elements)
         Grid vertices (N^3, 3), their images (N^3, 3) and the tetrahedra of :func:`rfmap.mesh.grid_mesh`.
     """
-    from .mesh import grid_mesh
+    from ..mesh import grid_mesh
 
     m = grid_mesh(n, 3)
     x, y, z = m.points.T

@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .mesh import jittered_points
-from .paper.generalization import generalization_table
-from .paper.tables import Table
-from .paper_fields import PAPER_N, TEST_FIELDS
-from .finish import quiet_quality
-from .tasks import DensityTask
+from ..mesh import jittered_points
+from .generalization import generalization_table
+from .tables import Table
+from ..fields.paper import PAPER_N, TEST_FIELDS
+from ..finish import quiet_quality
+from ..tasks import DensityTask
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
            "generalization_tables", "inference_table", "race", "wins"]
@@ -54,7 +54,7 @@ def model_table(surs: dict) -> Table:
     for name, s in surs.items():
         meta = s.meta
         mean = (meta.get("final_metrics") or {}).get("mean") or {}
-        # the selection score (a folded map counted as the identity; rfmap.validation.score) where recorded: a
+        # the selection score (a folded map counted as the identity; rfmap.training.validation.score) where recorded: a
         # plain mean over fields with a folded map is meaningless
         val = mean.get("penalized", mean.get("std_rho_map"))
         t.add(name, s.model.kwargs().get("arch", "unet"),
@@ -168,7 +168,7 @@ def inference_table(surs: dict, ns=(51, 128, 256), field: str = "multi-freq", re
 def race(configs: dict, seconds: float, out_dir, *, progress: bool = False) -> dict:
     """Train each configuration from scratch for the same wall-clock budget (``time_limit = seconds``), one after
     the other on this machine; returns ``{name: Surrogate}`` (their metadata holds the learning curves)."""
-    from .training import train
+    from ..training import train
 
     out = Path(out_dir)
     result = {}

@@ -1,6 +1,6 @@
 r"""Repair of 2D grid maps by the Linear Beltrami Solver on a patch around the folds, tried before the global rebuild.
 
-The rebuild of :mod:`rfmap.repair.lbs` is first tried on a patch (:func:`local_lbs_repair`): the truncated triangles
+The rebuild of :mod:`rfmap.finish.repair.lbs` is first tried on a patch (:func:`local_lbs_repair`): the truncated triangles
 grown by 2, 4, 8, then 16 vertex rings, the patch's rim and the domain boundary held where the map put them.  Folds of a
 network map are usually a few small clusters, so a patch solve costs a fraction of the global one and leaves the rest of
 the map exactly as the network made it.  Widespread folds (over 1 % of the triangles), a free boundary that crosses
@@ -15,9 +15,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import torch
 
-from ..geometry import beltrami_coefficient
-from ..surface import boundary_crossings, boundary_loop
-from ..folds import map_measures
+from ...geometry import beltrami_coefficient
+from ...core.surface import boundary_crossings, boundary_loop
+from ...core.folds import map_measures
 from .lbs import DELTA, cap_mu
 
 __all__ = ["LOCAL_RINGS", "local_lbs_repair"]
@@ -61,8 +61,8 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
     ``LOCAL_MIN_GIVE_UP`` vertices on small grids) ends fold-free, or when a free boundary crosses itself (boundary
     vertices keep their positions in a local solve, so only :func:`lbs_repair` can untangle it).
     """
-    from ..mesh import grid_mesh
-    from ..solvers.lbs import assemble_stiffness, beltrami_matrices
+    from ...mesh import grid_mesh
+    from ...solvers.lbs import assemble_stiffness, beltrami_matrices
 
     mesh = grid_mesh(n, 2)
     el = mesh.elements

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from .geometry import beltrami_from_jacobian
-from .mesh import check_dim, grid_points
+from ..geometry import beltrami_from_jacobian
+from ..mesh import check_dim, grid_points
 
 __all__ = [
     "RandomDensity",
@@ -431,7 +431,7 @@ class RandomMap:
 
     def mu_grid(self, n: int) -> np.ndarray:
         """Exact Beltrami coefficient at the vertices of the ``N``-grid, complex (N**2,)."""
-        from .geometry import beltrami_from_jacobian
+        from ..geometry import beltrami_from_jacobian
 
         return beltrami_from_jacobian(torch.as_tensor(self.jacobian_grid(n))).numpy()
 

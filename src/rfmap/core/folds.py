@@ -3,14 +3,14 @@ r"""Whether a map is folded: the signed element measures, and on a free boundary
 A piecewise-linear map of a simplicial mesh is *folded* when an element has a non-positive signed measure
 (:math:`\det J \le 0`).  On grid meshes the strided measures of :func:`rfmap.geometry.grid_signed_measures` are
 used; a free 2D boundary must be a simple polygon (a bucketed segment-crossing test), a free 3D boundary a surface
-without self-intersection (:func:`rfmap.surface.surface_intersections` on the mesh's boundary triangles).
+without self-intersection (:func:`rfmap.core.surface.surface_intersections` on the mesh's boundary triangles).
 """
 from __future__ import annotations
 
 import numpy as np
 import torch
 
-from .geometry import grid_min_measure, grid_signed_measures, signed_measures
+from ..geometry import grid_min_measure, grid_signed_measures, signed_measures
 from .surface import boundary_crossings, boundary_faces, boundary_loop, grid_surface_intersections, \
     surface_intersections
 
@@ -44,8 +44,8 @@ def fold_free(points: np.ndarray, elements: np.ndarray, *, grid_n: int | None = 
 
 
 def surface_crossing_count(points: np.ndarray, elements: np.ndarray, grid_n: int | None) -> int:
-    """Number of intersecting pairs of boundary triangles of a 3D map (:func:`rfmap.surface.surface_intersections`,
-    on a grid mesh :func:`rfmap.surface.grid_surface_intersections`)."""
+    """Number of intersecting pairs of boundary triangles of a 3D map (:func:`rfmap.core.surface.surface_intersections`,
+    on a grid mesh :func:`rfmap.core.surface.grid_surface_intersections`)."""
     if grid_n:
         return len(grid_surface_intersections(points, grid_n))
     return len(surface_intersections(points, boundary_faces(np.asarray(elements))))

@@ -18,7 +18,7 @@ classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flo
    :math:`u_0` is fold-free, so is the result.  Running the flow on the deformed mesh instead (solving in the
    reference frame for a map :math:`G` with :math:`u_0 \circ G` equalizing) would ask for a transport to the
    non-uniform target :math:`J_{u_0}`, which the density-equalizing flow does not solve.
-3. No flow removes a residual that alternates from element to element (``rfmap.metrics.residual_scales``), and the
+3. No flow removes a residual that alternates from element to element (``rfmap.core.metrics.residual_scales``), and the
    network's map has such a part: its displacement carries pixel-scale ripples of the working grid, which the
    bilinear resampling onto a finer output grid turns into kinks.  ``Surrogate.map(polish=...)`` therefore starts
    the flow from the map of the displacement smoothed on the working grid (:func:`smooth_displacement`, with
@@ -49,8 +49,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from .geometry import grid_element_mean, grid_signed_measures
-from .metrics import density_std
+from ..geometry import grid_element_mean, grid_signed_measures
+from ..core.metrics import density_std
 
 __all__ = ["GUARD", "POOR", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER", "OUTPUT_PASSES",
            "PolishOptions", "polish_map", "polish_tolerance", "smooth_displacement", "smooth_grid_displacement", "smooth_passes"]
@@ -154,7 +154,7 @@ def polish_tolerance(polish) -> float | None:
 
 
 class _Summary:
-    """The density metrics of maps of the ``N``-grid mesh, as :func:`rfmap.metrics.compute_metrics` gives them
+    """The density metrics of maps of the ``N``-grid mesh, as :func:`rfmap.core.metrics.compute_metrics` gives them
     (same kernels), without the 2D Beltrami coefficient that it also computes; the reference measures and
     element populations are computed once."""
 
@@ -180,7 +180,7 @@ class _Summary:
 def _in_box(points: np.ndarray, boundary: str, n: int) -> bool:
     """Whether ``points`` lie in the flow's box: the unit square/cube, or for a free boundary the sea box
     :math:`[-L, 1 + L]^d` (``L``: ``solve_flow``'s default margin of the dimension, whole cells)."""
-    from .solvers.flow import MARGIN
+    from ..solvers.flow import MARGIN
 
     pad = 0.0 if boundary == "square" else max(1, round(MARGIN[points.shape[1]] * (n - 1))) / (n - 1)
     return bool(points.min() >= -pad and points.max() <= 1 + pad)
@@ -249,7 +249,7 @@ def polish_map(result, *, n: int, boundary: str, options: PolishOptions = Polish
         ``min_jacobian``, and with the guard after a warm flow ``"warm"`` and ``"cold"``, the two candidates (each
         with its own flow's ``time``).
     """
-    from .solvers.flow import solve_flow
+    from ..solvers.flow import solve_flow
 
     t0 = time.perf_counter()
     ref, mapped, elements, density = result.ref_points, result.mapped_points, result.elements, result.field

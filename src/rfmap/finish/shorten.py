@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from .geometry import grid_element_mean
-from .metrics import density_std
-from .folds import map_measures, fold_free
+from ..geometry import grid_element_mean
+from ..core.metrics import density_std
+from ..core.folds import map_measures, fold_free
 
 __all__ = ["shorten_map", "SHORTEN_SAMPLES"]
 
@@ -49,7 +49,7 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
         with ``n``, or any simplicial mesh with ``elements``.
     density : ndarray, shape (P,)
         Vertex densities (the population of an element is its mean vertex density times its measure, as in
-        :mod:`rfmap.metrics`).
+        :mod:`rfmap.core.metrics`).
     n : int, optional
         Grid side (the fast strided measures of the grid mesh).
     boundary : {"fixed", "square", "free"}

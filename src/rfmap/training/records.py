@@ -4,7 +4,7 @@ option, trained side by side for the same wall time, and their validation curves
 ``benchmarks/train_study.py`` starts the runs at once (one thread each, so that they share the machine alike),
 and writes their validation histories (:func:`collect`) to ``src/rfmap/data/studies/NAME.json``; the book reads
 them with :func:`load_study` and draws them with :func:`plot_study`.  The score is the validation stream's
-(:func:`rfmap.validation.score`: per field family, Std(rho~_map) relative to Std(rho~_orig), averaged over the
+(:func:`rfmap.training.validation.score`: per field family, Std(rho~_map) relative to Std(rho~_orig), averaged over the
 families), never the paper's test fields.
 """
 from __future__ import annotations
@@ -210,7 +210,7 @@ def map_gap(sur, n: int, count: int = 4, stream: str = "report"):
     solvers lie from each other (a :class:`pandas.DataFrame`, one row per field of the held-out ``stream``).
 
     Columns: Std(rho~) of the input, of the network's raw map and of the diffusion map, and the relative squared
-    distances :math:`\sum_v |a_v - b_v|^2 / \sum_v |b_v - x_v|^2` (the teacher's loss, :mod:`rfmap.teacher`) of
+    distances :math:`\sum_v |a_v - b_v|^2 / \sum_v |b_v - x_v|^2` (the teacher's loss, :mod:`rfmap.tasks.teacher`) of
     the network's map and of the flow map to the diffusion map.  Every density-equalizing map composed with a
     measure-preserving one equalizes as well, so the data-free losses do not single out one map: a distance near 1
     or above means the network found another of them.
@@ -218,10 +218,10 @@ def map_gap(sur, n: int, count: int = 4, stream: str = "report"):
     import numpy as np
     import pandas as pd
 
-    from .inputs import preprocess_density
-    from .mesh import grid_points
-    from .finish import quiet_quality
-    from .teacher import teacher_map
+    from ..inputs import preprocess_density
+    from ..mesh import grid_points
+    from ..finish import quiet_quality
+    from ..tasks.teacher import teacher_map
     from .validation import validation_fields
 
     spec = sur.spec

@@ -2,10 +2,10 @@ r"""The entry point of the repair: a cheap check, then the strategy that fits th
 
 :func:`repair_map` first runs a cheap check (strided grid measures, :func:`rfmap.geometry.grid_signed_measures`, and
 on a free 2D boundary a bucketed segment-crossing test) and returns the map untouched when nothing is folded.
-Otherwise a 2D grid map is rebuilt by the Linear Beltrami Solver (:func:`~rfmap.repair.local.local_lbs_repair`, then
-:func:`~rfmap.repair.lbs.lbs_repair`), any other map, or one the LBS leaves folded, by the displacement scaling
-(:func:`~rfmap.repair.scale.scale_repair`); a 3D free-boundary map whose surface crosses itself is shortened until it
-is embedded (:func:`~rfmap.repair.embedding.surface_repair`).
+Otherwise a 2D grid map is rebuilt by the Linear Beltrami Solver (:func:`~rfmap.finish.repair.local.local_lbs_repair`, then
+:func:`~rfmap.finish.repair.lbs.lbs_repair`), any other map, or one the LBS leaves folded, by the displacement scaling
+(:func:`~rfmap.finish.repair.scale.scale_repair`); a 3D free-boundary map whose surface crosses itself is shortened until it
+is embedded (:func:`~rfmap.finish.repair.embedding.surface_repair`).
 """
 from __future__ import annotations
 
@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from ..geometry import grid_min_measure
-from ..surface import boundary_crossings, boundary_loop
-from ..folds import map_measures, surface_crossing_count, fold_free
+from ...geometry import grid_min_measure
+from ...core.surface import boundary_crossings, boundary_loop
+from ...core.folds import map_measures, surface_crossing_count, fold_free
 from .embedding import surface_repair
 from .lbs import DELTA, lbs_repair
 from .local import local_lbs_repair
@@ -30,7 +30,7 @@ REPAIR_METHODS = ("auto", "local", "lbs", "scale")
 
 
 def _metrics(ref, pts, elements, density, mu_ref) -> dict:
-    from ..metrics import compute_metrics
+    from ...core.metrics import compute_metrics
 
     m = compute_metrics(ref, pts, elements, density=density, mu_ref=mu_ref).to_dict()
     m.pop("time", None)
@@ -60,7 +60,7 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         :func:`lbs_repair` on the whole grid; ``scale``: :func:`scale_repair`.  Any of them ends with
         :func:`scale_repair` if its result is still folded.  ``auto``: ``local`` for 2D grid meshes, ``scale``
         otherwise.  The LBS repairs truncate :math:`|\mu| \le 1 - \delta` with :math:`\delta` =
-        :data:`rfmap.repair.lbs.DELTA`.
+        :data:`rfmap.finish.repair.lbs.DELTA`.
 
     Returns
     -------

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..folds import fold_free
+from ...core.folds import fold_free
 
 __all__ = ["surface_repair"]
 

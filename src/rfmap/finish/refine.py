@@ -17,9 +17,9 @@ from typing import Callable
 import numpy as np
 import torch
 
-from .geometry import beltrami_from_jacobian, edge_matrices, grid_signed_measures, signed_measures
-from .metrics import density_std, element_population
-from .nn.model import boundary_mask
+from ..geometry import beltrami_from_jacobian, edge_matrices, grid_signed_measures, signed_measures
+from ..core.metrics import density_std, element_population
+from ..nn.model import boundary_mask
 
 __all__ = ["golden_section", "refine_alpha", "RefineResult", "RefineConfig", "REFINE", "density_objective",
            "beltrami_objective"]

@@ -17,9 +17,9 @@ from typing import Callable
 import numpy as np
 import torch
 
-from .geometry import beltrami_from_jacobian
-from .inputs import preprocess_density
-from .mesh import check_n, element_centroids, grid_mesh, grid_points
+from ..geometry import beltrami_from_jacobian
+from ..inputs import preprocess_density
+from ..mesh import check_n, element_centroids, grid_mesh, grid_points
 
 __all__ = [
     "DensityField",

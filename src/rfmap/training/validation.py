@@ -32,9 +32,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .tasks import get_task
-from .tasks.density import DENSITY_KINDS
-from .tasks.heldout import STREAMS, VALIDATION_SEED, ValidationField
+from ..tasks import get_task
+from ..tasks.density import DENSITY_KINDS
+from ..tasks.heldout import STREAMS, VALIDATION_SEED, ValidationField
 
 __all__ = ["VALIDATION_SEED", "STREAMS", "ValidationField", "validation_fields", "evaluate", "score", "DENSITY_KINDS",
            "family", "family_table"]
@@ -52,7 +52,7 @@ def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "valid
 
 
 def _held_out_map(sur, field, n: int, repair: bool = False, native: bool = False):
-    from .finish import quiet_quality  # the metrics say how poor a map is; no warning per field
+    from ..finish import quiet_quality  # the metrics say how poor a map is; no warning per field
 
     with quiet_quality():
         return sur.map(field, n, repair=repair, native=native)

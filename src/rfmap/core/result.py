@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from .geometry import beltrami_coefficient, signed_measures
+from ..geometry import beltrami_coefficient, signed_measures
 from .metrics import MapMetrics, compute_metrics, element_population
 
 __all__ = ["MapResult", "save_npz_atomic", "load_result", "to_pyvista", "setup_pyvista", "DENSITY_FIELD_KINDS"]
@@ -91,7 +91,7 @@ class MapResult:
         return (rho / rho.mean()).numpy()
 
     def metrics(self, *, exact_points=None, mu_ref=None) -> MapMetrics:
-        """Metrics in the paper's conventions (see :func:`rfmap.metrics.compute_metrics`)."""
+        """Metrics in the paper's conventions (see :func:`rfmap.core.metrics.compute_metrics`)."""
         density = self.field.reshape(-1) if self.kind in DENSITY_FIELD_KINDS else None
         return compute_metrics(self.ref_points, self.mapped_points, self.elements, density=density,
                                exact_points=exact_points, mu_ref=mu_ref, time=self.time)

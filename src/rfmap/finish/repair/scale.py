@@ -39,8 +39,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ..mesh import grid_points
-from ..surface import boundary_crossings, boundary_loop
+from ...mesh import grid_points
+from ...core.surface import boundary_crossings, boundary_loop
 
 __all__ = ["scale_repair", "vertex_classes", "ETA", "LOCAL_START_RINGS"]
 

@@ -13,7 +13,7 @@ the boundary polygon is simple (:func:`untangle_boundary`).  Where the map was n
 :math:`|\mu| \le 1 - \delta` the coefficient is unchanged (flipped triangles get :math:`\mu = 0`, see
 :func:`cap_mu`), and the LBS reproduces a piecewise-linear map from its own coefficient, so the rebuilt map stays
 close to the input.  The discrete LBS has no bijectivity theorem (its stiffness weights may be negative), so its
-output is checked and, if still folded, handed to the displacement scaling (:mod:`rfmap.repair.scale`).
+output is checked and, if still folded, handed to the displacement scaling (:mod:`rfmap.finish.repair.scale`).
 
 References
 ----------
@@ -25,9 +25,9 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..geometry import beltrami_coefficient
-from ..surface import boundary_crossings, boundary_loop
-from ..folds import map_measures
+from ...geometry import beltrami_coefficient
+from ...core.surface import boundary_crossings, boundary_loop
+from ...core.folds import map_measures
 
 __all__ = ["DELTA", "cap_mu", "untangle_boundary", "lbs_repair"]
 
@@ -111,8 +111,8 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
     -------
     (points, capped) : the rebuilt map (N**2, 2) and the mask of the triangles whose :math:`\mu` was truncated.
     """
-    from ..mesh import grid_mesh
-    from ..solvers.lbs import solve_lbs
+    from ...mesh import grid_mesh
+    from ...solvers.lbs import solve_lbs
 
     mesh = grid_mesh(n, 2)
     ref_t, el_t = torch.as_tensor(mesh.points), torch.as_tensor(mesh.elements)

@@ -1,0 +1,7 @@
+"""The core below everything else: the metrics of a map, the result every map computation returns, fold checks of
+meshes and surfaces, and where the network runs.
+
+:mod:`~rfmap.core.metrics` (the paper's measures of a map), :mod:`~rfmap.core.result`
+(:class:`~rfmap.core.result.MapResult` and its exports), :mod:`~rfmap.core.folds` and :mod:`~rfmap.core.surface`
+(folded elements, crossing boundaries), :mod:`~rfmap.core.device` (CPU or GPU, threads).
+"""
