@@ -40,7 +40,7 @@ fail() { echo "device_train: error: $*" >&2; exit 2; }
 # every check before anything is written
 "$PY" - "$MINUTES" "$PRESET" "${CONFIGS[@]}" <<'EOF' || exit 2
 import sys
-from rfmap.config import get_config
+from rfmap.training.config import get_config
 minutes, preset, *names = sys.argv[1:]
 try:
     m = float(minutes)
