@@ -160,7 +160,7 @@ def _footnotes(scored: list[dict]) -> tuple[dict[str, str], list[str]]:
 CRITERION = (
     "**Criterion.** A case is *met* when the paper's method, run by this project, is at most the paper's value: "
     "the network evaluated on the requested grid itself, then the paper's weight refinement, and nothing else "
-    "(`Surrogate.map(field, n, refine=True, work_n=n, repair=False)`). Every metric scored is one where lower is "
+    "(`Surrogate.map(field, n, native=True, refine=True, repair=False)`). Every metric scored is one where lower is "
     "better. Beside it: the map the project delivers with its options on (the network on its working grid, "
     "averaged over the symmetries of the square or cube, refined, and repaired or shortened where needed: "
     "`Surrogate.map(field, n, refine=True, symmetrize=True)`), and the fastest classical solver of the project on the "

@@ -17,7 +17,7 @@ __all__ = ["refinement_study", "refinement_summary", "refinement_markdown"]
 
 @quiet_quality()
 def refinement_study(sur, fields, n: int, title: str = "") -> Table:
-    r"""Per field, the network on the ``n``-grid itself (``work_n=n``, no repair) with :math:`\alpha = 1` and refined:
+    r"""Per field, the network on the ``n``-grid itself (``native=True``, no repair) with :math:`\alpha = 1` and refined:
     the table's metric (the task's ``score_metric``: ``std_rho_map`` of a density model, ``mean_dd`` of a Beltrami
     model, :meth:`rfmap.tasks.Task.test_record`), the refinement
     objective at :math:`\alpha = 1` and at the refined :math:`\alpha`, and :math:`\alpha`.
@@ -39,10 +39,9 @@ def refinement_study(sur, fields, n: int, title: str = "") -> Table:
     metric = task.score_metric
     t = Table("tab:refinement", title or f"Weight refinement on the {sur.name} test fields, N = {n}",
               ["metric", "objective", "alpha"])
-    w = max(int(n), int(sur.model.min_size))
     for f in fields:
-        raw = sur.map(f, n, work_n=w, repair=False)
-        ref = sur.map(f, n, work_n=w, repair=False, refine=True)
+        raw = sur.map(f, n, native=True, repair=False)
+        ref = sur.map(f, n, native=True, repair=False, refine=True)
         for label, res in (("α = 1", raw), ("refined", ref)):
             values = task.test_record(res, f)
             objective = ref.info["refine_objective_start" if label == "α = 1" else "refine_objective"]

@@ -7,7 +7,7 @@ lower is better.  For each case this module puts four values side by side:
     the published value (``data/paper_tables.json``);
 ``native`` -- the paper's method
     the network run on the requested grid itself, then the paper's weight refinement (Sec. 4.3), nothing else:
-    ``Surrogate.map(field, n, refine=True, work_n=n, repair=False)``;
+    ``Surrogate.map(field, n, native=True, refine=True, repair=False)``;
 ``delivered``
     what the project returns by default with its options on: the network on its working grid (the requested side
     clipped to the training range, the displacement interpolated), averaged over the symmetries of the square or
@@ -46,8 +46,8 @@ __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "f
 #: The four columns of a comparison, in order.
 METHODS = ("paper", "native", "delivered", "classical")
 
-#: Keywords of :meth:`rfmap.Surrogate.map` for the paper's method (``work_n`` is the requested side).
-PAPER_METHOD = {"refine": True, "repair": False}
+#: Keywords of :meth:`rfmap.Surrogate.map` for the paper's method: the network on the requested grid, refined.
+PAPER_METHOD = {"native": True, "refine": True, "repair": False}
 #: Keywords of :meth:`rfmap.Surrogate.map` for the delivered map.
 DELIVERED = {"refine": True, "symmetrize": True}
 
@@ -359,16 +359,10 @@ def _network_values(res: MapResult, values: dict) -> dict:
             "alpha": info.get("alpha")}
 
 
-def _native_side(sur, n: int) -> int:
-    """The paper's method runs the network on the requested side (at least the model's smallest grid)."""
-    return max(int(n), int(sur.model.min_size))
-
-
 def _surrogate_maps(sur, field_, n: int) -> tuple[MapResult, MapResult]:
     """The paper's method and the delivered map of one field, timed (:func:`timed`)."""
-    w = _native_side(sur, n)
-    native = timed(lambda: sur.map(field_, n, work_n=w, **PAPER_METHOD),
-                   warm=lambda: sur.map(field_, n, work_n=w, repair=False))
+    native = timed(lambda: sur.map(field_, n, **PAPER_METHOD),
+                   warm=lambda: sur.map(field_, n, native=True, repair=False))
     delivered = timed(lambda: sur.map(field_, n, **DELIVERED), warm=lambda: sur.map(field_, n, repair=False))
     return native, delivered
 
