@@ -70,3 +70,12 @@ def test_chapter_ends_with_try_it(nb):
     assert cells[-1]["cell_type"] == "markdown" and last.startswith(TRY_IT), f"{nb.name} ends without '{TRY_IT}'"
     items = re.findall(r"^\d+\. ", last, re.M)
     assert 1 <= len(items) <= 3, f"{nb.name}: {len(items)} exercises"
+
+
+@pytest.mark.parametrize("nb", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_code_cells_fit_88_columns(nb):
+    """The book shows every code cell; a line longer than 88 characters scrolls sideways in the text column."""
+    cells = json.loads(nb.read_text(encoding="utf-8"))["cells"]
+    long = [f"cell {c.get('id')}: {ln[:60]!r}..." for c in cells if c["cell_type"] == "code"
+            for ln in "".join(c["source"]).splitlines() if len(ln) > 88]
+    assert not long, f"{nb.name}: code lines longer than 88 characters:\n" + "\n".join(long)
