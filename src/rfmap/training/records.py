@@ -17,7 +17,7 @@ __all__ = ["STUDIES_DIR", "collect", "load_study", "study_names", "study_table",
            "training_budget", "budget_table", "teacher_of", "to_markdown", "example_field",
            "example_text", "map_gap"]
 
-STUDIES_DIR = Path(__file__).resolve().parent / "data" / "studies"
+STUDIES_DIR = Path(__file__).resolve().parent.parent / "data" / "studies"
 
 
 def _curve(log_path: Path) -> dict:
