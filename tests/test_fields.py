@@ -21,16 +21,14 @@ from rfmap.fields import (
     check_mu,
     field_names,
     get_field,
-    jittered_points,
     preprocess_density,
     random_beltrami,
     random_boundary_map,
     random_density,
     sample_density,
-    vertex_weights,
 )
 from rfmap.geometry import beltrami_coefficient, signed_measures
-from rfmap.mesh import grid_mesh, grid_points
+from rfmap.mesh import grid_mesh, grid_points, jittered_points, vertex_weights
 from rfmap.core.metrics import compute_metrics
 
 # Std(rho~_orig) of the test densities as published in the paper's tables (tab:population_test,

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.finish import Draft, FinishOptions, InfoView, MapReport, NetworkReport, RegridReport, finish_map, judge, \
-    regrid, repair, shorten
+from rfmap.finish import Draft, FinishOptions, InfoView, MapReport, NetworkReport, RegridReport, finish_map
+from rfmap.finish.stages import judge, regrid, repair, shorten
 from rfmap.mesh import grid_mesh
 from rfmap.nn import MultiResUNet
 from rfmap.fields.paper import sample_density

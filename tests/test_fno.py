@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap import compare
+from rfmap.paper import compare
 from rfmap.training.config import ModelConfig, get_config
 from rfmap.experiments import Table
 from rfmap.nn import FNONet, MultiResUNet, build_model, fno_available, from_tensor_state, tensor_state

@@ -27,7 +27,7 @@ import rfmap
 #: Layer of every module, lowest first.  A module may import from its own layer or a lower one.
 LAYERS: dict[str, int] = {
     # core
-    "rfmap._version": 0, "rfmap.core.device": 0, "rfmap.geometry": 0, "rfmap.mesh": 0, "rfmap.inputs": 0, "rfmap.fields.paper": 0,
+    "rfmap._version": 0, "rfmap.core": 0, "rfmap.core.device": 0, "rfmap.geometry": 0, "rfmap.mesh": 0, "rfmap.inputs": 0, "rfmap.fields.paper": 0,
     "rfmap.fields.random": 0, "rfmap.fields": 0, "rfmap.core.metrics": 0, "rfmap.core.result": 0,
     "rfmap.core.surface": 0, "rfmap.core.folds": 0,
     # classical solvers, the network, the losses

@@ -2,7 +2,7 @@
 import pytest
 import torch
 
-from rfmap import losses as L
+from rfmap.tasks import losses as L
 from rfmap.nn.model import apply_displacement
 from rfmap.tasks import LossWeights, TaskSpec, sample_batch, task_loss
 

@@ -10,7 +10,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rfmap import losses as L
+from rfmap.tasks import losses as L
 from rfmap.fields import preprocess_density
 from rfmap.geometry import signed_measures
 from rfmap.mesh import grid_mesh

@@ -131,7 +131,7 @@ def _centroids(n: int) -> np.ndarray:
 def field_outputs() -> dict[str, np.ndarray]:
     """Test densities (preprocessed and raw), exact Beltrami coefficients and maps, weights and jitter."""
     import rfmap.fields as F
-    from rfmap.mesh import grid_mesh, grid_points
+    from rfmap.mesh import grid_mesh, grid_points, jittered_points, vertex_weights
 
     out = {}
     for name in DENSITIES_2D + DENSITIES_3D:
@@ -143,9 +143,9 @@ def field_outputs() -> dict[str, np.ndarray]:
         out[f"map/{name}"] = F.BELTRAMI_MAPS[name](grid_points(N2, 2))
     for dim, n in ((2, N2), (3, N3)):
         mesh = grid_mesh(n, dim)
-        out[f"weights/{dim}d"] = F.vertex_weights(mesh.points, mesh.elements)
+        out[f"weights/{dim}d"] = vertex_weights(mesh.points, mesh.elements)
         grad = np.linalg.norm(mesh.points - 0.5, axis=1)
-        out[f"jitter/{dim}d"] = F.jittered_points(n, dim, np.random.default_rng(7), grad_magnitude=grad)
+        out[f"jitter/{dim}d"] = jittered_points(n, dim, np.random.default_rng(7), grad_magnitude=grad)
     return out
 
 

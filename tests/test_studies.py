@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from rfmap import studies as S
+from rfmap.training import records as S
 
 
 def _log(path, records):

@@ -11,7 +11,8 @@ import pytest
 import torch
 
 import rfmap.surrogate as S
-from rfmap.fields import get_field, vertex_weights
+from rfmap.fields import get_field
+from rfmap.mesh import vertex_weights
 from rfmap.mesh import element_measures, grid_points
 from rfmap.nn import MultiResUNet
 from rfmap.surrogate import Surrogate

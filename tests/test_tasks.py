@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.fields import vertex_weights
+from rfmap.mesh import vertex_weights
 from rfmap.mesh import grid_mesh, grid_points
 from rfmap.tasks import TaskSpec, encode, grid_elements, kinds, sample_batch
 

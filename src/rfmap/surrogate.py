@@ -28,7 +28,8 @@ from ._version import __version__
 from .mesh import check_n, grid_mesh, grid_points, interpolate, triangulate
 from .core.device import resolve_device
 from .finish import Draft, FinishOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
-    poor_map_message, refine, regrid
+    poor_map_message
+from .finish.stages import refine, regrid
 from .finish.quality import QUALITY_MARGIN, PoorMapWarning, density_quality, quality_message, quiet_quality
 from .finish.polish import GUARD
 from .nn.model import MultiResUNet, apply_displacement

@@ -4,18 +4,22 @@ A map is predicted (:meth:`rfmap.Surrogate.map`: field, displacement, map of the
 (:mod:`rfmap.solvers`); then a sequence of stages, each a function from a :class:`Draft` (the map and the report
 of what was done to it) to the next, finishes it:
 
-* :func:`regrid` -- a folded network map tried on coarser working grids;
-* :func:`refine` -- weight refinement of the stretching vector (paper Sec. 4.3);
-* :func:`repair` -- the map made fold-free;
-* :func:`polish` -- a density map finished by the flow-based solver;
-* :func:`judge` -- whether a density map is more equal than its input (:mod:`~rfmap.finish.quality`);
-* :func:`shorten` -- if not, shortened towards the identity until it is.
+* :func:`~rfmap.finish.stages.regrid` -- a folded network map tried on coarser working grids;
+* :func:`~rfmap.finish.stages.refine` -- weight refinement of the stretching vector (paper Sec. 4.3);
+* :func:`~rfmap.finish.stages.repair` -- the map made fold-free;
+* :func:`~rfmap.finish.stages.polish` -- a density map finished by the flow-based solver;
+* :func:`~rfmap.finish.stages.judge` -- whether a density map is more equal than its input
+  (:mod:`~rfmap.finish.quality`);
+* :func:`~rfmap.finish.stages.shorten` -- if not, shortened towards the identity until it is.
 
 :func:`finish` composes them as :meth:`rfmap.Surrogate.map` does, with :class:`FinishOptions`; :func:`finish_map`
 applies them to a classical map.  The report is typed (:class:`MapReport`) and the delivered map's ``info`` is its
 read-only view (:class:`InfoView`), with the keys that ``info`` has always had.  Maps of query points go back to
 their working grid (:mod:`~rfmap.finish.query`).
 
+The stages are functions of :mod:`~rfmap.finish.stages`; each calls the module that does its work:
+:mod:`~rfmap.finish.refine` (the search for :math:`\alpha`), :mod:`~rfmap.finish.repair` (one strategy per module),
+:mod:`~rfmap.finish.polish` (the flow-based solver from the network's map) and :mod:`~rfmap.finish.shorten`.
 Modules: :mod:`~rfmap.finish.report`, :mod:`~rfmap.finish.draft`, :mod:`~rfmap.finish.stages`,
 :mod:`~rfmap.finish.query`, :mod:`~rfmap.finish.quality`, :mod:`~rfmap.finish.pipeline`.
 """
@@ -26,9 +30,7 @@ from .pipeline import FinishOptions, finish, finish_map
 from .quality import QUALITY_MARGIN, PoorMapWarning, density_quality, poor_map_message, quality_message, \
     quiet_quality
 from .report import InfoView, MapReport, NetworkReport, RefineReport, RegridReport
-from .stages import judge, polish, refine, regrid, repair, shorten
 
 __all__ = ["Draft", "Prediction", "WorkingGridMap", "displacement_at", "FinishOptions", "finish", "finish_map",
            "QUALITY_MARGIN", "PoorMapWarning", "density_quality", "poor_map_message", "quality_message",
-           "quiet_quality", "InfoView", "MapReport", "NetworkReport", "RefineReport", "RegridReport", "judge",
-           "polish", "refine", "regrid", "repair", "shorten"]
+           "quiet_quality", "InfoView", "MapReport", "NetworkReport", "RefineReport", "RegridReport"]
