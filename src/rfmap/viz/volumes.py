@@ -7,7 +7,7 @@ import numpy as np
 from ..core.result import setup_pyvista, to_pyvista
 from .figures import ColorScale, color_scale, save_figure, style
 
-__all__ = ["CAMERA_3D", "CUT_PLANE", "render_volume", "render_lattice", "volume_rows"]
+__all__ = ["CAMERA_3D", "CUT_PLANE", "render_volume", "render_lattice", "render_slices", "volume_rows"]
 
 
 #: one camera for every 3D panel (position, focal point, view-up), so that panels can be compared
@@ -119,29 +119,48 @@ def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines
     return img
 
 
+def render_slices(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), window_size=(420, 420),
+                  camera=CAMERA_3D, scale: ColorScale = RHO_SCALE, **kw):
+    r"""Filled horizontal slices (:math:`x_3` = ``slices``) through a 3D result's mesh, every piece coloured by the
+    :math:`\tilde\rho` of the tetrahedron it cuts: on the original mesh (``mapped=False``) the input's normalised
+    density, on the mapped mesh the density the map leaves there, one colour where the map equalizes; inside the
+    outline of the unit cube, off screen; returns the image (H, W, 3).  ``scale`` as in :func:`render_volume`."""
+    sc = color_scale(scale, **kw)
+    pv = setup_pyvista()
+    grid = to_pyvista(result, mapped=mapped)
+    pl = pv.Plotter(off_screen=True, window_size=list(window_size))
+    pl.add_mesh(pv.Box(bounds=(0, 1, 0, 1, 0, 1)).outline(), color="gray", line_width=1)
+    for z in slices:
+        cut = grid.slice(normal="z", origin=(0.5, 0.5, float(z)))
+        if cut.n_cells:
+            pl.add_mesh(cut, scalars="rho", preference="cell", clim=sc.clim, cmap=sc.cmap, show_scalar_bar=False)
+    pl.camera_position = camera
+    pl.background_color = "white"
+    img = pl.screenshot(return_img=True)
+    pl.close()
+    return img
+
+
 def volume_rows(results: dict, labels, fig_label: str, *, clim=(0.0, 2.5)):
-    r"""The paper's 3D figures, one row per result (keyed by ``labels``): the original lattice and the mapped one on
-    three slices (:func:`render_lattice`), coloured by :math:`\tilde\rho` (of the input on the original mesh, on
-    the mapped mesh for the mapped lattice), and the mapped volume cut by a plane (:func:`render_volume`,
-    ``clip="plane"``), coloured by the length of the displacement :math:`|u(x) - x|` on a scale of its own per row;
-    one camera (:data:`CAMERA_3D`), a colour bar for every colour scale.  Saved under ``fig_label`` (7.2 inches
-    wide, readable in the book's text column); returns the figure."""
+    r"""The paper's 3D figures, one row per result (keyed by ``labels``): filled slices through the original mesh
+    coloured by the input's :math:`\tilde\rho` and through the mapped mesh coloured by the :math:`\tilde\rho` the
+    map leaves (:func:`render_slices`: one colour where the map equalizes), and the grid itself on the same three
+    slices as the map moves it, coloured by the input's density carried along (:func:`render_lattice`,
+    ``carried=True``); one camera (:data:`CAMERA_3D`) and one colour scale with its colour bar.  Saved under
+    ``fig_label`` (7.2 inches wide, readable in the book's text column); returns the figure."""
     import matplotlib.pyplot as plt
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
     labels = list(labels)
-    titles = ["original lattice", "mapped lattice", "mapped volume, cut"]
+    titles = [r"input: $\tilde\rho$ on three slices", r"mapped: $\tilde\rho$ left", "the map: the grid moved"]
     with style():
         fig, axes = plt.subplots(len(labels), 3, figsize=(7.2, 2.25 * len(labels) + 0.9), layout="constrained",
                                  squeeze=False)
         for row, key in zip(axes, labels):
             r = results[key]
-            dlim = (0.0, float(np.linalg.norm(np.asarray(r.mapped_points) - np.asarray(r.ref_points), axis=1).max())
-                    or 1.0)
-            imgs = [render_lattice(r, mapped=False, clim=clim), render_lattice(r, mapped=True, clim=clim),
-                    render_volume(r, mapped=True, scalars="|u - x|", clim=dlim, cmap="magma", clip="plane",
-                                  camera=CAMERA_3D)]
+            imgs = [render_slices(r, mapped=False, clim=clim), render_slices(r, mapped=True, clim=clim),
+                    render_lattice(r, mapped=True, carried=True, clim=clim)]
             for ax, img in zip(row, imgs):
                 ax.imshow(img)
                 ax.set_xticks([])
@@ -149,11 +168,9 @@ def volume_rows(results: dict, labels, fig_label: str, *, clim=(0.0, 2.5)):
                 for side in ax.spines.values():
                     side.set_visible(False)
             row[0].set_ylabel(str(key))
-            fig.colorbar(ScalarMappable(Normalize(*dlim), "magma"), ax=row[2], location="right", shrink=0.8,
-                         label=r"$|u(x) - x|$")
         for ax, t in zip(axes[0], titles):
             ax.set_title(t)
-        fig.colorbar(ScalarMappable(Normalize(*clim), "viridis"), ax=axes[:, :2], location="bottom", shrink=0.7,
-                     aspect=30, label=r"$\tilde\rho$ (lattices)")
+        fig.colorbar(ScalarMappable(Normalize(*clim), "viridis"), ax=axes, location="bottom", shrink=0.7,
+                     aspect=30, label=r"$\tilde\rho$ (the grid: the input's, carried along)")
         save_figure(fig, fig_label)
     return fig
