@@ -94,12 +94,55 @@ def test_regions_under_the_judged_share_are_raised_within_a_budget(counties):
     assert pass_weights(few, 1e-4)[2] == pytest.approx(1e-4 * few.sum())
 
 
-def test_county_map_cartogram_passes_reach_the_tolerance(counties):
+def _written(path):
+    import json
+
+    doc = json.loads(path.read_text())
+    return doc, np.array([shape(f["geometry"]) for f in doc["features"]], dtype=object)
+
+
+def test_county_map_cartogram_passes_reach_the_tolerance(counties, tmp_path):
+    """Valid in the unit square and in the file written: scaled to metres, rounding made three counties cross
+    themselves by a speck (written as invalid while the status said "ok")."""
     c = cartogram(counties, "value", output="projected")
     assert min(c.info["max_error"]) <= 0.01  # the passes (before any sliver overlap is cut)
     m = c.metrics()
     assert m.n_invalid == 0 and m.n_overlapping == 0
     assert m.mean_error < 0.005
+    c.save(tmp_path / "counties.geojson")
+    doc, geoms = _written(tmp_path / "counties.geojson")
+    assert doc["rfmap"]["status"] == "ok" and doc["rfmap"]["coordinates"] == "projected"
+    assert shapely.is_valid(geoms).all(), np.flatnonzero(~shapely.is_valid(geoms))
+    # the repair moves no area: every written region holds its share of the total as the unit square's does
+    area = shapely.area(geoms)
+    assert np.allclose(area / area.sum(), c.areas / c.areas.sum(), rtol=1e-6, atol=0)
+
+
+def test_specks_of_rounding_are_repaired_and_what_is_written_invalid_fails(tmp_path):
+    from rfmap.cartogram_output import SPECK, repair_specks
+
+    # a square whose top edge passes a hair under one of its own vertices: a ring that crosses itself by a speck
+    eps = 1e-9
+    speck = shapely.Polygon([(0, 0), (1, 0), (1, 1), (0.5, 1), (0.5 + eps, 1 + eps), (0.5 + 2 * eps, 1 - eps),
+                             (0, 1)])
+    bowtie = shapely.Polygon([(0, 0), (1, 1), (1, 0), (0, 1)])  # two lobes of equal area: no speck to drop
+    geoms = np.array([speck, bowtie, shapely.box(2, 0, 3, 1)], dtype=object)
+    assert not shapely.is_valid(geoms[:2]).any()
+    out, fixed = repair_specks(geoms)
+    assert fixed == [0] and shapely.is_valid(out[0]) and out[2] is geoms[2]
+    assert abs(shapely.area(out[0]) - 1.0) <= SPECK
+    assert not shapely.is_valid(out[1])  # a real fold stays, for problems() to report
+    # a cartogram whose written polygons are invalid says so, in its file too
+    fc = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "id": k, "properties": {"v": 1.0},
+         "geometry": shapely.geometry.mapping(shapely.box(k, 0, k + 1, 1))} for k in range(3)]}
+    c = cartogram(fc, "v", n=32, iterations=1)
+    assert not c.problems()
+    c.geometries = c.geometries.copy()
+    c.geometries[1] = bowtie
+    assert any("invalid region(s) in the written coordinates" in p and "id 1" in p for p in c.problems())
+    c.save(tmp_path / "bad.geojson")
+    assert _written(tmp_path / "bad.geojson")[0]["rfmap"]["status"] == "failed"
 
 
 # ----------------------------------------------------------------------------------------------- the world

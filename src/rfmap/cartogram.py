@@ -60,7 +60,7 @@ import numpy as np
 from .cartogram_metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, judged, pass_weights, \
     repair_folds, repair_overlaps
 from .mesh import check_grid_memory, check_n
-from .cartogram_output import OUTPUTS, choose_output, crs_member, mapped_features, write_geojson
+from .cartogram_output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
 from .projection import PlanarFrame
 from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edge, \
     _shapely, density_grid, fit_outlines, montreal_election, read_regions, world_countries
@@ -263,10 +263,13 @@ class Cartogram:
             out.append(f"the largest area error {m.max_error:.4f} is above the tolerance {self.tol:g} after "
                        f"{self.info['iterations']} pass(es)" +
                        (": the passes stopped at the time limit" if self.info.get("timed_out") else ""))
-        if m.n_invalid:
-            bad = np.flatnonzero(~_shapely().is_valid(self.frame.equal_area(self.mapped)))
-            names = ", ".join(_feature_name(self.input_features[i], int(i)) for i in bad[:10])
-            out.append(f"{m.n_invalid} invalid region(s): {names}{', ...' if bad.size > 10 else ''}")
+        valid = _shapely().is_valid  # in the plane of the metrics, and as written (output_geometries)
+        for bad, where in ((~valid(self.frame.equal_area(self.mapped)), ""),
+                           (~valid(self.geometries), f" in the written coordinates ({self.output})")):
+            names = ", ".join(_feature_name(self.input_features[i], int(i)) for i in np.flatnonzero(bad)[:10])
+            if bad.any():
+                out.append(f"{bad.sum()} invalid region(s){where}: {names}{', ...' if bad.sum() > 10 else ''}")
+                break
         if m.n_overlapping:
             out.append(f"{m.n_overlapping} pair(s) of regions overlap (the largest by {m.max_overlap:.2g} of the "
                        f"total area)")
@@ -410,6 +413,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         passes run, ``info["kept"]`` the pass whose polygons are returned (1-based), ``info["timed_out"]`` whether
         ``timeout`` stopped the passes, ``info["repaired"]`` the
         regions whose numerically tiny fold was repaired (:func:`rfmap.cartogram_metrics.repair_folds`),
+        ``info["repaired_output"]`` those that rounding made cross themselves in the output's coordinates, repaired
+        there (:func:`rfmap.cartogram_output.output_geometries`),
         ``info["overlaps_cut"]`` the pairs ``(cut, kept)`` of regions whose sliver of overlap was cut from the first
         (:func:`rfmap.cartogram_metrics.repair_overlaps`).
 
@@ -470,7 +475,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
     elapsed = time.perf_counter() - t0
     output, info["beyond_domain"] = choose_output(frame, mapped, output)
-    out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
+    out, info["repaired_output"] = output_geometries(frame, mapped, output)  # valid as written, too
     return Cartogram(input_features=features, geometries=out, regions=regions, mapped=mapped, values=values,
                      floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time, info=info,
                      output=output, tol=float(tol), min_share=float(min_share))

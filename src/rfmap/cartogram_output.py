@@ -7,6 +7,13 @@ at the domain's edge.  By default (``output="auto"``) such a cartogram is writte
 and says so: the GeoJSON's ``"crs"`` member (GeoJSON 2008's named CRS, which RFC 7946 dropped but GDAL still reads)
 holds the plane's PROJ definition, and the ``"rfmap"`` member its ``coordinates`` and the regions that left the
 domain (:func:`choose_output`).
+
+The polygons are checked valid in the unit square, where the passes run.  Scaled to metres, coordinates are rounded
+again, and a vertex a few units of the last place from an edge can cross it; turned back into degrees, the straight
+edges between the same vertices are other curves on the Earth, and an edge that passed a vertex by a hair may cross
+it.  Either way a ring crosses itself by a speck.  :func:`output_geometries` checks the polygons in the coordinates
+that are written and repairs such specks (:func:`repair_specks`); what it cannot repair stays invalid, for
+:meth:`rfmap.cartogram.Cartogram.problems` to report.
 """
 from __future__ import annotations
 
@@ -14,11 +21,15 @@ import json
 
 import numpy as np
 
-__all__ = ["OUTPUTS", "choose_output", "crs_member", "mapped_features", "write_geojson"]
+__all__ = ["OUTPUTS", "SPECK", "choose_output", "crs_member", "mapped_features", "output_geometries", "repair_specks",
+           "write_geojson"]
 
 #: The coordinates of :func:`rfmap.cartogram.cartogram`'s output: ``"auto"`` (the input's, unless a region left
 #: their domain, then the projection's plane), the input's, or the projection's plane.
 OUTPUTS = ("auto", "input", "projected")
+#: The largest change of a region's area (a share of it) by which :func:`repair_specks` makes it valid, and the
+#: share of its area under which a polygon part of the repair is dropped as a speck
+SPECK = 1e-6
 
 
 def choose_output(frame, mapped: np.ndarray, output: str) -> tuple[str, list[int]]:
@@ -29,6 +40,38 @@ def choose_output(frame, mapped: np.ndarray, output: str) -> tuple[str, list[int
         return output, []
     far = np.flatnonzero(frame.beyond_domain(mapped)).tolist() if frame.projection.geographic else []
     return ("projected" if far else "input"), far
+
+
+def output_geometries(frame, mapped: np.ndarray, output: str) -> tuple[np.ndarray, list[int]]:
+    """The unit-square polygons ``mapped`` (R,) in the coordinates written (``"input"``: the projection inverted,
+    ``"projected"``: its plane), the regions that rounding there made invalid repaired (:func:`repair_specks`).
+    Returns the polygons and the indices of those repaired."""
+    out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
+    return repair_specks(out)
+
+
+def repair_specks(geoms: np.ndarray, *, max_change: float = SPECK) -> tuple[np.ndarray, list[int]]:
+    r"""Invalid polygons (R,) made valid where the fix moves at most ``max_change`` of their area: each is replaced by
+    the polygon parts of ``shapely.make_valid`` that hold more than ``max_change`` of its area (the speck where a
+    ring crossed itself is dropped).  Returns the polygons and the indices of those replaced; the others are left
+    as they were."""
+    import shapely
+
+    bad = np.flatnonzero(~shapely.is_valid(geoms))
+    out, fixed = geoms.copy(), []
+    for i in bad:
+        parts = shapely.get_parts(shapely.make_valid(geoms[i]))
+        parts = parts[np.isin(shapely.get_type_id(parts), (3, 6))]
+        parts = shapely.get_parts(parts)
+        area = abs(shapely.area(geoms[i]))
+        keep = parts[shapely.area(parts) > max_change * area]
+        if not keep.size:
+            continue
+        g = keep[0] if keep.size == 1 else shapely.multipolygons(keep)
+        if shapely.is_valid(g) and abs(shapely.area(g) - area) <= max_change * area:
+            out[i] = g
+            fixed.append(int(i))
+    return out, fixed
 
 
 def crs_member(frame, output: str) -> dict | None:
