@@ -21,18 +21,23 @@ def _cartogram_outputs(args) -> list[str]:
         raise CLIError("--out is required (or --make-csv to write a CSV template)")
     else:
         outs = [args.out]
-    for opt, suffix in (("png", (".png",)), ("svg", (".svg",)), ("gif", (".gif", ".mp4"))):
+    for opt, suffix in (("png", (".png",)), ("svg", (".svg",)), ("gif", (".gif", ".mp4")), ("html", (".html",))):
         path = getattr(args, opt)
         if path and not path.lower().endswith(suffix):
             raise CLIError(f"--{opt} must name a {' or '.join(suffix)} file, got {path!r}")
         if path and not args.make_csv:
             outs.append(path)
+    if args.html and not args.make_csv:
+        import importlib.util
+
+        if importlib.util.find_spec("plotly") is None:
+            raise CLIError("--html needs plotly: pip install 'rfmap[geo]'")
     if args.projected and args.lonlat:
         raise CLIError("--projected and --lonlat exclude each other")
     if args.max_passes < 1:
         raise CLIError(f"--max-passes must be at least 1, got {args.max_passes}")
-    if (args.color or args.label) and not args.data and not (args.png or args.svg):
-        raise CLIError("--color and --label are for the figures: add --png or --svg")
+    if (args.color or args.label) and not args.data and not (args.png or args.svg or args.html):
+        raise CLIError("--color and --label are for the figures: add --png, --svg or --html")
     for path in outs:
         folder = os.path.dirname(os.path.abspath(path))
         if not os.path.isdir(folder):
@@ -95,6 +100,7 @@ def cmd_cartogram(args) -> int:
         raise CLIError(str(e)) from e
     carto.save(args.out)
     _cartogram_figures(args, carto)
+    _cartogram_page(args, [carto])
     names = [carto.input_features[i].get("id", f"#{i}") for i in carto.floored]
     print(f"wrote {args.out}: {len(carto.input_features)} regions by {args.value!r}, {carto.method}, N = {carto.n}, "
           f"{carto.info['iterations']} pass(es), {carto.time:.2f} s; {carto.metrics()}")
@@ -133,13 +139,37 @@ def _cartogram_series(args, collection) -> int:
 
         matplotlib.use("Agg")
         save_animation(series, args.gif)
+    _cartogram_page(args, [f.carto for f in series.frames], [f.key for f in series.frames])
     for f in series.frames:
         print(f"{f.key}: {f.passes} pass(es), {f.seconds:.2f} s, largest area error {f.max_error:.4f}")
-    print(f"wrote {args.out} (the last frame, in the projection's plane)" + (f" and {args.gif}" if args.gif else ""))
+    also = [p for p in (args.gif, args.html) if p]
+    print(f"wrote {args.out} (the last frame, in the projection's plane)" + (f" and {', '.join(also)}" if also else ""))
     problems = series.problems()
     for p in problems:
         print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
     return 1 if problems else 0
+
+
+def _cartogram_page(args, cartos: list, keys: list | None = None) -> None:
+    """``--html``: an interactive page (:mod:`rfmap.cartogram_html`), a slider through the frames of a series;
+    hover labels from ``--label``, colours from ``--color``."""
+    if not args.html:
+        return
+    from .cartogram_html import HtmlOptions, page_figure, write_page
+
+    props = [f.get("properties") or {} for f in cartos[0].features]
+    labels = [p.get(args.label) for p in props] if args.label else None
+    colors = None
+    if args.color:
+        from matplotlib.colors import to_hex
+
+        from .viz.cartograms import region_colours
+
+        colors = [to_hex(c) for c in region_colours([p.get(args.color) for p in props])[0]]
+    opts = HtmlOptions(title=args.value, labels=labels, colors=colors)
+    write_page(page_figure(cartos, keys or [args.value], opts), args.html)
+    if not args.series:
+        print(f"wrote {args.html}: an interactive page (hover a region for its value and area error)")
 
 
 def _cartogram_figures(args, carto) -> None:
@@ -228,4 +258,8 @@ def add_cartogram_parser(sub) -> None:
     s.add_argument("--png", default=None,
                    help="also draw the input and the cartogram side by side, with an area legend (.png)")
     s.add_argument("--svg", default=None, help="the same figure as SVG (.svg)")
+    s.add_argument("--html", default=None, metavar="OUT.html",
+                   help="also write a self-contained interactive page (plotly, in the 'geo' extra): hover a region "
+                        "for its name (or --label), value and area error; with --series, a slider and a play button "
+                        "step through the frames")
     s.set_defaults(func=cmd_cartogram)
