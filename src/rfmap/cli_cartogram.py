@@ -56,7 +56,7 @@ def _cartogram_input(args):
 
     if not args.id:
         raise CLIError("--data needs --id COLUMN (the CSV column that holds the regions' ids)")
-    extra_cols = [c for c in (args.color, args.label) if c]
+    extra_cols = list(dict.fromkeys(c for c in (args.color, args.label, args.inset) if c))
     table = read_csv_table(args.data, args.id, extra_cols)
     extra = {c: {rid: row[c] for rid, row in table.items()} for c in extra_cols}
     collection = args.input
@@ -87,9 +87,13 @@ def cmd_cartogram(args) -> int:
         raise CLIError("--gif needs --series")
     from .cartogram import cartogram
 
+    if args.inset and args.series:
+        raise CLIError("--inset draws one cartogram: it does not go with --series")
     collection = _cartogram_input(args)
     if args.series:
         return _cartogram_series(args, collection)
+    if args.inset:
+        return _cartogram_insets(args, collection)
     try:
         carto = cartogram(collection, args.value, method=args.method, n=args.n, tol=args.tol, model=args.model,
                           max_iterations=args.max_passes, projection=args.projection,
@@ -145,6 +149,31 @@ def _cartogram_series(args, collection) -> int:
     also = [p for p in (args.gif, args.html) if p]
     print(f"wrote {args.out} (the last frame, in the projection's plane)" + (f" and {', '.join(also)}" if also else ""))
     problems = series.problems()
+    for p in problems:
+        print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
+    return 1 if problems else 0
+
+
+def _cartogram_insets(args, collection) -> int:
+    """``--inset COLUMN``: every inset a cartogram of its own, placed beside the main map on one scale
+    (:func:`rfmap.cartogram_insets.cartogram_insets`); written in the placed frames."""
+    from .cartogram_insets import cartogram_insets
+
+    if args.projected or args.lonlat:
+        raise CLIError("--inset writes the insets' placed frames: --projected and --lonlat do not apply")
+    try:
+        carto = cartogram_insets(collection, args.value, args.inset, method=args.method, n=args.n, tol=args.tol,
+                                 model=args.model, max_iterations=args.max_passes, projection=args.projection,
+                                 points=args.points, timeout=args.timeout)
+    except ImportError as e:
+        raise CLIError(str(e)) from e
+    carto.save(args.out)
+    _cartogram_figures(args, carto)
+    _cartogram_page(args, [carto])
+    sides = ", ".join(f"{side} {idx.size}" for side, idx in carto.groups.items())
+    print(f"wrote {args.out}: {len(carto.input_features)} regions by {args.value!r} in {len(carto.groups)} inset(s) "
+          f"({sides}), {carto.method}, N = {carto.n}, {carto.time:.2f} s; {carto.metrics()}")
+    problems = carto.problems()
     for p in problems:
         print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
     return 1 if problems else 0
@@ -225,7 +254,12 @@ def add_cartogram_parser(sub) -> None:
                         "programs do), dropped, or an error")
     d.add_argument("--color", default=None, metavar="COLUMN",
                    help="colour the figures by this column (colours, or categories); default: neighbours differ")
-    d.add_argument("--label", default=None, metavar="COLUMN", help="label the regions of the figures by this column")
+    d.add_argument("--label", default=None, metavar="COLUMN",
+                   help="label the regions of the figures (and the --html page's hover) by this column")
+    d.add_argument("--inset", default=None, metavar="COLUMN",
+                   help="the column (or, without --data, the property) naming each region's inset, as cartogram-cpp's "
+                        "'Inset': C or empty (the main map), L, R, T or B (left, right, top, bottom of it); each inset "
+                        "is a cartogram in its own frame, put on the main map's scale beside it")
     d.add_argument("--make-csv", default=None, metavar="OUT.csv",
                    help="only write a CSV template: one row per region with its --id (default: the feature id) and "
                         "an empty --value column")
