@@ -79,3 +79,24 @@ def test_code_cells_fit_88_columns(nb):
     long = [f"cell {c.get('id')}: {ln[:60]!r}..." for c in cells if c["cell_type"] == "code"
             for ln in "".join(c["source"]).splitlines() if len(ln) > 88]
     assert not long, f"{nb.name}: code lines longer than 88 characters:\n" + "\n".join(long)
+
+
+def test_glossary_defines_the_words_of_the_stages_and_measures():
+    """The glossary (book/glossary.md, in the table of contents) defines every word the chapters use for the stages
+    of a map and its measures; a chapter links a term with {term}`...`, and Sphinx fails the build (-W) on a term
+    the glossary lacks."""
+    text = (ROOT / "book" / "glossary.md").read_text(encoding="utf-8")
+    terms = set()
+    for block in re.findall(r"^```\{glossary\}\n(.*?)^```", text, re.S | re.M):
+        terms |= {ln.strip() for ln in block.splitlines() if ln.strip() and not ln.startswith(" ")}
+    required = {"raw map", "refined map", "repaired map", "shortened map", "delivered map", "working grid", "native",
+                "Std(ρ̃)", "α", "Kuhn tetrahedra", "flow solver", "the paper's method"}
+    assert required <= terms, f"missing from the glossary: {sorted(required - terms)}"
+    assert "file: book/glossary" in (ROOT / "_toc.yml").read_text(encoding="utf-8")
+    used = set()
+    for nb in NOTEBOOKS:
+        for cell in json.loads(nb.read_text(encoding="utf-8"))["cells"]:
+            if cell["cell_type"] == "markdown":
+                used |= {m.split("<")[-1].rstrip(">").strip()
+                         for m in re.findall(r"\{term\}`([^`]+)`", "".join(cell["source"]))}
+    assert used and used <= terms, f"terms linked but not defined: {sorted(used - terms)}"
