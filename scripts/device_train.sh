@@ -72,7 +72,7 @@ for cfg in "${CONFIGS[@]}"; do
     ARGS=${TRAIN_ARGS:-$(default_args "$cfg")}
     echo "== $cfg: $PER s on $DEVICE, $ARGS"
     # shellcheck disable=SC2086  # TRAIN_ARGS is a list of options
-    "$PY" -m rfmap.train --config "$cfg" --preset "$PRESET" --device "$DEVICE" --threads "$THREADS" \
+    "$PY" -m rfmap.training --config "$cfg" --preset "$PRESET" --device "$DEVICE" --threads "$THREADS" \
         --workers "$WORKERS" --time-limit "$PER" --steps 1000000 --no-validate --snapshot-every "$SNAPSHOT_EVERY" \
         --out "$WORK/$cfg" --no-progress $ARGS || echo "== $cfg: training failed (exit $?)"
     mkdir -p "$OUT/$cfg"

@@ -57,7 +57,7 @@ def make_tiny_models(data_dir: Path = TESTS / "data") -> list[Path]:
     """Train and write each network of :data:`TINY_STEPS` that ``data_dir`` lacks; returns the files written."""
     import torch
 
-    import rfmap.train as T
+    import rfmap.training as T
     from rfmap.training.config import get_config
     from rfmap.surrogate import Surrogate
 

@@ -1,4 +1,4 @@
-"""The training engine (:mod:`rfmap.train`, :mod:`rfmap.training.validation`, :mod:`rfmap.core.device`): reproducibility, batch
+"""The training engine (:mod:`rfmap.training`, :mod:`rfmap.training.validation`, :mod:`rfmap.core.device`): reproducibility, batch
 workers, warm restarts with lineage, the held-out validation and checkpoint choice, devices, the paper presets, and
 bad input on the command line (one line, exit 2, nothing written)."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import torch
 
-import rfmap.train as T
+import rfmap.training as T
 import rfmap.training.state as TS
 from rfmap.cli import main as cli_main
 from rfmap.training.config import CONFIGS, get_config
@@ -88,7 +88,7 @@ def test_batch_workers_exit_when_the_training_process_is_killed(tmp_path):
     psutil = pytest.importorskip("psutil")
     out = tmp_path / "run"
     # batches of 64 fields: larger than a pipe buffer, so a batch left in a worker's queue cannot be flushed
-    cmd = [sys.executable, "-m", "rfmap.train", "--config", "deq2d-square", "--preset", "ci", "--steps", "100000",
+    cmd = [sys.executable, "-m", "rfmap.training", "--config", "deq2d-square", "--preset", "ci", "--steps", "100000",
            "--batch", "64", "--workers", "2", "--threads", "1", "--out", str(out), "--no-progress"]
     # without the test session's thread pins (conftest), as a user's shell would start it
     env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS",
@@ -428,7 +428,7 @@ def test_weight_average_follows_its_recursion_and_is_what_ships(tmp_path):
     """WeightAverage against the recursion written out by hand, then a run with --ema: the shipped weights are the
     average (not the weights as trained), the command and config record it, and a resumed run restores it."""
     from rfmap.surrogate import Surrogate
-    from rfmap.train import WeightAverage
+    from rfmap.training import WeightAverage
 
     lin = torch.nn.Linear(3, 2)
     avg = WeightAverage(lin, 0.9)

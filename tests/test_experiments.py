@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.experiments import Table, beltrami_table, format_value, paper_table, population_table, resolution_table
+from rfmap.paper.reproduce import beltrami_table, population_table, resolution_table
+from rfmap.paper.tables import Table, format_value, paper_table
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
 
@@ -116,7 +117,7 @@ def test_population_table_with_symmetrized_rows_and_summary():
     """``symmetrize`` adds the symmetrized network's rows, their speed-up against the same classical run and the
     summary's symmetrized entries; the best with symmetrization is never above the best without."""
     from rfmap import load_or_train
-    from rfmap.experiments import SYM, SYM_REF, population_summary
+    from rfmap.paper.reproduce import SYM, SYM_REF, population_summary
 
     sur = load_or_train("deq2d-square", "ci")
     fields = ["sin-cos", "ring"]
@@ -172,7 +173,7 @@ def test_generalization_table_compares_with_the_classical_solver_on_unseen_field
     """Rows per kind of field and for all of them; the classical solver equalizes the unseen densities far below
     their input variation, and the report set is not the validation set that chooses checkpoints."""
     from rfmap import load_or_train
-    from rfmap.experiments import generalization_table
+    from rfmap.paper.generalization import generalization_table
     from rfmap.training.validation import validation_fields
 
     sur = load_or_train("deq2d-square", "ci")
@@ -191,7 +192,7 @@ def test_generalization_table_compares_with_the_classical_solver_on_unseen_field
 def test_displacement_demand_of_an_identity_network():
     """An untrained network (zero head) is the identity map: it reaches nowhere and leaves all the non-uniformity,
     while the classical map moves points and leaves little; the ramps ask for larger moves than the training draws."""
-    from rfmap.experiments import displacement_demand
+    from rfmap.paper.generalization import displacement_demand
     from rfmap.tasks import TaskSpec
 
     sur = Surrogate.untrained(TaskSpec("density", 2, "square"), base=4, depth=2, name="deq2d-square", n_range=[9, 17])
@@ -211,7 +212,7 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     """The recipe table states each model's training fields, fold penalty, learning rate, budget and recorded
     validation exactly as its metadata holds them."""
     from rfmap.training.config import get_config
-    from rfmap.experiments import recipe_table, training_fields_text
+    from rfmap.paper.recipes import recipe_table, training_fields_text
 
     cfg = get_config("deq2d-square", "full").with_overrides(lr=2e-4).to_dict()
     cfg["density_field"]["ramp_scale"] = 2.5
@@ -256,7 +257,7 @@ def test_distortion_table_puts_models_side_by_side_on_unseen_fields():
     """The identity network leaves every field as it came (Std of the input, |mu| = 0, ratio 0 against the reference
     model); the reference's own ratio is exactly 1; a Beltrami or 3D model is refused."""
     from rfmap import load_or_train
-    from rfmap.experiments import distortion_table
+    from rfmap.paper.generalization import distortion_table
     from rfmap.tasks import TaskSpec
 
     ci = load_or_train("deq2d-square", "ci")

@@ -12,7 +12,7 @@ import torch
 
 from rfmap.paper import compare
 from rfmap.training.config import ModelConfig, get_config
-from rfmap.experiments import Table
+from rfmap.paper.tables import Table
 from rfmap.nn import FNONet, MultiResUNet, build_model, fno_available, from_tensor_state, tensor_state
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
@@ -103,7 +103,7 @@ def test_fno_surrogate_save_load_is_exact(tmp_path):
 
 
 def test_fno_trains_and_init_checks_the_architecture(tmp_path):
-    from rfmap.train import train
+    from rfmap.training import train
 
     cfg = get_config("fno-deq2d-square", "ci").with_overrides(steps=4, val_every=2, ckpt_every=2)
     sur = train(cfg, tmp_path / "fno", progress=False)

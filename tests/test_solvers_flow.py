@@ -282,7 +282,7 @@ def test_sea_blend_tames_a_dense_coast():
 def test_sea_blend_study_rows():
     """One row per report field with its kind; the ramp against the coast stalls with the diffusion solver's sea,
     the default flow redoes it with a blended sea and ends far lower; no folds."""
-    from rfmap.experiments import sea_blend_study
+    from rfmap.paper.flow_studies import sea_blend_study
 
     rows = sea_blend_study(2, 33, count=4)
     assert [r["kind"] for r in rows] == ["smooth", "steps", "peak", "ramp"]
@@ -302,7 +302,7 @@ def test_stalled_pass_is_redone_with_a_blended_sea_then_blurred():
     (``info["sea_fallback"]``), which does not stall here and ends far more equal than the second remedy, the pass
     redone with a blurred density (``stall_blend=0``: recorded in ``stall_blurs``); a square boundary does not stall;
     with neither remedy the stall is an error at once."""
-    from rfmap.experiments import benchmark_fields
+    from rfmap.paper.benchmarks import benchmark_fields
 
     dens = dict(benchmark_fields(2, 51, paper=False, random=4))["random-3"]
     blurred = solve_flow(dens, boundary="free", stall_blend=0.0)
@@ -349,7 +349,7 @@ def test_keep_best_false_returns_the_last_pass():
 
 
 def test_residual_floor_rows():
-    from rfmap.experiments import residual_floor
+    from rfmap.paper.flow_studies import residual_floor
 
     rows = residual_floor(ns=(17, 33))
     assert [(r["n"], r["method"]) for r in rows] == [(n, m) for n in (17, 33)
@@ -364,7 +364,7 @@ def test_residual_floor_rows():
 def test_flow_convergence_rows():
     """One row per field and flow setting, labelled; the flow's map is fold-free and near diffusion's Std under
     every setting; a tighter step tolerance takes more steps; the diffusion run is shared by a field's rows."""
-    from rfmap.experiments import FLOW_SETTINGS, flow_convergence
+    from rfmap.paper.flow_studies import CONVERGENCE_SETTINGS as FLOW_SETTINGS, flow_convergence
 
     rows = flow_convergence(2, 17, "square", random=1)
     labels = ["default", "rtol=0.02", "rtol=0.005", "refine=4"]
@@ -389,7 +389,7 @@ def test_warm_start_residuals_rows():
     density to the raster, and end at the same Std; all flows are far below the input's variation; a Beltrami model
     is refused."""
     from rfmap import Surrogate
-    from rfmap.experiments import warm_start_residuals
+    from rfmap.paper.flow_studies import warm_start_residuals
     from rfmap.fields.paper import sample_density
 
     rows = warm_start_residuals(Surrogate.pretrained("deq2d-square"), "sin-cos", (17, 33))
@@ -468,7 +468,7 @@ def test_polish_warm_start_finishes_the_network_map():
 def test_compare_methods_rows_and_summary():
     """The hybrid's run gives two rows, the guarded hybrid and its warm flow alone (timed without the cold flow);
     the guarded hybrid is never worse than the flow, and the summary's ratios are against the best classical row."""
-    from rfmap.experiments import summarize
+    from rfmap.paper.benchmarks import summarize
     from rfmap.finish.polish import UNGUARDED
     from rfmap.paper.benchmarks import compare_methods
     from rfmap.surrogate import Surrogate
@@ -779,7 +779,7 @@ def test_velocity_is_the_same_on_any_number_of_threads(d, n):
 def test_time_to_accuracy_warms_every_method_up_once(monkeypatch):
     """With ``warmup`` every method runs once more, on the first field, and that run leaves no row."""
     import rfmap.paper.benchmarks as hybrid
-    from rfmap.experiments import time_to_accuracy
+    from rfmap.paper.benchmarks import time_to_accuracy
 
     calls = []
     real = hybrid.compare_methods

@@ -121,7 +121,7 @@ def test_draw_samples_with_a_teacher():
 
 def test_training_with_a_teacher_records_it(tmp_path):
     cfg = get_config("dem3d-cube", "ci").with_overrides(teacher=TeacherConfig("flow", share=1.0), snapshot_every=5)
-    from rfmap.train import train
+    from rfmap.training import train
 
     sur = train(cfg, tmp_path, progress=False)
     logs = [json.loads(x) for x in (tmp_path / "log.jsonl").read_text().splitlines()]

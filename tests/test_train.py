@@ -1,4 +1,4 @@
-"""Tests of training (:mod:`rfmap.train`) at ``ci`` scale: the loss goes down, outputs and metadata are written,
+"""Tests of training (:mod:`rfmap.training`) at ``ci`` scale: the loss goes down, outputs and metadata are written,
 resuming from a checkpoint reproduces an uninterrupted run exactly, and two data-parallel processes train the same
 model as one process with twice the batch."""
 from __future__ import annotations
@@ -13,7 +13,7 @@ import pytest
 import torch
 from safetensors.torch import load_file
 
-import rfmap.train as T
+import rfmap.training as T
 import rfmap.training.state as TS
 from rfmap.training.config import get_config
 from rfmap.nn import build_model
@@ -251,7 +251,7 @@ def test_two_process_data_parallel_equals_single_process_with_twice_the_batch(tm
     common = ["--config", "deq2d-square", "--preset", "ci", "--steps", "5", "--no-progress", "--threads", "1"]
     env = {**os.environ, "OMP_NUM_THREADS": "1"}
     env.pop("WORLD_SIZE", None)
-    proc = subprocess.run([str(torchrun), "--standalone", "--nproc_per_node=2", "-m", "rfmap.train", *common,
+    proc = subprocess.run([str(torchrun), "--standalone", "--nproc_per_node=2", "-m", "rfmap.training", *common,
                            "--batch", "1", "--out", str(tmp_path / "ddp")], env=env, capture_output=True,
                           text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr[-3000:]

@@ -5,7 +5,7 @@ One concept per module: :mod:`~rfmap.training.data` draws the batches (sample ``
 :mod:`~rfmap.training.averaging` keeps an exponential moving average of the weights (``--ema``);
 :mod:`~rfmap.training.state` holds the run's state, its checkpoint and the lineage of warm starts (``--init``);
 :mod:`~rfmap.training.loop` runs the steps, validates, chooses and writes the shipped weights; and
-:mod:`~rfmap.training.cli` is ``rfmap train`` (also ``python -m rfmap.train``).
+:mod:`~rfmap.training.cli` is ``rfmap train`` (also ``python -m rfmap.training``).
 """
 from ..core.device import resolve_device
 from .averaging import WeightAverage

@@ -1,7 +1,7 @@
-"""``rfmap train`` (also ``python -m rfmap.train``): the command line of training.
+"""``rfmap train`` (also ``python -m rfmap.training``): the command line of training.
 
 ``rfmap train --config NAME [--preset ci|full|paper] [--device auto|cpu|cuda] [--init MODEL|FILE] [--resume]`` trains
-the named configuration of :mod:`rfmap.training.config`.  Data-parallel: ``torchrun --nproc_per_node=K -m rfmap.train --config
+the named configuration of :mod:`rfmap.training.config`.  Data-parallel: ``torchrun --nproc_per_node=K -m rfmap.training --config
 NAME ...`` runs K processes (gloo on CPU, NCCL on GPU); K processes with batch ``B`` train the same model as one
 process with batch ``K*B``.
 """
@@ -217,7 +217,7 @@ def _command_line(args) -> str:
 
 
 def main(argv=None) -> int:
-    """``python -m rfmap.train`` (same options as ``rfmap train``); returns the exit status (2 on bad input)."""
+    """``python -m rfmap.training`` (same options as ``rfmap train``); returns the exit status (2 on bad input)."""
     args = build_parser().parse_args(argv)
     try:
         run(args)

@@ -186,7 +186,7 @@ def to_markdown(df) -> str:
 
 def example_field(values: dict, fields, suffix: str = "") -> dict:
     """The example a sentence quotes from a population summary (``values`` of
-    ``rfmap.experiments.population_summary``): the field where the best surrogate value (``{f}_best{suffix}``) comes
+    ``rfmap.paper.reproduce.population_summary``): the field where the best surrogate value (``{f}_best{suffix}``) comes
     closest to the paper's (``{f}_std_paper``), relative to it, so that it is a field that meets the paper whenever
     one does.  Returns ``field``, ``best``, ``paper``, ``ratio`` and ``verb`` ("meets" or "misses")."""
     ratio = {f: values[f"{f}_best{suffix}"] / values[f"{f}_std_paper"] for f in fields}
