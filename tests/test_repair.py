@@ -11,8 +11,10 @@ import torch
 from rfmap.geometry import beltrami_coefficient
 from rfmap.mesh import element_measures, grid_mesh
 from rfmap.nn import MultiResUNet
-from rfmap.finish.repair import (DELTA, LOCAL_RINGS, boundary_crossings, boundary_loop, cap_mu, grid_min_measure,
-                          lbs_repair, local_lbs_repair, repair_map, scale_repair, vertex_classes)
+from rfmap.core.surface import boundary_crossings, boundary_loop
+from rfmap.finish.repair import (DELTA, LOCAL_RINGS, cap_mu, lbs_repair, local_lbs_repair, repair_map, scale_repair,
+                                 vertex_classes)
+from rfmap.geometry import grid_min_measure
 from rfmap.fields.hard import hard_beltrami, hard_density
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
@@ -422,7 +424,7 @@ def test_colored_sweeps_recover_a_fold_free_target():
 
 def test_det_coefficients_match_direct_determinants():
     """sum_k c_k s^k equals det(E_x + s E_d) at any s (2D and 3D, random elements)."""
-    from rfmap.finish.repair import _det, _det_coefficients, _edges
+    from rfmap.finish.repair.scale import _det, _det_coefficients, _edges
     rng = np.random.default_rng(3)
     for d in (2, 3):
         pts, disp = rng.normal(size=(40, d)), rng.normal(size=(40, d))
@@ -437,7 +439,7 @@ def test_det_coefficients_match_direct_determinants():
 def test_bernstein_test_is_sufficient_and_tighter_than_the_coefficient_bound():
     """All-positive Bernstein coefficients imply positivity on [0, 1] (checked on a dense sampling); the cubic
     1 - 1.5 s + s^2 + 0 s^3 (minimum 0.4375) passes, though its power coefficients fail the triangle bound."""
-    from rfmap.finish.repair import _bernstein
+    from rfmap.finish.repair.scale import _bernstein
     rng = np.random.default_rng(4)
     c = rng.normal(size=(2000, 4)) + np.array([1.5, 0, 0, 0])
     s = np.linspace(0, 1, 401)
@@ -452,7 +454,8 @@ def test_scale_repair_cost_follows_the_folded_region():
     """A single folded tetrahedron on a 3D N = 24 grid: the repair is local (a local start, few vertices
     shortened, everything else exactly as the input) and fold-free."""
     from rfmap.mesh import grid_mesh
-    from rfmap.finish.repair import _measures, scale_repair
+    from rfmap.core.folds import map_measures as _measures
+    from rfmap.finish.repair import scale_repair
     n = 24
     mesh = grid_mesh(n, 3)
     pts = mesh.points + 0.002 * np.sin(7 * mesh.points[:, [1, 2, 0]])

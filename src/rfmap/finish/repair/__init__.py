@@ -28,12 +28,6 @@ from .lbs import DELTA, cap_mu, lbs_repair, untangle_boundary
 from .local import LOCAL_RINGS, local_lbs_repair
 from .scale import ETA, LOCAL_START_RINGS, scale_repair, vertex_classes
 
-# names that were importable from the single module rfmap.finish.repair, kept importable here
-from ...geometry import grid_min_measure  # noqa: F401, E402
-from ...core.surface import boundary_crossings, boundary_loop  # noqa: F401, E402
-from ...core.folds import map_measures as _measures  # noqa: F401, E402
-from .scale import _bernstein, _det, _det_coefficients, _edges  # noqa: F401, E402
-
 __all__ = ["repair_map", "fold_free", "cap_mu", "untangle_boundary", "scale_repair", "surface_repair", "lbs_repair",
            "local_lbs_repair", "shorten_map", "vertex_classes", "DELTA", "SHORTEN_SAMPLES", "REPAIR_METHODS", "ETA",
            "LOCAL_RINGS", "LOCAL_START_RINGS"]
