@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.finish import Draft, FinishOptions, InfoView, MapReport, NetworkReport, RegridReport, finish_map
+from rfmap.finish import Draft, MapOptions, InfoView, MapReport, NetworkReport, RegridReport, finish_map
 from rfmap.finish.stages import judge, regrid, repair, shorten
 from rfmap.mesh import grid_mesh
 from rfmap.nn import MultiResUNet
@@ -69,7 +69,7 @@ def test_a_classical_map_keeps_its_extras_and_gains_the_reports(dem):
 def test_refinement_of_a_classical_map_stretches_its_displacement(dem):
     """A diffusion map whose displacement was stretched by 1.6 is brought back by alpha of about 1 / 1.6."""
     over = replace(dem, mapped_points=dem.ref_points + 1.6 * dem.displacement)
-    out = finish_map(over, FinishOptions(refine=True, repair=False))
+    out = finish_map(over, MapOptions(refine=True, repair=False))
     assert out.info["refine_objective"] <= out.info["refine_objective_start"]
     np.testing.assert_allclose(out.info["alpha"], 1 / 1.6, atol=0.02)  # measured 0.007
     np.testing.assert_allclose(out.displacement, np.array(out.info["alpha"]) * over.displacement, atol=1e-12)
@@ -77,12 +77,12 @@ def test_refinement_of_a_classical_map_stretches_its_displacement(dem):
 
 
 def test_polish_of_a_classical_map(dem):
-    out = finish_map(dem, FinishOptions(polish=True))
+    out = finish_map(dem, MapOptions(polish=True))
     p = out.info["polish"]
     assert p["start"] in ("warm", "cold") and "smooth_passes" not in p and "quality" not in out.info
     assert out.metrics().n_flipped == 0 and out.info["method"] == "diffusion"
     with pytest.raises(ValueError, match="polish must be"):
-        FinishOptions(polish=-1.0)
+        MapOptions(polish=-1.0)
 
 
 def test_repair_judge_and_shorten_one_by_one():

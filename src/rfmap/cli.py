@@ -154,8 +154,7 @@ def cmd_map(args) -> int:
     if args.no_guard and polish is False:
         raise CLIError("--no-guard only applies with --polish")
     with quiet_quality():  # a poor map is reported below, in one line
-        res = sur.map(field, args.n, points, refine=args.refine, native=args.native, repair=not args.no_repair,
-                      polish=polish, guard=not args.no_guard, symmetrize=args.symmetrize)
+        res = sur.map(field, args.n, points, map_options(args, polish))
     res.save(args.out)
     if args.vtk:
         res.to_vtk(args.vtk)
@@ -181,6 +180,14 @@ def cmd_map(args) -> int:
             print(f"guard: warm flow {st['warm']['std_rho_map']:.4g} ({st['warm']['time']:.3f} s), cold flow "
                   f"{st['cold']['std_rho_map']:.4g} ({st['cold']['time']:.3f} s); kept the {p['kept']} map")
     return 0
+
+
+def map_options(args, polish) -> "MapOptions":
+    """The :class:`rfmap.finish.MapOptions` of ``rfmap map``'s arguments (the options of every way to map a field)."""
+    from .finish import MapOptions
+
+    return MapOptions(refine=args.refine, native=args.native, repair=not args.no_repair, polish=polish,
+                      guard=not args.no_guard, symmetrize=args.symmetrize)
 
 
 def regrid_summary(report: dict) -> str:

@@ -27,11 +27,10 @@ import torch
 from ._version import __version__
 from .mesh import check_n, grid_mesh, grid_points, interpolate, triangulate
 from .core.device import resolve_device
-from .finish import Draft, FinishOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
+from .finish import Draft, MapOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
     poor_map_message
 from .finish.stages import refine, regrid
 from .finish.quality import QUALITY_MARGIN, PoorMapWarning, density_quality, quality_message, quiet_quality
-from .finish.polish import GUARD
 from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .fields.paper import PAPER_N, BeltramiMap, DensityField, get_field
@@ -39,7 +38,7 @@ from .core.result import MapResult
 from .nn.symmetry import resolve_symmetry, symmetrized_displacement
 from .tasks import TaskSpec, encode
 
-__all__ = ["Surrogate", "MapOptions", "models", "PoorMapWarning", "QUALITY_MARGIN", "quiet_quality",
+__all__ = ["Surrogate", "models", "PoorMapWarning", "QUALITY_MARGIN", "quiet_quality",
            "density_quality", "quality_message", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
 
 #: Dimensions in which a folded network map of a grid (with ``repair``, the default working grid and no query points)
@@ -65,28 +64,6 @@ class _Input:
     grid: np.ndarray  # (N_in,)*d real density or complex mu at the vertices of the input grid
     fn: Callable | None  # exact evaluator when available (names, callables)
     preprocess: bool = True
-
-
-@dataclass(frozen=True)
-class MapOptions:
-    """The keywords of :meth:`Surrogate.map` and :meth:`Surrogate.map_batch` after the field and the output (each
-    documented there): how the network is evaluated, and how its map is finished (:meth:`finishing`)."""
-
-    refine: bool = False
-    work_n: int | None = None
-    native: bool = False
-    alpha: Sequence[float] | None = None
-    preprocess: bool = True
-    refine_bounds: tuple[float, float] | None = None
-    repair: bool = True
-    polish: bool | float = False
-    guard: bool = GUARD
-    symmetrize: bool | str = False
-
-    def finishing(self) -> FinishOptions:
-        """The options of the stages after the prediction (:func:`rfmap.finish.pipeline.finish`); refinement is not among
-        them, since the network's map is refined as it is predicted (every working grid tried is)."""
-        return FinishOptions(repair=self.repair, polish=self.polish, guard=self.guard)
 
 
 def _embedded_meta(path: Path) -> dict | None:
@@ -352,11 +329,9 @@ class Surrogate:
         x = encode(pts, par, self.spec, n).to(self.device)
         return self._forward(x).float().cpu()
 
-    def map(self, field, n: int | None = None, points=None, *, refine: bool = False, work_n: int | None = None,
-            native: bool = False, alpha: Sequence[float] | None = None, preprocess: bool = True, refine_bounds=None,
-            repair: bool = True, polish: bool | float = False, guard: bool = GUARD,
-            symmetrize: bool | str = False) -> MapResult:
-        """Map one field.
+    def map(self, field, n: int | None = None, points=None, options: MapOptions | None = None, **kw) -> MapResult:
+        """Map one field, as ``options`` say (:class:`rfmap.finish.pipeline.MapOptions`, the options of every way to
+        map a field), its fields also given as keywords (``sur.map(field, n, refine=True)``).
 
         Parameters
         ----------
@@ -368,6 +343,8 @@ class Surrogate:
         points : array (P, d), optional
             Evaluate the map at these arbitrary query points instead of the output grid; the result's elements
             are a Delaunay triangulation of them.
+        options : MapOptions, optional
+            The options below (default ``MapOptions()``); ``**kw`` replaces its fields:
         refine : bool
             Apply weight refinement (paper Sec. 4.3) before returning.
         work_n : int, optional
@@ -425,16 +402,16 @@ class Surrogate:
             training fields), or had to be shortened not to, a :class:`PoorMapWarning` names the numbers and the
             remedies (``refine``, ``polish``; :func:`quiet_quality` silences it).
         """
-        opts = MapOptions(refine=refine, work_n=work_n, native=native, alpha=alpha, preprocess=preprocess,
-                          refine_bounds=refine_bounds, repair=repair, polish=polish, guard=guard, symmetrize=symmetrize)
-        group = self._symmetry(symmetrize)
-        inp, n = self._resolve(field, n, preprocess)
+        opts = replace(options or MapOptions(), **kw)
+        group = self._symmetry(opts.symmetrize)
+        inp, n = self._resolve(field, n, opts.preprocess)
         return self._map_one(inp, n, points, opts, group)
 
-    def map_batch(self, fields: Sequence, n: int | None = None, points=None, **kw) -> list[MapResult]:
-        """Map several fields with one batched network evaluation (same ``n`` for all); ``kw``: the keywords of
-        :meth:`map` (:class:`MapOptions`)."""
-        opts = MapOptions(**kw)
+    def map_batch(self, fields: Sequence, n: int | None = None, points=None, options: MapOptions | None = None,
+                  **kw) -> list[MapResult]:
+        """Map several fields with one batched network evaluation (same ``n`` for all); ``options`` and ``kw`` as in
+        :meth:`map`."""
+        opts = replace(options or MapOptions(), **kw)
         group = self._symmetry(opts.symmetrize)
         inps = [self._resolve(f, n, opts.preprocess) for f in fields]
         ns = {k for _, k in inps}
@@ -454,7 +431,8 @@ class Surrogate:
         on coarser working grids when it folds (:func:`rfmap.finish.stages.regrid`, :data:`REGRID_DIMS`), then the stages
         of :func:`rfmap.finish.pipeline.finish`; a :class:`PoorMapWarning` when the delivered density map is poor.
         ``given``: the network's output on the default working grid from a batched evaluation (:meth:`_predict`)."""
-        stages = opts.finishing()
+        # the network's map is refined as it is predicted (every working grid tried is), not by the finishing stages
+        stages = replace(opts, refine=False)
         if stages.polish is not False and (not self.spec.task.equalizes or points is not None):
             raise ValueError("polish finishes density maps on the output grid; it does not apply to "
                              f"{self.spec.kind} maps or to query points")
