@@ -6,7 +6,8 @@ with the same 1 % tolerance: Montreal's 2013 election (total votes, :func:`rfmap
 Natural Earth world map by population (:func:`rfmap.regions.world_countries`) and three continental subsets (Africa,
 South America, and an Asia-Pacific set with Russia and Fiji that crosses the antimeridian), and two synthetic hard
 maps (:mod:`rfmap.cartogram_synthetic`): the contiguous United States cut into 3,100 counties of very different
-sizes (``counties``) and Russia cut into 80 subdivisions across the antimeridian (``russia``).  Both programs read the
+sizes (``counties``) and Russia cut into 80 subdivisions across the antimeridian (``russia``; ``russia-slivers``: its
+borders bent and each region simplified on its own, so that neighbours overlap in the input).  Both programs read the
 same GeoJSON (consecutive repeated points removed, which the reference refuses) and CSV files, written to a work
 folder.
 
@@ -41,7 +42,7 @@ import numpy as np
 
 #: GNU time, for the peak resident size (``%M``, as ``/usr/bin/time -v`` reports it)
 TIME = "/usr/bin/time"
-MAPS = ("montreal", "world", "africa", "south-america", "asia-pacific", "counties", "russia")
+MAPS = ("montreal", "world", "africa", "south-america", "asia-pacific", "counties", "russia", "russia-slivers")
 #: the Asia-Pacific subset: Russia and Fiji are split at the antimeridian, so the map crosses it
 ASIA_PACIFIC = ("Russia", "Fiji", "New Zealand", "Australia", "Papua New Guinea", "Indonesia", "Japan", "Philippines",
                 "China", "Mongolia", "South Korea", "North Korea", "Taiwan", "Vanuatu", "Solomon Is.", "New Caledonia")
@@ -64,6 +65,7 @@ def write_inputs(folder: str) -> dict:
         "asia-pacific": ([f for f in world if f["properties"]["name"] in ASIA_PACIFIC], "name", "pop_est"),
         "counties": (synthetic_counties()["features"], "id", "value"),
         "russia": (synthetic_subdivisions()["features"], "id", "value"),
+        "russia-slivers": (synthetic_subdivisions(slivers=True)["features"], "id", "value"),
     }
     out = {}
     for name, (feats, key, value) in chosen.items():

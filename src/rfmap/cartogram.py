@@ -57,8 +57,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .cartogram_metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, judged, pass_weights, \
-    repair_folds, repair_overlaps
+from .cartogram_metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, clean_input_overlaps, judged, \
+    pass_weights, repair_folds, repair_overlaps
 from .mesh import check_grid_memory, check_n
 from .cartogram_output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
 from .projection import PlanarFrame
@@ -414,7 +414,8 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         ``timeout`` stopped the passes, ``info["repaired"]`` the
         regions whose numerically tiny fold was repaired (:func:`rfmap.cartogram_metrics.repair_folds`),
         ``info["repaired_output"]`` those that rounding made cross themselves in the output's coordinates, repaired
-        there (:func:`rfmap.cartogram_output.output_geometries`),
+        there (:func:`rfmap.cartogram_output.output_geometries`), ``info["input_overlaps"]`` the count of pairs of
+        input regions that overlapped, made a coverage first (:func:`rfmap.cartogram_metrics.clean_input_overlaps`),
         ``info["overlaps_cut"]`` the pairs ``(cut, kept)`` of regions whose sliver of overlap was cut from the first
         (:func:`rfmap.cartogram_metrics.repair_overlaps`).
 
@@ -454,6 +455,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     regions = frame.project(geoms, 1.0 / n)
     if points is not None:  # a budget of vertices: simplified (shared borders kept) or densified to it
         regions = shapely.segmentize(fit_outlines(regions, points), 1.0 / n)
+    regions, cleaned = clean_input_overlaps(regions)  # overlapping input borders: a coverage, so the map keeps apart
     done = []  # the passes so far
 
     def grid_map(dens, points):  # the classical methods carry the polygons' vertices; the flow blurs at first
@@ -471,6 +473,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
                                      min_share=min_share, max_n=max_n if max_n is not None else max(n, MAX_N),
                                      split=method in ("flow", "diffusion"), accelerate=method == "flow",
                                      deadline=None if timeout is None else t0 + timeout)
+    info["input_overlaps"] = cleaned
     mapped, info["repaired"] = repair_folds(mapped)
     mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
     elapsed = time.perf_counter() - t0

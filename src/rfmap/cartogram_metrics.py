@@ -16,8 +16,8 @@ import numpy as np
 from .regions import _shapely
 
 __all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps", "judged", "pass_weights", "repair_folds",
-           "repair_overlaps", "boost", "MIN_SHARE", "MINOR_BUDGET", "SPLITS", "SPLIT_COST", "REPAIR_AREA",
-           "REPAIR_OVERLAP", "BOOST_GAIN", "BOOST_CAP"]
+           "repair_overlaps", "clean_input_overlaps", "boost", "MIN_SHARE", "MINOR_BUDGET", "SPLITS", "SPLIT_COST",
+           "REPAIR_AREA", "REPAIR_OVERLAP", "SLIVER_SHAPE", "SLIVER_SHARE", "BOOST_GAIN", "BOOST_CAP"]
 
 #: The share of the total value from which a region's area error is judged (stopping rule, :meth:`Cartogram.metrics`,
 #: tolerance): 0.01 %.  Smaller regions (a world map's uninhabited Antarctica, islands of a few thousand people) are
@@ -33,6 +33,9 @@ REPAIR_AREA = 1e-6
 #: neighbours that the input keeps a fraction of a grid cell apart (a lake, a river drawn as a gap) can be pressed
 #: together by the passes until their straight edges cross by a sliver
 REPAIR_OVERLAP = 1e-5
+#: :func:`clean_input_overlaps`: an overlap of two input regions is a sliver when its isoperimetric quotient is under
+#: this (a strip ten times as long as wide: 0.26; a square: 0.79) or it holds under ``SLIVER_SHARE`` of either region
+SLIVER_SHAPE, SLIVER_SHARE = 0.3, 0.01
 #: :func:`boost`: the smallest share of a region's log area error that a pass is taken to remove, and the largest
 #: log weight boost (a factor of :math:`e^{0.4} \approx 1.5`); stronger boosts overshoot, and the passes oscillate
 BOOST_GAIN, BOOST_CAP = 0.25, 0.4
@@ -181,6 +184,35 @@ def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tupl
     out = mapped.copy()
     out[bad[ok]] = fixed[ok]
     return out, [int(i) for i in bad[ok]]
+
+
+def clean_input_overlaps(regions: np.ndarray) -> tuple[np.ndarray, int]:
+    """Regions (R,) that overlap in the input (borders drawn twice, a file simplified feature by feature) made a
+    coverage: ``shapely.coverage_clean`` gives every overlap to one of its regions (the one with the longest border
+    along it) and snaps nearby vertices so that neighbours share their border vertex for vertex; gaps stay (sea).
+    The map of a coverage keeps its regions apart, where a map of overlapping regions carries every overlap along.
+    Only slivers are cleaned: every overlap holding more than :data:`REPAIR_AREA` of the total area (the metrics'
+    default tolerance; smaller ones are left to :func:`repair_overlaps`) must be thin, its isoperimetric quotient
+    :math:`4\pi A / P^2` under :data:`SLIVER_SHAPE`, or under :data:`SLIVER_SHARE` of the smaller region.  Regions
+    without such overlaps, or with one that is not a sliver (a region drawn over half of another: bad input that
+    :meth:`rfmap.cartogram.Cartogram.problems` reports), are returned as they are, and so is a cleaning that leaves
+    a region empty or invalid (or a shapely before 2.2).  Returns the regions and the count of pairs cleaned."""
+    shapely = _shapely()
+    left, right, inter = overlaps(regions)
+    area = shapely.area(regions)
+    big = inter > REPAIR_AREA * area.sum()
+    count = int(big.sum())
+    if not count or not hasattr(shapely, "coverage_clean"):
+        return regions, 0
+    shape = shapely.intersection(regions[left[big]], regions[right[big]])
+    thin = 4 * np.pi * inter[big] / np.maximum(shapely.length(shape), 1e-300) ** 2 < SLIVER_SHAPE
+    small = inter[big] < SLIVER_SHARE * np.minimum(area[left[big]], area[right[big]])
+    if not (thin | small).all():
+        return regions, 0
+    clean = shapely.coverage_clean(regions)
+    if shapely.is_empty(clean).any() or not shapely.is_valid(clean).all():
+        return regions, 0
+    return clean, count
 
 
 def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *,

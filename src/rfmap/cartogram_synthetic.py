@@ -197,8 +197,10 @@ def synthetic_counties(count: int = 3100, *, seed: int = 0, slivers: bool = Fals
     return tessellate(lower48, opts, prefix="C")
 
 
-def synthetic_subdivisions(country: str = "Russia", count: int = 80, *, seed: int = 0) -> dict:
+def synthetic_subdivisions(country: str = "Russia", count: int = 80, *, seed: int = 0, slivers: bool = False) -> dict:
     """A country cut into about ``count`` subdivisions (:func:`tessellate`, fewer clusters), for Russia across the
-    antimeridian, its regions there split at 180°."""
-    opts = TessellationOptions(count=count, clusters=6, clustered=0.35, spread=0.03, seed=seed)
+    antimeridian, its regions there split at 180°.  With ``slivers`` the borders are bent (``wiggle`` 0.1°) and every
+    region simplified on its own (0.05°): neighbours overlap along long shared borders."""
+    opts = TessellationOptions(count=count, clusters=6, clustered=0.35, spread=0.03, seed=seed,
+                               wiggle=0.1 if slivers else 0.0, simplify=0.05 if slivers else 0.0)
     return tessellate(country_outline(country), opts, prefix="S")
