@@ -11,9 +11,9 @@ from ..core.device import resolve_device
 from .averaging import WeightAverage
 from .cli import build_parser, main, run
 from .data import draw_step, single_blas_thread_env, step_size_n
-from .loop import history, report_paper_fields, train, validate
+from .loop import RunOptions, history, report_paper_fields, train, validate
 from .state import TrainState, load_init, machine, memory_format, sha256
 
-__all__ = ["train", "validate", "report_paper_fields", "resolve_device", "load_init", "main", "TrainState",
+__all__ = ["train", "RunOptions", "validate", "report_paper_fields", "resolve_device", "load_init", "main", "TrainState",
            "WeightAverage", "memory_format", "draw_step", "history", "build_parser", "run", "single_blas_thread_env",
            "step_size_n", "machine", "sha256"]

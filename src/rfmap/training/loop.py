@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +28,7 @@ from .validation import evaluate, family_table, score
 from .data import _loader
 from .state import TrainState, _build_state, _dist_info, memory_format
 
-__all__ = ["train", "validate", "report_paper_fields", "history"]
+__all__ = ["train", "RunOptions", "validate", "report_paper_fields", "history"]
 
 
 def validate(sur: Surrogate, cfg: TrainConfig) -> dict:
@@ -57,12 +58,11 @@ def report_paper_fields(sur: Surrogate, n: int, fields: list[str] | None = None)
     return out
 
 
-def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | None = None,
-          device: str | torch.device | None = "cpu", progress: bool = True, log_every: int = 10,
-          command: str | None = None, finish: bool = False) -> Surrogate:
-    """Train ``cfg``; returns the trained :class:`Surrogate` (also written to ``out_dir``).
+@dataclass(frozen=True)
+class RunOptions:
+    """How a training run starts, where it runs and what it reports (:func:`train`).
 
-    Parameters
+    Attributes
     ----------
     resume : bool
         Continue from ``out_dir/checkpoint.pt`` (model, optimiser, schedule, step and elapsed time).
@@ -76,7 +76,28 @@ def train(cfg: TrainConfig, out_dir=None, *, resume: bool = False, init: str | N
         With ``resume``: train no further, but end the run from its checkpoint as if its budget were spent (final
         validation, the choice of the best validated state, the paper-field report and the weight file), e.g. after
         the run was stopped early.
+    progress : bool
+        A progress bar (rank 0).
+    log_every : int
+        Steps between the loss records of ``log.jsonl``.
     """
+
+    resume: bool = False
+    init: str | None = None
+    device: str | torch.device | None = "cpu"
+    progress: bool = True
+    log_every: int = 10
+    command: str | None = None
+    finish: bool = False
+
+
+def train(cfg: TrainConfig, out_dir=None, options: RunOptions | None = None, **kw) -> Surrogate:
+    """Train ``cfg``; returns the trained :class:`Surrogate` (also written to ``out_dir``, default ``runs/NAME``).
+    ``options`` (:class:`RunOptions`) say how the run starts and reports; its fields may be given as keywords
+    (``train(cfg, out, init="deq2d-square", progress=False)``)."""
+    opts = replace(options or RunOptions(), **kw)
+    resume, init, device, finish = opts.resume, opts.init, opts.device, opts.finish
+    progress, log_every, command = opts.progress, opts.log_every, opts.command
     dev = device if isinstance(device, torch.device) else resolve_device(device)
     out = Path(out_dir or Path("runs") / cfg.name)
     if finish and not (resume and (out / "checkpoint.pt").exists()):
