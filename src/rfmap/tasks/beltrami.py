@@ -102,7 +102,7 @@ class BeltramiTask(Task):
         return {"density": None, "mu": field}
 
     def solver_input(self, grid: np.ndarray) -> np.ndarray:
-        """:math:`\mu` per triangle from a 2D coefficient on the grid's vertices: the mean of the three vertex
+        r""":math:`\mu` per triangle from a 2D coefficient on the grid's vertices: the mean of the three vertex
         values on every triangle (the P1 interpolant's mean, so :math:`|\mu| < 1` stays)."""
         if grid.ndim != 2:
             raise ValueError(f"method lbs needs a 2D Beltrami coefficient, shape (N, N); got shape {grid.shape}")
