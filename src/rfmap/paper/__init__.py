@@ -1,7 +1,10 @@
 """The paper layer: what the book shows, built on the library below it.
 
 Each module is named by what it shows: :mod:`~rfmap.paper.tables` (the table formatter, the paper's published
-tables and the glue of numbers into the text), :mod:`~rfmap.paper.reproduce` (the paper's tables, ``rfmap
+tables and the glue of numbers into the text), :mod:`~rfmap.paper.comparison` (each paper table as a four-way
+comparison: the paper, the paper's method run natively, the delivered map and the fastest classical solver, with one
+criterion; the chapters' tables and the scoreboard), :mod:`~rfmap.paper.ablations` (weight refinement against
+:math:`\alpha = 1`), :mod:`~rfmap.paper.reproduce` (the per-map values, and the older tables of ``rfmap
 reproduce``), :mod:`~rfmap.paper.generalization` (unseen random fields, distortion, displacement demand),
 :mod:`~rfmap.paper.recipes` (how the models were trained), :mod:`~rfmap.paper.benchmarks` (classical, neural and
 hybrid maps side by side), :mod:`~rfmap.paper.flow_studies` (studies of the flow-based solver),
