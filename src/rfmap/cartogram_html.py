@@ -1,8 +1,8 @@
 r"""Interactive cartograms: a self-contained HTML page (plotly) of one cartogram, or of a series with a slider.
 
 Every region is one filled plotly trace, so that hovering over it shows its label (its id or name unless a column
-gives labels), its value and its relative area error :math:`|A_i / T_i - 1|` (:attr:`rfmap.cartogram.Cartogram.
-area_errors`, measured in the equal-area plane).  A series (:class:`rfmap.cartogram_series.CartogramSeries`) becomes
+gives labels), its value and its relative area error :math:`|A_i / T_i - 1|`
+(:attr:`rfmap.cartogram.Cartogram.area_errors`, measured in the equal-area plane).  A series (:class:`rfmap.cartogram_series.CartogramSeries`) becomes
 one plotly frame per cartogram: a slider steps through them and a play button animates them; the axes hold the
 extent of every frame, so that a region's size can be compared from frame to frame.  Longitude/latitude are drawn
 with the aspect that is true to scale at the map's centre (:math:`1/\cos\varphi_0`), a plane's metres as they are.
