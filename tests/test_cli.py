@@ -1,7 +1,7 @@
-"""Tests of the ``rfmap`` command line (:mod:`rfmap.cli`): the subcommands write complete results, and bad input
+"""Tests of the ``rfmap`` command line (:mod:`rfmap.cli.commands`): the subcommands write complete results, and bad input
 prints one line on stderr, exits with status 2 and leaves no output file behind.
 
-Most tests call :func:`rfmap.cli.main` in-process (starting Python costs seconds); one runs the module as a
+Most tests call :func:`rfmap.cli.commands.main` in-process (starting Python costs seconds); one runs the module as a
 subprocess to check the real entry point, exit status and stderr."""
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.cli import main
+from rfmap.cli.commands import main
 from rfmap.nn import MultiResUNet
 from rfmap.core.result import load_result
 from rfmap.surrogate import Surrogate, quiet_quality
@@ -216,9 +216,9 @@ def test_entry_point_as_subprocess(tmp_path):
 
 @pytest.mark.parametrize("extra, code", [([], 0), (["--max-passes", "1", "--tol", "1e-4"], 1), (["--n", "1"], 2)])
 def test_cartogram_process_exits_at_once_with_its_status_and_whole_files(tmp_path, extra, code):
-    """``rfmap cartogram`` ends its process without the interpreter's teardown (``rfmap.cli.QUICK_EXIT``): the exit
-    status, the printed lines and the written GeoJSON are those of :func:`rfmap.cli.main`."""
-    from rfmap.cli import QUICK_EXIT
+    """``rfmap cartogram`` ends its process without the interpreter's teardown (``rfmap.cli.commands.QUICK_EXIT``): the exit
+    status, the printed lines and the written GeoJSON are those of :func:`rfmap.cli.commands.main`."""
+    from rfmap.cli.commands import QUICK_EXIT
 
     assert "cartogram" in QUICK_EXIT
     src, out = tmp_path / "in.geojson", tmp_path / "out.geojson"
@@ -533,7 +533,7 @@ def test_map_of_query_points_warns_in_one_line_when_shortened(tmp_path, capsys, 
 def test_a_named_subcommand_builds_only_its_parser_and_parses_alike(capsys):
     """``rfmap cartogram ...`` builds the cartogram parser alone (the others cost more than a small cartogram), with
     the same result as the whole parser; ``rfmap --help`` and an unknown command still see every sub-command."""
-    from rfmap.cli import COMMANDS, build_parser
+    from rfmap.cli.commands import COMMANDS, build_parser
 
     argv = ["cartogram", "map.geojson", "--value", "pop", "--n", "128", "--method", "dem", "--projected"]
     alone, whole = build_parser("cartogram").parse_args(argv), build_parser().parse_args(argv)

@@ -11,7 +11,7 @@ from rfmap.surrogate import WEIGHTS_DIR, models
 
 #: ``rfmap models`` in a process where ``import neuralop`` fails, as where the package is not installed
 WITHOUT_NEURALOP = ("import sys; sys.modules['neuralop'] = None\n"
-                    "from rfmap.cli import main\n"
+                    "from rfmap.cli.commands import main\n"
                     "sys.exit(main(sys.argv[1:]))")
 
 

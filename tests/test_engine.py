@@ -13,7 +13,7 @@ import torch
 
 import rfmap.training as T
 import rfmap.training.state as TS
-from rfmap.cli import main as cli_main
+from rfmap.cli.commands import main as cli_main
 from rfmap.training.config import CONFIGS, get_config
 from rfmap.core.device import resolve_device
 from rfmap.fields.random import RandomMap, RandomBeltramiConfig

@@ -59,13 +59,13 @@ LAYERS: dict[str, int] = {
     "rfmap.cartogram_synthetic": 3, "rfmap.cartogram_output": 3, "rfmap.cartogram_html": 3,
     "rfmap.cartogram_insets": 3,
     "rfmap.regions": 3, "rfmap.projection": 3, "rfmap.paper.compare": 3, "rfmap.training.records": 3,
-    "rfmap.cli": 4, "rfmap.cli_base": 4, "rfmap.cli_cartogram": 4, "rfmap.lazy_parser": 4,
+    "rfmap.cli": 4, "rfmap.cli.__main__": 4, "rfmap.cli.commands": 4, "rfmap.cli_base": 4, "rfmap.cli_cartogram": 4, "rfmap.cli.lazy_parser": 4,
     "rfmap": 4,
 }
 
 CORE = ("rfmap.mesh", "rfmap.geometry", "rfmap.fields", "rfmap.core.metrics")
 ABOVE_CORE = ("rfmap.nn", "rfmap.tasks", "rfmap.training", "rfmap.surrogate",
-              "rfmap.paper", "rfmap.cli")
+              "rfmap.paper", "rfmap.cli.commands")
 
 
 def _modules() -> dict[str, tuple[str, bool]]:

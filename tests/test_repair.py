@@ -392,7 +392,7 @@ def test_fast_path_does_no_repair_work(monkeypatch):
 
 
 def test_cli_repair_line_and_bad_input(tmp_path, capsys):
-    from rfmap.cli import main, repair_summary
+    from rfmap.cli.commands import main, repair_summary
 
     bad = tmp_path / "bad.npy"
     np.save(bad, np.full((33, 33), np.nan))

@@ -661,7 +661,7 @@ def test_polish_of_a_folded_network_map_skips_the_repair_and_starts_cold():
     polish the same map is repaired."""
     import torch
 
-    from rfmap.cli import repair_summary
+    from rfmap.cli.commands import repair_summary
     from rfmap.surrogate import Surrogate
     from rfmap.tasks import TaskSpec
 

@@ -166,7 +166,7 @@ def test_grid_fast_path_bad_input():
 
 
 def test_cli_repair_line_reports_surface_crossings():
-    from rfmap.cli import repair_summary
+    from rfmap.cli.commands import repair_summary
 
     ref, u, el = self_crossing_map(9, 1.3)
     line = repair_summary(repair_map(ref, u, el, boundary="free", grid_n=9)[1])

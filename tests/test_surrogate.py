@@ -479,7 +479,7 @@ def test_when_every_working_grid_folds_the_default_map_is_repaired():
 
 
 def test_regrid_summary_lines():
-    from rfmap.cli import regrid_summary
+    from rfmap.cli.commands import regrid_summary
 
     took = regrid_summary({"from": 48, "tried": [44, 40], "work_n": 40, "time": 0.25})
     assert took == "working grid: 48 folded; took 40 (tried 44, 40; 0.250 s)"

@@ -136,7 +136,7 @@ def test_symmetrize_rejects_unknown_groups():
 
 
 def test_cli_symmetrize(tmp_path, capsys):
-    from rfmap.cli import main
+    from rfmap.cli.commands import main
 
     out = tmp_path / "m.npz"
     assert main(["map", "--model", "deq2d-square", "--field", "ring", "--n", "17", "--symmetrize", "flips",

@@ -114,7 +114,7 @@ def test_the_built_in_kinds_are_tasks():
 
 
 def test_a_new_kind_trains_and_maps(shift_kind, tmp_path):
-    from rfmap.cli import main
+    from rfmap.cli.commands import main
     from rfmap.core.result import load_result
     from rfmap.training import train
 

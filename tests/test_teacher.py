@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.cli import main
+from rfmap.cli.commands import main
 from rfmap.training.config import get_config
 from rfmap.geometry import signed_measures
 from rfmap.mesh import grid_mesh, grid_points

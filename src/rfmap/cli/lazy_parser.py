@@ -35,7 +35,7 @@ def _deferred(parser: argparse.ArgumentParser, fill) -> argparse.ArgumentParser:
 def train_parser(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """``rfmap train``'s arguments (:func:`rfmap.training.cli.build_parser`), added to ``parser`` on first use."""
     def fill(p):
-        from .training.cli import build_parser
+        from ..training.cli import build_parser
 
         build_parser(p)
 

@@ -15,9 +15,9 @@ import sys
 
 import numpy as np
 
-from .cli_base import CLIError, solver_name
+from ..cli_base import CLIError, solver_name
 
-__all__ = ["main", "CLIError"]
+__all__ = ["main", "entry", "CLIError"]
 
 
 def _load_npy(path: str) -> np.ndarray:
@@ -30,7 +30,7 @@ def _load_npy(path: str) -> np.ndarray:
 
 def _grid_field_file(args) -> tuple[np.ndarray, int]:
     """``rfmap solve --field-file``: the array, sampled on an ``N^d`` grid, and ``N`` (``--n`` may only repeat it)."""
-    from .mesh import check_n
+    from ..mesh import check_n
 
     arr = _load_npy(args.field_file)
     if arr.ndim not in (2, 3) or len(set(arr.shape)) != 1:
@@ -43,8 +43,8 @@ def _grid_field_file(args) -> tuple[np.ndarray, int]:
 
 
 def cmd_solve(args) -> int:
-    from .fields.paper import field_names, get_field
-    from .tasks import get_task, kinds
+    from ..fields.paper import field_names, get_field
+    from ..tasks import get_task, kinds
 
     # the task whose classical solver the method is: it checks and prepares the field and solves
     task = next(get_task(k) for k in kinds() if args.method in get_task(k).methods)
@@ -67,8 +67,8 @@ def cmd_solve(args) -> int:
 
 
 def cmd_metrics(args) -> int:
-    from .fields.paper import BELTRAMI_MAPS, sample_mu
-    from .core.result import load_result
+    from ..fields.paper import BELTRAMI_MAPS, sample_mu
+    from ..core.result import load_result
 
     res = load_result(args.file)
     m = res.metrics()
@@ -90,7 +90,7 @@ def _model_meta(surrogate_cls, name: str) -> tuple[dict, str | None]:
     except ImportError:
         import json
 
-        from .surrogate import WEIGHTS_DIR
+        from ..surrogate import WEIGHTS_DIR
 
         meta = json.loads((WEIGHTS_DIR / f"{name}.json").read_text())
         arch = (meta.get("model") or {}).get("arch", "unet")
@@ -100,7 +100,7 @@ def _model_meta(surrogate_cls, name: str) -> tuple[dict, str | None]:
 
 
 def cmd_models(args) -> int:
-    from .surrogate import Surrogate, models
+    from ..surrogate import Surrogate, models
 
     names = models()
     if not names:
@@ -138,9 +138,9 @@ def cmd_models(args) -> int:
 
 
 def cmd_map(args) -> int:
-    from .core.device import resolve_device
-    from .finish import poor_map_message, quiet_quality
-    from .surrogate import Surrogate, models
+    from ..core.device import resolve_device
+    from ..finish import poor_map_message, quiet_quality
+    from ..surrogate import Surrogate, models
 
     device = resolve_device(args.device)  # before any work: an unavailable device is bad input
     sur = Surrogate.pretrained(args.model, device=device) if args.model in models() else \
@@ -160,7 +160,7 @@ def cmd_map(args) -> int:
         res.to_vtk(args.vtk)
     print(f"wrote {args.out}: {res.metrics()}")
     if res.info.get("symmetrize"):
-        from .nn.symmetry import symmetries
+        from ..nn.symmetry import symmetries
 
         group = res.info["symmetrize"]
         print(f"symmetrized: the network's mean over {len(symmetries(sur.spec.dim, group))} symmetries ({group})")
@@ -184,7 +184,7 @@ def cmd_map(args) -> int:
 
 def map_options(args, polish) -> "MapOptions":
     """The :class:`rfmap.finish.MapOptions` of ``rfmap map``'s arguments (the options of every way to map a field)."""
-    from .finish import MapOptions
+    from ..finish import MapOptions
 
     return MapOptions(refine=args.refine, native=args.native, repair=not args.no_repair, polish=polish,
                       guard=not args.no_guard, symmetrize=args.symmetrize)
@@ -221,7 +221,7 @@ def repair_summary(report: dict | None) -> str:
 
 
 def cmd_train(args) -> int:
-    from .training.cli import run
+    from ..training.cli import run
 
     sur = run(args)
     print(f"trained {sur.name}: {sur.meta.get('final_metrics', {}).get('mean')}")
@@ -229,7 +229,7 @@ def cmd_train(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from .training.selection import score_weights, scores_table, ship_best
+    from ..training.selection import score_weights, scores_table, ship_best
 
     if args.count is not None and args.count < 1:
         raise CLIError(f"--count must be at least 1, got {args.count}")
@@ -246,9 +246,9 @@ def cmd_validate(args) -> int:
 
 
 def cmd_reproduce(args) -> int:
-    from .paper.reproduce import reproduce
+    from ..paper.reproduce import reproduce
 
-    from .core.device import resolve_device
+    from ..core.device import resolve_device
 
     device = resolve_device(args.device)  # before any work: a bad device is one line and exit 2
     for path in reproduce(args.experiment, args.out, refine=not args.no_refine, device=device,
@@ -272,7 +272,7 @@ def _polish_arg(text: str):
 
 def _symmetry_arg(text: str):
     """``--symmetrize [GROUP]``: a group name of :data:`rfmap.nn.symmetry.SYMMETRY_GROUPS`."""
-    from .nn.symmetry import SYMMETRY_GROUPS
+    from ..nn.symmetry import SYMMETRY_GROUPS
 
     if text not in SYMMETRY_GROUPS:
         raise argparse.ArgumentTypeError(f"GROUP must be one of {', '.join(SYMMETRY_GROUPS)}, got {text!r}")
@@ -336,7 +336,7 @@ def _add_map(sub) -> None:
 
 def _add_cartogram(sub) -> None:
     """``rfmap cartogram`` (:mod:`rfmap.cli_cartogram`)."""
-    from .cli_cartogram import add_cartogram_parser
+    from ..cli_cartogram import add_cartogram_parser
 
     add_cartogram_parser(sub)
 
