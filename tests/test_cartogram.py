@@ -368,7 +368,7 @@ def test_cli_flow_cartogram(tmp_path, capsys):
 
 def test_cli_cartogram_methods_match_the_library():
     from rfmap.cartogram import CARTOGRAM_METHODS
-    from rfmap.cli import build_parser
+    from rfmap.cli.commands import build_parser
 
     sub = next(a for a in build_parser()._actions if a.dest == "cmd")
     method = next(a for a in sub.choices["cartogram"]._actions if a.dest == "method")

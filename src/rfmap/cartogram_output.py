@@ -21,6 +21,8 @@ import json
 
 import numpy as np
 
+from .cartogram_metrics import REPAIR_AREA
+
 __all__ = ["OUTPUTS", "SPECK", "choose_output", "crs_member", "mapped_features", "output_geometries", "repair_specks",
            "write_geojson"]
 
@@ -47,18 +49,21 @@ def output_geometries(frame, mapped: np.ndarray, output: str) -> tuple[np.ndarra
     ``"projected"``: its plane), the regions that rounding there made invalid repaired (:func:`repair_specks`).
     Returns the polygons and the indices of those repaired."""
     out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
-    return repair_specks(out)
+    return repair_specks(out, total_change=REPAIR_AREA)
 
 
-def repair_specks(geoms: np.ndarray, *, max_change: float = SPECK) -> tuple[np.ndarray, list[int]]:
-    r"""Invalid polygons (R,) made valid where the fix moves at most ``max_change`` of their area: each is replaced by
-    the polygon parts of ``shapely.make_valid`` that hold more than ``max_change`` of its area (the speck where a
-    ring crossed itself is dropped).  Returns the polygons and the indices of those replaced; the others are left
-    as they were."""
+def repair_specks(geoms: np.ndarray, *, max_change: float = SPECK,
+                  total_change: float = 0.0) -> tuple[np.ndarray, list[int]]:
+    r"""Invalid polygons (R,) made valid where the fix moves at most ``max_change`` of their area, or
+    ``total_change`` of the total area (:data:`rfmap.cartogram_metrics.REPAIR_AREA` for :func:`output_geometries`:
+    the metrics' tolerance on overlaps): each is replaced by the polygon parts of ``shapely.make_valid`` that hold
+    more than ``max_change`` of its area (the speck where a ring crossed itself is dropped).  Returns the polygons and
+    the indices of those replaced; the others are left as they were."""
     import shapely
 
     bad = np.flatnonzero(~shapely.is_valid(geoms))
     out, fixed = geoms.copy(), []
+    budget = total_change * float(np.abs(shapely.area(geoms)).sum()) if bad.size else 0.0
     for i in bad:
         parts = shapely.get_parts(shapely.make_valid(geoms[i]))
         parts = parts[np.isin(shapely.get_type_id(parts), (3, 6))]
@@ -68,7 +73,7 @@ def repair_specks(geoms: np.ndarray, *, max_change: float = SPECK) -> tuple[np.n
         if not keep.size:
             continue
         g = keep[0] if keep.size == 1 else shapely.multipolygons(keep)
-        if shapely.is_valid(g) and abs(shapely.area(g) - area) <= max_change * area:
+        if shapely.is_valid(g) and abs(shapely.area(g) - area) <= max(max_change * area, budget):
             out[i] = g
             fixed.append(int(i))
     return out, fixed
