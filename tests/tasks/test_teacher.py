@@ -20,7 +20,7 @@ from rfmap.tasks import draw_samples, make_batch, task_loss
 from rfmap.tasks.teacher import TeacherConfig, teacher_loss, teacher_map, teacher_targets
 from rfmap.training.validation import family, score
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def _one_d(n: int) -> tuple[np.ndarray, np.ndarray]:
