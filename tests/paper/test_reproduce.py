@@ -165,6 +165,7 @@ def test_reproduce_dem3d_writes_every_table(tmp_path, monkeypatch):
         for ext in ("md", "csv"))
     text = (tmp_path / "tab-3d-resolution-test.md").read_text()
     assert "ours + refinement" in text and "diffusion DEM" in text and "ours, symmetrized + refinement" in text
+    assert "paper's method: native + refinement" in text  # the paper's method beside the delivered rows
     with pytest.raises(ValueError, match="unknown experiment"):
         E.reproduce("dem4d", tmp_path)
 
