@@ -17,7 +17,7 @@ import numpy as np
 
 from ..cli_base import CLIError, solver_name
 
-__all__ = ["main", "entry", "CLIError"]
+__all__ = ["main", "entry", "build_parser", "CLIError"]
 
 
 def _load_npy(path: str) -> np.ndarray:
