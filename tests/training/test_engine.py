@@ -252,7 +252,7 @@ def test_score_counts_a_folded_map_as_the_identity(monkeypatch):
     fake = {0: (50.0, 0.4, 3), 1: (0.2, 0.5, 2), 2: (0.1, 0.3, 0), 3: (0.3, 0.6, 0)}
     calls = iter(range(4))
 
-    def raw_map(s, field, n, repair=False):
+    def raw_map(s, field, n, repair=False, native=False):
         std_map, std_orig, flips = fake[next(calls)]
         return SimpleNamespace(metrics=lambda: SimpleNamespace(std_rho_map=std_map, std_rho_orig=std_orig,
                                                                n_flipped=flips, min_jacobian=-0.1 if flips else 0.2))
