@@ -2,10 +2,10 @@
 
 Runs ``rfmap cartogram`` (flow and diffusion methods) and, with ``--reference PATH`` to the ``cartogram`` binary of
 cartogram-cpp (Gastner, Seguy & More's flow-based method), that program on the same real maps at N = 256 and 512
-with the same 1 % tolerance: Montreal's 2013 election (total votes, :func:`rfmap.regions.montreal_election`), the
-Natural Earth world map by population (:func:`rfmap.regions.world_countries`) and three continental subsets (Africa,
+with the same 1 % tolerance: Montreal's 2013 election (total votes, :func:`rfmap.cartogram.regions.montreal_election`), the
+Natural Earth world map by population (:func:`rfmap.cartogram.regions.world_countries`) and three continental subsets (Africa,
 South America, and an Asia-Pacific set with Russia and Fiji that crosses the antimeridian), and two synthetic hard
-maps (:mod:`rfmap.cartogram_synthetic`): the contiguous United States cut into 3,100 counties of very different
+maps (:mod:`rfmap.cartogram.synthetic`): the contiguous United States cut into 3,100 counties of very different
 sizes (``counties``) and Russia cut into 80 subdivisions across the antimeridian (``russia``; ``russia-slivers``: its
 borders bent and each region simplified on its own, so that neighbours overlap in the input).  Both programs read the
 same GeoJSON (consecutive repeated points removed, which the reference refuses) and CSV files, written to a work
@@ -15,8 +15,8 @@ rfmap's modules are byte-compiled first (``compileall``), as pip leaves an insta
 compiles them (an editable install run with ``PYTHONDONTWRITEBYTECODE`` set would).  Every command is run
 ``--repeat`` times as a child process; the table gives the median wall time and the median peak
 resident memory (``/usr/bin/time``'s maximum resident set size), the exit status, and the largest
-and mean relative area error :math:`|A_i/T_i - 1|` measured by :func:`rfmap.cartogram.cartogram_metrics` over the
-regions holding at least :data:`rfmap.cartogram.MIN_SHARE` of the total value (the others' largest error apart), in
+and mean relative area error :math:`|A_i/T_i - 1|` measured by :func:`rfmap.cartogram.resize.cartogram_metrics` over the
+regions holding at least :data:`rfmap.cartogram.resize.MIN_SHARE` of the total value (the others' largest error apart), in
 each program's equal-area plane (rfmap writes its projected plane, ``--projected``; the reference writes its own
 equal-area plane), with validity and overlaps.  The ratio column is the median time over the reference's.
 
@@ -53,8 +53,8 @@ def write_inputs(folder: str) -> dict:
     import shapely
     from shapely.geometry import mapping, shape
 
-    from rfmap.cartogram_synthetic import synthetic_counties, synthetic_subdivisions
-    from rfmap.regions import _listify, montreal_election, world_countries
+    from rfmap.cartogram.synthetic import synthetic_counties, synthetic_subdivisions
+    from rfmap.cartogram.regions import _listify, montreal_election, world_countries
 
     world = world_countries()["features"]
     chosen = {
@@ -101,7 +101,7 @@ def area_errors(path: str, key: str, value: str, values: dict) -> str:
     import shapely
     from shapely.geometry import shape
 
-    from rfmap.cartogram import MIN_SHARE, cartogram_metrics
+    from rfmap.cartogram.resize import MIN_SHARE, cartogram_metrics
 
     if not os.path.isfile(path):
         return "no output | | |"

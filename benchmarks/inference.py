@@ -23,7 +23,7 @@ import torch
 
 from rfmap.training.config import get_config
 from rfmap.fields import BELTRAMI_MAPS, DENSITIES
-from rfmap.mesh import grid_mesh
+from rfmap.core.mesh import grid_mesh
 from rfmap.solvers import solve_dem, solve_lbs
 from rfmap.surrogate import Surrogate, models
 from rfmap.tasks import sample_batch, task_loss

@@ -18,7 +18,7 @@ import time
 import numpy as np
 import torch
 
-from rfmap.mesh import grid_mesh
+from rfmap.core.mesh import grid_mesh
 from rfmap.finish.repair import repair_map
 from rfmap.solvers import solve_dem, solve_lbs
 from rfmap.fields.hard import hard_beltrami, hard_density

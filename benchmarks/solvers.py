@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from rfmap.fields import BELTRAMI_MAPS, sample_density
-from rfmap.mesh import element_measures, grid_mesh
+from rfmap.core.mesh import element_measures, grid_mesh
 from rfmap.solvers import solve_dem, solve_lbs
 
 

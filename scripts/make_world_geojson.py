@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Write src/rfmap/data/naturalearth_lowres.geojson, the world map of :func:`rfmap.regions.world_countries`.
+"""Write src/rfmap/data/naturalearth_lowres.geojson, the world map of :func:`rfmap.cartogram.regions.world_countries`.
 
 Usage::
 

@@ -12,8 +12,8 @@ import pytest
 
 shapely = pytest.importorskip("shapely")
 
-from rfmap.cartogram import MIN_SHARE, cartogram, cartogram_metrics  # noqa: E402
-from rfmap.regions import density_grid, fit_outlines, world_countries  # noqa: E402
+from rfmap.cartogram.resize import MIN_SHARE, cartogram, cartogram_metrics  # noqa: E402
+from rfmap.cartogram.regions import density_grid, fit_outlines, world_countries  # noqa: E402
 from rfmap.solvers.cartoflow import bilinear, flow_square, poisson_flux_2d  # noqa: E402
 
 
@@ -47,7 +47,7 @@ def test_classical_cartogram_path_never_imports_torch(tmp_path):
     src.write_text(json.dumps(squares([1, 1, 1, 5])))
     code = f"""
 import sys
-import rfmap, rfmap.cli, rfmap.cartogram, rfmap.regions, rfmap.projection, rfmap.solvers, rfmap.solvers.cartoflow
+import rfmap, rfmap.cli, rfmap.cartogram.resize, rfmap.cartogram.regions, rfmap.cartogram.projection, rfmap.solvers, rfmap.solvers.cartoflow
 rfmap.cli.build_parser()
 assert 'torch' not in sys.modules, 'import'
 for method in ('flow', 'diffusion'):
@@ -151,7 +151,7 @@ def test_heat_planes_are_exact_on_cosine_modes_and_the_diffusion_map_equalizes()
     r"""The diffusing density and its gradient on the vertex grid are exact for a sum of cosine modes
     (:math:`e^{-\pi^2|k|^2 t}` decay, to 1e-12); a diffusion map of a two-level density keeps the grid unfolded
     and leaves the mapped density far more uniform than the input."""
-    from rfmap.geometry import grid_min_measure
+    from rfmap.core.geometry import grid_min_measure
     from rfmap.solvers.cartodiffusion import _Heat, diffusion_square
 
     n, t = 33, 0.01
@@ -225,8 +225,8 @@ def test_stopping_rule_judges_regions_above_the_share_and_reports_the_rest():
 
 # ----------------------------------------------------------------------------------------------- outlines
 def test_fit_outlines_densifies_and_simplifies_to_a_budget_keeping_areas():
-    from rfmap.projection import PlanarFrame
-    from rfmap.regions import read_regions
+    from rfmap.cartogram.projection import PlanarFrame
+    from rfmap.cartogram.regions import read_regions
 
     _, geoms, values, _ = read_regions(continent("South America"), "pop_est")
     regions = PlanarFrame.fit(geoms, margin=0.1).project(geoms, 1 / 127)
@@ -247,7 +247,7 @@ def test_fit_outlines_densifies_and_simplifies_to_a_budget_keeping_areas():
 def test_cartogram_with_a_point_budget(fc, value, points):
     """A simplified map (Montreal's districts draw their shared borders with vertices that do not match) stays a
     coverage: within 1 %, every region valid and no two overlapping."""
-    from rfmap.regions import montreal_election
+    from rfmap.cartogram.regions import montreal_election
 
     c = cartogram(montreal_election() if fc == "montreal" else continent(fc), value, n=128, points=points)
     m = c.metrics()
@@ -258,7 +258,7 @@ def test_clean_coverage_makes_shared_borders_match():
     """Two unit squares whose shared border one draws with a midpoint and the other without (a T-junction), and a
     third overlapping the second by a sliver: the result is a valid coverage, areas kept but for the sliver, and the
     second's border with the first now has the midpoint."""
-    from rfmap.regions import clean_coverage
+    from rfmap.cartogram.regions import clean_coverage
 
     a = shapely.Polygon([(0, 0), (1, 0), (1, 0.5), (1, 1), (0, 1)])
     b = shapely.Polygon([(1, 0), (2, 0), (2, 1), (1, 1)])
@@ -276,7 +276,7 @@ def test_clean_coverage_makes_shared_borders_match():
 def test_distinct_vertices_merges_pairs_that_straddle_a_rounding_edge():
     """Points 4e-16 apart on either side of a rounding edge of 12 digits (which rounding would part) are one vertex;
     points 1e-9 apart stay two."""
-    from rfmap.regions import _distinct_vertices
+    from rfmap.cartogram.regions import _distinct_vertices
 
     x0 = 0.5e-12 + 123456789012 * 1e-12  # half way between two 12-digit numbers
     lo, hi = x0 - 2e-16, x0 + 2e-16
@@ -307,7 +307,7 @@ def test_flow_cartogram_of_real_maps_within_one_percent(name, n):
 @pytest.mark.parametrize("method", ["flow", "diffusion"])
 def test_world_cartogram_splits_stretched_edges(method):
     """The world by population at N = 96: Greenland shrinks a hundredfold while the map squeezes its fjords closed
-    and stretches their sides; the edges stretched beyond :data:`rfmap.cartogram.SPLIT_EDGE` cells are split again
+    and stretches their sides; the edges stretched beyond :data:`rfmap.cartogram.resize.SPLIT_EDGE` cells are split again
     between passes (both classical methods), so that no chord crosses its neighbour: every region valid, no
     overlaps, within 1 %."""
     c = cartogram(world_countries(), "pop_est", n=96, method=method)
@@ -318,7 +318,7 @@ def test_world_cartogram_splits_stretched_edges(method):
 
 
 def test_boost_aims_each_pass_at_the_whole_error():
-    from rfmap.cartogram_metrics import BOOST_CAP, BOOST_GAIN, boost
+    from rfmap.cartogram.metrics import BOOST_CAP, BOOST_GAIN, boost
 
     last = np.array([0.2, 0.2, -0.1, 0.05, 0.0])
     now = np.array([0.1, 0.0, -0.09, 0.06, 0.0])  # half removed, all removed, a tenth removed, grown, none
@@ -335,7 +335,7 @@ def test_boost_aims_each_pass_at_the_whole_error():
 
 
 def test_longest_edge_of_rings():
-    from rfmap.regions import _longest_edge
+    from rfmap.cartogram.regions import _longest_edge
 
     square = shapely.Polygon([(0, 0), (3, 0), (3, 2), (0, 2)], holes=[[(1, 1), (1.5, 1), (1.5, 1.5)]])
     parts = np.array([square, shapely.MultiPolygon([shapely.box(5, 5, 5.5, 9)])], dtype=object)
@@ -364,7 +364,7 @@ def test_repair_overlaps_cuts_slivers_from_the_region_above_its_target():
     """Two unit squares overlapping by a sliver of 1e-6 of the total area: the sliver is cut from the one further
     above its target area, after which the two share a border and keep their other areas; an overlap larger than
     REPAIR_OVERLAP stays."""
-    from rfmap.cartogram_metrics import REPAIR_OVERLAP, repair_overlaps
+    from rfmap.cartogram.metrics import REPAIR_OVERLAP, repair_overlaps
 
     a = shapely.box(0.0, 0.0, 1.0, 1.0)
     b = shapely.box(1.0 - 2e-6, 0.0, 2.0, 1.0)

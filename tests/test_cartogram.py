@@ -1,4 +1,4 @@
-"""Tests of :mod:`rfmap.cartogram` and :mod:`rfmap.projection`: exact answers on synthetic maps (equal densities give
+"""Tests of :mod:`rfmap.cartogram.resize` and :mod:`rfmap.cartogram.projection`: exact answers on synthetic maps (equal densities give
 the identity, the big region takes its share), GeoJSON in and out, zero values, bad input, the equal-area plane
 (areas checked against geodesic areas on the WGS84 ellipsoid, a map across the antimeridian, the world map), the
 ``rfmap cartogram`` command line and its exit status, and the Montreal election (when plotly is installed)."""
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import shapely
 
-from rfmap.cartogram import (PlanarFrame, cartogram, cartogram_metrics, density_grid, montreal_election,
+from rfmap.cartogram.resize import (PlanarFrame, cartogram, cartogram_metrics, density_grid, montreal_election,
                              read_regions, world_countries)
 from rfmap.cli import main
 
@@ -145,7 +145,7 @@ def test_metrics_find_overlaps_and_invalid_polygons():
 def test_overlaps_checks_only_pairs_with_an_unmatched_edge_and_finds_every_kind():
     """``overlaps`` against the intersection areas of every pair: a coverage whose borders match (no pair), an
     overlap across a border that matches elsewhere, a region inside another, a duplicate; invalid regions skipped."""
-    from rfmap.cartogram_metrics import overlaps
+    from rfmap.cartogram.metrics import overlaps
 
     tiles = [shapely.box(i, j, i + 1, j + 1) for i in range(3) for j in range(3)]
     left, right, inter = overlaps(np.array(tiles))
@@ -189,7 +189,7 @@ def geodesic_errors(geoms, values):
 def test_projection_follows_the_map():
     """Lambert azimuthal equal-area centred on a regional map, on the middle of the smallest arc of longitudes (180
     for a map across the antimeridian, not the mean 0 of its halves); Equal Earth for a world map."""
-    from rfmap.projection import WORLD_SPAN, Projection, longitude_arc
+    from rfmap.cartogram.projection import WORLD_SPAN, Projection, longitude_arc
 
     assert longitude_arc(np.array([170.0, 175, -175, -170])) == pytest.approx((-180.0, 20.0))
     assert longitude_arc(np.array([-73.9, -73.5])) == pytest.approx((-73.7, 0.4))
@@ -220,7 +220,7 @@ def test_equal_area_frame_round_trip():
 
 
 def test_rings_across_the_antimeridian_are_made_continuous():
-    from rfmap.projection import unwrap_rings, wrap_rings
+    from rfmap.cartogram.projection import unwrap_rings, wrap_rings
 
     across = shapely.Polygon([(175, -5), (-175, -5), (-175, 5), (175, 5)])
     polar = shapely.Polygon([(-180, -90), (-180, -80), (-90, -75), (0, -78), (90, -75), (180, -80), (180, -90)])
@@ -333,7 +333,7 @@ def test_bad_options():
 def test_hybrid_cartogram_is_finished_on_the_raster_grid():
     """The hybrid's passes map the raster's (N+1)-vertex grid (the network's map resampled and finished there by the
     flow, every pass's flow run: HYBRID_POLISH), so it meets the 1 % tolerance like the classical methods."""
-    from rfmap.cartogram import HYBRID_POLISH
+    from rfmap.cartogram.resize import HYBRID_POLISH
 
     c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="hybrid", n=64)
     m = c.metrics()
@@ -345,7 +345,7 @@ def test_hybrid_cartogram_is_finished_on_the_raster_grid():
 def test_flow_cartogram_meets_the_tolerance():
     """The flow-based method: the big region takes its share to the 1 % tolerance, with the topology intact, and the
     flow solver runs one flow per pass (FLOW_SETTINGS' tol=0) even when the raster is nearly uniform."""
-    from rfmap.cartogram import FLOW_SETTINGS
+    from rfmap.cartogram.resize import FLOW_SETTINGS
 
     c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="flow", n=64)
     m = c.metrics()
@@ -367,7 +367,7 @@ def test_cli_flow_cartogram(tmp_path, capsys):
 
 
 def test_cli_cartogram_methods_match_the_library():
-    from rfmap.cartogram import CARTOGRAM_METHODS
+    from rfmap.cartogram.resize import CARTOGRAM_METHODS
     from rfmap.cli.commands import build_parser
 
     sub = next(a for a in build_parser()._actions if a.dest == "cmd")
@@ -578,8 +578,8 @@ def test_world_population_cartogram(world):
 
 def test_passes_stop_when_the_error_stops_falling_and_the_best_pass_is_kept(monkeypatch):
     """A pass that does not lower the largest area error ends the loop (the flow's first such pass turns its
-    acceleration off instead, :func:`rfmap.cartogram_metrics.boost`), and the best pass's polygons are returned."""
-    import rfmap.cartogram as C
+    acceleration off instead, :func:`rfmap.cartogram.metrics.boost`), and the best pass's polygons are returned."""
+    import rfmap.cartogram.resize as C
 
     real, calls = C._grid_map, []
 
@@ -603,7 +603,7 @@ def test_passes_stop_when_the_error_stops_falling_and_the_best_pass_is_kept(monk
 
 
 def test_cli_cartogram_defaults_to_the_flow_and_takes_a_vertex_budget(tmp_path, capsys):
-    from rfmap.regions import montreal_election
+    from rfmap.cartogram.regions import montreal_election
 
     src, out, fitted = tmp_path / "in.geojson", tmp_path / "out.geojson", tmp_path / "fitted.geojson"
     src.write_text(json.dumps(montreal_election()))

@@ -1,4 +1,4 @@
-"""Tests of :mod:`rfmap.cartogram_data` (a CSV joined to GeoJSON regions, its template, the world's population), of
+"""Tests of :mod:`rfmap.cartogram.data` (a CSV joined to GeoJSON regions, its template, the world's population), of
 the figures of :func:`rfmap.viz.cartograms.cartogram_figure` (SVG and PNG with the area legend) and of ``rfmap
 cartogram --data / --make-csv / --svg`` with its exit status."""
 from __future__ import annotations
@@ -9,7 +9,7 @@ import json
 import numpy as np
 import pytest
 
-from rfmap.cartogram_data import join_values, read_csv_table, read_csv_values, region_ids, write_csv_template
+from rfmap.cartogram.data import join_values, read_csv_table, read_csv_values, region_ids, write_csv_template
 from rfmap.cli import main
 
 SIDE = 1000.0  # metres: planar coordinates
@@ -115,7 +115,7 @@ def test_template_has_one_row_per_region(tmp_path):
 
 
 def test_joined_values_make_the_cartogram():
-    from rfmap.cartogram import cartogram
+    from rfmap.cartogram.resize import cartogram
 
     j = join_values(block(), dict(zip("abcd", (1, 1, 1, 5))), key="code", value="pop")
     c = cartogram(j.collection, "pop", method="flow", n=48)
@@ -126,7 +126,7 @@ def test_joined_values_make_the_cartogram():
 def test_world_population_joins_gapminder_by_iso3():
     pytest.importorskip("plotly")
     pytest.importorskip("pyproj")
-    from rfmap.cartogram_data import gapminder_population, world_population
+    from rfmap.cartogram.data import gapminder_population, world_population
 
     j = world_population((1952, 2007))
     props = {f["properties"]["iso_a3"]: f["properties"] for f in j.collection["features"]}
@@ -147,7 +147,7 @@ def test_world_population_joins_gapminder_by_iso3():
 # ----------------------------------------------------------------------------------------------- figures
 @pytest.fixture(scope="module")
 def carto():
-    from rfmap.cartogram import cartogram
+    from rfmap.cartogram.resize import cartogram
 
     return cartogram(join_values(block(), dict(zip("abcd", (1, 1, 1, 5))), key="code", value="pop").collection,
                      "pop", method="flow", n=48)

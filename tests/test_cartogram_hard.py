@@ -1,5 +1,5 @@
 """Cartograms on hard maps (issue: thousands of small regions, regions that overlap in the input, a country across
-the antimeridian, the world in its plane): synthetic maps of :mod:`rfmap.cartogram_synthetic`."""
+the antimeridian, the world in its plane): synthetic maps of :mod:`rfmap.cartogram.synthetic`."""
 from __future__ import annotations
 
 import numpy as np
@@ -7,10 +7,10 @@ import pytest
 import shapely
 from shapely.geometry import shape
 
-from rfmap.cartogram import cartogram, density_grid
-from rfmap.cartogram_metrics import MINOR_BUDGET, judged, pass_weights
-from rfmap.cartogram_synthetic import synthetic_counties, synthetic_subdivisions
-from rfmap.regions import read_regions
+from rfmap.cartogram.resize import cartogram, density_grid
+from rfmap.cartogram.metrics import MINOR_BUDGET, judged, pass_weights
+from rfmap.cartogram.synthetic import synthetic_counties, synthetic_subdivisions
+from rfmap.cartogram.regions import read_regions
 
 
 @pytest.fixture(scope="module")
@@ -53,7 +53,7 @@ def test_overlapping_sparse_regions_keep_the_raster_positive():
 
 
 def test_the_raster_is_the_plain_sum_where_regions_do_not_overlap(counties):
-    from rfmap.regions import OVERLAP_COVER, _scanline_rows
+    from rfmap.cartogram.regions import OVERLAP_COVER, _scanline_rows
 
     _, geoms, values, _ = read_regions(counties, "value")
     unit = shapely.transform(geoms, lambda p: (p - [-125.0, 24.0]) / 60.0 * 0.8 + 0.1)
@@ -72,7 +72,7 @@ def test_the_raster_is_the_plain_sum_where_regions_do_not_overlap(counties):
 
 
 def test_a_county_map_with_overlapping_borders_is_not_refused(sliver_counties):
-    from rfmap.cartogram_metrics import overlaps
+    from rfmap.cartogram.metrics import overlaps
 
     _, geoms, values, _ = read_regions(sliver_counties, "value")
     left, right, inter = overlaps(geoms)
@@ -117,14 +117,14 @@ def test_county_map_cartogram_passes_reach_the_tolerance(counties, tmp_path):
     area = shapely.area(geoms)
     assert np.allclose(area / area.sum(), c.areas / c.areas.sum(), rtol=1e-6, atol=0)
     # turned back into longitude/latitude, straight edges are other curves: six counties crossed themselves there
-    from rfmap.cartogram_output import output_geometries
+    from rfmap.cartogram.output import output_geometries
 
     lonlat, fixed = output_geometries(c.frame, c.mapped, "input")
     assert shapely.is_valid(lonlat).all() and len(fixed) >= 1
 
 
 def test_specks_of_rounding_are_repaired_and_what_is_written_invalid_fails(tmp_path):
-    from rfmap.cartogram_output import SPECK, repair_specks
+    from rfmap.cartogram.output import SPECK, repair_specks
 
     # a square whose top edge passes a hair under one of its own vertices: a ring that crosses itself by a speck
     eps = 1e-9
@@ -155,7 +155,7 @@ def test_specks_of_rounding_are_repaired_and_what_is_written_invalid_fails(tmp_p
 def world_file(tmp_path_factory):
     import json
 
-    from rfmap.regions import world_countries
+    from rfmap.cartogram.regions import world_countries
 
     path = tmp_path_factory.mktemp("world") / "world.geojson"
     path.write_text(json.dumps(world_countries()))
@@ -195,7 +195,7 @@ def test_the_world_by_default_is_written_in_its_plane_and_exits_0(world_file, tm
 
 
 def test_a_cartogram_within_the_domain_stays_in_longitude_latitude():
-    from rfmap.regions import world_countries
+    from rfmap.cartogram.regions import world_countries
 
     africa = {"type": "FeatureCollection", "features": [f for f in world_countries()["features"]
                                                         if f["properties"]["continent"] == "Africa"]}
@@ -222,7 +222,7 @@ def test_subdivisions_whose_borders_overlap_come_out_disjoint():
     """Russia's subdivisions with every border bent and each region simplified on its own: dozens of neighbours
     overlap in the input, across 180° too.  The input is made a coverage first, so the cartogram holds no overlap
     (before: 31-36 overlapping pairs, exit 1), every region valid in longitude/latitude, within the tolerance."""
-    from rfmap.cartogram_metrics import REPAIR_AREA, overlaps
+    from rfmap.cartogram.metrics import REPAIR_AREA, overlaps
 
     fc = synthetic_subdivisions(slivers=True)
     g = _geoms(fc)

@@ -1,4 +1,4 @@
-"""Tests of :mod:`rfmap.cartogram_html` and ``rfmap cartogram --html``: the page's traces carry each region's label,
+"""Tests of :mod:`rfmap.cartogram.html` and ``rfmap cartogram --html``: the page's traces carry each region's label,
 value and area error; the page is self-contained; in headless Chromium it draws every region, hovering a region shows
 its text, and moving the slider shows another frame (skipped where Chromium is not installed)."""
 from __future__ import annotations
@@ -16,9 +16,9 @@ from shapely.geometry import mapping
 
 pytest.importorskip("plotly")
 
-from rfmap.cartogram import cartogram  # noqa: E402
-from rfmap.cartogram_html import HtmlOptions, cartogram_page, page_figure, series_page  # noqa: E402
-from rfmap.cartogram_series import cartogram_series  # noqa: E402
+from rfmap.cartogram.resize import cartogram  # noqa: E402
+from rfmap.cartogram.html import HtmlOptions, cartogram_page, page_figure, series_page  # noqa: E402
+from rfmap.cartogram.series import cartogram_series  # noqa: E402
 
 KEYS = ("a", "b")
 

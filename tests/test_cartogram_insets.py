@@ -1,4 +1,4 @@
-"""Tests of :mod:`rfmap.cartogram_insets` and ``rfmap cartogram --inset``: insets named as cartogram-cpp names them,
+"""Tests of :mod:`rfmap.cartogram.insets` and ``rfmap cartogram --inset``: insets named as cartogram-cpp names them,
 each a cartogram in its own frame, put on the main map's scale (a unit of value covers the same area in every
 frame) and placed beside it without overlap; labels from a column."""
 from __future__ import annotations
@@ -14,7 +14,7 @@ import pytest
 import shapely
 from shapely.geometry import mapping, shape
 
-from rfmap.cartogram_insets import GAP, cartogram_insets, inset_groups
+from rfmap.cartogram.insets import GAP, cartogram_insets, inset_groups
 
 
 def _feature(fid, box, value, inset):
@@ -115,7 +115,7 @@ def test_an_unknown_inset_is_bad_input(states, tmp_path):
 
 def test_the_interactive_page_draws_the_placed_insets(states):
     pytest.importorskip("plotly")
-    from rfmap.cartogram_html import HtmlOptions, page_figure
+    from rfmap.cartogram.html import HtmlOptions, page_figure
 
     c = cartogram_insets(states, "v", "inset", n=64)
     fig = page_figure([c], ["v"], HtmlOptions(detail=0.0))

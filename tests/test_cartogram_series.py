@@ -1,4 +1,4 @@
-"""Tests of :mod:`rfmap.cartogram_series`: a warm-started series of cartograms reaches the tolerance in every frame
+"""Tests of :mod:`rfmap.cartogram.series`: a warm-started series of cartograms reaches the tolerance in every frame
 in fewer passes than the cold one (passes compared, not seconds), the regions below the judged share are reported
 apart, and the animation is written."""
 from __future__ import annotations
@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from rfmap.cartogram_series import cartogram_series, compare_warm_cold, save_animation
+from rfmap.cartogram.series import cartogram_series, compare_warm_cold, save_animation
 
 YEARS = (1952, 1957, 1962)
 #: N and the flow method: South America's cartograms reach 1 % in 8-9 passes cold, 4 warm (measured at N = 96)
@@ -17,7 +17,7 @@ OPTIONS = {"n": 96, "method": "flow", "max_iterations": 12}
 def south_america():
     pytest.importorskip("plotly")
     pytest.importorskip("pyproj")
-    from rfmap.cartogram_data import world_population
+    from rfmap.cartogram.data import world_population
 
     fc = world_population(YEARS).collection
     return {"type": "FeatureCollection",

@@ -141,7 +141,7 @@ def test_solve_field_file_density_is_the_named_fields_map(tmp_path, capsys, meth
 
 def test_solve_field_file_beltrami(tmp_path, capsys):
     """A complex Beltrami coefficient at the vertices (averaged over each triangle) gives T1's map closely."""
-    from rfmap.mesh import grid_points
+    from rfmap.core.mesh import grid_points
     from rfmap.fields.paper import BELTRAMI_MAPS
 
     n = 33
@@ -411,7 +411,7 @@ def test_map_refine_undoes_an_overshoot(tmp_path, capsys):
 
 def _mirror_permutations(n: int):
     """Vertex permutations of the N-grid for the reflection x -> 1 - x and the transposition (x, y) -> (y, x)."""
-    from rfmap.mesh import grid_points
+    from rfmap.core.mesh import grid_points
 
     idx = np.rint(grid_points(n, 2) * (n - 1)).astype(int)
     lookup = {tuple(k): i for i, k in enumerate(idx)}
@@ -516,7 +516,7 @@ def test_map_warns_in_one_line_when_the_map_undoes_equalization(tmp_path, capsys
 def test_map_of_query_points_warns_in_one_line_when_shortened(tmp_path, capsys, tiny_model):
     """Query points are judged on the working grid (rfmap.finish.query.shorten_query); the CLI's line
     then names the grid-only remedy as such."""
-    from rfmap.mesh import grid_points
+    from rfmap.core.mesh import grid_points
 
     f, pts = tmp_path / "flat.npy", tmp_path / "pts.npy"
     np.save(f, np.ones((21, 21)))

@@ -1,4 +1,4 @@
-"""Jacobians, measures and Beltrami coefficients of piecewise-linear maps (rfmap.geometry)."""
+"""Jacobians, measures and Beltrami coefficients of piecewise-linear maps (rfmap.core.geometry)."""
 import math
 
 import numpy as np
@@ -7,7 +7,7 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rfmap.geometry import (
+from rfmap.core.geometry import (
     beltrami_coefficient,
     beltrami_from_jacobian,
     det,
@@ -17,7 +17,7 @@ from rfmap.geometry import (
     signed_measures,
     wirtinger,
 )
-from rfmap.mesh import grid_mesh
+from rfmap.core.mesh import grid_mesh
 
 MESH2 = grid_mesh(5, 2)
 MESH3 = grid_mesh(3, 3)
@@ -220,7 +220,7 @@ def test_gradcheck_beltrami_coefficient():
 def test_grid_fast_path_matches_the_element_list(dim, n):
     """Strided grid measures and element means equal the gathered ones exactly, element by element, and so do
     their gradients (the training losses use the strided path)."""
-    from rfmap.geometry import grid_element_mean, grid_signed_measures
+    from rfmap.core.geometry import grid_element_mean, grid_signed_measures
 
     mesh = grid_mesh(n, dim)
     el = torch.as_tensor(mesh.elements)

@@ -27,7 +27,7 @@ import rfmap
 #: Layer of every module, lowest first.  A module may import from its own layer or a lower one.
 LAYERS: dict[str, int] = {
     # core
-    "rfmap._version": 0, "rfmap.core": 0, "rfmap.core.device": 0, "rfmap.geometry": 0, "rfmap.mesh": 0, "rfmap.inputs": 0, "rfmap.fields.paper": 0,
+    "rfmap._version": 0, "rfmap.core": 0, "rfmap.core.device": 0, "rfmap.core.geometry": 0, "rfmap.core.mesh": 0, "rfmap.core.inputs": 0, "rfmap.fields.paper": 0,
     "rfmap.fields.random": 0, "rfmap.fields": 0, "rfmap.core.metrics": 0, "rfmap.core.result": 0,
     "rfmap.core.surface": 0, "rfmap.core.folds": 0,
     # classical solvers, the network, the losses
@@ -54,16 +54,16 @@ LAYERS: dict[str, int] = {
     "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,
     "rfmap.paper.flow_studies": 3, "rfmap.paper.design": 3, "rfmap.paper.cartograms": 3, "rfmap.paper.comparison": 3,
     "rfmap.paper.ablations": 3,
-    "rfmap.cartogram": 3,
-    "rfmap.cartogram_data": 3, "rfmap.cartogram_series": 3, "rfmap.cartogram_metrics": 3,
-    "rfmap.cartogram_synthetic": 3, "rfmap.cartogram_output": 3, "rfmap.cartogram_html": 3,
-    "rfmap.cartogram_insets": 3,
-    "rfmap.regions": 3, "rfmap.projection": 3, "rfmap.paper.compare": 3, "rfmap.training.records": 3,
-    "rfmap.cli": 4, "rfmap.cli.__main__": 4, "rfmap.cli.commands": 4, "rfmap.cli_base": 4, "rfmap.cli_cartogram": 4, "rfmap.cli.lazy_parser": 4,
+    "rfmap.cartogram": 3, "rfmap.cartogram.resize": 3,
+    "rfmap.cartogram.data": 3, "rfmap.cartogram.series": 3, "rfmap.cartogram.metrics": 3,
+    "rfmap.cartogram.synthetic": 3, "rfmap.cartogram.output": 3, "rfmap.cartogram.html": 3,
+    "rfmap.cartogram.insets": 3,
+    "rfmap.cartogram.regions": 3, "rfmap.cartogram.projection": 3, "rfmap.paper.compare": 3, "rfmap.training.records": 3,
+    "rfmap.cli": 4, "rfmap.cli.__main__": 4, "rfmap.cli.commands": 4, "rfmap.cli.base": 4, "rfmap.cli.cartogram": 4, "rfmap.cli.lazy_parser": 4,
     "rfmap": 4,
 }
 
-CORE = ("rfmap.mesh", "rfmap.geometry", "rfmap.fields", "rfmap.core.metrics")
+CORE = ("rfmap.core.mesh", "rfmap.core.geometry", "rfmap.fields", "rfmap.core.metrics")
 ABOVE_CORE = ("rfmap.nn", "rfmap.tasks", "rfmap.training", "rfmap.surrogate",
               "rfmap.paper", "rfmap.cli.commands")
 
@@ -186,8 +186,8 @@ def _reachable(graph, start: str) -> set[str]:
 
 
 def test_the_walk_finds_the_package(graph):
-    assert {"rfmap.mesh", "rfmap.surrogate", "rfmap.training", "rfmap.solvers.diffusion", "rfmap.nn.model"} <= set(graph)
-    assert "rfmap.geometry" in graph["rfmap.mesh"]
+    assert {"rfmap.core.mesh", "rfmap.surrogate", "rfmap.training", "rfmap.solvers.diffusion", "rfmap.nn.model"} <= set(graph)
+    assert "rfmap.core.geometry" in graph["rfmap.core.mesh"]
     assert "rfmap.tasks.losses" in graph["rfmap.tasks.base"]  # "from .. import losses": a submodule imported by name
     assert "rfmap.solvers.lbs" in graph["rfmap.solvers"]
 

@@ -81,7 +81,7 @@ def test_parameter_counts_skip_self_and_private_names():
     assert public_parameter_counts(src) == {"f": 3, "C.h": 1}
 
 
-@pytest.mark.xfail(strict=True, reason="the cartogram modules, moved last, still take long keyword lists: "
+@pytest.mark.xfail(strict=True, reason="the cartogram application still takes long keyword lists: "
                    "cartogram() 19, viz.cartograms.plot_regions 11, cartogram_figure 10 parameters")
 def test_no_public_function_takes_more_than_eight_parameters():
     """Long keyword lists are options objects (``MapOptions``, ``FlowOptions``, ``RunOptions``, ...)."""
@@ -98,8 +98,6 @@ def test_the_kinds_are_compared_only_in_the_tasks():
     assert len(found) <= 3, found
 
 
-@pytest.mark.xfail(strict=True, reason="the cartogram application (cartogram*, regions, projection, cli_cartogram) "
-                   "and the modules it imports (mesh, geometry, inputs, cli_base) are not yet in packages")
 def test_the_top_level_holds_at_most_four_modules():
     """The packages name the architecture; at most four modules stay beside them."""
     top = sorted(p.name for p in PACKAGE.glob("*.py") if p.name not in ("__init__.py", "_version.py"))

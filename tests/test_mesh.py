@@ -1,9 +1,9 @@
-"""Structured grids, their simplicial meshes and multilinear interpolation (rfmap.mesh)."""
+"""Structured grids, their simplicial meshes and multilinear interpolation (rfmap.core.mesh)."""
 import numpy as np
 import pytest
 import torch
 
-from rfmap.mesh import (
+from rfmap.core.mesh import (
     Mesh,
     check_dim,
     check_n,
@@ -242,7 +242,7 @@ def test_interpolation_rejects_bad_shapes():
 def test_grid_too_large_for_memory_is_refused_before_allocation():
     """A grid whose maps cannot fit in the available memory is a ValueError naming N and the memory, raised before
     anything is allocated (N = 10**6 in 2D would need about 4 TB)."""
-    from rfmap.mesh import BYTES_PER_VERTEX, check_grid_memory
+    from rfmap.core.mesh import BYTES_PER_VERTEX, check_grid_memory
 
     with pytest.raises(ValueError, match=r"N=1000000 is too large for this machine's memory"):
         grid_points(10**6, 2)

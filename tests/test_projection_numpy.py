@@ -1,4 +1,4 @@
-"""The numpy equal-area projections of :mod:`rfmap.projection` (ellipsoidal Lambert azimuthal equal-area and Equal
+"""The numpy equal-area projections of :mod:`rfmap.cartogram.projection` (ellipsoidal Lambert azimuthal equal-area and Equal
 Earth on WGS84) against PROJ through pyproj, the reference: forward to 1e-9 of the plane's extent, inverse to 1e-9 of
 a turn, on random points; and a longitude/latitude cartogram command that never imports pyproj."""
 from __future__ import annotations
@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from rfmap.projection import Projection, _eqearth, _laea, _proj
+from rfmap.cartogram.projection import Projection, _eqearth, _laea, _proj
 
 pytest.importorskip("pyproj")
 
@@ -66,7 +66,7 @@ def test_equal_earth_inverse_clamps_beyond_the_pole_as_proj():
 
 
 def test_lonlat_cartogram_command_does_not_import_pyproj(tmp_path):
-    from rfmap.regions import world_countries
+    from rfmap.cartogram.regions import world_countries
 
     feats = [f for f in world_countries()["features"] if f["properties"]["continent"] == "South America"]
     src = tmp_path / "sa.geojson"

@@ -122,7 +122,7 @@ def matches(key: str, now: np.ndarray, ref: np.ndarray) -> bool:
 
 
 def _centroids(n: int) -> np.ndarray:
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.mesh import grid_mesh
 
     mesh = grid_mesh(n, 2)
     return mesh.points[mesh.elements].mean(1)
@@ -131,7 +131,7 @@ def _centroids(n: int) -> np.ndarray:
 def field_outputs() -> dict[str, np.ndarray]:
     """Test densities (preprocessed and raw), exact Beltrami coefficients and maps, weights and jitter."""
     import rfmap.fields as F
-    from rfmap.mesh import grid_mesh, grid_points, jittered_points, vertex_weights
+    from rfmap.core.mesh import grid_mesh, grid_points, jittered_points, vertex_weights
 
     out = {}
     for name in DENSITIES_2D + DENSITIES_3D:
@@ -251,7 +251,7 @@ def surrogate_outputs() -> dict[str, np.ndarray]:
         if sur.spec.kind == "density":
             arr = F.DENSITIES[name].sample(n + 2, preprocess=False)
         else:
-            from rfmap.mesh import grid_points
+            from rfmap.core.mesh import grid_points
 
             arr = F.BELTRAMI_MAPS[name].mu(grid_points(n + 2, 2)).reshape(n + 2, n + 2)
         res = sur.map(arr, n, **RAW)
@@ -280,7 +280,7 @@ def cartogram_outputs() -> dict[str, np.ndarray]:
     """Vertices (unit-square frame) and areas of small cartograms by the diffusion and the flow-based method."""
     import shapely
 
-    from rfmap.cartogram import cartogram
+    from rfmap.cartogram.resize import cartogram
 
     out = {}
     for label, values in (("two", [3, 5]), ("block", [1, 1, 1, 5])):

@@ -12,8 +12,8 @@ import torch
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from rfmap.geometry import jacobian_determinants
-from rfmap.mesh import element_measures
+from rfmap.core.geometry import jacobian_determinants
+from rfmap.core.mesh import element_measures
 from rfmap.core.metrics import compute_metrics
 from rfmap.nn import MultiResUNet
 from rfmap.finish.refine import density_objective, golden_section, refine_alpha
@@ -220,8 +220,8 @@ def test_density_objective_equals_direct_evaluation(dim, boundary, grid):
     mesh to 1e-13 of the largest for any alpha, including ones that fold elements, and the objective must follow (to
     1e-9 relative: Std(rho) divides by measures near zero on folding maps, which amplifies rounding)."""
     from rfmap.finish.refine import _measure_coefficients, _measures_at
-    from rfmap.geometry import signed_measures
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.geometry import signed_measures
+    from rfmap.core.mesh import grid_mesh
     from rfmap.core.metrics import density_std, element_population
     from rfmap.nn.model import apply_displacement
 
@@ -245,8 +245,8 @@ def test_density_objective_equals_direct_evaluation(dim, boundary, grid):
 
 
 def test_beltrami_objective_equals_direct_evaluation():
-    from rfmap.geometry import beltrami_coefficient
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.geometry import beltrami_coefficient
+    from rfmap.core.mesh import grid_mesh
     from rfmap.nn.model import apply_displacement
     from rfmap.finish.refine import beltrami_objective
 

@@ -12,8 +12,8 @@ import torch
 
 import rfmap.surrogate as S
 from rfmap.fields import get_field
-from rfmap.mesh import vertex_weights
-from rfmap.mesh import element_measures, grid_points
+from rfmap.core.mesh import vertex_weights
+from rfmap.core.mesh import element_measures, grid_points
 from rfmap.nn import MultiResUNet
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
@@ -391,7 +391,7 @@ def test_3d_single_field_matches_its_row_in_a_batch():
 def test_density_objective_grid_path_equals_the_element_path(dim, n, boundary):
     """The refinement objective on a grid mesh gives the same value through the strided measures, for several
     stretching vectors, including one that folds the map (fold penalty active)."""
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.mesh import grid_mesh
     from rfmap.finish.refine import density_objective
 
     mesh = grid_mesh(n, dim)
@@ -498,7 +498,7 @@ def test_with_polish_a_folded_3d_map_starts_cold_without_trying_coarser_grids():
 
 @pytest.mark.parametrize("n, d", [(21, 2), (9, 3)])
 def test_density_quality_matches_the_metrics(n, d):
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.mesh import grid_mesh
     from rfmap.core.result import MapResult
 
     ref = grid_points(n, d)
@@ -517,7 +517,7 @@ def test_density_quality_matches_the_metrics(n, d):
 
 
 def test_density_quality_of_thin_and_broken_maps():
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.mesh import grid_mesh
     from rfmap.core.result import MapResult
 
     n = 11

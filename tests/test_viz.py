@@ -40,7 +40,7 @@ def test_architecture_diagram_draws_into_a_given_axes():
 
 def test_vertex_error_panels_show_the_error_of_each_map():
     from rfmap.core.result import MapResult
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.mesh import grid_mesh
     from rfmap.viz import vertex_error_panels
 
     n = 9

@@ -8,7 +8,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from rfmap.mesh import grid_mesh  # noqa: E402
+from rfmap.core.mesh import grid_mesh  # noqa: E402
 from rfmap.paper.reproduce import exact_beltrami_result  # noqa: E402
 from rfmap.core.result import MapResult  # noqa: E402
 from rfmap.viz import beltrami_figure, extreme_figure, map_rows_figure, style  # noqa: E402

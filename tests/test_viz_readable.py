@@ -109,7 +109,7 @@ def test_the_quoted_example_is_true_to_its_numbers():
 @pytest.mark.parametrize("clip", ["plane", True])
 def test_render_volume_cuts_along_flat_faces(clip):
     pytest.importorskip("pyvista")
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.mesh import grid_mesh
     from rfmap.core.result import MapResult
     from rfmap.viz.volumes import _cut
 

@@ -11,7 +11,7 @@ Quick start::
     sur = Surrogate.pretrained(models()[0])               # a shipped neural surrogate
 
 The neural names (:class:`Surrogate`, :func:`models`, :func:`load_or_train`) are imported on first use, so that the
-classical paths (``rfmap cartogram``, :mod:`rfmap.cartogram`) run without loading PyTorch.
+classical paths (``rfmap cartogram``, :mod:`rfmap.cartogram.resize`) run without loading PyTorch.
 """
 from ._version import __version__
 

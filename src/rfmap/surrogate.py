@@ -25,7 +25,7 @@ import numpy as np
 import torch
 
 from ._version import __version__
-from .mesh import check_n, grid_mesh, grid_points, interpolate, triangulate
+from .core.mesh import check_n, grid_mesh, grid_points, interpolate, triangulate
 from .core.device import resolve_device
 from .finish import Draft, MapOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
     poor_map_message

@@ -7,8 +7,8 @@ import pytest
 import torch
 
 from rfmap.fields import BELTRAMI_MAPS, sample_density
-from rfmap.geometry import signed_measures
-from rfmap.mesh import grid_mesh
+from rfmap.core.geometry import signed_measures
+from rfmap.core.mesh import grid_mesh
 from rfmap.core.metrics import MapMetrics, compute_metrics, density_std, element_population
 from rfmap.core.result import MapResult, load_result
 
@@ -182,7 +182,7 @@ def test_load_result_rejects_bad_files(tmp_path):
 def test_grid_fast_path_equals_the_general_path(dim, n):
     """On the grid mesh the measures come from strided kernels; permuting the elements (not a grid mesh any more)
     takes the gather path. Every metric is order-free, so both must agree to 1e-12, also for a folding map."""
-    from rfmap.mesh import grid_size
+    from rfmap.core.mesh import grid_size
 
     mesh = grid_mesh(n, dim)
     rng = np.random.default_rng(dim)
@@ -205,7 +205,7 @@ def test_grid_fast_path_equals_the_general_path(dim, n):
 # ----------------------------------------------------------------------------------------------- residual scales
 def test_residual_scales_split_a_smooth_residual_from_element_noise():
     from rfmap.core.metrics import residual_scales
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.mesh import grid_mesh
 
     m = grid_mesh(41, 2)
     x = m.points
@@ -231,7 +231,7 @@ def test_residual_scales_split_a_smooth_residual_from_element_noise():
 def _wall_fields(d: int, n: int):
     """A gradient g (no flux through the walls) and a divergence-free r, both vanishing normally on the walls, at
     the vertices of the n-grid, and their exact L2 norms squared over the unit square/cube."""
-    from rfmap.mesh import grid_points
+    from rfmap.core.mesh import grid_points
 
     x = grid_points(n, d)
     pi, s, c = np.pi, np.sin, np.cos
@@ -265,7 +265,7 @@ def test_rotational_share_of_exact_fields(d, n):
 def test_rotational_share_keeps_nodal_gradients_of_the_highest_cosine():
     """The gradient of cos(pi (N-1) x) cos(pi y) has the nodal samples (0, -pi cos(pi (N-1) x) sin(pi y)): kept
     whole, as a gradient."""
-    from rfmap.mesh import grid_points
+    from rfmap.core.mesh import grid_points
     from rfmap.core.metrics import rotational_share
 
     n = 17
@@ -275,7 +275,7 @@ def test_rotational_share_keeps_nodal_gradients_of_the_highest_cosine():
 
 
 def test_rotational_share_refuses_bad_maps():
-    from rfmap.mesh import grid_points
+    from rfmap.core.mesh import grid_points
     from rfmap.core.metrics import rotational_share
 
     x = grid_points(9, 2)

@@ -3,7 +3,7 @@ repair that keeps the surface embedded."""
 import numpy as np
 import pytest
 
-from rfmap.mesh import grid_mesh
+from rfmap.core.mesh import grid_mesh
 from rfmap.finish.repair import fold_free, repair_map
 from rfmap.fields.hard import first_folding, self_crossing_map
 from rfmap.core.surface import boundary_faces, grid_boundary_faces, grid_surface_intersections, surface_intersections

@@ -27,8 +27,8 @@ from rfmap.fields import (
     random_density,
     sample_density,
 )
-from rfmap.geometry import beltrami_coefficient, signed_measures
-from rfmap.mesh import grid_mesh, grid_points, jittered_points, vertex_weights
+from rfmap.core.geometry import beltrami_coefficient, signed_measures
+from rfmap.core.mesh import grid_mesh, grid_points, jittered_points, vertex_weights
 from rfmap.core.metrics import compute_metrics
 
 # Std(rho~_orig) of the test densities as published in the paper's tables (tab:population_test,

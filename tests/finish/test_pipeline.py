@@ -10,7 +10,7 @@ import torch
 
 from rfmap.finish import Draft, MapOptions, InfoView, MapReport, NetworkReport, RegridReport, finish_map
 from rfmap.finish.stages import judge, regrid, repair, shorten
-from rfmap.mesh import grid_mesh
+from rfmap.core.mesh import grid_mesh
 from rfmap.nn import MultiResUNet
 from rfmap.fields.paper import sample_density
 from rfmap.core.result import MapResult

@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.geometry import beltrami_coefficient
-from rfmap.mesh import element_measures, grid_mesh
+from rfmap.core.geometry import beltrami_coefficient
+from rfmap.core.mesh import element_measures, grid_mesh
 from rfmap.nn import MultiResUNet
 from rfmap.core.surface import boundary_crossings, boundary_loop
 from rfmap.finish.repair import (DELTA, LOCAL_RINGS, cap_mu, lbs_repair, local_lbs_repair, repair_map, scale_repair,
                                  vertex_classes)
-from rfmap.geometry import grid_min_measure
+from rfmap.core.geometry import grid_min_measure
 from rfmap.fields.hard import hard_beltrami, hard_density
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
@@ -453,7 +453,7 @@ def test_bernstein_test_is_sufficient_and_tighter_than_the_coefficient_bound():
 def test_scale_repair_cost_follows_the_folded_region():
     """A single folded tetrahedron on a 3D N = 24 grid: the repair is local (a local start, few vertices
     shortened, everything else exactly as the input) and fold-free."""
-    from rfmap.mesh import grid_mesh
+    from rfmap.core.mesh import grid_mesh
     from rfmap.core.folds import map_measures as _measures
     from rfmap.finish.repair import scale_repair
     n = 24

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.mesh import grid_mesh, grid_points
+from rfmap.core.mesh import grid_mesh, grid_points
 from rfmap.nn import BOUNDARIES, MultiResUNet, apply_displacement, boundary_mask
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec

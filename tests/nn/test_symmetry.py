@@ -152,8 +152,8 @@ def test_beltrami_coefficient_transforms_as_the_conjugated_map():
     """For an exact random map f and each symmetry g of the square (g x = A x + b), the coefficient of
     g o f o g^-1, computed from its Jacobian A J_f(g^-1 x) A^-1, equals transform_grid of f's coefficient
     (to 1e-12)."""
-    from rfmap.geometry import beltrami_from_jacobian
-    from rfmap.mesh import grid_points
+    from rfmap.core.geometry import beltrami_from_jacobian
+    from rfmap.core.mesh import grid_points
     from rfmap.fields.random import RandomBeltramiConfig, RandomMap
 
     n = 11

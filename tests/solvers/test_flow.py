@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from rfmap.fields import sample_density
-from rfmap.mesh import grid_mesh
+from rfmap.core.mesh import grid_mesh
 from rfmap.solvers import SOLVERS, get_solver, solve_dem, solve_flow
 from rfmap.solvers.diffusion import cosine_coefficients
 from rfmap.solvers.flow import F32_MARGIN, _turned_over, gaussian_blur, lumped_residual, poisson_flux, \
@@ -259,7 +259,7 @@ def test_sea_blend_tames_a_dense_coast():
     """A steep held-out ramp against the free boundary's coast: the abrupt sea with blurred retries leaves the flow's
     map about 6 times above the diffusion map's Std(rho~_map) at N = 65; a blended sea brings it within 2 times,
     fold-free, and records its width, and so does the default, whose stalled first pass is redone with it."""
-    from rfmap.inputs import preprocess_density
+    from rfmap.core.inputs import preprocess_density
     from rfmap.training.validation import validation_fields
 
     vf = next(f for f in validation_fields("density", 2, 16) if f.label == "ramp-3")
@@ -586,7 +586,7 @@ def test_smooth_grid_displacement_is_the_grid_filter_at_the_vertices(d, edges):
     import torch
 
     from rfmap.finish.polish import smooth_displacement, smooth_grid_displacement
-    from rfmap.mesh import grid_points
+    from rfmap.core.mesh import grid_points
 
     n = 9
     pts = torch.as_tensor(grid_points(n, d))
@@ -735,7 +735,7 @@ def test_fold_check_in_single_precision_agrees_with_double(d, n):
     """The step's fold check: float32 decides clear cases, float64 the ones within F32_MARGIN of zero."""
     import torch
 
-    from rfmap.geometry import grid_signed_measures
+    from rfmap.core.geometry import grid_signed_measures
 
     ref = grid_mesh(n, d).points
     h = 1.0 / (n - 1)

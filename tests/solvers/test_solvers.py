@@ -14,8 +14,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from rfmap.fields import BELTRAMI_MAPS, preprocess_density, sample_density
-from rfmap.geometry import beltrami_coefficient
-from rfmap.mesh import element_measures, grid_mesh
+from rfmap.core.geometry import beltrami_coefficient
+from rfmap.core.mesh import element_measures, grid_mesh
 from rfmap.core.result import MapResult
 from rfmap.solvers import SOLVERS, get_solver, solve_dem, solve_lbs
 from rfmap.solvers.diffusion import CosineDiffusion, cosine_coefficients, p1_upsample

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.mesh import vertex_weights
-from rfmap.mesh import grid_mesh, grid_points
+from rfmap.core.mesh import vertex_weights
+from rfmap.core.mesh import grid_mesh, grid_points
 from rfmap.tasks import TaskSpec, encode, grid_elements, kinds, sample_batch
 
 SPECS = [TaskSpec("density", 2, "square"), TaskSpec("beltrami", 2, "fixed"), TaskSpec("density", 3, "free")]

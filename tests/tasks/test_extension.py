@@ -16,7 +16,7 @@ import pytest
 import torch
 
 from rfmap.training.config import CONFIGS, get_config
-from rfmap.mesh import grid_points, interpolate
+from rfmap.core.mesh import grid_points, interpolate
 from rfmap.tasks import Batch, Task, TaskSpec, ValidationField, get_task, grid_elements, kinds, register_task
 from rfmap.tasks.base import _TASKS
 from rfmap.tasks.heldout import held_out_rng

@@ -12,8 +12,8 @@ from hypothesis import strategies as st
 
 from rfmap.tasks import losses as L
 from rfmap.fields import preprocess_density
-from rfmap.geometry import signed_measures
-from rfmap.mesh import grid_mesh
+from rfmap.core.geometry import signed_measures
+from rfmap.core.mesh import grid_mesh
 from rfmap.tasks import LossWeights, TaskSpec, sample_batch, task_loss
 
 

@@ -14,8 +14,8 @@ import torch
 
 from rfmap.cli.commands import main
 from rfmap.training.config import get_config
-from rfmap.geometry import signed_measures
-from rfmap.mesh import grid_mesh, grid_points
+from rfmap.core.geometry import signed_measures
+from rfmap.core.mesh import grid_mesh, grid_points
 from rfmap.tasks import draw_samples, make_batch, task_loss
 from rfmap.tasks.teacher import TeacherConfig, teacher_loss, teacher_map, teacher_targets
 from rfmap.training.validation import family, score

@@ -18,7 +18,7 @@ from rfmap.training.config import CONFIGS, get_config
 from rfmap.core.device import resolve_device
 from rfmap.fields.random import RandomMap, RandomBeltramiConfig
 from rfmap.surrogate import WEIGHTS_DIR, Surrogate
-from rfmap.mesh import grid_points
+from rfmap.core.mesh import grid_points
 from rfmap.tasks import draw_samples
 from rfmap.training.validation import VALIDATION_SEED, evaluate, score, validation_fields
 

@@ -15,7 +15,7 @@ import sys
 
 import numpy as np
 
-from ..cli_base import CLIError, solver_name
+from .base import CLIError, solver_name
 
 __all__ = ["main", "entry", "build_parser", "CLIError"]
 
@@ -30,7 +30,7 @@ def _load_npy(path: str) -> np.ndarray:
 
 def _grid_field_file(args) -> tuple[np.ndarray, int]:
     """``rfmap solve --field-file``: the array, sampled on an ``N^d`` grid, and ``N`` (``--n`` may only repeat it)."""
-    from ..mesh import check_n
+    from ..core.mesh import check_n
 
     arr = _load_npy(args.field_file)
     if arr.ndim not in (2, 3) or len(set(arr.shape)) != 1:
@@ -335,8 +335,8 @@ def _add_map(sub) -> None:
 
 
 def _add_cartogram(sub) -> None:
-    """``rfmap cartogram`` (:mod:`rfmap.cli_cartogram`)."""
-    from ..cli_cartogram import add_cartogram_parser
+    """``rfmap cartogram`` (:mod:`rfmap.cli.cartogram`)."""
+    from .cartogram import add_cartogram_parser
 
     add_cartogram_parser(sub)
 
@@ -405,7 +405,7 @@ def main(argv=None) -> int:
     except (CLIError, ValueError, FileNotFoundError, MemoryError) as e:
         if out and not existed and os.path.isfile(out) and args.cmd in ("solve", "map", "cartogram"):
             os.remove(out)
-        if isinstance(e, MemoryError):  # past the grid-size guard (rfmap.mesh.check_grid_memory): say so in one line
+        if isinstance(e, MemoryError):  # past the grid-size guard (rfmap.core.mesh.check_grid_memory): say so in one line
             e = f"out of memory ({e or 'allocation failed'}); use a smaller N or fewer points"
         print(f"rfmap {args.cmd}: error: {e}", file=sys.stderr)
         return 2

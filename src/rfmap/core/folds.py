@@ -1,7 +1,7 @@
 r"""Whether a map is folded: the signed element measures, and on a free boundary the embedding of its boundary.
 
 A piecewise-linear map of a simplicial mesh is *folded* when an element has a non-positive signed measure
-(:math:`\det J \le 0`).  On grid meshes the strided measures of :func:`rfmap.geometry.grid_signed_measures` are
+(:math:`\det J \le 0`).  On grid meshes the strided measures of :func:`rfmap.core.geometry.grid_signed_measures` are
 used; a free 2D boundary must be a simple polygon (a bucketed segment-crossing test), a free 3D boundary a surface
 without self-intersection (:func:`rfmap.core.surface.surface_intersections` on the mesh's boundary triangles).
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ..geometry import grid_min_measure, grid_signed_measures, signed_measures
+from .geometry import grid_min_measure, grid_signed_measures, signed_measures
 from .surface import boundary_crossings, boundary_faces, boundary_loop, grid_surface_intersections, \
     surface_intersections
 
@@ -19,7 +19,7 @@ __all__ = ["fold_free", "map_measures", "surface_crossing_count"]
 
 def map_measures(points: np.ndarray, elements: np.ndarray, grid_n: int | None) -> np.ndarray:
     """Signed measures of the elements of a map, shape (m,): the strided measures of the ``N``-grid mesh
-    (:func:`rfmap.geometry.grid_signed_measures`) with ``grid_n``, else of ``elements``, shape (m, d+1)."""
+    (:func:`rfmap.core.geometry.grid_signed_measures`) with ``grid_n``, else of ``elements``, shape (m, d+1)."""
     p = torch.as_tensor(np.asarray(points, dtype=np.float64))
     if grid_n is not None:
         return grid_signed_measures(p[None], grid_n)[0].numpy()
@@ -30,7 +30,7 @@ def fold_free(points: np.ndarray, elements: np.ndarray, *, grid_n: int | None = 
               boundary: str = "fixed") -> bool:
     """True when every element has positive measure (and, for a free 2D grid boundary, the boundary is simple).
 
-    ``grid_n``: the mesh is :func:`rfmap.mesh.grid_mesh` ``(N, d)`` and the strided measures are used (fast path).
+    ``grid_n``: the mesh is :func:`rfmap.core.mesh.grid_mesh` ``(N, d)`` and the strided measures are used (fast path).
     """
     if not np.isfinite(points).all():
         return False

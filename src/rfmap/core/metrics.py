@@ -17,8 +17,8 @@ from dataclasses import asdict, dataclass, fields
 import numpy as np
 import torch
 
-from ..geometry import beltrami_coefficient, grid_element_mean, grid_signed_measures, signed_measures
-from ..mesh import grid_size
+from .geometry import beltrami_coefficient, grid_element_mean, grid_signed_measures, signed_measures
+from .mesh import grid_size
 
 __all__ = ["MapMetrics", "compute_metrics", "density_std", "element_population", "residual_scales", "rotational_share"]
 
@@ -132,7 +132,7 @@ def compute_metrics(
         ref_meas, map_meas = grid_signed_measures(torch.stack([ref_t, map_t]), n_grid)
     else:
         ref_meas, map_meas = signed_measures(ref_t, el), signed_measures(map_t, el)  # once each (large 3D meshes)
-    det = map_meas / ref_meas  # as rfmap.geometry.jacobian_determinants
+    det = map_meas / ref_meas  # as rfmap.core.geometry.jacobian_determinants
     out.min_jacobian = float(det.min())
     out.n_flipped = int((det <= 0).sum())
     if density is not None:
@@ -243,7 +243,7 @@ def rotational_share(ref, mapped) -> float:
     Parameters
     ----------
     ref : array, shape (N**d, d)
-        The vertices of ``rfmap.mesh.grid_points(N, d)``, d = 2 or 3.
+        The vertices of ``rfmap.core.mesh.grid_points(N, d)``, d = 2 or 3.
     mapped : array, shape (N**d, d)
         Their images; every boundary vertex on its walls (to 1e-9).
 
@@ -252,7 +252,7 @@ def rotational_share(ref, mapped) -> float:
     float
         In [0, 1]: 0 for a gradient displacement (and for the identity), 1 for a divergence-free one.
     """
-    from ..mesh import grid_points
+    from .mesh import grid_points
 
     ref = np.asarray(ref, dtype=np.float64)
     mapped = np.asarray(mapped, dtype=np.float64)
@@ -262,7 +262,7 @@ def rotational_share(ref, mapped) -> float:
     d = ref.shape[1]
     n = int(round(ref.shape[0] ** (1.0 / d)))
     if n < 3 or n**d != ref.shape[0] or not np.allclose(ref, grid_points(n, d), rtol=0.0, atol=1e-12):
-        raise ValueError("ref must be the vertices of rfmap.mesh.grid_points(N, d) with N >= 3")
+        raise ValueError("ref must be the vertices of rfmap.core.mesh.grid_points(N, d) with N >= 3")
     if not np.isfinite(mapped).all():
         raise ValueError("the map has non-finite points")
     psi = (mapped - ref).T.reshape(d, *(n,) * d)

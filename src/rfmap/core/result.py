@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import torch
 
-from ..geometry import beltrami_coefficient, signed_measures
+from .geometry import beltrami_coefficient, signed_measures
 from .metrics import MapMetrics, compute_metrics, element_population
 
 __all__ = ["MapResult", "save_npz_atomic", "load_result", "to_pyvista", "setup_pyvista", "DENSITY_FIELD_KINDS"]

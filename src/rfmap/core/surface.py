@@ -37,7 +37,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..mesh import grid_mesh
+from .mesh import grid_mesh
 
 __all__ = ["boundary_faces", "surface_intersections", "grid_boundary_faces", "grid_surface_intersections",
            "boundary_loop", "boundary_crossings"]
@@ -86,7 +86,7 @@ def boundary_faces(elements: np.ndarray, points: np.ndarray | None = None) -> np
 
 @lru_cache(maxsize=8)
 def grid_boundary_faces(n: int) -> np.ndarray:
-    """:func:`boundary_faces` of :func:`rfmap.mesh.grid_mesh` ``(N, 3)``, outward, shape (12 (N-1)^2, 3); computed
+    """:func:`boundary_faces` of :func:`rfmap.core.mesh.grid_mesh` ``(N, 3)``, outward, shape (12 (N-1)^2, 3); computed
     once per ``N`` (a read-only array)."""
     m = grid_mesh(n, 3)
     out = boundary_faces(m.elements, m.points)
@@ -382,7 +382,7 @@ def _grid_faces(n: int) -> tuple:
     """Per face of the cube (axis ``a``, side ``s``): the indices of its triangles in :func:`grid_boundary_faces`,
     the two in-plane axes, the face's vertex loop (4 (N-1) vertex indices) and the reference orientation sign of
     each triangle projected on the face's plane."""
-    from ..mesh import grid_points
+    from .mesh import grid_points
 
     ref = grid_points(n, 3)
     faces = grid_boundary_faces(n)

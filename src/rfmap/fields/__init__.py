@@ -5,12 +5,12 @@
 * :mod:`rfmap.fields.random` -- random training fields (``RandomDensity``, ``RandomBeltrami``, ``RandomMap``, ...);
 * :mod:`rfmap.fields.hard` -- hard fields that make a network's raw map fold (sharp peaks, near-zero regions,
   steep ramps; :func:`~rfmap.fields.hard.first_folding`);
-* :mod:`rfmap.inputs` -- checking and normalising input fields (``check_density``, ``check_mu``, ``unit_mass``,
+* :mod:`rfmap.core.inputs` -- checking and normalising input fields (``check_density``, ``check_mu``, ``unit_mass``,
   ``preprocess_density``).
 """
 from __future__ import annotations
 
-from ..inputs import check_density, check_mu, preprocess_density, unit_mass
+from ..core.inputs import check_density, check_mu, preprocess_density, unit_mass
 from .paper import (BELTRAMI_MAPS, DENSITIES, PAPER_N, RECT_PEAK_BOX, TEST_FIELDS, BeltramiMap, DensityField,
                     field_names, get_field, sample_density, sample_mu)
 from .random import (RandomBeltrami, RandomBeltramiConfig, RandomDensity, RandomDensityConfig, RandomMap,

@@ -22,7 +22,7 @@ import math
 
 import numpy as np
 
-from ..mesh import grid_points
+from ..core.mesh import grid_points
 from ..finish import quiet_quality
 from ..tasks import DensityTask
 
@@ -104,9 +104,9 @@ def self_crossing_map(n: int, turns: float = 1.3) -> tuple[np.ndarray, np.ndarra
     Returns
     -------
     (ref, mapped, elements)
-        Grid vertices (N^3, 3), their images (N^3, 3) and the tetrahedra of :func:`rfmap.mesh.grid_mesh`.
+        Grid vertices (N^3, 3), their images (N^3, 3) and the tetrahedra of :func:`rfmap.core.mesh.grid_mesh`.
     """
-    from ..mesh import grid_mesh
+    from ..core.mesh import grid_mesh
 
     m = grid_mesh(n, 3)
     x, y, z = m.points.T

@@ -17,9 +17,9 @@ from typing import Callable
 import numpy as np
 import torch
 
-from ..geometry import beltrami_from_jacobian
-from ..inputs import preprocess_density
-from ..mesh import check_n, element_centroids, grid_mesh, grid_points
+from ..core.geometry import beltrami_from_jacobian
+from ..core.inputs import preprocess_density
+from ..core.mesh import check_n, element_centroids, grid_mesh, grid_points
 
 __all__ = [
     "DensityField",
@@ -287,7 +287,7 @@ def sample_density(name: str, n: int) -> np.ndarray:
 def sample_mu(name: str, n: int | None = None, *, points=None, elements=None) -> np.ndarray:
     r"""Exact Beltrami coefficient of the named test map at the element centroids, complex128 of shape (m,).
 
-    The elements are those of the ``N``-grid mesh (:func:`rfmap.mesh.grid_mesh`), or ``points``/``elements`` of any
+    The elements are those of the ``N``-grid mesh (:func:`rfmap.core.mesh.grid_mesh`), or ``points``/``elements`` of any
     triangle mesh; the per-triangle :math:`\mu` is the input of :func:`rfmap.solvers.solve_lbs` and the reference
     of the ``mean |Δμ|`` metric.
     """

@@ -11,8 +11,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..geometry import beltrami_from_jacobian
-from ..mesh import check_dim, grid_points
+from ..core.geometry import beltrami_from_jacobian
+from ..core.mesh import check_dim, grid_points
 
 __all__ = [
     "RandomDensity",
@@ -386,7 +386,7 @@ class RandomMap:
         return lo
 
     def _parts_grid(self, n: int):
-        """:meth:`_parts` on the regular ``N``-grid (:func:`rfmap.mesh.grid_points` order), by separable tables
+        """:meth:`_parts` on the regular ``N``-grid (:func:`rfmap.core.mesh.grid_points` order), by separable tables
         (:meth:`_parts_tensor` with one patch)."""
         t = np.linspace(0.0, 1.0, n)
         return self._parts_tensor(t[None], t[None])
@@ -431,7 +431,7 @@ class RandomMap:
 
     def mu_grid(self, n: int) -> np.ndarray:
         """Exact Beltrami coefficient at the vertices of the ``N``-grid, complex (N**2,)."""
-        from ..geometry import beltrami_from_jacobian
+        from ..core.geometry import beltrami_from_jacobian
 
         return beltrami_from_jacobian(torch.as_tensor(self.jacobian_grid(n))).numpy()
 

@@ -14,8 +14,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..geometry import grid_signed_measures
-from ..mesh import grid_mesh, grid_points, interpolate
+from ..core.geometry import grid_signed_measures
+from ..core.mesh import grid_mesh, grid_points, interpolate
 from ..core.result import MapResult
 from ..tasks import get_task
 from .report import InfoView, MapReport
@@ -33,7 +33,7 @@ def displacement_at(psi: torch.Tensor, points: np.ndarray, grid_n: int | None) -
     points : ndarray, shape (P, d)
         The output vertices.
     grid_n : int, optional
-        Set when ``points`` are the working grid itself (:func:`rfmap.mesh.grid_points` ``(W, d)``): the values are
+        Set when ``points`` are the working grid itself (:func:`rfmap.core.mesh.grid_points` ``(W, d)``): the values are
         read off; else they are interpolated multilinearly.
 
     Returns
@@ -104,7 +104,7 @@ class Draft:
     boundary : {"fixed", "square", "free"}
         The boundary condition the map keeps.
     grid_n : int, optional
-        Set when the mesh is :func:`rfmap.mesh.grid_mesh` ``(N, d)``; ``None`` for any other mesh (query points).
+        Set when the mesh is :func:`rfmap.core.mesh.grid_mesh` ``(N, d)``; ``None`` for any other mesh (query points).
     prediction : Prediction, optional
         The network's output, for a network's map.
     work_map : WorkingGridMap, optional
@@ -121,7 +121,7 @@ class Draft:
     @classmethod
     def of(cls, result: MapResult, boundary: str | None = None, n: int | None = None) -> "Draft":
         """Start from a computed map, e.g. a classical solver's.  ``boundary`` defaults to ``result.info
-        ["boundary"]``; ``n`` to the side of the grid when the mesh is :func:`rfmap.mesh.grid_mesh` ``(N, d)``."""
+        ["boundary"]``; ``n`` to the side of the grid when the mesh is :func:`rfmap.core.mesh.grid_mesh` ``(N, d)``."""
         boundary = boundary or result.info.get("boundary")
         if boundary is None:
             raise ValueError("the map's boundary condition is not in its info: pass boundary=")
@@ -168,7 +168,7 @@ class Draft:
 
 
 def _grid_side(result: MapResult) -> int | None:
-    """``N`` when the map's mesh is :func:`rfmap.mesh.grid_mesh` ``(N, d)``, else ``None``."""
+    """``N`` when the map's mesh is :func:`rfmap.core.mesh.grid_mesh` ``(N, d)``, else ``None``."""
     d, p = result.dim, result.ref_points.shape[0]
     n = round(p ** (1.0 / d))
     if n < 2 or n ** d != p or not np.array_equal(result.ref_points, grid_points(n, d)):

@@ -104,7 +104,7 @@ def finish_map(result: MapResult, options: MapOptions = MapOptions(), *, boundar
     boundary : {"fixed", "square", "free"}, optional
         The map's boundary condition (default ``result.info["boundary"]``, which the solvers record).
     n : int, optional
-        The grid side when the mesh is :func:`rfmap.mesh.grid_mesh` ``(N, d)`` (default: recognised).
+        The grid side when the mesh is :func:`rfmap.core.mesh.grid_mesh` ``(N, d)`` (default: recognised).
 
     Returns
     -------

@@ -49,7 +49,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..geometry import grid_element_mean, grid_signed_measures
+from ..core.geometry import grid_element_mean, grid_signed_measures
 from ..core.metrics import density_std
 
 __all__ = ["GUARD", "POOR", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER", "OUTPUT_PASSES",
@@ -96,7 +96,7 @@ def smooth_grid_displacement(psi_q, n: int, passes: int = OUTPUT_PASSES, edges: 
     Parameters
     ----------
     psi_q : tensor, shape (N**d, d)
-        Displacement at the vertices of ``rfmap.mesh.grid_points(N, d)``.
+        Displacement at the vertices of ``rfmap.core.mesh.grid_points(N, d)``.
     n : int
         Grid side ``N``.
     passes, edges
@@ -225,7 +225,7 @@ def polish_map(result, *, n: int, boundary: str, options: PolishOptions = Polish
     ----------
     result : MapResult
         The network's map :math:`u_0` of the grid: ``ref_points`` and ``mapped_points`` (N**d, d), ``elements`` of
-        :func:`rfmap.mesh.grid_mesh` ``(N, d)`` and ``field`` the vertex densities (N**d,, unit mass).
+        :func:`rfmap.core.mesh.grid_mesh` ``(N, d)`` and ``field`` the vertex densities (N**d,, unit mass).
     n : int
         Grid side ``N``.
     boundary : {"square", "free"}

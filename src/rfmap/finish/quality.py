@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..geometry import grid_element_mean, grid_signed_measures
+from ..core.geometry import grid_element_mean, grid_signed_measures
 from ..core.metrics import density_std
 from ..solvers.flow import F32_MARGIN
 from .report import MapReport
@@ -52,7 +52,7 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     Parameters
     ----------
     mapped : ndarray, shape (N**d, d)
-        The images of the grid's vertices (:func:`rfmap.mesh.grid_points` order); every reference element has
+        The images of the grid's vertices (:func:`rfmap.core.mesh.grid_points` order); every reference element has
         the same measure, so the reference vertices themselves are not needed.
     density : ndarray, shape (N**d,)
         Vertex densities.

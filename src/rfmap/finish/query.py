@@ -14,7 +14,7 @@ import numpy as np
 import torch
 
 from ..core.folds import fold_free
-from ..mesh import element_measures, grid_mesh, grid_points, interpolate
+from ..core.mesh import element_measures, grid_mesh, grid_points, interpolate
 from ..nn.model import apply_displacement
 from .repair import repair_map
 from .shorten import shorten_map

@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from ..geometry import beltrami_from_jacobian, edge_matrices, grid_signed_measures, signed_measures
+from ..core.geometry import beltrami_from_jacobian, edge_matrices, grid_signed_measures, signed_measures
 from ..core.metrics import density_std, element_population
 from ..nn.model import boundary_mask
 
@@ -175,8 +175,8 @@ def density_objective(ref, psi, elements, density, boundary, flip_weight: float 
     flip_weight : float
         :math:`\lambda`.
     grid_n : int, optional
-        Set when ``ref``/``elements`` are :func:`rfmap.mesh.grid_mesh` ``(N, d)``; the measures are then computed
-        from strided views (:func:`rfmap.geometry.grid_signed_measures`, same values, several times faster on 3D
+        Set when ``ref``/``elements`` are :func:`rfmap.core.mesh.grid_mesh` ``(N, d)``; the measures are then computed
+        from strided views (:func:`rfmap.core.geometry.grid_signed_measures`, same values, several times faster on 3D
         grids).
     """
     pop = element_population(ref, elements, np.asarray(density, dtype=np.float64))

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from ..geometry import grid_element_mean
+from ..core.geometry import grid_element_mean
 from ..core.metrics import density_std
 from ..core.folds import map_measures, fold_free
 
@@ -45,7 +45,7 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
     Parameters
     ----------
     ref, mapped : ndarray, shape (P, d)
-        The mesh's vertices and their images: the ``N``-grid (:func:`rfmap.mesh.grid_points` order, ``P = N**d``)
+        The mesh's vertices and their images: the ``N``-grid (:func:`rfmap.core.mesh.grid_points` order, ``P = N**d``)
         with ``n``, or any simplicial mesh with ``elements``.
     density : ndarray, shape (P,)
         Vertex densities (the population of an element is its mean vertex density times its measure, as in

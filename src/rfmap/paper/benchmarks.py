@@ -85,8 +85,8 @@ WARM_MODELS = {(2, "square"): "dem2d-square", (2, "free"): "deq2d-free", (3, "sq
 def benchmark_fields(dim: int, n: int, *, paper: bool = True, random: int = 0) -> list[tuple[str, np.ndarray]]:
     """Labelled densities on the ``N``-grid: the paper's test fields and ``random`` unseen random fields (the
     ``report`` stream of :func:`rfmap.training.validation.validation_fields`), preprocessed as the paper does."""
-    from ..inputs import preprocess_density
-    from ..mesh import grid_points
+    from ..core.inputs import preprocess_density
+    from ..core.mesh import grid_points
     from ..fields.paper import TEST_FIELDS, sample_density
     from ..training.validation import validation_fields
 

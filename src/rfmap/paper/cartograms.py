@@ -11,13 +11,13 @@ __all__ = ["methods_table", "series_table", "judged_max_error"]
 
 def judged_max_error(carto, min_share: float = 1e-4) -> float:
     """The largest relative area error of a cartogram over the regions holding at least ``min_share`` of the total
-    value (as :class:`rfmap.cartogram_series.SeriesFrame` judges a frame)."""
+    value (as :class:`rfmap.cartogram.series.SeriesFrame` judges a frame)."""
     share = carto.values / carto.values.sum()
     return float(carto.area_errors[share >= min_share].max())
 
 
 def methods_table(cartos: dict) -> str:
-    """Markdown: one row per ``(value, method)`` of :func:`rfmap.cartogram.compare_cartograms`' result, with the
+    """Markdown: one row per ``(value, method)`` of :func:`rfmap.cartogram.resize.compare_cartograms`' result, with the
     passes, the mean and largest area error and the seconds from GeoJSON to mapped polygons (six columns)."""
     lines = ["| value | method | passes | mean error | max error | time |", "|---|---|---:|---:|---:|---:|"]
     for (v, label), c in cartos.items():
@@ -28,7 +28,7 @@ def methods_table(cartos: dict) -> str:
 
 
 def series_table(warm, cold, labels=None) -> str:
-    """Markdown: one row per frame of two :class:`rfmap.cartogram_series.CartogramSeries` (warm and cold), with the
+    """Markdown: one row per frame of two :class:`rfmap.cartogram.series.CartogramSeries` (warm and cold), with the
     passes, the seconds and the largest area error over the judged regions of each (seven columns), and their
     totals (the largest error over all frames)."""
     labels = list(labels) if labels is not None else [f.key for f in warm.frames]

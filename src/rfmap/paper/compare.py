@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..mesh import jittered_points
+from ..core.mesh import jittered_points
 from .generalization import generalization_table
 from .tables import Table
 from ..fields.paper import PAPER_N, TEST_FIELDS

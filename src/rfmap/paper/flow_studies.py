@@ -37,8 +37,8 @@ def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float 
         spacings: how far the blend moves the map, its coastline included), ``time_default`` (the default flow's
         time over the diffusion solver's) and ``n_flipped`` (all flows together).
     """
-    from ..inputs import preprocess_density
-    from ..mesh import grid_points
+    from ..core.inputs import preprocess_density
+    from ..core.mesh import grid_points
     from ..solvers import solve_dem
     from ..solvers.flow import solve_flow
     from ..training.validation import validation_fields
@@ -169,7 +169,7 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
     list of dict
         One row per ``N`` and map: ``n``, ``method``, ``std``, ``smooth``, ``element_fraction``, ``time`` (s).
     """
-    from ..mesh import grid_mesh
+    from ..core.mesh import grid_mesh
     from ..core.metrics import residual_scales
     from ..fields.paper import sample_density
     from ..solvers.flow import solve_flow

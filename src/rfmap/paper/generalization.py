@@ -32,8 +32,8 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     the domain, with refinement and fold handling (:data:`~rfmap.paper.reproduce.SYM_REF`, or
     :data:`~rfmap.paper.reproduce.SYM` without ``refine``).
     """
-    from ..inputs import preprocess_density
-    from ..mesh import grid_points
+    from ..core.inputs import preprocess_density
+    from ..core.mesh import grid_points
     from ..solvers import solve_dem, solve_lbs
     from ..training.validation import validation_fields
 
@@ -195,8 +195,8 @@ def displacement_demand(sur, count: int = 16, train_count: int = 60, n: int | No
         :func:`rfmap.viz.studies.displacement_demand_figure`.
     """
     from ..training.config import get_config
-    from ..inputs import preprocess_density
-    from ..mesh import grid_points
+    from ..core.inputs import preprocess_density
+    from ..core.mesh import grid_points
     from ..fields.paper import sample_density
     from ..solvers import solve_dem
     from ..tasks import draw_samples

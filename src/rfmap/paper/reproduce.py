@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..mesh import grid_mesh
+from ..core.mesh import grid_mesh
 from ..fields.paper import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
 from ..core.result import MapResult
 from ..finish import quiet_quality

@@ -3,7 +3,7 @@ r"""The diffusion density-equalizing map of the unit square for cartograms, in n
 The method is that of :mod:`rfmap.solvers.diffusion` (Gastner & Newman 2004) with the square's walls fixed: the
 density diffuses, :math:`\partial_t\rho = \Delta\rho` with no-flux walls, and points follow
 :math:`\dot x = -\nabla\rho(x, t) / \rho(x, t)` until the density is nearly uniform.  As in
-:mod:`rfmap.solvers.cartoflow`, it is one pass of a cartogram (:func:`rfmap.cartogram.cartogram` with
+:mod:`rfmap.solvers.cartoflow`, it is one pass of a cartogram (:func:`rfmap.cartogram.resize.cartogram` with
 ``method="diffusion"``) and carries a cartogram's distinct polygon vertices themselves, or the ``N``-grid's vertices.
 
 * The density's cosine coefficients :math:`c_k` come from one type-I cosine transform of the vertex values

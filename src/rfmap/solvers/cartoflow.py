@@ -6,7 +6,7 @@ density is interpolated linearly in time, :math:`\rho_t = (1 - t)\rho_0 + t\bar\
 (:func:`poisson_flux_2d`, type-I DCT/DST on the vertex grid, :class:`rfmap.solvers.cosine.CosineTransforms`, as
 :func:`rfmap.solvers.spectral.poisson_flux`), and
 points follow :math:`\dot x = -\nabla\phi(x) / \rho_t(x)` from :math:`t = 0` to :math:`1`.  It is one pass of a
-cartogram (:func:`rfmap.cartogram.cartogram` with ``method="flow"``), which itself repeats passes on the mapped
+cartogram (:func:`rfmap.cartogram.resize.cartogram` with ``method="flow"``), which itself repeats passes on the mapped
 polygons, so this module has no passes, residual rasters or free boundary of its own: what it keeps is lean.
 
 * The points carried are a cartogram's distinct polygon vertices (a few thousand, where the grid has

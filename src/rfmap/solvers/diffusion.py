@@ -12,7 +12,7 @@ density tends to its mean; the vertex positions at :math:`t \to \infty` define t
 Numerical method:
 
 1. **Initial density.**  The piecewise-linear (P1) interpolant of the vertex values on the simplicial mesh of
-   :func:`rfmap.mesh.grid_mesh` -- the density whose element integrals :mod:`rfmap.core.metrics` uses -- is sampled on a
+   :func:`rfmap.core.mesh.grid_mesh` -- the density whose element integrals :mod:`rfmap.core.metrics` uses -- is sampled on a
    grid ``refine`` times finer, with :math:`M = \text{refine}\,(N-1) + 1` points per side (:func:`p1_upsample`).
    Starting from the P1 rather than the cosine interpolant of the vertex values avoids Gibbs ringing at steep
    features and lowers the final :math:`\mathrm{Std}(\tilde\rho)` markedly (e.g. 0.041 → 0.026 on rect-peak at
@@ -28,7 +28,7 @@ Numerical method:
 3. **Velocity.**  :math:`\rho` and :math:`\nabla\rho` are evaluated on the fine grid by separable products with
    cosine / sine tables (dense matrix products, :math:`O(M^{d} K)` per evaluation with :math:`K \le M` the modes
    not yet decayed below 1e-17), :math:`v = -\nabla\rho/\rho` is formed there and interpolated multilinearly at the
-   current vertex positions (:func:`rfmap.mesh.interpolate`).
+   current vertex positions (:func:`rfmap.core.mesh.interpolate`).
 4. **Time integration.**  :math:`\dot x = v(x, t)` is integrated with the embedded Bogacki–Shampine 3(2) pair
    (FSAL, 3 evaluations per step) with the local error per step bounded by ``rtol`` times the grid spacing, until
    the remaining displacement, estimated as :math:`\max|v| / \lambda_1` with :math:`\lambda_1 = \pi^2` the decay
@@ -68,8 +68,8 @@ import numpy as np
 import torch
 
 from ..core.device import torch_threads
-from ..geometry import grid_min_measure
-from ..mesh import grid_mesh, interpolate
+from ..core.geometry import grid_min_measure
+from ..core.mesh import grid_mesh, interpolate
 from ..core.result import MapResult
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
 from .spectral import cosine_coefficients, fft_workers
@@ -370,7 +370,7 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
     -------
     MapResult
         ``kind="density"``, ``field`` the vertex densities (shape (N**d,)), ``elements`` from
-        :func:`rfmap.mesh.grid_mesh`, ``time`` the wall-clock seconds; ``info`` holds ``iterations`` (accepted
+        :func:`rfmap.core.mesh.grid_mesh`, ``time`` the wall-clock seconds; ``info`` holds ``iterations`` (accepted
         steps), ``rejected``, ``evaluations`` (velocity-field evaluations), ``t_end`` (simulated time, box units),
         ``residual_velocity``, ``fold_rejections``, ``fold_blurs`` (blur widths of the redone flows, in vertex
         spacings; usually empty), ``fold_stop`` (the simulated time at which the flow was stopped to stay

@@ -76,8 +76,8 @@ import numpy as np
 import torch
 
 from ..core.device import torch_threads
-from ..geometry import grid_element_mean, grid_min_measure, grid_signed_measures
-from ..mesh import grid_mesh
+from ..core.geometry import grid_element_mean, grid_min_measure, grid_signed_measures
+from ..core.mesh import grid_mesh
 from ..core.result import MapResult
 from .locate import rasterize_elements
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
@@ -88,7 +88,7 @@ __all__ = ["STALL_BLEND", "FlowOptions", "solve_flow", "poisson_flux", "box_mean
            "residual_density", "lumped_residual", "vertex_residual", "gaussian_blur"]
 
 
-#: the fold check of a step (:func:`rfmap.geometry.grid_min_measure`, with the same threshold) and
+#: the fold check of a step (:func:`rfmap.core.geometry.grid_min_measure`, with the same threshold) and
 #: ``rfmap.surrogate.density_quality`` decide on float32 measures unless the smallest is below this fraction of the
 #: reference element measure; float64 then decides (the float32 rounding error of a grid element's measure is about
 #: 1e-6 / h of the mean, so this leaves a margin of about 20 at N = 1000)
@@ -97,7 +97,7 @@ F32_MARGIN = 1e-3
 
 def _turned_over(x: np.ndarray, n: int) -> bool:
     """Whether an element of the ``N``-grid mesh with vertices at ``x`` (N**d, d) has non-positive measure
-    (:func:`rfmap.geometry.grid_min_measure`: float32 unless the minimum is too close to zero for it, and only the
+    (:func:`rfmap.core.geometry.grid_min_measure`: float32 unless the minimum is too close to zero for it, and only the
     minimum is formed)."""
     return grid_min_measure(x, n) <= 0.0
 
@@ -225,7 +225,7 @@ class FlowOptions:
     tol : float
         Stop after the pass whose :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is at most ``tol`` (no pass at all
         when the input's is); 0 leaves the passes to ``max_passes`` and ``stall`` (a caller with its own stopping
-        rule, such as the passes of ``rfmap.cartogram.cartogram``, runs exactly one pass of a density that is not
+        rule, such as the passes of ``rfmap.cartogram.resize.cartogram``, runs exactly one pass of a density that is not
         exactly uniform).
     rtol : float, optional
         Largest predictor–corrector difference of an accepted step, in grid spacings of the raster's box; default

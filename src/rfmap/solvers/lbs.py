@@ -15,7 +15,7 @@ and taking the divergence eliminates the other component: :math:`\nabla\cdot(A\n
 :math:`\nabla\cdot(A\nabla v) = 0`.  :math:`A` is symmetric positive definite with :math:`\det A = 1`, so both are
 uniformly elliptic problems that share one stiffness matrix.
 
-Discretisation: piecewise-linear (P1) finite elements on :func:`rfmap.mesh.grid_mesh` with :math:`\mu` (and hence
+Discretisation: piecewise-linear (P1) finite elements on :func:`rfmap.core.mesh.grid_mesh` with :math:`\mu` (and hence
 :math:`A_T`) constant per triangle,
 
 .. math:: K_{ij} = \sum_T |T|\, \nabla\phi_i^\top A_T \nabla\phi_j .
@@ -39,8 +39,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..inputs import check_mu
-from ..mesh import Mesh, check_n, element_centroids, grid_mesh
+from ..core.inputs import check_mu
+from ..core.mesh import Mesh, check_n, element_centroids, grid_mesh
 from ..core.result import MapResult
 
 __all__ = ["solve_lbs", "beltrami_matrices", "p1_gradients", "assemble_stiffness", "LBS_BOUNDARIES"]
@@ -253,7 +253,7 @@ def solve_lbs(
     r"""Solve the Beltrami equation :math:`f_{\bar z} = \mu f_z` on the unit square with the Linear Beltrami Solver.
 
     Solves :math:`\nabla\cdot(A\nabla u) = 0` and :math:`\nabla\cdot(A\nabla v) = 0` for the two components of
-    :math:`f = u + iv` with P1 finite elements on the ``N``-grid (:func:`rfmap.mesh.grid_mesh`), ``A`` from
+    :math:`f = u + iv` with P1 finite elements on the ``N``-grid (:func:`rfmap.core.mesh.grid_mesh`), ``A`` from
     :func:`beltrami_matrices`.  The sparse system is factorised by ``scipy.sparse.linalg.splu`` in the nested-dissection order
     of :func:`grid_dissection_order`, and the two
     components are solved as two right-hand sides of one factorisation (``"fixed"``) or with one factorisation
@@ -262,7 +262,7 @@ def solve_lbs(
     Parameters
     ----------
     mu : complex ndarray of shape (m,) or callable
-        Beltrami coefficient per triangle, ``m = 2 (N-1)^2`` in the order of :func:`rfmap.mesh.square_triangles`;
+        Beltrami coefficient per triangle, ``m = 2 (N-1)^2`` in the order of :func:`rfmap.core.mesh.square_triangles`;
         or a callable ``mu(points)`` taking points of shape (P, 2) and returning complex values (P,), evaluated at
         the triangle centroids.  Must be finite with :math:`|\mu| < 1`.
     n : int

@@ -14,8 +14,8 @@ import math
 import numpy as np
 import torch
 
-from ..geometry import grid_cell_simplices, grid_signed_measures
-from ..mesh import grid_mesh
+from ..core.geometry import grid_cell_simplices, grid_signed_measures
+from ..core.mesh import grid_mesh
 
 __all__ = ["rasterize_elements", "WALK_STEPS", "WALK_COARSE", "WALK_COARSE_MIN", "WALK_FILL"]
 
@@ -170,7 +170,7 @@ def _inverse_guess(points: np.ndarray, n: int, mc: int, steps: int, y: np.ndarra
 
 def _walk_grid(points: np.ndarray, n: int, m: int, steps: int = WALK_STEPS, coarse: int = WALK_COARSE):
     r"""Locate the ``M``-grid nodes in a fold-free map ``points`` (N**d, d) of the ``N``-grid mesh (elements in
-    :func:`rfmap.mesh.grid_mesh` order) by Newton's method on the piecewise-linear map.
+    :func:`rfmap.core.mesh.grid_mesh` order) by Newton's method on the piecewise-linear map.
 
     A node :math:`y` starts at the reference point :math:`x` of the inverse map found by the same walk on a grid
     ``coarse`` times coarser (:func:`_inverse_guess`; at 3D N = 48 its first step finds four nodes in five, where
@@ -270,7 +270,7 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
     coordinates :math:`\lambda = E^{-1}(y - p_0)` (inside when all :math:`\lambda_i \ge 0` and
     :math:`\sum\lambda_i \le 1`, up to round-off); the work is the total node count of the bounding boxes,
     vectorized in chunks of ``chunk`` (element, node) pairs.  When the mesh is a map of the ``N``-grid mesh
-    (:func:`rfmap.mesh.grid_mesh`'s elements) that fills enough of its bounding box (:data:`WALK_FILL`: the square
+    (:func:`rfmap.core.mesh.grid_mesh`'s elements) that fills enough of its bounding box (:data:`WALK_FILL`: the square
     and cube boundaries, and the free boundary's mapped squares and cubes) the nodes are first located by a Newton
     walk on the grid (:func:`_walk_grid`, a few vectorized steps over the nodes instead of a scan over the elements;
     0.4 s against 1.6 s at 3D N = 48, ``M`` = 95), and only the elements whose boxes hold a node it did not find are
@@ -338,7 +338,7 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
 
 
 def _grid_side(points: np.ndarray, elements: np.ndarray) -> int | None:
-    """``N`` when ``elements`` are those of :func:`rfmap.mesh.grid_mesh` ``(N, d)`` over ``N**d`` points, else
+    """``N`` when ``elements`` are those of :func:`rfmap.core.mesh.grid_mesh` ``(N, d)`` over ``N**d`` points, else
     ``None`` (the vertices may be anywhere: a map of the grid mesh)."""
     d = points.shape[1]
     n = int(round(points.shape[0] ** (1.0 / d)))

@@ -21,8 +21,8 @@ import torch
 from torch import Tensor
 
 from . import losses as L
-from ..geometry import grid_signed_measures, signed_measures
-from ..mesh import grid_mesh, grid_points
+from ..core.geometry import grid_signed_measures, signed_measures
+from ..core.mesh import grid_mesh, grid_points
 from ..nn.model import BOUNDARIES, apply_displacement
 from ..core.result import DENSITY_FIELD_KINDS
 from ..fields.random import RandomBeltramiConfig, RandomDensityConfig

@@ -18,8 +18,8 @@ import torch
 from torch import Tensor
 
 from . import losses as L
-from ..inputs import check_mu
-from ..mesh import element_centroids, grid_mesh, grid_points, interpolate, jittered_points, square_triangles
+from ..core.inputs import check_mu
+from ..core.mesh import element_centroids, grid_mesh, grid_points, interpolate, jittered_points, square_triangles
 from ..fields.random import RandomBeltrami, RandomBeltramiConfig, RandomMap
 from ..finish.refine import REFINE, beltrami_objective
 from .base import Batch, LossWeights, MappedBatch, SampleOptions, Task, TaskSpec, grad_magnitude, grid_elements, \

@@ -20,9 +20,9 @@ import torch
 from torch import Tensor
 
 from . import losses as L
-from ..geometry import grid_element_mean
-from ..inputs import check_density, preprocess_density, unit_mass
-from ..mesh import grid_points, grid_vertex_weights, interpolate, jittered_points, vertex_weights
+from ..core.geometry import grid_element_mean
+from ..core.inputs import check_density, preprocess_density, unit_mass
+from ..core.mesh import grid_points, grid_vertex_weights, interpolate, jittered_points, vertex_weights
 from ..fields.random import RandomDensity, RandomDensityConfig
 from ..finish.refine import REFINE, density_objective
 from .teacher import teacher_map, teacher_targets

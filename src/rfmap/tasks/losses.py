@@ -13,7 +13,7 @@ import torch
 from torch import Tensor
 from torch.nn import functional as F
 
-from ..geometry import beltrami_coefficient, signed_measures
+from ..core.geometry import beltrami_coefficient, signed_measures
 
 __all__ = ["Measures", "weighted_mean", "beltrami_loss", "density_loss", "beltrami_energy", "fold_penalty", "area_penalty",
            "element_density", "loss_integrands"]
@@ -27,7 +27,7 @@ class Measures:
     Attributes
     ----------
     ref, mapped : Tensor, shape (B, m), optional
-        Signed element measures before and after the map (e.g. by :func:`rfmap.geometry.grid_signed_measures` on a
+        Signed element measures before and after the map (e.g. by :func:`rfmap.core.geometry.grid_signed_measures` on a
         grid mesh).
     density : Tensor, shape (B, m), optional
         The mean vertex density of every element.

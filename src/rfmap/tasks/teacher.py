@@ -27,7 +27,7 @@ import torch
 from torch import Tensor
 
 from ..fields import preprocess_density
-from ..mesh import interpolate
+from ..core.mesh import interpolate
 from ..solvers import ALIASES
 
 __all__ = ["TeacherConfig", "TEACHER_METHODS", "teacher_map", "teacher_targets", "teacher_indices", "teacher_loss"]
@@ -103,7 +103,7 @@ def teacher_map(raw_grid: np.ndarray, boundary: str, method: str) -> np.ndarray 
         return None
     mapped = np.asarray(r.mapped_points, dtype=np.float64)
     if boundary == "free":
-        from ..geometry import signed_measures
+        from ..core.geometry import signed_measures
 
         el = torch.as_tensor(r.elements)
         area = float(signed_measures(torch.as_tensor(mapped), el).sum())

@@ -218,8 +218,8 @@ def map_gap(sur, n: int, count: int = 4, stream: str = "report"):
     import numpy as np
     import pandas as pd
 
-    from ..inputs import preprocess_density
-    from ..mesh import grid_points
+    from ..core.inputs import preprocess_density
+    from ..core.mesh import grid_points
     from ..finish import quiet_quality
     from ..tasks.teacher import teacher_map
     from .validation import validation_fields

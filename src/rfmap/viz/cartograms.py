@@ -149,7 +149,7 @@ def _draw_labels(ax, geoms, labels, min_share: float) -> None:
 
 def cartogram_figure(carto, *, colors=None, labels=None, legend: bool = True, unit: str = "", title: str = "",
                      label: str | None = None, path=None, width: float = TEXT_COLUMN_IN, label_share: float = 5e-3):
-    """A map and its cartogram (:class:`rfmap.cartogram.Cartogram`) side by side, both in the plane of the
+    """A map and its cartogram (:class:`rfmap.cartogram.resize.Cartogram`) side by side, both in the plane of the
     cartogram (the equal-area projection for longitude/latitude input), on one scale.
 
     Parameters
@@ -232,7 +232,7 @@ def cartogram_figure(carto, *, colors=None, labels=None, legend: bool = True, un
 
 def cartogram_panels(cartos: dict, keys, *, label: str | None = None, cols: int = 3, width: float = TEXT_COLUMN_IN):
     """Cartograms in a grid of ``cols`` columns, one panel per key of ``cartos`` (``{key: Cartogram}``, keys as in
-    :func:`rfmap.cartogram.compare_cartograms`), regions coloured by their input density over the mean, with the
+    :func:`rfmap.cartogram.resize.compare_cartograms`), regions coloured by their input density over the mean, with the
     input map first, all in the cartogram's plane; ``width`` inches (text by :func:`column_style`); saved under
     ``label``; returns the figure."""
     import matplotlib.pyplot as plt
@@ -261,7 +261,7 @@ def area_error_histograms(cartos: dict, labels, values, *, label: str | None = N
                           cols: int = 2, width: float = TEXT_COLUMN_IN):
     """Histograms of the relative area errors :math:`|A_i/T_i - 1|` (log scale), one panel per value in a grid of
     ``cols`` columns and one colour per method label; ``cartos`` as returned by
-    :func:`rfmap.cartogram.compare_cartograms`; saved under ``label``; returns the figure."""
+    :func:`rfmap.cartogram.resize.compare_cartograms`; saved under ``label``; returns the figure."""
     import matplotlib.pyplot as plt
 
     values, labels = list(values), list(labels)
@@ -291,7 +291,7 @@ def area_error_histograms(cartos: dict, labels, values, *, label: str | None = N
 
 def series_grid(series, indices, *, titles=None, colors=None, label: str | None = None, cols: int = 2,
                 width: float = TEXT_COLUMN_IN):
-    """Frames of a :class:`rfmap.cartogram_series.CartogramSeries` in a grid of ``cols`` columns, all on one extent
+    """Frames of a :class:`rfmap.cartogram.series.CartogramSeries` in a grid of ``cols`` columns, all on one extent
     and scale, regions in fixed colours (``colors``, one per region, else :func:`neighbour_colours` of the input
     map), titled by ``titles`` (default: the frames' keys) with each frame's largest area error; saved under
     ``label``; returns the figure."""

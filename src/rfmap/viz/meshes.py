@@ -52,7 +52,7 @@ def plot_slice_outline(ax, points, n: int, k: int | None = None, *, title: str |
     """Draw the image of the slice ``z = k / (N - 1)`` of a map of the 3D ``N``-grid, projected on the xy-plane:
     its grid lines (at most ``max_lines`` per direction) and, thicker, its outline.  ``k`` defaults to the middle.
 
-    ``points``: mapped vertices (N^3, 3) in the grid's order (:func:`rfmap.mesh.grid_points`).
+    ``points``: mapped vertices (N^3, 3) in the grid's order (:func:`rfmap.core.mesh.grid_points`).
     """
     P = np.asarray(points).reshape(n, n, n, 3)[:, :, (n - 1) // 2 if k is None else int(k), :2]
     _grid_lines(ax, P.reshape(-1, 2), n, max(1, (n - 1) // max_lines), color=color, lw=lw)

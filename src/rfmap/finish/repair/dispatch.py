@@ -1,6 +1,6 @@
 r"""The entry point of the repair: a cheap check, then the strategy that fits the mesh, then the checks again.
 
-:func:`repair_map` first runs a cheap check (strided grid measures, :func:`rfmap.geometry.grid_signed_measures`, and
+:func:`repair_map` first runs a cheap check (strided grid measures, :func:`rfmap.core.geometry.grid_signed_measures`, and
 on a free 2D boundary a bucketed segment-crossing test) and returns the map untouched when nothing is folded.
 Otherwise a 2D grid map is rebuilt by the Linear Beltrami Solver (:func:`~rfmap.finish.repair.local.local_lbs_repair`, then
 :func:`~rfmap.finish.repair.lbs.lbs_repair`), any other map, or one the LBS leaves folded, by the displacement scaling
@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ...geometry import grid_min_measure
+from ...core.geometry import grid_min_measure
 from ...core.surface import boundary_crossings, boundary_loop
 from ...core.folds import map_measures, surface_crossing_count, fold_free
 from .embedding import surface_repair
@@ -49,7 +49,7 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     boundary : {"fixed", "square", "free"}
         The boundary condition the repaired map must keep.
     grid_n : int, optional
-        Set when the mesh is :func:`rfmap.mesh.grid_mesh` ``(N, d)``: enables the fast strided check and, in 2D,
+        Set when the mesh is :func:`rfmap.core.mesh.grid_mesh` ``(N, d)``: enables the fast strided check and, in 2D,
         the LBS repair.
     density : ndarray (n,), optional
         Vertex densities, for the density metrics in the report.

@@ -25,7 +25,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ...geometry import beltrami_coefficient
+from ...core.geometry import beltrami_coefficient
 from ...core.surface import boundary_crossings, boundary_loop
 from ...core.folds import map_measures
 
@@ -97,7 +97,7 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
     Parameters
     ----------
     mapped : ndarray, shape (N**2, 2)
-        The map on :func:`rfmap.mesh.grid_mesh` ``(N, 2)``.
+        The map on :func:`rfmap.core.mesh.grid_mesh` ``(N, 2)``.
     boundary : {"fixed", "square", "free"}
         ``fixed``: identity on the boundary; ``square`` and ``free``: Dirichlet values at the boundary positions of
         ``mapped``, untangled by :func:`untangle_boundary`.  On the square the vertices stay on their walls, as
@@ -111,7 +111,7 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
     -------
     (points, capped) : the rebuilt map (N**2, 2) and the mask of the triangles whose :math:`\mu` was truncated.
     """
-    from ...mesh import grid_mesh
+    from ...core.mesh import grid_mesh
     from ...solvers.lbs import solve_lbs
 
     mesh = grid_mesh(n, 2)

@@ -15,7 +15,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import torch
 
-from ...geometry import beltrami_coefficient
+from ...core.geometry import beltrami_coefficient
 from ...core.surface import boundary_crossings, boundary_loop
 from ...core.folds import map_measures
 from .lbs import DELTA, cap_mu
@@ -61,7 +61,7 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
     ``LOCAL_MIN_GIVE_UP`` vertices on small grids) ends fold-free, or when a free boundary crosses itself (boundary
     vertices keep their positions in a local solve, so only :func:`lbs_repair` can untangle it).
     """
-    from ...mesh import grid_mesh
+    from ...core.mesh import grid_mesh
     from ...solvers.lbs import assemble_stiffness, beltrami_matrices
 
     mesh = grid_mesh(n, 2)

@@ -39,7 +39,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ...mesh import grid_points
+from ...core.mesh import grid_points
 from ...core.surface import boundary_crossings, boundary_loop
 
 __all__ = ["scale_repair", "vertex_classes", "ETA", "LOCAL_START_RINGS"]
@@ -345,7 +345,7 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
 def vertex_classes(ref: np.ndarray, elements: np.ndarray) -> np.ndarray | None:
     r"""Classes of vertices no two of which share an element, from the parity of grid coordinates, or ``None``.
 
-    On a mesh whose elements lie in the cells of a regular grid (every mesh of :func:`rfmap.mesh.grid_mesh`), two
+    On a mesh whose elements lie in the cells of a regular grid (every mesh of :func:`rfmap.core.mesh.grid_mesh`), two
     vertices of one cell with the same parity :math:`(i_1 \bmod 2, \dots, i_d \bmod 2)` coincide, so the
     :math:`2^d` parity classes separate the vertices of every element.  The classes are computed from the
     vertex positions (an ``N^d`` grid spanning their bounding box) and checked on every element; ``None`` when

@@ -3,7 +3,7 @@ the contiguous states), as cartogram-cpp's ``Inset`` column places them.
 
 Every region names its inset: ``C`` (the main map; also empty), ``L``, ``R``, ``T`` or ``B`` (left, right, top,
 bottom of it; the words ``center``, ``left``, ... too).  Each inset is a cartogram of its own
-(:func:`rfmap.cartogram.cartogram`, in its own equal-area plane: an inset far from the main map is not distorted by
+(:func:`rfmap.cartogram.resize.cartogram`, in its own equal-area plane: an inset far from the main map is not distorted by
 the main map's projection), and the insets are then put on one scale: inset :math:`k`, holding the value
 :math:`V_k` on the area :math:`A_k`, is scaled about its centre by
 
@@ -11,7 +11,7 @@ the main map's projection), and the insets are then put on one scale: inset :mat
 
 so that a unit of value covers the same area in every frame, and placed beside the main map's bounding box on its
 side, a gap of :data:`GAP` of the main map's larger side away, centred on it.  The area errors, validity and overlaps
-are judged on the placed regions together, against the total value (:func:`rfmap.cartogram_metrics.cartogram_metrics`).
+are judged on the placed regions together, against the total value (:func:`rfmap.cartogram.metrics.cartogram_metrics`).
 The input map is laid out the same way at its true scale (:math:`s_k = 1`).  The placed frames are no map
 projection: the GeoJSON is written in them (``"coordinates": "insets"``) with each inset's projection, scale and
 offset in its ``"rfmap"`` member.
@@ -89,7 +89,7 @@ class InsetCartogram:
     ----------
     input_features : list of dict
     insets : dict
-        ``{side: rfmap.cartogram.Cartogram}``, each in its own projection's plane.
+        ``{side: rfmap.cartogram.resize.Cartogram}``, each in its own projection's plane.
     groups : dict
         ``{side: indices of its regions}`` (:func:`inset_groups`).
     geometries, regions : ndarray of shapely geometries, shape (R,)
@@ -127,7 +127,7 @@ class InsetCartogram:
 
     @property
     def features(self) -> list:
-        from .cartogram_output import mapped_features
+        from .output import mapped_features
 
         return mapped_features(self.input_features, self.geometries)
 
@@ -141,8 +141,8 @@ class InsetCartogram:
 
     def metrics(self, *, overlap_tol: float = 1e-6):
         """Area errors and topology of the placed regions together
-        (:func:`rfmap.cartogram_metrics.cartogram_metrics`)."""
-        from .cartogram_metrics import cartogram_metrics
+        (:func:`rfmap.cartogram.metrics.cartogram_metrics`)."""
+        from .metrics import cartogram_metrics
 
         if overlap_tol not in self._metrics:
             self._metrics[overlap_tol] = cartogram_metrics(self.geometries, self.values, overlap_tol=overlap_tol,
@@ -183,8 +183,8 @@ class InsetCartogram:
     def save(self, path) -> None:
         """Write the placed regions as a GeoJSON FeatureCollection, atomically, with the ``"rfmap"`` member
         :meth:`status` (no ``"crs"``: the placed frames are no one projection)."""
-        from .cartogram_data import atomic_write
-        from .cartogram_output import write_geojson
+        from .data import atomic_write
+        from .output import write_geojson
 
         atomic_write(path, lambda fh: write_geojson(fh, self.input_features, self.geometries, self.status(), None))
 
@@ -196,13 +196,13 @@ def cartogram_insets(collection, value: str, insets, **options) -> InsetCartogra
     Parameters
     ----------
     collection : dict, str or path
-        A GeoJSON FeatureCollection (:func:`rfmap.cartogram.cartogram`).
+        A GeoJSON FeatureCollection (:func:`rfmap.cartogram.resize.cartogram`).
     value : str
         The property holding each region's value.
     insets : str or sequence
         The property that names each region's inset (:data:`INSET_SIDES`), or one name per feature.
     **options
-        Keywords of :func:`rfmap.cartogram.cartogram` for every inset (``output`` is the projection's plane).
+        Keywords of :func:`rfmap.cartogram.resize.cartogram` for every inset (``output`` is the projection's plane).
 
     Returns
     -------
@@ -211,11 +211,11 @@ def cartogram_insets(collection, value: str, insets, **options) -> InsetCartogra
     Raises
     ------
     ValueError
-        For bad input (:func:`rfmap.cartogram.read_regions`), an unknown inset name, or insets not one per region.
+        For bad input (:func:`rfmap.cartogram.resize.read_regions`), an unknown inset name, or insets not one per region.
     """
     import shapely
 
-    from .cartogram import cartogram
+    from .resize import cartogram
     from .regions import read_regions
 
     features = read_regions(collection, value)[0]

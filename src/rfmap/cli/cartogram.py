@@ -1,4 +1,4 @@
-"""``rfmap cartogram``: GeoJSON regions resized by a value (:func:`rfmap.cartogram.cartogram`), a CSV template
+"""``rfmap cartogram``: GeoJSON regions resized by a value (:func:`rfmap.cartogram.resize.cartogram`), a CSV template
 (``--make-csv``), values joined from a CSV (``--data``), a time series (``--series``, ``--gif``) and figures
 (``--png``, ``--svg``).  Exit status 0: within tolerance, every region valid and no overlaps; 1: not so (the GeoJSON
 is written all the same, flagged); 2: bad input (one line, nothing written).
@@ -8,7 +8,7 @@ from __future__ import annotations
 import os
 import sys
 
-from .cli_base import CLIError, solver_name
+from .base import CLIError, solver_name
 
 __all__ = ["add_cartogram_parser", "cmd_cartogram"]
 
@@ -47,12 +47,12 @@ def _cartogram_outputs(args) -> list[str]:
 
 def _cartogram_input(args):
     """The regions of ``rfmap cartogram``: the GeoJSON as it is, or with ``--data`` joined to it
-    (:func:`rfmap.cartogram_data.join_values`); the join's two report lines are printed."""
+    (:func:`rfmap.cartogram.data.join_values`); the join's two report lines are printed."""
     if not args.data:
         if args.id:
             raise CLIError("--id needs --data (or --make-csv)")
         return args.input
-    from .cartogram_data import join_values, read_csv_table, read_csv_values
+    from ..cartogram.data import join_values, read_csv_table, read_csv_values
 
     if not args.id:
         raise CLIError("--data needs --id COLUMN (the CSV column that holds the regions' ids)")
@@ -72,10 +72,10 @@ def _cartogram_input(args):
 
 def cmd_cartogram(args) -> int:
     """Exit 0 for a cartogram within tolerance with valid, disjoint regions; 1 for one that is not (written all the
-    same, its ``"rfmap"`` status ``"failed"``: :meth:`rfmap.cartogram.Cartogram.problems`); 2 for bad input."""
+    same, its ``"rfmap"`` status ``"failed"``: :meth:`rfmap.cartogram.resize.Cartogram.problems`); 2 for bad input."""
     _cartogram_outputs(args)
     if args.make_csv:
-        from .cartogram_data import write_csv_template
+        from ..cartogram.data import write_csv_template
 
         key, value = args.id_property or args.id or "id", args.value or "value"
         n = write_csv_template(args.input, args.make_csv, key=key, value=value)
@@ -85,7 +85,7 @@ def cmd_cartogram(args) -> int:
         raise CLIError("give one of --value (a cartogram) and --series (a cartogram per value, animated)")
     if args.gif and not args.series:
         raise CLIError("--gif needs --series")
-    from .cartogram import cartogram
+    from ..cartogram.resize import cartogram
 
     if args.inset and args.series:
         raise CLIError("--inset draws one cartogram: it does not go with --series")
@@ -127,8 +127,8 @@ def cmd_cartogram(args) -> int:
 
 def _cartogram_series(args, collection) -> int:
     """``--series``: a cartogram per value, each warm-started from the previous
-    (:func:`rfmap.cartogram_series.cartogram_series`); ``--out`` holds the last, ``--gif`` the animation."""
-    from .cartogram_series import cartogram_series, save_animation
+    (:func:`rfmap.cartogram.series.cartogram_series`); ``--out`` holds the last, ``--gif`` the animation."""
+    from ..cartogram.series import cartogram_series, save_animation
 
     if args.method not in ("diffusion", "flow"):
         raise CLIError("--series runs the classical methods (diffusion or flow)")
@@ -156,8 +156,8 @@ def _cartogram_series(args, collection) -> int:
 
 def _cartogram_insets(args, collection) -> int:
     """``--inset COLUMN``: every inset a cartogram of its own, placed beside the main map on one scale
-    (:func:`rfmap.cartogram_insets.cartogram_insets`); written in the placed frames."""
-    from .cartogram_insets import cartogram_insets
+    (:func:`rfmap.cartogram.insets.cartogram_insets`); written in the placed frames."""
+    from ..cartogram.insets import cartogram_insets
 
     if args.projected or args.lonlat:
         raise CLIError("--inset writes the insets' placed frames: --projected and --lonlat do not apply")
@@ -180,11 +180,11 @@ def _cartogram_insets(args, collection) -> int:
 
 
 def _cartogram_page(args, cartos: list, keys: list | None = None) -> None:
-    """``--html``: an interactive page (:mod:`rfmap.cartogram_html`), a slider through the frames of a series;
+    """``--html``: an interactive page (:mod:`rfmap.cartogram.html`), a slider through the frames of a series;
     hover labels from ``--label``, colours from ``--color``."""
     if not args.html:
         return
-    from .cartogram_html import HtmlOptions, page_figure, write_page
+    from ..cartogram.html import HtmlOptions, page_figure, write_page
 
     props = [f.get("properties") or {} for f in cartos[0].features]
     labels = [p.get(args.label) for p in props] if args.label else None
@@ -192,7 +192,7 @@ def _cartogram_page(args, cartos: list, keys: list | None = None) -> None:
     if args.color:
         from matplotlib.colors import to_hex
 
-        from .viz.cartograms import region_colours
+        from ..viz.cartograms import region_colours
 
         colors = [to_hex(c) for c in region_colours([p.get(args.color) for p in props])[0]]
     opts = HtmlOptions(title=args.value, labels=labels, colors=colors)
@@ -210,7 +210,7 @@ def _cartogram_figures(args, carto) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .viz.cartograms import cartogram_figure
+    from ..viz.cartograms import cartogram_figure
 
     props = [f.get("properties") or {} for f in carto.features]
     colors = [p.get(args.color) for p in props] if args.color else None
@@ -223,8 +223,8 @@ def _cartogram_figures(args, carto) -> None:
 
 def add_cartogram_parser(sub) -> None:
     """Add ``rfmap cartogram`` to the sub-command parsers ``sub``."""
-    from .cartogram import CARTOGRAM_METHODS
-    from .projection import PROJECTIONS
+    from ..cartogram.resize import CARTOGRAM_METHODS
+    from ..cartogram.projection import PROJECTIONS
 
     s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)",
                        description="Resize GeoJSON regions by a value. Longitude/latitude are projected to an "

@@ -10,6 +10,6 @@ class CLIError(Exception):
 
 def solver_name(text: str) -> str:
     """A method's name, with another name of a solver (:data:`rfmap.solvers.ALIASES`: ``dem``) spelled as the one."""
-    from .solvers import ALIASES
+    from ..solvers import ALIASES
 
     return ALIASES.get(text, text)

@@ -1,7 +1,7 @@
 r"""Values for cartograms from tables: a CSV joined to GeoJSON regions by an id, a template to fill in, and the
 world's population by year.
 
-A cartogram (:func:`rfmap.cartogram.cartogram`) reads one value per region from a feature property.  Values often
+A cartogram (:func:`rfmap.cartogram.resize.cartogram`) reads one value per region from a feature property.  Values often
 live in a table instead: :func:`read_csv_values` reads a CSV column by an id column (every value a number
 :math:`\ge 0`), and :func:`join_values` writes it onto the regions whose id property matches, as cartogram programs
 do (``cartogram-cpp --id --area``).  Ids are compared as text (``11`` and ``11.0`` are the same id).  A region
@@ -14,7 +14,7 @@ without a region is reported too.  :func:`write_csv_template` writes the table t
 its id and an empty value column.
 
 :func:`world_population` joins plotly's gapminder table (population of 142 countries every five years, 1952-2007) to
-the Natural Earth countries of :func:`rfmap.regions.world_countries` by ISO 3166-1 alpha-3 code.
+the Natural Earth countries of :func:`rfmap.cartogram.regions.world_countries` by ISO 3166-1 alpha-3 code.
 
 Nothing here imports PyTorch.
 """
@@ -211,7 +211,7 @@ class Join:
 
 
 def _areas(features: list, projection: str) -> np.ndarray:
-    """Areas of the features' polygons in the equal-area plane of :class:`rfmap.projection.PlanarFrame`."""
+    """Areas of the features' polygons in the equal-area plane of :class:`rfmap.cartogram.projection.PlanarFrame`."""
     import shapely
     from shapely.geometry import shape
 
@@ -247,7 +247,7 @@ def join_values(collection, values: Mapping[str, float], *, key: str = "id", val
     extra : mapping, optional
         ``{property: {id: anything}}`` written beside the value (a colour or label column).
     projection : str
-        The plane in which areas are measured for ``missing="mean"`` (:class:`rfmap.projection.PlanarFrame`).
+        The plane in which areas are measured for ``missing="mean"`` (:class:`rfmap.cartogram.projection.PlanarFrame`).
 
     Returns
     -------
@@ -348,7 +348,7 @@ def gapminder_population(year: int) -> dict[str, float]:
 
 
 def world_population(years=(2007,), *, antarctica: bool = False) -> Join:
-    r"""The countries of :func:`rfmap.regions.world_countries` with their population in each of ``years`` as the
+    r"""The countries of :func:`rfmap.cartogram.regions.world_countries` with their population in each of ``years`` as the
     properties ``pop_<year>``, joined to the gapminder table by ISO-3 code (``iso_a3``).
 
     A country without a gapminder row (Russia, the other former Soviet republics, ...) keeps its share of Natural

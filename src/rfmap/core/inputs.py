@@ -1,6 +1,6 @@
 r"""Checking and normalising input fields: finite values, positivity, :math:`|\mu| < 1`, unit mass.
 
-Densities are normalised to unit mass with the vertex quadrature weights of :func:`rfmap.mesh.vertex_weights`
+Densities are normalised to unit mass with the vertex quadrature weights of :func:`rfmap.core.mesh.vertex_weights`
 (:math:`\int p = \sum_v w_v p_v` for the piecewise-linear interpolant); :func:`preprocess_density` applies the
 paper's preprocessing (paper Sec. 5.2): shift to minimum 0.1, then unit mass.
 """
@@ -53,7 +53,7 @@ def unit_mass(values: np.ndarray, weights: np.ndarray | None = None) -> np.ndarr
     ----------
     values : ndarray, shape (N,)*d (a grid field) or (n,) with ``weights``
     weights : array, shape (n,), optional
-        Vertex quadrature weights (:func:`rfmap.mesh.vertex_weights`); defaults to the ``N``-grid's.
+        Vertex quadrature weights (:func:`rfmap.core.mesh.vertex_weights`); defaults to the ``N``-grid's.
 
     Returns
     -------
@@ -77,7 +77,7 @@ def preprocess_density(values, *, floor: float = DENSITY_FLOOR, weights: np.ndar
     floor : float
         Minimum after the shift.
     weights : array, shape (n,), optional
-        Vertex quadrature weights (:func:`rfmap.mesh.vertex_weights`); defaults to the ``N``-grid's.
+        Vertex quadrature weights (:func:`rfmap.core.mesh.vertex_weights`); defaults to the ``N``-grid's.
 
     Returns
     -------

@@ -1,6 +1,6 @@
 r"""The output of a cartogram: the coordinates it is written in, and its GeoJSON.
 
-A cartogram of longitude/latitude regions is computed in an equal-area plane (:mod:`rfmap.projection`).  Written
+A cartogram of longitude/latitude regions is computed in an equal-area plane (:mod:`rfmap.cartogram.projection`).  Written
 back in longitude/latitude (``output="input"``), a region that the passes moved where no longitude/latitude lies
 (past a pole's line, beyond the far side of the Lambert disc: Russia on a world map by population) can only be drawn
 at the domain's edge.  By default (``output="auto"``) such a cartogram is written in its equal-area plane instead,
@@ -13,7 +13,7 @@ again, and a vertex a few units of the last place from an edge can cross it; tur
 edges between the same vertices are other curves on the Earth, and an edge that passed a vertex by a hair may cross
 it.  Either way a ring crosses itself by a speck.  :func:`output_geometries` checks the polygons in the coordinates
 that are written and repairs such specks (:func:`repair_specks`); what it cannot repair stays invalid, for
-:meth:`rfmap.cartogram.Cartogram.problems` to report.
+:meth:`rfmap.cartogram.resize.Cartogram.problems` to report.
 """
 from __future__ import annotations
 
@@ -21,12 +21,12 @@ import json
 
 import numpy as np
 
-from .cartogram_metrics import REPAIR_AREA
+from .metrics import REPAIR_AREA
 
 __all__ = ["OUTPUTS", "SPECK", "choose_output", "crs_member", "mapped_features", "output_geometries", "repair_specks",
            "write_geojson"]
 
-#: The coordinates of :func:`rfmap.cartogram.cartogram`'s output: ``"auto"`` (the input's, unless a region left
+#: The coordinates of :func:`rfmap.cartogram.resize.cartogram`'s output: ``"auto"`` (the input's, unless a region left
 #: their domain, then the projection's plane), the input's, or the projection's plane.
 OUTPUTS = ("auto", "input", "projected")
 #: The largest change of a region's area (a share of it) by which :func:`repair_specks` makes it valid, and the
@@ -36,7 +36,7 @@ SPECK = 1e-6
 
 def choose_output(frame, mapped: np.ndarray, output: str) -> tuple[str, list[int]]:
     """The coordinates to write mapped regions (unit square, (R,)) in, and the regions beyond the projection's domain
-    (:meth:`rfmap.projection.PlanarFrame.beyond_domain`; checked for ``"auto"`` only): ``"auto"`` becomes
+    (:meth:`rfmap.cartogram.projection.PlanarFrame.beyond_domain`; checked for ``"auto"`` only): ``"auto"`` becomes
     ``"projected"`` when there are any, else ``"input"``."""
     if output != "auto":
         return output, []
@@ -55,7 +55,7 @@ def output_geometries(frame, mapped: np.ndarray, output: str) -> tuple[np.ndarra
 def repair_specks(geoms: np.ndarray, *, max_change: float = SPECK,
                   total_change: float = 0.0) -> tuple[np.ndarray, list[int]]:
     r"""Invalid polygons (R,) made valid where the fix moves at most ``max_change`` of their area, or
-    ``total_change`` of the total area (:data:`rfmap.cartogram_metrics.REPAIR_AREA` for :func:`output_geometries`:
+    ``total_change`` of the total area (:data:`rfmap.cartogram.metrics.REPAIR_AREA` for :func:`output_geometries`:
     the metrics' tolerance on overlaps): each is replaced by the polygon parts of ``shapely.make_valid`` that hold
     more than ``max_change`` of its area (the speck where a ring crossed itself is dropped).  Returns the polygons and
     the indices of those replaced; the others are left as they were."""

@@ -5,7 +5,7 @@ A contiguous cartogram redraws every region :math:`i` of a map with an area prop
 density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area) of the region under each point:
 
 1. **Planar frame.**  Longitude/latitude are projected to a plane where areas are the Earth's: the Lambert azimuthal
-   equal-area projection centred on the map, or Equal Earth for a world map (:mod:`rfmap.projection`; a map that
+   equal-area projection centred on the map, or Equal Earth for a world map (:mod:`rfmap.cartogram.projection`; a map that
    crosses the antimeridian is centred there).  Long edges are first split along their straight lines in
    longitude/latitude, so that they bend as the projection bends them.  The map's bounding box is fitted into the
    unit square leaving a ``margin`` on every side (:class:`PlanarFrame`).
@@ -31,9 +31,9 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  Edges that the
    classical passes stretched beyond :data:`SPLIT_EDGE` cells are split again before the next pass, and (flow) each
    region's weight is boosted by the share of its error that the last pass left (a secant acceleration of the passes:
-   :func:`rfmap.cartogram_metrics.boost`).  A fold smaller than the overlap tolerance, where the input draws two
-   edges nearly touching, is repaired (:func:`rfmap.cartogram_metrics.repair_folds`), and so is a sliver where
-   neighbours under a cell apart in the input were pressed together (:func:`rfmap.cartogram_metrics.repair_overlaps`).
+   :func:`rfmap.cartogram.metrics.boost`).  A fold smaller than the overlap tolerance, where the input draws two
+   edges nearly touching, is repaired (:func:`rfmap.cartogram.metrics.repair_folds`), and so is a sliver where
+   neighbours under a cell apart in the input were pressed together (:func:`rfmap.cartogram.metrics.repair_overlaps`).
 5. **Output.**  Edges longer than a grid cell are first split so that they bend with the map; every vertex is
    mapped once (shared borders stay shared); the polygons come back in the input's coordinates or the projection's
    plane (``output="projected"``) as GeoJSON with the input's properties, its ``"rfmap"`` member saying whether the
@@ -57,14 +57,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .cartogram_metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, clean_input_overlaps, judged, \
+from .metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, clean_input_overlaps, judged, \
     pass_weights, repair_folds, repair_overlaps
-from .mesh import check_grid_memory, check_n
-from .cartogram_output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
+from ..core.mesh import check_grid_memory, check_n
+from .output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
 from .projection import PlanarFrame
 from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edge, \
     _shapely, density_grid, fit_outlines, montreal_election, read_regions, world_countries
-from .solvers import ALIASES
+from ..solvers import ALIASES
 
 __all__ = [
     "CARTOGRAM_METHODS",
@@ -127,7 +127,7 @@ HYBRID_POLISH = 1e-9
 def _at_points(res, points: np.ndarray) -> np.ndarray:
     """The grid map ``res`` (a :class:`rfmap.result.MapResult` on the ``N``-grid) at ``points`` (P, 2): its
     displacement interpolated bilinearly."""
-    from .solvers.cartoflow import bilinear
+    from ..solvers.cartoflow import bilinear
 
     if not res.info.get("grid", True):  # the flow carried the points themselves
         return res.mapped_points
@@ -142,15 +142,15 @@ def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
     kw = dict(solver_kw)
     points = kw.pop("points", None)
     if method == "flow":  # torch-free, as the diffusion
-        from .solvers.cartoflow import CartoFlowOptions, flow_square
+        from ..solvers.cartoflow import CartoFlowOptions, flow_square
 
         return flow_square(density, CartoFlowOptions(**kw), points=points)
     if method == "diffusion":
-        from .solvers.cartodiffusion import CartoDiffusionOptions, diffusion_square
+        from ..solvers.cartodiffusion import CartoDiffusionOptions, diffusion_square
 
         opts = CartoDiffusionOptions(**{"tol_end": DIFFUSION_SETTINGS["tol_end"], **kw})
         return diffusion_square(density, opts, points=points)
-    from .finish import quiet_quality
+    from ..finish import quiet_quality
 
     # the raster's Std(rho~) counts the sea and every region's edge; the cartogram judges a pass by its area errors
     with quiet_quality():
@@ -198,7 +198,7 @@ class Cartogram:
         plane), per-iteration ``results`` (:class:`rfmap.result.MapResult`), ``sea`` density, ``beyond_domain``
         (the regions that left the input's domain, for ``output="auto"``).
     output : {"input", "projected"}
-        The coordinates of ``features`` (:mod:`rfmap.cartogram_output`).
+        The coordinates of ``features`` (:mod:`rfmap.cartogram.output`).
     tol : float
         The tolerance on the largest relative area error that :meth:`problems` checks.
     """
@@ -289,7 +289,7 @@ class Cartogram:
         regions, the passes, the method, ``N``, the ``coordinates`` (``"input"`` or ``"projected"``), the regions
         that left the input's domain (``beyond_domain``, for which ``output="auto"`` chose the plane) and the PROJ
         definition of the ``projection``'s plane (``None`` for planar input); in the plane, the ``"crs"`` member
-        names it too (:func:`rfmap.cartogram_output.crs_member`)."""
+        names it too (:func:`rfmap.cartogram.output.crs_member`)."""
         crs = crs_member(self.frame, self.output)
         return {"type": "FeatureCollection", **({"crs": crs} if crs else {}), "features": self.features,
                 "rfmap": self._status()}
@@ -309,8 +309,8 @@ class Cartogram:
                 "projection": self.frame.projection.definition}
 
     def save(self, path) -> None:
-        """Write the mapped FeatureCollection as GeoJSON, atomically (:func:`rfmap.cartogram_data.atomic_write`)."""
-        from .cartogram_data import atomic_write
+        """Write the mapped FeatureCollection as GeoJSON, atomically (:func:`rfmap.cartogram.data.atomic_write`)."""
+        from .data import atomic_write
 
         atomic_write(path, lambda fh: write_geojson(fh, self.input_features, self.geometries, self._status(),
                                                     crs_member(self.frame, self.output)))
@@ -363,14 +363,14 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
     margin : float
         Sea around the map: the map's bounding box is fitted into :math:`[\mathrm{margin}, 1-\mathrm{margin}]^2`.
     projection : {"auto", "equal-area", "equirectangular", "none"}
-        The plane the cartogram is computed in (:class:`PlanarFrame`, :mod:`rfmap.projection`): ``"auto"`` is
+        The plane the cartogram is computed in (:class:`PlanarFrame`, :mod:`rfmap.cartogram.projection`): ``"auto"`` is
         ``"equal-area"`` for longitude/latitude input (Lambert azimuthal equal-area centred on the map, Equal Earth
         for a map wider than 180° of longitude) and ``"none"`` (the coordinates as they are) for planar input.
     output : {"auto", "input", "projected"}
         The coordinates of the returned features: the input's (the projection inverted), or the projection's plane
         (metres for the equal-area projections; its PROJ definition is in :meth:`Cartogram.to_geojson`); ``"auto"``
         (default) is the input's unless a region left their domain (past a pole, beyond the far side of the Lambert
-        disc), then the plane (:func:`rfmap.cartogram_output.choose_output`).
+        disc), then the plane (:func:`rfmap.cartogram.output.choose_output`).
     supersample : int
         Scanlines per grid cell (:func:`density_grid`).
     model : str, optional
@@ -395,7 +395,7 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         ``N``.
     points : int, optional
         A budget of polygon vertices: the outlines (already split to edges of at most a grid cell) are simplified,
-        shared borders kept (:func:`rfmap.regions.fit_outlines`), or densified to about that many.  Simplifying
+        shared borders kept (:func:`rfmap.cartogram.regions.fit_outlines`), or densified to about that many.  Simplifying
         removes detail finer than the grid (and speeds up maps drawn with far more vertices than the grid resolves);
         it changes the input's areas slightly.  The budget sets the outlines' detail, not the count of points the
         flow carries: as for any input, the outlines are then split to edges of at most a grid cell, and edges the
@@ -412,12 +412,12 @@ def cartogram(collection, value: str, *, method: str = "flow", n: int = 256, tol
         ``info["max_error"]`` lists the largest relative area error after every pass, ``info["iterations"]`` the
         passes run, ``info["kept"]`` the pass whose polygons are returned (1-based), ``info["timed_out"]`` whether
         ``timeout`` stopped the passes, ``info["repaired"]`` the
-        regions whose numerically tiny fold was repaired (:func:`rfmap.cartogram_metrics.repair_folds`),
+        regions whose numerically tiny fold was repaired (:func:`rfmap.cartogram.metrics.repair_folds`),
         ``info["repaired_output"]`` those that rounding made cross themselves in the output's coordinates, repaired
-        there (:func:`rfmap.cartogram_output.output_geometries`), ``info["input_overlaps"]`` the count of pairs of
-        input regions that overlapped, made a coverage first (:func:`rfmap.cartogram_metrics.clean_input_overlaps`),
+        there (:func:`rfmap.cartogram.output.output_geometries`), ``info["input_overlaps"]`` the count of pairs of
+        input regions that overlapped, made a coverage first (:func:`rfmap.cartogram.metrics.clean_input_overlaps`),
         ``info["overlaps_cut"]`` the pairs ``(cut, kept)`` of regions whose sliver of overlap was cut from the first
-        (:func:`rfmap.cartogram_metrics.repair_overlaps`).
+        (:func:`rfmap.cartogram.metrics.repair_overlaps`).
 
     Raises
     ------
@@ -488,7 +488,7 @@ def _square_surrogate(surrogate, model: str | None):
     """The surrogate of a cartogram (``surrogate``, else the shipped ``model``, default ``deq2d-square``), checked
     to map 2D densities with the square's walls fixed."""
     if surrogate is None:
-        from .surrogate import Surrogate
+        from ..surrogate import Surrogate
 
         surrogate = Surrogate.pretrained(model or "deq2d-square")
     spec = surrogate.spec
@@ -506,7 +506,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     no longer lowers the largest area error, and the polygons of the best pass are returned; without, all ``passes``
     run; with ``split``, edges stretched beyond :data:`SPLIT_EDGE` cells are split between passes, and with
     ``accelerate`` every region's weight is boosted by its own slow progress
-    (:func:`rfmap.cartogram_metrics.boost`) until a pass fails to lower the largest error; past ``deadline``
+    (:func:`rfmap.cartogram.metrics.boost`) until a pass fails to lower the largest error; past ``deadline``
     (``time.perf_counter``) no further pass starts.  ``n`` and ``max_n`` count cells per side; the rasters have
     ``n + 1`` vertices per side.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
     shapely = _shapely()
@@ -584,7 +584,7 @@ def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogat
     which would otherwise be charged to whichever run comes first.
     """
     if surrogate is not None:
-        from .finish import quiet_quality
+        from ..finish import quiet_quality
 
         with quiet_quality():  # a uniform density: any movement at all leaves it "less equal"
             surrogate.map(np.ones((surrogate.n_range[0],) * 2), preprocess=False)

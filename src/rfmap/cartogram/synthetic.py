@@ -12,7 +12,7 @@ tight clusters ("cities"), so that cell areas span orders of magnitude; every re
 (:math:`a_i` its area in degrees², :math:`z_i` standard normal): small regions are dense, as cities are.  The cells
 share their borders vertex for vertex (as a clean coverage does); coordinates are rounded to ``decimals`` as
 GeoJSON files are.  :func:`synthetic_counties` cuts the contiguous United States of Natural Earth's 1:110m map
-(:func:`rfmap.regions.world_countries`) into about 3,100 such counties; :func:`synthetic_subdivisions` cuts Russia
+(:func:`rfmap.cartogram.regions.world_countries`) into about 3,100 such counties; :func:`synthetic_subdivisions` cuts Russia
 into about 80 regions, those across 180° split there (RFC 7946) as real data draw them.
 
 Nothing here imports PyTorch.
@@ -70,7 +70,7 @@ class TessellationOptions:
 
 def country_outline(name: str):
     """The outline (longitude/latitude, a shapely (Multi)Polygon) of a country of
-    :func:`rfmap.regions.world_countries` by its ``name``; a country split at the antimeridian comes back as one
+    :func:`rfmap.cartogram.regions.world_countries` by its ``name``; a country split at the antimeridian comes back as one
     geometry with longitudes in :math:`[0, 360)`."""
     shapely = _shapely()
     from shapely.geometry import shape

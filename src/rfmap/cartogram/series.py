@@ -1,7 +1,7 @@
 r"""Cartograms of a time series: one cartogram per frame (a year's population, say), warm-started from the previous
 frame, checked against the tolerance, and drawn as an animation.
 
-A cold series computes every frame from the original map (:func:`rfmap.cartogram.cartogram`).  A warm series
+A cold series computes every frame from the original map (:func:`rfmap.cartogram.resize.cartogram`).  A warm series
 computes the first frame so, in the projection's plane (``output="projected"``), and every later frame from the
 previous frame's cartogram, in that same plane (``projection="none"``), with the new values.  Between two frames
 a region's share of the total changes by a few per cent, so the previous cartogram is already nearly
@@ -34,10 +34,10 @@ class SeriesFrame:
     ----------
     key : str
         The frame's value property (e.g. ``"pop_1952"``).
-    carto : rfmap.cartogram.Cartogram
+    carto : rfmap.cartogram.resize.Cartogram
         Its cartogram, in the projection's plane.
     seconds : float
-        Wall-clock seconds of the frame's :func:`~rfmap.cartogram.cartogram` call (parsing included).
+        Wall-clock seconds of the frame's :func:`~rfmap.cartogram.resize.cartogram` call (parsing included).
     passes : int
         Passes run.
     max_error : float
@@ -128,18 +128,18 @@ def cartogram_series(collection, keys: Sequence[str], *, warm: bool = True, min_
         plane) by the values of ``keys[k]``; ``False``: every frame from ``collection``.
     min_share : float
         Regions holding less than this share of a frame's total are checked apart (:class:`SeriesFrame`) and left
-        out of the passes' stopping rule (:func:`rfmap.cartogram.cartogram`'s ``min_share``).
+        out of the passes' stopping rule (:func:`rfmap.cartogram.resize.cartogram`'s ``min_share``).
     projection : str
-        The plane of the first frame (and of every cold frame): :class:`rfmap.projection.PlanarFrame`.
+        The plane of the first frame (and of every cold frame): :class:`rfmap.cartogram.projection.PlanarFrame`.
     **options
-        Further keyword arguments of :func:`rfmap.cartogram.cartogram` (``method``, ``n``, ``tol``,
+        Further keyword arguments of :func:`rfmap.cartogram.resize.cartogram` (``method``, ``n``, ``tol``,
         ``max_iterations``, ...); ``output`` is always ``"projected"`` (the warm frames are computed there).
 
     Returns
     -------
     CartogramSeries
     """
-    from .cartogram import cartogram
+    from .resize import cartogram
 
     keys = list(keys)
     if not keys:
@@ -176,7 +176,7 @@ def save_animation(series: CartogramSeries, path, *, titles: Sequence[str] | Non
     import matplotlib.pyplot as plt
     from matplotlib import animation
 
-    from .viz.cartograms import column_style, neighbour_colours, plot_regions
+    from ..viz.cartograms import column_style, neighbour_colours, plot_regions
 
     path = str(path)
     if not path.lower().endswith((".gif", ".mp4")):

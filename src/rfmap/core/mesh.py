@@ -10,8 +10,8 @@ Conventions (shared by every part of :mod:`rfmap`):
 * 3D: every grid cube is split into six tetrahedra around its main diagonal (Kuhn / Freudenthal split).
 * Every element is positively oriented on the reference grid.
 
-The split of one grid cell is :func:`rfmap.geometry.grid_cell_simplices`; the mesh here and the strided grid
-operators of :mod:`rfmap.geometry` both use it, so their element orders agree.  Beside the mesh: the vertex
+The split of one grid cell is :func:`rfmap.core.geometry.grid_cell_simplices`; the mesh here and the strided grid
+operators of :mod:`rfmap.core.geometry` both use it, so their element orders agree.  Beside the mesh: the vertex
 quadrature weights (:func:`vertex_weights`), element centroids, multilinear interpolation of grid fields and the
 Sobol-jittered vertices used in training (:func:`jittered_points`).
 """
@@ -25,7 +25,7 @@ from functools import lru_cache
 
 import numpy as np
 
-# torch (and rfmap.geometry, which needs it) is imported where it is used: the mesh's checks and grids serve
+# torch (and rfmap.core.geometry, which needs it) is imported where it is used: the mesh's checks and grids serve
 # the torch-free cartogram path too
 
 __all__ = [
@@ -51,7 +51,7 @@ __all__ = [
 
 
 def _geometry():
-    """:mod:`rfmap.geometry`, imported on first use (it needs torch)."""
+    """:mod:`rfmap.core.geometry`, imported on first use (it needs torch)."""
     from . import geometry
 
     return geometry
@@ -144,7 +144,7 @@ def grid_points(n: int, dim: int = 2, dtype=np.float64) -> np.ndarray:
 
 
 def _grid_elements(n: int, dim: int) -> np.ndarray:
-    """Elements of the ``N``-grid: every simplex type of :func:`rfmap.geometry.grid_cell_simplices`, over all
+    """Elements of the ``N``-grid: every simplex type of :func:`rfmap.core.geometry.grid_cell_simplices`, over all
     cells (C order), one type after the other."""
     cells = np.stack([a.reshape(-1) for a in np.meshgrid(*([np.arange(n - 1)] * dim), indexing="ij")], axis=-1)
     stride = n ** np.arange(dim - 1, -1, -1)
@@ -231,7 +231,7 @@ def _grid_arrays(n: int, dim: int) -> tuple[np.ndarray, np.ndarray]:
 def grid_size(points, elements) -> int | None:
     """``N`` when ``(points, elements)`` is exactly :func:`grid_mesh` ``(N, d)`` (same vertices, same elements in the
     same order), else ``None``: lets whole-mesh measurements use the strided grid kernels
-    (:func:`rfmap.geometry.grid_signed_measures`), an order of magnitude cheaper than gathers on 3D meshes."""
+    (:func:`rfmap.core.geometry.grid_signed_measures`), an order of magnitude cheaper than gathers on 3D meshes."""
     pts = points.detach().cpu().numpy() if _is_tensor(points) else np.asarray(points)
     el = elements.detach().cpu().numpy() if _is_tensor(elements) else np.asarray(elements)
     if pts.ndim != 2 or pts.shape[1] not in (2, 3) or el.ndim != 2 or el.shape[1] != pts.shape[1] + 1:
@@ -248,7 +248,7 @@ def element_measures(points, elements):
     """Signed areas (2D) or volumes (3D) of the elements.
 
     Accepts numpy arrays or torch tensors (returned in the same kind); see
-    :func:`rfmap.geometry.signed_measures`.
+    :func:`rfmap.core.geometry.signed_measures`.
     """
     import torch
 

@@ -2,7 +2,7 @@ r"""Interactive cartograms: a self-contained HTML page (plotly) of one cartogram
 
 Every region is one filled plotly trace, so that hovering over it shows its label (its id or name unless a column
 gives labels), its value and its relative area error :math:`|A_i / T_i - 1|`
-(:attr:`rfmap.cartogram.Cartogram.area_errors`, measured in the equal-area plane).  A series (:class:`rfmap.cartogram_series.CartogramSeries`) becomes
+(:attr:`rfmap.cartogram.resize.Cartogram.area_errors`, measured in the equal-area plane).  A series (:class:`rfmap.cartogram.series.CartogramSeries`) becomes
 one plotly frame per cartogram: a slider steps through them and a play button animates them; the axes hold the
 extent of every frame, so that a region's size can be compared from frame to frame.  Longitude/latitude are drawn
 with the aspect that is true to scale at the map's centre (:math:`1/\cos\varphi_0`), a plane's metres as they are.
@@ -85,7 +85,7 @@ def _label(feature: dict, k: int) -> str:
 
 
 def _traces(carto, labels: Sequence, colors: Sequence, step: float) -> list:
-    """One filled scatter trace per region of ``carto`` (a :class:`rfmap.cartogram.Cartogram`), in its output's
+    """One filled scatter trace per region of ``carto`` (a :class:`rfmap.cartogram.resize.Cartogram`), in its output's
     coordinates (simplified to ``step``), its hover text naming the region, its value and its area error."""
     go = _plotly()
     errors = carto.area_errors
@@ -111,7 +111,7 @@ def _extent(cartos) -> tuple[list, list]:
 
 def page_figure(cartos: Sequence, keys: Sequence[str], options: HtmlOptions | None = None):
     """The plotly figure of :func:`cartogram_page` (one cartogram) and :func:`series_page` (several, with a slider
-    and a play button): ``cartos`` are :class:`rfmap.cartogram.Cartogram` of the same regions in the same
+    and a play button): ``cartos`` are :class:`rfmap.cartogram.resize.Cartogram` of the same regions in the same
     coordinates, ``keys`` their values' names (frame names and slider labels).  Raises ValueError for labels or
     colours not one per region, or for cartograms of different regions."""
     go = _plotly()
@@ -122,7 +122,7 @@ def page_figure(cartos: Sequence, keys: Sequence[str], options: HtmlOptions | No
         raise ValueError("the cartograms of a page must hold the same regions, one key each")
     labels = [_label(f, k) for k, f in enumerate(first.input_features)] if opts.labels is None else list(opts.labels)
     if opts.colors is None:
-        from .viz.cartograms import neighbour_colours
+        from ..viz.cartograms import neighbour_colours
 
         colors = neighbour_colours(first.geometries)
     else:
@@ -163,20 +163,20 @@ def _play(frame_ms: int) -> dict:
 
 def write_page(fig, path) -> None:
     """Write the plotly figure ``fig`` as one self-contained HTML file (plotly.js embedded), atomically."""
-    from .cartogram_data import atomic_write
+    from .data import atomic_write
 
     html = fig.to_html(include_plotlyjs=True, full_html=True, auto_play=False, config={"responsive": True})
     atomic_write(path, lambda fh: fh.write(html))
 
 
 def cartogram_page(carto, path, options: HtmlOptions | None = None) -> None:
-    """Write an interactive page of one cartogram (:class:`rfmap.cartogram.Cartogram`) to ``path`` (.html): its
+    """Write an interactive page of one cartogram (:class:`rfmap.cartogram.resize.Cartogram`) to ``path`` (.html): its
     regions in the output's coordinates, each hovered with its label, value and area error."""
     write_page(page_figure([carto], [options.title if options and options.title else "cartogram"], options), path)
 
 
 def series_page(series, path, options: HtmlOptions | None = None) -> None:
-    """Write an interactive page of a series of cartograms (:class:`rfmap.cartogram_series.CartogramSeries`) to
+    """Write an interactive page of a series of cartograms (:class:`rfmap.cartogram.series.CartogramSeries`) to
     ``path`` (.html): a frame per cartogram, a slider and a play button."""
     frames = series.frames
     write_page(page_figure([f.carto for f in frames], [f.key for f in frames], options), path)

@@ -84,7 +84,7 @@ def grid_cell_simplices(dim: int) -> list[list[tuple[int, ...]]]:
     cube is cut into the six Kuhn tetrahedra :math:`0 \to e_{\sigma_1} \to e_{\sigma_1} + e_{\sigma_2} \to
     (1, 1, 1)`, one per permutation :math:`\sigma` (in ``itertools.permutations`` order), with the two middle
     corners swapped for odd permutations so that every simplex is positively oriented.  This is the one definition
-    of the split: :func:`rfmap.mesh.grid_mesh` builds its elements from it, in this order.
+    of the split: :func:`rfmap.core.mesh.grid_mesh` builds its elements from it, in this order.
     """
     if dim == 2:
         return [[(0, 0), (1, 0), (0, 1)], [(1, 0), (1, 1), (0, 1)]]
@@ -108,7 +108,7 @@ def grid_cell_simplices(dim: int) -> list[list[tuple[int, ...]]]:
 def grid_simplices(values: Tensor, n: int, dim: int) -> list[list[Tensor]]:
     r"""Vertex values of every simplex of the ``N``-grid mesh, gathered by slicing instead of indexing.
 
-    The simplices of :func:`rfmap.mesh.grid_mesh` come in ``d!`` types per grid cell (2 triangles, 6 Kuhn
+    The simplices of :func:`rfmap.core.mesh.grid_mesh` come in ``d!`` types per grid cell (2 triangles, 6 Kuhn
     tetrahedra); for each type this returns its ``d + 1`` corners as strided views of the grid, which is much
     cheaper than a gather (and its scatter-add backward) on the millions of indices of a 3D mesh.
 

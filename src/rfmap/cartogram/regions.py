@@ -1,8 +1,8 @@
 r"""GeoJSON regions in the unit square: reading and checking them, their density raster, and real maps to try.
 
-The input stage of a cartogram (:mod:`rfmap.cartogram`): a FeatureCollection of Polygon / MultiPolygon features with
+The input stage of a cartogram (:mod:`rfmap.cartogram.resize`): a FeatureCollection of Polygon / MultiPolygon features with
 a value per region (:func:`read_regions`), fitted into the unit square by an equal-area projection
-(:class:`rfmap.projection.PlanarFrame`), and rasterised to the vertex densities of the ``N``-grid with the sea at the
+(:class:`rfmap.cartogram.projection.PlanarFrame`), and rasterised to the vertex densities of the ``N``-grid with the sea at the
 mean density (:func:`density_grid`).  :func:`montreal_election` (a city) and :func:`world_countries` (the world) are
 real maps to try it on.
 """
@@ -15,7 +15,7 @@ import os
 
 import numpy as np
 
-from .mesh import check_n
+from ..core.mesh import check_n
 from .projection import PlanarFrame
 
 __all__ = ["read_regions", "PlanarFrame", "density_grid", "fit_outlines", "clean_coverage", "montreal_election",
@@ -154,9 +154,13 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     The mean is taken along ``supersample`` horizontal scanlines per cell, each measured exactly: the cell's share of
     the line that lies in each region (:func:`_scanline_rows`).  Where regions overlap (a border that two neighbours
     draw apart, a fold), a cell's covered shares :math:`c_i` sum to more than the share of the cell they cover;
-    there the cell takes the mean density of its regions, :math:`\sum_i ho_i c_i / \sum_i c_i`, over at most the
+    there the cell takes the mean density of its regions, :math:`\sum_i 
+ho_i c_i / \sum_i c_i`, over at most the
     whole cell (:math:`\min(1, \sum_i c_i)`) and the sea over the rest, so that every density is positive (the plain
-    sum :math:`arho + \sum_i (ho_i - arho) c_i` counts an overlap twice, and two sparse regions overlapping
+    sum :math:`ar
+ho + \sum_i (
+ho_i - ar
+ho) c_i` counts an overlap twice, and two sparse regions overlapping
     over a cell would make it negative).
 
     Parameters

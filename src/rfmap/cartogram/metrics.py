@@ -3,7 +3,7 @@ a given share of the total value, and the repair of numerically tiny folds.
 
 The relative area error of region :math:`i` is :math:`|A_i / T_i - 1|` with the target
 :math:`T_i = (v_i / \sum_j v_j) \sum_j A_j`; its mean and maximum are taken over the regions holding at least
-``min_share`` of the total value (:data:`MIN_SHARE` in :func:`rfmap.cartogram.cartogram`), and the others' largest
+``min_share`` of the total value (:data:`MIN_SHARE` in :func:`rfmap.cartogram.resize.cartogram`), and the others' largest
 error is reported apart.  The topology check asks that every polygon be valid and that no two regions overlap by more
 than ``overlap_tol`` of the total area.
 """
@@ -195,7 +195,7 @@ def clean_input_overlaps(regions: np.ndarray) -> tuple[np.ndarray, int]:
     default tolerance; smaller ones are left to :func:`repair_overlaps`) must be thin, its isoperimetric quotient
     :math:`4\pi A / P^2` under :data:`SLIVER_SHAPE`, or under :data:`SLIVER_SHARE` of the smaller region.  Regions
     without such overlaps, or with one that is not a sliver (a region drawn over half of another: bad input that
-    :meth:`rfmap.cartogram.Cartogram.problems` reports), are returned as they are, and so is a cleaning that leaves
+    :meth:`rfmap.cartogram.resize.Cartogram.problems` reports), are returned as they are, and so is a cleaning that leaves
     a region empty or invalid (or a shapely before 2.2).  Returns the regions and the count of pairs cleaned."""
     shapely = _shapely()
     left, right, inter = overlaps(regions)
