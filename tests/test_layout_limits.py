@@ -81,8 +81,6 @@ def test_parameter_counts_skip_self_and_private_names():
     assert public_parameter_counts(src) == {"f": 3, "C.h": 1}
 
 
-@pytest.mark.xfail(strict=True, reason="the cartogram application still takes long keyword lists: "
-                   "cartogram() 19, viz.cartograms.plot_regions 11, cartogram_figure 10 parameters")
 def test_no_public_function_takes_more_than_eight_parameters():
     """Long keyword lists are options objects (``MapOptions``, ``FlowOptions``, ``RunOptions``, ...)."""
     long = {f"{p.relative_to(PACKAGE)}:{name}": k for p in sorted(PACKAGE.rglob("*.py"))

@@ -3,19 +3,34 @@ histograms of the area errors."""
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from .figures import save_figure
 
-__all__ = ["plot_regions", "cartogram_figure", "cartogram_panels", "area_error_histograms", "column_style",
+__all__ = ["RegionStyle", "FigureOptions", "plot_regions", "cartogram_figure", "cartogram_panels", "area_error_histograms", "column_style",
            "neighbour_colours", "region_colours", "area_legend", "format_amount", "series_grid", "TEXT_COLUMN_IN",
            "QUALITATIVE"]
 
 
-def plot_regions(ax, geoms, values=None, *, title: str | None = None, cmap="viridis", vmin=None, vmax=None,
-                 edgecolor="white", lw=0.4, colorbar: bool = False, label: str | None = None):
-    """Draw shapely Polygons / MultiPolygons (holes included), filled by ``values`` (one per geometry) or grey."""
+@dataclass(frozen=True)
+class RegionStyle:
+    """How :func:`plot_regions` fills and outlines regions: colormap and limits of the values, edge colour and width."""
+
+    cmap: str = "viridis"
+    vmin: float | None = None
+    vmax: float | None = None
+    edgecolor: str = "white"
+    lw: float = 0.4
+
+
+def plot_regions(ax, geoms, values=None, *, title: str | None = None, colorbar: bool = False, label: str | None = None,
+                 style: RegionStyle | None = None, **kw):
+    """Draw shapely Polygons / MultiPolygons (holes included), filled by ``values`` (one per geometry) or grey, as
+    ``style`` says (:class:`RegionStyle`; its fields may be given as keywords: ``lw=0.2``, ``vmin=0``, ...)."""
+    st = replace(style or RegionStyle(), **kw)
+    cmap, vmin, vmax, edgecolor, lw = st.cmap, st.vmin, st.vmax, st.edgecolor, st.lw
     import matplotlib.pyplot as plt
     from matplotlib.collections import PatchCollection
     from matplotlib.patches import PathPatch
@@ -147,10 +162,23 @@ def _draw_labels(ax, geoms, labels, min_share: float) -> None:
             ax.text(p.x, p.y, str(lab), ha="center", va="center", clip_on=True)
 
 
-def cartogram_figure(carto, *, colors=None, labels=None, legend: bool = True, unit: str = "", title: str = "",
-                     label: str | None = None, path=None, width: float = TEXT_COLUMN_IN, label_share: float = 5e-3):
+@dataclass(frozen=True)
+class FigureOptions:
+    """What :func:`cartogram_figure` draws (each field documented there)."""
+
+    colors: object = None
+    labels: object = None
+    legend: bool = True
+    unit: str = ""
+    title: str = ""
+    width: float = TEXT_COLUMN_IN
+    label_share: float = 5e-3
+
+
+def cartogram_figure(carto, options: FigureOptions | None = None, *, label: str | None = None, path=None, **kw):
     """A map and its cartogram (:class:`rfmap.cartogram.resize.Cartogram`) side by side, both in the plane of the
-    cartogram (the equal-area projection for longitude/latitude input), on one scale.
+    cartogram (the equal-area projection for longitude/latitude input), on one scale; ``options``
+    (:class:`FigureOptions`, its fields also as keywords) say what is drawn.
 
     Parameters
     ----------
@@ -178,6 +206,9 @@ def cartogram_figure(carto, *, colors=None, labels=None, legend: bool = True, un
     """
     import matplotlib.pyplot as plt
 
+    o = replace(options or FigureOptions(), **kw)
+    colors, labels, legend, unit, title = o.colors, o.labels, o.legend, o.unit, o.title
+    width, label_share = o.width, o.label_share
     before, after = carto.projected_geometries(mapped=False), carto.projected_geometries()
     key = {}
     if isinstance(colors, str) and colors == "density":
