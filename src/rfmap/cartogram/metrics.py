@@ -187,7 +187,7 @@ def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tupl
 
 
 def clean_input_overlaps(regions: np.ndarray) -> tuple[np.ndarray, int]:
-    """Regions (R,) that overlap in the input (borders drawn twice, a file simplified feature by feature) made a
+    r"""Regions (R,) that overlap in the input (borders drawn twice, a file simplified feature by feature) made a
     coverage: ``shapely.coverage_clean`` gives every overlap to one of its regions (the one with the longest border
     along it) and snaps nearby vertices so that neighbours share their border vertex for vertex; gaps stay (sea).
     The map of a coverage keeps its regions apart, where a map of overlapping regions carries every overlap along.

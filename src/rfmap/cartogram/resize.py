@@ -127,7 +127,7 @@ HYBRID_POLISH = 1e-9
 
 
 def _at_points(res, points: np.ndarray) -> np.ndarray:
-    """The grid map ``res`` (a :class:`rfmap.result.MapResult` on the ``N``-grid) at ``points`` (P, 2): its
+    """The grid map ``res`` (a :class:`rfmap.core.result.MapResult` on the ``N``-grid) at ``points`` (P, 2): its
     displacement interpolated bilinearly."""
     from ..solvers.cartoflow import bilinear
 
@@ -197,7 +197,7 @@ class Cartogram:
         Seconds in the map computations themselves (solver or surrogate) over all iterations.
     info : dict
         ``iterations``, ``kept`` (the pass whose polygons are returned), ``max_error`` per pass (in the frame's
-        plane), per-iteration ``results`` (:class:`rfmap.result.MapResult`), ``sea`` density, ``beyond_domain``
+        plane), per-iteration ``results`` (:class:`rfmap.core.result.MapResult`), ``sea`` density, ``beyond_domain``
         (the regions that left the input's domain, for ``output="auto"``).
     output : {"input", "projected"}
         The coordinates of ``features`` (:mod:`rfmap.cartogram.output`).

@@ -74,7 +74,7 @@ class CartoFlowOptions:
 
 @dataclass
 class GridFlow:
-    """The map of the ``N``-grid's vertices by one flow (duck-types the parts of :class:`rfmap.result.MapResult`
+    """The map of the ``N``-grid's vertices by one flow (duck-types the parts of :class:`rfmap.core.result.MapResult`
     that a cartogram reads).
 
     Attributes

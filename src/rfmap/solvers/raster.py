@@ -2,7 +2,7 @@ r"""The density raster of the solvers' box: the checked input, its P1 interpolan
 boundary's balanced sea.
 
 Both classical density-equalizing solvers start from the piecewise-linear (P1) interpolant of the vertex densities
-on the simplicial mesh of :func:`rfmap.core.mesh.grid_mesh` (the density whose element integrals :mod:`rfmap.metrics`
+on the simplicial mesh of :func:`rfmap.core.mesh.grid_mesh` (the density whose element integrals :mod:`rfmap.core.metrics`
 uses), sampled ``refine`` times finer (:func:`p1_upsample`); a free boundary embeds the domain in a box filled with
 a sea whose level keeps the domain's measure (:func:`balanced_sea`).
 """
@@ -38,7 +38,7 @@ def p1_upsample(values: np.ndarray, refine: int) -> np.ndarray:
     r"""Sample the piecewise-linear interpolant of grid vertex values on a ``refine`` times finer grid.
 
     The interpolant is linear on every element of :func:`rfmap.core.mesh.grid_mesh` (P1), i.e. exactly the density whose
-    element integrals :mod:`rfmap.metrics` uses (mean vertex value times measure).  In 2D the square with local
+    element integrals :mod:`rfmap.core.metrics` uses (mean vertex value times measure).  In 2D the square with local
     coordinates :math:`(s, t)` is split by :math:`s + t = 1`; in 3D the Kuhn split gives the barycentric weights
     :math:`(1-c_1, c_1-c_2, c_2-c_3, c_3)` of the sorted local coordinates :math:`c_1 \ge c_2 \ge c_3` along the
     path :math:`v_{000} \to v_{000}+e_{\sigma_1} \to \dots \to v_{111}`.
