@@ -54,7 +54,7 @@ WARM_POLISH = ("tiny-dem3d-free", "sin-cos-3d")
 #: The stretching factor of the overshooting maps, by task: three (density) or eight (Beltrami) times the network's
 #: displacement folds them, so the default path repairs them and (density) shortens them.
 OVERSHOOT = {"density": 3.0, "beltrami": 8.0}
-#: Two squares of side 1000 (planar metres) with values 3 and 5, and the 2 x 2 block of tests/test_cartogram.py with
+#: Two squares of side 1000 (planar metres) with values 3 and 5, and the 2 x 2 block of tests/cartogram/test_resize.py with
 #: values 1, 1, 1, 5: the cartogram's input, mapped in two passes at N = 24.
 CARTOGRAM_N, CARTOGRAM_PASSES = 24, 2
 

@@ -13,7 +13,7 @@ from rfmap.core.result import MapResult
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("value, text", [

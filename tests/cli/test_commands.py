@@ -421,7 +421,7 @@ def _mirror_permutations(n: int):
 def test_map_symmetrize_is_the_symmetrized_api_map(tmp_path, capsys):
     """--symmetrize writes Surrogate.map(symmetrize=True); on the ring density, which has the square's symmetries, that
     map commutes with them to float32 round-off while the plain network's map does not."""
-    model = Path(__file__).resolve().parent / "data" / "tiny-deq2d-square.safetensors"  # frozen, never retrained
+    model = Path(__file__).resolve().parents[1] / "data" / "tiny-deq2d-square.safetensors"  # frozen, never retrained
     n = 17
     flip, transpose = _mirror_permutations(n)
 

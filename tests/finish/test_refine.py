@@ -138,7 +138,7 @@ def scaled(sur: Surrogate, factor: float) -> Surrogate:
     return out
 
 
-TINY = Path(__file__).resolve().parent / "data" / "tiny-deq2d-square.safetensors"  # frozen, never retrained
+TINY = Path(__file__).resolve().parents[1] / "data" / "tiny-deq2d-square.safetensors"  # frozen, never retrained
 
 
 @pytest.mark.parametrize("model,field", [
