@@ -272,7 +272,7 @@ class Surrogate:
         return self._checked(arr, None, preprocess), int(n or arr.shape[0])
 
     def _checked(self, grid: np.ndarray, fn, preprocess: bool) -> _Input:
-        """The field on a grid as the task checks and normalises it (:meth:`rfmap.tasks.Task.check_field`)."""
+        """The field on a grid as the task checks and normalises it (:meth:`rfmap.tasks.base.Task.check_field`)."""
         return _Input(self.spec.task.check_field(grid, preprocess), fn, preprocess)
 
     def _work_grid(self, inp: _Input, n_work: int) -> np.ndarray:
@@ -512,7 +512,7 @@ class Surrogate:
         return triangulate(ref)
 
     def _field_on(self, inp: _Input, ref: np.ndarray, elements: np.ndarray, grid_n: int | None = None) -> np.ndarray:
-        r"""The input field on the output mesh (:meth:`rfmap.tasks.Task.field_on_mesh`: unit-mass vertex densities
+        r"""The input field on the output mesh (:meth:`rfmap.tasks.base.Task.field_on_mesh`: unit-mass vertex densities
         (n,), or :math:`\mu` per element (m,) at the centroids, ...); from the exact evaluator when there is one,
         else interpolated from the input grid.  ``grid_n``: the output mesh is the ``N``-grid."""
         return self.spec.task.field_on_mesh(inp.grid, inp.fn, ref, elements, grid_n)

@@ -139,11 +139,10 @@ def pass_weights(values: np.ndarray, min_share: float, budget: float = MINOR_BUD
     r"""The weights by which a cartogram's passes map the regions: the judged regions' values (:func:`judged`), the
     others' raised to a floor :math:`f`, so that none (an uninhabited Antarctica) collapses into a sliver that folds.
 
-    The floor is the judged share, :math:`f = ` ``min_share`` :math:`\sum_j v_j`, unless raising the others to it
-    adds more than ``budget`` :math:`\sum_j v_j` in all (a county map holds a thousand regions under 0.01 %); then
-    :math:`f` is the floor that adds exactly that, :math:`\sum_{i 
-otin J} \max(0, f - v_i) = ` ``budget``
-    :math:`\sum_j v_j`.  Every judged region's target share is then off by at most ``budget``.
+    With :math:`s` = ``min_share`` and :math:`b` = ``budget``, the floor is the judged share
+    :math:`f = s \sum_j v_j`, unless raising the others to it adds more than :math:`b \sum_j v_j` in all (a county
+    map holds a thousand regions under 0.01 %); then :math:`f` is the floor that adds exactly that,
+    :math:`\sum_{i \notin J} \max(0, f - v_i) = b \sum_j v_j`.  Every judged region's target share is then off by at most ``budget``.
 
     Parameters
     ----------

@@ -154,13 +154,9 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     The mean is taken along ``supersample`` horizontal scanlines per cell, each measured exactly: the cell's share of
     the line that lies in each region (:func:`_scanline_rows`).  Where regions overlap (a border that two neighbours
     draw apart, a fold), a cell's covered shares :math:`c_i` sum to more than the share of the cell they cover;
-    there the cell takes the mean density of its regions, :math:`\sum_i 
-ho_i c_i / \sum_i c_i`, over at most the
+    there the cell takes the mean density of its regions, :math:`\sum_i \rho_i c_i / \sum_i c_i`, over at most the
     whole cell (:math:`\min(1, \sum_i c_i)`) and the sea over the rest, so that every density is positive (the plain
-    sum :math:`ar
-ho + \sum_i (
-ho_i - ar
-ho) c_i` counts an overlap twice, and two sparse regions overlapping
+    sum :math:`\bar\rho + \sum_i (\rho_i - \bar\rho) c_i` counts an overlap twice, and two sparse regions overlapping
     over a cell would make it negative).
 
     Parameters

@@ -17,7 +17,7 @@ __all__ = ["MapResult", "save_npz_atomic", "load_result", "to_pyvista", "setup_p
 
 #: The kinds of map whose ``field`` is a vertex density, so that the density metrics (Std(rho~)) and the VTK export's
 #: ``density`` and ``rho`` apply: the kind the density solvers write, and every registered task that equalizes a
-#: density (:func:`rfmap.tasks.register_task` adds it).
+#: density (:func:`rfmap.tasks.base.register_task` adds it).
 DENSITY_FIELD_KINDS: set[str] = {"density"}
 
 

@@ -133,7 +133,7 @@ class Draft:
 
     @property
     def task(self):
-        """The :class:`rfmap.tasks.Task` of the map's kind."""
+        """The :class:`rfmap.tasks.base.Task` of the map's kind."""
         return get_task(self.result.kind)
 
     def displacement(self) -> tuple[torch.Tensor, str]:

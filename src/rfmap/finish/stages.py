@@ -83,7 +83,7 @@ def _improves(draft: Draft) -> bool:
 def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
     r"""Weight refinement (paper Sec. 4.3): the map :math:`x + \mathcal{B}(x) \odot (\alpha^* \odot \psi(x))` with
     :math:`\alpha^* = \arg\min_\alpha \mathcal{J}` (:func:`rfmap.finish.refine.refine_alpha`, the objective of the task,
-    :meth:`rfmap.tasks.Task.refine_objective`, settings :data:`rfmap.finish.refine.REFINE`).  :math:`\psi` is the network's displacement, or a classical map's :math:`u - x`
+    :meth:`rfmap.tasks.base.Task.refine_objective`, settings :data:`rfmap.finish.refine.REFINE`).  :math:`\psi` is the network's displacement, or a classical map's :math:`u - x`
     (:meth:`rfmap.finish.draft.Draft.displacement`); a given stretching vector is replaced.
 
     Parameters

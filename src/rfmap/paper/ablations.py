@@ -4,7 +4,7 @@ the same map refined (the paper's method, Sec. 4.3).
 Refinement minimises an objective over the stretching vector :math:`\alpha` (the model's training loss on the map:
 the density loss, with the Beltrami energy for a DEQ model, or the Beltrami residual), starting from
 :math:`\alpha = 1`; it never returns a larger objective than :math:`\alpha = 1`.  The paper's tables score other
-numbers (Std(ρ̃_map), mean |Δd|), which refinement may raise: :func:`refinement_study` measures both.
+numbers (Std(ρ̃_map), mean ``|Δd|``), which refinement may raise: :func:`refinement_study` measures both.
 """
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ __all__ = ["refinement_study", "refinement_summary", "refinement_markdown"]
 def refinement_study(sur, fields, n: int, title: str = "") -> Table:
     r"""Per field, the network on the ``n``-grid itself (``native=True``, no repair) with :math:`\alpha = 1` and refined:
     the table's metric (the task's ``score_metric``: ``std_rho_map`` of a density model, ``mean_dd`` of a Beltrami
-    model, :meth:`rfmap.tasks.Task.test_record`), the refinement
+    model, :meth:`rfmap.tasks.base.Task.test_record`), the refinement
     objective at :math:`\alpha = 1` and at the refined :math:`\alpha`, and :math:`\alpha`.
 
     Parameters

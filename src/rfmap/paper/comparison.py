@@ -371,7 +371,7 @@ def _surrogate_maps(sur, field_, n: int) -> tuple[MapResult, MapResult]:
 def compare_density(sur, cases: list[Case], label: str, title: str, *, case_prefix: str = "") -> Comparison:
     """A density table (``tab:population_test``, ``_fb``, ``tab:resolution_test`` and the 3D ones) as a
     :class:`Comparison`: per case the paper's method, the delivered map and the flow-based solver with the
-    surrogate's boundary, and the paper's row.  Scored: Std(ρ̃_map), and in 2D mean |μ|.
+    surrogate's boundary, and the paper's row.  Scored: Std(ρ̃_map), and in 2D mean ``|μ|``.
 
     Parameters
     ----------
@@ -403,8 +403,8 @@ def compare_density(sur, cases: list[Case], label: str, title: str, *, case_pref
 
 def compare_beltrami(sur, cases: list[Case], label: str, title: str, *, case_prefix: str = "") -> Comparison:
     """A Beltrami table (``tab:reconstruction_results_mu``, ``_res``) as a :class:`Comparison`: per case the
-    paper's method, the delivered map, the Linear Beltrami Solver and the paper's row.  Scored: mean |Δd| and mean
-    |Δμ| (against the analytic coefficient at the triangle centroids)."""
+    paper's method, the delivered map, the Linear Beltrami Solver and the paper's row.  Scored: mean ``|Δd|`` and mean
+    ``|Δμ|`` (against the analytic coefficient at the triangle centroids)."""
     from ..solvers import solve_lbs
 
     cmp = Comparison(label, title, ["mean_dd", "mean_dmu"], list(cases), "LBS", case_prefix=case_prefix)
@@ -427,7 +427,7 @@ def compare_beltrami(sur, cases: list[Case], label: str, title: str, *, case_pre
 def compare_models(models: dict, field, n: int, label: str, title: str) -> Comparison:
     """One density mapped by several density surrogates with one boundary, the cases named by the keys of
     ``models`` (the paper's Fig. 10: the DEM and the DEQ model), each by the paper's method and delivered, beside
-    the flow solver's map of the same density (the same in every case).  Scored: Std(ρ̃_map) and mean |μ|; there
+    the flow solver's map of the same density (the same in every case).  Scored: Std(ρ̃_map) and mean ``|μ|``; there
     is no paper row.
 
     Parameters

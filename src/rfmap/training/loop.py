@@ -39,7 +39,7 @@ def validate(sur: Surrogate, cfg: TrainConfig) -> dict:
 @quiet_quality()
 def report_paper_fields(sur: Surrogate, n: int, fields: list[str] | None = None) -> dict:
     """Metrics on the paper's test fields at grid side ``n`` (a report; never used to select a model): the task's
-    test fields (:meth:`rfmap.tasks.Task.test_fields`) and records (:meth:`rfmap.tasks.Task.test_record`); empty
+    test fields (:meth:`rfmap.tasks.base.Task.test_fields`) and records (:meth:`rfmap.tasks.base.Task.test_record`); empty
     for a task without test fields."""
     task = sur.spec.task
     fields = fields or task.test_fields(sur.spec.dim)

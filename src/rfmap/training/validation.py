@@ -42,7 +42,7 @@ __all__ = ["VALIDATION_SEED", "STREAMS", "ValidationField", "validation_fields",
 
 def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "validation",
                       low_frequency: bool = False) -> list[ValidationField]:
-    """The fixed held-out set of a task (:meth:`rfmap.tasks.Task.validation_fields`): ``count`` fields (the density
+    """The fixed held-out set of a task (:meth:`rfmap.tasks.base.Task.validation_fields`): ``count`` fields (the density
     families in turn).  ``stream='validation'`` is the set used during training; ``stream='report'`` another set of
     the same kinds, used only to report generalization.  ``low_frequency`` (Beltrami only): random maps of 1-4 slow
     modes instead (``RandomBeltramiConfig.low_modes``, ``low_freq``; labels ``low-map-j``)."""

@@ -10,14 +10,14 @@ __all__ = ["LOSS_TERMS", "VAL_NAMES", "plot_batch", "plot_loss_terms", "training
            "validation_vs_time", "race_bars"]
 
 
-#: the loss terms of training (keys of :func:`rfmap.tasks.task_loss` and :func:`rfmap.tasks.losses.loss_integrands`)
+#: the loss terms of training (keys of :func:`rfmap.tasks.base.task_loss` and :func:`rfmap.tasks.losses.loss_integrands`)
 LOSS_TERMS = {"density": r"density mismatch $L(\tilde\rho - 1)$", "mu2": r"Beltrami energy $|\mu|^2$",
               "beltrami": r"$\mu$ mismatch $|\mu(u) - \mu_{in}|^2$", "fold": r"fold penalty relu$(\tau - \det J)$",
               "area": "area constraint"}
 
 
 def plot_batch(axes, batch, *, title: str = "sample"):
-    """The random fields of a training batch (:class:`rfmap.tasks.Batch`, 2D), one per axes, on their jittered
+    """The random fields of a training batch (:class:`rfmap.tasks.base.Batch`, 2D), one per axes, on their jittered
     mesh: the unit-mass density at the vertices, or :math:`|\\mu|` per triangle for a Beltrami batch."""
     el = batch.elements.numpy()
     for i, ax in enumerate(axes):
