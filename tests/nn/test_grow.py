@@ -97,6 +97,16 @@ def test_log_sampling_covers_the_range_per_octave():
     assert np.mean([step_size_n(uniform, t) < 64 for t in range(3000)]) < 0.2
 
 
+def test_mixed_sampling_keeps_the_small_sides_frequent():
+    cfg = replace(get_config("deq2d-square", "ci"), n_range=(32, 256), n_sampling="mixed")
+    ns = np.array([step_size_n(cfg, t) for t in range(4000)])
+    assert ns.min() == 32 and ns.max() == 256
+    small = np.mean(ns <= 96)  # half uniform on [32, 96], half log-uniform (of which ln(97/32)/ln(257/32))
+    expected = 0.5 + 0.5 * np.log(97 / 32) / np.log(257 / 32)
+    assert abs(small - expected) < 0.03
+    assert abs(np.mean(ns > 128) - 0.5 / 3) < 0.03  # only the log half reaches the top octave
+
+
 def test_batch_points_keep_the_cost_per_step():
     cfg = replace(get_config("dem3d-cube", "ci"), batch=8, batch_points=2 * 48**3)
     assert [step_batch(cfg, n) for n in (24, 48, 64)] == [8, 2, 1]

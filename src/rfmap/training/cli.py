@@ -61,8 +61,9 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
                         "(rfmap.nn.grow; a multiple of the parent's base) and train from there")
     p.add_argument("--n-range", type=int, nargs=2, default=None, metavar=("LO", "HI"),
                    help="override the training grid sides (e.g. 24 64 in 3D, 32 256 in 2D)")
-    p.add_argument("--n-sampling", choices=["uniform", "log"], default=None,
-                   help="how each step's grid side is drawn from the range (log: every octave equally often)")
+    p.add_argument("--n-sampling", choices=["uniform", "log", "mixed"], default=None,
+                   help="how each step's grid side is drawn from the range (log: every octave equally often; mixed: "
+                        "half log, half uniform on the small sides LO..3 LO)")
     p.add_argument("--batch-points", type=int, default=None, metavar="P",
                    help="each step's batch holds about P grid points (at most --batch), so steps cost alike at "
                         "every size (0: always --batch)")

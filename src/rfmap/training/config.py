@@ -21,7 +21,7 @@ __all__ = ["TrainConfig", "ModelConfig", "CONFIGS", "PRESETS", "get_config", "co
 
 PRESETS = ("ci", "full", "paper")
 #: how the training grid side of a step is drawn from ``n_range`` (:func:`rfmap.training.data.step_size_n`)
-N_SAMPLINGS = ("uniform", "log")
+N_SAMPLINGS = ("uniform", "log", "mixed")
 #: the presets ``RFMAP_SCALE`` may name
 SCALES = ("ci", "full")
 
@@ -80,7 +80,8 @@ class TrainConfig:
     ``init`` validates its parent at step 0, so that the parent competes with every checkpoint.
 
     Training grid sides: ``n_sampling`` ``'uniform'`` (every side in ``n_range`` equally often) or ``'log'``
-    (log-uniform: every octave of sizes equally often, a curriculum across the sizes the paper tests).
+    (log-uniform: every octave of sizes equally often, a curriculum across the sizes the paper tests) or
+    ``'mixed'`` (half the steps log-uniform, half uniform on the small sides ``[lo, 3 lo]``).
     ``batch_points`` > 0 sets each step's batch to about that many grid points,
     :math:`B(N) = \mathrm{clip}(\mathrm{round}(P / N^d), 1, \mathtt{batch})`, so that a step costs about the same
     at every size (0: always ``batch``).  ``grow`` (with ``init``): the parent network is widened to ``model.base``

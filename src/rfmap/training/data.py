@@ -21,10 +21,17 @@ __all__ = ["step_size_n", "step_batch", "draw_step", "single_blas_thread_env"]
 
 def step_size_n(cfg: TrainConfig, step: int) -> int:
     r"""Training grid side of step ``step``, the same on every rank: uniform in ``n_range``, or with
-    ``n_sampling='log'`` log-uniform, :math:`N = \lfloor \exp U(\log lo, \log(hi + 1)) \rfloor`."""
+    ``n_sampling='log'`` log-uniform, :math:`N = \lfloor \exp U(\log lo, \log(hi + 1)) \rfloor`, or with
+    ``'mixed'`` log-uniform on half the steps and uniform on :math:`[lo, \min(hi, 3\,lo)]` on the other half
+    (the small sides, where most of the paper's fields are tested, stay frequent)."""
     lo, hi = cfg.n_range
     rng = np.random.default_rng([cfg.seed, step, 2**31])
-    if cfg.n_sampling == "log":
+    mode = cfg.n_sampling
+    if mode == "mixed":
+        mode = "log" if rng.uniform() < 0.5 else "uniform"
+        if mode == "uniform":
+            hi = min(hi, 3 * lo)
+    if mode == "log":
         return int(min(hi, np.floor(np.exp(rng.uniform(np.log(lo), np.log(hi + 1))))))
     return int(rng.integers(lo, hi + 1))
 
