@@ -3,7 +3,7 @@
 #                    register the project's Jupyter kernel (rfmap) in .venv
 #   make test        unit tests, every notebook with nbval (through the rfmap kernel, from notebooks/, as
 #                    JupyterLab runs it) and the book build (every notebook again, from a temporary directory), all
-#                    at RFMAP_SCALE=ci
+#                    at RFMAP_SCALE=ci, side by side (one thread each; logs in _build/test-logs)
 #   make book        execute the notebooks at full scale and build the HTML book into _build/html
 #   make book-check  screenshot every whole page of the built book; fail on error output or a missing or blank figure
 #   make lab-check [NB=06_dem_deq_2d]
@@ -51,10 +51,9 @@ $(STAMP): pyproject.toml
 		--env VTK_DEFAULT_OPENGL_WINDOW vtkEGLRenderWindow --env PATH '$(CURDIR)/$(BIN):$${PATH}'
 	touch $@
 
+# the three steps run side by side, one thread each; logs in _build/test-logs (scripts/run_tests.sh)
 test: install
-	RFMAP_SCALE=ci $(BIN)/pytest tests/
-	cd notebooks && $(NB_ENV) RFMAP_SCALE=ci $(CURDIR)/$(BIN)/pytest $(NBVAL_FLAGS) .
-	$(NB_ENV) RFMAP_SCALE=ci $(BIN)/jupyter-book build . $(BOOK_FLAGS)
+	scripts/run_tests.sh $(BIN) "$(NBVAL_FLAGS)" "$(BOOK_FLAGS)"
 
 book: install
 	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter-book build . $(BOOK_FLAGS)

@@ -6,8 +6,10 @@ with the same 1 % tolerance: Montreal's 2013 election (total votes, :func:`rfmap
 Natural Earth world map by population (:func:`rfmap.cartogram.regions.world_countries`) and three continental subsets (Africa,
 South America, and an Asia-Pacific set with Russia and Fiji that crosses the antimeridian), and two synthetic hard
 maps (:mod:`rfmap.cartogram.synthetic`): the contiguous United States cut into 3,100 counties of very different
-sizes (``counties``) and Russia cut into 80 subdivisions across the antimeridian (``russia``; ``russia-slivers``: its
-borders bent and each region simplified on its own, so that neighbours overlap in the input).  Both programs read the
+sizes (``counties``; ``counties-slivers``: its borders bent and each county simplified on its own, as a county file
+simplified feature by feature draws them) and Russia cut into 80 subdivisions across the antimeridian (``russia``;
+``russia-slivers``: the same bending and simplification), so that neighbours overlap in the input and sliver gaps
+open between them.  Both programs read the
 same GeoJSON (consecutive repeated points removed, which the reference refuses) and CSV files, written to a work
 folder.
 
@@ -42,7 +44,8 @@ import numpy as np
 
 #: GNU time, for the peak resident size (``%M``, as ``/usr/bin/time -v`` reports it)
 TIME = "/usr/bin/time"
-MAPS = ("montreal", "world", "africa", "south-america", "asia-pacific", "counties", "russia", "russia-slivers")
+MAPS = ("montreal", "world", "africa", "south-america", "asia-pacific", "counties", "counties-slivers", "russia",
+        "russia-slivers")
 #: the Asia-Pacific subset: Russia and Fiji are split at the antimeridian, so the map crosses it
 ASIA_PACIFIC = ("Russia", "Fiji", "New Zealand", "Australia", "Papua New Guinea", "Indonesia", "Japan", "Philippines",
                 "China", "Mongolia", "South Korea", "North Korea", "Taiwan", "Vanuatu", "Solomon Is.", "New Caledonia")
@@ -64,6 +67,7 @@ def write_inputs(folder: str) -> dict:
         "south-america": ([f for f in world if f["properties"]["continent"] == "South America"], "name", "pop_est"),
         "asia-pacific": ([f for f in world if f["properties"]["name"] in ASIA_PACIFIC], "name", "pop_est"),
         "counties": (synthetic_counties()["features"], "id", "value"),
+        "counties-slivers": (synthetic_counties(slivers=True)["features"], "id", "value"),
         "russia": (synthetic_subdivisions()["features"], "id", "value"),
         "russia-slivers": (synthetic_subdivisions(slivers=True)["features"], "id", "value"),
     }

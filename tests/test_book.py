@@ -405,7 +405,10 @@ def test_reproduce_page_gives_the_nbval_command_of_make_test():
     kernel = re.search(r"^KERNEL := (\S+)$", make, re.M).group(1)
     flags = re.search(r"^NBVAL_FLAGS := (.+)$", make, re.M).group(1).replace("$(KERNEL)", kernel)
     assert kernel == "rfmap" and "--nbval-lax" in flags and "--nbval-current-env" not in flags
-    assert re.search(r"^\tcd notebooks && .*RFMAP_SCALE=ci \S*pytest \$\(NBVAL_FLAGS\) \.$", make, re.M)
+    assert re.search(r"^\tscripts/run_tests\.sh \$\(BIN\) \"\$\(NBVAL_FLAGS\)\" \"\$\(BOOK_FLAGS\)\"$", make, re.M)
+    runner = (ROOT / "scripts" / "run_tests.sh").read_text(encoding="utf-8")
+    assert re.search(r'^\(cd notebooks && .*\$BIN/pytest" \$NBVAL_FLAGS \.\)', runner, re.M)
+    assert "export RFMAP_SCALE=ci" in runner and 'jupyter-book" build . $BOOK_FLAGS' in runner
     assert f"pytest {flags} ." in (ROOT / "book" / "reproduce.md").read_text(encoding="utf-8")
 
 

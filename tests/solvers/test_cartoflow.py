@@ -363,8 +363,8 @@ def test_flow_cartogram_command_exit_codes(tmp_path, capsys):
 def test_repair_overlaps_cuts_slivers_from_the_region_above_its_target():
     """Two unit squares overlapping by a sliver of 1e-6 of the total area: the sliver is cut from the one further
     above its target area, after which the two share a border and keep their other areas; an overlap larger than
-    REPAIR_OVERLAP stays."""
-    from rfmap.cartogram.metrics import REPAIR_OVERLAP, repair_overlaps
+    REPAIR_OVERLAP stays unless it is a sliver (thin) within REPAIR_SLIVER."""
+    from rfmap.cartogram.metrics import REPAIR_OVERLAP, REPAIR_SLIVER, repair_overlaps
 
     a = shapely.box(0.0, 0.0, 1.0, 1.0)
     b = shapely.box(1.0 - 2e-6, 0.0, 2.0, 1.0)
@@ -372,9 +372,19 @@ def test_repair_overlaps_cuts_slivers_from_the_region_above_its_target():
     assert cut == [(0, 1)]  # a holds half b's value with about b's area: further above its target
     assert shapely.area(shapely.intersection(out[0], out[1])) == 0.0
     assert shapely.area(out[0]) == pytest.approx(1.0 - 2e-6, rel=1e-12) and shapely.area(out[1]) == shapely.area(b)
-    wide = shapely.box(1.0 - 4 * REPAIR_OVERLAP, 0.0, 2.0, 1.0)
-    out, cut = repair_overlaps(np.array([a, wide], dtype=object), np.array([1.0, 2.0]))
+    # a strip holding 2 REPAIR_OVERLAP of the total is thin: cut; one holding 4 REPAIR_SLIVER is not
+    for width, cuts in ((4 * REPAIR_OVERLAP, 1), (8 * REPAIR_SLIVER, 0)):
+        wide = shapely.box(1.0 - width, 0.0, 2.0, 1.0)
+        out, cut = repair_overlaps(np.array([a, wide], dtype=object), np.array([1.0, 2.0]))
+        assert len(cut) == cuts and (shapely.area(shapely.intersection(out[0], out[1])) > 0) == (cuts == 0)
+    # a square overlap (not thin) holding 2 REPAIR_OVERLAP of the total stays
+    side = (4 * REPAIR_OVERLAP) ** 0.5
+    corner = shapely.box(1.0 - side, 1.0 - side, 2.0 - side, 2.0 - side)
+    out, cut = repair_overlaps(np.array([a, corner], dtype=object), np.array([1.0, 2.0]))
     assert cut == [] and shapely.area(shapely.intersection(out[0], out[1])) > 0
+    # unless one of the two is under the judged share (drawn at a raised size, not at its value)
+    out, cut = repair_overlaps(np.array([a, corner], dtype=object), np.array([1.0, 1e-6]))
+    assert len(cut) == 1 and shapely.area(shapely.intersection(out[0], out[1])) == 0.0
 
 
 def test_timeout_stops_the_passes_and_the_command_says_so(tmp_path, capsys):

@@ -33,9 +33,15 @@ REPAIR_AREA = 1e-6
 #: neighbours that the input keeps a fraction of a grid cell apart (a lake, a river drawn as a gap) can be pressed
 #: together by the passes until their straight edges cross by a sliver
 REPAIR_OVERLAP = 1e-5
+#: The largest overlap that :func:`repair_overlaps` removes when it is thin (isoperimetric quotient under
+#: ``SLIVER_SHAPE``): two tiny, dense regions that touch at a corner in the input, each grown hundredfold by the passes
+REPAIR_SLIVER = 1e-4
 #: :func:`clean_input_overlaps`: an overlap of two input regions is a sliver when its isoperimetric quotient is under
 #: this (a strip ten times as long as wide: 0.26; a square: 0.79) or it holds under ``SLIVER_SHARE`` of either region
 SLIVER_SHAPE, SLIVER_SHARE = 0.3, 0.01
+#: the width, in cells of the raster, under which an enclosed gap between input regions that :func:`clean_input_overlaps`
+#: makes a coverage is closed (a quarter cell: far below what the raster resolves)
+SLIVER_GAP = 0.25
 #: :func:`boost`: the smallest share of a region's log area error that a pass is taken to remove, and the largest
 #: log weight boost (a factor of :math:`e^{0.4} \approx 1.5`); stronger boosts overshoot, and the passes oscillate
 BOOST_GAIN, BOOST_CAP = 0.25, 0.4
@@ -185,11 +191,14 @@ def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tupl
     return out, [int(i) for i in bad[ok]]
 
 
-def clean_input_overlaps(regions: np.ndarray) -> tuple[np.ndarray, int]:
+def clean_input_overlaps(regions: np.ndarray, gap_width: float = 0.0) -> tuple[np.ndarray, int]:
     r"""Regions (R,) that overlap in the input (borders drawn twice, a file simplified feature by feature) made a
     coverage: ``shapely.coverage_clean`` gives every overlap to one of its regions (the one with the longest border
-    along it) and snaps nearby vertices so that neighbours share their border vertex for vertex; gaps stay (sea).
-    The map of a coverage keeps its regions apart, where a map of overlapping regions carries every overlap along.
+    along it) and snaps nearby vertices so that neighbours share their border vertex for vertex.  Enclosed gaps
+    narrower than ``gap_width`` (the slivers of sea such a file opens between neighbours, which no raster resolves)
+    go to the neighbour with the longest border along them, so that the two then share that border; wider gaps
+    stay (sea).  The map of a coverage keeps its regions apart, where a map of overlapping regions carries every
+    overlap along, and the two sides of a sliver gap, drawn with different vertices, cross when the map closes it.
     Only slivers are cleaned: every overlap holding more than :data:`REPAIR_AREA` of the total area (the metrics'
     default tolerance; smaller ones are left to :func:`repair_overlaps`) must be thin, its isoperimetric quotient
     :math:`4\pi A / P^2` under :data:`SLIVER_SHAPE`, or under :data:`SLIVER_SHARE` of the smaller region.  Regions
@@ -208,16 +217,18 @@ def clean_input_overlaps(regions: np.ndarray) -> tuple[np.ndarray, int]:
     small = inter[big] < SLIVER_SHARE * np.minimum(area[left[big]], area[right[big]])
     if not (thin | small).all():
         return regions, 0
-    clean = shapely.coverage_clean(regions)
+    clean = shapely.coverage_clean(regions, gap_width=gap_width)
     if shapely.is_empty(clean).any() or not shapely.is_valid(clean).all():
         return regions, 0
     return clean, count
 
 
-def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *,
-                    max_change: float = REPAIR_OVERLAP) -> tuple[np.ndarray, list]:
+def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float = REPAIR_OVERLAP,
+                    min_share: float = MIN_SHARE) -> tuple[np.ndarray, list]:
     r"""Sliver overlaps of valid mapped regions removed: each overlap of two regions holding at most ``max_change``
-    of the total area (and over a thousandth of :data:`REPAIR_AREA`, below which it is rounding) is shared out
+    of the total area, or one holding at most :data:`REPAIR_SLIVER` of it that is thin (:data:`SLIVER_SHAPE`) or
+    touches a region under the judged share ``min_share`` (drawn at the size :func:`pass_weights` raised it to, not
+    at its value) (and over a thousandth of :data:`REPAIR_AREA`, below which it is rounding), is shared out
     between the two (``shapely.difference``), so that the two then share a border: the first gives up the share
     :math:`f \in` :data:`SPLITS` of it (the part on one side of a line across the overlap) and the second the rest,
     with :math:`f` the share that keeps the larger of their relative area errors :math:`|A_i / T_i - 1|` (target
@@ -243,9 +254,12 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *,
     total = float(area.sum())
     share = inter / total
     target = values / values.sum() * total
+    big = judged(values, min_share)
     out, cut = mapped.copy(), []
-    for k in np.flatnonzero((share > 1e-3 * REPAIR_AREA) & (share <= max_change)):
+    for k in np.flatnonzero((share > 1e-3 * REPAIR_AREA) & (share <= max(max_change, REPAIR_SLIVER))):
         a, b = left[k], right[k]
+        if share[k] > max_change and big[a] and big[b] and not _thin(shapely.intersection(out[a], out[b])):
+            continue
         # the share f of the overlap that a gives up (b gives up the rest): the one that keeps both errors lowest,
         # the whole overlap from one of them unless that costs more than SPLIT_COST
         err = {f: max(abs((area[a] - f * inter[k]) / target[a] - 1.0),
@@ -266,11 +280,25 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *,
 SPLITS, SPLIT_COST = tuple(np.linspace(0.0, 1.0, 11)), 1e-3
 
 
+def _thin(g) -> bool:
+    r"""Whether ``g`` is a sliver: its isoperimetric quotient :math:`4\pi A / P^2` is under :data:`SLIVER_SHAPE`."""
+    shapely = _shapely()
+    return bool(4 * np.pi * shapely.area(g) < SLIVER_SHAPE * max(shapely.length(g), 1e-300) ** 2)
+
+
+#: Polygons of less area than this (in the unit square) that a cut leaves are dropped: crumbs of rounding, whose
+#: vertices the next pass would merge into a ring without area
+CRUMB = 1e-12
+
+
 def _polygons(g):
-    """The polygonal parts of ``g`` as one (Multi)Polygon."""
+    """The polygonal parts of ``g`` (a collection flattened, crumbs under :data:`CRUMB` dropped) as one
+    (Multi)Polygon."""
     shapely = _shapely()
     parts = shapely.get_parts(g)
-    return shapely.union_all(parts[shapely.get_type_id(parts) == 3])
+    parts = np.concatenate([parts[shapely.get_type_id(parts) == 3],
+                            shapely.get_parts(parts[shapely.get_type_id(parts) == 6])])
+    return shapely.union_all(parts[shapely.area(parts) > CRUMB])
 
 
 def _cut_overlap(a, b, f: float):

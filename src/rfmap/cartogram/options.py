@@ -84,7 +84,7 @@ class CartogramOptions:
     method: str = "flow"
     n: int = 256
     tol: float = 0.01
-    max_iterations: int = 30
+    max_iterations: int = 60
     iterations: int | None = None
     margin: float = 0.1
     projection: str = "auto"

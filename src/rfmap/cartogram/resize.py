@@ -57,8 +57,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .metrics import MIN_SHARE, CartogramMetrics, boost, cartogram_metrics, clean_input_overlaps, judged, \
-    pass_weights, repair_folds, repair_overlaps
+from .metrics import MIN_SHARE, SLIVER_GAP, CartogramMetrics, boost, cartogram_metrics, clean_input_overlaps, \
+    judged, pass_weights, repair_folds, repair_overlaps
 from ..core.mesh import check_grid_memory, check_n
 from .options import CartogramOptions
 from .output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
@@ -114,6 +114,8 @@ GAIN = 1e-9
 #: between mapped vertices stands for a curve, and where the flow squeezes a fjord or an inlet closed while it
 #: stretches its sides, long chords cross
 SPLIT_EDGE = 1.0
+#: The most passes :func:`cartogram` runs after cutting sliver overlaps moved a region beyond the tolerance
+FINISH_PASSES = 4
 #: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for
 MAX_N = 1024
 #: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
@@ -401,7 +403,8 @@ def cartogram(collection, value: str, options: CartogramOptions | None = None, *
     regions = frame.project(geoms, 1.0 / n)
     if points is not None:  # a budget of vertices: simplified (shared borders kept) or densified to it
         regions = shapely.segmentize(fit_outlines(regions, points), 1.0 / n)
-    regions, cleaned = clean_input_overlaps(regions)  # overlapping input borders: a coverage, so the map keeps apart
+    # overlapping input borders: a coverage (sliver gaps closed), so that the map keeps the regions apart
+    regions, cleaned = clean_input_overlaps(regions, gap_width=SLIVER_GAP / n)
     done = []  # the passes so far
 
     def grid_map(dens, points):  # the classical methods carry the polygons' vertices; the flow blurs at first
@@ -420,8 +423,11 @@ def cartogram(collection, value: str, options: CartogramOptions | None = None, *
                                      split=method in ("flow", "diffusion"), accelerate=method == "flow",
                                      deadline=None if timeout is None else t0 + timeout)
     info["input_overlaps"] = cleaned
-    mapped, info["repaired"] = repair_folds(mapped)
-    mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
+    mapped, finish_time = _repair(mapped, values, grid_map, info, tol=None if fixed else tol, min_share=min_share,
+                                  supersample=supersample, max_n=max_n if max_n is not None else max(n, MAX_N),
+                                  split=method in ("flow", "diffusion"),
+                                  deadline=None if timeout is None else t0 + timeout)
+    map_time += finish_time
     elapsed = time.perf_counter() - t0
     output, info["beyond_domain"] = choose_output(frame, mapped, output)
     out, info["repaired_output"] = output_geometries(frame, mapped, output)  # valid as written, too
@@ -502,6 +508,42 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         mapped, kept = best[1], best[2]
     return mapped, {"iterations": len(results), "kept": kept, "max_error": history, "results": results,
                     "sea": sea, "grids": grids, "timed_out": timed_out}, map_time
+
+
+def _largest_error(mapped: np.ndarray, values: np.ndarray, min_share: float) -> float:
+    """The largest relative area error of the judged regions (:func:`rfmap.cartogram.metrics.judged`)."""
+    area = _shapely().area(mapped)
+    return float(np.abs(area / (values / values.sum() * area.sum()) - 1.0)[judged(values, min_share)].max())
+
+
+def _repair(mapped: np.ndarray, values: np.ndarray, grid_map, info: dict, *, tol: float | None, min_share: float,
+            supersample: int, max_n: int, split: bool, deadline: float | None) -> tuple[np.ndarray, float]:
+    """Tiny folds and sliver overlaps of the passes' polygons repaired (:func:`rfmap.cartogram.metrics.repair_folds`,
+    :func:`rfmap.cartogram.metrics.repair_overlaps`).  Cutting overlaps moves area; when that takes a judged region
+    beyond ``tol``, at most :data:`FINISH_PASSES` passes more start from the cut polygons (whose cut borders are now
+    shared, so the map keeps them apart) and their polygons, repaired in turn, are kept when their largest error is
+    lower (none past ``deadline``).  Returns the polygons and the seconds spent in ``grid_map``; ``info`` records the
+    repairs and the passes (``info["finish_passes"]``)."""
+    mapped, info["repaired"] = repair_folds(mapped)
+    mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
+    info["finish_passes"] = 0
+    if not info["overlaps_cut"] or tol is None or (err := _largest_error(mapped, values, min_share)) <= tol:
+        return mapped, 0.0
+    more, extra, seconds = _passes(mapped, values, grid_map, n=info["grids"][-1], supersample=supersample,
+                                   passes=FINISH_PASSES, tol=tol, min_share=min_share, max_n=max_n, split=split,
+                                   deadline=deadline)
+    more, folds = repair_folds(more)
+    more, cut = repair_overlaps(more, values)
+    if not _largest_error(more, values, min_share) < err:
+        return mapped, seconds
+    info["finish_passes"] = extra["iterations"]
+    info["repaired"] += folds
+    info["overlaps_cut"] += cut
+    for key in ("max_error", "results", "grids"):
+        info[key] = info[key] + extra[key]
+    info["iterations"] += extra["iterations"]
+    info["kept"] = info["iterations"] - extra["iterations"] + extra["kept"]
+    return more, seconds
 
 
 def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogate=None) -> dict:

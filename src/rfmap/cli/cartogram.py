@@ -270,7 +270,7 @@ def add_cartogram_parser(sub) -> None:
                    help="cells per side N of the density raster, as cartogram-cpp's -n (default 256)")
     s.add_argument("--tol", type=float, default=0.01,
                    help="repeat passes until the largest relative area error is at most this (default 0.01)")
-    s.add_argument("--max-passes", type=int, default=30, help="at most this many passes (default 30)")
+    s.add_argument("--max-passes", type=int, default=60, help="at most this many passes (default 60)")
     s.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
                    help="start no further pass after this many seconds; the best pass so far is written, and the "
                         "command exits 1 unless it is within the tolerance")
