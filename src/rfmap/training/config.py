@@ -293,6 +293,26 @@ CONFIGS["fno-deq2d-square"] = {
 }
 
 
+#: deq2d-square trained across the sizes the paper tests, to run natively (the network on the requested grid) at every
+#: side from 32 to 256: log-uniform sides (every octave a third of the steps) at about the same cost per step
+#: (batch_points), validated natively at both ends of the range, from deq2d-square's weights (the lineage)
+_SIZES = dict(n_range=(32, 256), n_sampling="log", batch_points=20736, batch=16, val_sizes=(32, 51, 128, 256),
+              val_native=True, lr=1e-4, ema=0.999, warmup=0)
+CONFIGS["deq2d-square-native"] = {
+    preset: replace(
+        cfg, name="deq2d-square-native",
+        **(_SIZES if preset == "full" else dict(n_range=(17, 33), n_sampling="log", val_native=True)
+           if preset == "ci" else dict(n_range=(32, 256), n_sampling="log")),
+        **(dict(steps=40000, time_limit=7200.0, threads=1, workers=0) if preset == "full" else {}),
+        description="deq2d-square's task, losses and fields, trained from its weights across grid sides 32-256 "
+                    "(log-uniform: each octave a third of the steps; batch of about 20,736 grid points, at most 16 "
+                    "fields) and validated on the network's own grid at 32, 51, 128 and 256, so that it runs "
+                    "natively at every side the paper tests. " + _HARD_NOTE[0].upper() + _HARD_NOTE[1:]
+                    + (f" Paper preset: {_NOTE_2D}" if preset == "paper" else ""))
+    for preset, cfg in CONFIGS["deq2d-square"].items()
+}
+
+
 def config_names() -> list[str]:
     """Names of the training configurations (each with ``ci``, ``full`` and ``paper`` presets)."""
     return list(CONFIGS)
