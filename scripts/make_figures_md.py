@@ -106,7 +106,8 @@ def glue_keys(item: dict) -> list[str]:
     if score.get("kind") != "score":
         return [m.group(1) for m in PLACEHOLDER.finditer(score.get("numbers", ""))]
     summary, per_case = score_keys(item)
-    return summary + per_case
+    notes = [m.group(1) for note in score.get("footnotes", []) for m in PLACEHOLDER.finditer(note)]
+    return summary + per_case + notes
 
 
 def paper_numbers(items: list[dict]) -> dict[str, str]:
@@ -147,12 +148,13 @@ def _scored(items: list[dict]) -> tuple[list[dict], dict[str, list[str]]]:
 
 
 def _footnotes(scored: list[dict]) -> tuple[dict[str, str], list[str]]:
-    """A footnote reference per scored item with footnotes, and the definitions."""
+    """A footnote reference per scored item with footnotes, and the definitions (a ``{key}`` in a footnote pasted
+    from the item's chapter, as in the table)."""
     refs, defs = {}, []
     for it in scored:
         notes = it["score"].get("footnotes", [])
         refs[it["label"]] = "".join(f"[^{it['score']['key']}-{k}]" for k in range(1, len(notes) + 1))
-        defs += [f"[^{it['score']['key']}-{k}]: {note}" for k, note in enumerate(notes, start=1)]
+        defs += [f"[^{it['score']['key']}-{k}]: {paste(note, it['notebook'])}" for k, note in enumerate(notes, start=1)]
     return refs, defs
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from rfmap.paper.comparison import (Case, Comparison, beltrami_comparison, compare_density, format_number,
-                                    format_time, resolution_comparison, score_row, timed)
+                                    format_time, native_side_by_side, resolution_comparison, score_row, timed)
 from rfmap.core.result import MapResult
 from rfmap.surrogate import Surrogate
 from rfmap.tasks import TaskSpec
@@ -37,6 +37,20 @@ def _comparison() -> Comparison:
         for method, v in zip(("paper", "native", "delivered", "classical"), (paper, native, delivered, classical)):
             c.values[(name, method)] = {"std_rho_map": v, "time": 0.01 if method != "native" else 0.02}
     return c
+
+
+def test_native_side_by_side_sets_each_models_method_against_the_paper():
+    a, b = _comparison(), _comparison()
+    b.values[("b", "native")]["std_rho_map"] = 0.03  # the second model meets the paper on b too
+    lines = native_side_by_side({"old": a, "new": b}).splitlines()
+    assert lines[0] == ("| case | paper Std(ρ̃_map) | old, paper's method | new, paper's method | flow solver |")
+    assert lines[2] == "| a | 0.08000 | 0.05000 (met) | 0.05000 (met) | 0.01000 |"
+    assert lines[3] == "| b | 0.04000 | 0.06000 (missed) | 0.03000 (met) | 0.02000 |"
+    b.cases = b.cases[:1]
+    with pytest.raises(ValueError, match="differs"):
+        native_side_by_side({"old": a, "new": b})
+    with pytest.raises(ValueError, match="at least one"):
+        native_side_by_side({})
 
 
 def test_met_is_the_paper_method_at_most_the_paper():

@@ -41,7 +41,7 @@ from .tables import paper_table
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
            "timed", "compare_density", "compare_beltrami", "compare_models", "population_comparison",
            "resolution_comparison", "beltrami_comparison", "beltrami_resolution_comparison", "PAPER_METHOD",
-           "DELIVERED"]
+           "DELIVERED", "native_side_by_side"]
 
 #: The four columns of a comparison, in order.
 METHODS = ("paper", "native", "delivered", "classical")
@@ -503,3 +503,34 @@ def beltrami_resolution_comparison(sur, ns: dict | None = None) -> Comparison:
                             "tab:reconstruction_results_res",
                             f"Reconstruction of T1 (a = 0.06, b = 0.04) per grid side, model {sur.name}",
                             case_prefix="N = ")
+
+
+def native_side_by_side(tables: dict[str, Comparison], metric: str = "std_rho_map") -> str:
+    """The paper's method of several models side by side, one row per case of the same paper table (Markdown):
+    the paper's value, each model's native value (``{model: comparison}``, in order) with whether it meets the
+    paper, and the classical solver of the first comparison.
+
+    Raises
+    ------
+    ValueError
+        When ``tables`` is empty or the comparisons differ in their cases or metrics.
+    """
+    if not tables:
+        raise ValueError("native_side_by_side needs at least one comparison")
+    first = next(iter(tables.values()))
+    for name, t in tables.items():
+        if [c.name for c in t.cases] != [c.name for c in first.cases] or metric not in t.metrics:
+            raise ValueError(f"comparison {name!r} differs from the first in its cases or lacks {metric!r}")
+    title = METRIC_TITLES[metric].replace("|", "\\|")
+    head = [first.case_prefix.strip(" =") or "case", f"paper {title}"]
+    head += [f"{name}, paper's method" for name in tables] + [first.classical]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for c in first.cases:
+        cells = [c.name, format_number(first.value(c.name, "paper", metric))]
+        for t in tables.values():
+            met = t.met(c.name, metric)
+            mark = "" if met is None else (" (met)" if met else " (missed)")
+            cells.append(format_number(t.value(c.name, "native", metric)) + mark)
+        cells.append(format_number(first.value(c.name, "classical", metric)))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines)
