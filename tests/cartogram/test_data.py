@@ -74,6 +74,15 @@ def test_unknown_columns_and_unreadable_files(tmp_path):
         region_ids(block(), "iso")
 
 
+def test_a_windows_1252_table_is_read_with_a_warning(tmp_path):
+    """Census tables often come in Windows-1252 ("Doña Ana" as one byte per letter): read, with a warning."""
+    path = tmp_path / "latin.csv"
+    path.write_bytes("code,pop,name\na,1,Doña Ana\nb,2,Bexar\n".encode("cp1252"))
+    with pytest.warns(UnicodeWarning, match="not UTF-8 text; read as Windows-1252"):
+        table = read_csv_table(path, "code", ["name"])
+    assert table["a"]["name"] == "Doña Ana" and table["b"]["name"] == "Bexar"
+
+
 def test_join_matches_and_reports_both_sides():
     values = {"a": 1, "b": 2, "d": 4, "zz": 9}
     j = join_values(block(), values, key="code", value="pop", missing="drop")

@@ -21,8 +21,10 @@ Nothing here imports PyTorch.
 from __future__ import annotations
 
 import csv
+import io
 import math
 import os
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
@@ -68,13 +70,31 @@ def _atomic_write_text(path, text: str) -> None:
 
 
 # ----------------------------------------------------------------------------------------------- CSV
+def _decode_csv(data: bytes, name: str) -> str:
+    """The text of a CSV file: UTF-8 (a byte-order mark allowed), else Windows-1252 with a warning (the encoding
+    spreadsheets and census tables often export, where a name such as "Doña Ana" is one byte per letter); bytes
+    that are neither, or a NUL byte (UTF-16, a binary file), are a ``ValueError``."""
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        if b"\x00" in data:
+            raise ValueError(f"cannot read {name}: not UTF-8 text ({e.reason} at byte {e.start})") from e
+        try:
+            text = data.decode("cp1252")
+        except UnicodeDecodeError:
+            raise ValueError(f"cannot read {name}: not UTF-8 text ({e.reason} at byte {e.start})") from e
+    warnings.warn(f"{name} is not UTF-8 text; read as Windows-1252", UnicodeWarning, stacklevel=3)
+    return text
+
+
 def read_csv_table(path, id_column: str, columns=()) -> dict[str, dict[str, str]]:
     """The rows of a CSV file by id: ``{id: {column: text}}`` for the named ``columns``.
 
     Parameters
     ----------
     path : str or path
-        A CSV file with a header row (UTF-8, a byte-order mark allowed).
+        A CSV file with a header row (UTF-8, a byte-order mark allowed; else Windows-1252, with a
+        ``UnicodeWarning``).
     id_column : str
     columns : sequence of str
         Further columns to keep (each must be in the header).
@@ -87,14 +107,13 @@ def read_csv_table(path, id_column: str, columns=()) -> dict[str, dict[str, str]
     """
     name = os.fspath(path)
     try:
-        with open(name, encoding="utf-8-sig", newline="") as fh:
-            reader = csv.DictReader(fh)
-            header = reader.fieldnames
-            rows = list(reader)
+        with open(name, "rb") as fh:
+            text = _decode_csv(fh.read(), name)
+        reader = csv.DictReader(io.StringIO(text, newline=""))
+        header = reader.fieldnames
+        rows = list(reader)
     except OSError as e:
         raise ValueError(f"cannot read {name}: {e.strerror or e}") from e
-    except UnicodeDecodeError as e:
-        raise ValueError(f"cannot read {name}: not UTF-8 text ({e.reason} at byte {e.start})") from e
     except csv.Error as e:
         raise ValueError(f"cannot read {name}: not a CSV table ({e})") from e
     if not header:

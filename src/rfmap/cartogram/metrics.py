@@ -311,7 +311,9 @@ def _cut_overlap(a, b, f: float):
     elif f <= 0.0:
         pieces = (a, _polygons(shapely.difference(b, a)))
     else:
-        inter = shapely.intersection(a, b)
+        inter = _polygons(shapely.intersection(a, b))
+        if shapely.is_empty(inter):  # an earlier cut took the overlap away
+            return None
         first = _area_split(inter, f)
         pieces = (_polygons(shapely.difference(a, first)),
                   _polygons(shapely.difference(b, shapely.difference(inter, first))))

@@ -113,16 +113,27 @@ def cmd_cartogram(args) -> int:
         print(f"written in the projection's plane ({carto.frame.projection.definition}; the GeoJSON's \"crs\" "
               f"member): {len(far)} region(s) left the longitude/latitude domain (use --lonlat to force it)")
     if names:
-        print(f"zero values floored in {len(names)} region(s): {', '.join(map(str, names))}")
+        print(f"zero values floored in {len(names)} region(s): {_listed(names)}")
     cut = carto.info.get("overlaps_cut", [])
     if cut:
         label = [carto.input_features[i].get("id", f"#{i}") for pair in cut for i in pair]
         print(f"sliver overlaps cut in {len(cut)} pair(s) of neighbours pressed together: "
-              f"{', '.join(f'{a} / {b}' for a, b in zip(label[::2], label[1::2]))}")
+              f"{_listed([f'{a} / {b}' for a, b in zip(label[::2], label[1::2])], LISTED_CUTS)}")
     problems = carto.problems()
     for p in problems:
         print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
     return 1 if problems else 0
+
+
+#: how many names a line of the command's report lists before it counts the rest
+LISTED = 10
+LISTED_CUTS = " (the output's \"rfmap\" member, \"overlaps_cut\", lists them all)"
+
+
+def _listed(names: list, where: str = "") -> str:
+    """The first :data:`LISTED` names, comma-separated, and how many more there are (and ``where`` to read them)."""
+    shown = ", ".join(map(str, names[:LISTED]))
+    return shown + (f" and {len(names) - LISTED} more{where}" if len(names) > LISTED else "")
 
 
 def _cartogram_series(args, collection) -> int:
