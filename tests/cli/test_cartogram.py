@@ -1,4 +1,6 @@
 """The cartogram command's report (rfmap.cli.cartogram)."""
+
+
 def test_long_lists_in_the_report_are_cut_to_ten_names():
     """A county map may cut overlaps in a thousand pairs: the report names ten and counts the rest."""
     from rfmap.cli.cartogram import LISTED_CUTS, _listed
