@@ -26,6 +26,12 @@ Usage::
 
     python benchmarks/cartogram.py --reference /path/to/cartogram-cpp/cartogram
     python benchmarks/cartogram.py --maps montreal africa --n 256 --repeat 1 --methods flow
+    python benchmarks/cartogram.py --reference CARTOGRAM --sample-data cartogram-cpp/sample_data \\
+        --maps us-counties russia-subjects world-countries --n 256 --repeat 1 --methods flow
+
+``--sample-data`` adds three real maps from cartogram-cpp's ``sample_data`` folder (its public repository): the
+3,108 counties of the contiguous United States (US Census Bureau), Russia's 83 federal subjects across the
+antimeridian, and 198 countries of the world, each by population.
 """
 from __future__ import annotations
 
@@ -51,8 +57,51 @@ ASIA_PACIFIC = ("Russia", "Fiji", "New Zealand", "Australia", "Papua New Guinea"
                 "China", "Mongolia", "South Korea", "North Korea", "Taiwan", "Vanuatu", "Solomon Is.", "New Caledonia")
 
 
-def write_inputs(folder: str) -> dict:
-    """GeoJSON + CSV of every map in ``folder``: ``{name: (geojson, csv, id property, value property)}``."""
+#: real maps of cartogram-cpp's ``sample_data`` folder (``--sample-data``): ``{name: (folder, id column, value
+#: column)}``, the GeoJSON and the CSV (Windows-1252 or UTF-8) of each folder joined by the id
+REAL = {
+    "us-counties": ("contiguous_usa_by_county_since_2001", "AFFGEOID", "Population (people)"),
+    "russia-subjects": ("russia_by_federal_subject_since_2008", "NAME_1", "Population (people)"),
+    "world-countries": ("world_by_country_since_2022", "ISO_CODE", "Population (people)"),
+}
+WORLDS = ("world", "world-countries")
+
+
+def real_maps(sample_data: str) -> dict:
+    """The maps of :data:`REAL` from a ``sample_data`` folder: ``{name: (features with "pop", id property,
+    "pop")}``; a folder or file that is missing is an error naming it."""
+    import glob
+
+    out = {}
+    for name, (sub, key, value) in REAL.items():
+        folder = os.path.join(sample_data, sub)
+        gj = glob.glob(os.path.join(folder, "*.geojson"))
+        tables = glob.glob(os.path.join(folder, "*population*.csv"))
+        if len(gj) != 1 or not tables:
+            raise SystemExit(f"--sample-data: {folder} needs one .geojson and a population CSV")
+        with open(gj[0], encoding="utf-8") as fh:
+            feats = json.load(fh)["features"]
+        with open(min(tables, key=len), "rb") as fh:
+            raw = fh.read()
+        text = raw.decode("utf-8-sig") if raw.isascii() or _utf8(raw) else raw.decode("cp1252")
+        pop = {row[key]: float(row[value]) for row in csv.DictReader(text.splitlines())}
+        for f in feats:
+            f["properties"] = {key: f["properties"][key], "pop": pop[f["properties"][key]]}
+        out[name] = (feats, key, "pop")
+    return out
+
+
+def _utf8(raw: bytes) -> bool:
+    try:
+        raw.decode("utf-8")
+        return True
+    except UnicodeDecodeError:
+        return False
+
+
+def write_inputs(folder: str, sample_data: str | None = None) -> dict:
+    """GeoJSON + CSV of every map in ``folder``: ``{name: (geojson, csv, id property, value property)}``; with
+    ``sample_data``, the real maps of :data:`REAL` too."""
     import shapely
     from shapely.geometry import mapping, shape
 
@@ -70,6 +119,7 @@ def write_inputs(folder: str) -> dict:
         "counties-slivers": (synthetic_counties(slivers=True)["features"], "id", "value"),
         "russia": (synthetic_subdivisions()["features"], "id", "value"),
         "russia-slivers": (synthetic_subdivisions(slivers=True)["features"], "id", "value"),
+        **(real_maps(sample_data) if sample_data else {}),
     }
     out = {}
     for name, (feats, key, value) in chosen.items():
@@ -130,7 +180,7 @@ def commands(args, name: str, files: tuple, n: int, folder: str) -> dict:
                                    "--max-passes", str(args.max_passes), "--out", path], path)
     if args.reference:
         ref = [os.path.abspath(args.reference), gj, table, "--id", key, "--area", value, "-n", str(n)]
-        if name == "world":
+        if name in WORLDS:
             ref.append("--world")
         stem = os.path.splitext(os.path.basename(gj))[0]
         out["cartogram-cpp"] = (ref, os.path.join(folder, f"{stem}_cartogram.geojson"))
@@ -170,11 +220,16 @@ HEAD = ("| map | N | program | wall [s] | × reference | peak RSS [MB] | exit | 
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--reference", default=None, help="path to cartogram-cpp's cartogram binary")
-    ap.add_argument("--maps", nargs="+", choices=MAPS, default=list(MAPS))
+    ap.add_argument("--maps", nargs="+", choices=MAPS + tuple(REAL), default=None,
+                    help="maps to run (default: every synthetic and Natural Earth map, and with --sample-data the "
+                         "real ones)")
+    ap.add_argument("--sample-data", default=None, metavar="DIR",
+                    help="cartogram-cpp's sample_data folder (its public repository): adds the real maps "
+                         f"{', '.join(REAL)}")
     ap.add_argument("--n", type=int, nargs="+", default=[256, 512])
     ap.add_argument("--methods", nargs="+", choices=("flow", "diffusion"), default=["flow", "diffusion"])
     ap.add_argument("--repeat", type=int, default=3, help="runs per command (median)")
-    ap.add_argument("--max-passes", type=int, default=30, help="rfmap's --max-passes")
+    ap.add_argument("--max-passes", type=int, default=60, help="rfmap's --max-passes")
     ap.add_argument("--workdir", default=None, help="folder for the inputs and outputs (default: a temporary one)")
     args = ap.parse_args(argv)
     # rfmap's modules byte-compiled, as pip leaves an installed package: an editable install run with
@@ -184,13 +239,16 @@ def main(argv: list[str] | None = None) -> None:
     compileall.compile_dir(os.path.dirname(rfmap.__file__), quiet=1)
     folder = args.workdir or tempfile.mkdtemp(prefix="rfmap-cartogram-bench-")
     os.makedirs(folder, exist_ok=True)
-    files = write_inputs(folder)
+    files = write_inputs(folder, args.sample_data)
+    maps = args.maps or [*MAPS, *(REAL if args.sample_data else ())]
+    if any(m in REAL for m in maps) and not args.sample_data:
+        ap.error("the real maps need --sample-data DIR")
     load = os.getloadavg()
     print(f"machine: {os.cpu_count()} cores, load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f} at the start; "
           f"median of {args.repeat} whole commands (rfmap's modules byte-compiled first, as pip installs them); "
           "tolerance 1 %; errors over regions >= 0.01 % of the total\n")
     print(HEAD, flush=True)
-    for name in args.maps:
+    for name in maps:
         for n in args.n:
             bench_map(args, name, files[name], n, folder)
     load = os.getloadavg()

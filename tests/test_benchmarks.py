@@ -85,3 +85,27 @@ def test_hybrid_benchmark_smoke():
     out = run_script("hybrid.py", *SMOKE["hybrid.py"][0])
     for method in ("diffusion", "flow", "surrogate", "hybrid"):
         assert method in out
+
+
+def test_the_cartogram_benchmark_reads_real_maps_of_cartogram_cpps_sample_data(tmp_path):
+    """``--sample-data``: each real map's GeoJSON joined to its population CSV (Windows-1252, as the US county table
+    comes) by the id column; a folder that is missing is named."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("bench_cartogram", BENCHMARKS / "cartogram.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    square = {"type": "Polygon", "coordinates": [[[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]]]}
+    for name, (sub, key, value) in mod.REAL.items():
+        folder = tmp_path / sub
+        folder.mkdir()
+        feats = [{"type": "Feature", "properties": {key: k, "other": 1}, "geometry": square} for k in ("Doña", "B")]
+        (folder / f"{sub}.geojson").write_text(json.dumps({"type": "FeatureCollection", "features": feats}),
+                                               encoding="utf-8")
+        (folder / "population.csv").write_bytes(f"{key},{value},Color\nDoña,5,\nB,7,\n".encode("cp1252"))
+    maps = mod.real_maps(str(tmp_path))
+    assert sorted(maps) == sorted(mod.REAL)
+    feats, key, value = maps["us-counties"]
+    assert value == "pop" and [f["properties"] for f in feats] == [{key: "Doña", "pop": 5.0}, {key: "B", "pop": 7.0}]
+    with pytest.raises(SystemExit, match="needs one .geojson"):
+        mod.real_maps(str(tmp_path / "nowhere"))
