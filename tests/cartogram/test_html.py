@@ -118,11 +118,12 @@ PROBE = """<script>
     var at = {clientX: r.right - 3, clientY: r.top + r.height / 2, bubbles: true, view: window, buttons: 1};
     rail.dispatchEvent(new MouseEvent("mousedown", at));
     rail.dispatchEvent(new MouseEvent("mouseup", at));
-    var tries = 0;
-    (function wait() {  // until the outlines change (the frame is drawn), for at most 10 s
+    var tries = 0, last = null;
+    (function wait() {  // until the outlines changed and stayed so for one poll (the frame drawn), at most 10 s
       out.active_after = gd._fullLayout.sliders[0].active;
       out.after = fills(gd);
-      if (out.after.join() !== out.before.join() || ++tries > 50) { report(out); } else { setTimeout(wait, 200); }
+      var now = out.after.join(), changed = now !== out.before.join();
+      if ((changed && now === last) || ++tries > 50) { report(out); } else { last = now; setTimeout(wait, 200); }
     })();
   }
   window.addEventListener("load", function () { setTimeout(probe, 500); });

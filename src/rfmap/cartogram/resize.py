@@ -459,7 +459,9 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     run; with ``split``, edges stretched beyond :data:`SPLIT_EDGE` cells are split between passes, and with
     ``accelerate`` every region's weight is boosted by its own slow progress
     (:func:`rfmap.cartogram.metrics.boost`) until a pass fails to lower the largest error; past ``deadline``
-    (``time.perf_counter``) no further pass starts.  ``n`` and ``max_n`` count cells per side; the rasters have
+    (``time.perf_counter``) no further pass starts.  With ``split``, a region that a pass made cross itself is
+    replaced by its valid part (``shapely.make_valid``) before its area is measured, so that the next pass corrects
+    a true area (a crossed ring's signed area misleads every later pass).  ``n`` and ``max_n`` count cells per side; the rasters have
     ``n + 1`` vertices per side.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
     shapely = _shapely()
     current, inverse = _distinct_vertices(regions)
@@ -494,6 +496,11 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         map_time += res.time
         results.append(res)
         mapped = shapely.set_coordinates(regions.copy(), current[inverse])
+        bad = np.flatnonzero(~shapely.is_valid(mapped))
+        if bad.size and split:  # a region the pass made cross itself: its valid part, whose area the next pass fixes
+            mapped[bad] = _valid_part(mapped[bad])
+            regions = mapped
+            current, inverse = _distinct_vertices(regions)
         area = shapely.area(mapped)
         history.append(float(np.abs(area / (values / values.sum() * area.sum()) - 1.0)[big].max()))
         if best is None or history[-1] < best[0]:
@@ -508,6 +515,16 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         mapped, kept = best[1], best[2]
     return mapped, {"iterations": len(results), "kept": kept, "max_error": history, "results": results,
                     "sea": sea, "grids": grids, "timed_out": timed_out}, map_time
+
+
+def _valid_part(geoms: np.ndarray) -> np.ndarray:
+    """The polygonal part of ``shapely.make_valid`` of each geometry, as one (Multi)Polygon."""
+    shapely = _shapely()
+    out = []
+    for g in shapely.make_valid(geoms):
+        parts = shapely.get_parts(g)
+        out.append(shapely.union_all(parts[np.isin(shapely.get_type_id(parts), (3, 6))]))
+    return np.array(out, dtype=object)
 
 
 def _largest_error(mapped: np.ndarray, values: np.ndarray, min_share: float) -> float:
