@@ -31,6 +31,8 @@ N = {2: 33, 3: 17}
 DENSITY_RATIO = {
     "dem2d-square": {"sin-cos": 0.155, "exp-log": 0.165, "rect-peak": 0.160, "ring": 0.140, "multi-freq": 0.193},
     "deq2d-square": {"sin-cos": 0.159, "exp-log": 0.178, "rect-peak": 0.160, "ring": 0.097, "multi-freq": 0.194},
+    "deq2d-square-native": {"sin-cos": 0.231, "exp-log": 0.274, "rect-peak": 0.221, "ring": 0.118,
+                            "multi-freq": 0.275},
     "deq2d-free": {"sin-cos": 0.139, "exp-log": 0.174, "rect-peak": 0.145, "ring": 0.158, "multi-freq": 0.192},
     "fno-deq2d-square": {"sin-cos": 0.468, "exp-log": 0.529, "rect-peak": 0.437, "ring": 0.454,
                          "multi-freq": 0.542},
