@@ -71,6 +71,9 @@ def real_maps(sample_data: str) -> dict:
     """The maps of :data:`REAL` from a ``sample_data`` folder: ``{name: (features with "pop", id property,
     "pop")}``; a folder or file that is missing is an error naming it."""
     import glob
+    import warnings
+
+    from rfmap.cartogram.data import read_csv_table
 
     out = {}
     for name, (sub, key, value) in REAL.items():
@@ -81,22 +84,14 @@ def real_maps(sample_data: str) -> dict:
             raise SystemExit(f"--sample-data: {folder} needs one .geojson and a population CSV")
         with open(gj[0], encoding="utf-8") as fh:
             feats = json.load(fh)["features"]
-        with open(min(tables, key=len), "rb") as fh:
-            raw = fh.read()
-        text = raw.decode("utf-8-sig") if raw.isascii() or _utf8(raw) else raw.decode("cp1252")
-        pop = {row[key]: float(row[value]) for row in csv.DictReader(text.splitlines())}
+        with warnings.catch_warnings():  # a Windows-1252 table (the US counties') is read as such
+            warnings.simplefilter("ignore", UnicodeWarning)
+            table = read_csv_table(min(tables, key=len), key, [value])
+        pop = {k: float(row[value]) for k, row in table.items()}
         for f in feats:
             f["properties"] = {key: f["properties"][key], "pop": pop[f["properties"][key]]}
         out[name] = (feats, key, "pop")
     return out
-
-
-def _utf8(raw: bytes) -> bool:
-    try:
-        raw.decode("utf-8")
-        return True
-    except UnicodeDecodeError:
-        return False
 
 
 def write_inputs(folder: str, sample_data: str | None = None) -> dict:

@@ -16,7 +16,7 @@ import numpy as np
 from .regions import _shapely
 
 __all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps", "judged", "pass_weights", "repair_folds",
-           "repair_overlaps", "clean_input_overlaps", "boost", "MIN_SHARE", "MINOR_BUDGET", "SPLITS", "SPLIT_COST",
+           "repair_overlaps", "valid_polygons", "clean_input_overlaps", "boost", "MIN_SHARE", "MINOR_BUDGET", "SPLITS", "SPLIT_COST",
            "REPAIR_AREA", "REPAIR_OVERLAP", "SLIVER_SHAPE", "SLIVER_SHARE", "BOOST_GAIN", "BOOST_CAP"]
 
 #: The share of the total value from which a region's area error is judged (stopping rule, :meth:`Cartogram.metrics`,
@@ -181,9 +181,7 @@ def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tupl
     bad = np.flatnonzero(~shapely.is_valid(mapped))
     if not bad.size:
         return mapped, []
-    fixed = shapely.make_valid(mapped[bad])
-    parts = [shapely.get_parts(g) for g in fixed]  # the polygons of each fix (no stray lines or points)
-    fixed = np.array([shapely.union_all(p[np.isin(shapely.get_type_id(p), (3, 6))]) for p in parts], dtype=object)
+    fixed = valid_polygons(mapped[bad])
     change = np.abs(shapely.area(fixed) - shapely.area(mapped[bad])) / shapely.area(mapped).sum()
     ok = (change <= max_change) & shapely.is_valid(fixed) & np.isin(shapely.get_type_id(fixed), (3, 6))
     out = mapped.copy()
@@ -278,6 +276,12 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float
 #: The shares of an overlap that :func:`repair_overlaps` may cut from the first of its two regions, and the increase of
 #: the larger relative area error of the two below which the whole overlap is cut from one of them
 SPLITS, SPLIT_COST = tuple(np.linspace(0.0, 1.0, 11)), 1e-3
+
+
+def valid_polygons(geoms: np.ndarray) -> np.ndarray:
+    """The polygonal part of ``shapely.make_valid`` of each geometry (R,), as one (Multi)Polygon each (no stray
+    lines or points, crumbs under :data:`CRUMB` dropped)."""
+    return np.array([_polygons(g) for g in _shapely().make_valid(geoms)], dtype=object)
 
 
 def _thin(g) -> bool:

@@ -58,7 +58,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .metrics import MIN_SHARE, SLIVER_GAP, CartogramMetrics, boost, cartogram_metrics, clean_input_overlaps, \
-    judged, pass_weights, repair_folds, repair_overlaps
+    judged, pass_weights, repair_folds, repair_overlaps, valid_polygons
 from ..core.mesh import check_grid_memory, check_n
 from .options import CartogramOptions
 from .output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
@@ -498,7 +498,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         mapped = shapely.set_coordinates(regions.copy(), current[inverse])
         bad = np.flatnonzero(~shapely.is_valid(mapped))
         if bad.size and split:  # a region the pass made cross itself: its valid part, whose area the next pass fixes
-            mapped[bad] = _valid_part(mapped[bad])
+            mapped[bad] = valid_polygons(mapped[bad])
             regions = mapped
             current, inverse = _distinct_vertices(regions)
         area = shapely.area(mapped)
@@ -515,16 +515,6 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         mapped, kept = best[1], best[2]
     return mapped, {"iterations": len(results), "kept": kept, "max_error": history, "results": results,
                     "sea": sea, "grids": grids, "timed_out": timed_out}, map_time
-
-
-def _valid_part(geoms: np.ndarray) -> np.ndarray:
-    """The polygonal part of ``shapely.make_valid`` of each geometry, as one (Multi)Polygon."""
-    shapely = _shapely()
-    out = []
-    for g in shapely.make_valid(geoms):
-        parts = shapely.get_parts(g)
-        out.append(shapely.union_all(parts[np.isin(shapely.get_type_id(parts), (3, 6))]))
-    return np.array(out, dtype=object)
 
 
 def _largest_error(mapped: np.ndarray, values: np.ndarray, min_share: float) -> float:

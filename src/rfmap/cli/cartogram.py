@@ -119,7 +119,11 @@ def cmd_cartogram(args) -> int:
         label = [carto.input_features[i].get("id", f"#{i}") for pair in cut for i in pair]
         print(f"sliver overlaps cut in {len(cut)} pair(s) of neighbours pressed together: "
               f"{_listed([f'{a} / {b}' for a, b in zip(label[::2], label[1::2])], LISTED_CUTS)}")
-    problems = carto.problems()
+    return _report_problems(carto.problems())
+
+
+def _report_problems(problems: list[str]) -> int:
+    """Each problem of a cartogram on its own line of stderr; the exit status (1 when there is any)."""
     for p in problems:
         print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
     return 1 if problems else 0
@@ -159,10 +163,7 @@ def _cartogram_series(args, collection) -> int:
         print(f"{f.key}: {f.passes} pass(es), {f.seconds:.2f} s, largest area error {f.max_error:.4f}")
     also = [p for p in (args.gif, args.html) if p]
     print(f"wrote {args.out} (the last frame, in the projection's plane)" + (f" and {', '.join(also)}" if also else ""))
-    problems = series.problems()
-    for p in problems:
-        print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
-    return 1 if problems else 0
+    return _report_problems(series.problems())
 
 
 def _cartogram_insets(args, collection) -> int:
@@ -184,10 +185,7 @@ def _cartogram_insets(args, collection) -> int:
     sides = ", ".join(f"{side} {idx.size}" for side, idx in carto.groups.items())
     print(f"wrote {args.out}: {len(carto.input_features)} regions by {args.value!r} in {len(carto.groups)} inset(s) "
           f"({sides}), {carto.method}, N = {carto.n}, {carto.time:.2f} s; {carto.metrics()}")
-    problems = carto.problems()
-    for p in problems:
-        print(f"rfmap cartogram: failed: {p}", file=sys.stderr)
-    return 1 if problems else 0
+    return _report_problems(carto.problems())
 
 
 def _cartogram_page(args, cartos: list, keys: list | None = None) -> None:
