@@ -71,10 +71,12 @@ IMG_SRC = re.compile(r'<img\b[^>]*\bsrc="([^"]+)"', re.IGNORECASE)
 def machine_path_markers(root: Path = ROOT) -> list[tuple[re.Pattern, str]]:
     """(pattern, what it means) of a path of the machine that built the book: a printed ``pathlib`` path, the
     repository's folder, the home folder, or a temporary file. A page shows paths relative to the project."""
-    home = os.path.expanduser("~")
+    home, repo = os.path.expanduser("~"), re.escape(str(root.resolve())) + r"\b"
+    # a checkout cloned into a temporary folder: its own paths count once, as the repository's
     markers = [(re.compile(r"\b(?:Posix|Windows)Path\("), "a printed pathlib path"),
-               (re.compile(re.escape(str(root.resolve())) + r"\b"), "the repository's folder on this machine"),
-               (re.compile(re.escape(tempfile.gettempdir()) + r"/tmp[\w.-]{6,}"), "a temporary file's path")]
+               (re.compile(repo), "the repository's folder on this machine"),
+               (re.compile(f"(?!{repo})" + re.escape(tempfile.gettempdir()) + r"/tmp[\w.-]{6,}"),
+                "a temporary file's path")]
     if len(home) > 1 and not str(root.resolve()).startswith(home):
         markers.append((re.compile(re.escape(home) + "/"), "the home folder of this machine"))
     return markers
