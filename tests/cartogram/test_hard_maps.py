@@ -256,3 +256,43 @@ def test_subdivisions_whose_borders_overlap_come_out_disjoint():
     m = c.metrics()
     assert m.n_overlapping == 0 and m.n_invalid == 0 and m.max_error <= 0.01, m
     assert not c.problems() and shapely.is_valid(c.geometries).all()
+
+
+def test_no_pass_asks_a_region_for_more_than_the_pass_contrast(monkeypatch):
+    """A city a few raster cells wide that must grow 2,000-fold (as St. Petersburg and Moscow do on Russia's
+    map): every pass's raster stays within PASS_CONTRAST of the sea's density, so the city grows over several passes
+    (before, one pass squeezed its neighbours into bands thinner than a cell whose borders crossed), and the
+    cartogram still meets the tolerance, valid, without overlaps."""
+    import rfmap.cartogram.resize as resize
+
+    disc = shapely.Point(5.0, 5.0).buffer(0.12, quad_segs=16)
+    feats = []
+    for i in range(3):
+        for j in range(3):
+            box = shapely.box(i * 10 / 3, j * 10 / 3, (i + 1) * 10 / 3, (j + 1) * 10 / 3)
+            if (i, j) == (1, 1):
+                box = box.difference(disc)
+            feats.append({"type": "Feature", "properties": {"value": box.area * (1.0 + 0.5 * ((i + 2 * j) % 3))},
+                          "geometry": shapely.geometry.mapping(box)})
+    feats.append({"type": "Feature", "properties": {"value": disc.area * 2000.0},
+                  "geometry": shapely.geometry.mapping(disc)})
+    seas, ratios, grid_map, raster = [], [], resize._grid_map, resize.density_grid
+
+    def spy_raster(*args, **kw):
+        dens, sea = raster(*args, **kw)
+        seas.append(sea)
+        return dens, sea
+
+    def spy_map(method, density, surrogate, kw):
+        ratios.append((density.max() / seas[-1], density.min() / seas[-1]))
+        return grid_map(method, density, surrogate, kw)
+
+    monkeypatch.setattr(resize, "density_grid", spy_raster)
+    monkeypatch.setattr(resize, "_grid_map", spy_map)
+    c = cartogram({"type": "FeatureCollection", "features": feats}, "value", n=256)
+    top, bottom = np.array(ratios).T
+    assert len(ratios) >= 3  # the city needed more than one pass
+    assert top.max() <= resize.PASS_CONTRAST * (1 + 1e-12) and bottom.min() >= (1 - 1e-12) / resize.PASS_CONTRAST
+    assert top[0] == pytest.approx(resize.PASS_CONTRAST)  # the first pass was clipped
+    m = c.metrics()
+    assert m.max_error <= 0.01 and m.n_invalid == 0 and m.n_overlapping == 0, m

@@ -26,7 +26,10 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    regions come out a little small and sparse ones a little large.  The cartogram is therefore computed again from
    the mapped polygons, whose densities are now nearly equal, and the maps are composed, until the largest relative
    area error over the regions holding at least ``min_share`` of the total value (:data:`MIN_SHARE`, 0.01 %) is
-   below ``tol`` (flow-based cartogram programs stop at 1 %, the default).  The smaller regions are mapped as if
+   below ``tol`` (flow-based cartogram programs stop at 1 %, the default).  No pass asks a region to change its
+   area more than :data:`PASS_CONTRAST` times (its raster densities are clipped to that factor of the sea's): a
+   city that must grow a hundredfold grows over several passes, and its neighbours are never squeezed into bands
+   thinner than a cell, whose borders would cross.  The smaller regions are mapped as if
    they held that share and their errors are reported apart.  A pass that gains little doubles the raster's
    resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  Edges that the
    classical passes stretched beyond :data:`SPLIT_EDGE` cells are split again before the next pass, and (flow) each
@@ -61,6 +64,8 @@ from .metrics import MIN_SHARE, SLIVER_GAP, CartogramMetrics, boost, cartogram_m
     judged, pass_weights, repair_folds, repair_overlaps, valid_polygons
 from ..core.mesh import check_grid_memory, check_n
 from .options import CartogramOptions
+from .passmap import DIFFUSION_SETTINGS, FLOW_SETTINGS, HYBRID_POLISH, at_points as _at_points, \
+    grid_map as _grid_map
 from .output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
 from .projection import PlanarFrame
 from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edge, \
@@ -95,15 +100,7 @@ __all__ = [
 CARTOGRAM_METHODS = ("diffusion", "flow", "surrogate", "hybrid")
 
 
-# ----------------------------------------------------------------------------------------------- maps
-#: Settings of :func:`rfmap.solvers.solve_dem` on a cartogram's raster (which holds cell means: ``refine=1``, book:
-#: Design decisions); stop at a remaining displacement of 1 % of a cell (``tol_end``, used by the cartograms' own
-#: torch-free diffusion, :func:`rfmap.solvers.cartodiffusion.diffusion_square`, too).
-DIFFUSION_SETTINGS = {"refine": 1, "tol_end": 1e-2}
-#: Settings of ``solve_dem(method="flow")`` on a cartogram's raster: one flow per pass (``tol=0``: passes stop on
-#: area errors), on the vertex grid (``refine=1``; book: Design decisions).  :func:`cartogram` itself carries the
-#: vertices by the torch-free :func:`rfmap.solvers.cartoflow.flow_square`.
-FLOW_SETTINGS = {"refine": 1, "tol": 0.0}
+# ----------------------------------------------------------------------------------------------- passes
 #: A pass that leaves more than this fraction of the previous pass's largest error doubles the raster's resolution
 #: (up to ``max_n``): the regions left are a few cells wide, which a finer raster resolves
 SLOW_PASS = 0.7
@@ -116,51 +113,20 @@ GAIN = 1e-9
 SPLIT_EDGE = 1.0
 #: The most passes :func:`cartogram` runs after cutting sliver overlaps moved a region beyond the tolerance
 FINISH_PASSES = 4
+#: A pass's raster densities are clipped to within this factor of the sea's (the mean), so that no pass asks a
+#: region to grow or shrink more than this many times: a city of a few cells that must grow a hundredfold otherwise
+#: squeezes its neighbours into bands thinner than a cell in one pass, and their borders cross (later passes ask
+#: for the rest)
+PASS_CONTRAST = 10.0
+#: Boosted passes in a row that may fail to lower the largest error before the boosts stop: a secant step that
+#: overshoots is corrected by the next one (the boost of a region whose error changed sign falls to none)
+BOOST_PATIENCE = 3
 #: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for
 MAX_N = 1024
 #: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
 #: coast's jump of density, sampled by the grid, otherwise bends the outline between nearby vertices into folds
 FLOW_BLUR = 1.0
-#: The hybrid's polish tolerance on Std(rho~_map) (``Surrogate.map(polish=...)``): far below any raster's variation, so
-#: that every pass runs its flow, for the reason of :data:`FLOW_SETTINGS`' ``tol=0``.  The polish runs on the
-#: raster's vertex grid (the network's map resampled to it), where the area errors are judged (book: Design
-#: decisions).
-HYBRID_POLISH = 1e-9
-
-
-def _at_points(res, points: np.ndarray) -> np.ndarray:
-    """The grid map ``res`` (a :class:`rfmap.core.result.MapResult` on the ``N``-grid) at ``points`` (P, 2): its
-    displacement interpolated bilinearly."""
-    from ..solvers.cartoflow import bilinear
-
-    if not res.info.get("grid", True):  # the flow carried the points themselves
-        return res.mapped_points
-    n = math.isqrt(res.ref_points.shape[0])
-    return points + bilinear((res.mapped_points - res.ref_points).reshape(n, n, 2), points)
-
-
-def _grid_map(method: str, density: np.ndarray, surrogate, solver_kw: dict):
-    """The map of the unit square for one pass: the classical diffusion or flow DEM with fixed walls, the
-    surrogate's map on its working grid (repaired there, so that it is fold-free before it is interpolated at the
-    polygon vertices), or the hybrid's on the raster's vertex grid."""
-    kw = dict(solver_kw)
-    points = kw.pop("points", None)
-    if method == "flow":  # torch-free, as the diffusion
-        from ..solvers.cartoflow import CartoFlowOptions, flow_square
-
-        return flow_square(density, CartoFlowOptions(**kw), points=points)
-    if method == "diffusion":
-        from ..solvers.cartodiffusion import CartoDiffusionOptions, diffusion_square
-
-        opts = CartoDiffusionOptions(**{"tol_end": DIFFUSION_SETTINGS["tol_end"], **kw})
-        return diffusion_square(density, opts, points=points)
-    from ..finish import quiet_quality
-
-    # the raster's Std(rho~) counts the sea and every region's edge; the cartogram judges a pass by its area errors
-    with quiet_quality():
-        if method == "hybrid":  # the network's map resampled to the vertex grid and finished there by the flow
-            return surrogate.map(density, density.shape[0], preprocess=False, polish=HYBRID_POLISH)
-        return surrogate.map(density, surrogate.work_n(density.shape[0]), preprocess=False)
+_NO_POINTS = np.empty((0, 2))
 
 
 def available_methods(surrogate=None) -> tuple[str, ...]:
@@ -199,7 +165,8 @@ class Cartogram:
         Seconds in the map computations themselves (solver or surrogate) over all iterations.
     info : dict
         ``iterations``, ``kept`` (the pass whose polygons are returned), ``max_error`` per pass (in the frame's
-        plane), per-iteration ``results`` (:class:`rfmap.core.result.MapResult`), ``sea`` density, ``beyond_domain``
+        plane), per-iteration ``results`` (:class:`rfmap.core.result.MapResult`; a flow that carried the polygon vertices
+        keeps its ``info`` and ``time``, not its points), ``sea`` density, ``beyond_domain``
         (the regions that left the input's domain, for ``output="auto"``).
     output : {"input", "projected"}
         The coordinates of ``features`` (:mod:`rfmap.cartogram.output`).
@@ -458,7 +425,8 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     no longer lowers the largest area error, and the polygons of the best pass are returned; without, all ``passes``
     run; with ``split``, edges stretched beyond :data:`SPLIT_EDGE` cells are split between passes, and with
     ``accelerate`` every region's weight is boosted by its own slow progress
-    (:func:`rfmap.cartogram.metrics.boost`) until a pass fails to lower the largest error; past ``deadline``
+    (:func:`rfmap.cartogram.metrics.boost`) until :data:`BOOST_PATIENCE` passes in a row fail to lower the largest
+    error; every raster's densities are clipped to within :data:`PASS_CONTRAST` times the sea's; past ``deadline``
     (``time.perf_counter``) no further pass starts.  With ``split``, a region that a pass made cross itself is
     replaced by its valid part (``shapely.make_valid``) before its area is measured, so that the next pass corrects
     a true area (a crossed ring's signed area misleads every later pass).  ``n`` and ``max_n`` count cells per side; the rasters have
@@ -473,7 +441,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     results, history, grids, map_time = [], [], [], 0.0
     best = None  # (largest area error, polygons, pass) of the best pass so far
     log_err, gain = None, np.zeros(len(values))  # the last pass's log area errors and log weight boosts
-    timed_out = False
+    timed_out, misses = False, 0  # misses: passes in a row that did not lower the largest error
     for _ in range(passes):
         if results and deadline is not None and time.perf_counter() >= deadline:
             timed_out = True
@@ -491,10 +459,15 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
             gain = boost(now, log_err, gain) if log_err is not None else gain
             log_err = now
         dens, sea = density_grid(mapped, weights * np.exp(-gain), n + 1, supersample=supersample)
+        np.clip(dens, sea / PASS_CONTRAST, sea * PASS_CONTRAST, out=dens)
         res = grid_map(dens, current)
-        current = _at_points(res, current)
+        moved = _at_points(res, current)
         map_time += res.time
-        results.append(res)
+        # a flow of the polygon vertices is kept as its info and time: its points would hold hundreds of megabytes
+        # over the passes of a county map
+        results.append(res if res.info.get("grid", True) else replace(res, ref_points=_NO_POINTS,
+                                                                       mapped_points=_NO_POINTS))
+        current = moved
         mapped = shapely.set_coordinates(regions.copy(), current[inverse])
         bad = np.flatnonzero(~shapely.is_valid(mapped))
         if bad.size and split:  # a region the pass made cross itself: its valid part, whose area the next pass fixes
@@ -505,11 +478,18 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         history.append(float(np.abs(area / (values / values.sum() * area.sum()) - 1.0)[big].max()))
         if best is None or history[-1] < best[0]:
             best = (history[-1], mapped, len(results))
-        if tol is not None and (history[-1] <= tol or len(history) > 1 and not history[-1] < (1 - GAIN) * history[-2]):
-            if accelerate and history[-1] > tol:  # a boosted pass overshot: plain passes from here on
-                accelerate, gain = False, np.zeros(len(values))
+        if tol is not None and history[-1] <= tol:
+            break  # within tolerance
+        if tol is not None and len(history) > 1 and not history[-1] < (1 - GAIN) * history[-2]:
+            misses += 1
+            if accelerate and misses < BOOST_PATIENCE:
+                continue  # a boosted pass overshot: the next secant step sees it
+            if accelerate:  # boosted passes keep overshooting: plain passes from here on
+                accelerate, gain, misses = False, np.zeros(len(values)), 0
                 continue
-            break  # within tolerance, or a pass that no longer lowers the largest error
+            break  # a pass that no longer lowers the largest error
+        else:
+            misses = 0
     kept = len(results)
     if tol is not None:  # the polygons of the pass with the lowest largest error
         mapped, kept = best[1], best[2]
