@@ -326,7 +326,8 @@ CONFIGS["dem3d-cube-native"] = {
         description="dem3d-cube's task, losses and fields, trained from its weights across grid sides 24-64 "
                     "(log-uniform; about 128,000 grid points per step, at most 2 fields) and validated on the "
                     "network's own grid at 32 and 64, so that it runs natively at every side the paper tests. "
-                    + _HARD3_NOTE)
+                    + _HARD3_NOTE + (" " + cfg.description[cfg.description.index("Paper preset"):]
+                                     if preset == "paper" else ""))
     for preset, cfg in CONFIGS["dem3d-cube"].items()
 }
 
