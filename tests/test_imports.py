@@ -57,7 +57,7 @@ LAYERS: dict[str, int] = {
     "rfmap.cartogram": 3, "rfmap.cartogram.resize": 3, "rfmap.cartogram.options": 3,
     "rfmap.cartogram.data": 3, "rfmap.cartogram.series": 3, "rfmap.cartogram.metrics": 3,
     "rfmap.cartogram.synthetic": 3, "rfmap.cartogram.output": 3, "rfmap.cartogram.html": 3,
-    "rfmap.cartogram.insets": 3,
+    "rfmap.cartogram.insets": 3, "rfmap.cartogram.passmap": 3,
     "rfmap.cartogram.regions": 3, "rfmap.cartogram.projection": 3, "rfmap.paper.compare": 3, "rfmap.training.records": 3,
     "rfmap.cli": 4, "rfmap.cli.__main__": 4, "rfmap.cli.commands": 4, "rfmap.cli.base": 4, "rfmap.cli.cartogram": 4, "rfmap.cli.lazy_parser": 4,
     "rfmap": 4,
