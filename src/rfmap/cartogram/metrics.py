@@ -299,7 +299,11 @@ def _polygons(g):
     """The polygonal parts of ``g`` (a collection flattened, crumbs under :data:`CRUMB` dropped) as one
     (Multi)Polygon."""
     shapely = _shapely()
+    kind = shapely.get_type_id(g)
     parts = shapely.get_parts(g)
+    if kind in (3, 6):  # a (Multi)Polygon's parts are disjoint already: no union needed
+        keep = parts[shapely.area(parts) > CRUMB]
+        return keep[0] if kind == 3 and len(keep) == 1 else shapely.multipolygons(keep)
     parts = np.concatenate([parts[shapely.get_type_id(parts) == 3],
                             shapely.get_parts(parts[shapely.get_type_id(parts) == 6])])
     return shapely.union_all(parts[shapely.area(parts) > CRUMB])
