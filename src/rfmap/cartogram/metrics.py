@@ -280,8 +280,11 @@ SPLITS, SPLIT_COST = tuple(np.linspace(0.0, 1.0, 11)), 1e-3
 
 def valid_polygons(geoms: np.ndarray) -> np.ndarray:
     """The polygonal part of ``shapely.make_valid`` of each geometry (R,), as one (Multi)Polygon each (no stray
-    lines or points, crumbs under :data:`CRUMB` dropped)."""
-    return np.array([_polygons(g) for g in _shapely().make_valid(geoms)], dtype=object)
+    lines or points, crumbs under :data:`CRUMB` dropped).  The ``"structure"`` method: the area inside the rings
+    (where a ring crossed itself, both lobes) less the holes, in half the time of the default on the long rings of
+    a country's subdivisions."""
+    valid = _shapely().make_valid(geoms, method="structure", keep_collapsed=False)
+    return np.array([_polygons(g) for g in valid], dtype=object)
 
 
 def _thin(g) -> bool:
