@@ -293,43 +293,41 @@ CONFIGS["fno-deq2d-square"] = {
 }
 
 
-#: deq2d-square trained across the sizes the paper tests, to run natively (the network on the requested grid) at every
-#: side from 32 to 256: log-uniform sides (every octave a third of the steps) at about the same cost per step
-#: (batch_points), validated natively at both ends of the range, from deq2d-square's weights (the lineage)
-_SIZES = dict(n_range=(32, 256), n_sampling="log", batch_points=20736, batch=16, val_sizes=(32, 51, 128, 256),
-              val_native=True, lr=1e-4, ema=0.999, warmup=0)
-CONFIGS["deq2d-square-native"] = {
-    preset: replace(
-        cfg, name="deq2d-square-native",
-        **(_SIZES if preset == "full" else dict(n_range=(17, 33), n_sampling="log", val_native=True)
-           if preset == "ci" else dict(n_range=(32, 256), n_sampling="log")),
-        **(dict(steps=40000, time_limit=7200.0, threads=1, workers=0) if preset == "full" else {}),
-        description="deq2d-square's task, losses and fields, trained from its weights across grid sides 32-256 "
-                    "(log-uniform: each octave a third of the steps; batch of about 20,736 grid points, at most 16 "
-                    "fields) and validated on the network's own grid at 32, 51, 128 and 256, so that it runs "
-                    "natively at every side the paper tests. " + _HARD_NOTE[0].upper() + _HARD_NOTE[1:]
-                    + (f" Paper preset: {_NOTE_2D}" if preset == "paper" else ""))
-    for preset, cfg in CONFIGS["deq2d-square"].items()
-}
+def _across_sizes(parent: str, name: str, full: dict, ci_range: tuple[int, int], what: str) -> dict:
+    """The presets of ``parent`` trained from its weights across grid sides (log-uniform), to run natively (the
+    network on the requested grid): ``full`` overrides the full preset, the ``ci`` preset draws sides from
+    ``ci_range``, the paper preset the full preset's sides; ``what`` opens each description."""
+    out = {}
+    for preset, cfg in CONFIGS[parent].items():
+        over = {"full": {**full, "threads": 1, "workers": 0},
+                "ci": dict(n_range=ci_range, n_sampling="log", val_native=True)}.get(
+                    preset, dict(n_range=full["n_range"], n_sampling="log"))
+        paper = " " + cfg.description[cfg.description.index("Paper preset"):] if preset == "paper" else ""
+        out[preset] = replace(cfg, name=name, **over, description=what + paper)
+    return out
 
 
+#: deq2d-square trained across the sizes the paper tests, to run natively at every side from 32 to 256: log-uniform
+#: sides (every octave a third of the steps) at about the same cost per step (batch_points), validated natively at
+#: both ends of the range, from deq2d-square's weights (the lineage)
+CONFIGS["deq2d-square-native"] = _across_sizes(
+    "deq2d-square", "deq2d-square-native",
+    dict(n_range=(32, 256), n_sampling="log", batch_points=20736, batch=16, val_sizes=(32, 51, 128, 256),
+         val_native=True, lr=1e-4, ema=0.999, warmup=0, steps=40000, time_limit=7200.0), (17, 33),
+    "deq2d-square's task, losses and fields, trained from its weights across grid sides 32-256 (log-uniform: each "
+    "octave a third of the steps; batch of about 20,736 grid points, at most 16 fields) and validated on the "
+    "network's own grid at 32, 51, 128 and 256, so that it runs natively at every side the paper tests. "
+    + _HARD_NOTE[0].upper() + _HARD_NOTE[1:])
 #: dem3d-cube trained across the 3D grid sides the paper tests (24-64), so that its resolution rows run natively: the
 #: same log-uniform sides at about the cost of two 40^3 grids per step, validated natively at both ends
-_SIZES3 = dict(n_range=(24, 64), n_sampling="log", batch_points=128000, batch=2, val_sizes=(32, 64), val_count=8,
-               val_native=True, val_every=1000, lr=1e-4, ema=0.999, warmup=0)
-CONFIGS["dem3d-cube-native"] = {
-    preset: replace(
-        cfg, name="dem3d-cube-native",
-        **(_SIZES3 if preset == "full" else dict(n_range=(9, 17), n_sampling="log", val_native=True)
-           if preset == "ci" else dict(n_range=(24, 64), n_sampling="log")),
-        **(dict(steps=40000, time_limit=8400.0, threads=1, workers=0) if preset == "full" else {}),
-        description="dem3d-cube's task, losses and fields, trained from its weights across grid sides 24-64 "
-                    "(log-uniform; about 128,000 grid points per step, at most 2 fields) and validated on the "
-                    "network's own grid at 32 and 64, so that it runs natively at every side the paper tests. "
-                    + _HARD3_NOTE + (" " + cfg.description[cfg.description.index("Paper preset"):]
-                                     if preset == "paper" else ""))
-    for preset, cfg in CONFIGS["dem3d-cube"].items()
-}
+CONFIGS["dem3d-cube-native"] = _across_sizes(
+    "dem3d-cube", "dem3d-cube-native",
+    dict(n_range=(24, 64), n_sampling="log", batch_points=128000, batch=2, val_sizes=(32, 64), val_count=8,
+         val_native=True, val_every=1000, lr=1e-4, ema=0.999, warmup=0, steps=40000, time_limit=8400.0), (9, 17),
+    "dem3d-cube's task, losses and fields, trained from its weights across grid sides 24-64 (log-uniform; about "
+    "128,000 grid points per step, at most 2 fields) and validated on the network's own grid at 32 and 64, so that "
+    "it runs natively at every side the paper tests. " + _HARD3_NOTE)
+
 
 def config_names() -> list[str]:
     """Names of the training configurations (each with ``ci``, ``full`` and ``paper`` presets)."""
