@@ -461,13 +461,12 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
         dens, sea = density_grid(mapped, weights * np.exp(-gain), n + 1, supersample=supersample)
         np.clip(dens, sea / PASS_CONTRAST, sea * PASS_CONTRAST, out=dens)
         res = grid_map(dens, current)
-        moved = _at_points(res, current)
+        current = _at_points(res, current)
         map_time += res.time
         # a flow of the polygon vertices is kept as its info and time: its points would hold hundreds of megabytes
         # over the passes of a county map
         results.append(res if res.info.get("grid", True) else replace(res, ref_points=_NO_POINTS,
                                                                        mapped_points=_NO_POINTS))
-        current = moved
         mapped = shapely.set_coordinates(regions.copy(), current[inverse])
         bad = np.flatnonzero(~shapely.is_valid(mapped))
         if bad.size and split:  # a region the pass made cross itself: its valid part, whose area the next pass fixes
