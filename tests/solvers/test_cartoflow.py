@@ -86,7 +86,8 @@ def test_numpy_poisson_flux_matches_the_solvers_transform():
 
 def test_cosine_transforms_match_their_sums_along_both_axes():
     """DCT-I and DST-I of :class:`rfmap.solvers.cosine.CosineTransforms` against their defining sums (to 1e-12 of
-    the largest term), along each axis, twice in a row (the buffers are reused), and shapes refused."""
+    the largest term), along each axis, twice in a row (the buffers are reused), whole tables and in blocks of rows
+    (4 rows and 1, as a 2049-vertex table runs), and shapes refused."""
     from rfmap.solvers.cosine import CosineTransforms
 
     m = 9
@@ -97,18 +98,22 @@ def test_cosine_transforms_match_their_sums_along_both_axes():
     i = np.arange(m - 2)
     s = 2.0 * np.sin(np.pi * np.outer(i + 1, i + 1) / (m - 1))  # K = M - 2, K + 1 = M - 1
     rng = np.random.default_rng(5)
-    ct = CosineTransforms(m)
-    for _ in range(2):
-        x, z = rng.normal(size=(m, m)), rng.normal(size=(m, m - 2))
-        tol = 1e-12 * 2 * m * max(np.abs(x).max(), np.abs(z).max())
-        assert np.abs(ct.dct(x, 1) - x @ c.T).max() < tol
-        assert np.abs(ct.dct(x, 0) - c @ x).max() < tol
-        assert np.abs(ct.dst(z, 1) - z @ s.T).max() < tol
-        assert np.abs(ct.dst(z.T, 0) - s @ z.T).max() < tol
-        into = np.empty((m - 2, m))
-        assert ct.dst(z.T, 0, out=into) is into and np.abs(into - s @ z.T).max() < tol
-        into = np.empty((m, m))
-        assert ct.dct(x, 0, out=into) is into and np.abs(into - c @ x).max() < tol
+    for ct in (CosineTransforms(m), CosineTransforms(m, block=4), CosineTransforms(m, block=1)):
+        for _ in range(2):
+            x, z = rng.normal(size=(m, m)), rng.normal(size=(m, m - 2))
+            tol = 1e-12 * 2 * m * max(np.abs(x).max(), np.abs(z).max())
+            assert np.abs(ct.dct(x, 1) - x @ c.T).max() < tol
+            assert np.abs(ct.dct(x, 0) - c @ x).max() < tol
+            assert np.abs(ct.dst(z, 1) - z @ s.T).max() < tol
+            assert np.abs(ct.dst(z.T, 0) - s @ z.T).max() < tol
+            into = np.empty((m - 2, m))
+            assert ct.dst(z.T, 0, out=into) is into and np.abs(into - s @ z.T).max() < tol
+            into = np.empty((m, m))
+            assert ct.dct(x, 0, out=into) is into and np.abs(into - c @ x).max() < tol
+            for axis, want in ((0, c @ x), (1, x @ c.T)):  # in place
+                into = x.copy()
+                assert ct.dct(into, axis, out=into) is into and np.abs(into - want).max() < tol
+    assert CosineTransforms(2049).block == 256  # a cartogram's finest raster: buffers of 256 rows
     with pytest.raises(ValueError, match="shape"):
         ct.dst(x, 1)
     with pytest.raises(ValueError, match="shape"):
@@ -117,6 +122,9 @@ def test_cosine_transforms_match_their_sums_along_both_axes():
         ct.dct(x, 1, out=np.empty((m, m - 1)))
     with pytest.raises(ValueError, match="at least 3"):
         CosineTransforms(2)
+    with pytest.raises(ValueError, match="block"):
+        CosineTransforms(m, block=0)
+
 
 def test_bilinear_is_exact_on_bilinear_fields():
     n = 9

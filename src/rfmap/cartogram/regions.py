@@ -190,7 +190,9 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     width = np.ones(n)
     width[[0, -1]] = 0.5  # the cells' widths within the square, in cells
     size = np.outer(width, lines)
-    dens = sea + excess / size
+    dens = excess  # sea + excess / size, in place
+    dens /= size
+    dens += sea
     cover /= size
     over = cover > 1.0 + OVERLAP_COVER  # overlapping regions: their mean density over the cell
     dens[over] = mass[over] / (cover[over] * size[over])
@@ -247,14 +249,18 @@ def _scanline_rows(geoms: np.ndarray, weights: tuple, n: int, s: int) -> list[np
     r, g = r[keep], g[keep]
     ca, cb = np.minimum(xa.astype(np.int64), n - 1), np.minimum(xb.astype(np.int64), n - 1)
     row = (r // s) * (n + 1)
-    idx = np.concatenate([row + ca, row + cb])
+    fa, fb = xa - ca, xb - cb  # the uncovered share of the first cell, the covered share of the last
+    idx = np.concatenate([row + ca, row + cb, row + ca + 1, row + cb + 1])
+    del x, r, xa, xb, ca, cb, row
     out = []
     for weight in weights:
         w = weight[g]
-        full = np.bincount(idx, np.concatenate([w, -w]), minlength=n * (n + 1)).reshape(n, n + 1)
-        ends = np.bincount(idx, np.concatenate([-w * (xa - ca), w * (xb - cb)]),
-                           minlength=n * (n + 1)).reshape(n, n + 1)
-        out.append((np.cumsum(full, axis=1) + ends)[:, :n])
+        # one difference array per weight: +w over the cells from the first to the last, less the first cell's
+        # uncovered share and plus the last cell's covered share, each put at its cell and taken off at the next
+        d = np.bincount(idx, np.concatenate([w * (1.0 - fa), -w * (1.0 - fb), w * fa, -w * fb]),
+                        minlength=n * (n + 1)).reshape(n, n + 1)
+        np.cumsum(d, axis=1, out=d)  # in place: at a 2049 raster every table is 34 MB
+        out.append(d[:, :n])
     return out
 
 

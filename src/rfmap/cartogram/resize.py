@@ -32,9 +32,9 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    thinner than a cell, whose borders would cross.  The smaller regions are mapped as if
    they held that share and their errors are reported apart.  A pass that gains little doubles the raster's
    resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  Edges that the
-   classical passes stretched beyond :data:`SPLIT_EDGE` cells are split again before the next pass, and (flow) each
-   region's weight is boosted by the share of its error that the last pass left (a secant acceleration of the passes:
-   :func:`rfmap.cartogram.metrics.boost`).  A fold smaller than the overlap tolerance, where the input draws two
+   classical passes stretched beyond :data:`SPLIT_EDGE` cells (of at most a :data:`SPLIT_MAX_N` raster) are split
+   again before the next pass, and (flow) each region's weight is boosted by the share of its error that the last
+   pass left (a secant acceleration of the passes: :func:`rfmap.cartogram.metrics.boost`).  A fold smaller than the overlap tolerance, where the input draws two
    edges nearly touching, is repaired (:func:`rfmap.cartogram.metrics.repair_folds`), and so is a sliver where
    neighbours under a cell apart in the input were pressed together (:func:`rfmap.cartogram.metrics.repair_overlaps`).
 5. **Output.**  Edges longer than a grid cell are first split so that they bend with the map; every vertex is
@@ -111,8 +111,11 @@ GAIN = 1e-9
 #: between mapped vertices stands for a curve, and where the flow squeezes a fjord or an inlet closed while it
 #: stretches its sides, long chords cross
 SPLIT_EDGE = 1.0
+#: The cells of a raster finer than this many per side count as this size's for :data:`SPLIT_EDGE`: a raster
+#: refined for the small regions left (a county map's) need not double every other region's vertices too
+SPLIT_MAX_N = 1024
 #: The most passes :func:`cartogram` runs after cutting sliver overlaps moved a region beyond the tolerance
-FINISH_PASSES = 4
+FINISH_PASSES = 6
 #: A pass's raster densities are clipped to within this factor of the sea's (the mean), so that no pass asks a
 #: region to grow or shrink more than this many times: a city of a few cells that must grow a hundredfold otherwise
 #: squeezes its neighbours into bands thinner than a cell in one pass, and their borders cross (later passes ask
@@ -121,8 +124,9 @@ PASS_CONTRAST = 10.0
 #: Boosted passes in a row that may fail to lower the largest error before the boosts stop: a secant step that
 #: overshoots is corrected by the next one (the boost of a region whose error changed sign falls to none)
 BOOST_PATIENCE = 3
-#: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for
-MAX_N = 1024
+#: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for (a county
+#: map's smallest regions, a few tens of cells at 1024, converge at 2048)
+MAX_N = 2048
 #: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
 #: coast's jump of density, sampled by the grid, otherwise bends the outline between nearby vertices into folds
 FLOW_BLUR = 1.0
@@ -423,7 +427,8 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
     """The passes of :func:`cartogram`: each rasterises the current polygons, maps the unit square by
     ``grid_map(density)`` and moves every distinct vertex.  With ``tol`` they stop within tolerance, or at a pass that
     no longer lowers the largest area error, and the polygons of the best pass are returned; without, all ``passes``
-    run; with ``split``, edges stretched beyond :data:`SPLIT_EDGE` cells are split between passes, and with
+    run; with ``split``, edges stretched beyond :data:`SPLIT_EDGE` cells (cells of at most a :data:`SPLIT_MAX_N`
+    raster, unless ``n`` is finer) are split between passes, and with
     ``accelerate`` every region's weight is boosted by its own slow progress
     (:func:`rfmap.cartogram.metrics.boost`) until :data:`BOOST_PATIENCE` passes in a row fail to lower the largest
     error; every raster's densities are clipped to within :data:`PASS_CONTRAST` times the sea's; past ``deadline``
@@ -450,8 +455,9 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
                 and SLOW_PASS * history[-2] < history[-1] < (1 - GAIN) * history[-2] and 2 * n <= max_n):
             n *= 2  # slow progress: regions down to a few cells (slivers, islands); twice the resolution
         grids.append(n)
-        if split and results and _longest_edge(mapped) > SPLIT_EDGE / n:  # stretched edges: split again
-            regions = shapely.segmentize(mapped, 1.0 / n)
+        cell = 1.0 / min(n, max(SPLIT_MAX_N, grids[0]))
+        if split and results and _longest_edge(mapped) > SPLIT_EDGE * cell:  # stretched edges: split again
+            regions = shapely.segmentize(mapped, cell)
             current, inverse = _distinct_vertices(regions)
         if accelerate:
             area = shapely.area(mapped)

@@ -166,17 +166,19 @@ def poisson_flux_2d(values: np.ndarray) -> np.ndarray:
     return _flux(ct.dct(ct.dct(values, 0), 1), ct)
 
 
-@functools.lru_cache(maxsize=2)
-def _inverse_laplacian(m: int) -> np.ndarray:
-    r""":math:`1 / ((2(M-1))^2 \pi^2 |k|^2)` on the (M, M) cosine modes, 0 for the mean: the DCT-I of the values
-    to the half coefficients :math:`b` of :func:`poisson_flux_2d` (read-only, cached)."""
-    k2 = (math.pi * np.arange(m)) ** 2
-    lam = (k2[:, None] + k2[None, :]) * (2.0 * (m - 1)) ** 2
-    lam[0, 0] = 1.0
-    inv = 1.0 / lam
-    inv[0, 0] = 0.0
-    inv.flags.writeable = False
-    return inv
+def _divide_by_laplacian(y: np.ndarray, rows: int = 256) -> np.ndarray:
+    r"""``y`` (M, M) of cosine modes divided in place by :math:`(2(M-1))^2 \pi^2 |k|^2`, the mean mode set to 0:
+    the DCT-I of the values to the half coefficients :math:`b` of :func:`poisson_flux_2d`, a block of ``rows`` at a
+    time (no table of the divisors: at a 2049 raster it would hold 34 MB)."""
+    m = y.shape[0]
+    k2 = (math.pi * np.arange(m)) ** 2 * (2.0 * (m - 1)) ** 2
+    for a in range(0, m, rows):
+        block = k2[a:a + rows, None] + k2[None, :]
+        if a == 0:
+            block[0, 0] = 1.0
+        y[a:a + rows] /= block
+    y[0, 0] = 0.0
+    return y
 
 
 def _flux(y: np.ndarray, ct: CosineTransforms, out: np.ndarray | None = None) -> np.ndarray:
@@ -184,13 +186,12 @@ def _flux(y: np.ndarray, ct: CosineTransforms, out: np.ndarray | None = None) ->
     ``out`` when given."""
     m = y.shape[0]
     k = math.pi * np.arange(m)
-    b = y
-    b *= _inverse_laplacian(m)
+    b = _divide_by_laplacian(y)
     out = np.empty((2, m, m)) if out is None else out
     c = ct.dct(b, 1)
     c *= k[:, None]
     ct.dst(c[1:-1], 0, out=out[0, 1:-1])
-    c = ct.dct(b, 0)
+    ct.dct(b, 0, out=c)
     c *= k[None, :]
     ct.dst(c[:, 1:-1], 1, out=out[1, :, 1:-1])
     out[0, [0, -1]] = 0.0  # no flux through the walls
@@ -205,7 +206,8 @@ def _transforms(dens: np.ndarray, sigma: float) -> np.ndarray:
     m = dens.shape[0]
     ct = CosineTransforms(m)
     planes = np.empty((3, m, m))
-    y = ct.dct(ct.dct(dens, 0), 1)
+    y = ct.dct(dens, 0)
+    ct.dct(y, 1, out=y)
     if sigma > 0:
         g = np.exp(-0.5 * (math.pi * sigma / (m - 1) * np.arange(m)) ** 2)
         y *= np.outer(g, g)
