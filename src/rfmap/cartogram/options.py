@@ -63,8 +63,8 @@ class CartogramOptions:
     max_n : int, optional
         A pass that lowers the largest error but leaves more than :data:`SLOW_PASS` of it (regions down to a few
         cells: slivers, small islands) doubles the raster's resolution, :math:`N \to 2N`, up to ``max_n``
-        (default the larger of ``n`` and :data:`MAX_N`; ``n`` turns it off); ``info["grids"]`` lists each pass's
-        ``N``.
+        (default the larger of ``n`` and :data:`MAX_N`, for the flow :data:`FLOW_MAX_N`; ``n`` turns it off);
+        ``info["grids"]`` lists each pass's ``N``.
     points : int, optional
         A budget of polygon vertices: the outlines (already split to edges of at most a grid cell) are simplified,
         shared borders kept (:func:`rfmap.cartogram.regions.fit_outlines`), or densified to about that many.  Simplifying

@@ -124,9 +124,12 @@ PASS_CONTRAST = 10.0
 #: Boosted passes in a row that may fail to lower the largest error before the boosts stop: a secant step that
 #: overshoots is corrected by the next one (the boost of a region whose error changed sign falls to none)
 BOOST_PATIENCE = 3
-#: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for (a county
-#: map's smallest regions, a few tens of cells at 1024, converge at 2048)
-MAX_N = 2048
+#: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for
+MAX_N = 1024
+#: The default ``max_n`` of the flow method, whose passes cost little more on a finer raster (they carry the
+#: polygons' vertices, whose count :data:`SPLIT_MAX_N` bounds): a county map's smallest judged regions, a few tens of
+#: cells at 1024, converge at 2048
+FLOW_MAX_N = 2048
 #: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
 #: coast's jump of density, sampled by the grid, otherwise bends the outline between nearby vertices into folds
 FLOW_BLUR = 1.0
@@ -388,14 +391,15 @@ def cartogram(collection, value: str, options: CartogramOptions | None = None, *
         done.append(1)
         return _grid_map(method, dens, surrogate, kw)
 
+    finest = max_n if max_n is not None else max(n, FLOW_MAX_N if method == "flow" else MAX_N)
     mapped, info, map_time = _passes(regions, values, grid_map,
                                      n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol,
-                                     min_share=min_share, max_n=max_n if max_n is not None else max(n, MAX_N),
+                                     min_share=min_share, max_n=finest,
                                      split=method in ("flow", "diffusion"), accelerate=method == "flow",
                                      deadline=None if timeout is None else t0 + timeout)
     info["input_overlaps"] = cleaned
     mapped, finish_time = _repair(mapped, values, grid_map, info, tol=None if fixed else tol, min_share=min_share,
-                                  supersample=supersample, max_n=max_n if max_n is not None else max(n, MAX_N),
+                                  supersample=supersample, max_n=finest,
                                   split=method in ("flow", "diffusion"),
                                   deadline=None if timeout is None else t0 + timeout)
     map_time += finish_time
