@@ -86,8 +86,8 @@ def test_numpy_poisson_flux_matches_the_solvers_transform():
 
 def test_cosine_transforms_match_their_sums_along_both_axes():
     """DCT-I and DST-I of :class:`rfmap.solvers.cosine.CosineTransforms` against their defining sums (to 1e-12 of
-    the largest term), along each axis, twice in a row (the buffers are reused), whole tables and in blocks of rows
-    (4 rows and 1, as a 2049-vertex table runs), and shapes refused."""
+    the largest term), along each axis, twice in a row (the buffers are reused), whole tables, in blocks of rows
+    (4 rows and 1) and by ``scipy.fft`` (as a 2049-vertex table runs), and shapes refused."""
     from rfmap.solvers.cosine import CosineTransforms
 
     m = 9
@@ -98,7 +98,8 @@ def test_cosine_transforms_match_their_sums_along_both_axes():
     i = np.arange(m - 2)
     s = 2.0 * np.sin(np.pi * np.outer(i + 1, i + 1) / (m - 1))  # K = M - 2, K + 1 = M - 1
     rng = np.random.default_rng(5)
-    for ct in (CosineTransforms(m), CosineTransforms(m, block=4), CosineTransforms(m, block=1)):
+    for ct in (CosineTransforms(m), CosineTransforms(m, block=4), CosineTransforms(m, block=1),
+               CosineTransforms(m, use_scipy=True)):
         for _ in range(2):
             x, z = rng.normal(size=(m, m)), rng.normal(size=(m, m - 2))
             tol = 1e-12 * 2 * m * max(np.abs(x).max(), np.abs(z).max())
@@ -113,7 +114,7 @@ def test_cosine_transforms_match_their_sums_along_both_axes():
             for axis, want in ((0, c @ x), (1, x @ c.T)):  # in place
                 into = x.copy()
                 assert ct.dct(into, axis, out=into) is into and np.abs(into - want).max() < tol
-    assert CosineTransforms(2049).block == 256  # a cartogram's finest raster: buffers of 256 rows
+    assert CosineTransforms(513).block == 1024 and CosineTransforms(513)._scipy is None  # numpy.fft, whole tables
     with pytest.raises(ValueError, match="shape"):
         ct.dst(x, 1)
     with pytest.raises(ValueError, match="shape"):

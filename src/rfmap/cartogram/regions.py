@@ -183,20 +183,23 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     areas = shapely.area(geoms)
     rho = values / areas
     sea = float(values.sum() / areas.sum())
-    # excess density (above the sea), density and 1 times the covered length, summed over each cell's scanlines
-    excess, mass, cover = (t.T for t in _scanline_rows(geoms, (rho - sea, rho, np.ones_like(rho)), n, s))
+    # excess density (above the sea) and 1 times the covered length, summed over each cell's scanlines (the density
+    # times it is the excess plus the sea's times the cover)
+    excess, cover = _scanline_rows(geoms, (rho - sea, np.ones_like(rho)), n, s)  # (row of cells, column)
     t = ((np.arange(n * s) + 0.5) / s - 0.5) / (n - 1)  # the scanlines' heights
     lines = np.add.reduceat(((t >= 0) & (t <= 1)).astype(float), np.arange(0, n * s, s))  # those in the square
     width = np.ones(n)
     width[[0, -1]] = 0.5  # the cells' widths within the square, in cells
-    size = np.outer(width, lines)
-    dens = excess  # sea + excess / size, in place
-    dens /= size
-    dens += sea
-    cover /= size
+    inv = 1.0 / lines  # the tables are (row of cells, column): divided by the lines, then the widths
+    excess *= inv[:, None]
+    cover *= inv[:, None]
+    excess[:, [0, -1]] *= 2.0
+    cover[:, [0, -1]] *= 2.0
     over = cover > 1.0 + OVERLAP_COVER  # overlapping regions: their mean density over the cell
-    dens[over] = mass[over] / (cover[over] * size[over])
-    return dens, sea
+    mass = excess[over] + sea * cover[over]  # sum_i rho_i c_i per cell
+    excess += sea  # the density: sea + excess / size
+    excess[over] = mass / cover[over]
+    return excess.T, sea
 
 
 #: A cell whose regions' covered shares sum to more than ``1 + OVERLAP_COVER`` holds an overlap (:func:`density_grid`);
@@ -238,8 +241,10 @@ def _scanline_rows(geoms: np.ndarray, weights: tuple, n: int, s: int) -> list[np
     ty = ((r + 0.5) / s - 0.5) * h
     a, b = p0[e], p1[e]
     x = a[:, 0] + (ty - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-    order = np.lexsort((x, r, reg[e]))
-    x, r, g = x[order], r[order], reg[e][order]
+    g = reg[e]
+    order = np.argsort(x)  # by region, line and x: x first, then a stable sort by (region, line)
+    order = order[np.argsort((g * m + r)[order], kind="stable")]
+    x, r, g = x[order], r[order], g[order]
     xa, xb, r, g = x[0::2], x[1::2], r[0::2], g[0::2]  # every (region, line) holds an even number of crossings
     ty = ((r + 0.5) / s - 0.5) * h
     keep = (ty >= 0) & (ty <= 1)  # scanlines beyond the square do not count

@@ -197,6 +197,7 @@ class Cartogram:
     tol: float = 0.01
     min_share: float = 0.0
     _metrics: dict = field(default_factory=dict, init=False, repr=False, compare=False)
+    _problems: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     _features: list | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
@@ -235,6 +236,14 @@ class Cartogram:
         """What keeps the cartogram from being right, one sentence each (empty when it is): a largest area error
         above :attr:`tol` (:meth:`metrics`), invalid regions, overlapping regions, and, for output in the input's
         coordinates, regions moved where no longitude/latitude lies (:meth:`PlanarFrame.beyond_domain`)."""
+        # saving the cartogram asks too: measured once for the same arrays of polygons (replacing one measures again)
+        key = (overlap_tol, id(self.geometries), id(self.mapped), self.output)
+        if key not in self._problems:
+            self._problems = {key: self._find_problems(overlap_tol)}
+        return list(self._problems[key])
+
+    def _find_problems(self, overlap_tol: float) -> list[str]:
+        """:meth:`problems`, measured."""
         m = self.metrics(overlap_tol=overlap_tol)
         out = []
         if not m.max_error <= self.tol:
