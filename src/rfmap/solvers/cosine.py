@@ -95,7 +95,8 @@ class CosineTransforms:
         src = self._rows(x, axis, m)
         result, rows = self._target(out, axis, (m, m))
         if self._scipy is not None:
-            rows[...] = self._scipy.dct(src, type=1, axis=-1)
+            for a in range(0, m, self.block):  # in blocks of rows: no temporary table
+                rows[a:a + self.block] = self._scipy.dct(src[a:a + self.block], type=1, axis=-1)
             return result
 
         def fill(ext, part):
@@ -113,7 +114,8 @@ class CosineTransforms:
         src = self._rows(x, axis, m - 2)
         result, rows = self._target(out, axis, (m, m - 2))
         if self._scipy is not None:
-            rows[...] = self._scipy.dst(src, type=1, axis=-1)
+            for a in range(0, m, self.block):
+                rows[a:a + self.block] = self._scipy.dst(src[a:a + self.block], type=1, axis=-1)
             return result
 
         def fill(ext, part):
