@@ -34,8 +34,8 @@ density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area)
    resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  Edges that the
    classical passes stretched beyond :data:`SPLIT_EDGE` cells (of at most a :data:`SPLIT_MAX_N` raster) are split
    again before the next pass, and (flow) each region's weight is boosted by the share of its error that the last
-   pass left (a secant acceleration of the passes: :func:`rfmap.cartogram.metrics.boost`).  A fold smaller than the overlap tolerance, where the input draws two
-   edges nearly touching, is repaired (:func:`rfmap.cartogram.metrics.repair_folds`), and so is a sliver where
+   pass left (a secant acceleration of the passes: :func:`rfmap.cartogram.metrics.boost`).  A fold smaller than
+   the overlap tolerance, where the input draws two edges nearly touching, is repaired (:func:`rfmap.cartogram.metrics.repair_folds`), and so is a sliver where
    neighbours under a cell apart in the input were pressed together (:func:`rfmap.cartogram.metrics.repair_overlaps`).
 5. **Output.**  Edges longer than a grid cell are first split so that they bend with the map; every vertex is
    mapped once (shared borders stay shared); the polygons come back in the input's coordinates or the projection's

@@ -24,7 +24,6 @@ most of a second: the transforms are real FFTs of ``numpy.fft`` (:func:`poisson_
 """
 from __future__ import annotations
 
-import functools
 import math
 import time
 from dataclasses import dataclass, field
