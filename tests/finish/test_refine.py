@@ -244,6 +244,36 @@ def test_density_objective_equals_direct_evaluation(dim, boundary, grid):
         assert J(a) == pytest.approx(direct, rel=1e-9)
 
 
+@pytest.mark.parametrize("dim", [2, 3])
+def test_measure_polynomial_along_the_search_lines_equals_the_full_polynomial(dim):
+    """MeasurePolynomial collapses the polynomial on the diagonal and along one component; over a sequence of
+    alphas like refine_alpha's (diagonal, a line per component, jumps), with and without an output buffer, it must
+    equal the full evaluation to 1e-13 of the largest measure."""
+    from rfmap.core.mesh import grid_mesh
+    from rfmap.finish.refine import MeasurePolynomial, _measure_coefficients, _measures_at
+
+    n = 7
+    mesh = grid_mesh(n, dim)
+    ref = torch.as_tensor(mesh.points, dtype=torch.float64)
+    disp = 0.3 * torch.randn(ref.shape, generator=torch.Generator().manual_seed(4), dtype=torch.float64)
+    coeffs = _measure_coefficients(ref, disp, mesh.elements, n)
+    poly = MeasurePolynomial(coeffs)
+    alphas = [np.ones(dim), np.full(dim, 0.4), np.full(dim, 2.2)]
+    base = np.array([0.9, 1.3, 0.7][:dim])
+    for axis in range(dim):
+        for t in (0.2, 2.9, 1.1):
+            a = base.copy()
+            a[axis] = t
+            alphas.append(a)
+    alphas += [np.array([0.5, 2.0, 1.5][:dim]), np.array([0.5, 2.0, 0.1][:dim])]
+    out = torch.empty(len(mesh.elements), dtype=torch.float64)
+    for i, a in enumerate(alphas):
+        want = _measures_at(coeffs, a)
+        got = poly(a, out=out) if i % 2 else poly(a)
+        assert float((got - want).abs().max()) <= 1e-13 * float(want.abs().max()), a
+    assert torch.equal(poly.constant, coeffs[0][1])
+
+
 def test_beltrami_objective_equals_direct_evaluation():
     from rfmap.core.geometry import beltrami_coefficient
     from rfmap.core.mesh import grid_mesh

@@ -81,17 +81,29 @@ def _t(x) -> torch.Tensor:
     return torch.as_tensor(np.asarray(x, dtype=np.float64)) if not isinstance(x, torch.Tensor) else x.double()
 
 
-def element_population(ref, elements, density) -> torch.Tensor:
-    """Population of every element: mean vertex density times reference measure, shape (..., m)."""
+def element_population(ref, elements, density, measures: torch.Tensor | None = None) -> torch.Tensor:
+    """Population of every element: mean vertex density times reference measure, shape (..., m).  ``measures``:
+    the reference measures (m,) when the caller has them already."""
     ref, dens = _t(ref), _t(density)
     el = torch.as_tensor(np.asarray(elements)).long()
-    return dens[..., el].mean(-1) * signed_measures(ref, el)
+    return dens[..., el].mean(-1) * (signed_measures(ref, el) if measures is None else measures)
 
 
-def density_std(population: torch.Tensor, measure: torch.Tensor) -> float:
-    r""":math:`\mathrm{Std}(\tilde\rho)` with :math:`\rho = \text{population}/\text{measure}`, ddof = 1."""
-    rho = population / measure
-    return float((rho / rho.mean()).std())
+def density_std(population: torch.Tensor, measure: torch.Tensor, out: torch.Tensor | None = None) -> float:
+    r""":math:`\mathrm{Std}(\tilde\rho)` with :math:`\rho = \text{population}/\text{measure}` and
+    :math:`\tilde\rho = \rho / \bar\rho`, ddof = 1.
+
+    Computed as :math:`\mathrm{Std}(\rho) / |\bar\rho|` from the sums :math:`\sum \rho` and
+    :math:`\sum \rho^2` (one pass each, several times faster than ``torch.std_mean`` on a CPU); in float64 the
+    cancellation costs a relative error of about :math:`10^{-16}\,\bar\rho^2/\mathrm{Var}(\rho)`, far below the digits
+    reported.  ``out``: a buffer of the shape of ``population`` for :math:`\rho` (saves an allocation when called
+    many times).  Shapes: population, measure (m,) -> float."""
+    rho = torch.div(population, measure, out=out).reshape(-1)
+    m = rho.numel()
+    s1, s2 = float(rho.sum()), float(torch.dot(rho, rho))
+    mean = s1 / m
+    var = max(s2 - s1 * mean, 0.0) / (m - 1)
+    return math.sqrt(var) / abs(mean)
 
 
 def compute_metrics(
