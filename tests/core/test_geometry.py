@@ -239,3 +239,27 @@ def test_grid_fast_path_matches_the_element_list(dim, n):
     torch.testing.assert_close(grid_element_mean(v, n, dim), v[:, el].mean(-1), rtol=0, atol=1e-15)
     with pytest.raises(ValueError, match="do not form"):
         grid_signed_measures(x[:, :-1], n)
+
+
+@pytest.mark.parametrize("dim,n", [(2, 2), (2, 6), (3, 2), (3, 5)])
+def test_grid_measure_coefficients_are_the_measures_of_mixed_meshes(dim, n):
+    """c_S of grid_measure_coefficients is the measure of the mesh whose coordinates a in S come from the
+    displacement and the others from the grid (measured on the element list), to 1e-15; and the polynomial
+    sum_S c_S prod alpha_a is the measure of the grid moved by alpha * D."""
+    from rfmap.core.geometry import grid_measure_coefficients
+
+    mesh = grid_mesh(n, dim)
+    ref = torch.as_tensor(mesh.points, dtype=torch.float64)
+    el = torch.as_tensor(mesh.elements)
+    disp = 0.2 * torch.randn(ref.shape, generator=torch.Generator().manual_seed(n + dim), dtype=torch.float64)
+    coeffs = grid_measure_coefficients(ref, disp, n)
+    assert [s for s, _ in coeffs] == [tuple(a for a in range(dim) if b >> a & 1) for b in range(2**dim)]
+    for s, c in coeffs:
+        mixed = torch.stack([disp[:, a] if a in s else ref[:, a] for a in range(dim)], -1)
+        torch.testing.assert_close(c, signed_measures(mixed, el), rtol=0, atol=1e-15)
+    alpha = [0.7, 1.9, 1.3][:dim]
+    poly = sum(c * math.prod(alpha[a] for a in s) for s, c in coeffs)
+    moved = ref + torch.as_tensor(alpha, dtype=torch.float64) * disp
+    torch.testing.assert_close(poly, signed_measures(moved, el), rtol=0, atol=1e-14)
+    with pytest.raises(ValueError, match="do not form"):
+        grid_measure_coefficients(ref[:-1], disp[:-1], n)

@@ -22,6 +22,7 @@ __all__ = [
     "signed_measures",
     "grid_cell_simplices",
     "grid_simplices",
+    "grid_measure_coefficients",
     "grid_signed_measures",
     "grid_min_measure",
     "grid_element_mean",
@@ -165,6 +166,87 @@ def grid_signed_measures(points: Tensor, n: int) -> Tensor:
                  + a[:, 2] * (b[:, 0] * c[:, 1] - b[:, 1] * c[:, 0]))
         out.append(m.reshape(B, -1))
     return torch.cat(out, -1) / math.factorial(d)
+
+
+def grid_measure_coefficients(ref: Tensor, disp: Tensor, n: int) -> list[tuple[tuple[int, ...], Tensor]]:
+    r"""The element measures of the ``N``-grid mesh at :math:`x + \alpha \odot D` as a polynomial in
+    :math:`\alpha`: :math:`|T(\alpha)| = \sum_{S \subseteq \{0..d-1\}} c_S \prod_{a \in S} \alpha_a`.
+
+    :math:`d!\,c_S` is the determinant of the edge matrix whose row :math:`a` (coordinate :math:`a` of the
+    :math:`d` edges from the simplex's first corner) comes from :math:`D` for :math:`a \in S` and from the reference
+    grid otherwise (the determinant is linear in each row).  On the grid the reference rows are the same numbers for
+    every cell of a simplex type, so each :math:`c_S` is expanded (Leibniz) with those numbers as scalars: terms with
+    a zero drop out and the others are fused multiply-adds, which costs a fraction of :math:`2^d` calls of
+    :func:`grid_signed_measures` and gives the same values up to rounding.
+
+    Parameters
+    ----------
+    ref : Tensor, shape (N**d, d)
+        The vertices of :func:`rfmap.core.mesh.grid_mesh` ``(N, d)`` (a uniform grid, in grid order).
+    disp : Tensor, shape (N**d, d)
+        The displacement :math:`D` at the vertices.
+
+    Returns
+    -------
+    list of ``(S, c_S)`` over the subsets :math:`S` in binary order (``S`` a sorted tuple of axes, ``c_S`` of shape
+    (m,), elements in the order of :func:`grid_signed_measures`).
+    """
+    P, d = disp.shape
+    if P != n**d or ref.shape != disp.shape:
+        raise ValueError(f"{P} displacements (and {ref.shape[0]} points) do not form an N={n} grid in {d}D")
+    step = (ref.reshape(*([n] * d), d)[(1,) * d] - ref[0]).tolist()  # grid spacing per axis
+    g = disp.reshape(*([n] * d), d).movedim(-1, 0).contiguous()  # (d, N, ..., N)
+
+    def corner(off):
+        return g[(slice(None),) + tuple(slice(o, n - 1 + o) for o in off)]
+
+    subsets = [tuple(a for a in range(d) if bits >> a & 1) for bits in range(2**d)]
+    parts: dict[tuple, list[Tensor]] = {s: [] for s in subsets}
+    perms = [(p, _parity(p)) for p in itertools.permutations(range(d))]
+    for simplex in grid_cell_simplices(d):
+        c0, *rest = [corner(off) for off in simplex]
+        edge_d = [[c[a] - c0[a] for c in rest] for a in range(d)]  # edge_d[a][k]: coordinate a of edge k
+        edge_r = [[step[a] * (off[a] - simplex[0][a]) for off in simplex[1:]] for a in range(d)]
+        for s in subsets:
+            rows = [edge_d[a] if a in s else edge_r[a] for a in range(d)]
+            parts[s].append(_leibniz(rows, perms, c0[0].shape).reshape(-1))
+    return [(s, torch.cat(parts[s]) / math.factorial(d)) for s in subsets]
+
+
+def _parity(perm: tuple[int, ...]) -> int:
+    """+1 or -1: the sign of a permutation."""
+    sign = 1
+    for i in range(len(perm)):
+        for j in range(i + 1, len(perm)):
+            sign = -sign if perm[i] > perm[j] else sign
+    return sign
+
+
+def _leibniz(rows: list[list], perms: list[tuple[tuple[int, ...], int]], shape) -> Tensor:
+    """The determinant :math:`\sum_\sigma \mathrm{sgn}\,\sigma \prod_a M_{a \sigma(a)}` of a matrix whose entries
+    are floats (the same for every cell) or tensors of ``shape``: products with a zero float are skipped, the
+    floats of a term become its coefficient."""
+    total = None
+    for perm, sign in perms:
+        coef, factors = float(sign), []
+        for a, k in enumerate(perm):
+            v = rows[a][k]
+            if isinstance(v, Tensor):
+                factors.append(v)
+            else:
+                coef *= v
+        if coef == 0.0:
+            continue
+        if total is None:
+            total = torch.zeros(shape, dtype=factors[0].dtype if factors else torch.float64)
+        if not factors:
+            total += coef
+        elif len(factors) == 1:
+            total.add_(factors[0], alpha=coef)
+        else:
+            head = factors[0] if len(factors) == 2 else factors[0] * factors[1]
+            total.addcmul_(head, factors[-1], value=coef)
+    return torch.zeros(shape, dtype=torch.float64) if total is None else total
 
 
 def grid_element_mean(values: Tensor, n: int, dim: int) -> Tensor:

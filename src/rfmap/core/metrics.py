@@ -81,12 +81,19 @@ def _t(x) -> torch.Tensor:
     return torch.as_tensor(np.asarray(x, dtype=np.float64)) if not isinstance(x, torch.Tensor) else x.double()
 
 
-def element_population(ref, elements, density, measures: torch.Tensor | None = None) -> torch.Tensor:
+def element_population(ref, elements, density, measures: torch.Tensor | None = None,
+                       grid_n: int | None = None) -> torch.Tensor:
     """Population of every element: mean vertex density times reference measure, shape (..., m).  ``measures``:
-    the reference measures (m,) when the caller has them already."""
+    the reference measures (m,) when the caller has them already; ``grid_n``: the mesh is
+    :func:`rfmap.core.mesh.grid_mesh` ``(N, d)`` and ``density`` has shape (N**d,) (the means then come from strided
+    views, :func:`rfmap.core.geometry.grid_element_mean`)."""
     ref, dens = _t(ref), _t(density)
     el = torch.as_tensor(np.asarray(elements)).long()
-    return dens[..., el].mean(-1) * (signed_measures(ref, el) if measures is None else measures)
+    if grid_n and dens.ndim == 1:
+        mean = grid_element_mean(dens[None], grid_n, ref.shape[-1])[0]
+    else:
+        mean = dens[..., el].mean(-1)
+    return mean * (signed_measures(ref, el) if measures is None else measures)
 
 
 def density_std(population: torch.Tensor, measure: torch.Tensor, out: torch.Tensor | None = None) -> float:

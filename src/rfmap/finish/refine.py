@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 import torch
 
-from ..core.geometry import beltrami_from_jacobian, edge_matrices, grid_signed_measures, signed_measures
+from ..core.geometry import beltrami_from_jacobian, edge_matrices, grid_measure_coefficients, signed_measures
 from ..core.metrics import density_std, element_population
 from ..nn.model import boundary_mask
 
@@ -175,14 +175,15 @@ def density_objective(ref, psi, elements, density, boundary, flip_weight: float 
     flip_weight : float
         :math:`\lambda`.
     grid_n : int, optional
-        Set when ``ref``/``elements`` are :func:`rfmap.core.mesh.grid_mesh` ``(N, d)``; the measures are then computed
-        from strided views (:func:`rfmap.core.geometry.grid_signed_measures`, same values, several times faster on 3D
-        grids).
+        Set when ``ref``/``elements`` are :func:`rfmap.core.mesh.grid_mesh` ``(N, d)``; the polynomial's
+        coefficients are then expanded with the grid's edges as numbers
+        (:func:`rfmap.core.geometry.grid_measure_coefficients`, same values, several times faster on 3D grids).
     """
     disp = boundary_mask(ref, boundary) * psi  # the refined map is ref + alpha * disp
     poly = MeasurePolynomial(_measure_coefficients(ref, disp, elements, grid_n))
     # c_{} is the measure of the reference mesh itself
-    pop = element_population(ref, elements, np.asarray(density, dtype=np.float64), measures=poly.constant)
+    pop = element_population(ref, elements, np.asarray(density, dtype=np.float64), measures=poly.constant,
+                             grid_n=grid_n)
     m = pop.shape[-1]
     meas, rho = torch.empty_like(pop), torch.empty_like(pop)  # buffers reused by every evaluation
 
@@ -201,14 +202,18 @@ def _measure_coefficients(ref, disp, elements, grid_n):
     determinant is linear in each row, so :math:`|T(\alpha)| = \sum_{S \subseteq \{0..d-1\}} c_S
     \prod_{a \in S} \alpha_a`, where :math:`c_S` is the measure of the element whose coordinates :math:`a \in S`
     come from :math:`D` and the others from :math:`x`.  Returns ``[(S, c_S)]`` (``c_S`` of shape (m,)); one
-    objective evaluation is then :math:`2^d` multiply-adds instead of a mesh pass.
+    objective evaluation is then :math:`2^d` multiply-adds instead of a mesh pass (and one along the lines that
+    :func:`refine_alpha` searches, :class:`MeasurePolynomial`).  ``grid_n``: the mesh is the ``N``-grid
+    (:func:`rfmap.core.geometry.grid_measure_coefficients`).
     """
+    if grid_n:
+        return grid_measure_coefficients(ref, disp, grid_n)
     d = ref.shape[-1]
     out = []
     for bits in range(2 ** d):
         subset = tuple(a for a in range(d) if bits >> a & 1)
         pts = torch.stack([disp[:, a] if a in subset else ref[:, a] for a in range(d)], -1)
-        c = grid_signed_measures(pts[None], grid_n)[0] if grid_n else signed_measures(pts, elements)
+        c = signed_measures(pts, elements)
         out.append((subset, c))
     return out
 
