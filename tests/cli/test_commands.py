@@ -269,13 +269,18 @@ def test_models_lineage_lists_every_run(capsys):
         assert head in stdout
         block = stdout.split(head, 1)[1].splitlines()[1:]
         lines = [ln.strip() for ln in block if ln.startswith("  ")]  # this model's runs and their resumptions
-        numbered = [ln for ln in lines if not ln.startswith("then ")][:len(runs)]
+        numbered = [ln for ln in lines if ln.split(".", 1)[0].isdigit()][:len(runs)]
         for k, (line, run) in enumerate(zip(numbered, runs), 1):
             assert line.startswith(f"{k}. {run['command']}   # {run['steps']} steps")
-            # a run's resumptions (e.g. an early end with --resume --finish) follow it
+            # a run's resumptions (e.g. an early end with --resume --finish) follow it, then the validated state
+            # it kept when that is not its last step
             after = lines[lines.index(line) + 1:]
-            for j, again in enumerate(run.get("resumed") or []):
-                assert after[j] == f"then {again}"
+            again = run.get("resumed") or []
+            for j, cmd in enumerate(again):
+                assert after[j] == f"then {cmd}"
+            kept = run.get("selected_step")
+            if kept is not None and int(kept) != int(run["steps"]):
+                assert after[len(again)].startswith(f"kept the weights of step {kept} ")
         assert sum(int(r["steps"]) for r in runs) == meta.get("cumulative_steps", meta["steps"])
 
 

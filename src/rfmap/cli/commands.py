@@ -124,6 +124,11 @@ def cmd_models(args) -> int:
                   f"{float(run.get('wall_time', 0.0)) / 60:.0f} min" + (f", sha256 {sha[:12]}" if sha else ""))
             for again in run.get("resumed") or []:  # continued after an interruption, or ended with --finish
                 print(f"     then {again}")
+            kept = run.get("selected_step")
+            if kept is not None and int(kept) != int(run.get("steps") or 0):  # validation chose an earlier state
+                print(f"     kept the weights of step {kept}" +
+                      (" (its parent's: no validated state improved on them)" if int(kept) == 0 else
+                       " (the best validated state)"))
             if run.get("grown"):  # the next run started from these weights widened (rfmap.nn.grow)
                 g = run["grown"]
                 print(f"     then widened from base {g['from'].get('base')} to {g['to'].get('base')} "

@@ -129,6 +129,8 @@ def load_init(source: str, cfg: TrainConfig) -> tuple[Surrogate, dict]:
               "cumulative_wall_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0)))}
     if meta.get("resumed"):
         record["resumed"] = list(meta["resumed"])
+    if meta.get("selected_step") is not None:  # the step whose weights the parent kept (0: its own parent's)
+        record["selected_step"] = int(meta["selected_step"])
     if cfg.grow:
         record["grown"] = {"from": have, "to": want, "method": "rfmap.nn.grow.grow_unet", "seed": cfg.seed}
     return parent, record
