@@ -223,7 +223,7 @@ def _parity(perm: tuple[int, ...]) -> int:
 
 
 def _leibniz(rows: list[list], perms: list[tuple[tuple[int, ...], int]], shape) -> Tensor:
-    """The determinant :math:`\sum_\sigma \mathrm{sgn}\,\sigma \prod_a M_{a \sigma(a)}` of a matrix whose entries
+    r"""The determinant :math:`\sum_\sigma \mathrm{sgn}\,\sigma \prod_a M_{a \sigma(a)}` of a matrix whose entries
     are floats (the same for every cell) or tensors of ``shape``: products with a zero float are skipped, the
     floats of a term become its coefficient."""
     total = None

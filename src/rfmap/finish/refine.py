@@ -249,7 +249,7 @@ class MeasurePolynomial:
         self.dim = max((len(s) for s, _ in coeffs), default=0)
         self.constant = next(c for s, c in coeffs if not s)
         self._powers = None  # diagonal: [sum_{|S| = k} c_S for k = 0..d]
-        self._line = None  # (axis, alpha with that axis zeroed, A, B)
+        self._line = None  # (axis, the alpha it was collapsed at, A, B)
         self._last = None
 
     def __call__(self, alpha, out: torch.Tensor | None = None) -> torch.Tensor:
