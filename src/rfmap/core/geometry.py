@@ -96,11 +96,7 @@ def grid_cell_simplices(dim: int) -> list[list[tuple[int, ...]]]:
             nxt = list(corners[-1])
             nxt[ax] += 1
             corners.append(nxt)
-        sign = 1
-        for i in range(3):
-            for j in range(i + 1, 3):
-                sign *= 1 if perm[i] < perm[j] else -1
-        if sign < 0:
+        if _parity(perm) < 0:
             corners[1], corners[2] = corners[2], corners[1]
         out.append([tuple(c) for c in corners])
     return out
