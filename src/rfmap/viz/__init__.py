@@ -5,23 +5,42 @@ One module per kind of figure: :mod:`~rfmap.viz.figures` (the style and where fi
 network), :mod:`~rfmap.viz.training` (batches, loss terms, learning curves), :mod:`~rfmap.viz.cartograms` and
 :mod:`~rfmap.viz.studies` (the studies' tables and reports).  Every name is importable from :mod:`rfmap.viz`,
 with :func:`rfmap.core.result.to_pyvista` and :func:`rfmap.core.result.setup_pyvista`.
+
+The names are imported on first access (PEP 562), each from its own module, so that drawing a cartogram
+(:mod:`rfmap.viz.cartograms`, torch-free) does not load the modules of the 3D figures and the map results, which
+need PyTorch.
 """
 from __future__ import annotations
 
-from ..core.result import setup_pyvista, to_pyvista
-from .architecture import architecture_diagram
-from .cartograms import area_error_histograms, cartogram_figure, cartogram_panels, plot_regions
-from .figures import STYLE, figures_dir, repository_root, save_figure, style
-from .meshes import beltrami_figure, element_rho, extreme_figure, map_rows_figure, plot_beltrami_row, plot_density, \
-    plot_map_row, plot_mesh, plot_mu, plot_slice_outline, population_figure, vertex_error_panels
-from .studies import displacement_demand_figure, shorten_curve, table_lines, time_accuracy_figure
-from .training import LOSS_TERMS, learning_curves, plot_batch, plot_loss_terms, training_curves, validation_vs_time
-from .volumes import CAMERA_3D, render_lattice, render_volume, volume_rows
+import importlib
 
-__all__ = ["STYLE", "style", "repository_root", "figures_dir", "save_figure", "plot_mesh", "plot_density", "plot_mu",
-           "plot_map_row", "to_pyvista", "render_volume", "element_rho", "setup_pyvista", "architecture_diagram",
-           "population_figure", "volume_rows", "render_lattice", "plot_batch", "plot_loss_terms", "training_curves",
-           "learning_curves", "CAMERA_3D", "LOSS_TERMS", "plot_regions", "cartogram_figure", "cartogram_panels",
-           "area_error_histograms", "time_accuracy_figure", "validation_vs_time", "table_lines", "plot_slice_outline",
-           "displacement_demand_figure", "vertex_error_panels", "shorten_curve", "plot_beltrami_row",
-           "beltrami_figure", "map_rows_figure", "extreme_figure"]
+#: the module (relative to this package) of each exported name
+_HOME = {
+    "..core.result": ("setup_pyvista", "to_pyvista"),
+    ".architecture": ("architecture_diagram",),
+    ".cartograms": ("area_error_histograms", "cartogram_figure", "cartogram_panels", "plot_regions"),
+    ".figures": ("STYLE", "figures_dir", "repository_root", "save_figure", "style"),
+    ".meshes": ("beltrami_figure", "element_rho", "extreme_figure", "map_rows_figure", "plot_beltrami_row",
+                "plot_density", "plot_map_row", "plot_mesh", "plot_mu", "plot_slice_outline", "population_figure",
+                "vertex_error_panels"),
+    ".studies": ("displacement_demand_figure", "shorten_curve", "table_lines", "time_accuracy_figure"),
+    ".training": ("LOSS_TERMS", "learning_curves", "plot_batch", "plot_loss_terms", "training_curves",
+                  "validation_vs_time"),
+    ".volumes": ("CAMERA_3D", "render_lattice", "render_volume", "volume_rows"),
+}
+_MODULE_OF = {name: module for module, names in _HOME.items() for name in names}
+
+__all__ = sorted(_MODULE_OF)
+
+
+def __getattr__(name: str):
+    """An exported name, imported from its module on first access."""
+    if name not in _MODULE_OF:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(_MODULE_OF[name], __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
