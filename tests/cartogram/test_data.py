@@ -203,6 +203,69 @@ def test_neighbours_get_different_colours(carto):
     assert region_colours(["red", "#00ff00"]) == (["red", "#00ff00"], {})
 
 
+#: a row of five planar squares named as Dutch provinces are, and the table's spellings of them
+PROVINCES = ("Fryslân", "Groningen", "Drenthe", "Île", "Zeeland")
+
+
+def provinces() -> dict:
+    return {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"name": name},
+         "geometry": {"type": "Polygon", "coordinates": square(k * SIDE, 0)}} for k, name in enumerate(PROVINCES)]}
+
+
+def test_loose_ids_drop_accents_and_case():
+    from rfmap.cartogram.data import loose_id
+
+    assert loose_id("Fryslân") == loose_id("FRYSLAN") == "fryslan"
+    assert loose_id("Île-de-France") == "ile-de-france" and loose_id("Straße") == "strasse"  # casefold: ß -> ss
+    assert loose_id("Frysl\u00e2n") == loose_id("Frysla\u0302n")  # composed and decomposed â alike
+
+
+def test_join_ignores_accents_and_case_where_the_partner_is_unique():
+    """Exact ids first ("Drenthe"); "Fryslan" and "groningen" find their one region with accents and case ignored
+    and are reported by pair; "ILE" and "île" both fold to the region "Île": not joined, asked about."""
+    values = {"Fryslan": 2, "groningen": 3, "Drenthe": 4, "ILE": 5, "île": 6, "Zeeland": 1}
+    j = join_values(provinces(), values, key="name", value="pop", missing="drop")
+    assert j.matched == 4 and j.unmatched_regions == ["Île"] and j.unmatched_rows == ["ILE", "île"]
+    assert j.loose == [("Fryslân", "Fryslan"), ("Groningen", "groningen")]
+    assert j.ambiguous == [("Île", ["ILE", "île"])]
+    assert [f["properties"]["pop"] for f in j.collection["features"]] == [2.0, 3.0, 4.0, 1.0]
+    assert j.report()[2:] == [
+        "joined with accents and case ignored (2, region = data): 'Fryslân' = 'Fryslan', 'Groningen' = 'groningen'",
+        "not joined, several near-matches (1): 'Île': did you mean 'ILE' or 'île'?"]
+
+
+def test_an_exact_match_wins_over_a_loose_one_and_regions_sharing_a_loose_id_are_asked_about():
+    """The row "Zeeland" joins its region exactly, so the row "ZEELAND" finds no free partner; two regions "Ile" and
+    "ÎLE" with one row "île" leave the row unjoined and both regions asked about."""
+    fc = provinces()
+    fc["features"][2]["properties"]["name"] = "ÎLE"
+    fc["features"][3]["properties"]["name"] = "Ile"
+    j = join_values(fc, {"Fryslân": 1, "Groningen": 1, "Zeeland": 2, "ZEELAND": 7, "île": 3}, key="name",
+                    value="pop", missing="drop")
+    assert j.loose == [] and j.ambiguous == [("ÎLE", ["île"]), ("Ile", ["île"])]
+    assert j.unmatched_rows == ["ZEELAND", "île"] and j.collection["features"][-1]["properties"]["pop"] == 2.0
+    assert len(j.report()) == 3  # no line of loose pairs
+
+
+def test_cli_reports_the_loose_pairs_and_takes_their_values(tmp_path, capsys):
+    src = tmp_path / "map.geojson"
+    src.write_text(json.dumps(provinces()), encoding="utf-8")
+    data = write_csv(tmp_path / "v.csv", [("Fryslan", 2, "x", "F"), ("GRONINGEN", 3, "y", "G"),
+                                          ("Drenthe", 4, "x", "D"), ("Île", 5, "y", "I"), ("Zeeland", 1, "x", "Z")],
+                     header=("province", "pop", "group", "short"))
+    out = tmp_path / "out.geojson"
+    rc, stdout, err = run_cli(capsys, "cartogram", src, "--data", data, "--id", "province", "--id-property", "name",
+                              "--value", "pop", "--label", "short", "--n", 48, "--out", out)
+    assert rc == 0, err
+    lines = stdout.splitlines()
+    assert lines[:3] == ["regions without data (0, given the mean density): none", "data without a region (0): none",
+                         "joined with accents and case ignored (2, region = data): 'Fryslân' = 'Fryslan', "
+                         "'Groningen' = 'GRONINGEN'"]
+    props = [f["properties"] for f in json.loads(out.read_text(encoding="utf-8"))["features"]]
+    assert [p["pop"] for p in props] == [2.0, 3.0, 4.0, 5.0, 1.0] and props[0]["short"] == "F"
+
+
 # ----------------------------------------------------------------------------------------------- command line
 def run_cli(capsys, *args):
     rc = main([str(a) for a in args])

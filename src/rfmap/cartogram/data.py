@@ -4,8 +4,10 @@ world's population by year.
 A cartogram (:func:`rfmap.cartogram.resize.cartogram`) reads one value per region from a feature property.  Values often
 live in a table instead: :func:`read_csv_values` reads a CSV column by an id column (every value a number
 :math:`\ge 0`), and :func:`join_values` writes it onto the regions whose id property matches, as cartogram programs
-do (``cartogram-cpp --id --area``).  Ids are compared as text (``11`` and ``11.0`` are the same id).  A region
-without a row is reported and, by default, takes the mean density of the matched regions,
+do (``cartogram-cpp --id --area``).  Ids are compared as text (``11`` and ``11.0`` are the same id); an id left
+without a partner is then compared with accents and case ignored (:func:`loose_id`: "Fryslan" finds "Fryslân"), and
+joined where that comparison finds exactly one partner on each side.  Such pairs are reported, and so are the ids
+that it finds several partners for ("did you mean ...").  A region without a row is reported and, by default, takes the mean density of the matched regions,
 
 .. math:: v_i = a_i \, \frac{\sum_{j \in M} v_j}{\sum_{j \in M} a_j},
 
@@ -24,13 +26,15 @@ import csv
 import io
 import math
 import os
+import unicodedata
 import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Join", "MISSING", "GAPMINDER_YEARS", "read_csv_table", "read_csv_values", "region_ids", "join_values",
+__all__ = ["Join", "MISSING", "GAPMINDER_YEARS", "read_csv_table", "read_csv_values", "region_ids", "loose_id",
+           "join_values",
            "write_csv_template", "gapminder_population", "world_population", "atomic_write"]
 
 #: What :func:`join_values` does with a region that has no row: give it the matched regions' ``"mean"`` density,
@@ -211,6 +215,12 @@ class Join:
         Ids of the rows without a region, sorted.
     missing : str
         What was done with the unmatched regions (:data:`MISSING`, or ``"fallback"`` where all had one).
+    loose : list of (str, str)
+        ``(region id, row id)`` of the pairs joined with accents and case ignored (:func:`loose_id`), in map order;
+        counted in ``matched``.
+    ambiguous : list of (str, list of str)
+        ``(region id, row ids)`` of the unmatched regions whose id, accents and case ignored, is that of several rows
+        or is shared with other unmatched regions: the candidates of a "did you mean", in map order.
     """
 
     collection: dict
@@ -219,14 +229,74 @@ class Join:
     unmatched_regions: list = field(default_factory=list)
     unmatched_rows: list = field(default_factory=list)
     missing: str = "mean"
+    loose: list = field(default_factory=list)
+    ambiguous: list = field(default_factory=list)
 
     def report(self) -> list[str]:
-        """Two lines: the regions without a row, and the rows without a region."""
+        """Two lines: the regions without a row, and the rows without a region; then a line for the pairs joined with
+        accents and case ignored, and one for the ambiguous near-matches, where there are any."""
         todo = {"mean": "given the mean density", "drop": "left out", "error": "", "fallback": "given a fallback"}
         regions = ", ".join(self.unmatched_regions) or "none"
         rows = ", ".join(self.unmatched_rows) or "none"
-        return [f"regions without data ({len(self.unmatched_regions)}, {todo[self.missing]}): {regions}",
-                f"data without a region ({len(self.unmatched_rows)}): {rows}"]
+        lines = [f"regions without data ({len(self.unmatched_regions)}, {todo[self.missing]}): {regions}",
+                 f"data without a region ({len(self.unmatched_rows)}): {rows}"]
+        if self.loose:
+            pairs = ", ".join(f"{region!r} = {row!r}" for region, row in self.loose)
+            lines.append(f"joined with accents and case ignored ({len(self.loose)}, region = data): {pairs}")
+        if self.ambiguous:
+            asks = "; ".join(f"{region!r}: did you mean {' or '.join(map(repr, rows))}?"
+                             for region, rows in self.ambiguous)
+            lines.append(f"not joined, several near-matches ({len(self.ambiguous)}): {asks}")
+        return lines
+
+
+def loose_id(text: str) -> str:
+    """An id with accents and case ignored: Unicode NFKD, the combining marks dropped, case-folded
+    (``"Fryslân"`` -> ``"fryslan"``, ``"ÎLE-DE-FRANCE"`` -> ``"ile-de-france"``)."""
+    parts = unicodedata.normalize("NFKD", text)
+    return "".join(c for c in parts if not unicodedata.combining(c)).casefold()
+
+
+def _match_rows(ids: list, values: Mapping[str, float], key: str) -> tuple[list, list, list]:
+    """The row id of every region (``None`` where there is none): exact matches first, then the ids that, with
+    accents and case ignored (:func:`loose_id`), have exactly one partner on each side.
+
+    Returns
+    -------
+    rows : list of str or None, one per region
+    loose : list of (int, str)
+        The regions (index) joined to a row (id) by the loose comparison.
+    ambiguous : list of (int, list of str)
+        The regions (index) left unmatched whose loose id is that of several rows, or of one row that several
+        unmatched regions share.
+    """
+    seen: dict[str, int] = {}
+    for k, rid in enumerate(ids):
+        if rid in values:
+            if rid in seen:
+                raise ValueError(f"the id {rid!r} names two regions (#{seen[rid]} and #{k}); ids must be unique")
+            seen[rid] = k
+    rows = [rid if rid in values else None for rid in ids]
+    free_rows: dict[str, list[str]] = {}
+    for rid in values:
+        if rid not in seen:
+            free_rows.setdefault(loose_id(rid), []).append(rid)
+    free_regions: dict[str, list[int]] = {}
+    for k, rid in enumerate(ids):
+        if rid and rows[k] is None:
+            free_regions.setdefault(loose_id(rid), []).append(k)
+    loose, ambiguous = [], []
+    for folded, regions in free_regions.items():
+        candidates = sorted(free_rows.get(folded, []))
+        if len(candidates) == 1 and len(regions) == 1:
+            rows[regions[0]] = candidates[0]
+            loose.append((regions[0], candidates[0]))
+        elif candidates:
+            ambiguous.extend((k, candidates) for k in regions)
+    if not any(r is not None for r in rows):
+        raise ValueError(f"no region's {key!r} matches an id of the data (e.g. {next(iter(values), 'none')!r} "
+                         f"against {next((i for i in ids if i), 'none')!r})")
+    return rows, sorted(loose), sorted(ambiguous)
 
 
 def _areas(features: list, projection: str) -> np.ndarray:
@@ -284,18 +354,10 @@ def join_values(collection, values: Mapping[str, float], *, key: str = "id", val
     ids = region_ids(collection if isinstance(collection, dict) else {"type": "FeatureCollection",
                                                                       "features": feats}, key)
     values = {_id_text(k): float(v) for k, v in values.items()}
-    seen: dict[str, int] = {}
-    for k, rid in enumerate(ids):
-        if rid in values:
-            if rid in seen:
-                raise ValueError(f"the id {rid!r} names two regions (#{seen[rid]} and #{k}); ids must be unique")
-            seen[rid] = k
-    if not seen:
-        raise ValueError(f"no region's {key!r} matches an id of the data (e.g. {next(iter(values), 'none')!r} "
-                         f"against {next((i for i in ids if i), 'none')!r})")
+    rows, loose, ambiguous = _match_rows(ids, values, key)
     names = [rid if rid else f"#{k}" for k, rid in enumerate(ids)]
-    unmatched = [k for k, rid in enumerate(ids) if rid not in values]
-    v = np.array([values.get(rid, np.nan) for rid in ids])
+    unmatched = [k for k, row in enumerate(rows) if row is None]
+    v = np.array([values[row] if row is not None else np.nan for row in rows])
     fallback = {_id_text(k): float(x) for k, x in (fallback or {}).items()}
     for k in unmatched:
         v[k] = fallback.get(ids[k], np.nan)
@@ -308,18 +370,19 @@ def join_values(collection, values: Mapping[str, float], *, key: str = "id", val
         keep = ~gap
     elif gap.any():
         a = _areas(feats, projection)
-        m = np.array([rid in values for rid in ids])
+        m = np.array([row is not None for row in rows])
         v[gap] = a[gap] * v[m].sum() / a[m].sum()
     out = []
     for k in np.flatnonzero(keep):
         f = feats[k]
         props = {**(f.get("properties") or {}), value: float(v[k])}
         for col, by_id in (extra or {}).items():
-            props[col] = by_id.get(ids[k]) if ids[k] in values else None
+            props[col] = by_id.get(rows[k]) if rows[k] is not None else None
         out.append({**f, "properties": props})
     how = missing if gap.any() else ("fallback" if unmatched else missing)
-    return Join({"type": "FeatureCollection", "features": out}, value, len(seen), [names[k] for k in unmatched],
-                sorted(set(values) - set(seen)), how)
+    return Join({"type": "FeatureCollection", "features": out}, value, len(feats) - len(unmatched),
+                [names[k] for k in unmatched], sorted(set(values) - {row for row in rows if row is not None}), how,
+                loose=[(names[k], row) for k, row in loose], ambiguous=[(names[k], c) for k, c in ambiguous])
 
 
 def write_csv_template(collection, path, *, key: str = "id", value: str = "value") -> int:

@@ -47,7 +47,7 @@ def _cartogram_outputs(args) -> list[str]:
 
 def _cartogram_input(args):
     """The regions of ``rfmap cartogram``: the GeoJSON as it is, or with ``--data`` joined to it
-    (:func:`rfmap.cartogram.data.join_values`); the join's two report lines are printed."""
+    (:func:`rfmap.cartogram.data.join_values`); the join's report lines are printed."""
     if not args.data:
         if args.id:
             raise CLIError("--id needs --data (or --make-csv)")
@@ -251,8 +251,10 @@ def add_cartogram_parser(sub) -> None:
     s.add_argument("--gif", default=None, help="with --series: write the frames as an animation (.gif, or .mp4)")
     d = s.add_argument_group("values from a CSV table")
     d.add_argument("--data", default=None, metavar="FILE.csv",
-                   help="read the values from this CSV, joined to the regions by --id; the regions without a row "
-                        "and the rows without a region are listed, one line each")
+                   help="read the values from this CSV, joined to the regions by --id (exactly, else with accents "
+                        "and case ignored where that finds one partner); the regions without a row, the rows "
+                        "without a region, the pairs joined ignoring accents and case and the ids with several "
+                        "such partners are listed, one line each")
     d.add_argument("--id", default=None, metavar="COLUMN",
                    help="the CSV column of the regions' ids, matched to the GeoJSON property of the same name "
                         "(or the feature's id for 'id')")
