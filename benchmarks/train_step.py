@@ -2,7 +2,12 @@
 
     python benchmarks/train_step.py [--json] [--device cpu|cuda|auto] [--steps 20] [--warmup 5]
                                     [--configs beltrami2d deq2d-square dem3d-cube] [--threads T] [--workers W]
+                                    [--precision fp32 bf16] [--bases 8 16 32]
     python benchmarks/train_step.py --smoke     # one step of batch 1 at the ``ci`` preset's smallest side
+
+``--precision`` times each configuration in every precision named (``TrainConfig.precision``: bf16 autocast around
+the network, the losses in float32) and ``--bases`` at every U-Net width named (the network freshly initialised);
+with two precisions a last column gives the speed-up of bf16 over fp32, measured in the same run.
 
 Each configuration runs its ``full`` preset (threads and batch workers as the preset sets them unless overridden)
 at a fixed grid side: batch 4 at N = 80 in 2D, batch 2 at N = 48 in 3D.  A step is timed from asking the loader
@@ -17,13 +22,14 @@ import json
 import sys
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from rfmap.training.config import get_config
-from rfmap.core.device import resolve_device
+from rfmap.core.device import check_precision, resolve_device
 from rfmap.training.data import _loader
 from rfmap.training.loop import _train_step
 from rfmap.training.state import _build_state
@@ -33,11 +39,16 @@ DEFAULT_THREADS = torch.get_num_threads()
 
 
 def measure(name: str, device: torch.device, steps: int, warmup: int, threads: int | None,
-            workers: int | None, smoke: bool = False) -> dict:
+            workers: int | None, smoke: bool = False, precision: str = "fp32", base: int | None = None) -> dict:
     torch.set_num_threads(DEFAULT_THREADS)  # a preset without a thread count gets torch's default
     cfg = get_config(name, "full")
     batch, n = (1, get_config(name, "ci").n_range[0]) if smoke else SIZES[cfg.task.dim]
-    over = {"batch": batch, "n_range": (n, n), "steps": warmup + steps, "time_limit": 0.0}
+    over = {"batch": batch, "n_range": (n, n), "steps": warmup + steps, "time_limit": 0.0,
+            "precision": check_precision(precision, device)}
+    if base is not None:
+        if cfg.model.arch != "unet":
+            raise ValueError(f"--bases applies to U-Net configs; {name} is {cfg.model.arch}")
+        over["model"] = replace(cfg.model, base=base)
     if threads is not None:
         over["threads"] = threads
     if workers is not None:
@@ -58,7 +69,8 @@ def measure(name: str, device: torch.device, steps: int, warmup: int, threads: i
         finally:
             loader.close()
     return {"ms_per_step": round(1e3 * float(np.median(times[warmup:])), 1), "batch": batch, "n": n,
-            "device": str(device), "threads": torch.get_num_threads(), "workers": cfg.workers}
+            "device": str(device), "threads": torch.get_num_threads(), "workers": cfg.workers,
+            "precision": cfg.precision, "base": cfg.model.base if cfg.model.arch == "unet" else None}
 
 
 def main(argv=None) -> int:
@@ -70,6 +82,10 @@ def main(argv=None) -> int:
     p.add_argument("--threads", type=int, default=None)
     p.add_argument("--workers", type=int, default=None)
     p.add_argument("--configs", nargs="+", default=["beltrami2d", "deq2d-square", "dem3d-cube"])
+    p.add_argument("--precision", nargs="+", default=["fp32"], metavar="fp32|bf16",
+                   help="time every configuration in each precision (bf16: autocast around the network)")
+    p.add_argument("--bases", nargs="+", type=int, default=None, metavar="B",
+                   help="time every U-Net configuration at each of these base widths (default: the config's)")
     p.add_argument("--smoke", action="store_true",
                    help="the smallest run: one step, no warm-up, batch 1 at the ci preset's smallest side")
     args = p.parse_args(argv)
@@ -81,15 +97,31 @@ def main(argv=None) -> int:
         print(f"train_step: error: {e}", file=sys.stderr)
         return 2
     out = {}
-    for name in args.configs:
-        out[name] = measure(name, device, args.steps, args.warmup, args.threads, args.workers, args.smoke)
-        if not args.json:
-            r = out[name]
-            print(f"{name:14s} {r['ms_per_step']:8.1f} ms/step  batch {r['batch']}, N = {r['n']}, {r['device']}, "
-                  f"{r['threads']} thread(s), {r['workers']} batch worker(s)", flush=True)
+    try:
+        for name in args.configs:
+            for base in args.bases or [None]:
+                for prec in args.precision:
+                    label = name + (f" base {base}" if base else "") + (f" {prec}" if args.precision != ["fp32"]
+                                                                          else "")
+                    out[label] = measure(name, device, args.steps, args.warmup, args.threads, args.workers,
+                                         args.smoke, prec, base)
+                    if not args.json:
+                        _print_row(label, out[label], out)
+    except ValueError as e:
+        print(f"train_step: error: {e}", file=sys.stderr)
+        return 2
     if args.json:
         print(json.dumps(out))
     return 0
+
+
+def _print_row(label: str, r: dict, out: dict) -> None:
+    """One line per measurement; a bf16 line also gives its speed-up over the fp32 line of the same config."""
+    ratio = ""
+    if r["precision"] == "bf16" and label.replace(" bf16", " fp32") in out:
+        ratio = f"  bf16 speed-up {out[label.replace(' bf16', ' fp32')]['ms_per_step'] / r['ms_per_step']:.2f}x"
+    print(f"{label:24s} {r['ms_per_step']:8.1f} ms/step  batch {r['batch']}, N = {r['n']}, {r['device']}, "
+          f"{r['threads']} thread(s), {r['workers']} batch worker(s){ratio}", flush=True)
 
 
 if __name__ == "__main__":

@@ -11,7 +11,8 @@
 #
 #   rfmap validate /work/.device/.../dem3d-cube --ship runs/device      # score on the validation stream, ship best
 #
-# Environment (all optional): OUT (default ./device-out), DEVICE (cuda), PRESET (full), THREADS (2), WORKERS (12),
+# Environment (all optional): OUT (default ./device-out), DEVICE (cuda), PRESET (full), PRECISION (bf16: the network
+# under bfloat16 autocast; fp32), THREADS (2), WORKERS (12),
 # SNAPSHOT_EVERY (steps between snapshots, 250), KEEP (snapshots kept per config, 3), TRAIN_ARGS (options of
 # rfmap train for every config; by default each config continues its shipped network, widened twofold by the
 # function-preserving growth, on the size curriculum: 3D "--init CONFIG --grow 16 --n-range 24 64 --n-sampling log
@@ -28,6 +29,7 @@ CONFIGS=("$@")
 OUT=${OUT:-device-out}
 DEVICE=${DEVICE:-cuda}
 PRESET=${PRESET:-full}
+PRECISION=${PRECISION:-bf16}
 THREADS=${THREADS:-2}
 WORKERS=${WORKERS:-12}
 SNAPSHOT_EVERY=${SNAPSHOT_EVERY:-250}
@@ -38,10 +40,15 @@ export PYTHONPATH="$PWD/src${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
 
 fail() { echo "device_train: error: $*" >&2; exit 2; }
 # every check before anything is written
-"$PY" - "$MINUTES" "$PRESET" "${CONFIGS[@]}" <<'EOF' || exit 2
+"$PY" - "$MINUTES" "$PRESET" "$DEVICE" "$PRECISION" "${CONFIGS[@]}" <<'EOF' || exit 2
 import sys
+from rfmap.core.device import check_precision, resolve_device
 from rfmap.training.config import get_config
-minutes, preset, *names = sys.argv[1:]
+minutes, preset, device, precision, *names = sys.argv[1:]
+try:
+    check_precision(precision, resolve_device(device))
+except ValueError as e:
+    sys.exit(print(f"device_train: error: {e}", file=sys.stderr) or 2)
 try:
     m = float(minutes)
 except ValueError:
@@ -72,7 +79,7 @@ for cfg in "${CONFIGS[@]}"; do
     ARGS=${TRAIN_ARGS:-$(default_args "$cfg")}
     echo "== $cfg: $PER s on $DEVICE, $ARGS"
     # shellcheck disable=SC2086  # TRAIN_ARGS is a list of options
-    "$PY" -m rfmap.training --config "$cfg" --preset "$PRESET" --device "$DEVICE" --threads "$THREADS" \
+    "$PY" -m rfmap.training --config "$cfg" --preset "$PRESET" --device "$DEVICE" --precision "$PRECISION" --threads "$THREADS" \
         --workers "$WORKERS" --time-limit "$PER" --steps 1000000 --no-validate --snapshot-every "$SNAPSHOT_EVERY" \
         --out "$WORK/$cfg" --no-progress $ARGS || echo "== $cfg: training failed (exit $?)"
     mkdir -p "$OUT/$cfg"

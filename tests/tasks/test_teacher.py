@@ -14,6 +14,7 @@ import torch
 
 from rfmap.cli.commands import main
 from rfmap.training.config import get_config
+from rfmap.core.device import bf16_supported
 from rfmap.core.geometry import signed_measures
 from rfmap.core.mesh import grid_mesh, grid_points
 from rfmap.tasks import draw_samples, make_batch, task_loss
@@ -172,8 +173,9 @@ def test_bad_teacher_and_validate_input(tmp_path, capsys, args, match):
 
 
 def _script(tmp_path, *args, **env):
+    bf16 = bf16_supported(torch.device("cpu"))
     e = {**os.environ, "OUT": str(tmp_path / "out"), "DEVICE": "cpu", "PRESET": "ci", "PYTHON": sys.executable,
-         "THREADS": "1", "WORKERS": "0", **env}
+         "THREADS": "1", "WORKERS": "0", "PRECISION": "bf16" if bf16 else "fp32", **env}
     return subprocess.run(["bash", str(ROOT / "scripts" / "device_train.sh"), *args], env=e, capture_output=True,
                           text=True, timeout=600)
 
@@ -198,4 +200,68 @@ def test_device_script_at_ci_scale(tmp_path):
 def test_device_script_rejects_bad_input(tmp_path, args):
     p = _script(tmp_path, *args)
     assert p.returncode == 2 and len(p.stderr.strip().splitlines()) == 1 and "error" in p.stderr
+    assert not (tmp_path / "out").exists()
+
+
+#: what the accelerator machine's image holds besides the standard library (the device tool's notes)
+DEVICE_IMAGE = ("torch", "numpy", "scipy", "safetensors", "tqdm", "matplotlib")
+
+
+def _device_image_python(tmp_path) -> str:
+    """A python command that sees only the standard library, rfmap (through the script's PYTHONPATH) and the files
+    of the distributions of :data:`DEVICE_IMAGE` with their requirements, as on the bare accelerator machine: the
+    interpreter runs without its site-packages (``-S``) on a folder of links to those distributions' files."""
+    import importlib.metadata as md
+    import re
+
+    dists: dict[str, md.Distribution] = {}
+
+    def close(name):
+        key = name.lower().replace("_", "-")
+        if key in dists:
+            return
+        try:
+            d = md.distribution(name)
+        except md.PackageNotFoundError:
+            return
+        dists[key] = d
+        for r in d.requires or []:
+            if "extra ==" not in r:
+                close(re.split(r"[ ;<>=!~\[(]", r.strip())[0])
+
+    for name in DEVICE_IMAGE:
+        close(name)
+    site = tmp_path / "device-image"
+    site.mkdir()
+    for d in dists.values():
+        for f in d.files or []:
+            top = f.parts[0]
+            if top not in ("..", "bin") and not (site / top).exists():
+                src = Path(d.locate_file(top))
+                if src.exists():
+                    (site / top).symlink_to(src)
+    wrapper = tmp_path / "python-image"
+    wrapper.write_text(f'#!/bin/sh\nPYTHONPATH="$PYTHONPATH:{site}" exec {sys.executable} -S "$@"\n')
+    wrapper.chmod(0o755)
+    return str(wrapper)
+
+
+def test_device_script_in_the_device_image_with_a_run_shorter_than_one_log_line(tmp_path):
+    """The script on what the bare accelerator machine has (an import of anything else fails), with a run that
+    stops after its first step, before any loss record: it still ends cleanly with its snapshot."""
+    py = _device_image_python(tmp_path)
+    probe = subprocess.run([py, "-c", "import torch, scipy, safetensors, tqdm, matplotlib\nimport shapely"],
+                           capture_output=True, text=True)
+    assert probe.returncode != 0 and "No module named 'shapely'" in probe.stderr, probe.stderr  # the image's set
+    p = _script(tmp_path, "0.2", "dem3d-cube", PYTHON=py, SNAPSHOT_EVERY="2", KEEP="1",
+                PRECISION="fp32", TRAIN_ARGS="--base 4 --depth 2 --time-limit 0.001")
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "training failed" not in p.stdout and "Traceback" not in p.stderr, p.stdout + p.stderr[-2000:]
+    snaps = list((tmp_path / "out" / "dem3d-cube").glob("*.safetensors"))
+    assert len(snaps) == 1
+
+
+def test_device_script_refuses_an_unknown_precision(tmp_path):
+    p = _script(tmp_path, "1", "dem3d-cube", PRECISION="fp16")
+    assert p.returncode == 2 and "unknown precision" in p.stderr and len(p.stderr.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()

@@ -15,7 +15,7 @@ import sys
 import torch
 
 from .config import PRESETS, TrainConfig, config_names, get_config
-from ..core.device import resolve_device
+from ..core.device import check_precision, resolve_device
 from ..surrogate import Surrogate
 from .loop import train
 from .state import load_init
@@ -36,7 +36,10 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
                         "validated state, weight file), e.g. after stopping it early")
     p.add_argument("--init", default=None, metavar="MODEL|FILE",
                    help="start from a shipped model or a .safetensors file (fresh optimiser and schedule)")
-    p.add_argument("--device", default="cpu", help="auto, cpu (default) or cuda; CUDA trains under bf16 autocast")
+    p.add_argument("--device", default="cpu", help="auto, cpu (default) or cuda")
+    p.add_argument("--precision", default=None, metavar="fp32|bf16",
+                   help="the network's arithmetic in training: fp32, or bf16 autocast (CUDA, or a CPU with "
+                        "AVX512-BF16/AMX); losses and Jacobians stay in fp32 (default: the config's, fp32)")
     p.add_argument("--steps", type=int, default=None, help="override the number of steps")
     p.add_argument("--batch", type=int, default=None, help="override the per-process batch size")
     p.add_argument("--time-limit", type=float, default=None, help="override the wall-time limit (s; 0: none)")
@@ -84,7 +87,8 @@ def run(args) -> Surrogate:
     cfg = get_config(args.config, args.preset)
     over = {k: v for k, v in {"steps": args.steps, "batch": args.batch, "time_limit": args.time_limit,
                               "threads": args.threads, "seed": args.seed, "workers": args.workers,
-                              "lr": args.lr, "ema": args.ema}.items()
+                              "lr": args.lr, "ema": args.ema,
+                              "precision": getattr(args, "precision", None)}.items()
             if v is not None}
     for k in ("steps", "batch"):
         if k in over and over[k] < 1:
@@ -97,6 +101,7 @@ def run(args) -> Surrogate:
         raise ValueError(f"--ema must lie in [0, 1), got {over['ema']}")
     cfg = cfg.with_overrides(**over, **_structured_overrides(cfg, args))
     device = resolve_device(args.device)
+    cfg = cfg.with_overrides(precision=check_precision(cfg.precision, device))
     if args.init and args.resume:
         raise ValueError("--init and --resume exclude each other (a resumed run keeps its own lineage)")
     if args.init:
@@ -191,6 +196,7 @@ def _command_line(args) -> str:
     for flag, val in [("--steps", args.steps), ("--batch", args.batch), ("--time-limit", args.time_limit),
                       ("--threads", args.threads), ("--workers", args.workers), ("--seed", args.seed),
                       ("--lr", args.lr), ("--ema", args.ema), ("--init", args.init),
+                      ("--precision", getattr(args, "precision", None)),
                       ("--teacher", getattr(args, "teacher", None)),
                       ("--teacher-share", getattr(args, "teacher_share", None)),
                       ("--teacher-weight", getattr(args, "teacher_weight", None)),

@@ -86,6 +86,10 @@ class TrainConfig:
     :math:`B(N) = \mathrm{clip}(\mathrm{round}(P / N^d), 1, \mathtt{batch})`, so that a step costs about the same
     at every size (0: always ``batch``).  ``grow`` (with ``init``): the parent network is widened to ``model.base``
     channels by a function-preserving growth (:func:`rfmap.nn.grow.grow_unet`) before training.
+
+    ``precision``: ``'fp32'`` or ``'bf16'`` (:data:`rfmap.core.device.PRECISIONS`): with ``'bf16'`` the network's
+    forward and backward pass run under bfloat16 autocast (CUDA, or a CPU with AVX512-BF16/AMX); the losses, the
+    Jacobians, the fold penalty, the optimiser's state and validation stay in float32.
     """
 
     name: str
@@ -129,6 +133,7 @@ class TrainConfig:
     ckpt_every: int = 250
     threads: int = 0
     time_limit: float = 0.0
+    precision: str = "fp32"
     description: str = ""
 
     def to_dict(self) -> dict:

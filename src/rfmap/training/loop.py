@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from .config import TrainConfig
-from ..core.device import resolve_device
+from ..core.device import autocast, check_precision, resolve_device
 from ..finish import quiet_quality
 from ..surrogate import Surrogate
 from ..tasks import make_batch, task_loss
@@ -69,7 +69,7 @@ class RunOptions:
     init : str, optional
         Start from a shipped model's weights or a ``.safetensors`` file (fresh optimiser and schedule).
     device : str or torch.device
-        ``'cpu'`` (default), ``'cuda'`` or ``'auto'``; on CUDA the network runs under bf16 autocast.
+        ``'cpu'`` (default), ``'cuda'`` or ``'auto'``; the network's arithmetic is ``cfg.precision``.
     command : str, optional
         The command line that started the run (recorded in the metadata).
     finish : bool
@@ -99,6 +99,7 @@ def train(cfg: TrainConfig, out_dir=None, options: RunOptions | None = None, **k
     resume, init, device, finish = opts.resume, opts.init, opts.device, opts.finish
     progress, log_every, command = opts.progress, opts.log_every, opts.command
     dev = device if isinstance(device, torch.device) else resolve_device(device)
+    check_precision(cfg.precision, dev)
     out = Path(out_dir or Path("runs") / cfg.name)
     if finish and not (resume and (out / "checkpoint.pt").exists()):
         raise ValueError(f"--finish ends a run from its checkpoint: give --resume and an --out with checkpoint.pt "
@@ -134,12 +135,9 @@ def _train_step(st: TrainState, n: int, pts: np.ndarray, par: np.ndarray,
     batch = make_batch(cfg.task, pts, par, n, targets).to(st.device)
     batch.inputs = batch.inputs.contiguous(memory_format=memory_format(cfg.task.dim))
     st.model.train()
-    if st.device.type == "cuda":
-        with torch.autocast("cuda", dtype=torch.bfloat16):
-            psi = st.net(batch.inputs)
-        psi = psi.float()
-    else:
+    with autocast(cfg.precision, st.device):
         psi = st.net(batch.inputs)
+    psi = psi.float()
     loss, parts = task_loss(cfg.task, batch, psi, cfg.loss, cfg.teacher.weight if cfg.teacher.active else 0.0)
     st.opt.zero_grad(set_to_none=True)
     loss.backward()
@@ -244,8 +242,10 @@ def _finish(st: TrainState) -> Surrogate:
 def history(log_path, points: int = 200) -> dict:
     """A compact training history from ``log.jsonl``: up to ``points`` (step, loss, elapsed) triples of a running
     mean of the loss, and the mean validation metrics over steps and wall time (stored in the weight metadata for
-    the book's plots)."""
+    the book's plots).  A run that ended before its first log record (no ``log.jsonl``) has an empty history."""
     steps, losses, times, val = [], [], [], []
+    if not Path(log_path).exists():
+        return {"step": [], "loss": [], "elapsed": [], "validation": []}
     with open(log_path) as f:
         for line in f:
             rec = json.loads(line)
