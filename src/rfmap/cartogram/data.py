@@ -7,7 +7,8 @@ live in a table instead: :func:`read_csv_values` reads a CSV column by an id col
 do (``cartogram-cpp --id --area``).  Ids are compared as text (``11`` and ``11.0`` are the same id); an id left
 without a partner is then compared with accents and case ignored (:func:`loose_id`: "Fryslan" finds "Fryslân"), and
 joined where that comparison finds exactly one partner on each side.  Such pairs are reported, and so are the ids
-that it finds several partners for ("did you mean ...").  A region without a row is reported and, by default, takes the mean density of the matched regions,
+that it finds several partners for ("did you mean ...").  A region without a row is reported and, by default, takes
+the mean density of the matched regions,
 
 .. math:: v_i = a_i \, \frac{\sum_{j \in M} v_j}{\sum_{j \in M} a_j},
 
@@ -380,8 +381,9 @@ def join_values(collection, values: Mapping[str, float], *, key: str = "id", val
             props[col] = by_id.get(rows[k]) if rows[k] is not None else None
         out.append({**f, "properties": props})
     how = missing if gap.any() else ("fallback" if unmatched else missing)
+    joined = {row for row in rows if row is not None}
     return Join({"type": "FeatureCollection", "features": out}, value, len(feats) - len(unmatched),
-                [names[k] for k in unmatched], sorted(set(values) - {row for row in rows if row is not None}), how,
+                [names[k] for k in unmatched], sorted(set(values) - joined), how,
                 loose=[(names[k], row) for k, row in loose], ambiguous=[(names[k], c) for k, c in ambiguous])
 
 
