@@ -4,7 +4,8 @@
 #   make test        unit tests, every notebook with nbval (through the rfmap kernel, from notebooks/, as
 #                    JupyterLab runs it) and the book build (every notebook again, from a temporary directory), all
 #                    at RFMAP_SCALE=ci, side by side (one thread each; logs in _build/test-logs)
-#   make book        execute the notebooks at full scale and build the HTML book into _build/html
+#   make book        execute the notebooks at full scale and build the HTML book into _build/html; fail on an
+#                    unresolved placeholder or a raw object repr on any page (scripts/book_text_check.py)
 #   make book-check  screenshot every whole page of the built book; fail on error output or a missing or blank figure
 #   make lab-check [NB=06_dem_deq_2d]
 #                    open a chapter in JupyterLab (started by `make lab`) in headless Chromium, screenshot it into
@@ -57,6 +58,7 @@ test: install
 
 book: install
 	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter-book build . $(BOOK_FLAGS)
+	$(BIN)/python scripts/book_text_check.py --html _build/html
 	@echo "book: open _build/html/index.html"
 
 # one chapter, as the book runs it but from notebooks/ (as JupyterLab does); the executed copy keeps its outputs

@@ -5,7 +5,8 @@ Usage: python scripts/book_check.py [--html _build/html] [--out _build/screensho
                                     [--no-screenshots]
 
 Every page listed in _toc.yml must exist under the HTML folder. Each page is scanned for signs of a failed
-notebook or a broken build (traceback or stderr output cells, docutils system messages, unresolved references), for
+notebook or a broken build (traceback or stderr output cells, docutils system messages, unresolved references,
+unresolved placeholders and raw reprs as scripts/book_text_check.py finds them), for
 paths of the machine that built it (a printed ``PosixPath``, the repository's folder, a temporary file), and
 for broken figures: an image whose file is missing or cannot be read, or a blank one (every pixel the same, up to a
 standard deviation of BLANK_STD grey levels). Each page is then captured whole, from top to bottom, by headless
@@ -47,6 +48,8 @@ from typing import NamedTuple
 from urllib.parse import unquote, urlparse
 
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from book_text_check import placeholder_problems, repr_problems  # noqa: E402  (a sibling script)
 CHROMIUM_FLAGS = [
     "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
     "--disable-background-networking", "--disable-component-update", "--disable-sync", "--hide-scrollbars",
@@ -139,6 +142,7 @@ def scan_html(page: Path) -> list[str]:
     if m:
         body = m.group(0)
     problems = [f"{why} ({pat.pattern})" for pat, why in ERROR_MARKERS if pat.search(body)]
+    problems += placeholder_problems(body) + repr_problems(body)  # scripts/book_text_check.py
     for pat, why in machine_path_markers():
         m = pat.search(body)
         if m:

@@ -4,7 +4,8 @@
 #   pytest      the library's tests (tests/)
 #   nbval       every chapter through the rfmap kernel, from notebooks/ (its figures go to a temporary folder,
 #               so that it never writes a file the book build is reading)
-#   book        the Jupyter Book build with warnings as errors (every chapter executed again, figures to book/figures)
+#   book        the Jupyter Book build with warnings as errors (every chapter executed again, figures to book/figures),
+#               then scripts/book_text_check.py (no unresolved placeholder, no raw repr on any page)
 #
 # Each step is single-threaded (OMP_NUM_THREADS=1), so that three steps on a 2-core machine share the cores instead
 # of fighting over them; each writes its output to _build/test-logs/STEP.log, which is printed when all have ended.
@@ -27,7 +28,8 @@ start=$(date +%s)
 "$BIN/pytest" tests/ >"$LOGS/pytest.log" 2>&1 & PIDS[pytest]=$!
 (cd notebooks && RFMAP_FIGURES=$NBFIG "${NB_ENV[@]}" "$ROOT/$BIN/pytest" $NBVAL_FLAGS .) >"$LOGS/nbval.log" 2>&1 &
 PIDS[nbval]=$!
-"${NB_ENV[@]}" "$BIN/jupyter-book" build . $BOOK_FLAGS >"$LOGS/book.log" 2>&1 & PIDS[book]=$!
+("${NB_ENV[@]}" "$BIN/jupyter-book" build . $BOOK_FLAGS && "$BIN/python" scripts/book_text_check.py --html _build/html) \
+    >"$LOGS/book.log" 2>&1 & PIDS[book]=$!
 
 failed=()
 for step in pytest nbval book; do

@@ -192,16 +192,21 @@ def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
     assert numbers["tab:3d_resolution_test"] == "Table 9" and numbers["fig:3d_resolution_test"] == "Fig. 13"
     board = mod.scoreboard(ROOT)
     assert "tab:" not in board and "fig:" not in board
-    assert "[Table 4 · Fig. 7](../notebooks/" in board
+    assert "[Table 4 (Fig. 7)](../notebooks/" in board
     rows = [line for line in board.splitlines() if line.startswith("| ")]
     n_metrics = sum(len(it["score"]["metrics"]) for it in _items() if it["score"]["kind"] == "score")
     assert len(rows) == 1 + n_metrics <= 16
     assert board.count("**Criterion.**") == 1 and "is at most the paper's value" in board
+    assert board.count("**Verdict.**") == 1 and "*not comparable*" in board
     head = rows[0]
-    for col in ("Paper", "the paper's method", "delivered", "Classical solver", "Met"):
+    for col in ("Verdict", "Paper", "Paper's method", "Delivered", "Classical"):
         assert col in head
     full = mod.full_scoreboard(ROOT)
-    assert "t4_std_rho_map_rect-peak_native" in full and "t9_std_rho_map_64_met" in full
+    for key in ("t4_std_rho_map_rect-peak_native", "t9_std_rho_map_64_met", "t7_verdict", "f10_verdict"):
+        assert f"::{key}:s`" in full, key  # pasted by a glue role, not left as text
+    for text in (board, full):  # every placeholder became a glue role (a key with a hyphen too)
+        left = re.sub(r"\{glue:text\}`[^`]*`", "", text)
+        assert not mod.PLACEHOLDER.search(re.sub(r"\{doc\}`[^`]*`", "", left)), mod.PLACEHOLDER.search(left)
     for it in _items():
         for k in range(1, len(it["score"].get("footnotes", [])) + 1):  # every caveat is referenced and defined
             ref = f"[^{it['score']['key']}-{k}]"
@@ -210,9 +215,10 @@ def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
 
 def test_scoreboard_pastes_from_the_chapters():
     mod = _figures_script()
-    row = mod.paste("{sq_met} of 4, {res_std_max:.3g}", "notebooks/06_dem_deq_2d.ipynb")
+    row = mod.paste("{sq_met} of 4, {res_std_max:.3g}, {t4_mean_mu_sin-cos_met}", "notebooks/06_dem_deq_2d.ipynb")
     assert row == ("{glue:text}`../notebooks/06_dem_deq_2d.ipynb::sq_met:s` of 4, "
-                   "{glue:text}`../notebooks/06_dem_deq_2d.ipynb::res_std_max:.3g`")
+                   "{glue:text}`../notebooks/06_dem_deq_2d.ipynb::res_std_max:.3g`, "
+                   "{glue:text}`../notebooks/06_dem_deq_2d.ipynb::t4_mean_mu_sin-cos_met:s`")
     assert "\\|" in mod.paste("|Δd| {k}", "notebooks/05_beltrami_reconstruction.ipynb")  # pipes escaped in a table
 
 

@@ -95,3 +95,55 @@ def test_main_fails_on_a_page_with_a_blank_figure(book_check, tmp_path, images, 
     monkeypatch.setattr(book_check, "toc_pages", lambda: ["notebooks/chapter"])
     assert book_check.main(["--html", str(html), "--no-screenshots"]) == 1
     assert "FAIL notebooks/chapter: blank image" in capsys.readouterr().out
+
+
+@pytest.fixture(scope="module")
+def text_check():
+    spec = importlib.util.spec_from_file_location("book_text_check", ROOT / "scripts" / "book_text_check.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.mark.parametrize("body, found", [
+    ("<td>{t4_std_rho_map_sin-cos_paper}</td>", "unresolved placeholder {t4_std_rho_map_sin-cos_paper}"),
+    ("<p>met on {t7n_std_rho_map_met:s} sides</p>", "unresolved placeholder {t7n_std_rho_map_met:s}"),
+    ("<p>{glue:text}`../notebooks/06.ipynb::key:s`</p>", "unresolved placeholder {glue:text}`../notebooks/06.ipynb::"),
+    ("<p>see {doc}`figures`</p>", "unresolved placeholder {doc}"),
+])
+def test_unresolved_placeholders_are_reported_with_their_key(book_check, text_check, tmp_path, body, found):
+    page = _page(tmp_path, body)
+    problems = text_check.page_problems(page)
+    assert len(problems) == 1 and problems[0].startswith(found), problems
+    assert any(p.startswith(found) for p in book_check.scan_html(page))  # make book-check reports it too
+
+
+@pytest.mark.parametrize("body", [
+    "<pre>print(f'{key}')</pre>", "<p>the dict <code class='literal'>{prefix}_{key}</code></p>",
+    '<span class="math notranslate nohighlight">\\(\\frac{a}{b} + \\mathrm{Std}\\)</span>',
+    '<div class="math notranslate nohighlight">\\[x^{n}_{ij}\\]</div>', "<p>\\(\\tilde\\rho_{map}\\)</p>",
+    "<p>the set {0, 1} and 0.08254</p>",
+])
+def test_braces_in_code_math_and_plain_text_pass(text_check, tmp_path, body):
+    assert text_check.page_problems(_page(tmp_path, body)) == []
+
+
+@pytest.mark.parametrize("shown, why", [
+    ("&lt;rfmap.surrogate.Surrogate object at 0x7f3a2c&gt;", "an object's default repr"),
+    ("MultiResUNet(\n  (lift): Conv2d(3, 8, kernel_size=(1, 1))\n)", "a torch module printout"),
+    ("Surrogate('deq2d-square', TaskSpec(kind='density'))", "a repr of an rfmap object"),
+    ("{'std_rho_map': 0.0812, 'n_flipped': 0}", "a printed dict of metrics"),
+])
+def test_raw_reprs_in_outputs_are_reported(text_check, tmp_path, shown, why):
+    body = f'<div class="output text_plain highlight-myst-ansi notranslate"><div class="highlight"><pre>{shown}</pre>'
+    problems = text_check.page_problems(_page(tmp_path, body + "</div></div>"))
+    assert len(problems) == 1 and problems[0].startswith(why), problems
+
+
+def test_the_text_check_fails_the_build_naming_page_and_key(text_check, tmp_path, capsys):
+    (tmp_path / "index.html").write_text("<html><article><p>fine</p></article></html>")
+    _page(tmp_path, "<td>{t4_verdict}</td>")
+    assert text_check.main(["--html", str(tmp_path)]) == 1
+    assert "FAIL notebooks/chapter: unresolved placeholder {t4_verdict}" in capsys.readouterr().out
+    (tmp_path / "notebooks" / "chapter.html").write_text("<html><article><p>0.0812</p></article></html>")
+    assert text_check.main(["--html", str(tmp_path)]) == 0

@@ -157,3 +157,33 @@ def test_models_compared_on_one_density_share_the_flow_map():
     assert c.maps["DEM"]["classical"] is c.maps["DEQ"]["classical"]
     assert c.value("DEM", "native", "std_rho_map") == pytest.approx(c.value("DEM", "native", "std_rho_orig"))
     assert c.met("DEM", "std_rho_map") is None and c.count("mean_mu") == (0, 0)
+
+
+def test_a_case_whose_input_is_not_the_papers_is_not_scored():
+    """rect-peak as this project defines it has Std(rho~_orig) 0.5709 on the paper's grid against the paper's
+    0.4807: it is not comparable (n/c) and left out of the counts and the verdict; sin-cos agrees to 5e-7."""
+    from rfmap.paper.verdicts import COMPARABLE_RTOL, input_std
+
+    assert abs(input_std("sin-cos", 51) / 0.453812 - 1) < COMPARABLE_RTOL
+    assert abs(input_std("rect-peak", 51) / 0.480728 - 1) > 100 * COMPARABLE_RTOL
+    cases = [Case("sin-cos", "sin-cos", 9), Case("rect-peak", "rect-peak", 9)]
+    c = Comparison("tab:population_test", "t", ["std_rho_map"], cases, "flow solver")
+    for name, paper_orig, (paper, native) in [("sin-cos", 0.453812, (0.08, 0.07)),
+                                              ("rect-peak", 0.480728, (0.09, 0.12))]:
+        c.values[(name, "paper")] = {"std_rho_map": paper, "std_rho_orig": paper_orig}
+        for method in ("native", "delivered", "classical"):
+            c.values[(name, method)] = {"std_rho_map": native, "std_rho_orig": 0.6, "time": 0.01}
+    assert c.comparable("sin-cos") and not c.comparable("rect-peak")
+    assert c.met("rect-peak", "std_rho_map") is None and c.count("std_rho_map") == (1, 1)
+    v = c.score_values()
+    assert v["verdict"] == "reproduced (1 of 1)"
+    assert v["std_rho_map_rect-peak_met"] == f"n/c; ratio {0.12 / 0.6:.3g} vs {0.09 / 0.480728:.3g}"
+    assert c.to_markdown().splitlines()[4].endswith("| n/c; ratio 0.2 vs 0.187 |")
+    c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses
+    assert c.score_values()["verdict"] == "not reproduced (0 of 1)"
+
+
+def test_verdict_words_follow_the_stated_rule():
+    from rfmap.paper.verdicts import VERDICTS, verdict
+
+    assert [verdict(f) for f in ([True] * 3, [True, False, None], [False, None], [None, None])] == list(VERDICTS)

@@ -33,10 +33,11 @@ from typing import Callable
 import numpy as np
 
 from ..finish import quiet_quality
-from ..fields.paper import DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
+from ..fields.paper import DENSITIES, PAPER_N, TEST_FIELDS, get_field, sample_mu
 from ..core.result import MapResult
 from .reproduce import beltrami_values, density_values, exact_beltrami_result
 from .tables import paper_table
+from .verdicts import is_comparable, std_ratio, verdict
 
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
            "timed", "compare_density", "compare_beltrami", "compare_models", "population_comparison",
@@ -173,8 +174,39 @@ class Comparison:
         return self.values.get((str(case), method), {}).get(quantity)
 
     def met(self, case: str, metric: str) -> bool | None:
-        """Whether the paper's method is at most the paper's value (``None`` without a paper value)."""
+        """Whether the paper's method is at most the paper's value (``None`` without a paper value, or where the
+        case's input is not the paper's: :meth:`comparable`)."""
+        if not self.comparable(case):
+            return None
         return _met(self.value(case, "native", metric), self.value(case, "paper", metric))
+
+    def comparable(self, case: str) -> bool:
+        """Whether the case's input is the paper's (:func:`rfmap.paper.verdicts.is_comparable`: its Std(rho~_orig)
+        on the paper's grid, a grid side named by the case or the table's, agrees with the paper's)."""
+        c = next(c for c in self.cases if c.name == str(case))
+        paper_std = self.value(c.name, "paper", "std_rho_orig")
+        if paper_std is None:
+            return True
+        n = int(c.name) if c.name.isdigit() else PAPER_N[get_field(c.field).dim]
+        return is_comparable(c.field, n, paper_std)
+
+    def verdict_word(self) -> str:
+        """The item's verdict (:func:`rfmap.paper.verdicts.verdict`) with its count, e.g. ``'partly (5 of 8)'``."""
+        flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
+        known = [f for f in flags if f is not None]
+        return f"{verdict(flags)} ({sum(known)} of {len(known)})" if known else verdict(flags)
+
+    def _case_met(self, case: str, metric: str) -> str:
+        """The met cell of a case: ``yes`` / ``no`` / ``—``, or for an input that is not the paper's ``n/c`` with
+        the Std ratios (ours, the paper's) of :func:`rfmap.paper.verdicts.std_ratio` for Std(rho~_map)."""
+        if self.comparable(case):
+            met = self.met(case, metric)
+            return "—" if met is None else ("yes" if met else "no")
+        if metric != "std_rho_map":
+            return "n/c"
+        ours, paper = (std_ratio(self.value(case, m, "std_rho_map"), self.value(case, m, "std_rho_orig"))
+                       for m in ("native", "paper"))
+        return "n/c" if ours is None or paper is None else f"n/c; ratio {ours:.3g} vs {paper:.3g}"
 
     def count(self, metric: str, test: Callable[[str], bool | None] | None = None) -> tuple[int, int]:
         """``(k, m)``: the cases where ``test(case)`` holds (default: :meth:`met`) among the ``m`` it decides."""
@@ -255,7 +287,9 @@ class Comparison:
             out[f"{metric}_classical_better"] = "{} of {}".format(*self.classical_better(metric))
             for c in self.cases:
                 row = score_row(*(self.value(c.name, m, metric) for m in METHODS))
+                row["met"] = self._case_met(c.name, metric)
                 out.update({f"{metric}_{c.name}_{k}": v for k, v in row.items()})
+        out["verdict"] = self.verdict_word()
         return out
 
     def heads(self) -> list[str]:
@@ -272,9 +306,8 @@ class Comparison:
                 if q == "time":
                     cells += [format_time(self.value(c.name, m, q)) for m in METHODS] + [""]
                 else:
-                    met = self.met(c.name, q)
                     cells += [format_number(self.value(c.name, m, q)) for m in METHODS]
-                    cells.append("—" if met is None else ("yes" if met else "no"))
+                    cells.append(self._case_met(c.name, q))
                 lines.append("| " + " | ".join(cells) + " |")
         return "\n".join(lines)
 

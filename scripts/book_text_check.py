@@ -1,0 +1,106 @@
+#!/usr/bin/env python3
+"""Fail on text a reader should never see in the built book: unresolved placeholders and raw object reprs.
+
+Usage: python scripts/book_text_check.py [--html _build/html]
+
+Every HTML page of the book (``_build/html/**/*.html`` but the theme's own pages) is read as a reader sees it: the
+article only, without code (``<pre>``, ``<code>``), math (MathJax spans and blocks) and scripts.  Two kinds of
+problem are reported, one line each, naming the page and what was found:
+
+* an **unresolved placeholder**: a ``{key}`` or ``{key:format}`` left in the text (a scoreboard template whose key
+  the generator did not turn into a glue role), or a raw ``{glue:...}`` / ``{glue}`` role that the build did not
+  resolve;
+* a **raw repr** in a cell's output: ``<... object at 0x...>``, a torch module printout (``(name): Conv2d(``), a
+  dataclass repr of the package (``Surrogate(``, ``TaskSpec(``, ``MapResult(``, ``MapMetrics(``) or a printed
+  ``dict`` of metric names.
+
+The exit status is 1 when any page has a problem.  ``make book`` runs this after the build, and
+``scripts/book_check.py`` (``make book-check``) reports the same problems per page.
+"""
+from __future__ import annotations
+
+import argparse
+import html
+import re
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+#: elements whose text is not prose: code, math and scripts (removed before the placeholder search)
+NOT_PROSE = re.compile(
+    r"<(pre|code|script|style|mjx-container)\b.*?</\1>"
+    r"|<(span|div)\b[^>]*class=\"[^\"]*\bmath\b[^\"]*\"[^>]*>.*?</\2>",
+    re.DOTALL | re.IGNORECASE)
+#: inline and display math delimiters MathJax reads in plain text
+TEX = re.compile(r"\\\(.*?\\\)|\\\[.*?\\\]|\$\$.*?\$\$", re.DOTALL)
+TAG = re.compile(r"<[^>]+>")
+PLACEHOLDER = re.compile(r"\{glue(?::\w+)?\}`?[^`\s]*`?|\{[A-Za-z_][A-Za-z0-9_-]*(?::[^{}\s]*)?\}")
+#: the text of a cell's plain-text output
+OUTPUT = re.compile(r'<div class="output text_plain[^"]*">.*?<pre>(.*?)</pre>', re.DOTALL)
+REPRS = [
+    (re.compile(r"<[\w.]+ object at 0x[0-9a-fA-F]+>"), "an object's default repr"),
+    (re.compile(r"^\s*\(\w+\): [A-Z]\w*\(", re.MULTILINE), "a torch module printout"),
+    (re.compile(r"\b(?:Surrogate|TaskSpec|MapResult|MapMetrics|MapOptions|TrainConfig)\((?:'|\w+=)"),
+     "a repr of an rfmap object"),
+    (re.compile(r"\{'(?:std_rho_map|std_rho_orig|mean_mu|max_mu|mean_dd|mean_dmu|min_jacobian|n_flipped)'"),
+     "a printed dict of metrics"),
+]
+
+
+def article(text: str) -> str:
+    """The ``<article>`` of a page (the whole text where there is none)."""
+    m = re.search(r"<article\b.*?</article>", text, re.DOTALL)
+    return m.group(0) if m else text
+
+
+def placeholder_problems(body: str) -> list[str]:
+    """Unresolved placeholders and raw glue roles in the prose of an article's HTML."""
+    prose = TEX.sub(" ", html.unescape(TAG.sub(" ", NOT_PROSE.sub(" ", body))))
+    found = list(dict.fromkeys(m.group(0) for m in PLACEHOLDER.finditer(prose)))
+    return [f"unresolved placeholder {f}" for f in found]
+
+
+def repr_problems(body: str) -> list[str]:
+    """Raw reprs in the plain-text outputs of an article's cells."""
+    out = []
+    for m in OUTPUT.finditer(body):
+        text = html.unescape(TAG.sub("", m.group(1)))
+        for pat, why in REPRS:
+            hit = pat.search(text)
+            if hit:
+                out.append(f"{why} in a cell's output: {hit.group(0).strip()[:60]!r}")
+    return list(dict.fromkeys(out))
+
+
+def page_problems(page: Path) -> list[str]:
+    body = article(page.read_text(encoding="utf-8", errors="replace"))
+    return placeholder_problems(body) + repr_problems(body)
+
+
+def book_pages(html_dir: Path) -> list[Path]:
+    """The book's pages: every HTML file but the theme's (search, genindex, _static, _sources)."""
+    skip = {"search.html", "genindex.html", "py-modindex.html"}
+    return sorted(p for p in html_dir.rglob("*.html")
+                  if p.name not in skip and not any(part.startswith("_") for part in p.relative_to(html_dir).parts))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--html", type=Path, default=ROOT / "_build" / "html")
+    args = parser.parse_args(argv)
+    pages = book_pages(args.html)
+    if not pages:
+        print(f"book_text_check: error: no built pages in {args.html}", file=sys.stderr)
+        return 1
+    bad = 0
+    for page in pages:
+        for p in page_problems(page):
+            print(f"FAIL {page.relative_to(args.html).with_suffix('')}: {p}")
+        bad += bool(page_problems(page))
+    print(f"book_text_check: {bad} of {len(pages)} page(s) with unresolved placeholders or raw reprs" if bad
+          else f"book_text_check: {len(pages)} pages, no unresolved placeholder and no raw repr")
+    return 1 if bad else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,82 @@
+r"""One verdict word per paper table or figure, and whether a test input is the paper's.
+
+A case of a density table is *comparable* with the paper when its input is the paper's: the test density on the
+paper's grid has the paper's :math:`\mathrm{Std}(\tilde\rho_{\text{orig}})` to within :data:`COMPARABLE_RTOL`
+(relative).  A case whose input differs (a field the paper describes too loosely to rebuild exactly) is not scored
+against the paper's value; :func:`std_ratio` compares it by the share of the input's spread the map leaves,
+:math:`\mathrm{Std}(\tilde\rho_{\text{map}}) / \mathrm{Std}(\tilde\rho_{\text{orig}})`.
+
+The verdict of an item (:func:`verdict`) counts, over its comparable cases and its scored metrics, the pairs where
+the paper's method is at most the paper's value:
+
+``reproduced``
+    every pair;
+``partly``
+    some, not all;
+``not reproduced``
+    none;
+``not comparable``
+    no comparable case (or no paper value to compare with).
+"""
+from __future__ import annotations
+
+from functools import lru_cache
+
+__all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "input_std", "is_comparable", "std_ratio", "verdict"]
+
+#: relative agreement of the input's Std(rho~_orig) with the paper's for a case to count as the paper's input (the
+#: paper prints six digits; the inputs rebuilt from its formulas agree to 3e-4 or better)
+COMPARABLE_RTOL = 1e-3
+#: the verdict words, best first
+VERDICTS = ("reproduced", "partly", "not reproduced", "not comparable")
+#: the rule of :func:`verdict`, as the scoreboards state it once
+VERDICT_RULE = (
+    "*reproduced*: the paper's method meets the paper in every scored metric of every case whose input is the "
+    "paper's; *partly*: in some of them; *not reproduced*: in none; *not comparable*: no case has the paper's input. "
+    "A case's input is the paper's when its Std(ρ̃_orig) on the paper's grid agrees with the paper's to "
+    f"{COMPARABLE_RTOL:.0e} (relative); a case whose input differs is marked *n/c* and compared instead by "
+    "Std(ρ̃_map) / Std(ρ̃_orig), the share of the input's spread the map leaves.")
+
+
+@lru_cache(maxsize=64)
+def input_std(field: str, n: int) -> float:
+    r""":math:`\mathrm{Std}(\tilde\rho_{\text{orig}})` of the test density ``field`` on the grid mesh of side ``n``
+    (the identity map's :attr:`~rfmap.core.metrics.MapMetrics.std_rho_orig`, as every table computes it)."""
+    from ..core.mesh import grid_mesh
+    from ..core.metrics import compute_metrics
+    from ..fields.paper import get_field, sample_density
+
+    mesh = grid_mesh(n, get_field(field).dim)
+    m = compute_metrics(mesh.points, mesh.points, mesh.elements, density=sample_density(field, n).reshape(-1))
+    return float(m.std_rho_orig)
+
+
+def is_comparable(field: str, n: int, paper_std_orig: float | None) -> bool:
+    """Whether the input ``field`` on the paper's grid side ``n`` is the paper's (module docstring); ``True``
+    where the paper prints no Std(rho~_orig) (the Beltrami tables: their inputs are closed-form maps)."""
+    if paper_std_orig is None:
+        return True
+    return abs(input_std(field, n) - paper_std_orig) <= COMPARABLE_RTOL * abs(paper_std_orig)
+
+
+def std_ratio(std_map: float | None, std_orig: float | None) -> float | None:
+    """Std(rho~_map) / Std(rho~_orig), ``None`` where either is missing."""
+    if std_map is None or not std_orig:
+        return None
+    return float(std_map) / float(std_orig)
+
+
+def verdict(met: list[bool | None]) -> str:
+    """The verdict word of an item from the met flags of its comparable (case, metric) pairs, each ``True``,
+    ``False`` or ``None`` (no paper value); see the module docstring.
+
+    Examples
+    --------
+    >>> verdict([True, True]), verdict([True, False]), verdict([False]), verdict([None]), verdict([])
+    ('reproduced', 'partly', 'not reproduced', 'not comparable', 'not comparable')
+    """
+    flags = [m for m in met if m is not None]
+    if not flags:
+        return "not comparable"
+    k = sum(flags)
+    return "reproduced" if k == len(flags) else ("partly" if k else "not reproduced")
