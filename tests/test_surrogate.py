@@ -538,10 +538,12 @@ def test_density_quality_of_thin_and_broken_maps():
 def test_a_map_that_undoes_equalization_warns():
     import warnings
 
-    flat = lambda x: np.ones(x.shape[:-1])  # noqa: E731  a uniform density: any movement makes it less equal
+    # a density uniform to one part in a million (a uniform one is mapped to the identity without the network):
+    # any movement makes it less equal
+    flat = lambda x: 1.0 + 1e-6 * x[..., 0]  # noqa: E731
     with pytest.warns(S.PoorMapWarning, match=r"less equal than it was .*shortened to .*refine=True.*polish=True"):
         r = tiny(head_seed=3).map(flat, 21)
-    # delivered: shortened back to the identity, the only map that leaves a uniform density uniform
+    # delivered: shortened back to the identity, the only map that leaves a nearly uniform density so
     assert r.info["shorten"]["scale"] == 0.0 and r.info["shorten"]["std_before"] > 1e-3
     assert not r.info["quality"]["worse"] and r.info["quality"]["std_rho_map"] < 1e-5  # (float32 measures)
     np.testing.assert_allclose(r.mapped_points, r.ref_points, atol=0)
@@ -593,3 +595,32 @@ def test_query_shortening_falls_back_to_the_query_mesh(monkeypatch):
     assert rep["query_mesh"] and rep["scale"] == rep["query_report"]["scale"]
     m = q.metrics()
     assert m.n_flipped == 0 and m.std_rho_map <= m.std_rho_orig + 1e-12
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("value", [0.0, 1.0, -1.0])
+def test_a_constant_density_is_the_identity_exactly(dim, value):
+    """A constant density (all zeros, all equal, all -1: uniform after the paper's preprocessing) is equal already:
+    a network that moves every other field (``head_seed``) returns the identity bit for bit, without a warning,
+    for an array, a function, query points, ``refine``, ``polish`` and a batch; ``info`` says why."""
+    import warnings
+
+    sur = tiny(TaskSpec("density", dim, "square"), head_seed=3)
+    n = 13
+    grid = np.full((n,) * dim, value)
+    const = lambda x: np.full(x.shape[:-1], value)  # noqa: E731
+    pts = 0.02 + 0.96 * grid_points(n, dim)[::5]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        results = [sur.map(grid), sur.map(const, n), sur.map(grid, points=pts), sur.map(grid, refine=True),
+                   *sur.map_batch([grid, grid], n)]
+        if dim == 2:
+            results.append(sur.map(grid, polish=True))
+    for r in results:
+        assert np.array_equal(r.mapped_points, r.ref_points) and r.mapped_points is not r.ref_points
+        assert dict(r.info) == {"uniform": True} and r.kind == "density"
+        assert np.ptp(r.field) <= 1e-12 * r.field[0]  # query points: a multilinear interpolant of the constant
+    assert results[2].ref_points.shape == pts.shape
+    with S.quiet_quality():  # the same network does move a field that is not constant
+        moved = sur.map(lambda x: 1.0 + 0.5 * np.sin(np.pi * x[..., 0]), n, repair=False)
+    assert np.abs(moved.mapped_points - moved.ref_points).max() > 1e-3

@@ -25,9 +25,10 @@ import numpy as np
 import torch
 
 from ._version import __version__
+from .core.inputs import is_uniform
 from .core.mesh import check_n, grid_mesh, grid_points, interpolate, triangulate
 from .core.device import resolve_device
-from .finish import Draft, MapOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
+from .finish import Draft, InfoView, MapOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
     poor_map_message
 from .finish.stages import refine, regrid
 from .finish.quality import QUALITY_MARGIN, PoorMapWarning, density_quality, quality_message, quiet_quality
@@ -400,7 +401,9 @@ class Surrogate:
             metrics).  A density map of the output grid without ``polish`` also carries ``info["quality"]``
             (:func:`density_quality`), and when it leaves the density less equal than it was (a field unlike the
             training fields), or had to be shortened not to, a :class:`PoorMapWarning` names the numbers and the
-            remedies (``refine``, ``polish``; :func:`quiet_quality` silences it).
+            remedies (``refine``, ``polish``; :func:`quiet_quality` silences it).  A uniform density (a constant,
+            e.g. all zeros, after preprocessing: :func:`rfmap.core.inputs.is_uniform`) is equal already: its map is
+            the identity, exactly, computed by no stage, and ``info`` holds only ``uniform = True``.
         """
         opts = replace(options or MapOptions(), **kw)
         group = self._symmetry(opts.symmetrize)
@@ -443,6 +446,10 @@ class Surrogate:
         grid_n = n if points is None else None
         mesh = MapResult(ref_points=ref, mapped_points=ref, elements=elements, kind=self.spec.kind,
                          field=self._field_on(inp, ref, elements, grid_n))
+        if self.spec.task.equalizes and is_uniform(inp.grid) and (inp.fn is None or is_uniform(mesh.field)):
+            # a uniform density is equal already: its map is the identity, exactly, and nothing is computed (a
+            # density function is asked at the output vertices too; a grid's interpolant is uniform to round-off)
+            return replace(mesh, mapped_points=ref.copy(), info=InfoView(MapReport(), {"uniform": True}))
 
         def predict(w: int, given=None) -> Draft:
             draft = self._predict(inp, mesh, grid_n, w, opts.alpha, group, given)

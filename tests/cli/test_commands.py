@@ -508,13 +508,13 @@ def test_an_allocation_that_fails_is_one_line_and_exit_2(tmp_path, capsys, monke
 
 def test_map_warns_in_one_line_when_the_map_undoes_equalization(tmp_path, capsys, tiny_model):
     f = tmp_path / "flat.npy"
-    np.save(f, np.ones((21, 21)))
+    np.save(f, 1.0 + 1e-6 * np.linspace(0, 1, 21)[:, None] * np.ones(21))  # uniform to one part in a million
     out = tmp_path / "flat.npz"
     rc, stdout, err = run_main(capsys, "map", "--model", tiny_model, "--field-file", f, "--out", out)
     assert rc == 0 and out.exists() and f"wrote {out}" in stdout
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("rfmap map: warning: the network's map left this density less")
-    assert "shortened to 0 of itself" in lines[0]  # a uniform density: the identity is the best map
+    assert "shortened to 0 of itself" in lines[0]  # a nearly uniform density: the identity is the best map
     assert "--refine" in lines[0] and "--polish" in lines[0] and "Warning" not in err
 
 
@@ -524,7 +524,7 @@ def test_map_of_query_points_warns_in_one_line_when_shortened(tmp_path, capsys, 
     from rfmap.core.mesh import grid_points
 
     f, pts = tmp_path / "flat.npy", tmp_path / "pts.npy"
-    np.save(f, np.ones((21, 21)))
+    np.save(f, 1.0 + 1e-6 * np.linspace(0, 1, 21)[:, None] * np.ones(21))  # uniform to one part in a million
     np.save(pts, grid_points(21, 2)[::5])
     out = tmp_path / "flat.npz"
     rc, stdout, err = run_main(capsys, "map", "--model", tiny_model, "--field-file", f, "--points", pts,
@@ -553,3 +553,29 @@ def test_a_named_subcommand_builds_only_its_parser_and_parses_alike(capsys):
     with pytest.raises(SystemExit) as e:
         main(["no-such-command"])
     assert e.value.code == 2 and "invalid choice" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("value", [0.0, 1.0, -1.0])
+def test_a_constant_density_maps_to_the_identity_without_a_warning(tmp_path, capsys, dim, value):
+    """``rfmap map`` (a network that moves other fields) and ``rfmap solve`` (both methods) write the identity, bit
+    for bit, for a constant field file of either dimension, say so, and print nothing on stderr."""
+    torch.manual_seed(0)
+    model = MultiResUNet(dim, 1, base=4, depth=2)
+    with torch.no_grad():
+        model.head.weight.normal_(0.0, 0.1)
+    weights = tmp_path / "tiny.safetensors"
+    Surrogate(model, TaskSpec("density", dim, "square"), {"name": "tiny", "n_range": [13, 17]}).save(weights)
+    field = tmp_path / "flat.npy"
+    np.save(field, np.full((13,) * dim, value))
+    runs = [("map", "--model", weights), ("solve", "--method", "diffusion", "--quiet"),
+            ("solve", "--method", "flow", "--quiet")]  # --quiet: no progress bar on stderr
+    for k, run in enumerate(runs):
+        out = tmp_path / f"m{k}.npz"
+        rc, stdout, err = run_main(capsys, *run, "--field-file", field, "--out", out)
+        assert rc == 0 and err == "", (run, err)
+        res = load_result(out)
+        assert np.array_equal(res.mapped_points, res.ref_points), run
+        if run[0] == "map":
+            assert "std_rho_map=0," in stdout and "n_flipped=0" in stdout
+            assert stdout.splitlines()[1] == "the density is uniform: its map is the identity (the network was not run)"

@@ -412,7 +412,7 @@ def test_warm_start_residuals_rows():
     (np.ones(5), {}, "grid field"),
     (np.ones((4, 5)), {}, "same number"),
     (np.ones((2, 2)), {}, None),
-    (-np.ones((5, 5)), {}, None),
+    (np.linspace(-1.0, 1.0, 25).reshape(5, 5), {}, "strictly positive"),  # (a constant is the identity's)
     (np.full((5, 5), np.nan), {}, None),
     (np.ones((5, 5)), {"boundary": "fixed"}, "unknown boundary"),
     (np.ones((5, 5)), {"tol": -1e-3}, "tol"),

@@ -415,3 +415,29 @@ def test_dem_bad_input():
         solve_dem(good, boundary="free", margin=float("nan"))
     with pytest.raises(ValueError, match="refine must be a positive integer"):
         solve_dem(good, refine=0)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("method", ["diffusion", "flow"])
+@pytest.mark.parametrize("value", [0.0, 2.5, -1.0])
+def test_a_constant_density_is_the_identity_exactly(dim, method, value):
+    """Any constant grid (zero and negative included: the paper's preprocessing makes it uniform) is mapped to the
+    identity bit for bit, with no step or pass and no warning, on both boundaries; the field is the uniform density
+    (ones where the constant is not positive), whose metrics are exact too."""
+    import warnings
+
+    n = 9 if dim == 2 else 6
+    for boundary in ("square", "free"):
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            res = solve_dem(np.full((n,) * dim, value), method=method, boundary=boundary)
+        assert np.array_equal(res.mapped_points, res.ref_points), (boundary, value)
+        assert res.mapped_points is not res.ref_points
+        assert res.info["iterations" if method == "diffusion" else "passes"] == 0
+        assert np.all(res.field == (value if value > 0 else 1.0))
+        m = res.metrics()
+        assert m.std_rho_map == 0.0 and m.n_flipped == 0 and m.min_jacobian == 1.0
+    dens = np.ones((n,) * dim)
+    dens.flat[0] = 0.0
+    with pytest.raises(ValueError, match="strictly positive"):  # not constant: a density must still be positive
+        solve_dem(dens, method=method)

@@ -164,6 +164,9 @@ def cmd_map(args) -> int:
     if args.vtk:
         res.to_vtk(args.vtk)
     print(f"wrote {args.out}: {res.metrics()}")
+    if res.info.get("uniform"):
+        print("the density is uniform: its map is the identity (the network was not run)")
+        return 0
     if res.info.get("symmetrize"):
         from ..nn.symmetry import symmetries
 

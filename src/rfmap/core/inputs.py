@@ -10,7 +10,7 @@ import numpy as np
 
 from .mesh import grid_vertex_weights
 
-__all__ = ["check_density", "check_mu", "unit_mass", "preprocess_density", "DENSITY_FLOOR"]
+__all__ = ["check_density", "check_mu", "unit_mass", "preprocess_density", "is_uniform", "DENSITY_FLOOR"]
 
 #: The minimum of a preprocessed density before normalisation (paper Sec. 5.2: :math:`p - \min p + 0.1`).
 DENSITY_FLOOR = 0.1
@@ -44,6 +44,12 @@ def check_mu(mu, *, name: str = "mu") -> np.ndarray:
     return m
 
 
+def is_uniform(density) -> bool:
+    """Whether a density is constant (its largest value is its smallest, as any constant is after
+    :func:`preprocess_density`): its density-equalizing map is the identity, which the solvers and the surrogates
+    return exactly, computing nothing."""
+    v = np.asarray(density)
+    return bool(v.max() == v.min())
 
 
 def unit_mass(values: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:

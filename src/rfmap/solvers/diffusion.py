@@ -68,6 +68,7 @@ import numpy as np
 import torch
 
 from ..core.device import torch_threads
+from ..core.inputs import is_uniform
 from ..core.geometry import grid_min_measure
 from ..core.mesh import grid_mesh, interpolate
 from ..core.result import MapResult
@@ -358,7 +359,8 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
     ----------
     density : ndarray, shape (N, N) or (N, N, N)
         Preprocessed vertex densities on the ``N``-grid (strictly positive, finite; unit mass is the convention,
-        any positive scale works).  The dimension is ``density.ndim``; ``N >= 3``.
+        any positive scale works).  The dimension is ``density.ndim``; ``N >= 3``.  A constant grid, of any value
+        (:func:`rfmap.solvers.raster.check_grid_density`), is mapped to the identity exactly, without integrating.
     options : DiffusionOptions, optional
         The solver's options (:class:`DiffusionOptions`: ``boundary``, ``rtol``, ``tol_end``, ``refine``,
         ``margin``, ``max_steps``, ``num_threads``, ``fold_guard``); its defaults when ``None``.
@@ -381,7 +383,7 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
     ------
     ValueError
         For a density that is not an (N,)*d array with ``d`` in {2, 3} and ``N >= 3``, contains NaN/inf or
-        non-positive values, an unknown ``boundary``, or non-positive ``rtol``/``tol_end``/``refine``/``margin``.
+        non-positive values (and is not constant), an unknown ``boundary``, or non-positive ``rtol``/``tol_end``/``refine``/``margin``.
     """
     t_start = time.perf_counter()
     opts = replace(options or DiffusionOptions(), **kwargs)
@@ -422,26 +424,32 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
     def positive(p: np.ndarray) -> bool:
         return grid_min_measure(p, n) > 0.0
 
-    threads = opts.num_threads if opts.num_threads is not None else (1 if d == 2 else None)
-    with torch_threads(threads):
-        field = CosineDiffusion(fine)
-        blurs: list[float] = []
-        for retry in range(len(FOLD_BLURS) + 1):
-            # a retry starts the vertices moving at t0 = (sigma h)^2 / 2, when diffusion has blurred the density
-            # with a Gaussian of width sigma vertex spacings (as cartogram programs blur sharp inputs)
-            t0 = 0.0 if retry == 0 else 0.5 * (FOLD_BLURS[retry - 1] / (nb - 1)) ** 2
-            y, info = _integrate(field, y0.copy(), project, h=1.0 / (nb - 1), rtol=float(opts.rtol),
-                                 tol_end=float(opts.tol_end), max_steps=int(opts.max_steps), progress=progress,
-                                 label=f"DEM {d}D N={n}", positive=positive if opts.fold_guard else None, t0=t0)
-            if info["fold_stop"] is None or retry == len(FOLD_BLURS):
-                break
-            blurs.append(FOLD_BLURS[retry])
-        info["fold_blurs"] = blurs
-    mapped = y * scale - shift
-    if boundary == "square":
-        mapped = project(mapped)
+    if is_uniform(dens):  # a uniform density does not diffuse: every vertex stays where it is, exactly
+        mapped, m = ref.copy(), fine.shape[0]
+        info = {"iterations": 0, "rejected": 0, "evaluations": 0, "t_end": 0.0, "residual_velocity": 0.0,
+                "fold_rejections": 0, "fold_stop": None, "fold_blurs": []}
+    else:
+        threads = opts.num_threads if opts.num_threads is not None else (1 if d == 2 else None)
+        with torch_threads(threads):
+            field = CosineDiffusion(fine)
+            blurs: list[float] = []
+            for retry in range(len(FOLD_BLURS) + 1):
+                # a retry starts the vertices moving at t0 = (sigma h)^2 / 2, when diffusion has blurred the density
+                # with a Gaussian of width sigma vertex spacings (as cartogram programs blur sharp inputs)
+                t0 = 0.0 if retry == 0 else 0.5 * (FOLD_BLURS[retry - 1] / (nb - 1)) ** 2
+                y, info = _integrate(field, y0.copy(), project, h=1.0 / (nb - 1), rtol=float(opts.rtol),
+                                     tol_end=float(opts.tol_end), max_steps=int(opts.max_steps), progress=progress,
+                                     label=f"DEM {d}D N={n}", positive=positive if opts.fold_guard else None, t0=t0)
+                if info["fold_stop"] is None or retry == len(FOLD_BLURS):
+                    break
+                blurs.append(FOLD_BLURS[retry])
+            info["fold_blurs"] = blurs
+        mapped = y * scale - shift
+        if boundary == "square":
+            mapped = project(mapped)
+        m = field.m
     elapsed = time.perf_counter() - t_start
-    info = {"method": "diffusion", "boundary": boundary, "n": n, "dim": d, **info, "eval_grid": field.m, "box_grid": nb}
+    info = {"method": "diffusion", "boundary": boundary, "n": n, "dim": d, **info, "eval_grid": m, "box_grid": nb}
     if boundary == "free":
         info["sea_density"] = sea
     return MapResult(ref_points=ref, mapped_points=mapped, elements=mesh.elements, field=dens.reshape(-1),

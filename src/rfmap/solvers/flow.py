@@ -76,6 +76,7 @@ import numpy as np
 import torch
 
 from ..core.device import torch_threads
+from ..core.inputs import is_uniform
 from ..core.geometry import grid_element_mean, grid_min_measure, grid_signed_measures
 from ..core.mesh import grid_mesh
 from ..core.result import MapResult
@@ -439,7 +440,9 @@ def solve_flow(density, options: FlowOptions | None = None, *, start=None, progr
     Parameters
     ----------
     density : ndarray, shape (N, N) or (N, N, N)
-        Vertex densities on the ``N``-grid (strictly positive, finite; any positive scale).  ``N >= 3``.
+        Vertex densities on the ``N``-grid (strictly positive, finite; any positive scale).  ``N >= 3``.  A constant
+        grid, of any value (:func:`rfmap.solvers.raster.check_grid_density`), is mapped to the identity exactly
+        (no pass) when there is no ``start``.
     options : FlowOptions, optional
         The solver's options (:class:`FlowOptions`: ``boundary``, ``tol``, ``rtol``, ``refine``, ``margin``,
         ``sea_blend``, ``stall_blend``, ``max_passes``, ``stall``, ``blur``, ``max_steps``, ``stall_blurs``,
@@ -488,7 +491,8 @@ def solve_flow(density, options: FlowOptions | None = None, *, start=None, progr
         mapped, raster = ref.copy(), run.first_raster()
     else:
         mapped, raster = _checked_start(start, ref, box, eq, opts.boundary), None
-    history = [eq.std(None if start is None else mapped)]
+    # a uniform density left on the identity is equal already: no pass runs, the identity is returned exactly
+    history = [0.0 if start is None and is_uniform(dens) else eq.std(None if start is None else mapped)]
     best, best_std = mapped, history[0]
     bar = None
     if progress:

@@ -12,7 +12,7 @@ import itertools
 
 import numpy as np
 
-from ..core.inputs import check_density
+from ..core.inputs import check_density, is_uniform
 from ..core.mesh import check_n
 from .spectral import contract, interval_weights
 
@@ -24,6 +24,10 @@ DEM_BOUNDARIES = ("square", "free")
 
 
 def check_grid_density(density) -> np.ndarray:
+    """The density as a float64 (N,)*d grid (``ValueError`` unless finite, of ``d`` in {2, 3}, ``N >= 3``, and
+    strictly positive); a constant grid of any value, zero or negative included, is read as the uniform density
+    (ones where it is not positive), as the paper's preprocessing would make it
+    (:func:`rfmap.core.inputs.is_uniform`)."""
     arr = np.asarray(density)
     if arr.ndim not in (2, 3):
         raise ValueError(f"density must be a grid field of shape (N, N) or (N, N, N); got {arr.ndim} dimension(s), "
@@ -31,7 +35,10 @@ def check_grid_density(density) -> np.ndarray:
     if len(set(arr.shape)) != 1:
         raise ValueError(f"density must have the same number of vertices per side, got shape {arr.shape}")
     check_n(arr.shape[0], 3)
-    return check_density(arr)
+    v = check_density(arr, positive=False)
+    if is_uniform(v) and v.flat[0] <= 0:
+        return np.ones_like(v)
+    return check_density(v)
 
 
 def p1_upsample(values: np.ndarray, refine: int) -> np.ndarray:
