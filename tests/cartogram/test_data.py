@@ -102,6 +102,19 @@ def test_a_region_without_data_gets_the_mean_density():
     assert j.collection["features"][2]["properties"]["value"] == 7.0 and j.unmatched_regions == ["c"]
 
 
+def test_a_region_without_data_gets_the_total_value_over_the_total_area_of_the_others():
+    """Matched squares of 4 and 1 km^2 holding 4 and 3 (densities 1 and 3 per km^2): a 1 km^2 region without data
+    gets (4 + 3) / (4 + 1) = 1.4 per km^2, the density of the matched land taken together; the mean of the two
+    densities, 2, would give 2.  Planar coordinates: the areas are exact."""
+    big = [[[0, 0], [2000, 0], [2000, 2000], [0, 2000], [0, 0]]]
+    fc = {"type": "FeatureCollection", "features": [
+        {"type": "Feature", "properties": {"k": k}, "geometry": {"type": "Polygon", "coordinates": ring}}
+        for k, ring in (("big", big), ("small", square(2000.0, 0.0)), ("none", square(2000.0, 1000.0)))]}
+    j = join_values(fc, {"big": 4e6, "small": 3e6}, key="k", value="v")
+    assert j.unmatched_regions == ["none"] and j.missing == "mean"
+    assert j.collection["features"][2]["properties"]["v"] == pytest.approx(1.4e6, rel=1e-12)
+
+
 def test_ids_match_as_text_and_the_feature_id_is_used():
     fc = block(ids=(1, 2, 3, 4.0), key="num")
     j = join_values(fc, {"1": 1, "2": 1, "3": 1, "4": 5}, key="num")

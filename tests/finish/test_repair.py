@@ -547,3 +547,36 @@ def test_shorten_map_on_a_general_mesh_matches_the_grid_path(dim, n, boundary):
         shorten_map(ref, over, dens, n, elements=grid_mesh(n, dim).elements, boundary=boundary)
     with pytest.raises(ValueError, match="density has"):
         shorten_map(ref, over, dens[:-1], elements=grid_mesh(n, dim).elements, boundary=boundary)
+
+
+def ring_distance(n: int, seeds: np.ndarray) -> np.ndarray:
+    """Vertex rings of the N-grid mesh from the vertices of the ``seeds`` triangles: 0 on them, k on the vertices that
+    share a triangle with ring k - 1 (breadth-first over the triangles' edges)."""
+    import scipy.sparse as sp
+    from scipy.sparse.csgraph import shortest_path
+
+    el = grid_mesh(n, 2).elements
+    i = np.concatenate([el[:, a] for a in range(3) for b in range(3) if a != b])
+    j = np.concatenate([el[:, b] for a in range(3) for b in range(3) if a != b])
+    adj = sp.coo_matrix((np.ones(i.size), (i, j)), shape=(n * n, n * n)).tocsr()
+    return shortest_path(adj, unweighted=True, indices=np.unique(el[seeds])).min(0)
+
+
+@pytest.mark.parametrize("rings", [2, 3, 4])
+def test_local_repair_reaches_exactly_its_rings(rings):
+    """With one patch of ``r`` rings, the vertices that move are the interior vertices within ``r`` rings of the
+    truncated triangles, and some vertex ``r`` rings out does move: a patch one ring smaller (or larger) fails."""
+    n = 33
+    mesh, p = pushed(n, 2, (0.14, 0.09))
+    mu = beltrami_coefficient(torch.as_tensor(mesh.points), torch.as_tensor(p),
+                              torch.as_tensor(mesh.elements)).numpy()
+    seeds = cap_mu(mu, DELTA)[1] | (element_measures(p, mesh.elements) <= 0)
+    dist = ring_distance(n, seeds)
+    out, _ = local_lbs_repair(p, n, "square", rings=(rings,))
+    assert flipped(out, mesh) == 0
+    moved = np.abs(out - p).max(1) > 0
+    assert dist[moved].max() == rings
+    assert np.all(dist[moved] <= rings) and not moved[mesh.boundary_mask()].any()
+    # every free vertex of the patch is solved for: nearly all of them move
+    free = (dist <= rings) & ~mesh.boundary_mask()
+    assert moved[free].mean() > 0.9

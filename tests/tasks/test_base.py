@@ -168,3 +168,26 @@ def test_task_loss_fast_path_equals_the_generic_path(spec):
     torch.testing.assert_close(totals[0], totals[1], rtol=1e-5, atol=1e-7)
     # float32: summation order differs, so compare at 1e-5 of the gradient's scale
     torch.testing.assert_close(grads[0], grads[1], rtol=1e-4, atol=1e-5 * float(grads[1].abs().max()))
+
+
+def test_the_beltrami_target_of_a_triangle_is_the_mean_of_its_three_vertices():
+    """A triangle's training target (and the LBS input of ``rfmap solve --method lbs``) is the mean of the three
+    vertex values of mu, the mean of its P1 interpolant: checked on distinct random vertex values, where no single
+    vertex's value is the mean, and on the first triangle by hand."""
+    from rfmap.tasks import get_task
+
+    n = 5
+    spec, task = TaskSpec("beltrami", 2, "fixed"), get_task("beltrami")
+    rng = np.random.default_rng(7)
+    mu = 0.6 * rng.uniform(size=n * n) * np.exp(2j * np.pi * rng.uniform(size=n * n))  # |mu| < 0.6, all distinct
+    params = torch.as_tensor(mu)[None]
+    ref = torch.as_tensor(grid_points(n, 2))[None]
+    b = task.batch(spec, None, ref, params, n, None)
+    el = grid_mesh(n, 2).elements
+    want = (mu[el[:, 0]] + mu[el[:, 1]] + mu[el[:, 2]]) / 3
+    np.testing.assert_allclose(b.mu_target[0].numpy(), want, rtol=0, atol=1e-15)
+    for corner in range(3):  # the mean is none of the vertices' values
+        assert np.abs(want - mu[el[:, corner]]).min() > 1e-3
+    a, c, d = el[0]
+    assert b.mu_target[0, 0].item() == pytest.approx((mu[a] + mu[c] + mu[d]) / 3, abs=1e-15)
+    np.testing.assert_allclose(task.solver_input(mu.reshape(n, n)), want, rtol=0, atol=1e-15)

@@ -1,0 +1,45 @@
+"""The learning-rate schedule of a training run (:func:`rfmap.training.state._scheduler`): exact rates of the linear
+warm-up and of the cosine that follows it."""
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from rfmap.training.config import get_config
+from rfmap.training.state import _scheduler
+
+LR, LR_MIN, WARMUP, STEPS = 1e-3, 1e-5, 4, 20
+
+
+def rates(n_steps: int, warmup: int = WARMUP) -> list[float]:
+    """The rate of each of the first ``n_steps`` optimiser steps under the cosine schedule."""
+    cfg = get_config("deq2d-square", "ci").with_overrides(lr=LR, lr_min=LR_MIN, warmup=warmup, steps=STEPS,
+                                                           schedule="cosine", time_limit=0.0)
+    opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=cfg.lr)
+    sched = _scheduler(opt, cfg)
+    out = []
+    for _ in range(n_steps):
+        out.append(opt.param_groups[0]["lr"])
+        opt.step()
+        sched.step()
+    return out
+
+
+def test_the_warm_up_starts_at_one_step_of_the_rate_and_reaches_the_peak_at_its_last_step():
+    """Step k < W runs at lr (k + 1) / W: step 0 at lr / W (never at 0, a step that would be wasted), step W - 1 at
+    the peak lr; then the cosine starts from the peak (step W at lr) and ends at lr_min (step STEPS)."""
+    r = rates(STEPS + 1)
+    assert r[0] == pytest.approx(LR / WARMUP, rel=1e-12) and r[0] > 0
+    assert r[WARMUP - 1] == pytest.approx(LR, rel=1e-12)
+    assert r[:WARMUP] == pytest.approx([LR * (k + 1) / WARMUP for k in range(WARMUP)], rel=1e-12)
+    assert r[WARMUP] == pytest.approx(LR, rel=1e-12)
+    mid = (WARMUP + STEPS) // 2  # half-way through the cosine: the mean of lr and lr_min
+    t = (mid - WARMUP) / (STEPS - WARMUP)
+    assert r[mid] == pytest.approx(LR_MIN + (LR - LR_MIN) * 0.5 * (1 + math.cos(math.pi * t)), rel=1e-12)
+    assert r[STEPS] == pytest.approx(LR_MIN, rel=1e-12)
+
+
+def test_without_a_warm_up_the_first_step_runs_at_the_peak_rate():
+    assert rates(1, warmup=0)[0] == pytest.approx(LR, rel=1e-12)
