@@ -28,7 +28,7 @@ import rfmap
 LAYERS: dict[str, int] = {
     # core
     "rfmap._version": 0, "rfmap.core": 0, "rfmap.core.device": 0, "rfmap.core.geometry": 0, "rfmap.core.mesh": 0, "rfmap.core.inputs": 0, "rfmap.fields.paper": 0,
-    "rfmap.fields.random": 0, "rfmap.fields": 0, "rfmap.core.metrics": 0, "rfmap.core.result": 0,
+    "rfmap.fields.random": 0, "rfmap.fields": 0, "rfmap.fields.hard": 0, "rfmap.core.metrics": 0, "rfmap.core.result": 0,
     "rfmap.core.surface": 0, "rfmap.core.folds": 0,
     # classical solvers, the network, the losses
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1, "rfmap.solvers.flow": 1,
@@ -46,14 +46,14 @@ LAYERS: dict[str, int] = {
     "rfmap.finish.query": 2, "rfmap.finish.stages": 2, "rfmap.finish.pipeline": 2,
     "rfmap.pretrained": 2, "rfmap.finish.repair": 2, "rfmap.finish.repair.dispatch": 2,
     "rfmap.finish.repair.lbs": 2, "rfmap.finish.repair.local": 2, "rfmap.finish.repair.scale": 2, "rfmap.finish.repair.embedding": 2,
-    "rfmap.finish.shorten": 2, "rfmap.training.validation": 2, "rfmap.tasks.teacher": 2, "rfmap.training.selection": 2, "rfmap.finish.polish": 2, "rfmap.fields.hard": 2,
+    "rfmap.finish.shorten": 2, "rfmap.training.validation": 2, "rfmap.tasks.teacher": 2, "rfmap.training.selection": 2, "rfmap.finish.polish": 2, "rfmap.tasks.objectives": 2,
     # the paper layer, the applications and plotting, then the command line and the package's front door
     "rfmap.viz": 3, "rfmap.viz.figures": 3, "rfmap.viz.meshes": 3, "rfmap.viz.volumes": 3, "rfmap.viz.architecture": 3,
     "rfmap.viz.training": 3, "rfmap.viz.cartograms": 3, "rfmap.viz.studies": 3,
     "rfmap.paper": 3, "rfmap.paper.tables": 3, "rfmap.paper.reproduce": 3,
     "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,
     "rfmap.paper.flow_studies": 3, "rfmap.paper.design": 3, "rfmap.paper.cartograms": 3, "rfmap.paper.comparison": 3,
-    "rfmap.paper.ablations": 3,
+    "rfmap.paper.ablations": 3, "rfmap.paper.folding": 3,
     "rfmap.cartogram": 3, "rfmap.cartogram.resize": 3, "rfmap.cartogram.options": 3,
     "rfmap.cartogram.data": 3, "rfmap.cartogram.series": 3, "rfmap.cartogram.metrics": 3,
     "rfmap.cartogram.synthetic": 3, "rfmap.cartogram.output": 3, "rfmap.cartogram.html": 3,

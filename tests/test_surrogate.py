@@ -392,7 +392,7 @@ def test_density_objective_grid_path_equals_the_element_path(dim, n, boundary):
     """The refinement objective on a grid mesh gives the same value through the strided measures, for several
     stretching vectors, including one that folds the map (fold penalty active)."""
     from rfmap.core.mesh import grid_mesh
-    from rfmap.finish.refine import density_objective
+    from rfmap.tasks.objectives import density_objective
 
     mesh = grid_mesh(n, dim)
     ref = torch.as_tensor(mesh.points)

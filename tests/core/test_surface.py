@@ -5,7 +5,8 @@ import pytest
 
 from rfmap.core.mesh import grid_mesh
 from rfmap.finish.repair import fold_free, repair_map
-from rfmap.fields.hard import first_folding, self_crossing_map
+from rfmap.fields.hard import self_crossing_map
+from rfmap.paper.folding import first_folding
 from rfmap.core.surface import boundary_faces, grid_boundary_faces, grid_surface_intersections, surface_intersections
 
 

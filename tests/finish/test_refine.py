@@ -16,7 +16,8 @@ from rfmap.core.geometry import jacobian_determinants
 from rfmap.core.mesh import element_measures
 from rfmap.core.metrics import compute_metrics
 from rfmap.nn import MultiResUNet
-from rfmap.finish.refine import density_objective, golden_section, refine_alpha
+from rfmap.finish.refine import golden_section, refine_alpha
+from rfmap.tasks.objectives import density_objective
 from rfmap.surrogate import Surrogate, quiet_quality
 from rfmap.tasks import TaskSpec
 
@@ -219,7 +220,7 @@ def test_density_objective_equals_direct_evaluation(dim, boundary, grid):
     """The objective evaluates the measures as a polynomial in alpha; they must equal the measures of the mapped
     mesh to 1e-13 of the largest for any alpha, including ones that fold elements, and the objective must follow (to
     1e-9 relative: Std(rho) divides by measures near zero on folding maps, which amplifies rounding)."""
-    from rfmap.finish.refine import _measure_coefficients, _measures_at
+    from rfmap.tasks.objectives import _measure_coefficients, _measures_at
     from rfmap.core.geometry import signed_measures
     from rfmap.core.mesh import grid_mesh
     from rfmap.core.metrics import density_std, element_population
@@ -250,7 +251,7 @@ def test_measure_polynomial_along_the_search_lines_equals_the_full_polynomial(di
     alphas like refine_alpha's (diagonal, a line per component, jumps), with and without an output buffer, it must
     equal the full evaluation to 1e-13 of the largest measure."""
     from rfmap.core.mesh import grid_mesh
-    from rfmap.finish.refine import MeasurePolynomial, _measure_coefficients, _measures_at
+    from rfmap.tasks.objectives import MeasurePolynomial, _measure_coefficients, _measures_at
 
     n = 7
     mesh = grid_mesh(n, dim)
@@ -278,7 +279,7 @@ def test_beltrami_objective_equals_direct_evaluation():
     from rfmap.core.geometry import beltrami_coefficient
     from rfmap.core.mesh import grid_mesh
     from rfmap.nn.model import apply_displacement
-    from rfmap.finish.refine import beltrami_objective
+    from rfmap.tasks.objectives import beltrami_objective
 
     n = 11
     mesh = grid_mesh(n, 2)

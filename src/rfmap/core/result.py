@@ -13,12 +13,52 @@ import torch
 from .geometry import beltrami_coefficient, signed_measures
 from .metrics import MapMetrics, compute_metrics, element_population
 
-__all__ = ["MapResult", "save_npz_atomic", "load_result", "to_pyvista", "setup_pyvista", "DENSITY_FIELD_KINDS"]
+__all__ = ["MapResult", "ResultKind", "register_result_kind", "result_kind", "kind_of_field", "save_npz_atomic",
+           "load_result", "to_pyvista", "setup_pyvista"]
 
-#: The kinds of map whose ``field`` is a vertex density, so that the density metrics (Std(rho~)) and the VTK export's
-#: ``density`` and ``rho`` apply: the kind the density solvers write, and every registered task that equalizes a
-#: density (:func:`rfmap.tasks.base.register_task` adds it).
-DENSITY_FIELD_KINDS: set[str] = {"density"}
+
+@dataclass(frozen=True)
+class ResultKind:
+    """What the ``field`` of a kind of map's result holds.
+
+    Attributes
+    ----------
+    name : str
+        The kind, as in ``MapResult.kind``.
+    vertex_density : bool
+        The field is a vertex density: the density metrics (Std(rho~)) and the VTK export's ``density`` and ``rho``
+        apply.
+    complex_field : bool
+        The field is complex (a Beltrami coefficient per element).
+    """
+
+    name: str
+    vertex_density: bool = False
+    complex_field: bool = False
+
+
+_RESULT_KINDS: dict[str, ResultKind] = {}
+
+
+def register_result_kind(kind: ResultKind) -> ResultKind:
+    """Declare a kind of result (every registered task declares its own, :meth:`rfmap.tasks.Task.result_kind`)."""
+    _RESULT_KINDS[kind.name] = kind
+    return kind
+
+
+def result_kind(name: str) -> ResultKind:
+    """The declared kind ``name``; an undeclared kind's field is neither a density nor complex."""
+    return _RESULT_KINDS.get(name) or ResultKind(name)
+
+
+def kind_of_field(field: np.ndarray) -> str:
+    """The first declared kind whose field is complex exactly when ``field`` is (a result file without ``kind``)."""
+    return next(k.name for k in _RESULT_KINDS.values() if k.complex_field == np.iscomplexobj(field))
+
+
+# the kinds that the classical solvers write, declared here because the solvers lie below the tasks
+register_result_kind(ResultKind("density", vertex_density=True))
+register_result_kind(ResultKind("beltrami", complex_field=True))
 
 
 def save_npz_atomic(path, **arrays) -> None:
@@ -92,7 +132,7 @@ class MapResult:
 
     def metrics(self, *, exact_points=None, mu_ref=None) -> MapMetrics:
         """Metrics in the paper's conventions (see :func:`rfmap.core.metrics.compute_metrics`)."""
-        density = self.field.reshape(-1) if self.kind in DENSITY_FIELD_KINDS else None
+        density = self.field.reshape(-1) if result_kind(self.kind).vertex_density else None
         return compute_metrics(self.ref_points, self.mapped_points, self.elements, density=density,
                                exact_points=exact_points, mu_ref=mu_ref, time=self.time)
 
@@ -141,7 +181,7 @@ def to_pyvista(result, *, mapped: bool = True):
     grid = pv.UnstructuredGrid(cells, np.full(len(el), celltype, dtype=np.uint8), pts)
     disp = result.mapped_points - result.ref_points
     grid.point_data["displacement"] = np.column_stack([disp, np.zeros(len(disp))]) if d == 2 else disp
-    if result.kind in DENSITY_FIELD_KINDS:
+    if result_kind(result.kind).vertex_density:
         grid.point_data["density"] = result.field.reshape(-1)
         grid.cell_data["rho"] = result.rho() if mapped else result.field.reshape(-1)[el].mean(1) / \
             result.field.reshape(-1)[el].mean(1).mean()
@@ -169,8 +209,7 @@ def load_result(path) -> MapResult:
             missing = {"ref_points", "mapped_points", "elements", "field"} - set(z.files)
             if missing:
                 raise ValueError(f"{path}: not a map result, missing keys {sorted(missing)}")
-            kind = str(z["kind"]) if "kind" in z.files else (
-                "beltrami" if np.iscomplexobj(z["field"]) else "density")
+            kind = str(z["kind"]) if "kind" in z.files else kind_of_field(z["field"])
             return MapResult(z["ref_points"], z["mapped_points"], z["elements"], z["field"], kind=kind,
                              time=float(z["time"]) if "time" in z.files else 0.0)
     except _UNREADABLE as e:

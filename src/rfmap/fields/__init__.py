@@ -4,7 +4,7 @@
   ``TEST_FIELDS``, ``PAPER_N``, ``sample_density``, ``sample_mu``, ...);
 * :mod:`rfmap.fields.random` -- random training fields (``RandomDensity``, ``RandomBeltrami``, ``RandomMap``, ...);
 * :mod:`rfmap.fields.hard` -- hard fields that make a network's raw map fold (sharp peaks, near-zero regions,
-  steep ramps; :func:`~rfmap.fields.hard.first_folding`);
+  steep ramps; each task draws its own, ``Task.hard_field``);
 * :mod:`rfmap.core.inputs` -- checking and normalising input fields (``check_density``, ``check_mu``, ``unit_mass``,
   ``preprocess_density``).
 """

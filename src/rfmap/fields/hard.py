@@ -12,9 +12,9 @@ drawn log-uniformly in :math:`[10^{-3}, 0.3]`.
 Beltrami coefficients have a smooth random part plus one to three localized bulges (Gaussian, width 0.03–0.12),
 are tapered to 0 at the boundary, and are scaled so that :math:`\|\mu\|_\infty` is drawn in :math:`[0.5, 0.95]`.
 
-:func:`first_folding` finds, among these seeded draws, one on which a given surrogate's raw map folds (the
-bijectivity chapter's examples), and :func:`self_crossing_map` is a 3D map that no element check can catch: every
-tetrahedron positive, the boundary surface passing through itself.
+Each task draws its hard fields (``Task.hard_field``); :func:`rfmap.paper.folding.first_folding` finds among them
+one on which a given surrogate's raw map folds (the bijectivity chapter's examples).  :func:`self_crossing_map` is a
+3D map that no element check can catch: every tetrahedron positive, the boundary surface passing through itself.
 """
 from __future__ import annotations
 
@@ -22,11 +22,9 @@ import math
 
 import numpy as np
 
-from ..core.mesh import grid_points
-from ..finish import quiet_quality
-from ..tasks import DensityTask
+from ..core.mesh import grid_mesh, grid_points
 
-__all__ = ["hard_density", "hard_beltrami", "first_folding", "self_crossing_map"]
+__all__ = ["hard_density", "hard_beltrami", "self_crossing_map"]
 
 
 def _log_uniform(rng, lo, hi):
@@ -73,27 +71,6 @@ def hard_beltrami(rng: np.random.Generator, n: int, *, sup: tuple[float, float] 
     return mu.reshape(n, n)
 
 
-@quiet_quality()
-def first_folding(sur, n: int, *, seed: int = 0, tries: int = 50) -> tuple[int, np.ndarray]:
-    """The first seed from ``seed`` on whose hard field the raw map of surrogate ``sur`` on the ``N``-grid folds.
-
-    Densities come from :func:`hard_density` (mapped with ``preprocess=False``), Beltrami coefficients from
-    :func:`hard_beltrami`.  Returns ``(seed, field)``; ``RuntimeError`` when none of ``tries`` seeds folds.
-    """
-    dim = sur.spec.dim
-    for s in range(seed, seed + tries):
-        rng = np.random.default_rng(s)
-        if isinstance(sur.spec.task, DensityTask):
-            field = hard_density(rng, n, dim)
-            raw = sur.map(field, n, preprocess=False, repair=False)
-        else:
-            field = hard_beltrami(rng, n)
-            raw = sur.map(field, n, repair=False)
-        if raw.metrics().n_flipped > 0:
-            return s, field
-    raise RuntimeError(f"the raw map folded on none of the hard fields with seeds {seed}..{seed + tries - 1}")
-
-
 def self_crossing_map(n: int, turns: float = 1.3) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     r"""The unit cube bent around the :math:`z` axis through ``turns`` full turns, on the 3D ``N``-grid.
 
@@ -106,8 +83,6 @@ def self_crossing_map(n: int, turns: float = 1.3) -> tuple[np.ndarray, np.ndarra
     (ref, mapped, elements)
         Grid vertices (N^3, 3), their images (N^3, 3) and the tetrahedra of :func:`rfmap.core.mesh.grid_mesh`.
     """
-    from ..core.mesh import grid_mesh
-
     m = grid_mesh(n, 3)
     x, y, z = m.points.T
     theta = 2 * np.pi * turns * x

@@ -258,13 +258,9 @@ BELTRAMI_MAPS: dict[str, BeltramiMap] = {
 
 
 def field_names(kind: str | None = None, dim: int | None = None) -> list[str]:
-    """Names of the built-in fields; ``kind`` is ``'density'`` or ``'beltrami'``."""
-    out = []
-    if kind in (None, "density"):
-        out += [k for k, f in DENSITIES.items() if dim is None or f.dim == dim]
-    if kind in (None, "beltrami") and dim in (None, 2):
-        out += list(BELTRAMI_MAPS)
-    return out
+    """Names of the built-in fields of task kind ``kind`` (each field's ``kind``) in ``dim`` dimensions; ``None``:
+    any."""
+    return [k for k, f in {**DENSITIES, **BELTRAMI_MAPS}.items() if kind in (None, f.kind) and dim in (None, f.dim)]
 
 
 def get_field(name: str) -> DensityField | BeltramiMap:

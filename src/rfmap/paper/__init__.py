@@ -8,6 +8,6 @@ criterion; the chapters' tables and the scoreboard), :mod:`~rfmap.paper.ablation
 reproduce``), :mod:`~rfmap.paper.generalization` (unseen random fields, distortion, displacement demand),
 :mod:`~rfmap.paper.recipes` (how the models were trained), :mod:`~rfmap.paper.benchmarks` (classical, neural and
 hybrid maps side by side), :mod:`~rfmap.paper.flow_studies` (studies of the flow-based solver),
-:mod:`~rfmap.paper.cartograms` (the cartogram chapter's tables) and :mod:`~rfmap.paper.design` (the design decisions
-page).  Nothing in the library imports this layer.
+:mod:`~rfmap.paper.cartograms` (the cartogram chapter's tables), :mod:`~rfmap.paper.folding` (the first hard field
+that folds a surrogate's raw map) and :mod:`~rfmap.paper.design` (the design decisions page).  Nothing in the library imports this layer.
 """

@@ -23,7 +23,6 @@ from .generalization import generalization_table
 from .tables import Table
 from ..fields.paper import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
-from ..tasks import DensityTask
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
            "generalization_tables", "inference_table", "race", "wins"]
@@ -41,7 +40,7 @@ def _check(surs: dict) -> tuple:
     if len(specs) != 1:
         raise ValueError(f"the surrogates solve different tasks: {sorted(map(str, specs))}")
     spec = specs.pop()
-    if not isinstance(spec.task, DensityTask) or spec.dim != 2:
+    if not spec.task.equalizes or spec.dim != 2:
         raise ValueError(f"the comparison covers 2D density models; got {spec}")
     return spec
 

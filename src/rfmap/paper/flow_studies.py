@@ -7,7 +7,6 @@ from typing import Any
 
 import numpy as np
 
-from ..tasks import DensityTask
 from .benchmarks import benchmark_fields
 
 __all__ = ["sea_blend_study", "SEA_TOL", "residual_floor", "CONVERGENCE_SETTINGS", "flow_convergence",
@@ -174,7 +173,7 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
     from ..fields.paper import sample_density
     from ..solvers.flow import solve_flow
 
-    if not isinstance(sur.spec.task, DensityTask) or sur.spec.boundary != "square":
+    if not sur.spec.task.equalizes or sur.spec.boundary != "square":
         raise ValueError(f"warm_start_residuals needs a density surrogate with a square boundary, got {sur.spec}")
     rows = []
     for n in ns:

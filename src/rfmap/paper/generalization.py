@@ -7,7 +7,6 @@ import numpy as np
 
 from ..fields.paper import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
-from ..tasks import BeltramiTask, DensityTask
 from .reproduce import METHOD_TITLES, SYM, SYM_REF
 from .tables import COLUMN_TITLES, Table, format_sig
 
@@ -32,22 +31,18 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     the domain, with refinement and fold handling (:data:`~rfmap.paper.reproduce.SYM_REF`, or
     :data:`~rfmap.paper.reproduce.SYM` without ``refine``).
     """
-    from ..core.inputs import preprocess_density
-    from ..core.mesh import grid_points
-    from ..solvers import solve_dem, solve_lbs
     from ..training.validation import validation_fields
 
-    spec = sur.spec
+    spec, task = sur.spec, sur.spec.task
     n = int(n or PAPER_N[spec.dim])
     fields = validation_fields(spec.kind, spec.dim, count, stream="report", low_frequency=low_frequency)
-    key = spec.task.score_metric
+    key = task.score_metric
     rows: dict[tuple[str, str], list[tuple[float, int, float]]] = {}
 
     def add(kind, method, value, flips, t):
         for k in (kind, "all"):
             rows.setdefault((k, method), []).append((float(value), int(flips), float(t)))
 
-    pts = grid_points(n, spec.dim)
     for vf in fields:
         kind = vf.label.rsplit("-", 1)[0]
         raw = sur.map(vf.field, n, repair=False)
@@ -56,20 +51,12 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
             variants.append(("ours + refinement", sur.map(vf.field, n, refine=True)))
         if symmetrize:
             variants.append((SYM_REF if refine else SYM, sur.map(vf.field, n, refine=refine, symmetrize=symmetrize)))
-        if isinstance(spec.task, BeltramiTask):
-            if classical:
-                variants.append(("classical (LBS)", solve_lbs(vf.field, n)))
-            for method, r in variants:
-                m = r.metrics(exact_points=vf.exact(r.ref_points))
-                add(kind, method, m.mean_dd, m.n_flipped, r.time)
-        else:
-            if classical:
-                dens = preprocess_density(vf.field(pts).reshape((n,) * spec.dim))
-                variants.append(("classical (diffusion DEM)",
-                                 solve_dem(dens, boundary="free" if spec.boundary == "free" else "square")))
-            for method, r in variants:
-                m = r.metrics()
-                add(kind, method, m.std_rho_map, m.n_flipped, r.time)
+        if classical:
+            variants.append((f"classical ({task.reference_title})",
+                             task.reference_of(vf.field, n, spec.dim, spec.boundary)))
+        for method, r in variants:
+            rec, value, _ = task.validation_record(r, vf)
+            add(kind, method, value, rec["n_flipped"], r.time)
     low = "low-" if low_frequency else ""
     table = Table(f"tab:generalization-{low}{sur.name}",
                   f"{sur.name}: {count} unseen {'low-frequency ' if low else ''}random fields at N = {n} "
@@ -141,7 +128,7 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
     if not surs:
         raise ValueError("distortion_table needs at least one model")
     for label, sur in surs.items():
-        if not isinstance(sur.spec.task, DensityTask) or sur.spec.dim != 2:
+        if not sur.spec.task.equalizes or sur.spec.dim != 2:
             raise ValueError(f"{label}: distortion_table compares 2D density models, got {sur.spec.kind} "
                              f"{sur.spec.dim}D")
     n = int(n or PAPER_N[2])
@@ -203,7 +190,7 @@ def displacement_demand(sur, count: int = 16, train_count: int = 60, n: int | No
     from ..training.validation import validation_fields
 
     spec = sur.spec
-    if not isinstance(spec.task, DensityTask):
+    if not spec.task.equalizes:
         raise ValueError(f"displacement_demand needs a density model, got a {spec.kind} model")
     n = int(n or PAPER_N[spec.dim])
     shape = (n,) * spec.dim

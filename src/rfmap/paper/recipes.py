@@ -1,29 +1,16 @@
 r"""How the shipped models were trained, from their metadata: the training fields in words and the recipe table."""
 from __future__ import annotations
 
-from ..tasks import BeltramiTask, get_task
+from ..tasks import get_task
 from .tables import Table
 
 __all__ = ["training_fields_text", "recipe_table", "recipe_differences", "differences_text"]
 
 
 def training_fields_text(config: dict) -> str:
-    """The random training fields of a stored training configuration (``meta["config"]``) in words: the paper's
-    smooth modes with steps and patches, plus the sharp features (narrow peaks, steep ramps) where drawn; for Beltrami
-    models the share of low-frequency maps where drawn."""
-    if isinstance(get_task(config["task"]["kind"]), BeltramiTask):
-        low = (config.get("beltrami_field") or {}).get("low", 0.0)
-        return "random boundary-fixing maps" + (f", low-frequency {100 * low:.0f} %" if low else "")
-    dens = config.get("density_field") or {}
-    extra = []
-    if dens.get("p_peak"):
-        extra.append(f"peaks {100 * dens['p_peak']:.0f} %")
-    if dens.get("p_ramp"):
-        scale = dens.get("ramp_scale", 1.0)
-        extra.append(f"ramps {100 * dens['p_ramp']:.0f} %" + (f" (height ×{scale:g})" if scale != 1.0 else ""))
-    if dens.get("p_hard"):
-        extra.append(f"single hard ramps or peaks {100 * dens['p_hard']:.0f} %")
-    return "modes, steps" + ("".join(f", {e}" for e in extra))
+    """The random training fields of a stored training configuration (``meta["config"]``) in words, as its task
+    describes them (``Task.training_fields_text``)."""
+    return get_task(config["task"]["kind"]).training_fields_text(config)
 
 
 def recipe_table(surs: dict) -> Table:

@@ -24,7 +24,7 @@ from . import losses as L
 from ..core.geometry import grid_signed_measures, signed_measures
 from ..core.mesh import grid_mesh, grid_points
 from ..nn.model import BOUNDARIES, apply_displacement
-from ..core.result import DENSITY_FIELD_KINDS
+from ..core.result import ResultKind, register_result_kind
 from ..fields.random import RandomBeltramiConfig, RandomDensityConfig
 from .teacher import TeacherConfig, teacher_indices, teacher_loss
 
@@ -38,9 +38,8 @@ def register_task(cls: type["Task"]) -> type["Task"]:
     """Class decorator: register a :class:`Task` subclass under its ``kind`` (one instance serves every spec)."""
     if not getattr(cls, "kind", None):
         raise ValueError(f"task class {cls.__name__} has no kind")
-    _TASKS[cls.kind] = cls()
-    if cls.equalizes:  # its maps' field is a vertex density: the density metrics apply
-        DENSITY_FIELD_KINDS.add(cls.kind)
+    _TASKS[cls.kind] = task = cls()
+    register_result_kind(task.result_kind())
     return cls
 
 
@@ -237,6 +236,10 @@ class Task:
         better, and may be polished by the flow-based solver (:mod:`rfmap.finish`).
     methods : tuple of str
         The classical solvers of :mod:`rfmap.solvers` that compute this kind of map (``rfmap solve --method``).
+    reference_title : str
+        The classical reference solver in words, for tables.
+    complex_field : bool
+        Whether the field of a map (``MapResult.field``) is complex.
     """
 
     kind: ClassVar[str] = ""
@@ -248,6 +251,8 @@ class Task:
     teacher: ClassVar[bool] = False
     equalizes: ClassVar[bool] = False
     methods: ClassVar[tuple[str, ...]] = ()
+    reference_title: ClassVar[str] = ""
+    complex_field: ClassVar[bool] = False
 
     # ------------------------------------------------------------------ encoding and input
     def n_params(self, dim: int) -> int:
@@ -276,6 +281,15 @@ class Task:
         """The input field on an output mesh, as a map's ``MapResult.field``: from the exact evaluator ``fn``
         when there is one, else interpolated from the checked ``grid`` (``grid_n``: the mesh is the ``N``-grid)."""
         raise NotImplementedError
+
+    def result_kind(self) -> ResultKind:
+        """What a map's ``MapResult.field`` holds: a vertex density when the task equalizes one."""
+        return ResultKind(self.kind, vertex_density=self.equalizes, complex_field=self.complex_field)
+
+    def hard_field(self, rng: np.random.Generator, n: int, dim: int) -> tuple[np.ndarray, dict]:
+        """A field on the ``N``-grid drawn to be hard for a surrogate (:mod:`rfmap.fields.hard`) and the keywords
+        of ``Surrogate.map`` to map it with."""
+        raise ValueError(f"{self.title} tasks have no hard fields")
 
     # ------------------------------------------------------------------ training
     def draw(self, rng: np.random.Generator, spec: TaskSpec, n: int, options: SampleOptions,
@@ -325,6 +339,15 @@ class Task:
         """The solver's input of a named field of this kind on the ``N``-grid."""
         return self.solver_input(np.asarray(self.sample_named(field)(grid_points(n, field.dim))).reshape(
             (n,) * field.dim))
+
+    def reference_of(self, field: Callable, n: int, dim: int, boundary: str):
+        """The classical reference map on the ``N``-grid of a field given as a function of points (a held-out
+        field, :class:`rfmap.tasks.heldout.ValidationField`), for a model with ``boundary``."""
+        raise ValueError(f"{self.title} tasks have no classical solver")
+
+    def training_fields_text(self, config: dict) -> str:
+        """The random training fields of a stored training configuration (``meta["config"]``) in words."""
+        return "random fields"
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
         """The paper's test fields of this kind in ``dim`` dimensions (reported after training, never used to select

@@ -6,7 +6,7 @@ Sec. 5.1).
   or a random coefficient (:class:`rfmap.fields.random.RandomBeltrami`), at Sobol-jittered vertices;
 * loss: :math:`\int_\Omega |\mu(u) - \mu_{\text{in}}|^2` (:func:`rfmap.tasks.losses.beltrami_loss`);
 * refinement objective: :math:`\mathrm{mean}|\mu(u_\alpha) - \mu_{\text{in}}| + \lambda\,\#\text{flipped}/m`
-  (:func:`rfmap.finish.refine.beltrami_objective`);
+  (:func:`rfmap.tasks.objectives.beltrami_objective`);
 * validation: the mean vertex distance to the exact map of held-out random maps, at sup-norm levels of
   :math:`|\mu|` spread over [0.1, 0.85] (a low-frequency set of 1-4 slow modes serves reports only);
 * reference solver: the Linear Beltrami Solver (:func:`rfmap.solvers.solve_lbs`).
@@ -20,11 +20,12 @@ from torch import Tensor
 from . import losses as L
 from ..core.inputs import check_mu
 from ..core.mesh import element_centroids, grid_mesh, grid_points, interpolate, jittered_points, square_triangles
+from ..fields.hard import hard_beltrami
 from ..fields.random import RandomBeltrami, RandomBeltramiConfig, RandomMap
-from ..finish.refine import REFINE, beltrami_objective
 from .base import Batch, LossWeights, MappedBatch, SampleOptions, Task, TaskSpec, grad_magnitude, grid_elements, \
     register_task
 from .heldout import ValidationField, held_out_rng
+from .objectives import FLIP_WEIGHT, beltrami_objective
 
 __all__ = ["BeltramiTask", "beltrami_validation_field"]
 
@@ -43,6 +44,8 @@ class BeltramiTask(Task):
     metric_names = ("mean_dd", "n_flipped", "min_jacobian")
     loss_terms = ("beltrami",)
     methods = ("lbs",)
+    reference_title = "LBS"
+    complex_field = True
 
     def n_params(self, dim: int) -> int:
         return 2
@@ -67,6 +70,10 @@ class BeltramiTask(Task):
             return np.asarray(fn(cen))
         v = interpolate(torch.as_tensor(np.stack([grid.real, grid.imag]))[None], torch.as_tensor(cen))[0].numpy()
         return v[:, 0] + 1j * v[:, 1]
+
+    def hard_field(self, rng, n: int, dim: int):
+        """A hard coefficient at the vertices (:func:`rfmap.fields.hard.hard_beltrami`)."""
+        return hard_beltrami(rng, n), {}
 
     # ------------------------------------------------------------------ training
     def draw(self, rng, spec: TaskSpec, n: int, options: SampleOptions, teach: bool):
@@ -96,7 +103,7 @@ class BeltramiTask(Task):
 
     # ------------------------------------------------------------------ maps
     def refine_objective(self, ref, psi, elements, field, boundary, grid_n):
-        return beltrami_objective(ref, psi, elements, field, boundary, REFINE.flip_weight)
+        return beltrami_objective(ref, psi, elements, field, boundary, FLIP_WEIGHT)
 
     def metric_inputs(self, field: np.ndarray) -> dict:
         return {"density": None, "mu": field}
@@ -117,6 +124,17 @@ class BeltramiTask(Task):
         from ..solvers import solve_lbs
 
         return solve_lbs(values, n, boundary="fixed" if boundary in (None, "fixed") else boundary)
+
+    def reference_of(self, field, n: int, dim: int, boundary: str):
+        """The Linear Beltrami Solver's map of the coefficient ``field`` (identity on the boundary)."""
+        from ..solvers import solve_lbs
+
+        return solve_lbs(field, n)
+
+    def training_fields_text(self, config: dict) -> str:
+        """Random boundary-fixing maps, with the share of low-frequency maps where drawn."""
+        low = (config.get("beltrami_field") or {}).get("low", 0.0)
+        return "random boundary-fixing maps" + (f", low-frequency {100 * low:.0f} %" if low else "")
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
         from ..fields.paper import TEST_FIELDS

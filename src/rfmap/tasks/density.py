@@ -7,7 +7,7 @@ r"""The density task: a density-equalizing map (DEM, DEQ) of the unit square or 
 * loss: the density mismatch :math:`L(\tilde\rho - 1)`, with :math:`\lambda \int |\mu|^2` for DEQ in 2D and the
   area constraint on a free boundary;
 * refinement objective: :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m`
-  (:func:`rfmap.finish.refine.density_objective`);
+  (:func:`rfmap.tasks.objectives.density_objective`);
 * validation: Std(rho~_map) on four families of held-out densities, relative to the field's own Std(rho~_orig);
 * reference solver: the diffusion method (:func:`rfmap.solvers.solve_dem`).
 """
@@ -23,12 +23,13 @@ from . import losses as L
 from ..core.geometry import grid_element_mean
 from ..core.inputs import check_density, preprocess_density, unit_mass
 from ..core.mesh import grid_points, grid_vertex_weights, interpolate, jittered_points, vertex_weights
+from ..fields.hard import hard_density
 from ..fields.random import RandomDensity, RandomDensityConfig
-from ..finish.refine import REFINE, density_objective
 from .teacher import teacher_map, teacher_targets
 from .base import Batch, LossWeights, MappedBatch, SampleOptions, Task, TaskSpec, grad_magnitude, grid_elements, \
     register_task, teacher_extra
 from .heldout import ValidationField, held_out_rng
+from .objectives import FLIP_WEIGHT, density_objective
 
 __all__ = ["DensityTask", "DENSITY_KINDS", "density_validation_field"]
 
@@ -50,6 +51,7 @@ class DensityTask(Task):
     teacher = True
     equalizes = True
     methods = ("diffusion", "dem", "flow")
+    reference_title = "diffusion DEM"
 
     def n_params(self, dim: int) -> int:
         return 1
@@ -74,6 +76,11 @@ class DensityTask(Task):
             return preprocess_density(np.asarray(fn(ref), dtype=np.float64), weights=w)
         src = torch.as_tensor(grid)[None, None]
         return unit_mass(interpolate(src, torch.as_tensor(ref))[0, :, 0].numpy(), w)
+
+    def hard_field(self, rng, n: int, dim: int):
+        """A hard positive density (:func:`rfmap.fields.hard.hard_density`), mapped with ``preprocess=False`` so
+        that its near-zero regions survive."""
+        return hard_density(rng, n, dim), {"preprocess": False}
 
     # ------------------------------------------------------------------ training
     def draw(self, rng, spec: TaskSpec, n: int, options: SampleOptions, teach: bool):
@@ -117,7 +124,7 @@ class DensityTask(Task):
 
     # ------------------------------------------------------------------ maps
     def refine_objective(self, ref, psi, elements, field, boundary, grid_n):
-        return density_objective(ref, psi, elements, field, boundary, REFINE.flip_weight, grid_n=grid_n)
+        return density_objective(ref, psi, elements, field, boundary, FLIP_WEIGHT, grid_n=grid_n)
 
     def metric_inputs(self, field: np.ndarray) -> dict:
         return {"density": field, "mu": None}
@@ -135,6 +142,27 @@ class DensityTask(Task):
         from ..solvers import solve_dem
 
         return solve_dem(values, method=method, boundary=boundary or "square", progress=progress)
+
+    def reference_of(self, field, n: int, dim: int, boundary: str):
+        """The diffusion DEM of the preprocessed density on a square or, for a free model, a free boundary."""
+        from ..solvers import solve_dem
+
+        dens = preprocess_density(field(grid_points(n, dim)).reshape((n,) * dim))
+        return solve_dem(dens, boundary="free" if boundary == "free" else "square")
+
+    def training_fields_text(self, config: dict) -> str:
+        """The paper's smooth modes with steps and patches, plus the sharp features (narrow peaks, steep ramps)
+        where drawn."""
+        dens = config.get("density_field") or {}
+        extra = []
+        if dens.get("p_peak"):
+            extra.append(f"peaks {100 * dens['p_peak']:.0f} %")
+        if dens.get("p_ramp"):
+            scale = dens.get("ramp_scale", 1.0)
+            extra.append(f"ramps {100 * dens['p_ramp']:.0f} %" + (f" (height ×{scale:g})" if scale != 1.0 else ""))
+        if dens.get("p_hard"):
+            extra.append(f"single hard ramps or peaks {100 * dens['p_hard']:.0f} %")
+        return "modes, steps" + ("".join(f", {e}" for e in extra))
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
         from ..fields.paper import TEST_FIELDS
