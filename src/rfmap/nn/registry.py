@@ -2,9 +2,11 @@
 
 Two architectures share one interface (input ``(B, d + m, *S)``, output ``(B, d, *S)``, ``kwargs()``,
 ``min_size``): the multi-resolution U-Net of the paper (``arch='unet'``, the default, also for metadata written
-before the choice existed) and ``neuraloperator``'s FNO (``arch='fno'``).
+before the choice existed) and ``neuraloperator``'s FNO (``arch='fno'``), each a constructor in :data:`NETWORKS`.
 """
 from __future__ import annotations
+
+from typing import Callable
 
 import torch
 from torch import Tensor, nn
@@ -14,24 +16,34 @@ from .model import MultiResUNet
 
 __all__ = ["ARCHS", "build_model", "tensor_state", "from_tensor_state"]
 
+
+def _unet(kw: dict) -> nn.Module:
+    return MultiResUNet(int(kw["dim"]), int(kw["n_params"]), int(kw["base"]), int(kw["depth"]),
+                        bool(kw.get("attention", True)))
+
+
+def _fno(kw: dict) -> nn.Module:
+    return FNONet(int(kw["dim"]), int(kw["n_params"]), int(kw["modes"]), int(kw["width"]), int(kw["layers"]),
+                  float(kw.get("padding", 0.25)))
+
+
+#: the constructor of every architecture a model description may name, from its stored ``kwargs()``
+NETWORKS: dict[str, Callable[[dict], nn.Module]] = {"unet": _unet, "fno": _fno}
+
 #: architectures a model description may name
-ARCHS = ("unet", "fno")
+ARCHS = tuple(NETWORKS)
 
 
 def build_model(kwargs: dict) -> nn.Module:
     """The network described by ``kwargs`` (what its ``kwargs()`` returned); a clear ``ValueError`` otherwise."""
     kw = dict(kwargs)
     arch = kw.pop("arch", "unet")
+    if arch not in NETWORKS:
+        raise ValueError(f"unknown model architecture {arch!r}; expected one of {ARCHS}")
     try:
-        if arch == "unet":
-            return MultiResUNet(int(kw["dim"]), int(kw["n_params"]), int(kw["base"]), int(kw["depth"]),
-                                bool(kw.get("attention", True)))
-        if arch == "fno":
-            return FNONet(int(kw["dim"]), int(kw["n_params"]), int(kw["modes"]), int(kw["width"]),
-                          int(kw["layers"]), float(kw.get("padding", 0.25)))
+        return NETWORKS[arch](kw)
     except KeyError as e:
         raise ValueError(f"model description {kwargs} lacks {e}") from e
-    raise ValueError(f"unknown model architecture {arch!r}; expected one of {ARCHS}")
 
 
 def tensor_state(model: nn.Module) -> dict[str, Tensor]:
