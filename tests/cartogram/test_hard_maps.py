@@ -276,19 +276,21 @@ def test_no_pass_asks_a_region_for_more_than_the_pass_contrast(monkeypatch):
                           "geometry": shapely.geometry.mapping(box)})
     feats.append({"type": "Feature", "properties": {"value": disc.area * 2000.0},
                   "geometry": shapely.geometry.mapping(disc)})
-    seas, ratios, grid_map, raster = [], [], resize._grid_map, resize.density_grid
+    from rfmap.cartogram.methods import FlowMethod
+
+    seas, ratios, grid_map, raster = [], [], FlowMethod.grid_map, resize.density_grid
 
     def spy_raster(*args, **kw):
         dens, sea = raster(*args, **kw)
         seas.append(sea)
         return dens, sea
 
-    def spy_map(method, density, surrogate, kw):
+    def spy_map(self, density, points):
         ratios.append((density.max() / seas[-1], density.min() / seas[-1]))
-        return grid_map(method, density, surrogate, kw)
+        return grid_map(self, density, points)
 
     monkeypatch.setattr(resize, "density_grid", spy_raster)
-    monkeypatch.setattr(resize, "_grid_map", spy_map)
+    monkeypatch.setattr(FlowMethod, "grid_map", spy_map)
     c = cartogram({"type": "FeatureCollection", "features": feats}, "value", n=256)
     top, bottom = np.array(ratios).T
     assert len(ratios) >= 3  # the city needed more than one pass

@@ -19,9 +19,11 @@ offset in its ``"rfmap"`` member.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+
+from .options import CartogramOptions
 
 __all__ = ["INSET_SIDES", "GAP", "InsetCartogram", "cartogram_insets", "inset_groups"]
 
@@ -189,7 +191,8 @@ class InsetCartogram:
         atomic_write(path, lambda fh: write_geojson(fh, self.input_features, self.geometries, self.status(), None))
 
 
-def cartogram_insets(collection, value: str, insets, **options) -> InsetCartogram:
+def cartogram_insets(collection, value: str, insets, options: CartogramOptions | None = None,
+                     **kw) -> InsetCartogram:
     """A cartogram whose regions are grouped into insets, each computed in its own frame and placed beside the main
     map on one scale (see the module docstring).
 
@@ -201,8 +204,9 @@ def cartogram_insets(collection, value: str, insets, **options) -> InsetCartogra
         The property holding each region's value.
     insets : str or sequence
         The property that names each region's inset (:data:`INSET_SIDES`), or one name per feature.
-    **options
-        Keywords of :func:`rfmap.cartogram.resize.cartogram` for every inset (``output`` is the projection's plane).
+    options : CartogramOptions, optional
+        The options of every inset's :func:`rfmap.cartogram.resize.cartogram` (its fields may be given as keywords;
+        ``output`` is always the projection's plane).
 
     Returns
     -------
@@ -223,8 +227,8 @@ def cartogram_insets(collection, value: str, insets, **options) -> InsetCartogra
     if len(names) != len(features):
         raise ValueError(f"insets must be one per region ({len(features)}), got {len(names)}")
     groups = inset_groups(names)
-    options = {**options, "output": "projected"}
-    cartos = {side: cartogram({"type": "FeatureCollection", "features": [features[i] for i in idx]}, value, **options)
+    o = replace(replace(options or CartogramOptions(), **kw), output="projected")
+    cartos = {side: cartogram({"type": "FeatureCollection", "features": [features[i] for i in idx]}, value, o)
               for side, idx in groups.items()}
     area = {side: float(shapely.area(c.geometries).sum()) for side, c in cartos.items()}
     total = {side: float(c.values.sum()) for side, c in cartos.items()}
@@ -241,5 +245,5 @@ def cartogram_insets(collection, value: str, insets, **options) -> InsetCartogra
         regions[idx] = _place(c.projected_geometries(mapped=False), before[side])
         values[idx] = c.values
     return InsetCartogram(input_features=features, insets=cartos, groups=groups, geometries=geoms, regions=regions,
-                          values=values, placement=placement, tol=float(options.get("tol", 0.01)),
+                          values=values, placement=placement, tol=float(o.tol),
                           min_share=float(cartos[main].min_share))

@@ -64,13 +64,13 @@ from .metrics import MIN_SHARE, SLIVER_GAP, CartogramMetrics, boost, cartogram_m
     judged, pass_weights, repair_folds, repair_overlaps, valid_polygons
 from ..core.mesh import check_grid_memory, check_n
 from .options import CartogramOptions
-from .passmap import DIFFUSION_SETTINGS, FLOW_SETTINGS, HYBRID_POLISH, at_points as _at_points, \
-    grid_map as _grid_map
+from .methods import DIFFUSION_SETTINGS, FLOW_BLUR, FLOW_MAX_N, FLOW_SETTINGS, HYBRID_POLISH, MAX_N, METHODS, \
+    CartogramMethod, get_method
+from .passmap import at_points as _at_points
 from .output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
 from .projection import PlanarFrame
 from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edge, \
     _shapely, density_grid, fit_outlines, montreal_election, read_regions, world_countries
-from ..solvers import ALIASES
 
 __all__ = [
     "CARTOGRAM_METHODS",
@@ -96,8 +96,9 @@ __all__ = [
     "CartogramOptions",
 ]
 
-#: Methods of :func:`cartogram` (``"dem"`` is accepted as another name of ``"diffusion"``, as by the solvers).
-CARTOGRAM_METHODS = ("diffusion", "flow", "surrogate", "hybrid")
+#: Methods of :func:`cartogram`, the names of :data:`rfmap.cartogram.methods.METHODS` (``"dem"`` is accepted as another
+#: name of ``"diffusion"``, as by the solvers).
+CARTOGRAM_METHODS = tuple(METHODS)
 
 
 # ----------------------------------------------------------------------------------------------- passes
@@ -124,15 +125,6 @@ PASS_CONTRAST = 10.0
 #: Boosted passes in a row that may fail to lower the largest error before the boosts stop: a secant step that
 #: overshoots is corrected by the next one (the boost of a region whose error changed sign falls to none)
 BOOST_PATIENCE = 3
-#: The default ``max_n`` of :func:`cartogram`: the finest raster (cells per side) a slow pass may ask for
-MAX_N = 1024
-#: The default ``max_n`` of the flow method, whose passes cost little more on a finer raster (they carry the
-#: polygons' vertices, whose count :data:`SPLIT_MAX_N` bounds): a county map's smallest judged regions, a few tens of
-#: cells at 1024, converge at 2048
-FLOW_MAX_N = 2048
-#: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
-#: coast's jump of density, sampled by the grid, otherwise bends the outline between nearby vertices into folds
-FLOW_BLUR = 1.0
 _NO_POINTS = np.empty((0, 2))
 
 
@@ -354,118 +346,106 @@ def cartogram(collection, value: str, options: CartogramOptions | None = None, *
         For longitude/latitude input centred near a pole in an equal-area projection without pyproj.
     """
     o = replace(options or CartogramOptions(), **kw)
-    method, n, tol, max_iterations, iterations = o.method, o.n, o.tol, o.max_iterations, o.iterations
-    margin, projection, output, supersample, model = o.margin, o.projection, o.output, o.supersample, o.model
-    surrogate, floor, solver_kw, min_share, max_n, points, timeout = (o.surrogate, o.floor, o.solver_kw, o.min_share,
-                                                                      o.max_n, o.points, o.timeout)
     shapely = _shapely()
-    method = ALIASES.get(method, method)
-    if method not in CARTOGRAM_METHODS:
-        raise ValueError(f"unknown cartogram method {method!r}; choose one of {', '.join(CARTOGRAM_METHODS)}")
-    n = check_n(n, 2)
-    check_grid_memory(n + 1, 2)
-    fixed = iterations is not None
-    passes = iterations if fixed else max_iterations
-    if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 1:
-        raise ValueError(f"{'iterations' if fixed else 'max_iterations'} must be a positive integer, got {passes!r}")
-    if not (isinstance(tol, numbers.Real) and tol >= 0):
-        raise ValueError(f"tol must be a number >= 0, got {tol!r}")
-    if timeout is not None and not (isinstance(timeout, numbers.Real) and not isinstance(timeout, bool)
-                                    and 0 < timeout < math.inf):
-        raise ValueError(f"timeout must be a positive number of seconds, got {timeout!r}")
-    if output not in OUTPUTS:
-        raise ValueError(f"unknown output {output!r}; choose one of {', '.join(OUTPUTS)}")
-    features, geoms, values, floored = read_regions(collection, value, floor=floor)
-    if method not in ("diffusion", "flow"):
-        surrogate = _square_surrogate(surrogate, model)
+    method = get_method(o.method)(o)
+    plan = _plan(o, method)
+    features, geoms, values, floored = read_regions(collection, value, floor=o.floor)
+    method.prepare()
 
     t0 = time.perf_counter()
-    frame = PlanarFrame.fit(geoms, margin=margin, projection=projection)
+    frame = PlanarFrame.fit(geoms, margin=o.margin, projection=o.projection)
     # edges longer than a grid cell are split, so that they bend with the projection and the map (and a border that
     # one neighbour draws with more vertices than the other still matches it)
-    regions = frame.project(geoms, 1.0 / n)
-    if points is not None:  # a budget of vertices: simplified (shared borders kept) or densified to it
-        regions = shapely.segmentize(fit_outlines(regions, points), 1.0 / n)
+    regions = frame.project(geoms, 1.0 / plan.n)
+    if o.points is not None:  # a budget of vertices: simplified (shared borders kept) or densified to it
+        regions = shapely.segmentize(fit_outlines(regions, o.points), 1.0 / plan.n)
     # overlapping input borders: a coverage (sliver gaps closed), so that the map keeps the regions apart
-    regions, cleaned = clean_input_overlaps(regions, gap_width=SLIVER_GAP / n)
-    done = []  # the passes so far
-
-    def grid_map(dens, points):  # the classical methods carry the polygons' vertices; the flow blurs at first
-        kw = solver_kw or {}
-        if method == "diffusion":
-            kw = {**kw, "points": points}
-        if method == "flow":
-            blur = FLOW_BLUR * 0.5 ** len(done)
-            kw = {"blur": blur if blur >= 0.25 else 0.0, **kw, "points": points}
-        done.append(1)
-        return _grid_map(method, dens, surrogate, kw)
-
-    finest = max_n if max_n is not None else max(n, FLOW_MAX_N if method == "flow" else MAX_N)
-    mapped, info, map_time = _passes(regions, values, grid_map,
-                                     n=n, supersample=supersample, passes=int(passes), tol=None if fixed else tol,
-                                     min_share=min_share, max_n=finest,
-                                     split=method in ("flow", "diffusion"), accelerate=method == "flow",
-                                     deadline=None if timeout is None else t0 + timeout)
+    regions, cleaned = clean_input_overlaps(regions, gap_width=SLIVER_GAP / plan.n)
+    if o.timeout is not None:
+        plan = replace(plan, deadline=t0 + o.timeout)
+    mapped, info, map_time = _passes(regions, values, method, plan)
     info["input_overlaps"] = cleaned
-    mapped, finish_time = _repair(mapped, values, grid_map, info, tol=None if fixed else tol, min_share=min_share,
-                                  supersample=supersample, max_n=finest,
-                                  split=method in ("flow", "diffusion"),
-                                  deadline=None if timeout is None else t0 + timeout)
+    mapped, finish_time = _repair(mapped, values, method, info, plan)
     map_time += finish_time
     elapsed = time.perf_counter() - t0
-    output, info["beyond_domain"] = choose_output(frame, mapped, output)
+    output, info["beyond_domain"] = choose_output(frame, mapped, o.output)
     out, info["repaired_output"] = output_geometries(frame, mapped, output)  # valid as written, too
     return Cartogram(input_features=features, geometries=out, regions=regions, mapped=mapped, values=values,
-                     floored=floored, frame=frame, method=method, n=n, time=elapsed, map_time=map_time, info=info,
-                     output=output, tol=float(tol), min_share=float(min_share))
+                     floored=floored, frame=frame, method=method.name, n=plan.n, time=elapsed, map_time=map_time,
+                     info=info, output=output, tol=float(o.tol), min_share=float(o.min_share))
 
 
-def _square_surrogate(surrogate, model: str | None):
-    """The surrogate of a cartogram (``surrogate``, else the shipped ``model``, default ``deq2d-square``), checked
-    to map 2D densities with the square's walls fixed."""
-    if surrogate is None:
-        from ..surrogate import Surrogate
+@dataclass(frozen=True)
+class PassPlan:
+    """How the passes of :func:`cartogram` run (:func:`_passes`): the first raster's cells per side ``n``, the
+    scanlines per cell ``supersample``, at most ``passes`` passes, the tolerance ``tol`` (``None``: all the passes
+    run), the judged share ``min_share``, the finest raster ``max_n``, whether stretched edges are split between
+    passes (``split``), whether the weights are boosted (``accelerate``) and the ``deadline`` (``time.perf_counter``)
+    after which no pass starts."""
 
-        surrogate = Surrogate.pretrained(model or "deq2d-square")
-    spec = surrogate.spec
-    if (spec.kind, spec.dim, spec.boundary) != ("density", 2, "square"):
-        raise ValueError(f"a cartogram needs a 2D density model of the square (e.g. deq2d-square); "
-                         f"{surrogate.name!r} maps {spec.dim}D {spec.kind} fields with a {spec.boundary} boundary")
-    return surrogate
+    n: int
+    supersample: int
+    passes: int
+    tol: float | None
+    min_share: float = 0.0
+    max_n: int = 0
+    split: bool = True
+    accelerate: bool = False
+    deadline: float | None = None
 
 
-def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supersample: int, passes: int,
-            tol: float | None, min_share: float = 0.0, max_n: int = 0, split: bool = True,
-            accelerate: bool = False, deadline: float | None = None) -> tuple[np.ndarray, dict, float]:
+def _plan(o: CartogramOptions, method: CartogramMethod) -> PassPlan:
+    """The passes' plan from the options, each checked (``ValueError`` in one line)."""
+    n = check_n(o.n, 2)
+    check_grid_memory(n + 1, 2)
+    fixed = o.iterations is not None
+    passes = o.iterations if fixed else o.max_iterations
+    if isinstance(passes, bool) or not isinstance(passes, (int, np.integer)) or passes < 1:
+        raise ValueError(f"{'iterations' if fixed else 'max_iterations'} must be a positive integer, got {passes!r}")
+    if not (isinstance(o.tol, numbers.Real) and o.tol >= 0):
+        raise ValueError(f"tol must be a number >= 0, got {o.tol!r}")
+    if o.timeout is not None and not (isinstance(o.timeout, numbers.Real) and not isinstance(o.timeout, bool)
+                                      and 0 < o.timeout < math.inf):
+        raise ValueError(f"timeout must be a positive number of seconds, got {o.timeout!r}")
+    if o.output not in OUTPUTS:
+        raise ValueError(f"unknown output {o.output!r}; choose one of {', '.join(OUTPUTS)}")
+    return PassPlan(n=n, supersample=o.supersample, passes=int(passes), tol=None if fixed else o.tol,
+                    min_share=o.min_share, max_n=o.max_n if o.max_n is not None else max(n, method.finest),
+                    split=method.carries_vertices, accelerate=method.accelerate)
+
+
+def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
+            plan: PassPlan) -> tuple[np.ndarray, dict, float]:
     """The passes of :func:`cartogram`: each rasterises the current polygons, maps the unit square by
-    ``grid_map(density)`` and moves every distinct vertex.  With ``tol`` they stop within tolerance, or at a pass that
-    no longer lowers the largest area error, and the polygons of the best pass are returned; without, all ``passes``
-    run; with ``split``, edges stretched beyond :data:`SPLIT_EDGE` cells (cells of at most a :data:`SPLIT_MAX_N`
-    raster, unless ``n`` is finer) are split between passes, and with
-    ``accelerate`` every region's weight is boosted by its own slow progress
+    ``method.grid_map(density, vertices)`` and moves every distinct vertex.  With ``plan.tol`` they stop within
+    tolerance, or at a pass that no longer lowers the largest area error, and the polygons of the best pass are
+    returned; without, all ``plan.passes`` run; with ``plan.split``, edges stretched beyond :data:`SPLIT_EDGE` cells
+    (cells of at most a :data:`SPLIT_MAX_N` raster, unless ``n`` is finer) are split between passes, and with
+    ``plan.accelerate`` every region's weight is boosted by its own slow progress
     (:func:`rfmap.cartogram.metrics.boost`) until :data:`BOOST_PATIENCE` passes in a row fail to lower the largest
-    error; every raster's densities are clipped to within :data:`PASS_CONTRAST` times the sea's; past ``deadline``
-    (``time.perf_counter``) no further pass starts.  With ``split``, a region that a pass made cross itself is
+    error; every raster's densities are clipped to within :data:`PASS_CONTRAST` times the sea's; past
+    ``plan.deadline`` no further pass starts.  With ``plan.split``, a region that a pass made cross itself is
     replaced by its valid part (``shapely.make_valid``) before its area is measured, so that the next pass corrects
-    a true area (a crossed ring's signed area misleads every later pass).  ``n`` and ``max_n`` count cells per side; the rasters have
-    ``n + 1`` vertices per side.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
+    a true area (a crossed ring's signed area misleads every later pass).  ``n`` and ``max_n`` count cells per side;
+    the rasters have ``n + 1`` vertices per side.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
+    n, tol, split, accelerate = plan.n, plan.tol, plan.split, plan.accelerate
     shapely = _shapely()
     current, inverse = _distinct_vertices(regions)
     mapped = regions
-    big = judged(values, min_share)  # the regions the stopping rule counts
+    big = judged(values, plan.min_share)  # the regions the stopping rule counts
     # the others are raised towards the judged share, so that none collapses into a sliver that folds; their errors
     # are still measured against their own values
-    weights = pass_weights(values, min_share)
+    weights = pass_weights(values, plan.min_share)
     results, history, grids, map_time = [], [], [], 0.0
     best = None  # (largest area error, polygons, pass) of the best pass so far
     log_err, gain = None, np.zeros(len(values))  # the last pass's log area errors and log weight boosts
     timed_out, misses = False, 0  # misses: passes in a row that did not lower the largest error
-    for _ in range(passes):
-        if results and deadline is not None and time.perf_counter() >= deadline:
+    for _ in range(plan.passes):
+        if results and plan.deadline is not None and time.perf_counter() >= plan.deadline:
             timed_out = True
             break
         if (tol is not None and len(history) > 1 and history[-1] > tol
-                and SLOW_PASS * history[-2] < history[-1] < (1 - GAIN) * history[-2] and 2 * n <= max_n):
+                and SLOW_PASS * history[-2] < history[-1] < (1 - GAIN) * history[-2] and 2 * n <= plan.max_n):
             n *= 2  # slow progress: regions down to a few cells (slivers, islands); twice the resolution
         grids.append(n)
         cell = 1.0 / min(n, max(SPLIT_MAX_N, grids[0]))
@@ -477,9 +457,9 @@ def _passes(regions: np.ndarray, values: np.ndarray, grid_map, *, n: int, supers
             now = np.log(np.maximum(area, 1e-300) / (weights / weights.sum() * area.sum()))
             gain = boost(now, log_err, gain) if log_err is not None else gain
             log_err = now
-        dens, sea = density_grid(mapped, weights * np.exp(-gain), n + 1, supersample=supersample)
+        dens, sea = density_grid(mapped, weights * np.exp(-gain), n + 1, supersample=plan.supersample)
         np.clip(dens, sea / PASS_CONTRAST, sea * PASS_CONTRAST, out=dens)
-        res = grid_map(dens, current)
+        res = method.grid_map(dens, current)
         current = _at_points(res, current)
         map_time += res.time
         # a flow of the polygon vertices is kept as its info and time: its points would hold hundreds of megabytes
@@ -521,22 +501,22 @@ def _largest_error(mapped: np.ndarray, values: np.ndarray, min_share: float) -> 
     return float(np.abs(area / (values / values.sum() * area.sum()) - 1.0)[judged(values, min_share)].max())
 
 
-def _repair(mapped: np.ndarray, values: np.ndarray, grid_map, info: dict, *, tol: float | None, min_share: float,
-            supersample: int, max_n: int, split: bool, deadline: float | None) -> tuple[np.ndarray, float]:
+def _repair(mapped: np.ndarray, values: np.ndarray, method: CartogramMethod, info: dict,
+            plan: PassPlan) -> tuple[np.ndarray, float]:
     """Tiny folds and sliver overlaps of the passes' polygons repaired (:func:`rfmap.cartogram.metrics.repair_folds`,
     :func:`rfmap.cartogram.metrics.repair_overlaps`).  Cutting overlaps moves area; when that takes a judged region
-    beyond ``tol``, at most :data:`FINISH_PASSES` passes more start from the cut polygons (whose cut borders are now
-    shared, so the map keeps them apart) and their polygons, repaired in turn, are kept when their largest error is
-    lower (none past ``deadline``).  Returns the polygons and the seconds spent in ``grid_map``; ``info`` records the
-    repairs and the passes (``info["finish_passes"]``)."""
+    beyond ``plan.tol``, at most :data:`FINISH_PASSES` passes more (not boosted) start from the cut polygons (whose
+    cut borders are now shared, so the map keeps them apart) and their polygons, repaired in turn, are kept when
+    their largest error is lower (none past ``plan.deadline``).  Returns the polygons and the seconds spent in
+    ``grid_map``; ``info`` records the repairs and the passes (``info["finish_passes"]``)."""
+    tol, min_share = plan.tol, plan.min_share
     mapped, info["repaired"] = repair_folds(mapped)
     mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
     info["finish_passes"] = 0
     if not info["overlaps_cut"] or tol is None or (err := _largest_error(mapped, values, min_share)) <= tol:
         return mapped, 0.0
-    more, extra, seconds = _passes(mapped, values, grid_map, n=info["grids"][-1], supersample=supersample,
-                                   passes=FINISH_PASSES, tol=tol, min_share=min_share, max_n=max_n, split=split,
-                                   deadline=deadline)
+    more, extra, seconds = _passes(mapped, values, method,
+                                   replace(plan, n=info["grids"][-1], passes=FINISH_PASSES, accelerate=False))
     more, folds = repair_folds(more)
     more, cut = repair_overlaps(more, values)
     if not _largest_error(more, values, min_share) < err:

@@ -19,9 +19,11 @@ from __future__ import annotations
 
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+
+from .options import CartogramOptions
 
 __all__ = ["SeriesFrame", "CartogramSeries", "cartogram_series", "compare_warm_cold", "save_animation"]
 
@@ -113,8 +115,8 @@ def _frame(carto, key: str, seconds: float, min_share: float) -> SeriesFrame:
                        float(err[~big].max()) if (~big).any() else 0.0, small)
 
 
-def cartogram_series(collection, keys: Sequence[str], *, warm: bool = True, min_share: float = 1e-4,
-                     projection: str = "auto", **options) -> CartogramSeries:
+def cartogram_series(collection, keys: Sequence[str], options: CartogramOptions | None = None, *, warm: bool = True,
+                     **kw) -> CartogramSeries:
     r"""One cartogram per value property in ``keys``, each warm-started from the previous frame or cold.
 
     Parameters
@@ -123,17 +125,15 @@ def cartogram_series(collection, keys: Sequence[str], *, warm: bool = True, min_
         A GeoJSON FeatureCollection whose regions hold every property of ``keys``.
     keys : sequence of str
         The frames' value properties, in order (e.g. ``["pop_1952", "pop_1957", ...]``).
+    options : CartogramOptions, optional
+        The options of every frame's :func:`rfmap.cartogram.resize.cartogram` (``method``, ``n``, ``tol``,
+        ``max_iterations``, ...; its fields may be given as keywords).  ``projection`` is the plane of the first
+        frame (and of every cold frame); ``min_share``: regions holding less than this share of a frame's total are
+        checked apart (:class:`SeriesFrame`) and left out of the passes' stopping rule; ``output`` stays
+        ``"auto"``: every frame is returned in the projection's plane (the warm frames are computed there).
     warm : bool
         ``True``: frame :math:`k > 0` is the cartogram of frame :math:`k-1`'s cartogram (in the projection's
         plane) by the values of ``keys[k]``; ``False``: every frame from ``collection``.
-    min_share : float
-        Regions holding less than this share of a frame's total are checked apart (:class:`SeriesFrame`) and left
-        out of the passes' stopping rule (:func:`rfmap.cartogram.resize.cartogram`'s ``min_share``).
-    projection : str
-        The plane of the first frame (and of every cold frame): :class:`rfmap.cartogram.projection.PlanarFrame`.
-    **options
-        Further keyword arguments of :func:`rfmap.cartogram.resize.cartogram` (``method``, ``n``, ``tol``,
-        ``max_iterations``, ...); ``output`` is always ``"projected"`` (the warm frames are computed there).
 
     Returns
     -------
@@ -141,30 +141,30 @@ def cartogram_series(collection, keys: Sequence[str], *, warm: bool = True, min_
     """
     from .resize import cartogram
 
+    o = replace(options or CartogramOptions(), **kw)
     keys = list(keys)
     if not keys:
         raise ValueError("give at least one value property")
-    if "output" in options:
+    if o.output != CartogramOptions.output:
         raise ValueError("a series is computed in the projection's plane; output cannot be chosen")
-    tol = float(options.get("tol", 0.01))
     frames, previous = [], None
     for key in keys:
         t0 = time.perf_counter()
         if warm and previous is not None:
             src = {"type": "FeatureCollection", "features": previous.features}
-            carto = cartogram(src, key, projection="none", output="input", min_share=min_share, **options)
+            carto = cartogram(src, key, replace(o, projection="none", output="input"))
         else:
-            carto = cartogram(collection, key, projection=projection, output="projected", min_share=min_share,
-                              **options)
-        frames.append(_frame(carto, key, time.perf_counter() - t0, min_share))
+            carto = cartogram(collection, key, replace(o, output="projected"))
+        frames.append(_frame(carto, key, time.perf_counter() - t0, o.min_share))
         previous = carto
-    return CartogramSeries(frames, warm, tol, min_share)
+    return CartogramSeries(frames, warm, float(o.tol), o.min_share)
 
 
-def compare_warm_cold(collection, keys: Sequence[str], **options) -> tuple[CartogramSeries, CartogramSeries]:
+def compare_warm_cold(collection, keys: Sequence[str], options: CartogramOptions | None = None,
+                      **kw) -> tuple[CartogramSeries, CartogramSeries]:
     """The warm and the cold series of :func:`cartogram_series` with the same options: ``(warm, cold)``."""
-    return (cartogram_series(collection, keys, warm=True, **options),
-            cartogram_series(collection, keys, warm=False, **options))
+    return (cartogram_series(collection, keys, options, warm=True, **kw),
+            cartogram_series(collection, keys, options, warm=False, **kw))
 
 
 def save_animation(series: CartogramSeries, path, *, titles: Sequence[str] | None = None, fps: float = 2.0,

@@ -10,7 +10,7 @@ import sys
 
 from .base import CLIError, solver_name
 
-__all__ = ["add_cartogram_parser", "cmd_cartogram"]
+__all__ = ["add_cartogram_parser", "cmd_cartogram", "cartogram_options"]
 
 
 def _cartogram_outputs(args) -> list[str]:
@@ -87,19 +87,16 @@ def cmd_cartogram(args) -> int:
         raise CLIError("--gif needs --series")
     from ..cartogram.resize import cartogram
 
+    options = cartogram_options(args)
     if args.inset and args.series:
         raise CLIError("--inset draws one cartogram: it does not go with --series")
     collection = _cartogram_input(args)
     if args.series:
-        return _cartogram_series(args, collection)
+        return _cartogram_series(args, collection, options)
     if args.inset:
-        return _cartogram_insets(args, collection)
+        return _cartogram_insets(args, collection, options)
     try:
-        carto = cartogram(collection, args.value, method=args.method, n=args.n, tol=args.tol, model=args.model,
-                          max_iterations=args.max_passes, projection=args.projection,
-                          output="projected" if args.projected else "input" if args.lonlat else "auto",
-                          points=args.points,
-                          timeout=args.timeout)
+        carto = cartogram(collection, args.value, options)
     except ImportError as e:  # pyproj (or plotly) missing: a setup problem, told in one line
         raise CLIError(str(e)) from e
     carto.save(args.out)
@@ -122,6 +119,16 @@ def cmd_cartogram(args) -> int:
     return _report_problems(carto.problems())
 
 
+def cartogram_options(args):
+    """The :class:`rfmap.cartogram.options.CartogramOptions` of ``rfmap cartogram``'s arguments, built once and passed
+    whole to the cartogram, the series or the insets."""
+    from ..cartogram.options import CartogramOptions
+
+    return CartogramOptions(method=args.method, n=args.n, tol=args.tol, max_iterations=args.max_passes,
+                            projection=args.projection, model=args.model, points=args.points, timeout=args.timeout,
+                            output="projected" if args.projected else "input" if args.lonlat else "auto")
+
+
 def _report_problems(problems: list[str]) -> int:
     """Each problem of a cartogram on its own line of stderr; the exit status (1 when there is any)."""
     for p in problems:
@@ -140,16 +147,19 @@ def _listed(names: list, where: str = "") -> str:
     return shown + (f" and {len(names) - LISTED} more{where}" if len(names) > LISTED else "")
 
 
-def _cartogram_series(args, collection) -> int:
+def _cartogram_series(args, collection, options) -> int:
     """``--series``: a cartogram per value, each warm-started from the previous
     (:func:`rfmap.cartogram.series.cartogram_series`); ``--out`` holds the last, ``--gif`` the animation."""
+    from ..cartogram.methods import METHODS, get_method
     from ..cartogram.series import cartogram_series, save_animation
 
-    if args.method not in ("diffusion", "flow"):
-        raise CLIError("--series runs the classical methods (diffusion or flow)")
+    if not get_method(options.method).classical:
+        classical = " or ".join(name for name, m in METHODS.items() if m.classical)
+        raise CLIError(f"--series runs the classical methods ({classical})")
+    if args.projected or args.lonlat:
+        raise CLIError("--series writes every frame in the projection's plane: --projected and --lonlat do not apply")
     try:
-        series = cartogram_series(collection, args.series, method=args.method, n=args.n, tol=args.tol,
-                                  max_iterations=args.max_passes, projection=args.projection, timeout=args.timeout)
+        series = cartogram_series(collection, args.series, options)
     except ImportError as e:
         raise CLIError(str(e)) from e
     series.frames[-1].carto.save(args.out)
@@ -166,7 +176,7 @@ def _cartogram_series(args, collection) -> int:
     return _report_problems(series.problems())
 
 
-def _cartogram_insets(args, collection) -> int:
+def _cartogram_insets(args, collection, options) -> int:
     """``--inset COLUMN``: every inset a cartogram of its own, placed beside the main map on one scale
     (:func:`rfmap.cartogram.insets.cartogram_insets`); written in the placed frames."""
     from ..cartogram.insets import cartogram_insets
@@ -174,9 +184,7 @@ def _cartogram_insets(args, collection) -> int:
     if args.projected or args.lonlat:
         raise CLIError("--inset writes the insets' placed frames: --projected and --lonlat do not apply")
     try:
-        carto = cartogram_insets(collection, args.value, args.inset, method=args.method, n=args.n, tol=args.tol,
-                                 model=args.model, max_iterations=args.max_passes, projection=args.projection,
-                                 points=args.points, timeout=args.timeout)
+        carto = cartogram_insets(collection, args.value, args.inset, options)
     except ImportError as e:
         raise CLIError(str(e)) from e
     carto.save(args.out)
@@ -232,8 +240,11 @@ def _cartogram_figures(args, carto) -> None:
 
 def add_cartogram_parser(sub) -> None:
     """Add ``rfmap cartogram`` to the sub-command parsers ``sub``."""
-    from ..cartogram.resize import CARTOGRAM_METHODS
+    from ..cartogram.methods import METHODS
+    from ..cartogram.options import CartogramOptions
     from ..cartogram.projection import PROJECTIONS
+
+    default = CartogramOptions()  # every default of the command is the API's
 
     s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)",
                        description="Resize GeoJSON regions by a value. Longitude/latitude are projected to an "
@@ -274,21 +285,22 @@ def add_cartogram_parser(sub) -> None:
     d.add_argument("--make-csv", default=None, metavar="OUT.csv",
                    help="only write a CSV template: one row per region with its --id (default: the feature id) and "
                         "an empty --value column")
-    s.add_argument("--method", choices=CARTOGRAM_METHODS, type=solver_name, default="flow",
+    s.add_argument("--method", choices=tuple(METHODS), type=solver_name, default=default.method,
                    help="classical flow-based method (default, the fastest), classical diffusion (also 'dem'), "
                         "neural surrogate, or the surrogate polished by the flow")
-    s.add_argument("--n", type=int, default=256,
-                   help="cells per side N of the density raster, as cartogram-cpp's -n (default 256)")
-    s.add_argument("--tol", type=float, default=0.01,
-                   help="repeat passes until the largest relative area error is at most this (default 0.01)")
-    s.add_argument("--max-passes", type=int, default=60, help="at most this many passes (default 60)")
+    s.add_argument("--n", type=int, default=default.n,
+                   help=f"cells per side N of the density raster, as cartogram-cpp's -n (default {default.n})")
+    s.add_argument("--tol", type=float, default=default.tol,
+                   help=f"repeat passes until the largest relative area error is at most this (default {default.tol})")
+    s.add_argument("--max-passes", type=int, default=default.max_iterations,
+                   help=f"at most this many passes (default {default.max_iterations})")
     s.add_argument("--timeout", type=float, default=None, metavar="SECONDS",
                    help="start no further pass after this many seconds; the best pass so far is written, and the "
                         "command exits 1 unless it is within the tolerance")
     s.add_argument("--points", type=int, default=None, metavar="COUNT",
                    help="simplify (shared borders kept) or densify the region outlines to about this many "
                         "vertices, the detail kept; the flow still splits edges to grid cells")
-    s.add_argument("--projection", choices=PROJECTIONS, default="auto",
+    s.add_argument("--projection", choices=PROJECTIONS, default=default.projection,
                    help="the plane of the cartogram: auto (default: equal-area for longitude/latitude, none for "
                         "planar coordinates), equal-area, equirectangular or none")
     s.add_argument("--projected", action="store_true",

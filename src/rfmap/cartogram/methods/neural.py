@@ -1,0 +1,62 @@
+"""The neural cartogram methods: a pretrained surrogate's map of the raster's grid (``"surrogate"``), or that map
+finished by the classical flow (``"hybrid"``).  PyTorch is loaded only when such a method prepares its surrogate."""
+from __future__ import annotations
+
+import numpy as np
+
+from .base import CartogramMethod
+
+__all__ = ["SurrogateMethod", "HybridMethod", "HYBRID_POLISH"]
+
+#: The hybrid's polish tolerance on Std(rho~_map) (``Surrogate.map(polish=...)``): far below any raster's variation,
+#: so that every pass runs its flow, for the reason of :data:`rfmap.cartogram.methods.flow.FLOW_SETTINGS`' ``tol=0``.
+#: The polish runs on the raster's vertex grid (the network's map resampled to it), where the area errors are judged
+#: (book: Design decisions).
+HYBRID_POLISH = 1e-9
+
+
+class SurrogateMethod(CartogramMethod):
+    """``"surrogate"``: the network's map on its working grid, repaired there so that it is fold-free before its
+    displacement is interpolated at the polygon vertices; the surrogate is ``options.surrogate`` or the shipped
+    ``options.model`` (default ``deq2d-square``), which must map 2D densities with the square's walls fixed."""
+
+    name = "surrogate"
+    classical = False
+    carries_vertices = False
+
+    def prepare(self) -> None:
+        self.surrogate = square_surrogate(self.options.surrogate, self.options.model)
+
+    def _map(self, density: np.ndarray, points: np.ndarray, solver_kw: dict):
+        from ...finish import quiet_quality
+
+        # the raster's Std(rho~) counts the sea and every region's edge; the cartogram judges a pass by its area errors
+        with quiet_quality():
+            return self._network_map(density)
+
+    def _network_map(self, density: np.ndarray):
+        return self.surrogate.map(density, self.surrogate.work_n(density.shape[0]), preprocess=False)
+
+
+class HybridMethod(SurrogateMethod):
+    """``"hybrid"``: the network's map resampled to the raster's vertex grid and finished there by the flow
+    (``Surrogate.map(polish=HYBRID_POLISH)``)."""
+
+    name = "hybrid"
+
+    def _network_map(self, density: np.ndarray):
+        return self.surrogate.map(density, density.shape[0], preprocess=False, polish=HYBRID_POLISH)
+
+
+def square_surrogate(surrogate, model: str | None):
+    """The surrogate of a cartogram (``surrogate``, else the shipped ``model``, default ``deq2d-square``), checked
+    to map 2D densities with the square's walls fixed (``ValueError`` otherwise)."""
+    if surrogate is None:
+        from ...surrogate import Surrogate
+
+        surrogate = Surrogate.pretrained(model or "deq2d-square")
+    spec = surrogate.spec
+    if (spec.kind, spec.dim, spec.boundary) != ("density", 2, "square"):
+        raise ValueError(f"a cartogram needs a 2D density model of the square (e.g. deq2d-square); "
+                         f"{surrogate.name!r} maps {spec.dim}D {spec.kind} fields with a {spec.boundary} boundary")
+    return surrogate
