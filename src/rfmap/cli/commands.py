@@ -99,6 +99,16 @@ def _model_meta(surrogate_cls, name: str) -> tuple[dict, str | None]:
         return meta, "fno"
 
 
+def _description(name: str, meta: dict) -> str:
+    """What a shipped model is: its config's current description (the weights' own, written when it was trained,
+    may tell a history that its lineage keeps), else the one in its metadata."""
+    from ..training.config import CONFIGS
+
+    preset = (meta.get("config") or {}).get("preset", "full")
+    cfg = CONFIGS.get(name, {}).get(preset)
+    return cfg.description if cfg is not None else meta.get("description", "")
+
+
 def cmd_models(args) -> int:
     from ..surrogate import Surrogate, models
 
@@ -112,7 +122,7 @@ def cmd_models(args) -> int:
             print(f"{name:16s} {t.get('kind', '?'):9s} {t.get('dim', '?')}D {t.get('boundary', '?'):7s} "
                   f"steps={meta.get('steps')} wall={meta.get('wall_time')}s  " +
                   (f"[needs rfmap[{needs}]: pip install 'rfmap[{needs}]'] " if needs else "") +
-                  f"{meta.get('description', '')}")
+                  f"{_description(name, meta)}")
             continue
         runs = list(meta.get("lineage", [])) + [meta]
         total_steps = meta.get("cumulative_steps", meta.get("steps"))

@@ -190,15 +190,15 @@ _FOLD_HARD = dict(fold=100.0, fold_threshold=0.02, density_tangent=True)
 #: the free 3D model: a fold penalty ten times stronger again, against overshooting folds on the low-density side of
 #: steep ramps (book: Design decisions; Surrogate.map handles those left on coarser working grids, REGRID_DIMS)
 _FOLD_HARD3 = dict(fold=1000.0, fold_threshold=0.02, density_tangent=True)
-_HARD_NOTE = ("the random training densities include narrow peaks and steep ramps (15 % of fields each) and, in 30 % "
-              "of fields, a single steep ramp (height ratio up to 51 after preprocessing) or narrow peak over faint "
-              "modes; fold penalty of weight 100 from det J < 0.02.")
-_HARD3_NOTE = ("The random training densities include narrow peaks and steep ramps (15 % of fields each) and, in 15 % "
-               "of fields, a single steep ramp or narrow peak over faint modes (half the 2D models' share: at 30 % "
-               "the held-out smooth and step fields stayed at twice the free model's Std); fold penalty of weight "
-               "100 from det J < 0.02.")
+#: the training fields and fold penalty of the 2D density models, in the words of a model description
+_HARD_NOTE = ("densities with narrow peaks and steep ramps (15 % each) and single hard ramps or peaks (30 %); fold "
+              "penalty 100 from det J < 0.02.")
+#: the 3D density models: half the 2D share of hard fields (at 30 % the held-out smooth and step fields stayed at twice
+#: the free model's Std)
+_HARD3_NOTE = ("Densities with narrow peaks and steep ramps (15 % each) and single hard ramps or peaks (15 %); fold "
+               "penalty 100 from det J < 0.02.")
 #: the 2D full presets train at grid sides from 48 (the paper's 64), so that its 51-point test grid runs at its own size
-_N48_NOTE = " Trained at N in [48, 96], so that the paper's 51-point grid runs at its own size."
+_N48_NOTE = " Trained at N in [48, 96]."
 #: validation of the 2D and 3D full presets: 16 held-out random fields at these grid sides
 _VAL2 = dict(val_sizes=(51, 128), val_count=16)
 #: (3D: scored on the maps as Surrogate.map delivers them, a folded map regridded or repaired; see rfmap.training.validation)
@@ -213,10 +213,10 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
     **{
         "beltrami2d": _presets(
             "beltrami2d", TaskSpec("beltrami", 2, "fixed"),
-            "Reconstruction of a boundary-fixing map from its Beltrami coefficient; loss ||mu(u) - mu_in||^2 "
-            "on the Beltrami coefficients of random boundary-fixing maps (no solver data); from 69,526 steps on, 30 % "
-            "of them low-frequency maps (1-4 modes, frequencies 0.25-2), which the model had reconstructed with "
-            "three times the vertex error of the default maps." + _N48_NOTE,
+            # the low-frequency share since 69,526 steps: before, such maps had three times the default maps' error
+            "Reconstruction of a boundary-fixing 2D map from its Beltrami coefficient; loss ||mu(u) - mu_in||^2 on "
+            "the coefficients of random boundary-fixing maps, 30 % of them low-frequency (1-4 modes); no solver "
+            "data." + _N48_NOTE,
             _CI, dict(steps=6000, batch=4, time_limit=3000.0, val_every=500, threads=1, workers=1, n_range=(48, 96),
                       **_VAL2),
             dict(steps=250000, batch=8, lr=1e-3, schedule="step", step_size=25000, gamma=0.5, warmup=0,
@@ -259,15 +259,14 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
         )
         for name, boundary, fields, fold, desc in [
             ("dem3d-cube", "square", _HARD3, _FOLD_HARD,
-             "3D density-equalizing map, cube boundary (density loss on tetrahedra, fold penalty). The paper trains "
-             "4000 epochs with cosine warm restarts at lr 2e-4 on a GPU; on a CPU budget of under an hour a single "
-             "cosine cycle at lr 5e-4 gets further. " + _HARD3_NOTE),
+             # the paper trains 4000 epochs with warm restarts at lr 2e-4 on a GPU; under an hour on a CPU one
+             # cosine cycle at lr 5e-4 gets further
+             "3D density-equalizing map, cube boundary (density loss on tetrahedra, fold penalty); one cosine cycle "
+             "at lr 5e-4. " + _HARD3_NOTE),
+            # fold penalty 100 until 23,366 steps: with it every steep held-out ramp at N = 48 folded
             ("dem3d-free", "free", _HARD3, _FOLD_HARD3, "3D density-equalizing map, free boundary (density loss, "
-             "volume constraint, fold penalty); same schedule as dem3d-cube. The random training densities include "
-             "narrow peaks and steep ramps (15 % of fields each) and, in 15 % of fields, a single steep ramp or "
-             "narrow peak over faint modes (half the cube model's share, which cost it accuracy on smooth fields); "
-             "fold penalty of weight 1000 from det J < 0.02 (100 until 23,366 steps: with it every steep held-out "
-             "ramp at N = 48 folded)."),
+             "volume constraint, fold penalty); same schedule and fields as dem3d-cube, fold penalty 1000 from "
+             "det J < 0.02."),
         ]
     },
 }
@@ -275,10 +274,6 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
 for _name in ("deq2d-square", "deq2d-free", "dem2d-square"):
     CONFIGS[_name]["full"] = replace(CONFIGS[_name]["full"], n_range=(48, 96))
 
-#: deq2d-square's task and fields as they were when the FNO was trained
-_FNO_FIELDS_NOTE = ("2D density-equalizing quasi-conformal map (DEQ: density loss + 0.1 Beltrami energy), square "
-                    "boundary; the random training densities include narrow peaks and steep ramps (15 % of fields "
-                    "each).")
 #: the FNO comparison: deq2d-square's task, losses, fields, schedule and wall-time budget as they were when the FNO
 #: was trained (the U-Net has since moved on to _HARD2 fields and N from 48), with neuraloperator's
 #: FNO in place of the U-Net (16 modes, width 24, 4 layers, 12.5 % padding: about the U-Net's parameter count and
@@ -290,10 +285,10 @@ CONFIGS["fno-deq2d-square"] = {
         n_range=(64, 96) if preset == "full" else cfg.n_range,
         model=ModelConfig(arch="fno", modes=4, width=8, layers=2) if preset == "ci" else
         ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125),
-        description="Fourier neural operator (neuraloperator's FNO, 16 modes per axis, width 24, 4 Fourier layers, "
-                    "12.5 % zero padding) trained exactly as deq2d-square (same fields, DEQ loss, square boundary "
-                    "mask, schedule and wall-time budget) except for the learning rate, 1e-3 instead of 5e-4, the "
-                    "usual FNO rate. " + _FNO_FIELDS_NOTE + (f" Paper preset: {_NOTE_2D}" if preset == "paper" else ""))
+        description="Fourier neural operator (FNO: 16 modes per axis, width 24, 4 layers, 12.5 % padding) for "
+                    "deq2d-square's task (2D DEQ map, square boundary), trained as deq2d-square was then (densities "
+                    "with narrow peaks and steep ramps) at lr 1e-3." +
+                    (f" Paper preset: {_NOTE_2D}" if preset == "paper" else ""))
     for preset, cfg in CONFIGS["deq2d-square"].items()
 }
 
@@ -319,19 +314,18 @@ CONFIGS["deq2d-square-native"] = _across_sizes(
     "deq2d-square", "deq2d-square-native",
     dict(n_range=(32, 256), n_sampling="log", batch_points=20736, batch=16, val_sizes=(32, 51, 128, 256),
          val_native=True, lr=1e-4, ema=0.999, warmup=0, steps=40000, time_limit=7200.0), (17, 33),
-    "deq2d-square's task, losses and fields, trained from its weights across grid sides 32-256 (log-uniform: each "
-    "octave a third of the steps; batch of about 20,736 grid points, at most 16 fields) and validated on the "
-    "network's own grid at 32, 51, 128 and 256, so that it runs natively at every side the paper tests. "
-    + _HARD_NOTE[0].upper() + _HARD_NOTE[1:])
+    "deq2d-square's task, losses and fields, trained from its weights across grid sides 32-256 (log-uniform, about "
+    "20,736 grid points a batch) and validated natively at 32, 51, 128 and 256: it runs natively at every side the "
+    "paper tests.")
 #: dem3d-cube trained across the 3D grid sides the paper tests (24-64), so that its resolution rows run natively: the
 #: same log-uniform sides at about the cost of two 40^3 grids per step, validated natively at both ends
 CONFIGS["dem3d-cube-native"] = _across_sizes(
     "dem3d-cube", "dem3d-cube-native",
     dict(n_range=(24, 64), n_sampling="log", batch_points=128000, batch=2, val_sizes=(32, 64), val_count=8,
          val_native=True, val_every=1000, lr=1e-4, ema=0.999, warmup=0, steps=40000, time_limit=8400.0), (9, 17),
-    "dem3d-cube's task, losses and fields, trained from its weights across grid sides 24-64 (log-uniform; about "
-    "128,000 grid points per step, at most 2 fields) and validated on the network's own grid at 32 and 64, so that "
-    "it runs natively at every side the paper tests. " + _HARD3_NOTE)
+    "dem3d-cube's task, losses and fields, trained from its weights across grid sides 24-64 (log-uniform, about "
+    "128,000 grid points a step) and validated natively at 32 and 64: it runs natively at every side the paper "
+    "tests.")
 
 
 def config_names() -> list[str]:
