@@ -26,6 +26,8 @@ SMOKE = {
     "design.py": (["--n", "9", "--repeat", "1", "--only", "RTOL"], "3D N = 9"),
     "hybrid.py": (["--dims", "2", "--n2", "33", "--boundaries", "square", "--no-paper", "--random", "1"], "hybrid"),
     "inference.py": (["--smoke", "--threads", "1"], "### one training step of the `full` presets"),
+    "paper_inputs.py": (["--field", "rect-peak", "--step", "0.25", "--values", "2", "--top", "1"],
+                        "| sin-cos, vertex, shift | add |"),
     "repair.py": (["--fields", "3", "--models", "beltrami2d"], "repair / classical"),
     "solvers.py": (["--smoke"], "### Diffusion density-equalizing map, 3D sin-cos-3d, cube boundary"),
     "train_step.py": (["--smoke", "--threads", "1", "--workers", "0", "--json"], '"ms_per_step"'),

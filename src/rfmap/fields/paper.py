@@ -83,7 +83,8 @@ class DensityField:
         return preprocess_density(raw) if preprocess else raw
 
 
-#: The box of the rect-peak test (c): the paper leaves ``rect(x, y)`` unspecified; we add ``+2`` on this box.
+#: The box of the rect-peak test (c): the paper leaves ``rect(x, y)`` unspecified; we add ``+2`` on this box (its
+#: published Std(rho~_orig) singles out no box: ``benchmarks/paper_inputs.py``).
 RECT_PEAK_BOX = ((0.6, 0.8), (0.2, 0.4), 2.0)
 
 
