@@ -4,10 +4,16 @@
                                     [--configs beltrami2d deq2d-square dem3d-cube] [--threads T] [--workers W]
                                     [--precision fp32 bf16] [--bases 8 16 32]
     python benchmarks/train_step.py --smoke     # one step of batch 1 at the ``ci`` preset's smallest side
+    python benchmarks/train_step.py --train-steps 300 [--configs deq2d-square]   # trains as well in bf16?
 
 ``--precision`` times each configuration in every precision named (``TrainConfig.precision``: bf16 autocast around
 the network, the losses in float32) and ``--bases`` at every U-Net width named (the network freshly initialised);
 with two precisions a last column gives the speed-up of bf16 over fp32, measured in the same run.
+
+``--train-steps K`` instead trains each configuration's ``full`` preset from scratch for K steps from one seed in
+fp32 and in bf16 and prints both validation family scores (mean Std(rho~_map) / Std(rho~_orig) over the held-out
+fields; the identity map scores 1) with their relative difference: whether bf16 trains as well (the tiny-scale
+check of the same is ``tests/training/test_precision.py``).
 
 Each configuration runs its ``full`` preset (threads and batch workers as the preset sets them unless overridden)
 at a fixed grid side: batch 4 at N = 80 in 2D, batch 2 at N = 48 in 3D.  A step is timed from asking the loader
@@ -86,6 +92,8 @@ def main(argv=None) -> int:
                    help="time every configuration in each precision (bf16: autocast around the network)")
     p.add_argument("--bases", nargs="+", type=int, default=None, metavar="B",
                    help="time every U-Net configuration at each of these base widths (default: the config's)")
+    p.add_argument("--train-steps", type=int, default=0, metavar="K",
+                   help="compare training instead: K steps from scratch in fp32 and bf16, then the validation score")
     p.add_argument("--smoke", action="store_true",
                    help="the smallest run: one step, no warm-up, batch 1 at the ci preset's smallest side")
     args = p.parse_args(argv)
@@ -96,6 +104,8 @@ def main(argv=None) -> int:
     except ValueError as e:
         print(f"train_step: error: {e}", file=sys.stderr)
         return 2
+    if args.train_steps:
+        return compare_training(args.configs, args.train_steps, device, args.threads)
     out = {}
     try:
         for name in args.configs:
@@ -112,6 +122,29 @@ def main(argv=None) -> int:
         return 2
     if args.json:
         print(json.dumps(out))
+    return 0
+
+
+def compare_training(names: list[str], steps: int, device: torch.device, threads: int | None) -> int:
+    """``--train-steps``: each config's ``full`` preset trained ``steps`` steps from scratch in fp32 and bf16 (one
+    seed, no validation during the run), then validated; one line per config with both scores."""
+    from rfmap.training.loop import train, validate
+    from rfmap.training.validation import score
+
+    for name in names:
+        scores, secs = {}, {}
+        for prec in ("fp32", "bf16"):
+            cfg = get_config(name, "full").with_overrides(
+                steps=steps, time_limit=0.0, val_every=0, select_best=False, ckpt_every=10 ** 9, warmup=0,
+                precision=check_precision(prec, device), **({"threads": threads} if threads else {}))
+            with tempfile.TemporaryDirectory() as tmp:
+                t0 = time.perf_counter()
+                sur = train(cfg, tmp, device=device, progress=False)
+                secs[prec] = time.perf_counter() - t0
+                scores[prec] = score(validate(sur, cfg)["mean"])[1]
+        gap = scores["bf16"] / scores["fp32"] - 1
+        print(f"{name:14s} {steps} steps: validation family score fp32 {scores['fp32']:.4f} ({secs['fp32']:.0f} s), "
+              f"bf16 {scores['bf16']:.4f} ({secs['bf16']:.0f} s); bf16 {gap:+.1%} relative", flush=True)
     return 0
 
 
