@@ -2,7 +2,8 @@
 
 * LBS on the test map T1: mu sampled at the triangle centroids, error = mean vertex distance to the exact map.
 * 2D DEM (square boundary) on sin-cos, 3D DEM (cube boundary) on sin-cos-3d: Std(rho~) on the mapped mesh, smallest
-  element Jacobian, flipped elements.
+  element Jacobian, flipped elements; by the diffusion method, and with ``--methods diffusion flow`` also by the
+  flow-based one.
 * ``--targets`` adds the acceptance table: LBS on T1-T4 at N=51, 2D DEM on four densities at N=51, 3D DEM on four
   densities at N=48, and the free boundary.
 
@@ -12,6 +13,7 @@ Usage::
     python benchmarks/solvers.py --quick    # stops at N=128 (2D) and N=32 (3D)
     python benchmarks/solvers.py --smoke    # one small size (N=17 in 2D, N=9 in 3D), one run each
     python benchmarks/solvers.py --targets --threads 1
+    python benchmarks/solvers.py --quick --methods diffusion flow --threads 1
 """
 from __future__ import annotations
 
@@ -42,13 +44,15 @@ def lbs_row(name: str, n: int, repeat: int) -> str:
     return f"| {name} | {n} | {res.time:.4f} | {met.mean_dd:.3e} | {met.n_flipped} |"
 
 
-def dem_row(name: str, n: int, repeat: int, boundary: str = "square", threads: int | None = None) -> str:
+def dem_row(name: str, n: int, repeat: int, boundary: str = "square", threads: int | None = None,
+            method: str = "diffusion") -> str:
     dens = sample_density(name, n)
-    res = best_of(lambda: solve_dem(dens, boundary=boundary, num_threads=threads), repeat)
+    res = best_of(lambda: solve_dem(dens, method=method, boundary=boundary, num_threads=threads), repeat)
     met = res.metrics()
     area = float(element_measures(res.mapped_points, res.elements).sum())
+    steps = res.info["iterations"] if method == "diffusion" else res.info["steps"]
     return (f"| {name} | {boundary} | {n} | {res.time:.3f} | {met.std_rho_orig:.4f} | {met.std_rho_map:.4f} | "
-            f"{met.min_jacobian:.4f} | {met.n_flipped} | {area - 1:+.1e} | {res.info['iterations']} |")
+            f"{met.min_jacobian:.4f} | {met.n_flipped} | {area - 1:+.1e} | {steps} |")
 
 
 LBS_HEAD = "| map | N | time [s] | mean \\|Δd\\| | flips |\n|---|---:|---:|---:|---:|"
@@ -63,6 +67,8 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument("--targets", action="store_true", help="also print the acceptance-target table")
     ap.add_argument("--no-sweep", action="store_true", help="skip the N sweep (with --targets)")
     ap.add_argument("--repeat", type=int, default=3, help="best-of repeats for runs under one second")
+    ap.add_argument("--methods", nargs="+", choices=("diffusion", "flow"), default=["diffusion"],
+                    help="density-equalizing methods of the sweep (default: diffusion)")
     ap.add_argument("--threads", type=int, default=None,
                     help="torch threads for 3D DEM (default: torch's setting; 2D DEM always uses 1)")
     args = ap.parse_args(argv)
@@ -82,14 +88,16 @@ def main(argv: list[str] | None = None) -> None:
         print(LBS_HEAD)
         for n in n2:
             print(lbs_row("T1", n, args.repeat), flush=True)
-        print("\n### Diffusion density-equalizing map, 2D sin-cos, square boundary\n")
-        print(DEM_HEAD)
-        for n in n2:
-            print(dem_row("sin-cos", n, rep(n, 2)), flush=True)
-        print("\n### Diffusion density-equalizing map, 3D sin-cos-3d, cube boundary\n")
-        print(DEM_HEAD)
-        for n in n3:
-            print(dem_row("sin-cos-3d", n, 1, threads=args.threads), flush=True)
+        for method in args.methods:
+            title = method.capitalize() if method == "diffusion" else "Flow-based"
+            print(f"\n### {title} density-equalizing map, 2D sin-cos, square boundary\n")
+            print(DEM_HEAD)
+            for n in n2:
+                print(dem_row("sin-cos", n, rep(n, 2), method=method), flush=True)
+            print(f"\n### {title} density-equalizing map, 3D sin-cos-3d, cube boundary\n")
+            print(DEM_HEAD)
+            for n in n3:
+                print(dem_row("sin-cos-3d", n, 1, threads=args.threads, method=method), flush=True)
 
     if args.targets:
         print("\n### Targets: LBS at N=51 (target: time <= 0.05 s, mean |Δd| <= 1e-4)\n")

@@ -14,7 +14,7 @@ shapely = pytest.importorskip("shapely")
 
 from rfmap.cartogram.resize import MIN_SHARE, cartogram, cartogram_metrics  # noqa: E402
 from rfmap.cartogram.regions import density_grid, fit_outlines, world_countries  # noqa: E402
-from rfmap.solvers.cartoflow import bilinear, flow_square, poisson_flux_2d  # noqa: E402
+from rfmap.solvers.cartoflow import bilinear, flow_square  # noqa: E402
 
 
 def squares(values, *, side: float = 1000.0) -> dict:
@@ -73,14 +73,21 @@ def test_solvers_registry_is_lazy_but_complete():
 
 
 # ----------------------------------------------------------------------------------------------- numerics
-def test_numpy_poisson_flux_matches_the_solvers_transform():
-    from rfmap.solvers.spectral import poisson_flux
+def test_numpy_and_scipy_transforms_give_one_poisson_flux_and_blur():
+    """The cosine method of :mod:`rfmap.solvers.spectral` on the cartograms' ``numpy.fft`` transforms and on the
+    maps' ``scipy.fft`` ones: the same flux, blurred planes and heat synthesis to round-off."""
+    from rfmap.solvers.cosine import CosineTransforms
+    from rfmap.solvers.spectral import flow_planes, gaussian_blur, poisson_flux
 
     rng = np.random.default_rng(3)
     dens = np.exp(rng.normal(size=(33, 33)))
-    ours, ref = poisson_flux_2d(dens), poisson_flux(dens)
+    ours, ref = poisson_flux(dens, transforms=CosineTransforms(33)), poisson_flux(dens)
     assert np.abs(ours - ref).max() <= 1e-12 * np.abs(ref).max()
     assert np.all(ours[0, [0, -1]] == 0) and np.all(ours[1, :, [0, -1]] == 0)  # no flux through the walls
+    planes = flow_planes(dens, 0.05, transforms=CosineTransforms(33))
+    assert np.abs(planes[2] - gaussian_blur(dens, 0.05)).max() <= 1e-12 * dens.max()
+    assert np.abs(planes[:2] - flow_planes(dens, 0.05)[:2]).max() <= 1e-12 * np.abs(ref).max()
+    assert np.array_equal(flow_planes(dens, transforms=CosineTransforms(33))[2], dens)
 
 
 
@@ -168,7 +175,8 @@ def test_heat_planes_are_exact_on_cosine_modes_and_the_diffusion_map_equalizes()
     x, y = np.meshgrid(s, s, indexing="ij")
     heat = _Heat(2 + np.cos(np.pi * x) + 0.5 * np.cos(2 * np.pi * y))
     e1, e2 = np.exp(-np.pi ** 2 * t), np.exp(-4 * np.pi ** 2 * t)
-    gx, gy, rho = heat.planes(t).reshape(3, n, n)
+    gx, gy, rho = -heat.planes(t).reshape(3, n, n)  # the flux -grad(rho), then rho
+    rho = -rho
     assert np.abs(rho - (2 + e1 * np.cos(np.pi * x) + 0.5 * e2 * np.cos(2 * np.pi * y))).max() < 1e-12
     assert np.abs(gx + np.pi * e1 * np.sin(np.pi * x)).max() < 1e-12
     assert np.abs(gy + np.pi * e2 * np.sin(2 * np.pi * y)).max() < 1e-12

@@ -15,8 +15,8 @@ from rfmap.fields import sample_density
 from rfmap.core.mesh import grid_mesh
 from rfmap.solvers import SOLVERS, get_solver, solve_dem, solve_flow
 from rfmap.solvers.diffusion import cosine_coefficients
-from rfmap.solvers.flow import F32_MARGIN, _turned_over, gaussian_blur, lumped_residual, poisson_flux, \
-    rasterize_elements, vertex_residual
+from rfmap.solvers.flow import F32_MARGIN, _turned_over, lumped_residual, rasterize_elements, vertex_residual
+from rfmap.solvers.spectral import gaussian_blur, poisson_flux
 from rfmap.solvers.residual import _measures
 from rfmap.fields.hard import hard_density
 
@@ -717,7 +717,8 @@ def test_box_mean_is_the_zero_cosine_coefficient_and_rtol_defaults_per_dimension
     """box_mean (trapezoidal mean) equals the cosine interpolant's a_0 without the transform; the step tolerance
     defaults to RTOL of the density's dimension and is recorded."""
     from rfmap.solvers.diffusion import cosine_coefficients
-    from rfmap.solvers.flow import RTOL, box_mean
+    from rfmap.solvers.flow import RTOL
+    from rfmap.solvers.spectral import box_mean
 
     rng = np.random.default_rng(0)
     for shape in [(9,), (8, 8), (7, 7, 7)]:

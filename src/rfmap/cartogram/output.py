@@ -14,16 +14,23 @@ edges between the same vertices are other curves on the Earth, and an edge that 
 it.  Either way a ring crosses itself by a speck.  :func:`output_geometries` checks the polygons in the coordinates
 that are written and repairs such specks (:func:`repair_specks`); what it cannot repair stays invalid, for
 :meth:`rfmap.cartogram.resize.Cartogram.problems` to report.
+
+A file is also reprojected by its users.  Before writing, :func:`output_geometries` removes the needles of regions
+that the passes squeezed (:func:`rfmap.cartogram.reprojection.remove_needles`), and, for longitude/latitude output,
+checks every region in the cylindrical equal-area plane of the whole map and splits the edges of those that are
+invalid there only (:func:`rfmap.cartogram.reprojection.split_bent_edges`); :class:`OutputRepairs` says what was done.
 """
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from .metrics import REPAIR_AREA
+from .reprojection import cylindrical_equal_area, remove_needles, split_bent_edges
 
-__all__ = ["OUTPUTS", "SPECK", "choose_output", "crs_member", "mapped_features", "output_geometries", "repair_specks",
+__all__ = ["OUTPUTS", "SPECK", "OutputRepairs", "choose_output", "crs_member", "mapped_features", "output_geometries", "repair_specks",
            "write_geojson"]
 
 #: The coordinates of :func:`rfmap.cartogram.resize.cartogram`'s output: ``"auto"`` (the input's, unless a region left
@@ -44,12 +51,43 @@ def choose_output(frame, mapped: np.ndarray, output: str) -> tuple[str, list[int
     return ("projected" if far else "input"), far
 
 
-def output_geometries(frame, mapped: np.ndarray, output: str) -> tuple[np.ndarray, list[int]]:
+@dataclass
+class OutputRepairs:
+    """What :func:`output_geometries` changed in the regions as written (indices of regions)."""
+
+    #: regions that crossed themselves by a speck in the written coordinates, the speck dropped (:func:`repair_specks`)
+    specks: list = field(default_factory=list)
+    #: ``{region: vertices removed}``: needles and collapsed rings
+    #: (:func:`rfmap.cartogram.reprojection.remove_needles`)
+    needles: dict = field(default_factory=dict)
+    #: ``{region: vertices added}``: edges split so that the region stays valid in the cylindrical equal-area plane
+    #: (:func:`rfmap.cartogram.reprojection.split_bent_edges`), the neighbours along them included
+    split: dict = field(default_factory=dict)
+    #: regions valid as written that are invalid in that plane even so
+    invalid_reprojected: list = field(default_factory=list)
+
+    @property
+    def regions(self) -> list[int]:
+        """Every region changed, sorted."""
+        return sorted({*self.specks, *self.needles, *self.split})
+
+
+def output_geometries(frame, mapped: np.ndarray, output: str) -> tuple[np.ndarray, OutputRepairs]:
     """The unit-square polygons ``mapped`` (R,) in the coordinates written (``"input"``: the projection inverted,
-    ``"projected"``: its plane), the regions that rounding there made invalid repaired (:func:`repair_specks`).
-    Returns the polygons and the indices of those repaired."""
+    ``"projected"``: its plane), their needles removed
+    (:func:`rfmap.cartogram.reprojection.remove_needles`), the regions that rounding there made invalid repaired
+    (:func:`repair_specks`) and, in longitude/latitude, the regions invalid in the cylindrical equal-area plane
+    (:func:`rfmap.cartogram.reprojection.cylindrical_equal_area`, standard parallel the map's centre) made valid
+    there (:func:`rfmap.cartogram.reprojection.split_bent_edges`).  Returns the polygons and what was repaired."""
     out = frame.unproject(mapped) if output == "input" else frame.planar(mapped)
-    return repair_specks(out, total_change=REPAIR_AREA)
+    out, needles = remove_needles(out)
+    out, specks = repair_specks(out, total_change=REPAIR_AREA)
+    repairs = OutputRepairs(specks=specks, needles=needles)
+    if output == "input" and frame.projection.geographic:
+        lat0 = frame.projection.lat0
+        out, repairs.split, repairs.invalid_reprojected = split_bent_edges(
+            out, lambda xy: cylindrical_equal_area(xy, lat0))
+    return out, repairs
 
 
 def repair_specks(geoms: np.ndarray, *, max_change: float = SPECK,

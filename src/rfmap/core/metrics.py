@@ -18,7 +18,7 @@ import numpy as np
 import torch
 
 from .geometry import beltrami_coefficient, grid_element_mean, grid_signed_measures, signed_measures
-from .mesh import grid_size
+from .mesh import grid_points, grid_size
 
 __all__ = ["MapMetrics", "compute_metrics", "density_std", "element_population", "residual_scales", "rotational_share"]
 
@@ -271,8 +271,6 @@ def rotational_share(ref, mapped) -> float:
     float
         In [0, 1]: 0 for a gradient displacement (and for the identity), 1 for a divergence-free one.
     """
-    from .mesh import grid_points
-
     ref = np.asarray(ref, dtype=np.float64)
     mapped = np.asarray(mapped, dtype=np.float64)
     if ref.ndim != 2 or ref.shape[1] not in (2, 3) or mapped.shape != ref.shape:

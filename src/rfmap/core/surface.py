@@ -37,7 +37,7 @@ from functools import lru_cache
 
 import numpy as np
 
-from .mesh import grid_mesh
+from .mesh import grid_mesh, grid_points
 
 __all__ = ["boundary_faces", "surface_intersections", "grid_boundary_faces", "grid_surface_intersections",
            "boundary_loop", "boundary_crossings"]
@@ -382,8 +382,6 @@ def _grid_faces(n: int) -> tuple:
     """Per face of the cube (axis ``a``, side ``s``): the indices of its triangles in :func:`grid_boundary_faces`,
     the two in-plane axes, the face's vertex loop (4 (N-1) vertex indices) and the reference orientation sign of
     each triangle projected on the face's plane."""
-    from .mesh import grid_points
-
     ref = grid_points(n, 3)
     faces = grid_boundary_faces(n)
     loop2 = boundary_loop(n)  # (i, j) -> i*N + j on the 2D grid

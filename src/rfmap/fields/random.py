@@ -431,8 +431,6 @@ class RandomMap:
 
     def mu_grid(self, n: int) -> np.ndarray:
         """Exact Beltrami coefficient at the vertices of the ``N``-grid, complex (N**2,)."""
-        from ..core.geometry import beltrami_from_jacobian
-
         return beltrami_from_jacobian(torch.as_tensor(self.jacobian_grid(n))).numpy()
 
     def _parts(self, x):

@@ -51,6 +51,8 @@ import torch
 
 from ..core.geometry import grid_element_mean, grid_signed_measures
 from ..core.metrics import density_std
+from ..solvers import flow
+from ..solvers.flow import MARGIN
 
 __all__ = ["GUARD", "POOR", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER", "OUTPUT_PASSES",
            "PolishOptions", "polish_map", "polish_tolerance", "smooth_displacement", "smooth_grid_displacement", "smooth_passes"]
@@ -180,8 +182,6 @@ class _Summary:
 def _in_box(points: np.ndarray, boundary: str, n: int) -> bool:
     """Whether ``points`` lie in the flow's box: the unit square/cube, or for a free boundary the sea box
     :math:`[-L, 1 + L]^d` (``L``: ``solve_flow``'s default margin of the dimension, whole cells)."""
-    from ..solvers.flow import MARGIN
-
     pad = 0.0 if boundary == "square" else max(1, round(MARGIN[points.shape[1]] * (n - 1))) / (n - 1)
     return bool(points.min() >= -pad and points.max() <= 1 + pad)
 
@@ -249,8 +249,6 @@ def polish_map(result, *, n: int, boundary: str, options: PolishOptions = Polish
         ``min_jacobian``, and with the guard after a warm flow ``"warm"`` and ``"cold"``, the two candidates (each
         with its own flow's ``time``).
     """
-    from ..solvers.flow import solve_flow
-
     t0 = time.perf_counter()
     ref, mapped, elements, density = result.ref_points, result.mapped_points, result.elements, result.field
     tol, poor, guard, progress = options.tol, options.poor, options.guard, options.progress
@@ -276,7 +274,7 @@ def polish_map(result, *, n: int, boundary: str, options: PolishOptions = Polish
         if start is not None and _fits(start, elements, boundary, n):
             first, smoothed = start, True
         try:  # a warm flow whose steps keep being cut (near-degenerate elements of u0) is abandoned early
-            res = solve_flow(grid, boundary=boundary, start=first, progress=progress, max_steps=WARM_STEPS,
+            res = flow.solve_flow(grid, boundary=boundary, start=first, progress=progress, max_steps=WARM_STEPS,
                              stall_blurs=(), **kw)
         except RuntimeError as e:
             reason = f"the warm flow stalled ({e})"
@@ -285,13 +283,13 @@ def polish_map(result, *, n: int, boundary: str, options: PolishOptions = Polish
     kept = "warm" if res is not None else "cold"
     if res is not None and guard:  # the cold flow too; keep the better map
         t1 = time.perf_counter()
-        cold = solve_flow(grid, boundary=boundary, progress=progress, **kw)
+        cold = flow.solve_flow(grid, boundary=boundary, progress=progress, **kw)
         stages["warm"] = summary(res.mapped_points, res.time)
         stages["cold"] = summary(cold.mapped_points, time.perf_counter() - t1)
         if stages["cold"]["std_rho_map"] < stages["warm"]["std_rho_map"]:
             res, kept = cold, "cold"
     if res is None:
-        res = solve_flow(grid, boundary=boundary, progress=progress, **kw)
+        res = flow.solve_flow(grid, boundary=boundary, progress=progress, **kw)
     seconds = time.perf_counter() - t0
     stages["polish"] = summary(res.mapped_points, seconds)
     report = {"start": "cold" if reason else "warm", "reason": reason, "smoothed": smoothed, "tol": kw.get("tol"),

@@ -7,7 +7,14 @@ from typing import Any
 
 import numpy as np
 
+from ..core.inputs import preprocess_density
+from ..core.mesh import grid_points
+from ..fields.paper import TEST_FIELDS, sample_density
 from ..finish.polish import UNGUARDED
+from ..solvers import solve_dem
+from ..surrogate import Surrogate
+from ..training.validation import DENSITY_KINDS, validation_fields
+from .tables import Table, headline
 
 __all__ = ["METHODS", "ROWS", "WARM_MODELS", "STD_TOL", "FLOW_TIME", "HYBRID_TIME", "compare_methods",
            "benchmark_fields", "time_to_accuracy", "summarize", "target_checks", "targets_headline", "summary_table",
@@ -48,8 +55,6 @@ def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "squ
         for the hybrid, ``start`` (warm or cold) and ``kept`` (the map the guard kept); the hybrid's run adds the
         row :data:`rfmap.finish.polish.UNGUARDED` before its own: its warm flow's map, timed without the guard's cold flow.
     """
-    from ..solvers import solve_dem
-
     rows = []
     for method in methods:
         if method not in METHODS:
@@ -85,11 +90,6 @@ WARM_MODELS = {(2, "square"): "dem2d-square", (2, "free"): "deq2d-free", (3, "sq
 def benchmark_fields(dim: int, n: int, *, paper: bool = True, random: int = 0) -> list[tuple[str, np.ndarray]]:
     """Labelled densities on the ``N``-grid: the paper's test fields and ``random`` unseen random fields (the
     ``report`` stream of :func:`rfmap.training.validation.validation_fields`), preprocessed as the paper does."""
-    from ..core.inputs import preprocess_density
-    from ..core.mesh import grid_points
-    from ..fields.paper import TEST_FIELDS, sample_density
-    from ..training.validation import validation_fields
-
     out = [(name, sample_density(name, n)) for name in TEST_FIELDS[("density", dim)]] if paper else []
     if random:
         pts = grid_points(n, dim)
@@ -109,8 +109,6 @@ def time_to_accuracy(dim: int, n: int, boundary: str = "square", *, paper: bool 
     """
     methods = METHODS if methods is None else methods
     if surrogate is None and set(methods) - {"diffusion", "flow"}:
-        from ..surrogate import Surrogate
-
         surrogate = Surrogate.pretrained(WARM_MODELS[(dim, boundary)])
     rows = []
     fields = benchmark_fields(dim, n, paper=paper, random=random)
@@ -186,8 +184,6 @@ def target_checks(summary: list[dict[str, Any]], cases) -> list[dict[str, Any]]:
 def targets_headline(checks: list[dict[str, Any]]):
     """The targets at a glance: a :class:`~rfmap.paper.tables.Headline` with one row per case and criterion (the
     measured ratio, its target and whether it is met), from the rows of :func:`target_checks`."""
-    from .tables import headline
-
     criteria = (("flow_time", "flow time / diffusion", FLOW_TIME), ("flow_std", "flow Std / diffusion", STD_TOL),
                 ("hybrid_time", "hybrid time / best classical", HYBRID_TIME),
                 ("hybrid_std", "hybrid Std / best classical", STD_TOL))
@@ -204,8 +200,6 @@ def summary_table(summary: list[dict[str, Any]]):
     """The rows of :func:`summarize` as a :class:`~rfmap.paper.tables.Table`: one case per dimension, grid side
     and boundary, one row per method, with the mean Std(rho~_map), the mean time, the folds and the ratios to the
     case's best classical solver."""
-    from .tables import Table
-
     table = Table("tab:time_to_accuracy", "Time to accuracy: means over each case's fields",
                   ["std_rho_map", "time", "n_flipped", "std_ratio", "time_ratio"])
     for r in summary:
@@ -292,7 +286,6 @@ def _roughest_field(by: dict, rows: list[dict[str, Any]], case: tuple) -> dict[s
     rough = max(over, key=over.get)
     label = rough
     if rough.startswith("random-"):  # an unseen field of the report stream: say which kind it is
-        from ..training.validation import DENSITY_KINDS
 
         kind = DENSITY_KINDS[int(rough.split("-")[1]) % len(DENSITY_KINDS)]
         label = f"the unseen random field {rough} (a {kind} field)"

@@ -19,10 +19,11 @@ from pathlib import Path
 import numpy as np
 
 from ..core.mesh import jittered_points
-from .generalization import generalization_table
-from .tables import Table
 from ..fields.paper import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
+from ..training import train
+from .generalization import generalization_table
+from .tables import Table
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
            "generalization_tables", "inference_table", "race", "wins"]
@@ -167,8 +168,6 @@ def inference_table(surs: dict, ns=(51, 128, 256), field: str = "multi-freq", re
 def race(configs: dict, seconds: float, out_dir, *, progress: bool = False) -> dict:
     """Train each configuration from scratch for the same wall-clock budget (``time_limit = seconds``), one after
     the other on this machine; returns ``{name: Surrogate}`` (their metadata holds the learning curves)."""
-    from ..training import train
-
     out = Path(out_dir)
     result = {}
     for name, cfg in configs.items():

@@ -7,6 +7,13 @@ from typing import Any
 
 import numpy as np
 
+from ..core.inputs import preprocess_density
+from ..core.mesh import grid_mesh, grid_points
+from ..core.metrics import residual_scales, rotational_share
+from ..fields.paper import sample_density
+from ..solvers import solve_dem
+from ..solvers.flow import solve_flow
+from ..training.validation import validation_fields
 from .benchmarks import benchmark_fields
 
 __all__ = ["sea_blend_study", "SEA_TOL", "residual_floor", "CONVERGENCE_SETTINGS", "flow_convergence",
@@ -36,12 +43,6 @@ def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float 
         spacings: how far the blend moves the map, its coastline included), ``time_default`` (the default flow's
         time over the diffusion solver's) and ``n_flipped`` (all flows together).
     """
-    from ..core.inputs import preprocess_density
-    from ..core.mesh import grid_points
-    from ..solvers import solve_dem
-    from ..solvers.flow import solve_flow
-    from ..training.validation import validation_fields
-
     pts = grid_points(n, dim)
     rows = []
     for vf in validation_fields("density", dim, count, stream="report"):
@@ -77,11 +78,6 @@ def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: s
         ``std`` (= Std(rho~_map)), ``smooth``, ``element_fraction``, ``time`` (s; the second pass alone) and
         ``n_flipped``.  The second pass's own map is reported, even where it is worse than its start.
     """
-    from ..core.metrics import residual_scales
-    from ..fields.paper import sample_density
-    from ..solvers import solve_dem
-    from ..solvers.flow import solve_flow
-
     rows = []
     for n in ns:
         dens = sample_density(density_name, int(n))
@@ -122,10 +118,6 @@ def flow_convergence(dim: int = 2, n: int = 256, boundary: str = "square", *, ra
         diffusion solver's displacement that is not a gradient (:func:`rfmap.core.metrics.rotational_share`; ``None``
         for a free boundary, whose walls move).
     """
-    from ..core.metrics import rotational_share
-    from ..solvers import solve_dem
-    from ..solvers.flow import solve_flow
-
     def rotation(res):
         return rotational_share(res.ref_points, res.mapped_points) if boundary == "square" else None
 
@@ -168,11 +160,6 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
     list of dict
         One row per ``N`` and map: ``n``, ``method``, ``std``, ``smooth``, ``element_fraction``, ``time`` (s).
     """
-    from ..core.mesh import grid_mesh
-    from ..core.metrics import residual_scales
-    from ..fields.paper import sample_density
-    from ..solvers.flow import solve_flow
-
     if not sur.spec.task.equalizes or sur.spec.boundary != "square":
         raise ValueError(f"warm_start_residuals needs a density surrogate with a square boundary, got {sur.spec}")
     rows = []

@@ -5,8 +5,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fields.paper import PAPER_N, TEST_FIELDS
+from ..core.inputs import preprocess_density
+from ..core.mesh import grid_points
+from ..fields.paper import PAPER_N, TEST_FIELDS, sample_density
 from ..finish import quiet_quality
+from ..solvers import solve_dem
+from ..tasks import draw_samples
+from ..training.config import get_config
+from ..training.validation import validation_fields
 from .reproduce import METHOD_TITLES, SYM, SYM_REF
 from .tables import COLUMN_TITLES, Table, format_sig
 
@@ -31,8 +37,6 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     the domain, with refinement and fold handling (:data:`~rfmap.paper.reproduce.SYM_REF`, or
     :data:`~rfmap.paper.reproduce.SYM` without ``refine``).
     """
-    from ..training.validation import validation_fields
-
     spec, task = sur.spec, sur.spec.task
     n = int(n or PAPER_N[spec.dim])
     fields = validation_fields(spec.kind, spec.dim, count, stream="report", low_frequency=low_frequency)
@@ -123,8 +127,6 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
         ``tab:distortion``: rows ``(kind, label)``, columns ``std_rho_map`` (the mean), ``median``, ``worst``,
         ``mean_mu``, ``max_mu``, ``min_jacobian``, ``n_flipped``, ``mu_ratio``.
     """
-    from ..training.validation import validation_fields
-
     if not surs:
         raise ValueError("distortion_table needs at least one model")
     for label, sur in surs.items():
@@ -181,14 +183,6 @@ def displacement_demand(sur, count: int = 16, train_count: int = 60, n: int | No
         ``demand``, ``reach``, ``left_net``, ``left_classical``, ``n_flipped``) for
         :func:`rfmap.viz.studies.displacement_demand_figure`.
     """
-    from ..training.config import get_config
-    from ..core.inputs import preprocess_density
-    from ..core.mesh import grid_points
-    from ..fields.paper import sample_density
-    from ..solvers import solve_dem
-    from ..tasks import draw_samples
-    from ..training.validation import validation_fields
-
     spec = sur.spec
     if not spec.task.equalizes:
         raise ValueError(f"displacement_demand needs a density model, got a {spec.kind} model")

@@ -12,10 +12,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .. import solvers
 from ..core.mesh import grid_mesh
-from ..fields.paper import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
 from ..core.result import MapResult
+from ..fields.paper import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
 from ..finish import quiet_quality
+from ..surrogate import Surrogate, models
 from .tables import COLUMN_TITLES, Headline, Table, format_sig, format_value, headline, paper_table
 
 __all__ = ["beltrami_table", "beltrami_resolution_table", "population_table", "resolution_table", "reproduce",
@@ -60,11 +62,9 @@ def beltrami_values(res: MapResult, name: str) -> dict:
 
 
 def _lbs(name: str, n: int) -> MapResult:
-    from ..solvers import solve_lbs
-
     mu = sample_mu(name, n)
-    solve_lbs(mu, n)  # warm-up
-    return min((solve_lbs(mu, n) for _ in range(3)), key=lambda r: r.time)
+    solvers.solve_lbs(mu, n)  # warm-up
+    return min((solvers.solve_lbs(mu, n) for _ in range(3)), key=lambda r: r.time)
 
 
 #: row names of the symmetrized network (``symmetrize`` of the tables; :mod:`rfmap.nn.symmetry`)
@@ -140,14 +140,12 @@ def density_values(res: MapResult, with_mu: bool) -> dict:
 def _classical(name: str, n: int, boundary: str, repeats: int = 3, slow: float = 1.0) -> MapResult:
     """The diffusion solver's map of a test density, timed as :func:`_timed_map` times the surrogate: the fastest of
     ``repeats`` runs after an untimed warm-up, one timed run when the warm-up took more than ``slow`` seconds."""
-    from ..solvers import solve_dem
-
     dens = DENSITIES[name].sample(n)
     t0 = time.perf_counter()
-    solve_dem(dens, boundary=boundary)  # warm-up
+    solvers.solve_dem(dens, boundary=boundary)  # warm-up
     if time.perf_counter() - t0 > slow:
         repeats = 1
-    return min((solve_dem(dens, boundary=boundary) for _ in range(repeats)), key=lambda r: r.time)
+    return min((solvers.solve_dem(dens, boundary=boundary) for _ in range(repeats)), key=lambda r: r.time)
 
 
 @quiet_quality()
@@ -234,8 +232,6 @@ def reproduce(experiment: str, out_dir, *, refine: bool = True, device="cpu",
     """Write the tables of one experiment (``beltrami``, ``dem2d``, ``dem3d``) as Markdown and CSV; the networks
     run on ``device`` (``'cpu'``, ``'cuda'`` or ``'auto'``), the classical solvers on the CPU.  ``symmetrize`` adds
     the rows of the networks averaged over symmetries of the domain (:mod:`rfmap.nn.symmetry`)."""
-    from ..surrogate import Surrogate, models
-
     def need(name):
         if name not in models():
             raise ValueError(f"the pretrained model {name!r} is not shipped with this version; train it with "

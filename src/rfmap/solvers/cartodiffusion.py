@@ -7,9 +7,10 @@ density diffuses, :math:`\partial_t\rho = \Delta\rho` with no-flux walls, and po
 ``method="diffusion"``) and carries a cartogram's distinct polygon vertices themselves, or the ``N``-grid's vertices.
 
 * The density's cosine coefficients :math:`c_k` come from one type-I cosine transform of the vertex values
-  (``numpy.fft``, :func:`rfmap.solvers.cartoflow.poisson_flux_2d`'s transforms); at time :math:`t` they are
-  :math:`c_k e^{-\pi^2|k|^2 t}`, and :math:`\rho`, :math:`\partial_x\rho`, :math:`\partial_y\rho` on the vertex grid
-  are their cosine and sine syntheses (five transforms along one axis each).
+  (:func:`rfmap.solvers.spectral.half_coefficients` on the ``numpy.fft`` transforms of
+  :class:`rfmap.solvers.cosine.CosineTransforms`); at time :math:`t` they are :math:`c_k e^{-\pi^2|k|^2 t}`, and
+  :math:`\rho`, :math:`-\partial_x\rho`, :math:`-\partial_y\rho` on the vertex grid are their cosine and sine
+  syntheses (five transforms along one axis each; :func:`rfmap.solvers.spectral.flux_synthesis`, the flow's).
 * The velocity at a point is the bilinear interpolant of those three planes (:func:`rfmap.solvers.cartoflow.bilinear`).
 * Time steps are predictor--corrector (Heun) pairs: a step is accepted when :math:`\max|x' - x^*|` is at most
   ``rtol`` grid spacings (for the grid, also when no triangle turned over), the next step scaled by the error.
@@ -28,6 +29,7 @@ import numpy as np
 
 from .cartoflow import GridFlow, _bilinear_planes, _project, heun_step, square_inputs, step_factor
 from .cosine import CosineTransforms
+from .spectral import damp, flux_synthesis, half_coefficients, heat_factor
 
 __all__ = ["CartoDiffusionOptions", "diffusion_square"]
 
@@ -60,36 +62,27 @@ class CartoDiffusionOptions:
 
 
 class _Heat:
-    r""":math:`\rho(\cdot, t)` and its gradient on the vertex grid, from the cosine coefficients of :math:`\rho_0`."""
+    r""":math:`\rho(\cdot, t)` and its flux :math:`-\nabla\rho` on the vertex grid, from the half cosine coefficients
+    of :math:`\rho_0` (:func:`rfmap.solvers.spectral.half_coefficients`)."""
 
     def __init__(self, dens: np.ndarray):
-        m = dens.shape[0]
-        self.n = m
-        self.ct = CosineTransforms(m)  # its buffers serve every evaluation
-        self.coef = self.ct.dct(self.ct.dct(dens, 0), 1) / (2.0 * (m - 1)) ** 2  # synthesis: the same transforms
-        self.k = math.pi * np.arange(m)
-        self.rate = self.k ** 2  # per axis: exp(-(k_x^2 + k_y^2) t) = exp(-k_x^2 t) exp(-k_y^2 t)
+        self.n = dens.shape[0]
+        self.ct = CosineTransforms(self.n)  # its buffers serve every evaluation
+        self.coef = half_coefficients(dens, transforms=self.ct)  # synthesis: the same transforms
         self.evaluations = 0
 
     def planes(self, t: float) -> np.ndarray:
-        """(3, N*N): :math:`\\partial_x\\rho`, :math:`\\partial_y\\rho`, :math:`\\rho` at time ``t``."""
-        decay = np.exp(-self.rate * t)
-        b = self.coef * decay[:, None] * decay[None, :]
-        m, k, ct = self.n, self.k, self.ct
-        out = np.empty((3, m, m))
-        along_y = ct.dct(b, 1)  # cosine synthesis along y: shared by rho and its x derivative
-        ct.dct(along_y, 0, out=out[2])
-        ct.dst(along_y[1:-1] * -k[1:-1, None], 0, out=out[0, 1:-1])
-        ct.dst(ct.dct(b, 0)[:, 1:-1] * -k[None, 1:-1], 1, out=out[1, :, 1:-1])
-        out[0, [0, -1]] = 0.0  # the derivatives across the walls vanish
-        out[1, :, [0, -1]] = 0.0
-        return out.reshape(3, -1)
+        """(3, N*N): :math:`-\partial_x\rho`, :math:`-\partial_y\rho`, :math:`\rho` at time ``t``: the decayed
+        coefficients (:func:`rfmap.solvers.spectral.heat_factor`) synthesised as a flux and its potential
+        (:func:`rfmap.solvers.spectral.flux_synthesis`)."""
+        b = damp(self.coef, heat_factor(self.n, t))
+        return flux_synthesis(b, self.ct, value=True).reshape(3, -1)
 
     def velocity(self, t: float, pts: np.ndarray) -> np.ndarray:
         r""":math:`-\nabla\rho/\rho` at points (P, 2)."""
         self.evaluations += 1
         f = _bilinear_planes(self.planes(t), self.n, pts)
-        return -f[:, :2] / f[:, 2:]
+        return f[:, :2] / f[:, 2:]
 
 
 def _integrate(heat: _Heat, y: np.ndarray, t: float, opts: CartoDiffusionOptions, grid: bool) -> tuple:

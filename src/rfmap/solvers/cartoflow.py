@@ -3,8 +3,8 @@ r"""The flow-based density-equalizing map of the unit square for cartograms, in 
 The method is that of :mod:`rfmap.solvers.flow` (Gastner, Seguy & More 2018) with the square's walls fixed: the
 density is interpolated linearly in time, :math:`\rho_t = (1 - t)\rho_0 + t\bar\rho`, the flux
 :math:`-\nabla\phi` of :math:`\Delta\phi = \bar\rho - \rho_0` (no-flux walls) is computed once by cosine transforms
-(:func:`poisson_flux_2d`, type-I DCT/DST on the vertex grid, :class:`rfmap.solvers.cosine.CosineTransforms`, as
-:func:`rfmap.solvers.spectral.poisson_flux`), and
+(:func:`rfmap.solvers.spectral.flow_planes`, the map solver's Poisson solve, here on the vertex grid and by the
+``numpy.fft`` transforms of :class:`rfmap.solvers.cosine.CosineTransforms`), and
 points follow :math:`\dot x = -\nabla\phi(x) / \rho_t(x)` from :math:`t = 0` to :math:`1`.  It is one pass of a
 cartogram (:func:`rfmap.cartogram.resize.cartogram` with ``method="flow"``), which itself repeats passes on the mapped
 polygons, so this module has no passes, residual rasters or free boundary of its own: what it keeps is lean.
@@ -20,7 +20,7 @@ polygons, so this module has no passes, residual rasters or free boundary of its
   2, then 4 vertex spacings (:data:`STALL_BLURS`), as cartogram programs blur sharp edges.
 
 PyTorch is never imported here (the whole cartogram command runs without it), nor ``scipy.fft``, whose import takes
-most of a second: the transforms are real FFTs of ``numpy.fft`` (:func:`poisson_flux_2d`).
+most of a second: the transforms are real FFTs of ``numpy.fft`` (:class:`rfmap.solvers.cosine.CosineTransforms`).
 """
 from __future__ import annotations
 
@@ -31,8 +31,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .cosine import CosineTransforms
+from .spectral import box_mean, flow_planes
 
-__all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "poisson_flux_2d", "bilinear", "min_triangle_area",
+__all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "bilinear", "min_triangle_area",
            "square_inputs", "heun_step", "step_factor", "STALL_DT"]
 
 #: a pass stalls when the step falls below this (in units of the unit time interval)
@@ -143,81 +144,6 @@ def min_triangle_area(y: np.ndarray) -> float:
     return float(min(first, (cx * dy - cy * dx).min()))
 
 
-def poisson_flux_2d(values: np.ndarray) -> np.ndarray:
-    r"""The flux :math:`-\nabla\phi` of :math:`\Delta\phi = \bar\rho - \rho_0` with no-flux walls on the unit
-    square, at the grid nodes: :func:`rfmap.solvers.spectral.poisson_flux` in 2D, by ``numpy.fft``.
-
-    With the half coefficients :math:`b_k = \mathrm{DCT\text{-}I}(\rho_0)_k / (2(M-1))^2 / (\pi^2|k|^2)`
-    (:math:`b_0 = 0`), :math:`-\partial_i\phi` is the cosine synthesis (a type-I DCT) of :math:`b` along the other
-    axis and the sine synthesis (a type-I DST of the interior coefficients times :math:`\pi k_i`) along axis ``i``;
-    it vanishes on the walls normal to axis ``i``.
-
-    Parameters
-    ----------
-    values : ndarray, shape (M, M)
-
-    Returns
-    -------
-    ndarray, shape (2, M, M)
-    """
-    values = np.asarray(values, dtype=np.float64)
-    ct = CosineTransforms(values.shape[0])
-    return _flux(ct.dct(ct.dct(values, 0), 1), ct)
-
-
-def _divide_by_laplacian(y: np.ndarray, rows: int = 256) -> np.ndarray:
-    r"""``y`` (M, M) of cosine modes divided in place by :math:`(2(M-1))^2 \pi^2 |k|^2`, the mean mode set to 0:
-    the DCT-I of the values to the half coefficients :math:`b` of :func:`poisson_flux_2d`, a block of ``rows`` at a
-    time (no table of the divisors: at a 2049 raster it would hold 34 MB)."""
-    m = y.shape[0]
-    k2 = (math.pi * np.arange(m)) ** 2 * (2.0 * (m - 1)) ** 2
-    for a in range(0, m, rows):
-        block = k2[a:a + rows, None] + k2[None, :]
-        if a == 0:
-            block[0, 0] = 1.0
-        y[a:a + rows] /= block
-    y[0, 0] = 0.0
-    return y
-
-
-def _flux(y: np.ndarray, ct: CosineTransforms, out: np.ndarray | None = None) -> np.ndarray:
-    """:func:`poisson_flux_2d` (2, M, M) from the type-I DCT ``y`` (M, M) of the values (consumed), written into
-    ``out`` when given."""
-    m = y.shape[0]
-    k = math.pi * np.arange(m)
-    b = _divide_by_laplacian(y)
-    out = np.empty((2, m, m)) if out is None else out
-    c = ct.dct(b, 1)
-    c *= k[:, None]
-    ct.dst(c[1:-1], 0, out=out[0, 1:-1])
-    ct.dct(b, 0, out=c)
-    c *= k[None, :]
-    ct.dst(c[:, 1:-1], 1, out=out[1, :, 1:-1])
-    out[0, [0, -1]] = 0.0  # no flux through the walls
-    out[1, :, [0, -1]] = 0.0
-    return out
-
-
-def _transforms(dens: np.ndarray, sigma: float) -> np.ndarray:
-    """The planes (3, N, N) of a flow: its flux (:func:`poisson_flux_2d`) and the density, blurred over ``sigma``
-    vertex spacings with mirror walls when ``sigma > 0`` (its type-I cosine modes damped by the heat kernel; the
-    mean is kept), sharing the forward transform."""
-    m = dens.shape[0]
-    ct = CosineTransforms(m)
-    planes = np.empty((3, m, m))
-    y = ct.dct(dens, 0)
-    ct.dct(y, 1, out=y)
-    if sigma > 0:
-        g = np.exp(-0.5 * (math.pi * sigma / (m - 1) * np.arange(m)) ** 2)
-        y *= np.outer(g, g)
-        ct.dct(ct.dct(y, 0), 1, out=planes[2])
-        planes[2] /= (2.0 * (m - 1)) ** 2
-    else:
-        planes[2] = dens
-    _flux(y, ct, out=planes[:2])
-    return planes
-
-
 class _Stalled(RuntimeError):
     """Every step, however short, turns a triangle over."""
 
@@ -226,11 +152,11 @@ class _Velocity:
     r""":math:`v(x, t) = -\nabla\phi(x) / ((1-t)\rho_0(x) + t\bar\rho)` of one density on the vertex grid."""
 
     def __init__(self, dens: np.ndarray, sigma: float = 0.0):
-        planes = _transforms(dens, sigma)  # flux x, flux y, density: (3, N, N)
-        self.n = dens.shape[0]
-        self.planes = planes.reshape(3, -1)
-        # the box mean of the cosine interpolant: the trapezoidal mean (rfmap.solvers.spectral.box_mean)
-        self.mean = float(np.trapezoid(np.trapezoid(planes[2], axis=0))) / (self.n - 1) ** 2
+        """``sigma``: blur width in vertex spacings."""
+        self.n = n = dens.shape[0]
+        # flux x, flux y, density (3, N*N), blurred with mirror walls when sigma > 0
+        self.planes = flow_planes(dens, sigma / (n - 1), transforms=CosineTransforms(n)).reshape(3, -1)
+        self.mean = box_mean(dens)  # the box mean of the cosine interpolant, which the blur keeps
         self.evaluations = 0
 
     def __call__(self, t: float, pts: np.ndarray) -> np.ndarray:

@@ -1,8 +1,8 @@
-r"""Type-I cosine and sine transforms of square vertex tables, by ``numpy.fft`` alone.
+r"""Type-I cosine and sine transforms along the axes of grid tables: the one place the cosine solvers transform.
 
-The classical cartogram solvers (:mod:`rfmap.solvers.cartoflow`, :mod:`rfmap.solvers.cartodiffusion`) expand the
-density on the vertex grid :math:`(i, j)/(M-1)` of the unit square in cosine modes, which satisfy the square's
-no-flux walls.  Along one axis of an (M, M) table,
+The classical solvers (:mod:`rfmap.solvers.spectral`, and through it the flow and diffusion maps and their cartogram
+passes) expand a density on the vertex grid :math:`j/(M-1)` of the unit box in cosine modes, which satisfy the box's
+no-flux walls.  Along one axis,
 
 .. math::
 
@@ -10,23 +10,29 @@ no-flux walls.  Along one axis of an (M, M) table,
     \qquad
     \mathrm{DST\text{-}I}(x)_j = 2\sum_{k=0}^{K-1} x_k \sin\frac{\pi (j+1)(k+1)}{K+1},
 
-(``scipy.fft.dct(x, type=1)`` and ``scipy.fft.dst(x, type=1)``, unnormalised), the first the real part of the real
-FFT of the even extension :math:`(x_0, \dots, x_{M-1}, x_{M-2}, \dots, x_1)`, the second minus the imaginary part of
-that of the odd extension :math:`(0, x, 0, -\bar x)` (:math:`\bar x` reversed), both of length :math:`2(M-1)` when
-:math:`K = M - 2` (the interior of an axis).  Tables of a side of at least :data:`SCIPY_SIDE` go to ``scipy.fft``
-itself, whose type-I transforms skip the extension (a quarter faster along the first axis of a 2049 table); the
-smaller ones do not import it, since its import (a few tenths of a second) takes longer than a small cartogram.
+(``scipy.fft.dct(x, type=1)`` and ``scipy.fft.dst(x, type=1)``, unnormalised).  Two objects compute them with one
+interface (``dct(x, axis, out=None)``, ``dst(x, axis, out=None)``, ``dctn(x)``):
 
-:class:`CosineTransforms` keeps the extension and the spectrum of a block of rows in two buffers between calls: a
-table of a few hundred thousand numbers allocated afresh for every transform costs the operating system's page
-faults, about as much as the FFT itself, and a table of millions (a cartogram's finest raster) would need two more
-tables' worth of memory at once.
+* :class:`ScipyTransforms`: ``scipy.fft`` along any axis of a table of any dimension and precision, threaded as the
+  solver runs (:func:`fft_workers`); the maps of :mod:`rfmap.solvers.flow` and :mod:`rfmap.solvers.diffusion`.
+* :class:`CosineTransforms`: (M, M) tables by ``numpy.fft`` alone, for the torch-free cartogram passes.  The first
+  transform is the real part of the real FFT of the even extension :math:`(x_0, \dots, x_{M-1}, x_{M-2}, \dots,
+  x_1)`, the second minus the imaginary part of that of the odd extension :math:`(0, x, 0, -\bar x)` (:math:`\bar x`
+  reversed), both of length :math:`2(M-1)` when :math:`K = M - 2` (the interior of an axis).  Tables of a side of
+  at least :data:`SCIPY_SIDE` go to ``scipy.fft`` itself, whose type-I transforms skip the extension (a quarter
+  faster along the first axis of a 2049 table); the smaller ones do not import it, since its import (a few tenths
+  of a second) takes longer than a small cartogram.  It keeps the extension and the spectrum of a block of rows in
+  two buffers between calls: a table of a few hundred thousand numbers allocated afresh for every transform costs
+  the operating system's page faults, about as much as the FFT itself, and a table of millions (a cartogram's
+  finest raster) would need two more tables' worth of memory at once.
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
-__all__ = ["CosineTransforms"]
+__all__ = ["CosineTransforms", "ScipyTransforms", "fft_workers"]
 
 
 #: Rows transformed at a time by :class:`CosineTransforms`, as a count of numbers in its extension buffer: a table of
@@ -36,8 +42,53 @@ BLOCK_NUMBERS = 1 << 20
 SCIPY_SIDE = 1025
 
 
+def fft_workers() -> int:
+    """Threads for scipy's transforms: the torch thread count the solver runs with, or where torch is not loaded
+    (the torch-free cartogram path) ``scipy.fft``'s current default (``scipy.fft.set_workers``)."""
+    torch = sys.modules.get("torch")
+    if torch is None:
+        from scipy.fft import get_workers
+
+        return get_workers()
+    return max(1, torch.get_num_threads())
+
+
+class ScipyTransforms:
+    """DCT-I and DST-I along any axis of tables of any dimension and float precision, by ``scipy.fft`` (imported on
+    construction), with ``workers`` threads (default :func:`fft_workers` at construction).
+
+    ``out=x`` transforms in place (``overwrite_x``); another ``out`` receives a copy of the result.
+    """
+
+    def __init__(self, workers: int | None = None):
+        import scipy.fft
+
+        self._fft = scipy.fft
+        self.workers = fft_workers() if workers is None else workers
+
+    def _apply(self, transform, x: np.ndarray, axis: int, out: np.ndarray | None) -> np.ndarray:
+        y = transform(x, type=1, axis=axis, workers=self.workers, overwrite_x=out is x)
+        if out is None or y is out:
+            return y
+        out[...] = y
+        return out
+
+    def dct(self, x: np.ndarray, axis: int, out: np.ndarray | None = None) -> np.ndarray:
+        """DCT-I of ``x`` along ``axis``: a fresh array, or written into ``out`` (``x`` itself: in place)."""
+        return self._apply(self._fft.dct, x, axis, out)
+
+    def dst(self, x: np.ndarray, axis: int, out: np.ndarray | None = None) -> np.ndarray:
+        """DST-I of ``x`` along ``axis``: a fresh array, or written into ``out``."""
+        return self._apply(self._fft.dst, x, axis, out)
+
+    def dctn(self, x: np.ndarray) -> np.ndarray:
+        """DCT-I along every axis of ``x``: a fresh array."""
+        return self._fft.dctn(x, type=1, workers=self.workers)
+
+
 class CosineTransforms:
-    """DCT-I and DST-I along either axis of (M, M) tables (module docstring), sharing two buffers.
+    """DCT-I and DST-I along either axis of (M, M) float64 tables by ``numpy.fft`` (module docstring), sharing two
+    buffers.
 
     Parameters
     ----------
@@ -111,6 +162,11 @@ class CosineTransforms:
         for a, b, spec in self._spectra(src, fill):
             rows[a:b] = spec.real
         return result
+
+    def dctn(self, x: np.ndarray) -> np.ndarray:
+        """DCT-I of ``x`` (M, M) along both axes, the first axis first: a fresh array."""
+        y = self.dct(x, 0)
+        return self.dct(y, 1, out=y)
 
     def dst(self, x: np.ndarray, axis: int, out: np.ndarray | None = None) -> np.ndarray:
         """DST-I of ``x`` along ``axis`` (0 or 1), whose length along that axis is ``M - 2`` (an axis's interior):

@@ -23,7 +23,8 @@ Numerical method:
 2. **Poisson solve.**  With the cosine coefficients :math:`a_k` of the raster (type-I DCT,
    ``rfmap.solvers.spectral.cosine_coefficients``), :math:`\phi_k = a_k / (\pi^2 |k|^2)` for
    :math:`k \ne 0`; the flux :math:`-\nabla\phi` is evaluated on the raster by inverse type-I DCTs along the cosine
-   axes and a type-I DST along the differentiated axis (:func:`poisson_flux`), :math:`O(M^d \log M)`.  Its normal
+   axes and a type-I DST along the differentiated axis (``rfmap.solvers.spectral.flow_planes``, which the
+   cartogram passes of ``rfmap.solvers.cartoflow`` share), :math:`O(M^d \log M)`.  Its normal
    component vanishes exactly on the walls (no-flux).
 3. **Velocity at a point.**  The flux and :math:`\rho_0` are interpolated multilinearly at the vertex and
    :math:`v = -\nabla\phi / ((1-t)\rho_0 + t\bar\rho)` is formed there.  The Poisson solve and this table are
@@ -83,10 +84,10 @@ from ..core.result import MapResult
 from .locate import rasterize_elements
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
 from .residual import lumped_residual, residual_density, vertex_residual
-from .spectral import box_mean, gaussian_blur, poisson_flux
+from .spectral import box_mean, flow_planes
 
-__all__ = ["STALL_BLEND", "FlowOptions", "solve_flow", "poisson_flux", "box_mean", "rasterize_elements",
-           "residual_density", "lumped_residual", "vertex_residual", "gaussian_blur"]
+__all__ = ["STALL_BLEND", "FlowOptions", "solve_flow", "rasterize_elements", "residual_density", "lumped_residual",
+           "vertex_residual"]
 
 
 #: the fold check of a step (:func:`rfmap.core.geometry.grid_min_measure`, with the same threshold) and
@@ -137,14 +138,11 @@ class _FlowPass:
     def __init__(self, raster: np.ndarray, sigma: float = 0.0):
         self.dim = raster.ndim
         self.m = raster.shape[0]
-        if sigma > 0:
-            raster = gaussian_blur(raster, sigma)
-        self.mean = box_mean(raster)  # the box mean of the cosine interpolant
+        self.mean = box_mean(raster)  # the box mean of the cosine interpolant, which the blur keeps
         # the velocity table in single precision: torch's grid_sample is vectorised for float32 only (book: Design
-        # decisions), and its error is far below the step's tolerance; the positions are integrated in float64
-        flux = poisson_flux(raster, dtype=np.float32)
-        # channels first, grid axes reversed: grid_sample takes the last point coordinate along the last grid axis
-        self.grid = torch.from_numpy(np.concatenate([flux, raster[None].astype(np.float32)]))[None]  # (1, d+1, M..)
+        # decisions), and its error is far below the step's tolerance; the positions are integrated in float64.
+        # Channels first, grid axes reversed: grid_sample takes the last point coordinate along the last grid axis
+        self.grid = torch.from_numpy(flow_planes(raster, sigma, np.float32))[None]  # (1, d+1, M..): flux, density
         self.evaluations = 0
 
     def velocity(self, t: float, y: np.ndarray) -> np.ndarray:
@@ -255,7 +253,8 @@ class FlowOptions:
     stall : float
         See ``max_passes``; in (0, 1].
     blur : float
-        Width (in vertex grid spacings) of a Gaussian blur of the first pass's density (:func:`gaussian_blur`),
+        Width (in vertex grid spacings) of a Gaussian blur of the first pass's density
+        (``rfmap.solvers.spectral.gaussian_blur``),
         halved at every further pass, as cartogram programs do to soften sharp edges; 0 turns it off.
     max_steps : int
         Most (accepted + rejected) steps of one pass; ``RuntimeError`` if exceeded, or if a pass still stalls

@@ -1,40 +1,76 @@
-r"""Cosine transforms of the box :math:`[0,1]^d` shared by the diffusion and the flow-based solvers.
+r"""The cosine method on the box :math:`[0,1]^d`, shared by the diffusion and the flow-based solvers, maps and
+cartograms alike.
 
 A grid field :math:`p_j` at the nodes :math:`j/(M-1)` has the cosine interpolant :math:`\sum_k a_k \prod_i
-\cos(\pi k_i x_i)`, :math:`0 \le k_i \le M-1`, whose coefficients a type-I DCT gives (:func:`cosine_coefficients`).
-The diffusion solver evolves it exactly (``rfmap.solvers.diffusion.CosineDiffusion``); the flow solver solves the
-Poisson equation with it (:func:`poisson_flux`: :func:`half_coefficients`, :func:`laplacian_eigenvalues`,
-:func:`flux_synthesis`) and blurs with it (:func:`gaussian_blur`); both integrate it over boxes
-(:func:`box_mean`, :func:`interval_weights`).
+\cos(\pi k_i x_i)`, :math:`0 \le k_i \le M-1`, whose coefficients a type-I DCT gives (:func:`cosine_coefficients`,
+:func:`half_coefficients`).  On them the diffusion solvers evolve the density exactly (:func:`damp` by
+:func:`heat_factor`; ``rfmap.solvers.diffusion.CosineDiffusion`` and ``rfmap.solvers.cartodiffusion``), the flow
+solvers solve the Poisson equation (:func:`poisson_flux`, :func:`flow_planes`: :func:`divide_by_laplacian`,
+:func:`flux_synthesis`) and blur (:func:`gaussian_blur`, :func:`blur_factor`); both integrate the interpolant over
+boxes (:func:`box_mean`, :func:`interval_weights`).
+
+Every function takes the transforms it runs on (:mod:`rfmap.solvers.cosine`): by default ``scipy.fft`` in any
+dimension and precision (:class:`rfmap.solvers.cosine.ScipyTransforms`, the maps of :mod:`rfmap.solvers.flow` and
+:mod:`rfmap.solvers.diffusion`), or ``numpy.fft`` on (M, M) tables (:class:`rfmap.solvers.cosine.CosineTransforms`,
+the torch-free cartogram passes, which must not import ``scipy.fft``): one method, two engines.
 """
 from __future__ import annotations
 
 import math
-import sys
 
 import numpy as np
-from scipy.fft import dct, dctn, dst
 
-__all__ = ["fft_workers", "cosine_coefficients", "dct1", "half_coefficients", "laplacian_eigenvalues",
-           "flux_synthesis", "poisson_flux", "gaussian_blur", "box_mean", "interval_weights", "contract"]
+from .cosine import ScipyTransforms, fft_workers
+
+__all__ = ["fft_workers", "cosine_coefficients", "half_coefficients", "laplacian_eigenvalues", "divide_by_laplacian",
+           "flux_synthesis", "poisson_flux", "flow_planes", "heat_factor", "blur_factor", "damp", "gaussian_blur",
+           "box_mean", "interval_weights", "contract"]
 
 
-def fft_workers() -> int:
-    """Threads for scipy's transforms: the torch thread count the solver runs with, or where torch is not loaded
-    (the torch-free cartogram path) ``scipy.fft``'s current default (``scipy.fft.set_workers``)."""
-    torch = sys.modules.get("torch")
-    if torch is None:
-        from scipy.fft import get_workers
+def _edge_factors(m: int, dtype) -> np.ndarray:
+    r""":math:`e_k`: 1 at both ends of an axis of ``m`` modes, 2 inside."""
+    e = np.full(m, 2.0, dtype=dtype)
+    e[0] = e[-1] = 1.0
+    return e
 
-        return get_workers()
-    return max(1, torch.get_num_threads())
+
+def _along(v: np.ndarray, ax: int, d: int) -> np.ndarray:
+    """A 1D array ``v`` shaped to broadcast along axis ``ax`` of a ``d``-dimensional table."""
+    return v.reshape([len(v) if j == ax else 1 for j in range(d)])
+
+
+def half_coefficients(values: np.ndarray, dtype=np.float64, transforms=None) -> np.ndarray:
+    r""":math:`b_k = \mathrm{DCT\text{-}I}(p)_k / (2(M-1))^d` (unnormalised transform) of grid values ``p``.
+
+    These are the cosine coefficients :math:`a_k` of the interpolant with every interior index halved per axis
+    (:math:`a_k = e_k b_k`, :math:`e_k = 1` at the ends and 2 inside); a type-I DCT of :math:`b` along an axis is the
+    cosine synthesis along it, so ``transforms.dctn(b)`` gives the values back.
+
+    Parameters
+    ----------
+    values : ndarray, shape (M,)*d
+    dtype : numpy dtype
+        Precision of the transform.
+    transforms : optional
+        :class:`rfmap.solvers.cosine.ScipyTransforms` (default) or :class:`rfmap.solvers.cosine.CosineTransforms`.
+
+    Returns
+    -------
+    ndarray, shape (M,)*d, of ``dtype``
+    """
+    tr = transforms if transforms is not None else ScipyTransforms()
+    d, m = values.ndim, values.shape[0]
+    y = tr.dctn(np.asarray(values, dtype=dtype))
+    y /= (2.0 * (m - 1)) ** d
+    return y
 
 
 def cosine_coefficients(values: np.ndarray, workers: int | None = None) -> np.ndarray:
     r"""Coefficients :math:`a_k` of the cosine interpolant :math:`\sum_k a_k \prod_i \cos(\pi k_i x_i)` of grid values.
 
-    With the unnormalised type-I DCT :math:`y = \mathrm{DCT\text{-}I}(p)` (``scipy.fft.dctn(p, type=1)``),
-    :math:`a_k = y_k \prod_i c_{k_i} / (2(M-1))^d`, :math:`c_0 = c_{M-1} = 1`, :math:`c_k = 2` otherwise.
+    :math:`a_k = b_k \prod_i e_{k_i}` with the half coefficients :math:`b_k` (:func:`half_coefficients`):
+    :math:`a_k = \mathrm{DCT\text{-}I}(p)_k \prod_i e_{k_i} / (2(M-1))^d`, :math:`e_0 = e_{M-1} = 1`, :math:`e_k = 2`
+    otherwise.
 
     Parameters
     ----------
@@ -48,31 +84,12 @@ def cosine_coefficients(values: np.ndarray, workers: int | None = None) -> np.nd
     ndarray, shape (M,)*d, float32 for float32 values, else float64
     """
     d, m = values.ndim, values.shape[0]
-    c = np.full(m, 2.0, dtype=np.result_type(values.dtype, np.float32))
-    c[0] = c[-1] = 1.0
-    coef = dctn(values, type=1, workers=workers) / (2.0 * (m - 1)) ** d
+    dtype = np.result_type(values.dtype, np.float32)
+    coef = half_coefficients(values, dtype, ScipyTransforms(workers=1 if workers is None else workers))
+    e = _edge_factors(m, dtype)
     for ax in range(d):
-        shape = [1] * d
-        shape[ax] = m
-        coef = coef * c.reshape(shape)
+        coef = coef * _along(e, ax, d)
     return coef
-
-
-def dct1(x: np.ndarray, axis: int) -> np.ndarray:
-    r"""Unnormalised type-I DCT along ``axis`` (may overwrite ``x``): :math:`\sum_k e_k x_k \cos(\pi k j/(M-1))` at the
-    nodes ``j``, with :math:`e_k = 1` at both ends and 2 inside."""
-    return dct(x, type=1, axis=axis, workers=fft_workers(), overwrite_x=True)
-
-
-def half_coefficients(values: np.ndarray, dtype=np.float64) -> np.ndarray:
-    r""":math:`b_k = \mathrm{DCT\text{-}I}(p)_k / (2(M-1))^d` (unnormalised transform) of grid values ``p``: the cosine
-    coefficients :math:`a_k` of their interpolant with every interior index halved per axis (:math:`a_k = e_k b_k`,
-    :math:`e_k = 1` at the ends and 2 inside).  A type-I DCT of :math:`b` along an axis is the cosine synthesis
-    along it (:func:`dct1`).  Shape (M,)*d, of ``dtype``."""
-    d, m = values.ndim, values.shape[0]
-    y = dctn(np.asarray(values, dtype=dtype), type=1, workers=fft_workers())
-    y *= y.dtype.type(1.0 / (2.0 * (m - 1)) ** d)
-    return y
 
 
 def laplacian_eigenvalues(d: int, m: int, dtype=np.float64) -> np.ndarray:
@@ -81,23 +98,60 @@ def laplacian_eigenvalues(d: int, m: int, dtype=np.float64) -> np.ndarray:
     k2 = (math.pi * np.arange(m, dtype=np.float64)) ** 2
     lam = np.zeros((m,) * d, dtype=dtype)
     for ax in range(d):
-        lam += k2.astype(dtype).reshape([m if j == ax else 1 for j in range(d)])
+        lam += _along(k2.astype(dtype), ax, d)
     lam.flat[0] = 1.0
     return lam
 
 
-def flux_synthesis(b: np.ndarray) -> np.ndarray:
-    r"""The flux :math:`-\nabla\psi` at the grid nodes of the potential :math:`\psi = \sum_k e_k b_k \prod_i
-    \cos(\pi k_i x_i)` given by its half coefficients ``b`` (:func:`half_coefficients`; consumed), shape (d, M..).
+def divide_by_laplacian(b: np.ndarray, rows: int = 256) -> np.ndarray:
+    r"""``b`` (M,)*d divided in place by the eigenvalues :math:`\pi^2|k|^2` (:func:`laplacian_eigenvalues`, in
+    ``b``'s precision), the mean mode set to 0: the coefficients of :math:`\Delta^{-1} b` orthogonal to constants.
+
+    The divisors are formed ``rows`` indices of the first axis at a time (a table of them at a 2049 raster would
+    hold 34 MB); the values are those of the whole table.
+    """
+    d, m = b.ndim, b.shape[0]
+    k2 = ((math.pi * np.arange(m, dtype=np.float64)) ** 2).astype(b.dtype)
+    for a in range(0, m, rows):
+        block = np.zeros((min(rows, m - a),) + (m,) * (d - 1), dtype=b.dtype)
+        block += _along(k2[a:a + rows], 0, d)
+        for ax in range(1, d):
+            block += _along(k2, ax, d)
+        if a == 0:
+            block.flat[0] = 1.0
+        b[a:a + rows] /= block
+    b.flat[0] = 0.0
+    return b
+
+
+def flux_synthesis(b: np.ndarray, transforms=None, out: np.ndarray | None = None,
+                   value: bool = False) -> np.ndarray:
+    r"""The flux :math:`-\nabla\psi` at the grid nodes of :math:`\psi = \sum_k e_k b_k \prod_i \cos(\pi k_i x_i)`
+    given by its half coefficients ``b`` (:func:`half_coefficients`; consumed).
 
     :math:`-\partial_i\psi = \sum_k e_k b_k\,\pi k_i \sin(\pi k_i x_i) \prod_{j\ne i}\cos(\pi k_j x_j)`: cosine
     syntheses along the other axes and, along axis ``i``, the type-I DST of the interior coefficients (only interior
     :math:`k_i` contribute; zero on both walls).  Transforms along an axis commute with factors along another, so the
     cosine syntheses are shared between the components: in 3D eight one-axis transforms, and no transposed copies.
+
+    Parameters
+    ----------
+    b : ndarray, shape (M,)*d, d in {2, 3}
+    transforms : optional
+        As in :func:`half_coefficients` (a :class:`rfmap.solvers.cosine.CosineTransforms` in 2D only).
+    out : ndarray, shape (d, M..) (or (d + 1, M..) with ``value``), optional
+    value : bool
+        Also :math:`\psi` itself, as the last component (2D only).
+
+    Returns
+    -------
+    ndarray, shape (d, M, ..., M) (d + 1 with ``value``), of ``b``'s dtype
     """
+    tr = transforms if transforms is not None else ScipyTransforms()
     d, m = b.ndim, b.shape[0]
     k = (math.pi * np.arange(m)).astype(b.dtype)
-    out = np.empty((d,) + (m,) * d, dtype=b.dtype)
+    if out is None:
+        out = np.empty((d + int(value),) + (m,) * d, dtype=b.dtype)
 
     def deriv(g: np.ndarray, i: int) -> None:  # out[i]: the sine synthesis along axis i of g * pi k_i
         inner = tuple(slice(1, m - 1) if j == i else slice(None) for j in range(d))
@@ -105,21 +159,26 @@ def flux_synthesis(b: np.ndarray) -> np.ndarray:
         for end in (0, m - 1):
             wall[i] = end
             out[i][tuple(wall)] = 0.0
-        g = g[inner] * k[1:-1].reshape([m - 2 if j == i else 1 for j in range(d)])
-        out[i][inner] = dst(g, type=1, axis=i, workers=fft_workers(), overwrite_x=True)
+        tr.dst(g[inner] * _along(k[1:-1], i, d), i, out=out[i][inner])
 
     if d == 2:
-        deriv(dct1(b.copy(), 1), 0)
-        deriv(dct1(b, 0), 1)
+        c = tr.dct(b, 1)
+        if value:
+            tr.dct(c, 0, out=out[2])
+        deriv(c, 0)
+        deriv(tr.dct(b, 0, out=b), 1)
         return out
-    p2 = dct1(b.copy(), 2)  # cosine along axis 2: shared by components 0 and 1
-    deriv(dct1(p2.copy(), 1), 0)
-    deriv(dct1(p2, 0), 1)
-    deriv(dct1(dct1(b, 0), 1), 2)
+    if value:
+        raise ValueError("flux_synthesis(value=True) is 2D only")
+    p2 = tr.dct(b, 2)  # cosine along axis 2: shared by components 0 and 1
+    deriv(tr.dct(p2, 1), 0)
+    deriv(tr.dct(p2, 0, out=p2), 1)
+    q = tr.dct(b, 0, out=b)
+    deriv(tr.dct(q, 1, out=q), 2)
     return out
 
 
-def poisson_flux(values: np.ndarray, dtype=np.float64) -> np.ndarray:
+def poisson_flux(values: np.ndarray, dtype=np.float64, transforms=None) -> np.ndarray:
     r"""The flux :math:`-\nabla\phi` of :math:`\Delta\phi = \bar\rho - \rho_0` with no-flux walls on :math:`[0,1]^d`.
 
     :math:`\rho_0` is the cosine interpolant of the grid values (coefficients :math:`a_k`); then
@@ -132,40 +191,92 @@ def poisson_flux(values: np.ndarray, dtype=np.float64) -> np.ndarray:
         Density at the grid nodes :math:`j/(M-1)` of :math:`[0,1]^d`.
     dtype : numpy dtype
         Precision of the transforms (``np.float32`` halves their time; the flow uses it).
+    transforms : optional
+        As in :func:`half_coefficients`.
 
     Returns
     -------
     ndarray, shape (d, M, ..., M), of ``dtype``
         The flux components on the grid; the normal component is exactly zero on the walls.
     """
-    d, m = values.ndim, values.shape[0]
-    b = half_coefficients(values, dtype)
-    b /= laplacian_eigenvalues(d, m, b.dtype)
-    b.flat[0] = 0.0
-    return flux_synthesis(b)
+    return flow_planes(values, dtype=dtype, transforms=transforms, density=False)
 
 
-def gaussian_blur(values: np.ndarray, sigma: float) -> np.ndarray:
-    r"""Gaussian blur of width ``sigma`` (box units) with mirror walls: the cosine coefficients are multiplied by
-    :math:`e^{-\pi^2|k|^2\sigma^2/2}` (the heat kernel at time :math:`\sigma^2/2`); the mean is kept.
+def flow_planes(values: np.ndarray, sigma: float = 0.0, dtype=np.float64, transforms=None,
+                density: bool = True) -> np.ndarray:
+    r"""The tables of a flow-based map: the flux :math:`-\nabla\phi` of the density (:func:`poisson_flux`) and the
+    density itself, both of the density blurred over ``sigma`` (:func:`gaussian_blur`) when ``sigma > 0``; the
+    blur and the Poisson solve share one forward transform.
 
     Parameters
     ----------
     values : ndarray, shape (M,)*d
     sigma : float
+        Blur width in box units; 0 leaves the density as it is.
+    dtype, transforms
+        As in :func:`half_coefficients`.
+    density : bool
+        Whether to append the density as the last table.
+
+    Returns
+    -------
+    ndarray, shape (d + 1, M, ..., M) (d without ``density``), of ``dtype``
+    """
+    tr = transforms if transforms is not None else ScipyTransforms()
+    d, m = values.ndim, values.shape[0]
+    planes = np.empty((d + int(density),) + (m,) * d, dtype=dtype)
+    b = half_coefficients(values, dtype, tr)
+    if sigma > 0:
+        damp(b, blur_factor(m, sigma, dtype), out=b)
+        if density:
+            planes[d] = tr.dctn(b)
+    elif density:
+        planes[d] = values
+    flux_synthesis(divide_by_laplacian(b), tr, out=planes[:d])
+    return planes
+
+
+def heat_factor(m: int, t: float, dtype=np.float64) -> np.ndarray:
+    r"""The per-axis decay :math:`e^{-\pi^2 k^2 t}` of the cosine modes :math:`k = 0..M-1` after diffusing for time
+    ``t``: the heat equation's solution multiplies :math:`b_k` by their product over the axes (:func:`damp`)."""
+    return np.exp(-((math.pi * np.arange(m)) ** 2) * t).astype(dtype, copy=False)
+
+
+def blur_factor(m: int, sigma: float, dtype=np.float64) -> np.ndarray:
+    r"""The per-axis factor :math:`e^{-\pi^2 k^2 \sigma^2/2}` of a Gaussian blur of width ``sigma`` (box units) with
+    mirror walls: the heat kernel at time :math:`\sigma^2/2` (:func:`heat_factor`)."""
+    return np.exp(-0.5 * (math.pi * sigma * np.arange(m)) ** 2).astype(dtype, copy=False)
+
+
+def damp(b: np.ndarray, g: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    r"""``b`` (M,)*d times :math:`\prod_i g_{k_i}` (a separable factor, one axis after the other): a fresh array,
+    or written into ``out`` (``b`` itself: in place)."""
+    d = b.ndim
+    out = np.multiply(b, _along(g, 0, d), out=out)
+    for ax in range(1, d):
+        out *= _along(g, ax, d)
+    return out
+
+
+def gaussian_blur(values: np.ndarray, sigma: float, transforms=None) -> np.ndarray:
+    r"""Gaussian blur of width ``sigma`` (box units) with mirror walls: the cosine coefficients are multiplied by
+    :math:`e^{-\pi^2|k|^2\sigma^2/2}` (:func:`blur_factor`, the heat kernel at time :math:`\sigma^2/2`); the mean
+    is kept.
+
+    Parameters
+    ----------
+    values : ndarray, shape (M,)*d
+    sigma : float
+    transforms : optional
+        As in :func:`half_coefficients`.
 
     Returns
     -------
     ndarray, shape (M,)*d
     """
-    d, m = values.ndim, values.shape[0]
-    y = dctn(values, type=1, workers=fft_workers())
-    g = np.exp(-0.5 * (math.pi * sigma * np.arange(m)) ** 2)
-    for ax in range(d):
-        shape = [1] * d
-        shape[ax] = m
-        y = y * g.reshape(shape)
-    return dctn(y, type=1, workers=fft_workers()) / (2.0 * (m - 1)) ** d
+    tr = transforms if transforms is not None else ScipyTransforms()
+    b = half_coefficients(values, np.result_type(values.dtype, np.float32), tr)
+    return tr.dctn(damp(b, blur_factor(values.shape[0], sigma, b.dtype), out=b))
 
 
 def box_mean(values: np.ndarray) -> float:
@@ -190,13 +301,13 @@ def interval_weights(m: int, lo: float, hi: float) -> np.ndarray:
     r"""Weights :math:`w_j` with :math:`\int_{lo}^{hi} \rho = \sum_j w_j p_j` for the 1D cosine interpolant of
     values :math:`p_j` at :math:`j/(M-1)`: :math:`w_j = e_j\,\mathrm{DCT\text{-}I}(I)_j / (2(M-1))` with
     :math:`I_k = \int_{lo}^{hi} \cos(\pi k y)\,dy` and :math:`e_j = 1` at the ends, 2 inside."""
+    from scipy.fft import dct
+
     k = np.arange(m)
     integ = np.empty(m)
     integ[0] = hi - lo
     integ[1:] = (np.sin(math.pi * k[1:] * hi) - np.sin(math.pi * k[1:] * lo)) / (math.pi * k[1:])
-    e = np.full(m, 2.0)
-    e[0] = e[-1] = 1.0
-    return e * dct(integ, type=1) / (2.0 * (m - 1))
+    return _edge_factors(m, np.float64) * dct(integ, type=1) / (2.0 * (m - 1))
 
 
 def contract(values: np.ndarray, w: np.ndarray) -> float:

@@ -17,11 +17,13 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from . import losses as L
+from .. import solvers
 from ..core.inputs import check_mu
 from ..core.mesh import element_centroids, grid_mesh, grid_points, interpolate, jittered_points, square_triangles
 from ..fields.hard import hard_beltrami
+from ..fields.paper import BELTRAMI_MAPS, TEST_FIELDS, sample_mu
 from ..fields.random import RandomBeltrami, RandomBeltramiConfig, RandomMap
+from . import losses as L
 from .base import Batch, LossWeights, MappedBatch, SampleOptions, Task, TaskSpec, grad_magnitude, grid_elements, \
     register_task
 from .heldout import ValidationField, held_out_rng
@@ -116,20 +118,14 @@ class BeltramiTask(Task):
         return check_mu(grid, name="the Beltrami coefficient").reshape(-1)[square_triangles(grid.shape[0])].mean(1)
 
     def solver_sample(self, field, n: int) -> np.ndarray:
-        from ..fields.paper import sample_mu
-
         return sample_mu(field.name, n)
 
     def solve(self, values: np.ndarray, n: int, method: str, boundary: str | None, progress: bool = False):
-        from ..solvers import solve_lbs
-
-        return solve_lbs(values, n, boundary="fixed" if boundary in (None, "fixed") else boundary)
+        return solvers.solve_lbs(values, n, boundary="fixed" if boundary in (None, "fixed") else boundary)
 
     def reference_of(self, field, n: int, dim: int, boundary: str):
         """The Linear Beltrami Solver's map of the coefficient ``field`` (identity on the boundary)."""
-        from ..solvers import solve_lbs
-
-        return solve_lbs(field, n)
+        return solvers.solve_lbs(field, n)
 
     def training_fields_text(self, config: dict) -> str:
         """Random boundary-fixing maps, with the share of low-frequency maps where drawn."""
@@ -137,13 +133,9 @@ class BeltramiTask(Task):
         return "random boundary-fixing maps" + (f", low-frequency {100 * low:.0f} %" if low else "")
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
-        from ..fields.paper import TEST_FIELDS
-
         return TEST_FIELDS[self.kind, dim]
 
     def test_record(self, result, name: str) -> dict:
-        from ..fields.paper import BELTRAMI_MAPS
-
         m = result.metrics(exact_points=BELTRAMI_MAPS[name](result.ref_points), mu_ref=result.field)
         return {"mean_dd": m.mean_dd, "mean_dmu": m.mean_dmu, "n_flipped": m.n_flipped,
                 "min_jacobian": m.min_jacobian}

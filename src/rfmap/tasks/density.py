@@ -19,17 +19,19 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from . import losses as L
+from .. import solvers
 from ..core.geometry import grid_element_mean
 from ..core.inputs import check_density, preprocess_density, unit_mass
 from ..core.mesh import grid_points, grid_vertex_weights, interpolate, jittered_points, vertex_weights
 from ..fields.hard import hard_density
+from ..fields.paper import TEST_FIELDS
 from ..fields.random import RandomDensity, RandomDensityConfig
-from .teacher import teacher_map, teacher_targets
+from . import losses as L
 from .base import Batch, LossWeights, MappedBatch, SampleOptions, Task, TaskSpec, grad_magnitude, grid_elements, \
     register_task, teacher_extra
 from .heldout import ValidationField, held_out_rng
 from .objectives import FLIP_WEIGHT, density_objective
+from .teacher import teacher_map, teacher_targets
 
 __all__ = ["DensityTask", "DENSITY_KINDS", "density_validation_field"]
 
@@ -139,16 +141,12 @@ class DensityTask(Task):
         return field.sample(n)
 
     def solve(self, values: np.ndarray, n: int, method: str, boundary: str | None, progress: bool = False):
-        from ..solvers import solve_dem
-
-        return solve_dem(values, method=method, boundary=boundary or "square", progress=progress)
+        return solvers.solve_dem(values, method=method, boundary=boundary or "square", progress=progress)
 
     def reference_of(self, field, n: int, dim: int, boundary: str):
         """The diffusion DEM of the preprocessed density on a square or, for a free model, a free boundary."""
-        from ..solvers import solve_dem
-
         dens = preprocess_density(field(grid_points(n, dim)).reshape((n,) * dim))
-        return solve_dem(dens, boundary="free" if boundary == "free" else "square")
+        return solvers.solve_dem(dens, boundary="free" if boundary == "free" else "square")
 
     def training_fields_text(self, config: dict) -> str:
         """The paper's smooth modes with steps and patches, plus the sharp features (narrow peaks, steep ramps)
@@ -165,8 +163,6 @@ class DensityTask(Task):
         return "modes, steps" + ("".join(f", {e}" for e in extra))
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
-        from ..fields.paper import TEST_FIELDS
-
         return TEST_FIELDS[self.kind, dim]
 
     def test_record(self, result, name: str) -> dict:

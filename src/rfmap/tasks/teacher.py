@@ -26,8 +26,9 @@ import numpy as np
 import torch
 from torch import Tensor
 
-from ..fields import preprocess_density
+from ..core.geometry import signed_measures
 from ..core.mesh import interpolate
+from ..fields import preprocess_density
 from ..solvers import ALIASES
 
 __all__ = ["TeacherConfig", "TEACHER_METHODS", "teacher_map", "teacher_targets", "teacher_indices", "teacher_loss"]
@@ -103,8 +104,6 @@ def teacher_map(raw_grid: np.ndarray, boundary: str, method: str) -> np.ndarray 
         return None
     mapped = np.asarray(r.mapped_points, dtype=np.float64)
     if boundary == "free":
-        from ..core.geometry import signed_measures
-
         el = torch.as_tensor(r.elements)
         area = float(signed_measures(torch.as_tensor(mapped), el).sum())
         c = mapped.mean(0)

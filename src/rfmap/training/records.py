@@ -13,6 +13,12 @@ import json
 import shlex
 from pathlib import Path
 
+from ..core.inputs import preprocess_density
+from ..core.mesh import grid_points
+from ..finish import quiet_quality
+from ..tasks.teacher import teacher_map
+from .validation import validation_fields
+
 __all__ = ["STUDIES_DIR", "collect", "load_study", "study_names", "study_table", "plot_study", "study_values",
            "training_budget", "budget_table", "teacher_of", "to_markdown", "example_field",
            "example_text", "map_gap"]
@@ -218,11 +224,6 @@ def map_gap(sur, n: int, count: int = 4, stream: str = "report"):
     import numpy as np
     import pandas as pd
 
-    from ..core.inputs import preprocess_density
-    from ..core.mesh import grid_points
-    from ..finish import quiet_quality
-    from ..tasks.teacher import teacher_map
-    from .validation import validation_fields
 
     spec = sur.spec
     pts = grid_points(n, spec.dim)

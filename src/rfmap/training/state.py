@@ -20,13 +20,13 @@ from typing import Callable
 import torch
 
 from .._version import __version__
-from .config import TrainConfig
 from ..nn.grow import check_growth, grow_unet
 from ..nn.registry import build_model
-from ..surrogate import Surrogate, models
+from ..surrogate import Surrogate, WEIGHTS_DIR, models
 from ..tasks import TaskSpec
-from .validation import score
 from .averaging import WeightAverage
+from .config import TrainConfig
+from .validation import score
 
 __all__ = ["TrainState", "memory_format", "machine", "sha256", "load_init"]
 
@@ -93,8 +93,6 @@ def load_init(source: str, cfg: TrainConfig) -> tuple[Surrogate, dict]:
     Raises ``ValueError`` when they were trained for another task, dimension or boundary, or with another
     architecture than ``cfg.model``."""
     if source in models():
-        from ..surrogate import WEIGHTS_DIR
-
         path = WEIGHTS_DIR / f"{source}.safetensors"
     else:
         path = Path(source)

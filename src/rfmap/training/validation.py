@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..finish import quiet_quality
 from ..tasks import get_task
 from ..tasks.density import DENSITY_KINDS
 from ..tasks.heldout import STREAMS, VALIDATION_SEED, ValidationField
@@ -52,8 +53,6 @@ def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "valid
 
 
 def _held_out_map(sur, field, n: int, repair: bool = False, native: bool = False):
-    from ..finish import quiet_quality  # the metrics say how poor a map is; no warning per field
-
     with quiet_quality():
         return sur.map(field, n, repair=repair, native=native)
 

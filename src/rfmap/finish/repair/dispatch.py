@@ -14,9 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from ...core.geometry import grid_min_measure
-from ...core.surface import boundary_crossings, boundary_loop
 from ...core.folds import map_measures, surface_crossing_count, fold_free
+from ...core.geometry import grid_min_measure
+from ...core.metrics import compute_metrics
+from ...core.surface import boundary_crossings, boundary_loop
 from .embedding import surface_repair
 from .lbs import DELTA, lbs_repair
 from .local import local_lbs_repair
@@ -30,8 +31,6 @@ REPAIR_METHODS = ("auto", "local", "lbs", "scale")
 
 
 def _metrics(ref, pts, elements, density, mu_ref) -> dict:
-    from ...core.metrics import compute_metrics
-
     m = compute_metrics(ref, pts, elements, density=density, mu_ref=mu_ref).to_dict()
     m.pop("time", None)
     return m

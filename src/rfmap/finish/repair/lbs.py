@@ -25,9 +25,11 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ...core.geometry import beltrami_coefficient
-from ...core.surface import boundary_crossings, boundary_loop
 from ...core.folds import map_measures
+from ...core.geometry import beltrami_coefficient
+from ...core.mesh import grid_mesh
+from ...core.surface import boundary_crossings, boundary_loop
+from ...solvers.lbs import solve_lbs
 
 __all__ = ["DELTA", "cap_mu", "untangle_boundary", "lbs_repair"]
 
@@ -111,9 +113,6 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
     -------
     (points, capped) : the rebuilt map (N**2, 2) and the mask of the triangles whose :math:`\mu` was truncated.
     """
-    from ...core.mesh import grid_mesh
-    from ...solvers.lbs import solve_lbs
-
     mesh = grid_mesh(n, 2)
     ref_t, el_t = torch.as_tensor(mesh.points), torch.as_tensor(mesh.elements)
     bv = None

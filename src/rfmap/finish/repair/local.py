@@ -15,9 +15,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import torch
 
-from ...core.geometry import beltrami_coefficient
-from ...core.surface import boundary_crossings, boundary_loop
 from ...core.folds import map_measures
+from ...core.geometry import beltrami_coefficient
+from ...core.mesh import grid_mesh
+from ...core.surface import boundary_crossings, boundary_loop
+from ...solvers.lbs import assemble_stiffness, beltrami_matrices
 from .lbs import DELTA, cap_mu
 
 __all__ = ["LOCAL_RINGS", "local_lbs_repair"]
@@ -61,9 +63,6 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
     ``LOCAL_MIN_GIVE_UP`` vertices on small grids) ends fold-free, or when a free boundary crosses itself (boundary
     vertices keep their positions in a local solve, so only :func:`lbs_repair` can untangle it).
     """
-    from ...core.mesh import grid_mesh
-    from ...solvers.lbs import assemble_stiffness, beltrami_matrices
-
     mesh = grid_mesh(n, 2)
     el = mesh.elements
     n_pts = mesh.points.shape[0]
