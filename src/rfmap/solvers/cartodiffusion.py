@@ -72,7 +72,7 @@ class _Heat:
         self.evaluations = 0
 
     def planes(self, t: float) -> np.ndarray:
-        """(3, N*N): :math:`-\partial_x\rho`, :math:`-\partial_y\rho`, :math:`\rho` at time ``t``: the decayed
+        r"""(3, N*N): :math:`-\partial_x\rho`, :math:`-\partial_y\rho`, :math:`\rho` at time ``t``: the decayed
         coefficients (:func:`rfmap.solvers.spectral.heat_factor`) synthesised as a flux and its potential
         (:func:`rfmap.solvers.spectral.flux_synthesis`)."""
         b = damp(self.coef, heat_factor(self.n, t))

@@ -113,10 +113,9 @@ def divide_by_laplacian(b: np.ndarray, rows: int = 256) -> np.ndarray:
     d, m = b.ndim, b.shape[0]
     k2 = ((math.pi * np.arange(m, dtype=np.float64)) ** 2).astype(b.dtype)
     for a in range(0, m, rows):
-        block = np.zeros((min(rows, m - a),) + (m,) * (d - 1), dtype=b.dtype)
-        block += _along(k2[a:a + rows], 0, d)
-        for ax in range(1, d):
-            block += _along(k2, ax, d)
+        block = _along(k2[a:a + rows], 0, d) + _along(k2, 1, d)  # summed axis by axis, as the whole table
+        for ax in range(2, d):
+            block = block + _along(k2, ax, d)
         if a == 0:
             block.flat[0] = 1.0
         b[a:a + rows] /= block
@@ -153,13 +152,14 @@ def flux_synthesis(b: np.ndarray, transforms=None, out: np.ndarray | None = None
     if out is None:
         out = np.empty((d + int(value),) + (m,) * d, dtype=b.dtype)
 
-    def deriv(g: np.ndarray, i: int) -> None:  # out[i]: the sine synthesis along axis i of g * pi k_i
+    def deriv(g: np.ndarray, i: int) -> None:  # out[i]: the sine synthesis along axis i of g * pi k_i (g consumed)
         inner = tuple(slice(1, m - 1) if j == i else slice(None) for j in range(d))
         wall = [slice(None)] * d
         for end in (0, m - 1):
             wall[i] = end
             out[i][tuple(wall)] = 0.0
-        tr.dst(g[inner] * _along(k[1:-1], i, d), i, out=out[i][inner])
+        g *= _along(k, i, d)  # in place: no table allocated per component
+        tr.dst(g[inner], i, out=out[i][inner])
 
     if d == 2:
         c = tr.dct(b, 1)
