@@ -34,6 +34,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .projection import PlanarFrame
+from .regions import _load_collection, world_countries
+
 __all__ = ["Join", "MISSING", "GAPMINDER_YEARS", "read_csv_table", "read_csv_values", "region_ids", "loose_id",
            "join_values",
            "write_csv_template", "gapminder_population", "world_population", "atomic_write"]
@@ -167,8 +170,6 @@ def read_csv_values(path, id_column: str, value_column: str) -> dict[str, float]
 
 # ----------------------------------------------------------------------------------------------- regions
 def _features(collection) -> list:
-    from .regions import _load_collection
-
     fc = _load_collection(collection)
     if not isinstance(fc, dict) or fc.get("type") != "FeatureCollection" or not isinstance(fc.get("features"), list):
         raise ValueError("not a GeoJSON FeatureCollection (need {'type': 'FeatureCollection', 'features': [...]})")
@@ -304,8 +305,6 @@ def _areas(features: list, projection: str) -> np.ndarray:
     """Areas of the features' polygons in the equal-area plane of :class:`rfmap.cartogram.projection.PlanarFrame`."""
     import shapely
     from shapely.geometry import shape
-
-    from .projection import PlanarFrame
 
     try:
         geoms = np.array([shape(f["geometry"]) for f in features], dtype=object)
@@ -445,8 +444,6 @@ def world_population(years=(2007,), *, antarctica: bool = False) -> Join:
         ``collection`` with the ``pop_<year>`` properties (``value`` is the first year's), the countries without a
         gapminder row (by name) and the gapminder codes without a country of the map.
     """
-    from .regions import world_countries
-
     years = [int(y) for y in years]
     if not years:
         raise ValueError("give at least one year")

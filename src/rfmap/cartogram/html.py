@@ -17,6 +17,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .data import atomic_write
+
 __all__ = ["HtmlOptions", "cartogram_page", "series_page", "page_figure", "write_page"]
 
 
@@ -163,8 +165,6 @@ def _play(frame_ms: int) -> dict:
 
 def write_page(fig, path) -> None:
     """Write the plotly figure ``fig`` as one self-contained HTML file (plotly.js embedded), atomically."""
-    from .data import atomic_write
-
     html = fig.to_html(include_plotlyjs=True, full_html=True, auto_play=False, config={"responsive": True})
     atomic_write(path, lambda fh: fh.write(html))
 

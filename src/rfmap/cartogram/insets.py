@@ -23,7 +23,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .data import atomic_write
+from .metrics import cartogram_metrics
 from .options import CartogramOptions
+from .output import mapped_features, write_geojson
+from .regions import read_regions
+from .resize import cartogram
 
 __all__ = ["INSET_SIDES", "GAP", "InsetCartogram", "cartogram_insets", "inset_groups"]
 
@@ -129,8 +134,6 @@ class InsetCartogram:
 
     @property
     def features(self) -> list:
-        from .output import mapped_features
-
         return mapped_features(self.input_features, self.geometries)
 
     @property
@@ -144,8 +147,6 @@ class InsetCartogram:
     def metrics(self, *, overlap_tol: float = 1e-6):
         """Area errors and topology of the placed regions together
         (:func:`rfmap.cartogram.metrics.cartogram_metrics`)."""
-        from .metrics import cartogram_metrics
-
         if overlap_tol not in self._metrics:
             self._metrics[overlap_tol] = cartogram_metrics(self.geometries, self.values, overlap_tol=overlap_tol,
                                                            min_share=self.min_share)
@@ -185,9 +186,6 @@ class InsetCartogram:
     def save(self, path) -> None:
         """Write the placed regions as a GeoJSON FeatureCollection, atomically, with the ``"rfmap"`` member
         :meth:`status` (no ``"crs"``: the placed frames are no one projection)."""
-        from .data import atomic_write
-        from .output import write_geojson
-
         atomic_write(path, lambda fh: write_geojson(fh, self.input_features, self.geometries, self.status(), None))
 
 
@@ -218,9 +216,6 @@ def cartogram_insets(collection, value: str, insets, options: CartogramOptions |
         For bad input (:func:`rfmap.cartogram.resize.read_regions`), an unknown inset name, or insets not one per region.
     """
     import shapely
-
-    from .resize import cartogram
-    from .regions import read_regions
 
     features = read_regions(collection, value)[0]
     names = [(f.get("properties") or {}).get(insets) for f in features] if isinstance(insets, str) else list(insets)

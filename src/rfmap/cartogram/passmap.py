@@ -7,14 +7,14 @@ import math
 
 import numpy as np
 
+from ..solvers.cartoflow import bilinear
+
 __all__ = ["at_points"]
 
 
 def at_points(res, points: np.ndarray) -> np.ndarray:
     """The grid map ``res`` (a :class:`rfmap.core.result.MapResult` on the ``N``-grid) at ``points`` (P, 2): its
     displacement interpolated bilinearly."""
-    from ..solvers.cartoflow import bilinear
-
     if not res.info.get("grid", True):  # the flow carried the points themselves
         return res.mapped_points
     n = math.isqrt(res.ref_points.shape[0])

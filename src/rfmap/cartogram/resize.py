@@ -71,6 +71,7 @@ from .output import OUTPUTS, choose_output, crs_member, mapped_features, output_
 from .projection import PlanarFrame
 from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edge, \
     _shapely, density_grid, fit_outlines, montreal_election, read_regions, world_countries
+from .data import atomic_write
 
 __all__ = [
     "CARTOGRAM_METHODS",
@@ -289,8 +290,6 @@ class Cartogram:
 
     def save(self, path) -> None:
         """Write the mapped FeatureCollection as GeoJSON, atomically (:func:`rfmap.cartogram.data.atomic_write`)."""
-        from .data import atomic_write
-
         atomic_write(path, lambda fh: write_geojson(fh, self.input_features, self.geometries, self._status(),
                                                     crs_member(self.frame, self.output)))
 

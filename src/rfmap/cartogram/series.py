@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .options import CartogramOptions
+from .resize import cartogram
 
 __all__ = ["SeriesFrame", "CartogramSeries", "cartogram_series", "compare_warm_cold", "save_animation"]
 
@@ -139,8 +140,6 @@ def cartogram_series(collection, keys: Sequence[str], options: CartogramOptions 
     -------
     CartogramSeries
     """
-    from .resize import cartogram
-
     o = replace(options or CartogramOptions(), **kw)
     keys = list(keys)
     if not keys:

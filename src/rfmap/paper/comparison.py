@@ -32,6 +32,7 @@ from typing import Callable
 
 import numpy as np
 
+from .. import solvers
 from ..finish import quiet_quality
 from ..fields.paper import DENSITIES, PAPER_N, TEST_FIELDS, get_field, sample_mu
 from ..core.result import MapResult
@@ -414,8 +415,6 @@ def compare_density(sur, cases: list[Case], label: str, title: str, *, case_pref
     label, title : str
     case_prefix : str
     """
-    from ..solvers import solve_dem
-
     dim, boundary = sur.spec.dim, ("free" if sur.spec.boundary == "free" else "square")
     with_mu = dim == 2
     cmp = Comparison(label, title, ["std_rho_map"] + (["mean_mu"] if with_mu else []), list(cases),
@@ -424,7 +423,7 @@ def compare_density(sur, cases: list[Case], label: str, title: str, *, case_pref
     for c in cases:
         native, delivered = _surrogate_maps(sur, c.field, c.n)
         dens = DENSITIES[c.field].sample(c.n)
-        flow = timed(lambda: solve_dem(dens, method="flow", boundary=boundary))
+        flow = timed(lambda: solvers.solve_dem(dens, method="flow", boundary=boundary))
         cmp.values[(c.name, "native")] = _network_values(native, density_values(native, with_mu))
         cmp.values[(c.name, "delivered")] = _network_values(delivered, density_values(delivered, with_mu))
         cmp.values[(c.name, "classical")] = density_values(flow, with_mu)
@@ -438,14 +437,12 @@ def compare_beltrami(sur, cases: list[Case], label: str, title: str, *, case_pre
     """A Beltrami table (``tab:reconstruction_results_mu``, ``_res``) as a :class:`Comparison`: per case the
     paper's method, the delivered map, the Linear Beltrami Solver and the paper's row.  Scored: mean ``|Δd|`` and mean
     ``|Δμ|`` (against the analytic coefficient at the triangle centroids)."""
-    from ..solvers import solve_lbs
-
     cmp = Comparison(label, title, ["mean_dd", "mean_dmu"], list(cases), "LBS", case_prefix=case_prefix)
     paper = paper_table(label)["rows"]
     for c in cases:
         native, delivered = _surrogate_maps(sur, c.field, c.n)
         mu = sample_mu(c.field, c.n)
-        lbs = timed(lambda: solve_lbs(mu, c.n))
+        lbs = timed(lambda: solvers.solve_lbs(mu, c.n))
         for method, res in (("native", native), ("delivered", delivered)):
             cmp.values[(c.name, method)] = _network_values(res, beltrami_values(res, c.field))
         cmp.values[(c.name, "classical")] = beltrami_values(lbs, c.field)
@@ -471,8 +468,6 @@ def compare_models(models: dict, field, n: int, label: str, title: str) -> Compa
     n : int
     label, title : str
     """
-    from ..solvers import solve_dem
-
     name = field if isinstance(field, str) else getattr(field, "__name__", "field")
     cmp = Comparison(label, title, ["std_rho_map", "mean_mu"], [Case(k, name, n) for k in models], "flow solver")
     flow = None
@@ -481,7 +476,7 @@ def compare_models(models: dict, field, n: int, label: str, title: str) -> Compa
         if flow is None:
             dens = np.asarray(native.field).reshape((n,) * sur.spec.dim)
             boundary = "free" if sur.spec.boundary == "free" else "square"
-            flow = timed(lambda: solve_dem(dens, method="flow", boundary=boundary))
+            flow = timed(lambda: solvers.solve_dem(dens, method="flow", boundary=boundary))
         cmp.values[(key, "native")] = _network_values(native, density_values(native, True))
         cmp.values[(key, "delivered")] = _network_values(delivered, density_values(delivered, True))
         cmp.values[(key, "classical")] = density_values(flow, True)

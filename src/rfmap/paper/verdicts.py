@@ -22,6 +22,10 @@ from __future__ import annotations
 
 from functools import lru_cache
 
+from ..core.mesh import grid_mesh
+from ..core.metrics import compute_metrics
+from ..fields.paper import get_field, sample_density
+
 __all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "input_std", "is_comparable", "std_ratio", "verdict"]
 
 #: relative agreement of the input's Std(rho~_orig) with the paper's for a case to count as the paper's input (the
@@ -42,10 +46,6 @@ VERDICT_RULE = (
 def input_std(field: str, n: int) -> float:
     r""":math:`\mathrm{Std}(\tilde\rho_{\text{orig}})` of the test density ``field`` on the grid mesh of side ``n``
     (the identity map's :attr:`~rfmap.core.metrics.MapMetrics.std_rho_orig`, as every table computes it)."""
-    from ..core.mesh import grid_mesh
-    from ..core.metrics import compute_metrics
-    from ..fields.paper import get_field, sample_density
-
     mesh = grid_mesh(n, get_field(field).dim)
     m = compute_metrics(mesh.points, mesh.points, mesh.elements, density=sample_density(field, n).reshape(-1))
     return float(m.std_rho_orig)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...solvers import cartodiffusion
 from .base import CartogramMethod
 
 __all__ = ["DiffusionMethod", "DIFFUSION_SETTINGS"]
@@ -20,7 +21,5 @@ class DiffusionMethod(CartogramMethod):
     name = "diffusion"
 
     def _map(self, density: np.ndarray, points: np.ndarray, solver_kw: dict):
-        from ...solvers.cartodiffusion import CartoDiffusionOptions, diffusion_square
-
-        opts = CartoDiffusionOptions(**{"tol_end": DIFFUSION_SETTINGS["tol_end"], **solver_kw})
-        return diffusion_square(density, opts, points=points)
+        opts = cartodiffusion.CartoDiffusionOptions(**{"tol_end": DIFFUSION_SETTINGS["tol_end"], **solver_kw})
+        return cartodiffusion.diffusion_square(density, opts, points=points)

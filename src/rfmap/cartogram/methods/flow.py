@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...solvers import cartoflow
 from .base import CartogramMethod
 
 __all__ = ["FlowMethod", "FLOW_MAX_N", "FLOW_BLUR", "FLOW_SETTINGS"]
@@ -31,8 +32,6 @@ class FlowMethod(CartogramMethod):
     finest = FLOW_MAX_N
 
     def _map(self, density: np.ndarray, points: np.ndarray, solver_kw: dict):
-        from ...solvers.cartoflow import CartoFlowOptions, flow_square
-
         blur = FLOW_BLUR * 0.5 ** (self.calls - 1)
         kw = {"blur": blur if blur >= 0.25 else 0.0, **solver_kw}
-        return flow_square(density, CartoFlowOptions(**kw), points=points)
+        return cartoflow.flow_square(density, cartoflow.CartoFlowOptions(**kw), points=points)

@@ -56,7 +56,7 @@ def square_surrogate(surrogate, model: str | None):
 
         surrogate = Surrogate.pretrained(model or "deq2d-square")
     spec = surrogate.spec
-    if (spec.kind, spec.dim, spec.boundary) != ("density", 2, "square"):
+    if not (spec.task.equalizes and spec.dim == 2 and spec.boundary == "square"):
         raise ValueError(f"a cartogram needs a 2D density model of the square (e.g. deq2d-square); "
                          f"{surrogate.name!r} maps {spec.dim}D {spec.kind} fields with a {spec.boundary} boundary")
     return surrogate
