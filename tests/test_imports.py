@@ -57,6 +57,7 @@ LAYERS: dict[str, int] = {
     "rfmap.cartogram": 3, "rfmap.cartogram.resize": 3, "rfmap.cartogram.options": 3,
     "rfmap.cartogram.data": 3, "rfmap.cartogram.series": 3, "rfmap.cartogram.metrics": 3,
     "rfmap.cartogram.synthetic": 3, "rfmap.cartogram.output": 3, "rfmap.cartogram.html": 3,
+    "rfmap.cartogram.reprojection": 3,
     "rfmap.cartogram.insets": 3, "rfmap.cartogram.passmap": 3, "rfmap.cartogram.methods": 3,
     "rfmap.cartogram.methods.base": 3, "rfmap.cartogram.methods.flow": 3, "rfmap.cartogram.methods.diffusion": 3,
     "rfmap.cartogram.methods.neural": 3, "rfmap.paper.verdicts": 3,

@@ -143,7 +143,7 @@ def test_county_map_cartogram_passes_reach_the_tolerance(counties, tmp_path):
     from rfmap.cartogram.output import output_geometries
 
     lonlat, fixed = output_geometries(c.frame, c.mapped, "input")
-    assert shapely.is_valid(lonlat).all() and len(fixed) >= 1
+    assert shapely.is_valid(lonlat).all() and len(fixed.regions) >= 1
 
 
 def test_specks_of_rounding_are_repaired_and_what_is_written_invalid_fails(tmp_path):

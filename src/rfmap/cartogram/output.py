@@ -30,8 +30,8 @@ import numpy as np
 from .metrics import REPAIR_AREA
 from .reprojection import cylindrical_equal_area, remove_needles, split_bent_edges
 
-__all__ = ["OUTPUTS", "SPECK", "OutputRepairs", "choose_output", "crs_member", "mapped_features", "output_geometries", "repair_specks",
-           "write_geojson"]
+__all__ = ["OUTPUTS", "SPECK", "OutputRepairs", "choose_output", "crs_member", "mapped_features", "output_geometries",
+           "repair_specks", "write_geojson"]
 
 #: The coordinates of :func:`rfmap.cartogram.resize.cartogram`'s output: ``"auto"`` (the input's, unless a region left
 #: their domain, then the projection's plane), the input's, or the projection's plane.
@@ -57,7 +57,7 @@ class OutputRepairs:
 
     #: regions that crossed themselves by a speck in the written coordinates, the speck dropped (:func:`repair_specks`)
     specks: list = field(default_factory=list)
-    #: ``{region: vertices removed}``: needles and collapsed rings
+    #: ``{region: points removed}``: needles and collapsed rings
     #: (:func:`rfmap.cartogram.reprojection.remove_needles`)
     needles: dict = field(default_factory=dict)
     #: ``{region: vertices added}``: edges split so that the region stays valid in the cylindrical equal-area plane
