@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cartoflow import GridFlow, _bilinear_planes, _project, heun_step, square_inputs, step_factor
+from .cartoflow import GridFlow, _bilinear_planes, HeunOptions, _grid_turned_over, _project, heun_flow, square_inputs
 from .cosine import CosineTransforms
 from .spectral import damp, flux_synthesis, half_coefficients, heat_factor
 
@@ -86,27 +86,18 @@ class _Heat:
 
 
 def _integrate(heat: _Heat, y: np.ndarray, t: float, opts: CartoDiffusionOptions, grid: bool) -> tuple:
-    """Heun steps from ``t`` until the remaining displacement is below ``tol_end`` spacings (or ``t_max``)."""
+    r"""Heun steps (:func:`rfmap.solvers.cartoflow.heun_flow`) from ``t`` until the remaining displacement
+    :math:`\max|v|/\pi^2` is below ``tol_end`` spacings (or ``t_max``)."""
     n = heat.n
     h = 1.0 / (n - 1)
     project = (lambda p: _project(p, n)) if grid else (lambda p: np.clip(p, 0.0, 1.0, out=p))
-    dt = 0.1 * h * h
-    accepted = rejected = folds = 0
-    k1 = heat.velocity(t, y)
-    while t < opts.t_max:
-        if math.sqrt(float(np.einsum("ij,ij->i", k1, k1).max())) / math.pi ** 2 <= opts.tol_end * h:
-            break
-        if accepted + rejected >= opts.max_steps:
-            raise RuntimeError(f"diffusion map did not settle in {opts.max_steps} steps (t={t:.4g})")
-        dt = min(dt, opts.t_max - t)
-        y_new, err, folded = heun_step(heat.velocity, t, dt, y, k1, project, opts.rtol * h, n if grid else None)
-        if err <= 1.0 and not folded:
-            t, y, accepted = t + dt, y_new, accepted + 1
-            k1 = heat.velocity(t, y)
-        else:
-            rejected, folds = rejected + 1, folds + int(folded)
-        dt *= step_factor(err, err <= 1.0 and not folded, folded)
-    return y, {"steps": accepted, "rejected": rejected, "fold_rejections": folds, "t_end": t}
+
+    def settled(v: np.ndarray) -> bool:
+        return math.sqrt(float(np.einsum("ij,ij->i", v, v).max())) / math.pi ** 2 <= opts.tol_end * h
+
+    stepping = HeunOptions(opts.rtol * h, t0=t, t_end=opts.t_max, first_step=0.1 * h * h, max_steps=opts.max_steps,
+                           stall_dt=0.0)
+    return heun_flow(heat.velocity, y, project, stepping, _grid_turned_over(n) if grid else None, settled=settled)
 
 
 def diffusion_square(density: np.ndarray, options: CartoDiffusionOptions | None = None, *,

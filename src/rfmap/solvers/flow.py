@@ -30,7 +30,8 @@ Numerical method:
    :math:`v = -\nabla\phi / ((1-t)\rho_0 + t\bar\rho)` is formed there.  The Poisson solve and this table are
    single precision (a relative error of about 1e-7, far below a step's tolerance, at half the transform time and
    a tenth of the interpolation time of double precision); the vertex positions are integrated in double.
-4. **Time steps.**  Predictor–corrector (Heun) steps, :math:`x^* = x + \Delta t\, v(x, t)`,
+4. **Time steps.**  Predictor–corrector (Heun) steps (``rfmap.solvers.cartoflow.heun_flow``, the cartogram
+   passes' integrator), :math:`x^* = x + \Delta t\, v(x, t)`,
    :math:`x' = x + \tfrac{\Delta t}{2}\,(v(x, t) + v(x^*, t + \Delta t))`.  A step is accepted when the
    predictor–corrector difference :math:`\max|x' - x^*|` is at most ``rtol`` grid spacings *and* no element of the
    mesh has turned over (all signed measures stay positive; decided in single precision unless the smallest
@@ -81,13 +82,14 @@ from ..core.inputs import is_uniform
 from ..core.geometry import grid_element_mean, grid_min_measure, grid_signed_measures
 from ..core.mesh import grid_mesh
 from ..core.result import MapResult
+from .cartoflow import STALL_BLURS, STALL_DT, HeunOptions, Stalled, heun_flow
 from .locate import rasterize_elements
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
 from .residual import lumped_residual, residual_density, vertex_residual
 from .spectral import box_mean, flow_planes
 
-__all__ = ["STALL_BLEND", "FlowOptions", "solve_flow", "rasterize_elements", "residual_density", "lumped_residual",
-           "vertex_residual"]
+__all__ = ["STALL_BLEND", "STALL_DT", "STALL_BLURS", "FlowOptions", "solve_flow", "rasterize_elements",
+           "residual_density", "lumped_residual", "vertex_residual"]
 
 
 #: the fold check of a step (:func:`rfmap.core.geometry.grid_min_measure`, with the same threshold) and
@@ -104,10 +106,6 @@ def _turned_over(x: np.ndarray, n: int) -> bool:
     return grid_min_measure(x, n) <= 0.0
 
 
-class _Stalled(RuntimeError):
-    """A pass cannot advance: every step, however short, turns an element over (a collapsing element)."""
-
-
 #: default step tolerance per dimension (grid spacings): 3D steps cost about ten times 2D ones, so 3D takes a coarser
 #: tolerance for nearly the same Std(rho~_map) (book: Design decisions)
 RTOL = {2: 0.2, 3: 0.4}
@@ -122,14 +120,6 @@ MARGIN = {2: 0.5, 3: 0.25}
 #: start, tried before the blurred retries (``STALL_BLURS``): the width with the lowest mean Std(rho~_map) on the
 #: validation stream (book: Design decisions).  A pass that does not stall keeps the diffusion solver's sea.
 STALL_BLEND = 0.25
-
-
-#: a pass stalls when the step falls below this (in units of the unit time interval)
-STALL_DT = 1e-9
-
-
-#: blur widths (vertex grid spacings) of the retries of a stalled pass
-STALL_BLURS = (1.0, 2.0, 4.0)
 
 
 class _FlowPass:
@@ -164,37 +154,17 @@ class _FlowPass:
 
     def run(self, y: np.ndarray, turned_over, project, *, h: float, rtol: float, max_steps: int,
             bar) -> tuple[np.ndarray, dict]:
-        t, dt = 0.0, 1e-2
-        accepted = rejected = folds = 0
-        k1 = self.velocity(0.0, y)
-        while t < 1.0:
-            if accepted + rejected >= max_steps:
-                raise RuntimeError(f"flow map did not reach t = 1 in {max_steps} steps (t={t:.4g}); "
-                                   "increase max_steps or rtol")
-            dt = min(dt, 1.0 - t)
-            if dt < STALL_DT:
-                raise _Stalled(f"flow step fell below {STALL_DT:g} at t = {t:.4g} (a collapsing element)")
-            y_pred = project(y + dt * k1)
-            k2 = self.velocity(t + dt, y_pred)
-            y_new = project(y + (0.5 * dt) * (k1 + k2))
-            diff = y_new - y_pred
-            err = math.sqrt(float(np.einsum("ij,ij->i", diff, diff).max())) / (rtol * h)
-            folded = err <= 1.0 and turned_over(y_new)
-            if err <= 1.0 and not folded:
-                t = 1.0 if 1.0 - (t + dt) < 1e-12 else t + dt
-                y = y_new
-                accepted += 1
-                if t < 1.0:
-                    k1 = self.velocity(t, y)
-                if bar is not None:
-                    bar.n = round(t, 4)
-                    bar.refresh()
-                dt *= min(2.0, max(0.3, 0.9 / math.sqrt(max(err, 1e-12))))
-            else:
-                rejected += 1
-                folds += int(folded)
-                dt *= 0.5 if folded else max(0.2, 0.9 / math.sqrt(err))
-        return y, {"steps": accepted, "rejected": rejected, "fold_rejections": folds}
+        """The points ``y`` carried from t = 0 to 1 by the Heun steps of the cartogram pass
+        (:func:`rfmap.solvers.cartoflow.heun_flow`), from a first step of 1e-2 and with rejections shrinking the step
+        by at least 0.2; ``Stalled`` when the step collapses."""
+
+        def on_step(t: float) -> None:
+            bar.n = round(t, 4)
+            bar.refresh()
+
+        stepping = HeunOptions(rtol * h, first_step=1e-2, max_steps=max_steps, floor=0.2)
+        return heun_flow(self.velocity, y, project, stepping, turned_over,
+                         on_step=on_step if bar is not None else None)
 
 
 def _sea_raster(dens: np.ndarray, pad: int, refine: int, blend: float) -> tuple[np.ndarray, float, float]:
@@ -387,7 +357,7 @@ class _Run:
             try:
                 y_next, info = fp.run(y, lambda x: _turned_over(x, n), box.project, h=1.0 / (box.nb - 1),
                                       rtol=float(opts.rtol), max_steps=int(opts.max_steps), bar=bar)
-            except _Stalled as exc:
+            except Stalled as exc:
                 self.totals["evaluations"] += fp.evaluations
                 if (not box.square and not self.warm and passes == 0 and self.sea_blend == 0
                         and opts.stall_blend > 0 and not self.fallback_tried):
