@@ -138,3 +138,23 @@ def test_output_geometries_say_what_they_repaired():
     out, repairs = output_geometries(c.frame, c.mapped, "input")
     assert repairs.regions == [] and repairs.needles == {} and repairs.invalid_reprojected == []
     assert shapely.equals(out, c.frame.unproject(c.mapped)).all()
+
+
+def test_a_region_left_invalid_in_the_equal_area_plane_is_a_problem(monkeypatch):
+    """A region the output step could not keep valid under reprojection makes the cartogram fail, named."""
+    import rfmap.cartogram.resize as resize
+    from rfmap.cartogram.output import OutputRepairs
+
+    real = resize.output_geometries
+
+    def leaves_one(frame, mapped, output):
+        out, repairs = real(frame, mapped, output)
+        return out, OutputRepairs(invalid_reprojected=[1])
+
+    monkeypatch.setattr(resize, "output_geometries", leaves_one)
+    feats = [{"type": "Feature", "properties": {"v": v, "name": f"r{i}"},
+              "geometry": {"type": "Polygon", "coordinates": [[[i, 0], [i + 1, 0], [i + 1, 1], [i, 1], [i, 0]]]}}
+             for i, v in enumerate([1.0, 2.0])]
+    c = resize.cartogram({"type": "FeatureCollection", "features": feats}, "v", n=32, projection="none")
+    assert any("1 region(s) valid as written become invalid in a cylindrical equal-area reprojection: #1 (r1)" in p
+               for p in c.problems()), c.problems()

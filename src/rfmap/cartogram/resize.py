@@ -228,7 +228,9 @@ class Cartogram:
     def problems(self, *, overlap_tol: float = 1e-6) -> list[str]:
         """What keeps the cartogram from being right, one sentence each (empty when it is): a largest area error
         above :attr:`tol` (:meth:`metrics`), invalid regions, overlapping regions, and, for output in the input's
-        coordinates, regions moved where no longitude/latitude lies (:meth:`PlanarFrame.beyond_domain`)."""
+        coordinates, regions moved where no longitude/latitude lies (:meth:`PlanarFrame.beyond_domain`) and regions
+        valid as written that are invalid in the cylindrical equal-area plane (a reprojection of the file would break
+        them: ``info["repaired_output"].invalid_reprojected``)."""
         # saving the cartogram asks too: measured once for the same arrays of polygons (replacing one measures again)
         key = (overlap_tol, id(self.geometries), id(self.mapped), self.output)
         if key not in self._problems:
@@ -260,6 +262,11 @@ class Cartogram:
                 out.append(f"{far.size} region(s) moved beyond the projection's domain, where no longitude/latitude "
                            f"lies (past a pole or the map's edge): {names}{', ...' if far.size > 10 else ''}; in the "
                            f"input's coordinates they are drawn at its edge (the projected output keeps them)")
+        bent = list(getattr(self.info.get("repaired_output"), "invalid_reprojected", []))
+        if bent:
+            names = ", ".join(_feature_name(self.input_features[i], int(i)) for i in bent[:10])
+            out.append(f"{len(bent)} region(s) valid as written become invalid in a cylindrical equal-area "
+                       f"reprojection: {names}{', ...' if len(bent) > 10 else ''}")
         return out
 
     def to_geojson(self) -> dict:
@@ -330,8 +337,10 @@ def cartogram(collection, value: str, options: CartogramOptions | None = None, *
         passes run, ``info["kept"]`` the pass whose polygons are returned (1-based), ``info["timed_out"]`` whether
         ``timeout`` stopped the passes, ``info["repaired"]`` the
         regions whose numerically tiny fold was repaired (:func:`rfmap.cartogram.metrics.repair_folds`),
-        ``info["repaired_output"]`` those that rounding made cross themselves in the output's coordinates, repaired
-        there (:func:`rfmap.cartogram.output.output_geometries`), ``info["input_overlaps"]`` the count of pairs of
+        ``info["repaired_output"]`` what was changed in the regions as written
+        (:class:`rfmap.cartogram.output.OutputRepairs`: specks that rounding made cross themselves, needles removed,
+        edges split so that longitude/latitude output stays valid in an equal-area plane, and the regions left
+        invalid there), ``info["input_overlaps"]`` the count of pairs of
         input regions that overlapped, made a coverage first (:func:`rfmap.cartogram.metrics.clean_input_overlaps`),
         ``info["overlaps_cut"]`` the pairs ``(cut, kept)`` of regions whose sliver of overlap was cut from the first
         (:func:`rfmap.cartogram.metrics.repair_overlaps`).
