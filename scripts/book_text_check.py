@@ -4,7 +4,8 @@
 Usage: python scripts/book_text_check.py [--html _build/html]
 
 Every HTML page of the book (``_build/html/**/*.html`` but the theme's own pages) is read as a reader sees it: the
-article only, without code (``<pre>``, ``<code>``), math (MathJax spans and blocks) and scripts.  Two kinds of
+article only, without code (``<pre>``, ``<code>``, the API's signatures), math (MathJax spans and blocks) and
+scripts.  Two kinds of
 problem are reported, one line each, naming the page and what was found:
 
 * an **unresolved placeholder**: a ``{key}`` or ``{key:format}`` left in the text (a scoreboard template whose key
@@ -29,7 +30,8 @@ ROOT = Path(__file__).resolve().parent.parent
 #: elements whose text is not prose: code, math and scripts (removed before the placeholder search)
 NOT_PROSE = re.compile(
     r"<(pre|code|script|style|mjx-container)\b.*?</\1>"
-    r"|<(span|div)\b[^>]*class=\"[^\"]*\bmath\b[^\"]*\"[^>]*>.*?</\2>",
+    r"|<(span|div)\b[^>]*class=\"[^\"]*\bmath\b[^\"]*\"[^>]*>.*?</\2>"
+    r"|<dt\b[^>]*class=\"[^\"]*\bsig\b[^\"]*\"[^>]*>.*?</dt>",  # an API signature (values as Python literals)
     re.DOTALL | re.IGNORECASE)
 #: inline and display math delimiters MathJax reads in plain text
 TEX = re.compile(r"\\\(.*?\\\)|\\\[.*?\\\]|\$\$.*?\$\$", re.DOTALL)

@@ -123,6 +123,8 @@ def test_unresolved_placeholders_are_reported_with_their_key(book_check, text_ch
     '<span class="math notranslate nohighlight">\\(\\frac{a}{b} + \\mathrm{Std}\\)</span>',
     '<div class="math notranslate nohighlight">\\[x^{n}_{ij}\\]</div>', "<p>\\(\\tilde\\rho_{map}\\)</p>",
     "<p>the set {0, 1} and 0.08254</p>",
+    '<dl><dt class="sig sig-object py"><span class="pre">NAMES</span> = <span class="pre">{\'a\': \'$\\rho_{map}$\'}</span>'
+    "</dt><dd>doc</dd></dl>",
 ])
 def test_braces_in_code_math_and_plain_text_pass(text_check, tmp_path, body):
     assert text_check.page_problems(_page(tmp_path, body)) == []

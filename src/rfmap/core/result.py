@@ -41,7 +41,7 @@ _RESULT_KINDS: dict[str, ResultKind] = {}
 
 
 def register_result_kind(kind: ResultKind) -> ResultKind:
-    """Declare a kind of result (every registered task declares its own, :meth:`rfmap.tasks.Task.result_kind`)."""
+    """Declare a kind of result (every registered task declares its own, :meth:`rfmap.tasks.base.Task.result_kind`)."""
     _RESULT_KINDS[kind.name] = kind
     return kind
 

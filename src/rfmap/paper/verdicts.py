@@ -45,7 +45,7 @@ VERDICT_RULE = (
 @lru_cache(maxsize=64)
 def input_std(field: str, n: int) -> float:
     r""":math:`\mathrm{Std}(\tilde\rho_{\text{orig}})` of the test density ``field`` on the grid mesh of side ``n``
-    (the identity map's :attr:`~rfmap.core.metrics.MapMetrics.std_rho_orig`, as every table computes it)."""
+    (the identity map's ``std_rho_orig``, :class:`rfmap.core.metrics.MapMetrics`, as every table computes it)."""
     mesh = grid_mesh(n, get_field(field).dim)
     m = compute_metrics(mesh.points, mesh.points, mesh.elements, density=sample_density(field, n).reshape(-1))
     return float(m.std_rho_orig)

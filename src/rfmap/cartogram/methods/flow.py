@@ -10,7 +10,7 @@ from .base import CartogramMethod
 __all__ = ["FlowMethod", "FLOW_MAX_N", "FLOW_BLUR", "FLOW_SETTINGS"]
 
 #: The default ``max_n`` of the flow method, whose passes cost little more on a finer raster (they carry the
-#: polygons' vertices, whose count :data:`rfmap.cartogram.resize.SPLIT_MAX_N` bounds): a county map's smallest judged
+#: polygons' vertices, whose count ``SPLIT_MAX_N`` of :mod:`rfmap.cartogram.resize` bounds): a county map's smallest judged
 #: regions, a few tens of cells at 1024, converge at 2048
 FLOW_MAX_N = 2048
 #: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
