@@ -201,7 +201,8 @@ def scoreboard(root: Path = ROOT) -> str:
     refs, defs = _footnotes(scored)
     head = ["Paper item", "Verdict", "Metric", "Paper", "Paper's method (cases met)", "Delivered", "Classical"]
     lines = [CRITERION, "", _rule(), "",
-             "Values are means over the paper's cases (four test fields, or four grid sides).", "",
+             "Values are means over the paper's cases (four test fields, or four grid sides) whose input is the "
+             "paper's: the cases the verdict counts.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for it in scored:
         score, nb = it["score"], it["notebook"]

@@ -177,6 +177,9 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     assert c.met("rect-peak", "std_rho_map") is None and c.count("std_rho_map") == (1, 1)
     v = c.score_values()
     assert v["verdict"] == "reproduced (1 of 1)"
+    # the means beside the verdict are over the comparable case only
+    assert (v["std_rho_map_native"], v["std_rho_map_paper"]) == ("0.07000", "0.08000")
+    assert c.mean("native", "std_rho_map") == pytest.approx(0.095)
     assert v["std_rho_map_rect-peak_met"] == f"n/c; ratio {0.12 / 0.6:.3g} vs {0.09 / 0.480728:.3g}"
     assert c.to_markdown().splitlines()[4].endswith("| n/c; ratio 0.2 vs 0.187 |")
     c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses

@@ -222,10 +222,13 @@ class Comparison:
             return None if a is None or b is None else a < b
         return self.count(metric, test)
 
-    def mean(self, method: str, metric: str) -> float | None:
-        """The mean of a method's values of ``metric`` over the cases (``None`` if any is missing)."""
-        vals = [self.value(c.name, method, metric) for c in self.cases]
-        return None if any(v is None for v in vals) else float(np.mean(vals))
+    def mean(self, method: str, metric: str, comparable: bool = False) -> float | None:
+        """The mean of a method's values of ``metric`` over the cases (``None`` if any is missing); with
+        ``comparable``, over the cases whose input is the paper's only (:meth:`comparable`), as the scoreboard
+        counts them."""
+        cases = [c for c in self.cases if not comparable or self.comparable(c.name)]
+        vals = [self.value(c.name, method, metric) for c in cases]
+        return None if not vals or any(v is None for v in vals) else float(np.mean(vals))
 
     def speed(self, method: str = "native") -> dict[str, float]:
         """Per case the classical solver's time over ``method``'s (above 1: ``method`` is faster)."""
@@ -278,11 +281,11 @@ class Comparison:
 
     def score_values(self) -> dict[str, str]:
         """The numbers the scoreboard pastes, as formatted text: for every metric ``{metric}_{col}`` (the mean over
-        the cases of each column of :data:`METHODS`), ``{metric}_met`` and ``{metric}_classical_better``
+        the comparable cases of each column of :data:`METHODS`, those the counts and the verdict judge), ``{metric}_met`` and ``{metric}_classical_better``
         (``"k of m"``), and per case ``{metric}_{case}_{col}`` and ``{metric}_{case}_met``."""
         out: dict[str, str] = {}
         for metric in self.metrics:
-            row = score_row(*(self.mean(m, metric) for m in METHODS))
+            row = score_row(*(self.mean(m, metric, comparable=True) for m in METHODS))
             out.update({f"{metric}_{k}": v for k, v in row.items() if k != "met"})
             out[f"{metric}_met"] = "{} of {}".format(*self.count(metric))
             out[f"{metric}_classical_better"] = "{} of {}".format(*self.classical_better(metric))
