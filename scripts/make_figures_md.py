@@ -321,13 +321,13 @@ def render(root: Path = ROOT) -> str:
         "",
         f"{n_produced} of {len(items)} items are produced.",
         "",
-        "| Item | Label | What it shows | Chapter | File | Status |",
-        "| --- | --- | --- | --- | --- | --- |",
+        "| Item | What it shows | Chapter | File | Status |",
+        "| --- | --- | --- | --- | --- |",
     ]
     for it in items:
         nb_cell = _chapter_cell(it, root, in_toc)
         out = f"`{Path(it['output']).name}`" if it.get("output") else "—"
-        lines.append(f"| {numbers[it['label']]} | `{it['label']}` | {_cell(it['description'])} | {nb_cell} | {out} | "
+        lines.append(f"| {numbers[it['label']]} `{it['label']}` | {_cell(it['description'])} | {nb_cell} | {out} | "
                      f"{_cell(status(it, root))} |")
     lines += [
         "",
