@@ -12,12 +12,17 @@ Image = pytest.importorskip("PIL.Image")
 ROOT = Path(__file__).resolve().parent.parent
 
 
-@pytest.fixture(scope="module")
-def book_check():
-    spec = importlib.util.spec_from_file_location("book_check", ROOT / "scripts" / "book_check.py")
+def _script(name: str):
+    """A script of scripts/ loaded as a module."""
+    spec = importlib.util.spec_from_file_location(name, ROOT / "scripts" / f"{name}.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
     return mod
+
+
+@pytest.fixture(scope="module")
+def book_check():
+    return _script("book_check")
 
 
 def _png(pixels: np.ndarray) -> bytes:
@@ -99,10 +104,7 @@ def test_main_fails_on_a_page_with_a_blank_figure(book_check, tmp_path, images, 
 
 @pytest.fixture(scope="module")
 def text_check():
-    spec = importlib.util.spec_from_file_location("book_text_check", ROOT / "scripts" / "book_text_check.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return _script("book_text_check")
 
 
 @pytest.mark.parametrize("body, found", [
