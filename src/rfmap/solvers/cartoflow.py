@@ -260,7 +260,7 @@ def heun_flow(vel, y: np.ndarray, project, options: HeunOptions, turned_over=Non
               on_step=None) -> tuple[np.ndarray, dict]:
     r"""Heun steps (:func:`heun_step`) of :math:`\dot y = v(t, y)` from :math:`t_0` to :math:`t_{end}`: the time
     integration shared by the flow-based map (from 0 to 1: the cartogram pass :func:`flow_square` and the map solver
-    :func:`rfmap.solvers.flow.solve_flow`) and the cartogram's diffusion map
+    :func:`rfmap.solvers.solve_flow`) and the cartogram's diffusion map
     (:func:`rfmap.solvers.cartodiffusion.diffusion_square`, until the velocity has ``settled``).
 
     A step is accepted when its error is at most 1 and no element turned over; the next step follows
