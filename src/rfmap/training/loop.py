@@ -99,7 +99,7 @@ def train(cfg: TrainConfig, out_dir=None, options: RunOptions | None = None, **k
     resume, init, device, finish = opts.resume, opts.init, opts.device, opts.finish
     progress, log_every, command = opts.progress, opts.log_every, opts.command
     dev = device if isinstance(device, torch.device) else resolve_device(device)
-    check_precision(cfg.precision, dev)
+    cfg = cfg.with_overrides(precision=check_precision(cfg.precision, dev))  # "BF16" is "bf16"
     out = Path(out_dir or Path("runs") / cfg.name)
     if finish and not (resume and (out / "checkpoint.pt").exists()):
         raise ValueError(f"--finish ends a run from its checkpoint: give --resume and an --out with checkpoint.pt "
