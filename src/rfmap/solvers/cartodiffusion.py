@@ -27,8 +27,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cartoflow import GridFlow, _bilinear_planes, HeunOptions, _grid_turned_over, _project, heun_flow, square_inputs
+from .cartoflow import GridFlow, _bilinear_planes, _grid_turned_over, _project, square_inputs
 from .cosine import CosineTransforms
+from .heun import HeunOptions, heun_flow
 from .spectral import damp, flux_synthesis, half_coefficients, heat_factor
 
 __all__ = ["CartoDiffusionOptions", "diffusion_square"]
@@ -86,7 +87,7 @@ class _Heat:
 
 
 def _integrate(heat: _Heat, y: np.ndarray, t: float, opts: CartoDiffusionOptions, grid: bool) -> tuple:
-    r"""Heun steps (:func:`rfmap.solvers.cartoflow.heun_flow`) from ``t`` until the remaining displacement
+    r"""Heun steps (:func:`rfmap.solvers.heun.heun_flow`) from ``t`` until the remaining displacement
     :math:`\max|v|/\pi^2` is below ``tol_end`` spacings (or ``t_max``)."""
     n = heat.n
     h = 1.0 / (n - 1)

@@ -30,7 +30,7 @@ Numerical method:
    :math:`v = -\nabla\phi / ((1-t)\rho_0 + t\bar\rho)` is formed there.  The Poisson solve and this table are
    single precision (a relative error of about 1e-7, far below a step's tolerance, at half the transform time and
    a tenth of the interpolation time of double precision); the vertex positions are integrated in double.
-4. **Time steps.**  Predictor–corrector (Heun) steps (``rfmap.solvers.cartoflow.heun_flow``, the cartogram
+4. **Time steps.**  Predictor–corrector (Heun) steps (``rfmap.solvers.heun.heun_flow``, the cartogram
    passes' integrator), :math:`x^* = x + \Delta t\, v(x, t)`,
    :math:`x' = x + \tfrac{\Delta t}{2}\,(v(x, t) + v(x^*, t + \Delta t))`.  A step is accepted when the
    predictor–corrector difference :math:`\max|x' - x^*|` is at most ``rtol`` grid spacings *and* no element of the
@@ -82,7 +82,7 @@ from ..core.inputs import is_uniform
 from ..core.geometry import grid_element_mean, grid_min_measure, grid_signed_measures
 from ..core.mesh import grid_mesh
 from ..core.result import MapResult
-from .cartoflow import STALL_BLURS, STALL_DT, HeunOptions, Stalled, heun_flow
+from .heun import STALL_BLURS, STALL_DT, HeunOptions, Stalled, heun_flow
 from .locate import rasterize_elements
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
 from .residual import lumped_residual, residual_density, vertex_residual
@@ -155,7 +155,7 @@ class _FlowPass:
     def run(self, y: np.ndarray, turned_over, project, *, h: float, rtol: float, max_steps: int,
             bar) -> tuple[np.ndarray, dict]:
         """The points ``y`` carried from t = 0 to 1 by the Heun steps of the cartogram pass
-        (:func:`rfmap.solvers.cartoflow.heun_flow`), from a first step of 1e-2 and with rejections shrinking the step
+        (:func:`rfmap.solvers.heun.heun_flow`), from a first step of 1e-2 and with rejections shrinking the step
         by at least 0.2; ``Stalled`` when the step collapses."""
 
         def on_step(t: float) -> None:
