@@ -272,7 +272,7 @@ def test_cli_reports_the_loose_pairs_and_takes_their_values(tmp_path, capsys):
                               "--value", "pop", "--label", "short", "--n", 48, "--out", out)
     assert rc == 0, err
     lines = stdout.splitlines()
-    assert lines[:3] == ["regions without data (0, given the mean density): none", "data without a region (0): none",
+    assert lines[:3] == ["regions without data: none", "data without a region: none",
                          "joined with accents and case ignored (2, region = data): 'Fryslân' = 'Fryslan', "
                          "'Groningen' = 'GRONINGEN'"]
     props = [f["properties"] for f in json.loads(out.read_text(encoding="utf-8"))["features"]]

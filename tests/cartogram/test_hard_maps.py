@@ -168,7 +168,7 @@ def test_specks_of_rounding_are_repaired_and_what_is_written_invalid_fails(tmp_p
     assert not c.problems()
     c.geometries = c.geometries.copy()
     c.geometries[1] = bowtie
-    assert any("invalid region(s) in the written coordinates" in p and "id 1" in p for p in c.problems())
+    assert any("invalid region in the written coordinates" in p and "id 1" in p for p in c.problems())
     c.save(tmp_path / "bad.geojson")
     assert _written(tmp_path / "bad.geojson")[0]["rfmap"]["status"] == "failed"
 

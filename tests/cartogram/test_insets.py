@@ -93,7 +93,7 @@ def test_the_command_reads_cartogram_cpp_inset_and_label_columns(states, tmp_pat
     proc = _cli(src, "--data", table, "--id", "Region", "--id-property", "id", "--value", "Data", "--inset", "Inset",
                 "--label", "Label", "--n", 64, "--out", out, "--svg", svg)
     assert proc.returncode == 0, proc.stderr
-    assert "3 inset(s) (C 9, L 1, B 2)" in proc.stdout
+    assert "3 insets (C 9, L 1, B 2)" in proc.stdout
     doc = json.loads(out.read_text())
     assert doc["rfmap"]["status"] == "ok" and doc["rfmap"]["coordinates"] == "insets" and "crs" not in doc
     assert set(doc["rfmap"]["insets"]) == {"C", "L", "B"}

@@ -17,6 +17,7 @@ import torch
 from rfmap.cli.commands import main
 from rfmap.nn import MultiResUNet
 from rfmap.core.result import load_result
+from rfmap.core.wording import counted
 from rfmap.surrogate import Surrogate, quiet_quality
 from rfmap.tasks import TaskSpec
 
@@ -232,7 +233,9 @@ def test_cartogram_process_exits_at_once_with_its_status_and_whole_files(tmp_pat
     if code == 2:
         assert proc.stdout == "" and len(proc.stderr.strip().splitlines()) == 1 and not out.exists()
         return
-    assert proc.stdout.startswith(f"wrote {out}: 4 regions by 'pop', flow")
+    report = proc.stdout.splitlines()
+    assert report[0] == f"wrote {out}: 4 regions by 'pop'" and report[1].startswith("  flow, N = 32: ")
+    assert report[2].startswith("  area error mean ") and report[3].startswith("  topology: ")
     status = json.loads(out.read_text())["rfmap"]
     assert status["status"] == ("ok" if code == 0 else "failed")
     assert ("rfmap cartogram: failed:" in proc.stderr) == (code == 1)
@@ -265,7 +268,7 @@ def test_models_lineage_lists_every_run(capsys):
     for name in models():
         meta = json.loads((WEIGHTS_DIR / f"{name}.json").read_text())
         runs = meta.get("lineage", []) + [meta]
-        head = f"{name}: {len(runs)} run(s), {meta.get('cumulative_steps', meta['steps'])} steps"
+        head = f"{name}: {counted(len(runs), 'run')}, {meta.get('cumulative_steps', meta['steps'])} steps"
         assert head in stdout
         block = stdout.split(head, 1)[1].splitlines()[1:]
         lines = [ln.strip() for ln in block if ln.startswith("  ")]  # this model's runs and their resumptions

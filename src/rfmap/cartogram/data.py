@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.wording import counted
 from .projection import PlanarFrame
 from .regions import _load_collection, world_countries
 
@@ -235,13 +236,15 @@ class Join:
     ambiguous: list = field(default_factory=list)
 
     def report(self) -> list[str]:
-        """Two lines: the regions without a row, and the rows without a region; then a line for the pairs joined with
-        accents and case ignored, and one for the ambiguous near-matches, where there are any."""
+        """Two lines: the regions without a row (how many, what they were given, their ids; ``none`` when every
+        region has a row), and the rows without a region; then a line for the pairs joined with accents and case
+        ignored, and one for the ambiguous near-matches, where there are any."""
         todo = {"mean": "given the mean density", "drop": "left out", "error": "", "fallback": "given a fallback"}
-        regions = ", ".join(self.unmatched_regions) or "none"
-        rows = ", ".join(self.unmatched_rows) or "none"
-        lines = [f"regions without data ({len(self.unmatched_regions)}, {todo[self.missing]}): {regions}",
-                 f"data without a region ({len(self.unmatched_rows)}): {rows}"]
+        n_regions, n_rows = len(self.unmatched_regions), len(self.unmatched_rows)
+        lines = [f"regions without data ({n_regions}, {todo[self.missing]}): {', '.join(self.unmatched_regions)}"
+                 if n_regions else "regions without data: none",
+                 f"data without a region ({n_rows}): {', '.join(self.unmatched_rows)}"
+                 if n_rows else "data without a region: none"]
         if self.loose:
             pairs = ", ".join(f"{region!r} = {row!r}" for region, row in self.loose)
             lines.append(f"joined with accents and case ignored ({len(self.loose)}, region = data): {pairs}")
@@ -365,7 +368,7 @@ def join_values(collection, values: Mapping[str, float], *, key: str = "id", val
     gap = np.isnan(v)
     if gap.any() and missing == "error":
         bad = np.flatnonzero(gap)
-        raise ValueError(f"{bad.size} region(s) without data: {', '.join(names[k] for k in bad[:10])}")
+        raise ValueError(f"{counted(bad.size, 'region without data')}: {', '.join(names[k] for k in bad[:10])}")
     if gap.any() and missing == "drop":
         keep = ~gap
     elif gap.any():
@@ -398,10 +401,10 @@ def write_csv_template(collection, path, *, key: str = "id", value: str = "value
     ids = region_ids(collection, key)
     missing = [f"#{k}" for k, rid in enumerate(ids) if not rid]
     if missing:
-        raise ValueError(f"{len(missing)} region(s) have no {key!r}: {', '.join(missing[:10])}")
+        raise ValueError(f"{counted(len(missing), 'region without')} {key!r}: {', '.join(missing[:10])}")
     dup = sorted({rid for rid in ids if ids.count(rid) > 1})
     if dup:
-        raise ValueError(f"the id(s) {', '.join(map(repr, dup[:10]))} name several regions; ids must be unique")
+        raise ValueError(f"ids that name several regions: {', '.join(map(repr, dup[:10]))}; ids must be unique")
     import io
 
     buf = io.StringIO()

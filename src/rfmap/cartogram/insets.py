@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..core.wording import counted
 from .data import atomic_write
 from .metrics import cartogram_metrics
 from .options import CartogramOptions
@@ -165,9 +166,10 @@ class InsetCartogram:
             out.append(f"the largest area error {m.max_error:.4f} (insets together) is above the tolerance "
                        f"{self.tol:g}")
         if m.n_invalid:
-            out.append(f"{m.n_invalid} invalid region(s)")
+            out.append(counted(m.n_invalid, "invalid region"))
         if m.n_overlapping:
-            out.append(f"{m.n_overlapping} pair(s) of regions overlap (the largest by {m.max_overlap:.2g})")
+            out.append(f"overlapping regions: {counted(m.n_overlapping, 'pair')} (the largest overlap "
+                       f"{m.max_overlap:.2g})")
         for side, c in self.insets.items():
             out += [f"inset {side}: {p}" for p in c.problems()]
         return out

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.wording import counted
 from .regions import _shapely
 
 __all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps", "judged", "pass_weights", "repair_folds",
@@ -67,12 +68,19 @@ class CartogramMetrics:
         """Every polygon valid and no pair of regions overlapping by more than ``overlap_tol``."""
         return self.n_invalid == 0 and self.n_overlapping == 0
 
-    def __str__(self) -> str:
-        topo = "valid, no overlaps" if self.topology_ok else \
-            f"{self.n_invalid} invalid, {self.n_overlapping} overlapping pairs (max {self.max_overlap:.2g})"
-        minor = f" ({self.n_minor} region(s) under the judged share: max {self.max_error_minor:.4f})" \
+    def report_lines(self) -> list[str]:
+        """Two lines: the area errors (and those of the regions under the judged share, where there are any), and
+        the topology."""
+        minor = f" ({counted(self.n_minor, 'region')} under the judged share: max {self.max_error_minor:.4f})" \
             if self.n_minor else ""
-        return f"area error mean {self.mean_error:.4f}, max {self.max_error:.4f}{minor}; {topo}"
+        topo = "valid, no overlaps" if self.topology_ok else \
+            (f"{counted(self.n_invalid, 'invalid region')}, {counted(self.n_overlapping, 'overlapping pair')} "
+             f"(the largest overlap {self.max_overlap:.2g})")
+        return [f"area error mean {self.mean_error:.4f}, max {self.max_error:.4f}{minor}", f"topology: {topo}"]
+
+    def __str__(self) -> str:
+        errors, topo = self.report_lines()
+        return f"{errors}; {topo}"
 
 
 def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: float = 1e-6,

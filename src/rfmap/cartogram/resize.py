@@ -63,6 +63,7 @@ import numpy as np
 from .metrics import MIN_SHARE, SLIVER_GAP, CartogramMetrics, boost, cartogram_metrics, clean_input_overlaps, \
     judged, pass_weights, repair_folds, repair_overlaps, valid_polygons
 from ..core.mesh import check_grid_memory, check_n
+from ..core.wording import counted
 from .options import CartogramOptions
 from .methods import DIFFUSION_SETTINGS, FLOW_BLUR, FLOW_MAX_N, FLOW_SETTINGS, HYBRID_POLISH, MAX_N, METHODS, \
     CartogramMethod, get_method
@@ -243,29 +244,29 @@ class Cartogram:
         out = []
         if not m.max_error <= self.tol:
             out.append(f"the largest area error {m.max_error:.4f} is above the tolerance {self.tol:g} after "
-                       f"{self.info['iterations']} pass(es)" +
+                       f"{counted(self.info['iterations'], 'pass')}" +
                        (": the passes stopped at the time limit" if self.info.get("timed_out") else ""))
         valid = _shapely().is_valid  # in the plane of the metrics, and as written (output_geometries)
         for bad, where in ((~valid(self.frame.equal_area(self.mapped)), ""),
                            (~valid(self.geometries), f" in the written coordinates ({self.output})")):
             names = ", ".join(_feature_name(self.input_features[i], int(i)) for i in np.flatnonzero(bad)[:10])
             if bad.any():
-                out.append(f"{bad.sum()} invalid region(s){where}: {names}{', ...' if bad.sum() > 10 else ''}")
+                out.append(f"{counted(bad.sum(), 'invalid region')}{where}: {names}{', ...' if bad.sum() > 10 else ''}")
                 break
         if m.n_overlapping:
-            out.append(f"{m.n_overlapping} pair(s) of regions overlap (the largest by {m.max_overlap:.2g} of the "
-                       f"total area)")
+            out.append(f"overlapping regions: {counted(m.n_overlapping, 'pair')} (the largest overlap "
+                       f"{m.max_overlap:.2g} of the total area)")
         if self.output == "input":
             far = np.flatnonzero(self.frame.beyond_domain(self.mapped))
             if far.size:
                 names = ", ".join(_feature_name(self.input_features[i], int(i)) for i in far[:10])
-                out.append(f"{far.size} region(s) moved beyond the projection's domain, where no longitude/latitude "
-                           f"lies (past a pole or the map's edge): {names}{', ...' if far.size > 10 else ''}; in the "
+                out.append(f"{counted(far.size, 'region')} moved beyond the projection's domain, where no "
+                           f"longitude/latitude lies (past a pole or the map's edge): {names}{', ...' if far.size > 10 else ''}; in the "
                            f"input's coordinates they are drawn at its edge (the projected output keeps them)")
         bent = list(getattr(self.info.get("repaired_output"), "invalid_reprojected", []))
         if bent:
             names = ", ".join(_feature_name(self.input_features[i], int(i)) for i in bent[:10])
-            out.append(f"{len(bent)} region(s) valid as written become invalid in a cylindrical equal-area "
+            out.append(f"{counted(len(bent), 'region')} valid as written but invalid in a cylindrical equal-area "
                        f"reprojection: {names}{', ...' if len(bent) > 10 else ''}")
         return out
 

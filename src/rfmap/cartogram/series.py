@@ -23,6 +23,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from ..core.wording import counted
 from .options import CartogramOptions
 from .resize import cartogram
 
@@ -93,11 +94,12 @@ class CartogramSeries:
         out = []
         for f in self.frames:
             if not f.max_error <= self.tol:
-                out.append(f"{f.key}: largest area error {f.max_error:.4f} above {self.tol:g} after {f.passes} "
-                           f"pass(es)")
+                out.append(f"{f.key}: largest area error {f.max_error:.4f} above {self.tol:g} after "
+                           f"{counted(f.passes, 'pass')}")
             m = f.carto.metrics()
             if not m.topology_ok:
-                out.append(f"{f.key}: {m.n_invalid} invalid region(s), {m.n_overlapping} overlapping pair(s)")
+                out.append(f"{f.key}: {counted(m.n_invalid, 'invalid region')}, "
+                           f"{counted(m.n_overlapping, 'overlapping pair')}")
         return out
 
 

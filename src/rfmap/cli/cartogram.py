@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import sys
 
+from ..core.wording import counted
 from .base import CLIError, solver_name
 
 __all__ = ["add_cartogram_parser", "cmd_cartogram", "cartogram_options"]
@@ -103,18 +104,20 @@ def cmd_cartogram(args) -> int:
     _cartogram_figures(args, carto)
     _cartogram_page(args, [carto])
     names = [carto.input_features[i].get("id", f"#{i}") for i in carto.floored]
-    print(f"wrote {args.out}: {len(carto.input_features)} regions by {args.value!r}, {carto.method}, N = {carto.n}, "
-          f"{carto.info['iterations']} pass(es), {carto.time:.2f} s; {carto.metrics()}")
+    _print_report(f"wrote {args.out}: {counted(len(carto.input_features), 'region')} by {args.value!r}",
+                  f"{carto.method}, N = {carto.n}: {counted(carto.info['iterations'], 'pass')}, {carto.time:.2f} s",
+                  carto.metrics())
     far = carto.info.get("beyond_domain", [])
     if far:
         print(f"written in the projection's plane ({carto.frame.projection.definition}; the GeoJSON's \"crs\" "
-              f"member): {len(far)} region(s) left the longitude/latitude domain (use --lonlat to force it)")
+              f"member): {counted(len(far), 'region')} left the longitude/latitude domain (use --lonlat to force "
+              "it)")
     if names:
-        print(f"zero values floored in {len(names)} region(s): {_listed(names)}")
+        print(f"zero values floored in {counted(len(names), 'region')}: {_listed(names)}")
     cut = carto.info.get("overlaps_cut", [])
     if cut:
         label = [carto.input_features[i].get("id", f"#{i}") for pair in cut for i in pair]
-        print(f"sliver overlaps cut in {len(cut)} pair(s) of neighbours pressed together: "
+        print(f"sliver overlaps cut in {counted(len(cut), 'pair of neighbours')} pressed together: "
               f"{_listed([f'{a} / {b}' for a, b in zip(label[::2], label[1::2])], LISTED_CUTS)}")
     return _report_problems(carto.problems())
 
@@ -127,6 +130,15 @@ def cartogram_options(args):
     return CartogramOptions(method=args.method, n=args.n, tol=args.tol, max_iterations=args.max_passes,
                             projection=args.projection, model=args.model, points=args.points, timeout=args.timeout,
                             output="projected" if args.projected else "input" if args.lonlat else "auto")
+
+
+def _print_report(head: str, run: str, metrics) -> None:
+    """The report of a written cartogram: what was written, then, indented, one line for the run (method, raster,
+    passes, time), one for the area errors and one for the topology
+    (:meth:`rfmap.cartogram.metrics.CartogramMetrics.report_lines`)."""
+    print(head)
+    for line in (run, *metrics.report_lines()):
+        print(f"  {line}")
 
 
 def _report_problems(problems: list[str]) -> int:
@@ -170,7 +182,7 @@ def _cartogram_series(args, collection, options) -> int:
         save_animation(series, args.gif)
     _cartogram_page(args, [f.carto for f in series.frames], [f.key for f in series.frames])
     for f in series.frames:
-        print(f"{f.key}: {f.passes} pass(es), {f.seconds:.2f} s, largest area error {f.max_error:.4f}")
+        print(f"{f.key}: {counted(f.passes, 'pass')}, {f.seconds:.2f} s, largest area error {f.max_error:.4f}")
     also = [p for p in (args.gif, args.html) if p]
     print(f"wrote {args.out} (the last frame, in the projection's plane)" + (f" and {', '.join(also)}" if also else ""))
     return _report_problems(series.problems())
@@ -191,8 +203,9 @@ def _cartogram_insets(args, collection, options) -> int:
     _cartogram_figures(args, carto)
     _cartogram_page(args, [carto])
     sides = ", ".join(f"{side} {idx.size}" for side, idx in carto.groups.items())
-    print(f"wrote {args.out}: {len(carto.input_features)} regions by {args.value!r} in {len(carto.groups)} inset(s) "
-          f"({sides}), {carto.method}, N = {carto.n}, {carto.time:.2f} s; {carto.metrics()}")
+    _print_report(f"wrote {args.out}: {counted(len(carto.input_features), 'region')} by {args.value!r} in "
+                  f"{counted(len(carto.groups), 'inset')} ({sides})",
+                  f"{carto.method}, N = {carto.n}: {carto.time:.2f} s", carto.metrics())
     return _report_problems(carto.problems())
 
 

@@ -15,6 +15,7 @@ import sys
 
 import numpy as np
 
+from ..core.wording import counted
 from .base import CLIError, solver_name
 
 __all__ = ["main", "entry", "build_parser", "CLIError"]
@@ -127,7 +128,7 @@ def cmd_models(args) -> int:
         runs = list(meta.get("lineage", [])) + [meta]
         total_steps = meta.get("cumulative_steps", meta.get("steps"))
         total_wall = float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0)))
-        print(f"{name}: {len(runs)} run(s), {total_steps} steps, {total_wall / 60:.0f} min")
+        print(f"{name}: {counted(len(runs), 'run')}, {total_steps} steps, {total_wall / 60:.0f} min")
         for k, run in enumerate(runs, 1):
             sha = run.get("sha256")
             print(f"  {k}. {run.get('command', '?')}   # {run.get('steps')} steps, "
@@ -226,8 +227,8 @@ def repair_summary(report: dict | None) -> str:
     if not report["needed"]:
         return f"repair: not needed, nothing folded ({report['time'] * 1e3:.1f} ms check)"
     if report.get("skipped"):
-        return (f"repair: skipped, {report['n_flipped_before']} folded element(s); the polish starts cold from the "
-                "identity")
+        return (f"repair: skipped, {counted(report['n_flipped_before'], 'folded element')}; the polish starts cold "
+                "from the identity")
     b, a = report["metrics_before"], report["metrics_after"]
     extra = "".join(f", {k} {b[k]:.4g} -> {a[k]:.4g}" for k in ("std_rho_map", "max_mu", "mean_dmu") if k in b)
     if "surface_crossings_before" in report:

@@ -6,6 +6,8 @@ import contextlib
 
 import torch
 
+from .wording import counted
+
 __all__ = ["resolve_device", "DEVICE_CHOICES", "torch_threads", "PRECISIONS", "check_precision", "autocast"]
 
 #: what ``--device`` accepts (``cuda:K`` picks one of several GPUs)
@@ -37,7 +39,8 @@ def resolve_device(name: str | torch.device | None = "auto") -> torch.device:
         except RuntimeError as e:
             raise ValueError(f"invalid device {name!r}: {e}") from e
         if dev.index is not None and dev.index >= torch.cuda.device_count():
-            raise ValueError(f"device {name!r} requested but only {torch.cuda.device_count()} CUDA device(s) exist")
+            raise ValueError(f"device {name!r} requested, but this machine has "
+                             f"{counted(torch.cuda.device_count(), 'CUDA device')}")
         return dev
     raise ValueError(f"unknown device {name!r}; expected one of {', '.join(DEVICE_CHOICES)} (or cuda:K)")
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from .mesh import grid_vertex_weights
+from .wording import counted
 
 __all__ = ["check_density", "check_mu", "unit_mass", "preprocess_density", "is_uniform", "DENSITY_FLOOR"]
 
@@ -23,7 +24,7 @@ def check_density(values, *, name: str = "density", positive: bool = True) -> np
         raise ValueError(f"{name} is empty")
     bad = ~np.isfinite(v)
     if bad.any():
-        raise ValueError(f"{name} contains {int(bad.sum())} NaN or infinite value(s), e.g. {v[bad].flat[0]}")
+        raise ValueError(f"{name} contains {counted(bad.sum(), 'NaN or infinite value')}, e.g. {v[bad].flat[0]}")
     if positive and (v <= 0).any():
         raise ValueError(f"{name} must be strictly positive; minimum is {v.min():.6g}")
     return v
@@ -37,7 +38,7 @@ def check_mu(mu, *, name: str = "mu") -> np.ndarray:
     m = m.astype(np.complex128)
     bad = ~np.isfinite(m)
     if bad.any():
-        raise ValueError(f"{name} contains {int(bad.sum())} NaN or infinite value(s)")
+        raise ValueError(f"{name} contains {counted(bad.sum(), 'NaN or infinite value')}")
     a = np.abs(m)
     if (a >= 1).any():
         raise ValueError(f"|{name}| must be < 1 everywhere (quasi-conformality); max |{name}| = {a.max():.6g}")

@@ -51,6 +51,7 @@ import torch
 
 from ..core.geometry import grid_element_mean, grid_signed_measures
 from ..core.metrics import density_std
+from ..core.wording import counted
 from ..solvers import flow
 from ..solvers.flow import MARGIN
 
@@ -259,7 +260,7 @@ def polish_map(result, *, n: int, boundary: str, options: PolishOptions = Polish
     before = summary(mapped, stage_time)
     reason = None
     if before["n_flipped"]:
-        reason = f"the network's map has {before['n_flipped']} folded element(s)"
+        reason = f"the network's map has {counted(before['n_flipped'], 'folded element')}"
     elif not before["std_rho_map"] <= poor * before["std_rho_orig"]:
         reason = (f"the network's map is poor: Std(rho~_map) {before['std_rho_map']:.3g} > {poor:g} x "
                   f"Std(rho~_orig) {before['std_rho_orig']:.3g}")

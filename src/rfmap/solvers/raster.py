@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.inputs import check_density, is_uniform
 from ..core.mesh import check_n
+from ..core.wording import counted
 from .spectral import contract, interval_weights
 
 __all__ = ["DEM_BOUNDARIES", "check_grid_density", "p1_upsample", "balanced_sea"]
@@ -30,7 +31,7 @@ def check_grid_density(density) -> np.ndarray:
     (:func:`rfmap.core.inputs.is_uniform`)."""
     arr = np.asarray(density)
     if arr.ndim not in (2, 3):
-        raise ValueError(f"density must be a grid field of shape (N, N) or (N, N, N); got {arr.ndim} dimension(s), "
+        raise ValueError(f"density must be a grid field of shape (N, N) or (N, N, N); got {counted(arr.ndim, 'dimension')}, "
                          f"shape {arr.shape}")
     if len(set(arr.shape)) != 1:
         raise ValueError(f"density must have the same number of vertices per side, got shape {arr.shape}")
