@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Table", "Headline", "headline", "format_sig", "paper_table", "format_value", "glue_all", "COLUMN_TITLES",
-           "DIGITS", "MAX_COLUMNS"]
+__all__ = ["Table", "Headline", "headline", "format_sig", "paper_table", "format_value", "span_text", "change_text",
+           "glue_all", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
 
 
 DATA = Path(__file__).resolve().parent.parent / "data"
@@ -235,6 +235,20 @@ def headline(title: str, metric: str, ours: dict, paper: dict | None = None, cla
 
 def _num(v) -> float | None:
     return None if v is None else float(v)
+
+
+def span_text(lo: float, hi: float, fmt: str = ".3g") -> str:
+    """A range for the book's text: ``"0.41 to 0.57"``, or one value where both ends print the same
+    (``"0.57"``, never ``"0.57 to 0.57"``).  ``fmt``: the format of each end."""
+    a, b = format(float(lo), fmt), format(float(hi), fmt)
+    return a if a == b else f"{a} to {b}"
+
+
+def change_text(before: float, after: float, fmt: str = ".4f") -> str:
+    """A change for the book's text: ``"goes from 1.0831 to 0.1162"``, or ``"stays at 0.1923 (to the digits
+    shown)"`` where both values print the same.  ``fmt``: the format of each value."""
+    a, b = format(float(before), fmt), format(float(after), fmt)
+    return f"goes from {a} to {b}" if a != b else f"stays at {a} (to the digits shown)"
 
 
 def glue_all(values: dict, prefix: str) -> None:
