@@ -30,9 +30,12 @@ Numerical method:
    not yet decayed below 1e-17), :math:`v = -\nabla\rho/\rho` is formed there and interpolated multilinearly at the
    current vertex positions (:func:`rfmap.core.mesh.interpolate`).
 4. **Time integration.**  :math:`\dot x = v(x, t)` is integrated with the embedded Bogacki–Shampine 3(2) pair
-   (FSAL, 3 evaluations per step) with the local error per step bounded by ``rtol`` times the grid spacing, until
-   the remaining displacement, estimated as :math:`\max|v| / \lambda_1` with :math:`\lambda_1 = \pi^2` the decay
-   rate of the slowest mode, falls below ``tol_end`` times the grid spacing.
+   (:func:`rfmap.solvers.bs32.bs32_flow`: FSAL, 3 evaluations per step) with the local error per step bounded by
+   ``rtol`` times the grid spacing, until the remaining displacement, estimated as :math:`\max|v| / \lambda_1` with
+   :math:`\lambda_1 = \pi^2` the decay rate of the slowest mode, falls below ``tol_end`` times the grid spacing.
+   The flow's driver, this stopping rule and the blurred starts below are the cartogram diffusion's too
+   (:mod:`rfmap.solvers.heatflow`); its field (step 3) and its integrator are this solver's own, as the results of
+   both are kept bit for bit and the cartogram's must not import PyTorch.
 5. **Fold guard.**  A step after which an element of the mesh would be turned over is rejected and retried with half
    the step.  The exact flow is a diffeomorphism, but its image of a straight-sided element is not straight, and
    where the density varies faster than the mesh resolves (a sharp peak beside a near-empty region) the vertex
@@ -72,6 +75,8 @@ from ..core.inputs import is_uniform
 from ..core.geometry import grid_min_measure
 from ..core.mesh import grid_mesh, interpolate
 from ..core.result import MapResult
+from .bs32 import BS32Options
+from .heatflow import SLOWEST_RATE, Settling, blur_start, diffuse
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
 from .spectral import cosine_coefficients, fft_workers
 
@@ -83,16 +88,6 @@ __all__ = [
     "p1_upsample",
     "DEM_BOUNDARIES",
 ]
-
-
-# Bogacki–Shampine 3(2) tableau
-_BS_C = (0.5, 0.75)
-
-
-_BS_B = (2.0 / 9.0, 1.0 / 3.0, 4.0 / 9.0)
-
-
-_BS_E = (-5.0 / 72.0, 1.0 / 12.0, 1.0 / 9.0, -1.0 / 8.0)  # 3rd-order minus embedded 2nd-order solution
 
 
 class CosineDiffusion:
@@ -210,82 +205,44 @@ FOLD_STOP = 60
 FOLD_BLURS = (1.0, 2.0, 4.0)
 
 
-def _integrate(field: CosineDiffusion, y: np.ndarray, project, *, h: float, rtol: float, tol_end: float,
-               max_steps: int, progress: bool, label: str, positive=None, t0: float = 0.0) -> tuple[np.ndarray, dict]:
-    r"""Integrate :math:`\dot y = v(y, t)` with the Bogacki–Shampine 3(2) pair until the flow has settled.
+class _Progress:
+    """A ``tqdm`` bar over simulated time, its end re-estimated as the flow slows down (an ``on_step`` of
+    :func:`rfmap.solvers.heatflow.diffuse`, reading the speed of its :class:`rfmap.solvers.heatflow.Settling`)."""
 
-    ``positive(y) -> bool``: whether every element of the mesh at positions ``y`` is positively oriented; a step
-    that passes the error test but fails this one is rejected and retried with half the step, and after
-    :data:`FOLD_STOP` such rejections the integration stops at the last accepted (fold-free) state.
-    """
-    n_eval = 0
+    def __init__(self, label: str, settling: Settling):
+        self.label, self.settling, self.bar = label, settling, None
 
-    def rhs(t: float, p: np.ndarray) -> np.ndarray:
-        nonlocal n_eval
-        n_eval += 1
-        return field.velocity_at(t, p)
+    def __call__(self, t: float) -> None:
+        if self.bar is None:
+            from tqdm.auto import tqdm
 
-    def max_norm(v: np.ndarray) -> float:
-        return float(np.sqrt(np.einsum("ij,ij->i", v, v).max()))
+            self.bar = tqdm(total=round(self.settling.remaining(t), 4), desc=self.label, leave=False,
+                            bar_format="{l_bar}{bar}| t={n:.4f}/{total:.4f} [{elapsed}<{remaining}]")
+        self.bar.total = round(self.settling.remaining(t), 4)
+        self.bar.n = round(t, 4)
+        self.bar.refresh()
 
-    lam1 = math.pi**2  # decay rate of the slowest mode in box units
-    err_scale = rtol * h
-    end_scale = tol_end * h * lam1  # max|v| below which the remaining displacement max|v|/lam1 < tol_end * h
-    def t_remaining(t: float, v: float) -> float:
-        """Estimated end time: the slowest mode decays as exp(-lam1 t)."""
-        return t + max(math.log(max(v, end_scale) / end_scale), 0.0) / lam1
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.total = self.bar.n
+            self.bar.refresh()
+            self.bar.close()
 
-    k1 = rhs(t0, y)
-    vmax = max_norm(k1)
-    t = t0
-    dt = 1.0 / (lam1 * (field.m - 1) ** 2)  # the decay time of the fastest mode; the controller grows it
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
 
-        bar = tqdm(total=round(t_remaining(0.0, vmax), 4), desc=label, leave=False,
-                   bar_format="{l_bar}{bar}| t={n:.4f}/{total:.4f} [{elapsed}<{remaining}]")
-    accepted = rejected = folds = 0
-    fold_stop = None
+def _flow(field: CosineDiffusion, y: np.ndarray, project, stepping: BS32Options, tol: float, turned_over,
+          label: str | None) -> tuple[np.ndarray, dict]:
+    r"""The vertices ``y`` carried by the diffusion flow (:func:`rfmap.solvers.heatflow.diffuse`, Bogacki--Shampine
+    steps) until the remaining displacement is at most ``tol`` (box units), with a progress bar when ``label`` is
+    given; the info of :func:`solve_dem` (``iterations``, ..., ``fold_stop``)."""
+    settling = Settling(tol)
+    bar = _Progress(label, settling) if label is not None else None
     try:
-        while vmax > end_scale:
-            if accepted + rejected >= max_steps:
-                raise RuntimeError(f"diffusion map did not converge in {max_steps} steps (t={t:.4g}, "
-                                   f"max|v|={vmax:.3g}); increase max_steps or rtol")
-            k2 = rhs(t + _BS_C[0] * dt, project(y + (_BS_C[0] * dt) * k1))
-            k3 = rhs(t + _BS_C[1] * dt, project(y + (_BS_C[1] * dt) * k2))
-            y_new = project(y + dt * (_BS_B[0] * k1 + _BS_B[1] * k2 + _BS_B[2] * k3))
-            k4 = rhs(t + dt, y_new)  # FSAL: the first stage of the next step
-            err = max_norm(dt * (_BS_E[0] * k1 + _BS_E[1] * k2 + _BS_E[2] * k3 + _BS_E[3] * k4)) / err_scale
-            if err <= 1.0 and positive is not None and not positive(y_new):
-                rejected += 1
-                folds += 1
-                if folds >= FOLD_STOP:  # the flow turns an element over however short the step: stop here
-                    fold_stop = t
-                    break
-                dt *= 0.5
-                continue
-            if err <= 1.0:
-                t += dt
-                y, k1 = y_new, k4
-                accepted += 1
-                vmax = max_norm(k1)
-                if bar is not None:  # the end time is re-estimated as the flow slows down
-                    bar.total = round(t_remaining(t, vmax), 4)
-                    bar.n = round(t, 4)
-                    bar.refresh()
-            else:
-                rejected += 1
-            dt *= min(5.0, max(0.2, 0.9 * max(err, 1e-12) ** (-1.0 / 3.0)))
-        if bar is not None:
-            bar.total = bar.n = round(t, 4)
-            bar.refresh()
+        y, out = diffuse(field, y, project, stepping, settling, turned_over, on_step=bar)
     finally:
         if bar is not None:
             bar.close()
-    info = {"iterations": accepted, "rejected": rejected, "evaluations": n_eval, "t_end": t,
-            "residual_velocity": vmax, "fold_rejections": folds, "fold_stop": fold_stop}
-    return y, info
+    keys = ("rejected", "evaluations", "t_end", "residual_velocity", "fold_rejections", "fold_stop")
+    return y, {"iterations": out["steps"], **{k: out[k] for k in keys}}
 
 
 @dataclass(frozen=True)
@@ -421,8 +378,8 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
         def project(p: np.ndarray) -> np.ndarray:
             return np.clip(p, 0.0, 1.0, out=p)
 
-    def positive(p: np.ndarray) -> bool:
-        return grid_min_measure(p, n) > 0.0
+    def turned_over(p: np.ndarray) -> bool:
+        return not grid_min_measure(p, n) > 0.0
 
     if is_uniform(dens):  # a uniform density does not diffuse: every vertex stays where it is, exactly
         mapped, m = ref.copy(), fine.shape[0]
@@ -432,14 +389,16 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
         threads = opts.num_threads if opts.num_threads is not None else (1 if d == 2 else None)
         with torch_threads(threads):
             field = CosineDiffusion(fine)
+            h = 1.0 / (nb - 1)
+            # from the decay time of the fastest mode, which the step control grows
+            stepping = BS32Options(float(opts.rtol) * h, first_step=1.0 / (SLOWEST_RATE * (field.m - 1) ** 2),
+                                   max_steps=int(opts.max_steps), fold_stop=FOLD_STOP)
             blurs: list[float] = []
             for retry in range(len(FOLD_BLURS) + 1):
-                # a retry starts the vertices moving at t0 = (sigma h)^2 / 2, when diffusion has blurred the density
-                # with a Gaussian of width sigma vertex spacings (as cartogram programs blur sharp inputs)
-                t0 = 0.0 if retry == 0 else 0.5 * (FOLD_BLURS[retry - 1] / (nb - 1)) ** 2
-                y, info = _integrate(field, y0.copy(), project, h=1.0 / (nb - 1), rtol=float(opts.rtol),
-                                     tol_end=float(opts.tol_end), max_steps=int(opts.max_steps), progress=progress,
-                                     label=f"DEM {d}D N={n}", positive=positive if opts.fold_guard else None, t0=t0)
+                # a retry starts the vertices moving when diffusion has blurred the density over FOLD_BLURS spacings
+                t0 = 0.0 if retry == 0 else blur_start(FOLD_BLURS[retry - 1], nb)
+                y, info = _flow(field, y0.copy(), project, replace(stepping, t0=t0), float(opts.tol_end) * h,
+                                turned_over if opts.fold_guard else None, f"DEM {d}D N={n}" if progress else None)
                 if info["fold_stop"] is None or retry == len(FOLD_BLURS):
                     break
                 blurs.append(FOLD_BLURS[retry])

@@ -1,0 +1,123 @@
+r"""The flow of the diffusion method (Gastner & Newman 2004), shared by the map and the cartogram solvers.
+
+The density diffuses with no-flux walls on the box :math:`[0,1]^d`, :math:`\partial_t\rho = \Delta\rho`, which the
+cosine basis solves exactly,
+
+.. math:: \rho(x, t) = \sum_k a_k \prod_i \cos(\pi k_i x_i)\, e^{-\pi^2 |k|^2 t},
+
+with the coefficients :math:`a_k` of the initial density (:func:`rfmap.solvers.spectral.half_coefficients`,
+:func:`rfmap.solvers.spectral.cosine_coefficients`) decaying by :func:`rfmap.solvers.spectral.heat_factor`; points
+follow :math:`\dot x = v = -\nabla\rho/\rho` until the flow has settled.  One implementation here, for
+:func:`rfmap.solvers.diffusion.solve_dem` (maps of the square and cube) and
+:func:`rfmap.solvers.cartodiffusion.diffusion_square` (a cartogram's pass):
+
+* the driver, :func:`diffuse`: velocity evaluations counted, the time integrator a strategy chosen by its options
+  (:data:`INTEGRATORS`);
+* the end of the flow, :class:`Settling`: the slowest mode decays at the rate :math:`\pi^2`
+  (:data:`SLOWEST_RATE`), so the displacement still to come is about :math:`\max|v|/\pi^2`, and the flow stops when
+  it is below a tolerance;
+* a blurred start, :func:`blur_start`: the points start moving when diffusion has blurred the density over
+  :math:`\sigma` vertex spacings, at :math:`t_0 = (\sigma h)^2/2` (the map's retries of a folding flow, the
+  cartogram's ``blur``).
+
+What stays two, and why.  A solver hands :func:`diffuse` a heat field (an object with ``velocity_at(t, points)``)
+and its integrator's options; each solver keeps its own, because merging them would change results that are
+reproduced bit for bit (``tests/test_reference_outputs.py`` and the numbers of the book):
+
+* the fields: :class:`rfmap.solvers.diffusion.CosineDiffusion` (maps) evaluates :math:`\rho` and
+  :math:`\nabla\rho` by dense products in torch with cosine and sine tables on the refined raster, in any dimension,
+  skipping decayed modes and only on the window of the raster around the points, forms :math:`v` there and
+  interpolates it; the cartogram's field (:mod:`rfmap.solvers.cartodiffusion`) synthesises them with ``numpy.fft``
+  (:func:`rfmap.solvers.spectral.flux_synthesis`) on the 2D vertex grid, interpolates :math:`\rho` and its flux
+  and divides at the points.  They round differently, and the cartogram's must not import PyTorch;
+* the integrators: the maps take Bogacki--Shampine 3(2) steps (:func:`rfmap.solvers.bs32.bs32_flow`, error
+  ``1e-2`` grid spacings, stopped after repeated folds), the cartogram passes Heun pairs
+  (:func:`rfmap.solvers.heun.heun_flow`, ``0.2`` spacings, the cartogram flow's), with their own first steps.
+
+numpy only.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .bs32 import BS32Options, bs32_flow
+from .heun import HeunOptions, heun_flow
+
+__all__ = ["SLOWEST_RATE", "INTEGRATORS", "Settling", "blur_start", "diffuse"]
+
+#: the decay rate :math:`\pi^2` of the slowest cosine mode of the unit box
+SLOWEST_RATE = math.pi ** 2
+#: the time integrators of :func:`diffuse`, by the type of their options
+INTEGRATORS = {BS32Options: bs32_flow, HeunOptions: heun_flow}
+
+
+def blur_start(blur: float, n: int) -> float:
+    r"""The time :math:`(\sigma h)^2/2` at which diffusion has blurred the density over ``blur`` (:math:`\sigma`)
+    spacings of an ``n``-grid of the box (:math:`h = 1/(n-1)`)."""
+    return 0.5 * (blur / (n - 1)) ** 2
+
+
+class Settling:
+    r"""The end of the flow: the velocity :math:`v` at the points has settled when the displacement still to come,
+    about :math:`\max|v|/\pi^2`, is at most ``tol`` (box units).
+
+    A callable ``(v) -> bool`` on velocities of shape (P, d); ``speed`` is :math:`\max|v|` of the last one asked
+    (the residual velocity of a finished flow; ``inf`` before any).
+    """
+
+    def __init__(self, tol: float):
+        self.threshold = tol * SLOWEST_RATE  # on max|v|
+        self.speed = math.inf
+
+    def __call__(self, v: np.ndarray) -> bool:
+        self.speed = float(np.sqrt(np.einsum("ij,ij->i", v, v).max()))
+        return not self.speed > self.threshold
+
+    def remaining(self, t: float) -> float:
+        """The time at which the flow is estimated to settle, from time ``t`` (the slowest mode decays as
+        :math:`e^{-\\pi^2 t}`)."""
+        return t + max(math.log(max(self.speed, self.threshold) / self.threshold), 0.0) / SLOWEST_RATE
+
+
+def diffuse(field, y: np.ndarray, project, options, settling: Settling, turned_over=None,
+            on_step=None) -> tuple[np.ndarray, dict]:
+    r"""Carry points by the diffusion flow of ``field`` until it has settled.
+
+    Parameters
+    ----------
+    field
+        The heat field: ``field.velocity_at(t, points)`` is :math:`v = -\nabla\rho/\rho` at points (P, d).
+    y : ndarray, shape (P, d)
+        Starting points (in the field's box).
+    project : callable
+        Points back onto the box, in place.
+    options : BS32Options or HeunOptions
+        The integrator's options (tolerance, start time, first step, ...): the integrator is the one they belong
+        to (:data:`INTEGRATORS`).
+    settling : Settling
+        When to stop; its ``speed`` is reported.
+    turned_over : callable ``(y) -> bool``, optional
+        Whether the mesh at ``y`` has an element turned over; steps that turn one over are rejected.
+    on_step : callable ``(t) -> None``, optional
+        Called after every accepted step.
+
+    Returns
+    -------
+    y : ndarray, shape (P, d)
+    info : dict
+        The integrator's (``steps``, ``rejected``, ``fold_rejections``, ``t_end``, ...), ``evaluations`` (of the
+        velocity) and ``residual_velocity`` (:math:`\max|v|` at the end).
+    """
+    evaluations = 0
+
+    def velocity(t: float, p: np.ndarray) -> np.ndarray:
+        nonlocal evaluations
+        evaluations += 1
+        return field.velocity_at(t, p)
+
+    y, info = INTEGRATORS[type(options)](velocity, y, project, options, turned_over, settled=settling,
+                                         on_step=on_step)
+    info.update(evaluations=evaluations, residual_velocity=settling.speed)
+    return y, info
