@@ -29,7 +29,7 @@ LAYERS: dict[str, int] = {
     # core
     "rfmap._version": 0, "rfmap.core": 0, "rfmap.core.device": 0, "rfmap.core.geometry": 0, "rfmap.core.mesh": 0, "rfmap.core.inputs": 0, "rfmap.fields.paper": 0,
     "rfmap.fields.random": 0, "rfmap.fields": 0, "rfmap.fields.hard": 0, "rfmap.core.metrics": 0, "rfmap.core.result": 0,
-    "rfmap.core.surface": 0, "rfmap.core.folds": 0,
+    "rfmap.core.surface": 0, "rfmap.core.folds": 0, "rfmap.core.wording": 0,
     # classical solvers, the network, the losses
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1, "rfmap.solvers.flow": 1,
     "rfmap.solvers.spectral": 1, "rfmap.solvers.raster": 1, "rfmap.solvers.cartoflow": 1,
