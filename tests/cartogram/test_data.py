@@ -159,9 +159,16 @@ def test_world_population_joins_gapminder_by_iso3():
     assert "North Korea" not in j.unmatched_regions
     assert props["IND"]["pop_1952"] < props["IND"]["pop_2007"]
     assert "Russia" in j.unmatched_regions and "SGP" in j.unmatched_rows  # too small for the 1:110m map
+    # the table's Sudan is the Sudan of before 2011: split between today's Sudan and South Sudan, not counted twice
+    assert "S. Sudan" not in j.unmatched_regions
+    for year in (1952, 2007):
+        parts = props["SDN"][f"pop_{year}"] + props["SSD"][f"pop_{year}"]
+        assert parts == pytest.approx(gapminder_population(year)["SDN"], rel=1e-12)
+    assert props["SSD"]["pop_2007"] / props["SDN"]["pop_2007"] == pytest.approx(
+        props["SSD"]["pop_est"] / props["SDN"]["pop_est"], rel=1e-12)
     # a country without a row keeps its share of Natural Earth's estimate among the matched countries
     est = {i: p["pop_est"] for i, p in props.items()}
-    matched = [i for i in props if i in gapminder_population(2007)]
+    matched = [i for i, p in props.items() if p["name"] not in j.unmatched_regions]
     ratio = sum(props[i]["pop_2007"] for i in matched) / sum(est[i] for i in matched)
     assert props["RUS"]["pop_2007"] == pytest.approx(est["RUS"] * ratio, rel=1e-12)
 

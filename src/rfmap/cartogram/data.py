@@ -38,7 +38,7 @@ from ..core.wording import counted
 from .projection import PlanarFrame
 from .regions import _load_collection, world_countries
 
-__all__ = ["Join", "MISSING", "GAPMINDER_YEARS", "read_csv_table", "read_csv_values", "region_ids", "loose_id",
+__all__ = ["Join", "MISSING", "GAPMINDER_YEARS", "SPLIT_ROWS", "read_csv_table", "read_csv_values", "region_ids", "loose_id",
            "join_values",
            "write_csv_template", "gapminder_population", "world_population", "atomic_write"]
 
@@ -433,13 +433,23 @@ def gapminder_population(year: int) -> dict[str, float]:
     return {i: float(p) for i, p in zip(iso, g["pop"])}
 
 
+#: Rows of the gapminder table that cover several countries of today's map: its Sudan (to 2007) is the Sudan of
+#: before 2011, South Sudan included.  :func:`world_population` splits such a row in proportion to Natural Earth's
+#: estimates of the parts.
+SPLIT_ROWS = {"SDN": ("SDN", "SSD")}
+
+
 def world_population(years=(2007,), *, antarctica: bool = False) -> Join:
     r"""The countries of :func:`rfmap.cartogram.regions.world_countries` with their population in each of ``years`` as the
     properties ``pop_<year>``, joined to the gapminder table by ISO-3 code (``iso_a3``).
 
-    A country without a gapminder row (Russia, the other former Soviet republics, ...) keeps its share of Natural
-    Earth's own estimate ``pop_est`` (about 2019): :math:`v_i = e_i \sum_{j \in M} v_j / \sum_{j \in M} e_j` over
-    the matched countries :math:`M` of that year.  Antarctica, nearly unpeopled, is left out unless ``antarctica``.
+    The borders are Natural Earth's, of about 2019; gapminder gives each country's population within its present
+    borders back to 1952 (one Germany, Slovenia apart from Yugoslavia), and a row that today's map divides
+    (:data:`SPLIT_ROWS`) is split in proportion to Natural Earth's estimates ``pop_est`` of the parts.  A country
+    without a gapminder row (Russia, the other former Soviet republics, ...) keeps its share of those estimates
+    (about 2019) in every year: :math:`v_i = e_i \sum_{j \in M} v_j / \sum_{j \in M} e_j` over the matched
+    countries :math:`M` of that year, so its size follows the world's total, not its own population.  Antarctica,
+    nearly unpeopled, is left out unless ``antarctica``.
 
     Returns
     -------
@@ -457,6 +467,10 @@ def world_population(years=(2007,), *, antarctica: bool = False) -> Join:
     joins = []
     for year in years:
         pop = gapminder_population(year)
+        for row, parts in SPLIT_ROWS.items():
+            if row in pop and all(p in estimate for p in parts):
+                total, whole = pop.pop(row), sum(estimate[p] for p in parts)
+                pop.update({p: total * estimate[p] / whole for p in parts})
         matched = [iso for iso in estimate if iso in pop]
         ratio = sum(pop[iso] for iso in matched) / sum(estimate[iso] for iso in matched)
         fallback = {iso: e * ratio for iso, e in estimate.items() if iso not in pop}
