@@ -42,7 +42,8 @@ OUTPUT = re.compile(r'<div class="output text_plain[^"]*">.*?<pre>(.*?)</pre>', 
 REPRS = [
     (re.compile(r"<[\w.]+ object at 0x[0-9a-fA-F]+>"), "an object's default repr"),
     (re.compile(r"^\s*\(\w+\): [A-Z]\w*\(", re.MULTILINE), "a torch module printout"),
-    (re.compile(r"\b(?:Surrogate|TaskSpec|MapResult|MapMetrics|MapOptions|TrainConfig)\((?:'|\w+=)"),
+    (re.compile(r"\b(?:Surrogate|TaskSpec|MapResult|MapMetrics|MapOptions|FinishOptions|PredictOptions|TrainConfig)"
+                r"\((?:'|\w+=)"),
      "a repr of an rfmap object"),
     (re.compile(r"\{'(?:std_rho_map|std_rho_orig|mean_mu|max_mu|mean_dd|mean_dmu|min_jacobian|n_flipped)'"),
      "a printed dict of metrics"),

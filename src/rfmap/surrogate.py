@@ -28,7 +28,7 @@ from ._version import __version__
 from .core.inputs import is_uniform
 from .core.mesh import check_n, grid_mesh, grid_points, interpolate, triangulate
 from .core.device import resolve_device
-from .finish import Draft, InfoView, MapOptions, MapReport, NetworkReport, Prediction, displacement_at, finish, \
+from .finish import Draft, FinishOptions, InfoView, MapReport, NetworkReport, Prediction, displacement_at, finish, \
     poor_map_message
 from .finish.stages import refine, regrid
 from .finish.quality import QUALITY_MARGIN, PoorMapWarning, density_quality, quality_message, quiet_quality
@@ -39,8 +39,8 @@ from .core.result import MapResult
 from .nn.symmetry import resolve_symmetry, symmetrized_displacement
 from .tasks import TaskSpec, encode
 
-__all__ = ["Surrogate", "models", "PoorMapWarning", "QUALITY_MARGIN", "quiet_quality",
-           "density_quality", "quality_message", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
+__all__ = ["Surrogate", "models", "MapOptions", "PredictOptions", "PoorMapWarning", "QUALITY_MARGIN",
+           "quiet_quality", "density_quality", "quality_message", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
 
 #: Dimensions in which a folded network map of a grid (with ``repair``, the default working grid and no query points)
 #: is first evaluated again on coarser working grids, :data:`REGRID_STEP` sides apart down to the bottom of the
@@ -65,6 +65,65 @@ class _Input:
     grid: np.ndarray  # (N_in,)*d real density or complex mu at the vertices of the input grid
     fn: Callable | None  # exact evaluator when available (names, callables)
     preprocess: bool = True
+
+
+@dataclass(frozen=True)
+class PredictOptions:
+    """How a network predicts a map: on which working grid (the grid rule), from which input, with which stretching
+    and symmetry.  The surrogate's own part of :class:`MapOptions`.
+
+    Attributes
+    ----------
+    work_n : int, optional
+        A network's working grid side (default :meth:`Surrogate.work_n`; then, in 3D and without ``polish``, a
+        folded map is first tried on coarser working grids).  Given explicitly, it is used as given.
+    native : bool
+        Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried): the paper's
+        method.  Excludes ``work_n``.
+    alpha : sequence of d floats, optional
+        A fixed stretching vector of a network's map (ignored with ``refine``).
+    preprocess : bool
+        Apply the paper's density preprocessing (shift to minimum 0.1, unit mass) to raw values; with ``False`` a
+        positive density is only scaled to unit mass.
+    symmetrize : bool or str
+        Average a network's displacement over symmetries of the square or cube (:mod:`rfmap.nn.symmetry`).
+    """
+
+    work_n: int | None = None
+    native: bool = False
+    alpha: Sequence[float] | None = None
+    preprocess: bool = True
+    symmetrize: bool | str = False
+
+    def working_side(self, n: int, default: Callable[[int], int]) -> int:
+        """The grid rule: the network's grid side for an output of side ``n``, ``n`` itself with ``native``, else
+        ``work_n`` as given, else ``default(n)`` (:meth:`Surrogate.work_n`)."""
+        if self.native:
+            if self.work_n is not None and int(self.work_n) != int(n):
+                raise ValueError(f"native runs the network on the requested grid N={n}; work_n={self.work_n} "
+                                 "contradicts it")
+            return int(n)
+        return int(self.work_n or default(n))
+
+    @property
+    def default_grid(self) -> bool:
+        """Whether the working grid is the default one (no ``work_n``, not ``native``): only then may a folded map
+        be tried on coarser grids."""
+        return self.work_n is None and not self.native
+
+
+@dataclass(frozen=True)
+class MapOptions(FinishOptions, PredictOptions):
+    """How a field is mapped by a network, listed once: the keywords of :meth:`Surrogate.map` (and ``map_batch``)
+    and the options of ``rfmap map``.  The prediction's options (:class:`PredictOptions`: the grid rule, the input,
+    the stretching, the symmetry) and the finishing stages' (:class:`rfmap.finish.pipeline.FinishOptions`:
+    ``refine``, ``refine_bounds``, ``repair``, ``polish``, ``guard``), which the stages receive alone
+    (:attr:`finishing`)."""
+
+    @property
+    def finishing(self) -> FinishOptions:
+        """The finishing stages' options."""
+        return FinishOptions(**{name: getattr(self, name) for name in FinishOptions.__dataclass_fields__})
 
 
 def _embedded_meta(path: Path) -> dict | None:
@@ -331,8 +390,8 @@ class Surrogate:
         return self._forward(x).float().cpu()
 
     def map(self, field, n: int | None = None, points=None, options: MapOptions | None = None, **kw) -> MapResult:
-        """Map one field, as ``options`` say (:class:`rfmap.finish.pipeline.MapOptions`, the options of every way to
-        map a field), its fields also given as keywords (``sur.map(field, n, refine=True)``).
+        """Map one field, as ``options`` say (:class:`MapOptions`, the options of every way to map a field), its
+        fields also given as keywords (``sur.map(field, n, refine=True)``).
 
         Parameters
         ----------
@@ -421,7 +480,7 @@ class Surrogate:
         if len(ns) != 1:
             raise ValueError(f"map_batch needs one output size, got {sorted(ns)}")
         n_out = ns.pop()
-        nw = self._working_side(n_out, opts)
+        nw = opts.working_side(n_out, self.work_n)
         t0 = time.perf_counter()
         grids = np.stack([self._work_grid(i, nw) for i, _ in inps])
         psi = self.displacement(grids, group) if group else self.displacement(grids)
@@ -435,11 +494,9 @@ class Surrogate:
         of :func:`rfmap.finish.pipeline.finish`; a :class:`PoorMapWarning` when the delivered density map is poor.
         ``given``: the network's output on the default working grid from a batched evaluation (:meth:`_predict`)."""
         # the network's map is refined as it is predicted (every working grid tried is), not by the finishing stages
-        stages = replace(opts, refine=False)
-        if stages.polish is not False and (not self.spec.task.equalizes or points is not None):
-            raise ValueError("polish finishes density maps on the output grid; it does not apply to "
-                             f"{self.spec.kind} maps or to query points")
-        nw = self._working_side(n, opts)
+        stages = replace(opts.finishing, refine=False)
+        stages.check(self.spec.task, points is None)
+        nw = opts.working_side(n, self.work_n)
         if nw < self.model.min_size:
             raise ValueError(f"working grid N={nw} is smaller than this model accepts ({self.model.min_size})")
         ref, elements = self._output_mesh(n, points)
@@ -456,8 +513,7 @@ class Surrogate:
             return refine(draft, opts.refine_bounds) if opts.refine else draft
 
         draft = predict(nw, given)
-        if (stages.repair and opts.work_n is None and not opts.native and stages.polish is False
-                and self.spec.dim in REGRID_DIMS):
+        if stages.repair and opts.default_grid and stages.polish is False and self.spec.dim in REGRID_DIMS:
             draft = regrid(draft, predict, self._regrid_sides(nw))
         draft = finish(draft, stages)
         message = poor_map_message(draft.report)
@@ -487,16 +543,6 @@ class Surrogate:
         result = replace(mesh, mapped_points=mapped, time=t_net + time.perf_counter() - t1)
         report = MapReport(network=NetworkReport(w, t_net, group), alpha=a.tolist())
         return Draft(result, report, self.spec.boundary, grid_n, Prediction(psi, psi_out, grid))
-
-    def _working_side(self, n: int, opts: MapOptions) -> int:
-        """The network's grid side for an output of side ``n``: ``n`` itself with ``native``, else ``work_n``
-        as given, else :meth:`work_n`."""
-        if opts.native:
-            if opts.work_n is not None and int(opts.work_n) != int(n):
-                raise ValueError(f"native runs the network on the requested grid N={n}; work_n={opts.work_n} "
-                                 "contradicts it")
-            return int(n)
-        return int(opts.work_n or self.work_n(n))
 
     def _regrid_sides(self, nw: int) -> list[int]:
         """The coarser working grids tried on a folded map: ``nw - REGRID_STEP``, ``nw - 2 REGRID_STEP``, ...

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from rfmap.finish import Draft, MapOptions, InfoView, MapReport, NetworkReport, RegridReport, finish_map
+from rfmap.finish import Draft, FinishOptions, InfoView, MapReport, NetworkReport, RegridReport, finish_map
 from rfmap.finish.stages import judge, regrid, repair, shorten
 from rfmap.core.mesh import grid_mesh
 from rfmap.nn import MultiResUNet
@@ -69,7 +69,7 @@ def test_a_classical_map_keeps_its_extras_and_gains_the_reports(dem):
 def test_refinement_of_a_classical_map_stretches_its_displacement(dem):
     """A diffusion map whose displacement was stretched by 1.6 is brought back by alpha of about 1 / 1.6."""
     over = replace(dem, mapped_points=dem.ref_points + 1.6 * dem.displacement)
-    out = finish_map(over, MapOptions(refine=True, repair=False))
+    out = finish_map(over, FinishOptions(refine=True, repair=False))
     assert out.info["refine_objective"] <= out.info["refine_objective_start"]
     np.testing.assert_allclose(out.info["alpha"], 1 / 1.6, atol=0.02)  # measured 0.007
     np.testing.assert_allclose(out.displacement, np.array(out.info["alpha"]) * over.displacement, atol=1e-12)
@@ -77,12 +77,12 @@ def test_refinement_of_a_classical_map_stretches_its_displacement(dem):
 
 
 def test_polish_of_a_classical_map(dem):
-    out = finish_map(dem, MapOptions(polish=True))
+    out = finish_map(dem, FinishOptions(polish=True))
     p = out.info["polish"]
     assert p["start"] in ("warm", "cold") and "smooth_passes" not in p and "quality" not in out.info
     assert out.metrics().n_flipped == 0 and out.info["method"] == "diffusion"
     with pytest.raises(ValueError, match="polish must be"):
-        MapOptions(polish=-1.0)
+        FinishOptions(polish=-1.0)
 
 
 def test_repair_judge_and_shorten_one_by_one():
@@ -126,3 +126,32 @@ def test_regrid_takes_the_first_fold_free_working_grid():
     none = regrid(draft(folded, n, 1.0), lambda w: draft(folded, w, 0.25), [7])
     assert none.report.regrid.work_n is None and none.report.network == NetworkReport(n, 1.0)
     assert none.report.flat()["regrid"] == {"from": n, "tried": [7], "work_n": None, "time": none.report.regrid.time}
+
+
+def test_map_options_are_the_predictions_and_the_finishing_stages():
+    """``MapOptions`` (the keywords of ``Surrogate.map``) is the surrogate's ``PredictOptions`` and the stages'
+    ``FinishOptions``, each field owned by one; the stages receive their own part; the polish is refused for maps it
+    cannot finish by one check, whichever path asks."""
+    from dataclasses import fields
+
+    from rfmap.surrogate import MapOptions, PredictOptions
+    from rfmap.tasks import get_task
+
+    own = {f.name for f in fields(FinishOptions)}
+    assert own.isdisjoint(f.name for f in fields(PredictOptions))
+    assert {f.name for f in fields(MapOptions)} == own | {f.name for f in fields(PredictOptions)}
+    o = MapOptions(refine=True, polish=0.01, work_n=33, symmetrize=True)
+    assert o.finishing == FinishOptions(refine=True, polish=0.01) and type(o.finishing) is FinishOptions
+    assert o.working_side(65, lambda n: 17) == 33 and not o.default_grid
+    assert MapOptions().working_side(65, lambda n: 17) == 17 and MapOptions().default_grid
+    assert MapOptions(native=True).working_side(65, lambda n: 17) == 65
+    with pytest.raises(ValueError, match="contradicts"):
+        MapOptions(native=True, work_n=33).working_side(65, lambda n: 17)
+    with pytest.raises(ValueError, match="polish must be"):
+        MapOptions(polish=-1.0)
+    with pytest.raises(ValueError, match="does not apply to beltrami maps"):
+        FinishOptions(polish=True).check(get_task("beltrami"), True)
+    with pytest.raises(ValueError, match="or to query points"):
+        FinishOptions(polish=True).check(get_task("density"), False)
+    FinishOptions(polish=True).check(get_task("density"), True)
+    FinishOptions().check(get_task("beltrami"), False)

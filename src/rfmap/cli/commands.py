@@ -202,8 +202,9 @@ def cmd_map(args) -> int:
 
 
 def map_options(args, polish) -> "MapOptions":
-    """The :class:`rfmap.finish.MapOptions` of ``rfmap map``'s arguments (the options of every way to map a field)."""
-    from ..finish import MapOptions
+    """The :class:`rfmap.surrogate.MapOptions` of ``rfmap map``'s arguments (the options of every way to map a
+    field)."""
+    from ..surrogate import MapOptions
 
     return MapOptions(refine=args.refine, native=args.native, repair=not args.no_repair, polish=polish,
                       guard=not args.no_guard, symmetrize=args.symmetrize)

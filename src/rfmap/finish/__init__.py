@@ -12,7 +12,7 @@ of what was done to it) to the next, finishes it:
   (:mod:`~rfmap.finish.quality`);
 * :func:`~rfmap.finish.stages.shorten` -- if not, shortened towards the identity until it is.
 
-:func:`finish` composes them as :meth:`rfmap.Surrogate.map` does, with :class:`MapOptions`; :func:`finish_map`
+:func:`finish` composes them as :meth:`rfmap.Surrogate.map` does, with :class:`FinishOptions`; :func:`finish_map`
 applies them to a classical map.  The report is typed (:class:`MapReport`) and the delivered map's ``info`` is its
 read-only view (:class:`InfoView`), with the keys that ``info`` has always had.  Maps of query points go back to
 their working grid (:mod:`~rfmap.finish.query`).
@@ -26,11 +26,11 @@ Modules: :mod:`~rfmap.finish.report`, :mod:`~rfmap.finish.draft`, :mod:`~rfmap.f
 from __future__ import annotations
 
 from .draft import Draft, Prediction, WorkingGridMap, displacement_at
-from .pipeline import MapOptions, finish, finish_map
+from .pipeline import FinishOptions, finish, finish_map
 from .quality import QUALITY_MARGIN, PoorMapWarning, density_quality, poor_map_message, quality_message, \
     quiet_quality
 from .report import InfoView, MapReport, NetworkReport, RefineReport, RegridReport
 
-__all__ = ["Draft", "Prediction", "WorkingGridMap", "displacement_at", "MapOptions", "finish", "finish_map",
+__all__ = ["Draft", "Prediction", "WorkingGridMap", "displacement_at", "FinishOptions", "finish", "finish_map",
            "QUALITY_MARGIN", "PoorMapWarning", "density_quality", "poor_map_message", "quality_message",
            "quiet_quality", "InfoView", "MapReport", "NetworkReport", "RefineReport", "RegridReport"]

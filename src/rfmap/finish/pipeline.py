@@ -2,21 +2,20 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
 
 from .polish import GUARD, polish_tolerance
 from ..core.result import MapResult
 from .draft import Draft
 from .stages import judge, polish, refine, repair, shorten
 
-__all__ = ["MapOptions", "finish", "finish_map"]
+__all__ = ["FinishOptions", "finish", "finish_map"]
 
 
 @dataclass(frozen=True)
-class MapOptions:
-    """How a field is mapped, listed once: the keywords of :meth:`rfmap.Surrogate.map` (and ``map_batch``), the
-    options of ``rfmap map``, and of :func:`finish` / :func:`finish_map` for classical maps (which read the
-    finishing stages' fields: ``refine``, ``refine_bounds``, ``repair``, ``polish``, ``guard``).
+class FinishOptions:
+    """How a computed map is finished: the options of the stages of :func:`finish`, for a network's map (part of
+    :class:`rfmap.surrogate.MapOptions`, the keywords of :meth:`rfmap.Surrogate.map`) and a classical one
+    (:func:`finish_map`).
 
     Attributes
     ----------
@@ -34,19 +33,6 @@ class MapOptions:
         is the tolerance on Std(rho~_map).  A polished map is not judged or shortened: the flow equalizes it.
     guard : bool
         With ``polish``: keep the better of the warm and the cold flow (:data:`rfmap.finish.polish.GUARD`).
-    work_n : int, optional
-        A network's working grid side (default :meth:`rfmap.Surrogate.work_n`; then, in 3D and without ``polish``,
-        a folded map is first tried on coarser working grids).  Given explicitly, it is used as given.
-    native : bool
-        Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried): the paper's
-        method.  Excludes ``work_n``.
-    alpha : sequence of d floats, optional
-        A fixed stretching vector of a network's map (ignored with ``refine``).
-    preprocess : bool
-        Apply the paper's density preprocessing (shift to minimum 0.1, unit mass) to raw values; with ``False`` a
-        positive density is only scaled to unit mass.
-    symmetrize : bool or str
-        Average a network's displacement over symmetries of the square or cube (:mod:`rfmap.nn.symmetry`).
     """
 
     refine: bool = False
@@ -54,11 +40,6 @@ class MapOptions:
     repair: bool = True
     polish: bool | float = False
     guard: bool = GUARD
-    work_n: int | None = None
-    native: bool = False
-    alpha: Sequence[float] | None = None
-    preprocess: bool = True
-    symmetrize: bool | str = False
 
     def __post_init__(self):
         if self.polish is not False:
@@ -69,16 +50,21 @@ class MapOptions:
         """The polish's tolerance on Std(rho~_map) (``None``: the solver's default)."""
         return polish_tolerance(self.polish) if self.polish is not False else None
 
+    def check(self, task, on_grid: bool) -> None:
+        """``ValueError`` when these options cannot finish a map of ``task`` (a :class:`rfmap.tasks.base.Task`) of
+        the output grid (``on_grid``) or of query points: the polish finishes density maps of a grid only."""
+        if self.polish is not False and (not task.equalizes or not on_grid):
+            raise ValueError("polish finishes density maps on the output grid; it does not apply to "
+                             f"{task.kind} maps or to query points")
 
-def finish(draft: Draft, options: MapOptions = MapOptions()) -> Draft:
+
+def finish(draft: Draft, options: FinishOptions = FinishOptions()) -> Draft:
     """The stages after the map is computed: refine, repair, then polish, or for a density map judge and shorten.
 
     A density map of a grid without ``polish`` is judged (:func:`rfmap.finish.stages.judge`); with ``repair`` a density
     map of a grid or a network's map of query points is shortened when it is no more equal than its input.
     """
-    if options.polish is not False and (not draft.task.equalizes or draft.grid_n is None):
-        raise ValueError("polish finishes density maps on the output grid; it does not apply to "
-                         f"{draft.kind} maps or to query points")
+    options.check(draft.task, draft.grid_n is not None)
     if options.refine:
         draft = refine(draft, options.refine_bounds)
     if options.repair:
@@ -93,14 +79,14 @@ def finish(draft: Draft, options: MapOptions = MapOptions()) -> Draft:
     return draft
 
 
-def finish_map(result: MapResult, options: MapOptions = MapOptions(), *, boundary: str | None = None,
+def finish_map(result: MapResult, options: FinishOptions = FinishOptions(), *, boundary: str | None = None,
                n: int | None = None) -> MapResult:
     """Finish a computed map, e.g. a classical solver's (:mod:`rfmap.solvers`), with the stages of :func:`finish`.
 
     Parameters
     ----------
     result : MapResult
-    options : MapOptions
+    options : FinishOptions
     boundary : {"fixed", "square", "free"}, optional
         The map's boundary condition (default ``result.info["boundary"]``, which the solvers record).
     n : int, optional
