@@ -219,8 +219,8 @@ def scoreboard(root: Path = ROOT) -> str:
             lines.append("| " + " | ".join(cells) + " |")
     others = [numbers[it["label"]] for it in items if (it.get("score") or {}).get("kind") == "illustration"]
     others = sorted(others, key=lambda s: (s.startswith("Fig"), int(s.split()[-1])))
-    lines += ["", f"{', '.join(others)} illustrate the method and are not scored; {{doc}}`figures` lists every "
-              "item with the chapter that makes it, and the full scoreboard, case by case."]
+    lines += ["", f"The paper's {', '.join(others)} illustrate the method and are not scored; {{doc}}`figures` "
+              "lists every item with the chapter that makes it, and the full scoreboard, case by case."]
     return "\n".join(lines + [""] + defs) + "\n"
 
 

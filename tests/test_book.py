@@ -257,72 +257,6 @@ def test_chapter_times_are_read_from_a_record(tmp_path):
     assert mod.from_chapters(tmp_path, "full")[0] == {}
 
 
-# ----------------------------------------------------------------------------------------------- design decisions
-def _design_script():
-    spec = importlib.util.spec_from_file_location("make_design_md", ROOT / "scripts" / "make_design_md.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
-
-
-def test_design_page_is_up_to_date_and_in_the_toc():
-    from rfmap.paper.design import to_markdown
-
-    assert (ROOT / "book" / "design.md").read_text(encoding="utf-8") == to_markdown(), \
-        "book/design.md is stale: run python scripts/make_design_md.py"
-    assert "book/design" in _toc_files()
-    assert _design_script().main(["--check"]) == 0
-
-
-def test_design_values_are_those_in_the_code():
-    """Every constant recorded in design.json holds the recorded value in the code (a changed constant needs new
-    measurements)."""
-    from rfmap.paper.design import current_value, load_decisions, stale_values
-
-    decisions = load_decisions()
-    assert len({d["constant"] for d in decisions}) == len(decisions)
-    for d in decisions:
-        for key in ("module", "value", "what", "criterion", "benchmark"):
-            assert str(d.get(key, "")).strip(), (d["constant"], key)
-    assert sum(current_value(d) is not None for d in decisions) >= 15
-    assert stale_values() == []
-    changed = [{**decisions[0], "value": "(2, 3)"}]
-    assert stale_values(changed) == [(decisions[0]["constant"], "(2, 3)", decisions[0]["value"])]
-
-
-def test_design_record_updates_one_entry(tmp_path):
-    from rfmap.paper.design import DESIGN_PATH, load_decisions, record
-
-    path = tmp_path / "design.json"
-    path.write_text(DESIGN_PATH.read_text(encoding="utf-8"), encoding="utf-8")
-    rows = [{"case": "3D, N = 48", "chosen": "0.70 s", "alternative": "1.10 s"}]
-    assert record("MARGIN", path=path, results=rows, date="2026-11-27")["results"] == rows
-    after = {d["constant"]: d for d in load_decisions(path)}
-    assert after["MARGIN"]["results"] == rows and after["RTOL"] == {d["constant"]: d for d in load_decisions()}["RTOL"]
-    with pytest.raises(KeyError):
-        record("NO_SUCH_CONSTANT", path=path, value="1")
-
-
-def test_design_benchmark_measures_and_records(tmp_path):
-    """benchmarks/design.py at the smallest size: one row per 3D test density and decision, stored with --record."""
-    import subprocess
-    import sys
-
-    from rfmap.paper.design import DESIGN_PATH, load_decisions
-
-    path = tmp_path / "design.json"
-    path.write_text(DESIGN_PATH.read_text(encoding="utf-8"), encoding="utf-8")
-    out = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "design.py"), "--n", "9", "--repeat", "1",
-                          "--record", "--out", str(path)], capture_output=True, text=True, timeout=600)
-    assert out.returncode == 0, out.stderr[-2000:]
-    rows = [line for line in out.stdout.splitlines() if line.startswith("| ") and "3D N = 9" in line]
-    assert len(rows) == 8
-    stored = {d["constant"]: d for d in load_decisions(path)}
-    for decision in ("RTOL", "MARGIN"):
-        assert len(stored[decision]["results"]) == 4 and "N = 9" in stored[decision]["data"]
-    assert load_decisions() != load_decisions(path)  # the package's record is untouched
-
-
 # ----------------------------------------------------------------------------------------------- toc and config
 def test_every_toc_file_exists():
     toc = _toc()
@@ -425,6 +359,33 @@ def test_every_saved_figure_is_shown_with_its_caption(nb):
     caption names its counterpart in the paper (scripts/book_check.py checks the built page the same way)."""
     problems = _book_check().figure_source_problems(nb)
     assert not problems, "\n".join(problems)
+
+
+#: how the prose of a chapter cites a figure of the paper: "the paper's Fig. 5", "its Table 3 and Fig. 6" (in a
+#: sentence about the paper), "paper Fig. 4", or "Fig. 5 of the paper"
+PAPER_FIGURE = re.compile(r"(?:the paper's|\bits|\bpaper) (?:Tables? [\d ,and]+)?(?:Fig\.|Figs\.) \d+"
+                          r"|Figs?\. \d+(?: and \d+)? of the paper", re.I)
+
+
+def test_the_book_numbers_none_of_its_own_figures():
+    """Jupyter Book numbers captioned figures across the whole book unless told not to; those numbers would clash
+    with the paper's, which the text cites. With numfig off, every "Fig. n" in the book is the paper's, and the
+    chapters say so where they cite one."""
+    cfg = yaml.safe_load((ROOT / "_config.yml").read_text(encoding="utf-8"))
+    # sphinx-jupyterbook-latex would set numfig back to True in every build
+    assert cfg["sphinx"]["config"]["numfig"] is False and cfg["latex"]["use_jupyterbook_latex"] is False
+    bare = []
+    for nb in NOTEBOOKS:
+        cells = json.loads(nb.read_text(encoding="utf-8"))["cells"]
+        for cell in cells:
+            texts = ["".join(cell["source"])] if cell["cell_type"] == "markdown" else []
+            texts.append(str(cell["metadata"].get("mystnb", {}).get("figure", {}).get("caption", "")))
+            for text in texts:
+                text = " ".join(text.split())
+                cited = {m.start() + m.group().index("Fig") for m in PAPER_FIGURE.finditer(text)}
+                bare += [f"{nb.stem} {cell['id']}: ...{text[max(0, m.start() - 40):m.end()]}"
+                         for m in re.finditer(r"Figs?\. \d+|Figures? \d+", text) if m.start() not in cited]
+    assert not bare, "a figure number not said to be the paper's:\n" + "\n".join(bare)
 
 
 def test_paper_figure_numbers_follow_the_paper():
