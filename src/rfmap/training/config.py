@@ -17,7 +17,7 @@ from ..fields import RandomBeltramiConfig, RandomDensityConfig
 from ..tasks import LossWeights, TaskSpec
 from ..tasks.teacher import TeacherConfig
 
-__all__ = ["TrainConfig", "ModelConfig", "CONFIGS", "PRESETS", "get_config", "config_names", "scale"]
+__all__ = ["TrainConfig", "ModelConfig", "Presets", "CONFIGS", "PRESETS", "get_config", "config_names", "scale"]
 
 PRESETS = ("ci", "full", "paper")
 #: how the training grid side of a step is drawn from ``n_range`` (:func:`rfmap.training.data.step_size_n`)
@@ -160,17 +160,54 @@ class TrainConfig:
         return replace(self, **kw)
 
 
-def _presets(name, task, description, ci: dict, full: dict, paper: dict, paper_note: str,
-             **common) -> dict[str, TrainConfig]:
-    base = TrainConfig(name=name, task=task, description=description, **common)
-    # the paper's runs: no wall-time limit, every thread of the machine, one batch worker
-    paper = {"time_limit": 0.0, "threads": 0, "workers": 1, "val_every": 1000, "ckpt_every": 500,
-             **{k: full[k] for k in ("val_sizes", "val_count", "val_repair") if k in full}, **paper}
-    return {"ci": replace(base, preset="ci", **ci), "full": replace(base, preset="full", **full),
-            "paper": replace(base, preset="paper", description=f"{description} Paper preset: {paper_note}",
-                             **paper)}
+@dataclass(frozen=True)
+class Presets:
+    """One configuration's ``ci``, ``full`` and ``paper`` presets, each a :class:`TrainConfig` built by keyword.
+
+    Build them with :meth:`of` (from what the presets share and what each one changes) or :meth:`derive` (from
+    another configuration's presets); :meth:`configs` is the ``{preset: TrainConfig}`` of :data:`CONFIGS`.
+
+    Attributes
+    ----------
+    ci, full, paper : TrainConfig
+    paper_note : str
+        The paper's recipe as printed, which the ``paper`` preset's description appends.
+    """
+
+    ci: TrainConfig
+    full: TrainConfig
+    paper: TrainConfig
+    paper_note: str
+
+    @classmethod
+    def of(cls, base: TrainConfig, *, ci: dict, full: dict, paper: dict, paper_note: str) -> "Presets":
+        """The presets of ``base`` (name, task, description, losses, fields and optimiser: what the three share),
+        each with the fields it changes.  The ``paper`` preset runs as the paper's runs did (no wall-time limit,
+        every thread of the machine, one batch worker) and validates as the ``full`` preset does."""
+        shared = {"time_limit": 0.0, "threads": 0, "workers": 1, "val_every": 1000, "ckpt_every": 500,
+                  **{k: full[k] for k in ("val_sizes", "val_count", "val_repair") if k in full}}
+        return cls(ci=replace(base, preset="ci", **ci), full=replace(base, preset="full", **full),
+                   paper=replace(base, preset="paper", description=f"{base.description} Paper preset: {paper_note}",
+                                 **{**shared, **paper}),
+                   paper_note=paper_note)
+
+    def derive(self, *, name: str, description: str, ci: dict | None = None, full: dict | None = None,
+               paper: dict | None = None, **shared) -> "Presets":
+        """Another configuration from these presets: its ``name`` and ``description`` (the ``paper`` preset's with
+        the paper's recipe appended), the fields ``shared`` by the three changed alike, then each preset's own."""
+        def one(cfg: TrainConfig, own: dict | None, text: str) -> TrainConfig:
+            return replace(cfg, name=name, description=text, **{**shared, **(own or {})})
+
+        return Presets(ci=one(self.ci, ci, description), full=one(self.full, full, description),
+                       paper=one(self.paper, paper, f"{description} Paper preset: {self.paper_note}"),
+                       paper_note=self.paper_note)
+
+    def configs(self) -> dict[str, TrainConfig]:
+        """``{"ci": ..., "full": ..., "paper": ...}``."""
+        return {"ci": self.ci, "full": self.full, "paper": self.paper}
 
 
+#: the ``ci`` presets: tiny networks for a few steps, 2D and 3D
 _CI = dict(model=ModelConfig(base=4, depth=2), steps=20, batch=2, n_range=(17, 25), warmup=2, val_every=10,
            ckpt_every=10, val_n=17, val_count=4)
 _CI3 = dict(model=ModelConfig(base=4, depth=2), steps=10, batch=1, n_range=(9, 13), warmup=2, val_every=5,
@@ -209,123 +246,119 @@ _NOTE_2D = ("12,000 epochs, AdamW lr 1e-5, weight decay 1e-5, x0.5 every 200 epo
             "printed; an epoch is one step on a freshly drawn batch (the paper draws a new grid every epoch) and "
             "the batch size, which the paper does not give, is 8.")
 
-CONFIGS: dict[str, dict[str, TrainConfig]] = {
-    **{
-        "beltrami2d": _presets(
-            "beltrami2d", TaskSpec("beltrami", 2, "fixed"),
-            # the low-frequency share since 69,526 steps: before, such maps had three times the default maps' error
-            "Reconstruction of a boundary-fixing 2D map from its Beltrami coefficient; loss ||mu(u) - mu_in||^2 on "
-            "the coefficients of random boundary-fixing maps, 30 % of them low-frequency (1-4 modes); no solver "
-            "data." + _N48_NOTE,
-            _CI, dict(steps=6000, batch=4, time_limit=3000.0, val_every=500, threads=1, workers=1, n_range=(48, 96),
-                      **_VAL2),
-            dict(steps=250000, batch=8, lr=1e-3, schedule="step", step_size=25000, gamma=0.5, warmup=0,
-                 n_range=(64, 96), clip=1.0),
-            "250,000 epochs with step decay, N in [64, 96], clip 1.0, as printed; the paper gives neither the "
-            "learning rate nor the decay, so lr 1e-3 (that of the full preset) halved every 25,000 steps (ten "
-            "halvings) is used, with batch 8; an epoch is one step on a freshly drawn batch.",
-            beltrami_field=RandomBeltramiConfig(sup=(0.05, 0.6), low=0.3), loss=LossWeights(fold=1.0),
-        ),
-    },
-    **{
-        name: _presets(
-            name, TaskSpec("density", 2, boundary), desc, _CI,
-            dict(steps=steps, batch=4, time_limit=limit, val_every=500, threads=2, workers=1, **_VAL2),
-            _PAPER_2D, _NOTE_2D,
-            loss=LossWeights(beltrami=lam, **fold), lr=5e-4, warmup=300, density_field=fields,
-        )
-        for name, boundary, lam, steps, limit, fields, fold, desc in [
-            ("deq2d-square", "square", 0.1, 6000, 3000.0, _HARD2, _FOLD_HARD,
-             "2D density-equalizing quasi-conformal map (DEQ: density loss + 0.1 Beltrami energy), square boundary; "
-             + _HARD_NOTE + _N48_NOTE),
-            ("deq2d-free", "free", 0.1, 2500, 2700.0, _HARD2, _FOLD_HARD,
-             "2D DEQ map, free boundary; " + _HARD_NOTE + _N48_NOTE),
-            ("dem2d-square", "square", 0.0, 2500, 2700.0, _HARD2, _FOLD_HARD,
-             "2D density-equalizing map (density loss only), square boundary; " + _HARD_NOTE + _N48_NOTE),
-        ]
-    },
-    **{
-        name: _presets(
-            name, TaskSpec("density", 3, boundary), desc, _CI3,
-            dict(steps=3000, batch=2, time_limit=3300.0, val_every=500, ckpt_every=100, threads=2, workers=1,
-                 **_VAL3),
-            dict(steps=4000, batch=2, lr=2e-4, schedule="restarts", T0=600, T_mult=2, lr_min=2e-6, clip=1.0),
-            "4,000 epochs, AdamW lr 2e-4, betas (0.9, 0.995), weight decay 5e-5, cosine warm restarts T0 = 600, "
+_PAPER_3D = dict(steps=4000, batch=2, lr=2e-4, schedule="restarts", T0=600, T_mult=2, lr_min=2e-6, clip=1.0)
+_NOTE_3D = ("4,000 epochs, AdamW lr 2e-4, betas (0.9, 0.995), weight decay 5e-5, cosine warm restarts T0 = 600, "
             "T_mult = 2, min lr 2e-6, N in [32, 48], clip 1.0, as printed; an epoch is one step on a freshly drawn "
-            "batch of 2 (the paper gives no batch size).",
-            model=ModelConfig(base=8, depth=2), n_range=(32, 48), jitter=0.0, lr=5e-4, weight_decay=5e-5,
-            betas=(0.9, 0.995), schedule="cosine", warmup=200, lr_min=2e-6, val_n=24, density_field=fields,
-            loss=LossWeights(**fold),
-        )
-        for name, boundary, fields, fold, desc in [
-            ("dem3d-cube", "square", _HARD3, _FOLD_HARD,
-             # the paper trains 4000 epochs with warm restarts at lr 2e-4 on a GPU; under an hour on a CPU one
-             # cosine cycle at lr 5e-4 gets further
-             "3D density-equalizing map, cube boundary (density loss on tetrahedra, fold penalty); one cosine cycle "
-             "at lr 5e-4. " + _HARD3_NOTE),
-            # fold penalty 100 until 23,366 steps: with it every steep held-out ramp at N = 48 folded
-            ("dem3d-free", "free", _HARD3, _FOLD_HARD3, "3D density-equalizing map, free boundary (density loss, "
-             "volume constraint, fold penalty); same schedule and fields as dem3d-cube, fold penalty 1000 from "
-             "det J < 0.02."),
-        ]
-    },
-}
+            "batch of 2 (the paper gives no batch size).")
 
-for _name in ("deq2d-square", "deq2d-free", "dem2d-square"):
-    CONFIGS[_name]["full"] = replace(CONFIGS[_name]["full"], n_range=(48, 96))
 
+def _density2d(name: str, boundary: str, *, beltrami: float, steps: int, time_limit: float,
+               description: str) -> Presets:
+    """A 2D density model (``beltrami``: the weight of the Beltrami energy beside the density loss, 0 for a DEM) on
+    the hard fields and fold penalty of :data:`_HARD2` and :data:`_FOLD_HARD`; its ``full`` preset trains at N in
+    [48, 96] for ``steps`` steps or ``time_limit`` seconds."""
+    base = TrainConfig(name=name, task=TaskSpec("density", 2, boundary), description=description,
+                       loss=LossWeights(beltrami=beltrami, **_FOLD_HARD), lr=5e-4, warmup=300, density_field=_HARD2)
+    return Presets.of(base, ci=_CI, paper=_PAPER_2D, paper_note=_NOTE_2D,
+                      full=dict(steps=steps, batch=4, time_limit=time_limit, val_every=500, threads=2, workers=1,
+                                n_range=(48, 96), **_VAL2))
+
+
+def _density3d(name: str, boundary: str, *, fold: dict, description: str) -> Presets:
+    """A 3D density model on the fields of :data:`_HARD3` with the fold penalty ``fold``; one cosine cycle at lr
+    5e-4 (the paper's warm restarts at 2e-4 are for a GPU; under an hour on a CPU one cycle gets further)."""
+    base = TrainConfig(name=name, task=TaskSpec("density", 3, boundary), description=description,
+                       model=ModelConfig(base=8, depth=2), n_range=(32, 48), jitter=0.0, lr=5e-4, weight_decay=5e-5,
+                       betas=(0.9, 0.995), schedule="cosine", warmup=200, lr_min=2e-6, val_n=24,
+                       density_field=_HARD3, loss=LossWeights(**fold))
+    return Presets.of(base, ci=_CI3, paper=_PAPER_3D, paper_note=_NOTE_3D,
+                      full=dict(steps=3000, batch=2, time_limit=3300.0, val_every=500, ckpt_every=100, threads=2,
+                                workers=1, **_VAL3))
+
+
+def _across_sizes(parent: Presets, *, name: str, description: str, ci_range: tuple[int, int],
+                  full: dict) -> Presets:
+    """``parent`` trained from its weights across grid sides (log-uniform), to run natively (the network on the
+    requested grid): ``full`` changes the full preset (which runs on one thread), the ``ci`` preset draws sides from
+    ``ci_range`` and validates natively, the paper preset draws the full preset's sides."""
+    return parent.derive(name=name, description=description,
+                         ci=dict(n_range=ci_range, n_sampling="log", val_native=True),
+                         full={**full, "threads": 1, "workers": 0},
+                         paper=dict(n_range=full["n_range"], n_sampling="log"))
+
+
+# the low-frequency share since 69,526 steps: before, such maps had three times the default maps' error
+_BELTRAMI2D = Presets.of(
+    TrainConfig(name="beltrami2d", task=TaskSpec("beltrami", 2, "fixed"),
+                description="Reconstruction of a boundary-fixing 2D map from its Beltrami coefficient; loss "
+                            "||mu(u) - mu_in||^2 on the coefficients of random boundary-fixing maps, 30 % of them "
+                            "low-frequency (1-4 modes); no solver data." + _N48_NOTE,
+                beltrami_field=RandomBeltramiConfig(sup=(0.05, 0.6), low=0.3), loss=LossWeights(fold=1.0)),
+    ci=_CI,
+    full=dict(steps=6000, batch=4, time_limit=3000.0, val_every=500, threads=1, workers=1, n_range=(48, 96),
+              **_VAL2),
+    paper=dict(steps=250000, batch=8, lr=1e-3, schedule="step", step_size=25000, gamma=0.5, warmup=0,
+               n_range=(64, 96), clip=1.0),
+    paper_note="250,000 epochs with step decay, N in [64, 96], clip 1.0, as printed; the paper gives neither the "
+               "learning rate nor the decay, so lr 1e-3 (that of the full preset) halved every 25,000 steps (ten "
+               "halvings) is used, with batch 8; an epoch is one step on a freshly drawn batch.")
+_DEQ2D_SQUARE = _density2d(
+    "deq2d-square", "square", beltrami=0.1, steps=6000, time_limit=3000.0,
+    description="2D density-equalizing quasi-conformal map (DEQ: density loss + 0.1 Beltrami energy), square "
+                "boundary; " + _HARD_NOTE + _N48_NOTE)
+_DEQ2D_FREE = _density2d("deq2d-free", "free", beltrami=0.1, steps=2500, time_limit=2700.0,
+                         description="2D DEQ map, free boundary; " + _HARD_NOTE + _N48_NOTE)
+_DEM2D_SQUARE = _density2d(
+    "dem2d-square", "square", beltrami=0.0, steps=2500, time_limit=2700.0,
+    description="2D density-equalizing map (density loss only), square boundary; " + _HARD_NOTE + _N48_NOTE)
+_DEM3D_CUBE = _density3d(
+    "dem3d-cube", "square", fold=_FOLD_HARD,
+    description="3D density-equalizing map, cube boundary (density loss on tetrahedra, fold penalty); one cosine "
+                "cycle at lr 5e-4. " + _HARD3_NOTE)
+# fold penalty 100 until 23,366 steps: with it every steep held-out ramp at N = 48 folded
+_DEM3D_FREE = _density3d(
+    "dem3d-free", "free", fold=_FOLD_HARD3,
+    description="3D density-equalizing map, free boundary (density loss, volume constraint, fold penalty); same "
+                "schedule and fields as dem3d-cube, fold penalty 1000 from det J < 0.02.")
 #: the FNO comparison: deq2d-square's task, losses, fields, schedule and wall-time budget as they were when the FNO
 #: was trained (the U-Net has since moved on to _HARD2 fields and N from 48), with neuraloperator's
 #: FNO in place of the U-Net (16 modes, width 24, 4 layers, 12.5 % padding: about the U-Net's parameter count and
-#: step time; book: Design decisions)
-CONFIGS["fno-deq2d-square"] = {
-    preset: replace(
-        # the loss of deq2d-square when the FNO was trained (fold penalty of weight 10 from det J < 0.02)
-        cfg, name="fno-deq2d-square", lr=1e-3, loss=LossWeights(beltrami=0.1), density_field=_SHARP2,
-        n_range=(64, 96) if preset == "full" else cfg.n_range,
-        model=ModelConfig(arch="fno", modes=4, width=8, layers=2) if preset == "ci" else
-        ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125),
-        description="Fourier neural operator (FNO: 16 modes per axis, width 24, 4 layers, 12.5 % padding) for "
-                    "deq2d-square's task (2D DEQ map, square boundary), trained as deq2d-square was then (densities "
-                    "with narrow peaks and steep ramps) at lr 1e-3." +
-                    (f" Paper preset: {_NOTE_2D}" if preset == "paper" else ""))
-    for preset, cfg in CONFIGS["deq2d-square"].items()
-}
-
-
-def _across_sizes(parent: str, name: str, full: dict, ci_range: tuple[int, int], what: str) -> dict:
-    """The presets of ``parent`` trained from its weights across grid sides (log-uniform), to run natively (the
-    network on the requested grid): ``full`` overrides the full preset, the ``ci`` preset draws sides from
-    ``ci_range``, the paper preset the full preset's sides; ``what`` opens each description."""
-    out = {}
-    for preset, cfg in CONFIGS[parent].items():
-        over = {"full": {**full, "threads": 1, "workers": 0},
-                "ci": dict(n_range=ci_range, n_sampling="log", val_native=True)}.get(
-                    preset, dict(n_range=full["n_range"], n_sampling="log"))
-        paper = " " + cfg.description[cfg.description.index("Paper preset"):] if preset == "paper" else ""
-        out[preset] = replace(cfg, name=name, **over, description=what + paper)
-    return out
-
-
+#: step time; book: Design decisions); the loss of deq2d-square then (fold penalty of weight 10 from det J < 0.02)
+_FNO_DEQ2D_SQUARE = _DEQ2D_SQUARE.derive(
+    name="fno-deq2d-square",
+    description="Fourier neural operator (FNO: 16 modes per axis, width 24, 4 layers, 12.5 % padding) for "
+                "deq2d-square's task (2D DEQ map, square boundary), trained as deq2d-square was then (densities "
+                "with narrow peaks and steep ramps) at lr 1e-3.",
+    lr=1e-3, loss=LossWeights(beltrami=0.1), density_field=_SHARP2,
+    ci=dict(model=ModelConfig(arch="fno", modes=4, width=8, layers=2)),
+    full=dict(n_range=(64, 96), model=ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125)),
+    paper=dict(model=ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125)))
 #: deq2d-square trained across the sizes the paper tests, to run natively at every side from 32 to 256: log-uniform
 #: sides (every octave a third of the steps) at about the same cost per step (batch_points), validated natively at
 #: both ends of the range, from deq2d-square's weights (the lineage)
-CONFIGS["deq2d-square-native"] = _across_sizes(
-    "deq2d-square", "deq2d-square-native",
-    dict(n_range=(32, 256), n_sampling="log", batch_points=20736, batch=16, val_sizes=(32, 51, 128, 256),
-         val_native=True, lr=1e-4, ema=0.999, warmup=0, steps=40000, time_limit=7200.0), (17, 33),
-    "deq2d-square's task, losses and fields, trained from its weights across grid sides 32-256 (log-uniform, about "
-    "20,736 grid points a batch) and validated natively at 32, 51, 128 and 256: it runs natively at every side the "
-    "paper tests.")
+_DEQ2D_SQUARE_NATIVE = _across_sizes(
+    _DEQ2D_SQUARE, name="deq2d-square-native", ci_range=(17, 33),
+    full=dict(n_range=(32, 256), n_sampling="log", batch_points=20736, batch=16, val_sizes=(32, 51, 128, 256),
+              val_native=True, lr=1e-4, ema=0.999, warmup=0, steps=40000, time_limit=7200.0),
+    description="deq2d-square's task, losses and fields, trained from its weights across grid sides 32-256 "
+                "(log-uniform, about 20,736 grid points a batch) and validated natively at 32, 51, 128 and 256: it "
+                "runs natively at every side the paper tests.")
 #: dem3d-cube trained across the 3D grid sides the paper tests (24-64), so that its resolution rows run natively: the
 #: same log-uniform sides at about the cost of two 40^3 grids per step, validated natively at both ends
-CONFIGS["dem3d-cube-native"] = _across_sizes(
-    "dem3d-cube", "dem3d-cube-native",
-    dict(n_range=(24, 64), n_sampling="log", batch_points=128000, batch=2, val_sizes=(32, 64), val_count=8,
-         val_native=True, val_every=1000, lr=1e-4, ema=0.999, warmup=0, steps=40000, time_limit=8400.0), (9, 17),
-    "dem3d-cube's task, losses and fields, trained from its weights across grid sides 24-64 (log-uniform, about "
-    "128,000 grid points a step) and validated natively at 32 and 64: it runs natively at every side the paper "
-    "tests.")
+_DEM3D_CUBE_NATIVE = _across_sizes(
+    _DEM3D_CUBE, name="dem3d-cube-native", ci_range=(9, 17),
+    full=dict(n_range=(24, 64), n_sampling="log", batch_points=128000, batch=2, val_sizes=(32, 64), val_count=8,
+              val_native=True, val_every=1000, lr=1e-4, ema=0.999, warmup=0, steps=40000, time_limit=8400.0),
+    description="dem3d-cube's task, losses and fields, trained from its weights across grid sides 24-64 "
+                "(log-uniform, about 128,000 grid points a step) and validated natively at 32 and 64: it runs "
+                "natively at every side the paper tests.")
+
+#: every training configuration by name: ``{preset: TrainConfig}`` (:meth:`Presets.configs`)
+CONFIGS: dict[str, dict[str, TrainConfig]] = {
+    p.full.name: p.configs()
+    for p in (_BELTRAMI2D, _DEQ2D_SQUARE, _DEQ2D_FREE, _DEM2D_SQUARE, _DEM3D_CUBE, _DEM3D_FREE, _FNO_DEQ2D_SQUARE,
+              _DEQ2D_SQUARE_NATIVE, _DEM3D_CUBE_NATIVE)
+}
 
 
 def config_names() -> list[str]:
