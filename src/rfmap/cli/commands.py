@@ -48,7 +48,10 @@ def cmd_solve(args) -> int:
     from ..tasks import get_task, kinds
 
     # the task whose classical solver the method is: it checks and prepares the field and solves
-    task = next(get_task(k) for k in kinds() if args.method in get_task(k).methods)
+    task = next((get_task(k) for k in kinds() if args.method in get_task(k).methods), None)
+    if task is None:
+        known = ", ".join(m for k in kinds() for m in get_task(k).methods)
+        raise CLIError(f"unknown method {args.method!r}; the solvers of the registered kinds are {known}")
     if args.field_file:
         arr, n = _grid_field_file(args)
         values = task.solver_input(arr)  # a density as rfmap map preprocesses it, mu per triangle, ...
@@ -302,9 +305,9 @@ def _symmetry_arg(text: str):
 def _add_classical(sub) -> None:
     """``rfmap solve`` and ``rfmap metrics``."""
     s = sub.add_parser("solve", help="run a classical solver (Linear Beltrami Solver, diffusion or flow DEM)")
-    s.add_argument("--method", choices=["lbs", "diffusion", "flow", "dem"], metavar="{lbs,diffusion,flow}",
-                   required=True, help="lbs (Beltrami), diffusion (diffusion DEM; also 'dem') or flow (flow-based "
-                                       "DEM, faster)")
+    s.add_argument("--method", metavar="{lbs,diffusion,flow}", required=True,
+                   help="lbs (Beltrami), diffusion (diffusion DEM; also 'dem') or flow (flow-based DEM, faster): "
+                        "a classical solver of a registered kind of map (rfmap.tasks.kinds)")
     g = s.add_mutually_exclusive_group(required=True)
     g.add_argument("--field", help="a built-in field name")
     g.add_argument("--field-file", help=".npy array sampled on an N^d grid: a density (preprocessed as by rfmap map) "
