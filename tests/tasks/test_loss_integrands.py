@@ -49,3 +49,19 @@ def test_integrands_match_the_parts_of_task_loss():
     for key in ("density", "mu2", "fold"):
         assert float(L.weighted_mean(t[key], t["weight"])) == pytest.approx(parts[key], rel=1e-4, abs=1e-9), key
     assert float(t["area"].mean()) == pytest.approx(parts["area"], rel=1e-4, abs=1e-12)
+
+
+def test_batch_loss_terms_of_an_untrained_network_are_those_of_the_identity():
+    """rfmap.tasks.batch_loss_terms: an untrained network (zero head) maps every vertex to itself; its loss is the
+    density mismatch of the input alone, and the integrands give the same number."""
+    from rfmap.nn.model import MultiResUNet
+    from rfmap.tasks import batch_loss_terms
+
+    spec = TaskSpec("density", 2, "square")
+    batch = sample_batch(spec, seed=0, step=0, indices=range(2), n=9)
+    weights = LossWeights(beltrami=0.1)
+    total, parts, mapped, terms = batch_loss_terms(MultiResUNet(base=4, depth=2), spec, batch, weights)
+    assert torch.equal(mapped, batch.ref)
+    assert parts["fold"] == 0 and parts["mu2"] == pytest.approx(0, abs=1e-12)
+    assert total == pytest.approx(parts["density"], rel=1e-6)
+    assert float(L.weighted_mean(terms["density"], terms["weight"])) == pytest.approx(parts["density"], rel=1e-5)

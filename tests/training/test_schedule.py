@@ -43,3 +43,18 @@ def test_the_warm_up_starts_at_one_step_of_the_rate_and_reaches_the_peak_at_its_
 
 def test_without_a_warm_up_the_first_step_runs_at_the_peak_rate():
     assert rates(1, warmup=0)[0] == pytest.approx(LR, rel=1e-12)
+
+
+def test_learning_rates_are_the_rates_a_run_steps_with():
+    """rfmap.training.learning_rates gives the rate of every step: the cosine above, and the paper's printed step
+    decay of the 2D density models (halved every step_size steps)."""
+    from rfmap.training import learning_rates
+
+    cfg = get_config("deq2d-square", "ci").with_overrides(lr=LR, lr_min=LR_MIN, warmup=WARMUP, steps=STEPS,
+                                                           schedule="cosine", time_limit=0.0)
+    assert learning_rates(cfg, STEPS + 1) == pytest.approx(rates(STEPS + 1), rel=1e-12)
+    paper = get_config("deq2d-square", "paper")
+    r = learning_rates(paper, 2 * paper.step_size + 1)
+    assert r[0] == r[paper.step_size - 1] == pytest.approx(paper.lr, rel=1e-12)
+    assert r[paper.step_size] == pytest.approx(paper.lr * paper.gamma, rel=1e-12)
+    assert r[2 * paper.step_size] == pytest.approx(paper.lr * paper.gamma**2, rel=1e-12)

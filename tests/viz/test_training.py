@@ -64,3 +64,15 @@ def test_loss_term_panels_carry_the_batch_values():
     assert axes[1][1].get_title().endswith(f"= {value:.3g}")
     assert "fold penalty" in axes[1][3].get_title()
     plt.close(fig)
+
+
+def test_learning_rates_are_drawn_on_a_log_axis_one_line_per_schedule():
+    from rfmap.viz import plot_learning_rates
+
+    fig, ax = plt.subplots()
+    plot_learning_rates(ax, {"step decay": [1e-5, 1e-5, 5e-6, 5e-6], "warm-up": [0.0, 1e-4, 2e-4]})
+    assert ax.get_yscale() == "log" and len(ax.lines) == 2
+    assert list(ax.lines[0].get_xdata()) == [1, 2, 3, 4]
+    assert list(ax.lines[1].get_xdata()) == [2, 3]  # the zero rate is left out of the log axis
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["step decay", "warm-up"]
+    plt.close(fig)

@@ -29,7 +29,7 @@ from ..fields.random import RandomBeltramiConfig, RandomDensityConfig
 from .teacher import TeacherConfig, teacher_indices, teacher_loss
 
 __all__ = ["Task", "TaskSpec", "SampleOptions", "Batch", "LossWeights", "register_task", "get_task", "kinds",
-           "encode", "grid_elements", "draw_samples", "make_batch", "sample_batch", "task_loss"]
+           "encode", "grid_elements", "draw_samples", "make_batch", "sample_batch", "task_loss", "batch_loss_terms"]
 
 _TASKS: dict[str, "Task"] = {}
 
@@ -496,3 +496,31 @@ def task_loss(spec: TaskSpec, batch: Batch, psi: Tensor, weights: LossWeights,
                                         batch.n)
         total = total + teacher_weight * parts["teacher"]
     return total, {k: float(v.detach()) for k, v in parts.items()}
+
+
+def batch_loss_terms(model, spec: TaskSpec, batch: Batch, weights: LossWeights) -> tuple[float, dict, Tensor, dict]:
+    r"""A network's loss on a batch as training computes it, with the terms element by element, without gradients.
+
+    Parameters
+    ----------
+    model : torch.nn.Module
+        The displacement network (``Surrogate.model``): ``batch.inputs`` to :math:`\psi` of shape ``(B, d, *S)``.
+
+    Returns
+    -------
+    total : float
+        :func:`task_loss` of the network's maps.
+    parts : dict
+        Its terms (batch means).
+    mapped : Tensor, shape (B, n, d)
+        The mapped vertices :math:`u = x + \mathcal{B}(x) \odot \psi(x)`.
+    terms : dict
+        :func:`rfmap.tasks.losses.loss_integrands` of the maps (fold threshold of ``weights``).
+    """
+    with torch.no_grad():
+        psi = model(batch.inputs)
+        total, parts = task_loss(spec, batch, psi, weights)
+        mapped = apply_displacement(batch.ref, psi.flatten(2).transpose(1, 2), spec.boundary)
+        terms = L.loss_integrands(batch.ref, mapped, batch.elements, density=batch.density,
+                                  mu_target=batch.mu_target, fold_threshold=weights.fold_threshold)
+    return float(total), parts, mapped, terms

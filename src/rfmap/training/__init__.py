@@ -12,8 +12,8 @@ from .averaging import WeightAverage
 from .cli import build_parser, main, run
 from .data import draw_step, single_blas_thread_env, step_size_n
 from .loop import RunOptions, history, report_paper_fields, train, validate
-from .state import TrainState, load_init, machine, memory_format, sha256
+from .state import TrainState, learning_rates, load_init, machine, memory_format, sha256
 
 __all__ = ["train", "RunOptions", "validate", "report_paper_fields", "resolve_device", "load_init", "main", "TrainState",
            "WeightAverage", "memory_format", "draw_step", "history", "build_parser", "run", "single_blas_thread_env",
-           "step_size_n", "machine", "sha256"]
+           "step_size_n", "machine", "sha256", "learning_rates"]

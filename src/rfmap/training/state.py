@@ -28,7 +28,7 @@ from .averaging import WeightAverage
 from .config import TrainConfig
 from .validation import score
 
-__all__ = ["TrainState", "memory_format", "machine", "sha256", "load_init"]
+__all__ = ["TrainState", "memory_format", "machine", "sha256", "load_init", "learning_rates"]
 
 
 def memory_format(dim: int) -> torch.memory_format:
@@ -66,6 +66,20 @@ def _scheduler(opt, cfg: TrainConfig, clock: Callable[[], float] | None = None):
     if cfg.schedule == "restarts":
         return torch.optim.lr_scheduler.CosineAnnealingWarmRestarts(opt, cfg.T0, cfg.T_mult, eta_min=cfg.lr_min)
     raise ValueError(f"unknown schedule {cfg.schedule!r}; expected cosine, step or restarts")
+
+
+def learning_rates(cfg: TrainConfig, steps: int | None = None) -> list[float]:
+    """The learning rate of each of the first ``steps`` optimiser steps (default ``cfg.steps``) of a run of ``cfg``
+    (its ``schedule``), by the step count alone: a run that reaches its wall-time limit first goes through the same
+    cosine in fewer steps."""
+    opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=cfg.lr)
+    sched = _scheduler(opt, cfg)
+    rates = []
+    for _ in range(cfg.steps if steps is None else steps):
+        rates.append(opt.param_groups[0]["lr"])
+        opt.step()
+        sched.step()
+    return rates
 
 
 def machine(device: torch.device) -> dict:

@@ -7,7 +7,7 @@ from .meshes import plot_density, plot_mesh
 from .studies import plain_log_ticks
 
 __all__ = ["LOSS_TERMS", "VAL_NAMES", "plot_batch", "plot_loss_terms", "training_curves", "learning_curves",
-           "validation_vs_time", "race_bars"]
+           "validation_vs_time", "race_bars", "plot_learning_rates"]
 
 
 #: the loss terms of training (keys of :func:`rfmap.tasks.base.task_loss` and :func:`rfmap.tasks.losses.loss_integrands`)
@@ -235,3 +235,19 @@ def validation_vs_time(metas: dict, ax=None, *, key: str | None = None):
     ax.set(xlabel="wall time of the last run (min)", ylabel=f"held-out mean {VAL_NAMES.get(key, key)}")
     ax.legend()
     return ax
+
+
+def plot_learning_rates(ax, rates: dict, *, title: str = ""):
+    """Learning-rate schedules against the optimiser step on a log axis, one line per entry of ``rates`` (label ->
+    the rate of every step, :func:`rfmap.training.state.learning_rates`); a rate of zero is left out. Returns the
+    axes."""
+    for k, (label, r) in enumerate(rates.items()):
+        r = np.asarray(r, dtype=float)
+        steps = np.arange(1, len(r) + 1)
+        keep = r > 0
+        ax.semilogy(steps[keep], r[keep], color=f"C{k}", lw=1.4, label=label)
+    ax.set(xlabel="optimiser step", ylabel="learning rate", title=title)
+    ax.set_xlim(left=0)
+    ax.legend()
+    return ax
+
