@@ -14,7 +14,8 @@
 #                    execute one chapter as the book does (rfmap kernel, same environment) into _build/chapters/,
 #                    print its wall time and record it in _build/chapters/NB.time.json
 #   make pages       regenerate the generated book pages (book/figures.md and the scoreboard of book/intro.md from
-#                    src/rfmap/data/figures.json; book/design.md from src/rfmap/data/design.json)
+#                    src/rfmap/data/figures.json; book/design.md from src/rfmap/data/design.json; the retraining
+#                    commands of book/reproduce.md from the shipped weights' metadata)
 #   make lab         start JupyterLab in the repository root with the book's environment (RFMAP_SCALE, default full)
 #   make clean       remove build outputs (make distclean also removes .venv)
 
@@ -77,6 +78,7 @@ chapter: install
 pages: install
 	$(BIN)/python scripts/make_figures_md.py
 	$(BIN)/python scripts/make_design_md.py
+	$(BIN)/python scripts/make_reproduce_md.py
 
 lab: install
 	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter lab --ServerApp.root_dir="$(CURDIR)" \

@@ -42,7 +42,7 @@ LAYERS: dict[str, int] = {
     "rfmap.tasks": 2, "rfmap.tasks.base": 2, "rfmap.tasks.heldout": 2, "rfmap.tasks.density": 2,
     "rfmap.tasks.beltrami": 2, "rfmap.training.config": 2, "rfmap.training": 2, "rfmap.training.__main__": 2,
     "rfmap.training.data": 2, "rfmap.training.averaging": 2, "rfmap.training.state": 2, "rfmap.training.loop": 2,
-    "rfmap.training.cli": 2, "rfmap.finish.refine": 2, "rfmap.surrogate": 2,
+    "rfmap.training.cli": 2, "rfmap.training.lineage": 2, "rfmap.finish.refine": 2, "rfmap.surrogate": 2,
     "rfmap.finish": 2, "rfmap.finish.report": 2, "rfmap.finish.draft": 2, "rfmap.finish.quality": 2,
     "rfmap.finish.query": 2, "rfmap.finish.stages": 2, "rfmap.finish.pipeline": 2,
     "rfmap.pretrained": 2, "rfmap.finish.repair": 2, "rfmap.finish.repair.dispatch": 2,

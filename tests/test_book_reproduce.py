@@ -1,0 +1,64 @@
+"""book/reproduce.md: its retraining section is generated from the shipped weights' metadata and is up to date;
+its account of scripts/device_train.sh matches the script's defaults."""
+from __future__ import annotations
+
+import importlib.util
+import re
+import shlex
+from pathlib import Path
+
+from rfmap.surrogate import WEIGHTS_DIR
+from rfmap.training.lineage import load_metadata, retrain_command, shipped_hashes
+
+ROOT = Path(__file__).resolve().parent.parent
+PAGE = ROOT / "book" / "reproduce.md"
+
+
+def _script():
+    spec = importlib.util.spec_from_file_location("make_reproduce_md", ROOT / "scripts" / "make_reproduce_md.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_reproduce_page_is_up_to_date():
+    mod = _script()
+    assert PAGE.read_text(encoding="utf-8") == mod.page(), "book/reproduce.md is stale: run make pages"
+    assert mod.main(["--check"]) == 0
+    assert "$(BIN)/python scripts/make_reproduce_md.py" in (ROOT / "Makefile").read_text(encoding="utf-8")
+
+
+def test_every_shipped_model_has_its_retraining_command_on_the_page():
+    text = PAGE.read_text(encoding="utf-8")
+    # the shell blocks, their continuation lines joined
+    blocks = [shlex.split(b.replace("\\\n", " "), comments=True)
+              for b in re.findall(r"```bash\n(.*?)```", text, re.S)]
+    commands = [b for b in blocks if b[:2] == ["rfmap", "train"]]
+    shipped = shipped_hashes(WEIGHTS_DIR)
+    for name, meta in load_metadata(WEIGHTS_DIR).items():
+        assert f"(retrain-{name})=" in text and f"| [{name}](retrain-{name}) |" in text, name
+        assert shlex.split(retrain_command(meta, name, shipped)) in commands, name
+
+
+def test_wrap_keeps_the_words():
+    wrap = _script().wrap
+    cmd = ("rfmap train --config dem3d-cube-native --preset full --time-limit 4200 --threads 1 --lr 3e-05 "
+           "--n-range 32 64 --val-sizes 48 64 --init runs/retrain/x/run-12/dem3d-cube-native.safetensors "
+           "--out runs/retrain/x/run-13")
+    lines = wrap(cmd, width=60).split("\n")
+    assert len(lines) > 1 and all(line.endswith(" \\") for line in lines[:-1])
+    assert shlex.split(wrap(cmd, width=60).replace("\\\n", " ")) == shlex.split(cmd)
+
+
+def test_the_gpu_section_states_device_train_defaults():
+    """The command the page shows for scripts/device_train.sh carries the script's own defaults."""
+    script = (ROOT / "scripts" / "device_train.sh").read_text(encoding="utf-8")
+    defaults = dict(re.findall(r"^([A-Z_]+)=\$\{\1:-([^}]*)\}", script, re.M))
+    text = PAGE.read_text(encoding="utf-8")
+    shown = re.search(r"python -m rfmap\.training (.*?)\$TRAIN_ARGS", text, re.S).group(1).replace("\\\n", " ")
+    words = shlex.split(shown)
+    for flag, var in [("--preset", "PRESET"), ("--device", "DEVICE"), ("--precision", "PRECISION"),
+                      ("--threads", "THREADS"), ("--workers", "WORKERS"), ("--snapshot-every", "SNAPSHOT_EVERY")]:
+        assert words[words.index(flag) + 1] == defaults[var], (flag, defaults[var])
+        assert f"`{var}`" in text
+    assert "--no-validate" in words and "--no-validate" in script

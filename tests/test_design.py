@@ -1,0 +1,133 @@
+"""The design record (src/rfmap/data/design.json), its page (book/design.md) and the script that measures it again
+(benchmarks/design.py)."""
+from __future__ import annotations
+
+import importlib.util
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from rfmap.paper.design import (DESIGN_PATH, current_value, load_decisions, record, remeasure_command, stale_values,
+                                to_markdown)
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _load(path: Path, name: str):
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod  # a dataclass of the module looks its module up
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def _cases() -> dict:
+    return _load(ROOT / "benchmarks" / "design.py", "design_benchmark").CASES
+
+
+def test_design_page_is_up_to_date_and_in_the_toc():
+    assert (ROOT / "book" / "design.md").read_text(encoding="utf-8") == to_markdown(), \
+        "book/design.md is stale: run python scripts/make_design_md.py"
+    assert "- file: book/design" in (ROOT / "_toc.yml").read_text(encoding="utf-8")
+    assert _load(ROOT / "scripts" / "make_design_md.py", "make_design_md").main(["--check"]) == 0
+
+
+def test_design_values_are_those_in_the_code():
+    """Every constant recorded in design.json holds the recorded value in the code (a changed constant needs new
+    measurements)."""
+    decisions = load_decisions()
+    assert len({d["constant"] for d in decisions}) == len(decisions)
+    for d in decisions:
+        for key in ("module", "value", "what", "criterion", "benchmark"):
+            assert str(d.get(key, "")).strip(), (d["constant"], key)
+    assert sum(current_value(d) is not None for d in decisions) >= 15
+    assert stale_values() == []
+    changed = [{**decisions[0], "value": "(2, 3)"}]
+    assert stale_values(changed) == [(decisions[0]["constant"], "(2, 3)", decisions[0]["value"])]
+
+
+def test_every_decision_is_re_measurable_or_a_dated_record():
+    """A decision either names a case of benchmarks/design.py, whose last run's rows, data, date, code version and
+    machine are stored, or is a historical record with the commits that set the value and entered its numbers."""
+    cases = _cases()
+    keys = [d["remeasure"] for d in load_decisions() if d.get("remeasure")]
+    assert sorted(keys) == sorted(cases), "every case of benchmarks/design.py measures exactly one decision"
+    for d in load_decisions():
+        if d.get("remeasure"):
+            assert d["benchmark"] == "benchmarks/design.py" and "recorded" not in d, d["constant"]
+            assert remeasure_command(d) == f"python benchmarks/design.py --only {d['remeasure']}"
+            assert d.get("results") and d.get("data"), f"{d['constant']}: run benchmarks/design.py --record"
+            assert {"date", "code", "machine"} <= set(d.get("measured", {})), d["constant"]
+            assert d["measured"]["code"].startswith("rfmap ")
+        else:
+            entered = d.get("recorded", {}).get("entered", {})
+            assert entered.get("commit") and entered.get("date"), d["constant"]
+            assert remeasure_command(d) is None
+
+
+def test_recorded_commits_are_in_the_history():
+    git = ROOT / ".git"
+    if not git.exists():
+        pytest.skip("not a git checkout")
+    commits = {e["commit"] for d in load_decisions() for e in d.get("recorded", {}).values()}
+    for sha in sorted(commits):
+        out = subprocess.run(["git", "-C", str(ROOT), "cat-file", "-e", f"{sha}^{{commit}}"], capture_output=True)
+        assert out.returncode == 0, f"design.json names commit {sha}, which the history does not hold"
+
+
+def test_the_page_says_how_to_re_measure_and_what_is_historical():
+    page = to_markdown()
+    for d in load_decisions():
+        if d.get("remeasure"):
+            assert f"`{remeasure_command(d)}`" in page
+    assert page.count("**Historical record, not re-measured.**") == sum(not d.get("remeasure")
+                                                                         for d in load_decisions())
+
+
+def test_design_record_updates_one_entry(tmp_path):
+    path = tmp_path / "design.json"
+    path.write_text(DESIGN_PATH.read_text(encoding="utf-8"), encoding="utf-8")
+    rows = [{"case": "3D, N = 48", "chosen": "0.70 s", "alternative": "1.10 s"}]
+    assert record("MARGIN", path=path, results=rows, data="x")["results"] == rows
+    after = {d["constant"]: d for d in load_decisions(path)}
+    assert after["MARGIN"]["results"] == rows and after["RTOL"] == {d["constant"]: d for d in load_decisions()}["RTOL"]
+    # a decision that is not a constant is found by its case name
+    assert record("velocity-table-float32", path=path, results=rows)["constant"] == "velocity table in float32"
+    with pytest.raises(KeyError):
+        record("NO_SUCH_CONSTANT", path=path, value="1")
+
+
+def test_design_benchmark_measures_and_records(tmp_path):
+    """benchmarks/design.py at the smallest size: one row per 3D test density and decision, stored with --record."""
+    path = tmp_path / "design.json"
+    path.write_text(DESIGN_PATH.read_text(encoding="utf-8"), encoding="utf-8")
+    out = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "design.py"), "--n", "9", "--repeat", "1",
+                          "--only", "RTOL", "MARGIN", "--record", "--out", str(path)],
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    rows = [line for line in out.stdout.splitlines() if line.startswith("| ") and "3D N = 9" in line]
+    assert len(rows) == 8
+    stored = {d["constant"]: d for d in load_decisions(path)}
+    assert len(stored["RTOL"]["results"]) == 8 and len(stored["MARGIN"]["results"]) == 4  # RTOL: 3D and 2D
+    for decision in ("RTOL", "MARGIN"):
+        assert "N = 9" in stored[decision]["data"] and stored[decision]["measured"]["code"].startswith("rfmap ")
+    assert load_decisions() != load_decisions(path)  # the package's record is untouched
+
+
+#: the cases cheap enough for the test suite at their smallest size (the others load the shipped networks)
+SMALL = ["WALK_FILL", "RESIDUAL_ITERATIONS", "element-measures-float32", "velocity-table-float32",
+         "grid-sample-per-thread", "fno-size"]
+
+
+def test_design_benchmark_cases_print_their_tables():
+    out = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "design.py"), "--n", "9", "--repeat", "1",
+                          "--only", *SMALL], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    for name in SMALL:
+        assert f"### {name}\n\n| case | chosen | alternative |" in out.stdout, name
+    assert "rasters differ by at most" in out.stdout
+    listed = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "design.py"), "--list"], capture_output=True,
+                            text=True, timeout=120).stdout
+    assert all(name in listed for name in _cases())
