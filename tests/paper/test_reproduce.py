@@ -46,6 +46,7 @@ def test_table_markdown_and_csv_roundtrip(tmp_path):
     (0.0198912, "std_rho_map", "0.01989"), (2.432098, "mean_dd", "2.432"), (-0.0123456, "min_jacobian", "-0.01235"),
     (0.0123456, "time", "12.3 ms"), (2.432098, "time", "2.43 s"), (123.456, "time", "123 s"),
     (41.237, "speedup", "41.2×"), (3, "n_flipped", "3"), (np.int64(7), "n_flipped", "7"), (None, "time", "—"),
+    (1.6512e-05, "mean_dd", "1.651 × 10⁻⁵"),
 ])
 def test_cells_have_four_significant_digits_and_times_their_unit(value, column, text):
     assert format_value(value, column) == text

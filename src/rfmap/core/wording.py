@@ -1,11 +1,12 @@
 """Counts in the package's messages, in the singular or the plural as the number asks: ``1 pass``, ``3 passes``.
 
 Reports, warnings and errors count things ("2 folded elements", "1 region without data"); :func:`counted` writes
-the number and the noun that agrees with it, so that no message reads "pass(es)".
+the number and the noun that agrees with it, so that no message reads "pass(es)".  :func:`of_count` writes a part of
+a whole as a sentence says it: ``all 4 densities``, ``none of the 4``, ``3 of 4``, never ``4 of 4`` or ``0 of 4``.
 """
 from __future__ import annotations
 
-__all__ = ["counted"]
+__all__ = ["counted", "of_count"]
 
 #: plurals that do not add "s" or "es"
 _IRREGULAR = {"vertex": "vertices", "matrix": "matrices"}
@@ -16,6 +17,8 @@ _PREPOSITIONS = {"of", "without", "with", "in", "under", "on", "per", "from", "t
 def _plural(word: str) -> str:
     if word in _IRREGULAR:
         return _IRREGULAR[word]
+    if len(word) > 1 and word.endswith("y") and word[-2] not in "aeiou":  # density, boundary
+        return word[:-1] + "ies"
     return word + ("es" if word.endswith(("s", "x", "z", "ch", "sh")) else "s")
 
 
@@ -41,3 +44,32 @@ def counted(n: int, noun: str, plural: str | None = None) -> str:
         words[k] = _plural(words[k])
         plural = " ".join(words)
     return f"{n} {plural}"
+
+
+def of_count(k: int, n: int, noun: str = "", plural: str | None = None) -> str:
+    """``k`` of ``n`` things as a sentence says it: ``"3 of 4 densities"``, but ``"all 4 densities"`` where
+    ``k == n``, ``"none of the 4 densities"`` where ``k == 0``, and ``"both"`` / ``"neither of the 2"`` / ``"the
+    one"`` for wholes of one or two.  Without ``noun`` the bare count (``"all 4"``, ``"none of the 4"``); the noun is
+    inflected as :func:`counted` does (``plural`` where that rule is wrong).
+
+    Examples
+    --------
+    >>> of_count(4, 4, "density"), of_count(0, 4), of_count(3, 4, "side")
+    ('all 4 densities', 'none of the 4', '3 of 4 sides')
+    """
+    k, n = int(k), int(n)
+    if not 0 <= k <= n:
+        raise ValueError(f"a part of a whole needs 0 <= k <= n, got k={k}, n={n}")
+    nouns = counted(n, noun, plural).split(" ", 1)[1] if noun else ""
+    tail = f" {nouns}" if nouns else ""
+    if n == 1:
+        return f"the one{tail}" if k == 1 else f"not the one{tail}"
+    if n == 2 and k == 2:
+        return f"both{tail}"
+    if n == 2 and k == 0:
+        return f"neither of the 2{tail}"
+    if k == n:
+        return f"all {n}{tail}"
+    if k == 0:
+        return f"none of the {n}{tail}"
+    return f"{k} of {n}{tail}"

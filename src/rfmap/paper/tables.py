@@ -7,13 +7,14 @@ from __future__ import annotations
 import csv
 import io
 import json
+from decimal import Decimal
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Table", "Headline", "headline", "format_sig", "paper_table", "format_value", "span_text", "change_text",
+__all__ = ["Table", "Headline", "headline", "format_sig", "power_of_ten", "printed_digits", "paper_table", "format_value", "span_text", "change_text",
            "glue_all", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
 
 
@@ -32,7 +33,7 @@ COLUMN_TITLES = {
     "fields": "training fields", "fold": "fold penalty", "lr": "peak lr", "ema": "weight average",
     "held_out": "held-out mean", "scored": "held-out maps scored", "folded_maps": "folded held-out maps",
     "val_n": "held-out N", "mu_ratio": "mean |μ| ratio", "std_ratio": "Std / best classical",
-    "time_ratio": "time / best classical",
+    "time_ratio": "time / best classical", "folded": "folded fields",
 }
 
 
@@ -45,7 +46,7 @@ MAX_COLUMNS = 6
 
 
 def format_value(v, column: str = "", *, unit: bool = True) -> str:
-    """One table cell: :data:`DIGITS` significant digits; times (column ``time``, seconds) as ``12.3 ms`` or
+    """One table cell: :data:`DIGITS` significant digits (below 10⁻³ as ``2.572 × 10⁻⁵``, :func:`format_sig`); times (column ``time``, seconds) as ``12.3 ms`` or
     ``2.43 s`` (without ``unit``: seconds, as a plain number); speed-ups as ``41.2×``; integers exactly; a missing
     value as an em dash (empty without ``unit``)."""
     if v is None:
@@ -64,7 +65,7 @@ def format_value(v, column: str = "", *, unit: bool = True) -> str:
             return f"{v * 1e3:.{DIGITS - 1}g} ms" if abs(v) < 1 else f"{v:.{DIGITS - 1}g} s"
         if column == "speedup":
             return f"{v:.{DIGITS - 1}g}×"
-        return f"{v:.{DIGITS}g}"
+        return format_sig(v, DIGITS)
     return str(v)
 
 
@@ -142,6 +143,21 @@ class Table:
 _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 
+def power_of_ten(v: float, digits: int = 3) -> str:
+    """``v`` to ``digits`` significant digits as a power of ten in Unicode (no e-notation, safe in HTML and in
+    a glued phrase): ``power_of_ten(2.5716e-05, 2)`` is ``"2.6 × 10⁻⁵"``, ``power_of_ten(6e-06, 1)`` ``"6 × 10⁻⁶"``."""
+    mantissa, exponent = f"{float(v):.{max(digits, 1) - 1}e}".split("e")
+    return f"{mantissa} × 10{str(int(exponent)).translate(_SUPERSCRIPT)}"
+
+
+def printed_digits(v: float) -> int:
+    """The significant digits of the shortest text of ``v`` (``0.000006``: 1, ``0.082541``: 5): the digits a
+    published value was printed with, where it is stored as the float of that text."""
+    if float(v) == 0 or not np.isfinite(float(v)):
+        return 1
+    return len(Decimal(repr(abs(float(v)))).normalize().as_tuple().digits)
+
+
 def format_sig(v, digits: int = 3) -> str:
     """A number for a headline table: ``digits`` significant digits, in scientific notation (``3.81 × 10⁻⁵``) when
     its magnitude is below 10⁻³ or at least 10⁵; integers exactly; ``None`` or NaN as an em dash."""
@@ -153,8 +169,7 @@ def format_sig(v, digits: int = 3) -> str:
     if not np.isfinite(v):
         return "—"
     if v != 0 and not 1e-3 <= abs(v) < 1e5:
-        mantissa, exponent = f"{v:.{digits - 1}e}".split("e")
-        return f"{mantissa} × 10{str(int(exponent)).translate(_SUPERSCRIPT)}"
+        return power_of_ten(v, digits)
     rounded = float(f"{v:.{digits}g}")
     if abs(rounded) >= 10 ** digits:  # 12,345 to three digits: 12,300, never 1.23e+04
         return f"{rounded:,.0f}"
