@@ -14,7 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Table", "Headline", "headline", "format_sig", "power_of_ten", "printed_digits", "paper_table", "format_value", "span_text", "change_text",
+__all__ = ["Table", "Headline", "headline", "format_sig", "power_of_ten", "printed_digits", "paper_table",
+           "format_value", "span_text", "change_text",
            "glue_all", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
 
 
@@ -46,7 +47,8 @@ MAX_COLUMNS = 6
 
 
 def format_value(v, column: str = "", *, unit: bool = True) -> str:
-    """One table cell: :data:`DIGITS` significant digits (below 10⁻³ as ``2.572 × 10⁻⁵``, :func:`format_sig`); times (column ``time``, seconds) as ``12.3 ms`` or
+    """One table cell: :data:`DIGITS` significant digits (below 10⁻³ as ``2.572 × 10⁻⁵``, :func:`format_sig`);
+    times (column ``time``, seconds) as ``12.3 ms`` or
     ``2.43 s`` (without ``unit``: seconds, as a plain number); speed-ups as ``41.2×``; integers exactly; a missing
     value as an em dash (empty without ``unit``)."""
     if v is None:
@@ -145,7 +147,8 @@ _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 def power_of_ten(v: float, digits: int = 3) -> str:
     """``v`` to ``digits`` significant digits as a power of ten in Unicode (no e-notation, safe in HTML and in
-    a glued phrase): ``power_of_ten(2.5716e-05, 2)`` is ``"2.6 × 10⁻⁵"``, ``power_of_ten(6e-06, 1)`` ``"6 × 10⁻⁶"``."""
+    a glued phrase): ``power_of_ten(2.5716e-05, 2)`` is ``"2.6 × 10⁻⁵"``, ``power_of_ten(6e-06, 1)``
+    ``"6 × 10⁻⁶"``."""
     mantissa, exponent = f"{float(v):.{max(digits, 1) - 1}e}".split("e")
     return f"{mantissa} × 10{str(int(exponent)).translate(_SUPERSCRIPT)}"
 
