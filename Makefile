@@ -70,6 +70,7 @@ chapter: install
 	@start=$$(date +%s.%N); \
 	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter nbconvert --to notebook --execute notebooks/$(NB).ipynb \
 		--ExecutePreprocessor.kernel_name=$(KERNEL) --ExecutePreprocessor.timeout=1800 \
+		--ExecutePreprocessor.iopub_timeout=300 --ExecutePreprocessor.raise_on_iopub_timeout=True \
 		--output-dir _build/chapters --output $(NB).ipynb; \
 	end=$$(date +%s.%N); \
 	$(BIN)/python scripts/chapter_times.py record $(NB) --start "$$start" --end "$$end" \

@@ -15,6 +15,11 @@ problem are reported, one line each, naming the page and what was found:
   dataclass repr of the package (``Surrogate(``, ``TaskSpec(``, ``MapResult(``, ``MapMetrics(``) or a printed
   ``dict`` of metric names.
 
+A third check reads the sources rather than the pages: every key a ``{glue:...}`` role of a chapter or of a page
+of ``book/`` refers to must be in the glue data the build recorded for its notebook
+(``_build/jupyter_execute/notebooks/NAME.glue.json``).  A key that is missing renders as nothing at all (a
+sentence ending in ": ."), so it is reported as ``missing glue key``, naming the notebook and the key.
+
 The exit status is 1 when any page has a problem.  ``make book`` runs this after the build, and
 ``scripts/book_check.py`` (``make book-check``) reports the same problems per page.
 """
@@ -22,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import html
+import json
 import re
 import sys
 from pathlib import Path
@@ -80,6 +86,49 @@ def page_problems(page: Path) -> list[str]:
     return placeholder_problems(body) + repr_problems(body)
 
 
+#: a glue role and its target: {glue:text}`key:fmt`, {glue}`key`, {glue:text}`../notebooks/NB.ipynb::key:fmt`
+GLUE_ROLE = re.compile(r"\{glue(?::\w+)?\}`([^`]+)`")
+
+
+def glue_refs(source: Path) -> list[tuple[str, str]]:
+    """(notebook stem, key) of every glue role in ``source`` (a notebook's Markdown cells or a Markdown page); a
+    role without ``path::`` refers to the notebook itself."""
+    if source.suffix == ".ipynb":
+        cells = json.loads(source.read_text(encoding="utf-8"))["cells"]
+        text = "\n".join("".join(c["source"]) for c in cells if c["cell_type"] == "markdown")
+    else:
+        text = source.read_text(encoding="utf-8")
+    out = []
+    for target in GLUE_ROLE.findall(text):
+        path, _, key = target.rpartition("::")
+        stem = Path(path).stem if path else source.stem
+        out.append((stem, key.split(":", 1)[0]))
+    return list(dict.fromkeys(out))
+
+
+def glue_problems(sources: list[Path], glue_dir: Path) -> list[str]:
+    """``missing glue key`` for every glue role of ``sources`` whose key the build did not record in
+    ``glue_dir/NB.glue.json`` (every key of a notebook whose glue data is absent)."""
+    data: dict[str, set[str] | None] = {}
+    out = []
+    for source in sources:
+        for stem, key in glue_refs(source):
+            if stem not in data:
+                f = glue_dir / f"{stem}.glue.json"
+                data[stem] = set(json.loads(f.read_text(encoding="utf-8"))) if f.exists() else None
+            keys = data[stem]
+            if keys is None:
+                out.append(f"{source.relative_to(ROOT)}: no glue data for {stem} (looked for {stem}.glue.json)")
+            elif key not in keys:
+                out.append(f"{source.relative_to(ROOT)}: missing glue key {key!r} of {stem}")
+    return list(dict.fromkeys(out))
+
+
+def book_sources() -> list[Path]:
+    """The chapters (``notebooks/*.ipynb``) and the Markdown pages of ``book/`` the build renders."""
+    return sorted((ROOT / "notebooks").glob("*.ipynb")) + sorted((ROOT / "book").glob("*.md"))
+
+
 def book_pages(html_dir: Path) -> list[Path]:
     """The book's pages: every HTML file but the theme's (search, genindex, _static, _sources)."""
     skip = {"search.html", "genindex.html", "py-modindex.html"}
@@ -90,7 +139,10 @@ def book_pages(html_dir: Path) -> list[Path]:
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--html", type=Path, default=ROOT / "_build" / "html")
+    parser.add_argument("--glue", type=Path, default=None,
+                        help="the build's glue data (default: jupyter_execute/notebooks beside --html)")
     args = parser.parse_args(argv)
+    glue_dir = args.glue or args.html.parent / "jupyter_execute" / "notebooks"
     pages = book_pages(args.html)
     if not pages:
         print(f"book_text_check: error: no built pages in {args.html}", file=sys.stderr)
@@ -100,9 +152,18 @@ def main(argv: list[str] | None = None) -> int:
         for p in page_problems(page):
             print(f"FAIL {page.relative_to(args.html).with_suffix('')}: {p}")
         bad += bool(page_problems(page))
+    missing = glue_problems(book_sources(), glue_dir) if glue_dir.is_dir() else []
+    for p in missing:
+        print(f"FAIL glue: {p}")
+    bad_glue = bool(missing)
+    if not glue_dir.is_dir():
+        print(f"book_text_check: no glue data in {glue_dir}; glue keys not checked")
+    else:
+        print(f"book_text_check: {len(missing)} missing glue key(s)" if missing
+              else "book_text_check: every glue key the sources use was recorded")
     print(f"book_text_check: {bad} of {len(pages)} page(s) with unresolved placeholders or raw reprs" if bad
           else f"book_text_check: {len(pages)} pages, no unresolved placeholder and no raw repr")
-    return 1 if bad else 0
+    return 1 if bad or bad_glue else 0
 
 
 if __name__ == "__main__":

@@ -151,3 +151,28 @@ def test_the_text_check_fails_the_build_naming_page_and_key(text_check, tmp_path
     assert "FAIL notebooks/chapter: unresolved placeholder {t4_verdict}" in capsys.readouterr().out
     (tmp_path / "notebooks" / "chapter.html").write_text("<html><article><p>0.0812</p></article></html>")
     assert text_check.main(["--html", str(tmp_path)]) == 0
+
+
+def test_the_text_check_fails_on_a_missing_glue_key(text_check, tmp_path, monkeypatch, capsys):
+    """A glue key a chapter or a page of book/ refers to, absent from the build's glue data, fails the check
+    (a missing key renders as nothing, so the pages alone cannot show it)."""
+    import json
+
+    nb = tmp_path / "09_dem_3d.ipynb"
+    nb.write_text(json.dumps({"cells": [{"cell_type": "markdown", "source": [
+        "meets on {glue:text}`t7_met` densities; ratio {glue:text}`t7_ratio:.3f`"]}]}))
+    page = tmp_path / "figures.md"
+    page.write_text("| {glue:text}`../notebooks/09_dem_3d.ipynb::t7_verdict:s` |")
+    glue = tmp_path / "glue"
+    glue.mkdir()
+    (glue / "09_dem_3d.glue.json").write_text(json.dumps({"t7_met": {}, "t7_ratio": {}}))
+    monkeypatch.setattr(text_check, "ROOT", tmp_path)
+    assert text_check.glue_problems([nb], glue) == []
+    assert text_check.glue_problems([nb, page], glue) == [
+        "figures.md: missing glue key 't7_verdict' of 09_dem_3d"]
+    html = tmp_path / "html"
+    html.mkdir()
+    (html / "index.html").write_text("<html><article><p>fine</p></article></html>")
+    monkeypatch.setattr(text_check, "book_sources", lambda: [nb, page])
+    assert text_check.main(["--html", str(html), "--glue", str(glue)]) == 1
+    assert "FAIL glue: figures.md: missing glue key 't7_verdict'" in capsys.readouterr().out
