@@ -90,13 +90,16 @@ COLUMNS = [("paper", "Paper"), ("native", "Ours: the paper's method"), ("deliver
 def score_keys(item: dict) -> tuple[list[str], list[str]]:
     """The glue keys of a scored item (``"kind": "score"``): its verdict (``{key}_verdict``), the summary keys of
     each metric (``{key}_{metric}_{col}`` for every column, ``_met`` and ``_classical_better``) and the per-case
-    keys (``{key}_{metric}_{case}_{col}``, ``_met``).  The chapter glues them all with ``glue_all(comparison.score_values(), key)``."""
+    keys (``{key}_{metric}_{case}_{col}``, ``_met``); for a metric the paper prints but the verdict does not score
+    (``"shown"``) the summary keys only, ``_met`` counting the cases at most the paper's.  The chapter glues them all with ``glue_all(comparison.score_values(), key)``."""
     score = item["score"]
     cols = [c for c, _ in COLUMNS]
     summary, per_case = [f"{score['key']}_verdict"], []
     for metric in score["metrics"]:
         summary += [f"{score['key']}_{metric}_{c}" for c in cols + ["met", "classical_better"]]
         per_case += [f"{score['key']}_{metric}_{case}_{c}" for case in score.get("cases", []) for c in cols + ["met"]]
+    for metric in score.get("shown", {}):  # shown beside the scored metrics, outside the verdict
+        summary += [f"{score['key']}_{metric}_{c}" for c in cols + ["met"]]
     return summary, per_case
 
 
@@ -129,13 +132,28 @@ def _chapter_link(item: dict, root: Path, in_toc: set[str], text: str) -> str:
     return text
 
 
-def _chapter_cell(item: dict, root: Path, in_toc: set[str], short: bool = False) -> str:
-    """A link from a page in book/ to the item's notebook (code when the notebook is not part of the book); with
-    ``short``, named by its number (``05``) or page name (``intro``)."""
+def chapter_title(notebook: str, root: Path = ROOT) -> str:
+    """The title of a chapter (its first level-1 heading), prefixed by its number: ``05 Reconstructing maps from
+    Beltrami coefficients``; a page of book/ (``book/intro.md``) is the introduction."""
+    path = root / notebook
+    if path.suffix != ".ipynb":
+        return "Introduction"
+    number = path.stem.split("_")[0]
+    if path.exists():
+        for cell in json.loads(path.read_text(encoding="utf-8"))["cells"]:
+            for line in "".join(cell["source"]).splitlines():
+                if cell["cell_type"] == "markdown" and line.startswith("# "):
+                    return f"{number} {line[2:].strip()}"
+    return path.stem
+
+
+def _chapter_cell(item: dict, root: Path, in_toc: set[str]) -> str:
+    """A link from a page in book/ to the item's chapter, named by its title (plain when it is not in the book)."""
     nb = Path(item["notebook"])
-    name = nb.stem.split("_")[0] if short else nb.stem
-    linked = _chapter_link(item, root, in_toc, name)
-    return linked if linked != name else f"`{name}`"
+    title = chapter_title(item["notebook"], root)
+    if nb.suffix == ".md":
+        return f"{{doc}}`{nb.stem}`" if nb.parent.as_posix() == "book" else title
+    return _chapter_link(item, root, in_toc, title)
 
 
 def _scored(items: list[dict]) -> tuple[list[dict], dict[str, list[str]]]:
@@ -149,46 +167,46 @@ def _scored(items: list[dict]) -> tuple[list[dict], dict[str, list[str]]]:
 
 def _footnotes(scored: list[dict]) -> tuple[dict[str, str], list[str]]:
     """A footnote reference per scored item with footnotes, and the definitions (a ``{key}`` in a footnote pasted
-    from the item's chapter, as in the table)."""
-    refs, defs = {}, []
+    from the item's chapter, as in the table; a note that several items carry is defined once)."""
+    refs, defs, seen = {}, [], {}
     for it in scored:
-        notes = it["score"].get("footnotes", [])
-        refs[it["label"]] = "".join(f"[^{it['score']['key']}-{k}]" for k in range(1, len(notes) + 1))
-        defs += [f"[^{it['score']['key']}-{k}]: {paste(note, it['notebook'])}" for k, note in enumerate(notes, start=1)]
+        names = []
+        for k, note in enumerate(it["score"].get("footnotes", []), start=1):
+            text = paste(note, it["notebook"])
+            if text not in seen:  # a note two items share is defined once, referenced by both
+                seen[text] = f"{it['score']['key']}-{k}"
+                defs.append(f"[^{seen[text]}]: {text}")
+            names.append(seen[text])
+        refs[it["label"]] = "".join(f"[^{name}]" for name in names)
     return refs, defs
 
 
 #: the criterion of every scoreboard, stated once above it
 CRITERION = (
-    "**Criterion.** A case is *met* when the paper's method, run by this project, is at most the paper's value: "
-    "the network evaluated on the requested grid itself, then the paper's weight refinement, and nothing else "
-    "(`Surrogate.map(field, n, native=True, refine=True, repair=False)`). Every metric scored is one where lower is "
-    "better. Beside it: the map the project delivers with its options on (the network on its working grid, "
-    "averaged over the symmetries of the square or cube, refined, and repaired or shortened where needed: "
-    "`Surrogate.map(field, n, refine=True, symmetrize=True)`), and the fastest classical solver of the project on the "
-    "same mesh (the flow-based density-equalizing map, or the Linear Beltrami Solver). Times are not scored: the "
-    "paper's were measured on a GPU, and each chapter sets the network's time beside the classical solver's, "
-    "measured on the same CPU in the same run."
+    "**Criterion.** A case is *met* when the paper's method, run here, is at most the paper's value: the network "
+    "on the requested grid, then the paper's weight refinement, nothing else "
+    "(`Surrogate.map(field, n, native=True, refine=True, repair=False)`). Beside it stand the {term}`delivered map` "
+    "(`Surrogate.map(field, n, refine=True, symmetrize=True)`) and the fastest {term}`classical solver` of the "
+    "project on the same mesh. Times are not scored: the paper's were measured on a GPU; each chapter times the "
+    "network and the classical solver on the same CPU in the same run."
 )
 
 
-def _rule() -> str:
-    """The verdict's rule (rfmap.paper.verdicts.VERDICT_RULE), read from the package source so that this script
-    runs without the package installed."""
-    import ast
+def _verdicts() -> tuple[str, str]:
+    """The verdict's rule and the reason for the metrics it scores (rfmap.paper.verdicts.VERDICT_RULE and
+    SCORED_METRICS), read from the package."""
+    sys.path.insert(0, str(ROOT / "src"))
+    from rfmap.paper.verdicts import SCORED_METRICS, VERDICT_RULE
 
-    tree = ast.parse((ROOT / "src/rfmap/paper/verdicts.py").read_text(encoding="utf-8"))
-    rtol = rule = None
-    for node in tree.body:
-        if isinstance(node, ast.Assign) and isinstance(node.targets[0], ast.Name):
-            if node.targets[0].id == "COMPARABLE_RTOL":
-                rtol = ast.literal_eval(node.value)
-            elif node.targets[0].id == "VERDICT_RULE":
-                rule = node.value
-    parts = []
-    for v in rule.values:  # the f-string's pieces: literal text and {COMPARABLE_RTOL:.0e}
-        parts.append(v.value if isinstance(v, ast.Constant) else format(rtol, ".0e"))
-    return "**Verdict.** " + "".join(parts)
+    return "**Verdict.** " + VERDICT_RULE, "**Scored metrics.** " + SCORED_METRICS
+
+
+def _preamble() -> list[str]:
+    rule, metrics = _verdicts()
+    return [CRITERION, "", rule, "", metrics + (
+        " The rows *max |μ| (shown, not scored)* give its means and the number of cases in which the paper's "
+        "method is at most the paper's value; where that number falls short of all cases, scoring max |μ| "
+        "would lower the verdict."), ""]
 
 
 def scoreboard(root: Path = ROOT) -> str:
@@ -200,7 +218,7 @@ def scoreboard(root: Path = ROOT) -> str:
     scored, shown_with = _scored(items)
     refs, defs = _footnotes(scored)
     head = ["Paper item", "Verdict", "Metric", "Paper", "Paper's method (cases met)", "Delivered", "Classical"]
-    lines = [CRITERION, "", _rule(), "",
+    lines = _preamble() + [
              "Values are means over the paper's cases (four test fields, or four grid sides) whose input is the "
              "paper's: the cases the verdict counts.", "",
              "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -209,7 +227,9 @@ def scoreboard(root: Path = ROOT) -> str:
         figs = [numbers[f] for f in shown_with.get(it["label"], [])]
         name = numbers[it["label"]] + (f" ({', '.join(figs)})" if figs else "")
         item = f"{_chapter_link(it, root, in_toc, name)}: {_cell(it['short'])}{refs[it['label']]}"
-        for i, (metric, title) in enumerate(score["metrics"].items()):
+        rows = [(m, t) for m, t in score["metrics"].items()]
+        rows += [(m, f"{t} (shown, not scored)") for m, t in score.get("shown", {}).items()]
+        for i, (metric, title) in enumerate(rows):
             k = f"{score['key']}_{metric}"
             cells = [item if i == 0 else "", paste(f"**{{{score['key']}_verdict}}**", nb) if i == 0 else "",
                      _cell(title), paste(f"{{{k}_paper}}", nb)]
@@ -232,7 +252,7 @@ def full_scoreboard(root: Path = ROOT) -> str:
     scored, _ = _scored(items)
     refs, defs = _footnotes(scored)
     head = ["Paper item", "Case, metric", "Paper", "Paper's method", "Delivered", "Classical", "Met"]
-    lines = [CRITERION, "", _rule(), "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = _preamble() + ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for it in scored:
         score, nb = it["score"], it["notebook"]
         item = (f"{_chapter_link(it, root, in_toc, numbers[it['label']])}{refs[it['label']]}: "
@@ -247,6 +267,11 @@ def full_scoreboard(root: Path = ROOT) -> str:
                 cells += [paste(f"{{{k}_{c}}}", nb) for c, _ in COLUMNS] + [paste(f"{{{k}_met}}", nb)]
                 lines.append("| " + " | ".join(cells) + " |")
                 first = False
+        for metric, title in score.get("shown", {}).items():
+            k = f"{score['key']}_{metric}"
+            cells = ["", _cell(f"mean over the cases, {title} (shown, not scored)")]
+            cells += [paste(f"{{{k}_{c}}}", nb) for c, _ in COLUMNS] + [paste(f"at most the paper's in {{{k}_met}}", nb)]
+            lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines + [""] + defs) + "\n"
 
 
@@ -266,10 +291,12 @@ def _duration(seconds: float | None) -> str:
 def reproduction(root: Path = ROOT) -> str:
     """One row per chapter that makes a figure or table: its items, the command that reruns it and its times."""
     times = load_times(root)
-    chapters: dict[str, list[str]] = {}
-    for it in load_items(root):
+    items = load_items(root)
+    numbers, in_toc = paper_numbers(items), toc_documents(root)
+    chapters: dict[str, tuple[dict, list[str]]] = {}
+    for it in items:
         if it["notebook"].startswith("notebooks/") and it.get("output"):
-            chapters.setdefault(Path(it["notebook"]).stem, []).append(f"`{it['label']}`")
+            chapters.setdefault(Path(it["notebook"]).stem, (it, []))[1].append(numbers[it["label"]])
     lines = []
     for scale in ("ci", "full"):
         info = times.get(scale) or {}
@@ -279,11 +306,12 @@ def reproduction(root: Path = ROOT) -> str:
         else:
             lines.append(f"* `{scale}`: not measured yet (`python scripts/chapter_times.py collect --scale {scale} "
                          f"...`).")
-    lines += ["", "| Chapter | Items | Command | Time at `ci` | Time at `full` |", "| --- | --- | --- | --- | --- |"]
-    for stem, labels in sorted(chapters.items()):
-        t = [(times.get(scale) or {}).get("seconds", {}).get(stem) for scale in ("ci", "full")]
-        lines.append(f"| {stem} | {', '.join(labels)} | `make chapter NB={stem} RFMAP_SCALE=full` | "
-                     f"{_duration(t[0])} | {_duration(t[1])} |")
+    lines += ["", "| Chapter | Paper items | `NB=` | Time at `full` | Time at `ci`, beside the test suite |",
+              "| --- | --- | --- | --- | --- |"]
+    for stem, (it, labels) in sorted(chapters.items()):
+        t = [(times.get(scale) or {}).get("seconds", {}).get(stem) for scale in ("full", "ci")]
+        lines.append(f"| {_chapter_link(it, root, in_toc, chapter_title(it['notebook'], root))} | "
+                     f"{', '.join(labels)} | `{stem}` | {_duration(t[0])} | {_duration(t[1])} |")
     return "\n".join(lines) + "\n"
 
 
@@ -297,7 +325,6 @@ def render_intro(root: Path = ROOT) -> str:
 def render(root: Path = ROOT) -> str:
     items = load_items(root)
     in_toc = toc_documents(root)
-    n_produced = sum(status(it, root) == "produced" for it in items)
     numbers = paper_numbers(items)
     lines = [
         f"<!-- Generated by scripts/make_figures_md.py from {SOURCE.as_posix()}: edit the JSON, then rerun. -->",
@@ -305,8 +332,8 @@ def render(root: Path = ROOT) -> str:
         "# Figures and tables of the paper",
         "",
         "Every figure and table of the paper, numbered as in the paper, with the chapter of this book that "
-        "regenerates it (in `notebooks/`) and the file that chapter writes (in `book/figures/`, when the book is "
-        "built). A row is *produced* when its notebook is part of the repository.",
+        "regenerates it. The chapter writes it to `book/figures/` when the book is built, named after the paper's "
+        "LaTeX label (`fig-population-test.png` for Fig. 7, `tab-population-test.md` and `.csv` for Table 4).",
         "",
         "## The scoreboard, case by case",
         "",
@@ -319,24 +346,25 @@ def render(root: Path = ROOT) -> str:
         "",
         "## Index",
         "",
-        f"{n_produced} of {len(items)} items are produced.",
-        "",
-        "| Item | What it shows | Chapter | File | Status |",
-        "| --- | --- | --- | --- | --- |",
+        "| Item | What it shows | Chapter |",
+        "| --- | --- | --- |",
     ]
     for it in items:
-        nb_cell = _chapter_cell(it, root, in_toc)
-        out = f"`{Path(it['output']).name}`" if it.get("output") else "—"
-        lines.append(f"| {numbers[it['label']]} `{it['label']}` | {_cell(it['description'])} | {nb_cell} | {out} | "
-                     f"{_cell(status(it, root))} |")
+        lines.append(f"| {numbers[it['label']]} | {_cell(it['description'])} | {_chapter_cell(it, root, in_toc)} |")
+    missing = [numbers[it["label"]] for it in items if status(it, root) == "not yet produced"]
+    if missing:
+        lines += ["", f"Not yet produced: {', '.join(missing)}."]
     lines += [
         "",
         "## Reproducing one item",
         "",
         "Each chapter runs on its own from the command line, as the book runs it (the project's kernel, the same "
         "environment, `RFMAP_SCALE` as given: `full` is the default); the executed copy, with its outputs, goes to "
-        "`_build/chapters/`, and the chapter writes its figures and tables to `book/figures/`. The times are wall "
-        "times of the whole chapter, on the machines named below.",
+        "`_build/chapters/`, and the chapter writes its figures and tables to `book/figures/`: "
+        "`make chapter NB=05_beltrami_reconstruction RFMAP_SCALE=full` reruns chapter 05, and the column `NB=` "
+        "gives the name of each. The times are wall times of the whole chapter, on the machines named below; the "
+        "`ci` times were measured while the test suite ran beside the chapters on the same cores, so they can "
+        "exceed the `full` ones.",
         "",
         reproduction(root).rstrip("\n"),
     ]

@@ -130,8 +130,10 @@ def test_figures_md_is_up_to_date():
     mod = _figures_script()
     current = (ROOT / "book" / "figures.md").read_text(encoding="utf-8")
     assert current == mod.render(ROOT), "book/figures.md is stale: run python scripts/make_figures_md.py"
-    for label in PAPER_LABELS:
-        assert f"`{label}`" in current
+    numbers = mod.paper_numbers(_items())
+    index = current.split("## Index", 1)[1]
+    for label in PAPER_LABELS:  # every item by the paper's number, never by its LaTeX label
+        assert f"| {numbers[label]} |" in index and label not in current
 
 
 def test_intro_scoreboard_is_up_to_date():
@@ -194,8 +196,9 @@ def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
     assert "tab:" not in board and "fig:" not in board
     assert "[Table 4 (Fig. 7)](../notebooks/" in board
     rows = [line for line in board.splitlines() if line.startswith("| ")]
-    n_metrics = sum(len(it["score"]["metrics"]) for it in _items() if it["score"]["kind"] == "score")
-    assert len(rows) == 1 + n_metrics <= 16
+    n_metrics = sum(len(it["score"]["metrics"]) + len(it["score"].get("shown", {}))
+                    for it in _items() if it["score"]["kind"] == "score")
+    assert len(rows) == 1 + n_metrics <= 19
     assert board.count("**Criterion.**") == 1 and "is at most the paper's value" in board
     assert board.count("**Verdict.**") == 1 and "*not comparable*" in board
     head = rows[0]
@@ -206,11 +209,17 @@ def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
         assert f"::{key}:s`" in full, key  # pasted by a glue role, not left as text
     for text in (board, full):  # every placeholder became a glue role (a key with a hyphen too)
         left = re.sub(r"\{glue:text\}`[^`]*`", "", text)
-        assert not mod.PLACEHOLDER.search(re.sub(r"\{doc\}`[^`]*`", "", left)), mod.PLACEHOLDER.search(left)
+        left = re.sub(r"\{(doc|term)\}`[^`]*`", "", left)
+        assert not mod.PLACEHOLDER.search(left), mod.PLACEHOLDER.search(left)
+    refs, defs = mod._footnotes([it for it in _items() if it["score"]["kind"] == "score"])
+    assert len({d.split("]:")[0] for d in defs}) == len(defs)  # a caveat two items share is defined once
+    for d in defs:  # every caveat is defined once and referenced
+        name = d.split("]:")[0] + "]"
+        for text in (board, full):
+            assert text.count("\n" + name + ":") == 1 and text.count(name) >= 2, name
     for it in _items():
-        for k in range(1, len(it["score"].get("footnotes", [])) + 1):  # every caveat is referenced and defined
-            ref = f"[^{it['score']['key']}-{k}]"
-            assert board.count(ref) == 2 and full.count(ref) == 2, ref
+        notes = it["score"].get("footnotes", [])
+        assert refs.get(it["label"], "").count("[^") == len(notes), it["label"]
 
 
 def test_scoreboard_pastes_from_the_chapters():

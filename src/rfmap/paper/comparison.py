@@ -43,7 +43,7 @@ from .verdicts import is_comparable, std_ratio, verdict
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
            "timed", "compare_density", "compare_beltrami", "compare_models", "population_comparison",
            "resolution_comparison", "beltrami_comparison", "beltrami_resolution_comparison", "PAPER_METHOD",
-           "DELIVERED", "native_side_by_side"]
+           "DELIVERED", "SHOWN", "native_side_by_side"]
 
 #: The four columns of a comparison, in order.
 METHODS = ("paper", "native", "delivered", "classical")
@@ -59,6 +59,10 @@ METRIC_TITLES = {"std_rho_map": "Std(ρ̃_map)", "std_rho_orig": "Std(ρ̃_orig)
                  "mean_dmu_pl": "mean |Δμ| vs PL", "min_jacobian": "min det J", "n_flipped": "flips",
                  "time": "time", "network_time": "network time", "work_n": "network grid", "alpha": "α",
                  "mu_ratio": "mean |μ|, DEQ / DEM"}
+
+#: Quantities the paper prints, lower being better, that the verdict does not score
+#: (:data:`rfmap.paper.verdicts.SCORED_METRICS`): the scoreboard shows them beside the scored ones.
+SHOWN = ("max_mu",)
 
 #: significant digits of every number of the comparison tables and the scoreboard
 DIGITS = 4
@@ -199,7 +203,8 @@ class Comparison:
 
     def _case_met(self, case: str, metric: str) -> str:
         """The met cell of a case: ``yes`` / ``no`` / ``—``, or for an input that is not the paper's ``n/c`` with
-        the Std ratios (ours, the paper's) of :func:`rfmap.paper.verdicts.std_ratio` for Std(rho~_map)."""
+        the Std ratios (ours, the paper's) of :func:`rfmap.paper.verdicts.std_ratio` for Std(rho~_map), as ``not
+        comparable (ours 0.125, the paper's 0.194)``."""
         if self.comparable(case):
             met = self.met(case, metric)
             return "—" if met is None else ("yes" if met else "no")
@@ -207,7 +212,9 @@ class Comparison:
             return "n/c"
         ours, paper = (std_ratio(self.value(case, m, "std_rho_map"), self.value(case, m, "std_rho_orig"))
                        for m in ("native", "paper"))
-        return "n/c" if ours is None or paper is None else f"n/c; ratio {ours:.3g} vs {paper:.3g}"
+        if ours is None or paper is None:
+            return "n/c"
+        return f"not comparable (ours {ours:.3g}, the paper's {paper:.3g})"
 
     def count(self, metric: str, test: Callable[[str], bool | None] | None = None) -> tuple[int, int]:
         """``(k, m)``: the cases where ``test(case)`` holds (default: :meth:`met`) among the ``m`` it decides."""
@@ -293,8 +300,21 @@ class Comparison:
                 row = score_row(*(self.value(c.name, m, metric) for m in METHODS))
                 row["met"] = self._case_met(c.name, metric)
                 out.update({f"{metric}_{c.name}_{k}": v for k, v in row.items()})
+        for q in self.shown():
+            row = score_row(*(self.mean(m, q, comparable=True) for m in METHODS))
+            out.update({f"{q}_{k}": v for k, v in row.items() if k != "met"})
+            out[f"{q}_met"] = "{} of {}".format(*self.count(q))
         out["verdict"] = self.verdict_word()
         return out
+
+    def shown(self) -> list[str]:
+        """The quantities of :data:`SHOWN` that the paper's table prints: the scoreboard shows them beside the
+        scored metrics (means and ``"k of m"`` cases at most the paper's), outside the verdict."""
+        try:
+            columns = paper_table(self.label)["columns"]
+        except ValueError:  # a figure: no printed table
+            return []
+        return [q for q in SHOWN if q in columns and q not in self.metrics]
 
     def heads(self) -> list[str]:
         return ["paper", "paper's method", "delivered", self.classical]

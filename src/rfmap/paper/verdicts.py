@@ -26,7 +26,7 @@ from ..core.mesh import grid_mesh
 from ..core.metrics import compute_metrics
 from ..fields.paper import get_field, sample_density
 
-__all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "input_std", "is_comparable", "std_ratio", "verdict"]
+__all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "input_std", "is_comparable", "std_ratio", "verdict"]
 
 #: relative agreement of the input's Std(rho~_orig) with the paper's for a case to count as the paper's input (the
 #: paper prints six digits; the inputs rebuilt from its formulas agree to 3e-4 or better)
@@ -38,8 +38,14 @@ VERDICT_RULE = (
     "*reproduced*: the paper's method meets the paper in every scored metric of every case whose input is the "
     "paper's; *partly*: in some of them; *not reproduced*: in none; *not comparable*: no case has the paper's input. "
     "A case's input is the paper's when its Std(ρ̃_orig) on the paper's grid agrees with the paper's to "
-    f"{COMPARABLE_RTOL:.0e} (relative); a case whose input differs is marked *n/c* and compared instead by "
-    "Std(ρ̃_map) / Std(ρ̃_orig), the share of the input's spread the map leaves.")
+    f"within {COMPARABLE_RTOL * 100:g} %; a case whose input differs is marked *not comparable* (*n/c*) and "
+    "compared instead by Std(ρ̃_map) / Std(ρ̃_orig), the share of the input's spread the map leaves.")
+#: why the verdict scores the metrics it does, as the scoreboards state it once
+SCORED_METRICS = (
+    "The verdict scores the mean measures that the paper's losses drive down: the mean errors |Δd| and |Δμ| of a "
+    "Beltrami reconstruction, the density's remaining spread Std(ρ̃_map) and, for DEQ maps, the mean distortion "
+    "mean |μ|. The extremes the paper prints beside them, max |μ| and min det J, are set by a single element each; "
+    "max |μ| is shown next to the scored metrics, outside the verdict, and folds are counted in the chapters.")
 
 
 @lru_cache(maxsize=64)
