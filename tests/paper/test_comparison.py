@@ -17,7 +17,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("value, text", [
-    (0.0825411, "0.08254"), (0.0297, "0.02970"), (3.8104e-05, "0.00003810"), (1234.5, "1234"), (12000.0, "12000"),
+    (0.0825411, "0.08254"), (0.0297, "0.02970"), (3.8104e-05, "3.810 × 10⁻⁵"), (1234.5, "1234"),
+    (12000.0, "12000"), (0.00099996, "0.001000"),
     (-0.0123456, "-0.01235"), (7, "7"), (np.int64(3), "3"), (None, "—"), (float("nan"), "—"), (True, "yes"),
 ])
 def test_one_number_format_of_four_significant_digits(value, text):
@@ -26,6 +27,14 @@ def test_one_number_format_of_four_significant_digits(value, text):
 
 def test_times_carry_their_unit():
     assert (format_time(0.0123456), format_time(2.4321), format_time(None)) == ("12.3 ms", "2.43 s", "—")
+    # three significant digits in every cell, trailing zeros kept; no e-notation above 100 s
+    assert (format_time(0.084), format_time(0.9996), format_time(1234.5)) == ("84.0 ms", "1.00 s", "1,234 s")
+
+
+def test_a_published_value_keeps_the_digits_it_was_printed_with():
+    assert format_number(0.000006, printed=True) == "6 × 10⁻⁶" and format_number(0.05, printed=True) == "0.05"
+    assert format_number(0.082541, printed=True) == "0.08254"
+    assert score_row(0.000006, 0.0000051, None, None)["paper"] == "6 × 10⁻⁶"
 
 
 def _comparison() -> Comparison:
@@ -60,17 +69,17 @@ def test_met_is_the_paper_method_at_most_the_paper():
     assert c.mean("paper", "std_rho_map") == pytest.approx(0.06)
     assert c.speed() == {"a": pytest.approx(0.5), "b": pytest.approx(0.5)}
     v = c.score_values()
-    assert v["std_rho_map_met"] == "1 of 2" and v["std_rho_map_classical_better"] == "2 of 2"
+    assert v["std_rho_map_met"] == "1 of 2" and v["std_rho_map_classical_better"] == "both"
     assert v["std_rho_map_paper"] == "0.06000" and v["std_rho_map_b_met"] == "no"
-    assert "1 of 2" in c.verdict() and "flow solver does better than the paper's method on 2 of 2" in c.verdict()
+    assert "1 of 2" in c.verdict() and "flow solver does better than the paper's method on both." in c.verdict()
     assert score_row(None, 0.1, 0.1, 0.1)["met"] == "—"
 
 
 def test_table_is_shaped_like_the_paper_one_block_per_case():
     lines = _comparison().to_markdown().splitlines()
     assert lines[0] == "| case | quantity | paper | paper's method | delivered | flow solver | met |"
-    assert lines[2] == "| a | Std(ρ̃_map) | 0.08000 | 0.05000 | 0.04000 | 0.01000 | yes |"
-    assert lines[3] == "|  | time | 10 ms | 20 ms | 10 ms | 10 ms |  |"
+    assert lines[2] == "| a | Std(ρ̃_map) | 0.08 | 0.05000 | 0.04000 | 0.01000 | yes |"  # the paper's as printed
+    assert lines[3] == "|  | time | 10.0 ms | 20.0 ms | 10.0 ms | 10.0 ms |  |"
     assert len(lines) == 2 + 2 * 2
 
 
@@ -181,9 +190,9 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     assert (v["std_rho_map_native"], v["std_rho_map_paper"]) == ("0.07000", "0.08000")
     assert c.mean("native", "std_rho_map") == pytest.approx(0.095)
     assert v["std_rho_map_rect-peak_met"] == (
-        f"not comparable (ours {0.12 / 0.6:.3g}, the paper's {0.09 / 0.480728:.3g})")
+        f"not comparable (ours {0.12 / 0.6:.3g}, the paper's {0.09 / 0.480728:.3g} as Std(ρ̃_map) / Std(ρ̃_orig))")
     assert c.to_markdown().splitlines()[4].endswith(
-        "| not comparable (ours 0.2, the paper's 0.187) |")
+        "| not comparable (ours 0.2, the paper's 0.187 as Std(ρ̃_map) / Std(ρ̃_orig)) |")
     c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses
     assert c.score_values()["verdict"] == "not reproduced (0 of 1)"
 

@@ -37,7 +37,8 @@ from ..finish import quiet_quality
 from ..fields.paper import DENSITIES, PAPER_N, TEST_FIELDS, get_field, sample_mu
 from ..core.result import MapResult
 from .reproduce import beltrami_values, density_values, exact_beltrami_result
-from .tables import paper_table
+from ..core.wording import of_count
+from .tables import paper_table, power_of_ten, printed_digits
 from .verdicts import is_comparable, std_ratio, verdict
 
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
@@ -68,14 +69,16 @@ SHOWN = ("max_mu",)
 DIGITS = 4
 
 
-def format_number(v, digits: int = DIGITS) -> str:
-    """One number format for every table of the comparisons: ``digits`` significant digits in positional notation
-    (``0.08254``, ``0.00003810``, ``1234``), integers exactly, ``None`` or NaN as an em dash.
+def format_number(v, digits: int = DIGITS, *, printed: bool = False) -> str:
+    """One number format for every table of the comparisons and the scoreboard: ``digits`` significant digits in
+    positional notation (``0.08254``, ``1234``), below 10⁻³ as a power of ten (``3.810 × 10⁻⁵``, never
+    e-notation or a run of zeros), integers exactly, ``None`` or NaN as an em dash.  With ``printed`` (a published
+    value) no more digits than the value was printed with: the paper's 0.000006 stays ``6 × 10⁻⁶``.
 
     Examples
     --------
-    >>> format_number(0.0825411), format_number(3.8104e-05), format_number(7)
-    ('0.08254', '0.00003810', '7')
+    >>> format_number(0.0825411), format_number(3.8104e-05), format_number(7), format_number(6e-06, printed=True)
+    ('0.08254', '3.810 × 10⁻⁵', '7', '6 × 10⁻⁶')
     """
     if v is None:
         return "—"
@@ -86,17 +89,25 @@ def format_number(v, digits: int = DIGITS) -> str:
     v = float(v)
     if not np.isfinite(v):
         return "—"
-    if v != 0 and abs(v) < 1e-6:  # rounding noise of an exact zero, or a value too small to matter here
-        return f"{v:.{digits - 1}e}"
+    if printed:
+        digits = min(digits, printed_digits(v))
+    if v != 0 and abs(float(f"{v:.{digits - 1}e}")) < 1e-3:
+        return power_of_ten(v, digits)
     return format(Decimal(f"{v:.{digits - 1}e}"), "f")
 
 
 def format_time(seconds) -> str:
-    """A time with its unit and three significant digits: ``12.3 ms``, ``2.43 s``; ``None`` as an em dash."""
+    """A time with its unit and three significant digits, trailing zeros kept so that times in one table read
+    alike: ``12.3 ms``, ``84.0 ms``, ``2.43 s``; from 100 s whole seconds (``1,234 s``); ``None`` as an em dash."""
     if seconds is None:
         return "—"
     s = float(seconds)
-    return f"{s * 1e3:.3g} ms" if s < 1 else f"{s:.3g} s"
+    ms = float(f"{s * 1e3:.3g}")
+    if ms < 1000:
+        return f"{ms:#.3g}".rstrip(".") + " ms"
+    if s < 99.95:
+        return f"{float(f'{s:.3g}'):#.3g}".rstrip(".") + " s"
+    return f"{s:,.0f} s"
 
 
 def _met(native, paper) -> bool | None:
@@ -105,11 +116,13 @@ def _met(native, paper) -> bool | None:
     return bool(native <= paper)
 
 
-def score_row(paper, native, delivered, classical) -> dict[str, str]:
+def score_row(paper, native, delivered, classical, *, published: bool = True) -> dict[str, str]:
     """The four values of one scoreboard cell and its verdict, as the book pastes them: each number by
-    :func:`format_number`, ``met`` ``yes`` / ``no`` (``—`` without a paper value)."""
+    :func:`format_number` (``paper`` with no more digits than it was printed with, unless it is not a
+    ``published`` value but, say, a mean of them), ``met`` ``yes`` / ``no`` (``—`` without a paper value)."""
     met = _met(native, paper)
-    return {"paper": format_number(paper), "native": format_number(native), "delivered": format_number(delivered),
+    return {"paper": format_number(paper, printed=published), "native": format_number(native),
+            "delivered": format_number(delivered),
             "classical": format_number(classical), "met": "—" if met is None else ("yes" if met else "no")}
 
 
@@ -214,7 +227,7 @@ class Comparison:
                        for m in ("native", "paper"))
         if ours is None or paper is None:
             return "n/c"
-        return f"not comparable (ours {ours:.3g}, the paper's {paper:.3g})"
+        return f"not comparable (ours {ours:.3g}, the paper's {paper:.3g} as Std(ρ̃_map) / Std(ρ̃_orig))"
 
     def count(self, metric: str, test: Callable[[str], bool | None] | None = None) -> tuple[int, int]:
         """``(k, m)``: the cases where ``test(case)`` holds (default: :meth:`met`) among the ``m`` it decides."""
@@ -262,7 +275,7 @@ class Comparison:
         return (f"On this machine the {self.classical} takes a median {format_time(tc)} per case; the paper's method "
                 f"takes {format_time(tn)} (the network alone {format_time(tnet)}), {ratio:.3g} times the "
                 f"{self.classical}'s time, and the delivered map {format_time(td)}. The {self.classical} does "
-                f"better on {kc} of {mc} cases: averaged over the cases, {METRIC_TITLES[metric]} is "
+                f"better on {of_count(kc, mc, 'case')}: averaged over the cases, {METRIC_TITLES[metric]} is "
                 f"{acc['classical']} for the {self.classical}, {acc['native']} for the paper's method and "
                 f"{acc['delivered']} delivered.")
 
@@ -288,22 +301,23 @@ class Comparison:
 
     def score_values(self) -> dict[str, str]:
         """The numbers the scoreboard pastes, as formatted text: for every metric ``{metric}_{col}`` (the mean over
-        the comparable cases of each column of :data:`METHODS`, those the counts and the verdict judge), ``{metric}_met`` and ``{metric}_classical_better``
-        (``"k of m"``), and per case ``{metric}_{case}_{col}`` and ``{metric}_{case}_met``."""
+        the comparable cases of each column of :data:`METHODS`, those the counts and the verdict judge),
+        ``{metric}_met`` and ``{metric}_classical_better`` (``"3 of 4"``, ``"all 4"``, ``"none of the 4"``:
+        :func:`rfmap.core.wording.of_count`), and per case ``{metric}_{case}_{col}`` and ``{metric}_{case}_met``."""
         out: dict[str, str] = {}
         for metric in self.metrics:
-            row = score_row(*(self.mean(m, metric, comparable=True) for m in METHODS))
+            row = score_row(*(self.mean(m, metric, comparable=True) for m in METHODS), published=False)
             out.update({f"{metric}_{k}": v for k, v in row.items() if k != "met"})
-            out[f"{metric}_met"] = "{} of {}".format(*self.count(metric))
-            out[f"{metric}_classical_better"] = "{} of {}".format(*self.classical_better(metric))
+            out[f"{metric}_met"] = of_count(*self.count(metric))
+            out[f"{metric}_classical_better"] = of_count(*self.classical_better(metric))
             for c in self.cases:
                 row = score_row(*(self.value(c.name, m, metric) for m in METHODS))
                 row["met"] = self._case_met(c.name, metric)
                 out.update({f"{metric}_{c.name}_{k}": v for k, v in row.items()})
         for q in self.shown():
-            row = score_row(*(self.mean(m, q, comparable=True) for m in METHODS))
+            row = score_row(*(self.mean(m, q, comparable=True) for m in METHODS), published=False)
             out.update({f"{q}_{k}": v for k, v in row.items() if k != "met"})
-            out[f"{q}_met"] = "{} of {}".format(*self.count(q))
+            out[f"{q}_met"] = of_count(*self.count(q))
         out["verdict"] = self.verdict_word()
         return out
 
@@ -330,7 +344,7 @@ class Comparison:
                 if q == "time":
                     cells += [format_time(self.value(c.name, m, q)) for m in METHODS] + [""]
                 else:
-                    cells += [format_number(self.value(c.name, m, q)) for m in METHODS]
+                    cells += [format_number(self.value(c.name, m, q), printed=m == "paper") for m in METHODS]
                     cells.append(self._case_met(c.name, q))
                 lines.append("| " + " | ".join(cells) + " |")
         return "\n".join(lines)
@@ -342,8 +356,9 @@ class Comparison:
         for metric in self.metrics:
             k, m = self.count(metric)
             kc, mc = self.classical_better(metric)
-            parts.append(f"{METRIC_TITLES[metric]}: the paper's method is at most the paper's value on {k} of {m} "
-                         f"cases; the {self.classical} does better than the paper's method on {kc} of {mc}.")
+            parts.append(f"{METRIC_TITLES[metric]}: the paper's method is at most the paper's value on "
+                         f"{of_count(k, m, 'case')}; the {self.classical} does better than the paper's method on "
+                         f"{of_count(kc, mc)}.")
         return " ".join(parts)
 
     def full_quantities(self) -> list[str]:
@@ -370,7 +385,7 @@ class Comparison:
                     elif isinstance(v, (list, tuple)):
                         cells.append(", ".join(f"{float(a):.3g}" for a in v))
                     else:
-                        cells.append(format_number(v))
+                        cells.append(format_number(v, printed=m == "paper"))
                 lines.append("| " + " | ".join(cells) + " |")
         return "\n".join(lines)
 
