@@ -10,3 +10,16 @@ def test_differences_leave_out_run_settings_and_flatten_sections():
     assert text.startswith("`a` and `b` differ in weight average decay (none against 0.999), Beltrami weight λ")
     assert text.endswith("and training steps (1,000 against 20)")
     assert differences_text({"a": {"config": a}, "b": {"config": a}}) == "`a` and `b` differ in training steps (0 against 0)"
+
+
+def test_differences_table_has_a_row_per_setting_and_a_column_per_model():
+    from rfmap.paper.recipes import differences_table
+
+    a = {"name": "a", "lr": 2e-4, "ema": None, "n_range": [48, 96]}
+    b = {"name": "b", "lr": 7e-5, "ema": 0.999, "n_range": [64, 96]}
+    md = differences_table({"a": {"config": a, "cumulative_steps": 1000}, "b": {"config": b, "steps": 20}})
+    lines = md.splitlines()
+    assert lines[0] == "| setting | `a` | `b` |"
+    assert "| weight average decay | — | 0.999 |" in lines
+    assert "| training grid sides | 48 to 96 | 64 to 96 |" in lines
+    assert lines[-1] == "| training steps (cumulative) | 1,000 | 20 |"

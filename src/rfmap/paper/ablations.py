@@ -52,7 +52,7 @@ def refinement_study(sur, fields, n: int, title: str = "") -> Table:
 
 def refinement_summary(table: Table) -> dict:
     """Counts over the fields of a :func:`refinement_study`: ``fields``, ``objective_lowered`` (refinement lowered its
-    objective, or kept it: never raised), ``metric_lowered`` and ``metric_raised`` (the table's metric), and the
+    objective, or kept it: never raised), ``metric_lowered`` and ``metric_raised`` (the table's metric, as the table prints it), and the
     ``worst`` field (largest rise of the metric, relative) with its two values as text."""
     fields = list(dict.fromkeys(c for c, _, _ in table.rows))
     out = {"fields": len(fields), "objective_lowered": 0, "metric_lowered": 0, "metric_raised": 0}
@@ -61,8 +61,9 @@ def refinement_summary(table: Table) -> dict:
         a, r = (table.value(f, m, "metric") for m in ("α = 1", "refined"))
         oa, o = (table.value(f, m, "objective") for m in ("α = 1", "refined"))
         out["objective_lowered"] += int(o <= oa)
-        out["metric_lowered"] += int(r < a)
-        out["metric_raised"] += int(r > a)
+        differ = format_number(r) != format_number(a)  # a change the table does not print is no change
+        out["metric_lowered"] += int(r < a and differ)
+        out["metric_raised"] += int(r > a and differ)
         if a > 0 and r / a - 1 > rise:
             worst, rise = f, r / a - 1
     out["worst"] = "none" if worst is None else (

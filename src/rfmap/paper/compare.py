@@ -23,10 +23,10 @@ from ..fields.paper import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
 from ..training import train
 from .generalization import generalization_table
-from .tables import Table
+from .tables import Table, format_sig
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
-           "generalization_tables", "inference_table", "race", "wins"]
+           "generalization_tables", "inference_table", "race", "wins", "folded_cell", "side_by_side"]
 
 
 def parameter_count(model) -> int:
@@ -190,3 +190,45 @@ def wins(table: Table, column: str = "std_rho_map", *, lower: bool = True) -> di
         for m, v in vals.items():
             count[m] = count.get(m, 0) + int(v == best)
     return count
+
+
+def folded_cell(value, flips: int = 0, folded: int | None = None) -> str:
+    """One cell of a headline table.  Std of a folded map (negative areas) is not a density spread, so a single
+    folded map reads ``folded (n flips)``; a value over several fields (read the median) says how many of them
+    folded: ``0.152 (3 folded, 109 flips)``."""
+    if value is None:
+        return "—"
+    if flips and folded is None:
+        return f"folded ({flips:,} flips)"
+    if flips and folded:
+        return f"{format_sig(value)} ({folded} folded, {flips:,} flips)"
+    return format_sig(value)
+
+
+def side_by_side(table: Table, columns: dict, case_title: str) -> str:
+    """One row per case of a comparison table, one column per (method, column) pair, as Markdown.
+
+    ``columns`` maps a header to ``(method, column)``.  A raw map that folds (``n_flipped`` > 0 in a row of
+    :func:`paper_fields_table`, :func:`resolution_table` or :func:`points_table`) reads ``folded (n flips)``
+    in its ``raw_std`` column; a row over several fields (:func:`generalization_tables`, with a ``folded``
+    count) keeps its value and says how many of its maps folded (:func:`folded_cell`); times carry their unit."""
+    cases = list(dict.fromkeys(c for c, _, _ in table.rows))
+    vals = {(c, m): v for c, m, v in table.rows}
+
+    def cell(case, method, column):
+        v = vals.get((case, method))
+        if v is None or v.get(column) is None:
+            return "—"
+        if column == "time":
+            from .comparison import format_time
+
+            return format_time(v[column])
+        flips = int(v.get("n_flipped") or 0)
+        if "folded" in v:
+            return folded_cell(v[column], flips, int(v["folded"]))
+        return folded_cell(v[column], flips if column == "raw_std" else 0)
+
+    head = [case_title, *columns]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join([c] + [cell(c, m, col) for m, col in columns.values()]) + " |" for c in cases]
+    return "\n".join(lines)

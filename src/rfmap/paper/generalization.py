@@ -29,8 +29,9 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     Density models: Std(rho~_map) of the raw network map, of the map with weight refinement (and what
     ``Surrogate.map`` does by default about folds: coarser working grids in 3D, then the repair), and of the
     classical diffusion DEM with the model's boundary; Beltrami models: mean vertex distance (``mean_dd``) to the
-    exact random map, ours against the Linear Beltrami Solver.  Rows: each kind of field and ``all``; columns: mean
-    and worst metric, flipped elements of the raw network map, and mean time.
+    exact random map, ours against the Linear Beltrami Solver.  Rows: each kind of field and ``all``; columns: mean,
+    median and worst metric, flipped elements of the map and the number of fields whose map folds (``folded``; the
+    metric of a folded map is not a density spread, so read the median there), and mean time.
     ``classical=False`` leaves the classical solver's rows out (when another table already has them);
     ``low_frequency`` (Beltrami models) draws random maps of 1-4 slow modes instead (table
     ``tab:generalization-low-NAME``); ``symmetrize`` (density models) adds the network averaged over symmetries of
@@ -65,7 +66,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     table = Table(f"tab:generalization-{low}{sur.name}",
                   f"{sur.name}: {count} unseen {'low-frequency ' if low else ''}random fields at N = {n} "
                   f"({COLUMN_TITLES.get(key, key)})",
-                  ["mean", "worst", "n_flipped", "time"])
+                  ["mean", "median", "worst", "n_flipped", "folded", "time"])
     kinds = sorted({k for k, _ in rows if k != "all"})
     kinds = kinds + ["all"] if len(kinds) > 1 else ["all"]
     methods = list(dict.fromkeys(m for _, m in rows))
@@ -74,8 +75,10 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
             vals = rows.get((k, method))
             if vals:
                 v = np.array([x[0] for x in vals])
-                table.add(k, method, {"mean": float(v.mean()), "worst": float(v.max()),
+                table.add(k, method, {"mean": float(v.mean()), "median": float(np.median(v)),
+                                      "worst": float(v.max()),
                                       "n_flipped": int(sum(x[1] for x in vals)),
+                                      "folded": int(sum(x[1] > 0 for x in vals)),
                                       "time": float(np.mean([x[2] for x in vals]))})
     return table
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 from ..tasks import get_task
 from .tables import Table
 
-__all__ = ["training_fields_text", "recipe_table", "recipe_differences", "differences_text"]
+__all__ = ["training_fields_text", "recipe_table", "recipe_differences", "differences_text", "differences_table"]
 
 
 def training_fields_text(config: dict) -> str:
@@ -77,3 +77,28 @@ def differences_text(metas: dict) -> str:
     steps = [int(m.get("cumulative_steps", m.get("steps", 0))) for m in (ma, mb)]
     parts.append(f"training steps ({steps[0]:,} against {steps[1]:,})")
     return f"`{na}` and `{nb}` differ in " + ", ".join(parts[:-1]) + (" and " if len(parts) > 1 else "") + parts[-1]
+
+
+def _setting_value(v) -> str:
+    if v is None:
+        return "—"
+    if isinstance(v, (list, tuple)):
+        return " to ".join(_setting_value(x) for x in v) if len(v) == 2 else ", ".join(map(_setting_value, v))
+    if isinstance(v, float):
+        return f"{v:g}"
+    return str(v)
+
+
+def differences_table(metas: dict) -> str:
+    """How two shipped models' training differs, from their metadata (``{name: meta}``), as a Markdown table: one
+    row per setting of :func:`recipe_differences` (named as :data:`SETTING_NAMES` names it, else by its dotted
+    key), one column per model ("—": the setting is absent, i.e. off), the cumulative steps over each model's warm
+    restarts last."""
+    (na, ma), (nb, mb) = metas.items()
+    rows = [(SETTING_NAMES.get(k, f"`{k}`"), _setting_value(x), _setting_value(y))
+            for k, x, y in recipe_differences(ma.get("config") or {}, mb.get("config") or {})]
+    steps = [int(m.get("cumulative_steps", m.get("steps", 0))) for m in (ma, mb)]
+    rows.append(("training steps (cumulative)", f"{steps[0]:,}", f"{steps[1]:,}"))
+    lines = [f"| setting | `{na}` | `{nb}` |", "|---|---|---|"]
+    lines += [f"| {k} | {x} | {y} |" for k, x, y in rows]
+    return "\n".join(lines)

@@ -143,14 +143,15 @@ def _chain_axis(ax, xs, offset: int, budget: int):
     ax.set_xlabel("step of the chain" + (f" (0 to {offset:,}: earlier runs)" if offset else ""))
 
 
-def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1):
+def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: bool = False):
     r"""The learning curves of trained models from their metadata (``Surrogate.meta``): for each model one panel
     for the running mean of the loss and one for the mean held-out validation metric of its last run (log scales),
     against the step counted over its whole ``--init`` chain. The step axis spans the stored steps: the
     ``cumulative_steps - steps`` steps of the earlier runs, whose curves are not stored, are named in its label,
     and the paper's budget of steps (``budgets[name]``) is dashed where it falls inside. The loss panel's title
     gives the chain's steps and their share of the paper's, as the training chapter's budget table counts them.
-    ``ncols`` models per row (two panels each), 7.2 inches wide in all; returns the figure."""
+    ``ncols`` models per row (two panels each), 7.2 inches wide in all; ``mark_folded`` draws open markers on the
+    validated states whose maps folded on some held-out field; returns the figure."""
     import matplotlib.pyplot as plt
 
     names = list(metas)
@@ -168,7 +169,7 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1):
         xs = [s + offset for s in hist.get("step", [])]
         ax.semilogy(xs, hist.get("loss", []), color="tab:blue", lw=1.2)
         plain_log_ticks(ax.yaxis)
-        ax.set_title(f"{name}: {total:,} steps,\n{_percent(100 * total / budget)} of the paper's")
+        ax.set_title(f"{name}: {total:,} steps,\n{_percent(100 * total / budget)} of the paper's epochs as steps")
         ax.set_ylabel("loss (running mean)")
         _chain_axis(ax, xs, offset, budget)
         val = hist.get("validation", [])
@@ -176,6 +177,8 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1):
         if key:
             vx = [v["step"] + offset for v in val]
             ax_val.semilogy(vx, [v[key] for v in val], "o-", color="tab:orange", ms=3, lw=1)
+            if mark_folded:
+                _folded_marks(ax_val, vx, ([v[key] for v in val], val), "tab:orange")
             plain_log_ticks(ax_val.yaxis)
             ax_val.set_ylabel(f"held-out {VAL_NAMES[key]}")
             ax_val.set_title("validation")
@@ -205,12 +208,23 @@ def race_bars(metas: dict, ax=None, *, key: str = "std_rho_map"):
     return ax
 
 
-def validation_vs_time(metas: dict, ax=None, *, key: str | None = None):
+def _folded_marks(ax, xs, val, color):
+    """Open markers on the validated states whose maps folded on some held-out field (``folded_fields`` > 0)."""
+    pts = [(x, y) for x, y, v in zip(xs, *val) if v.get("folded_fields", 0) > 0]
+    if pts:
+        ax.plot(*zip(*pts), "o", ms=5, mfc="white", mec=color, mew=1.2, zorder=3)
+
+
+def validation_vs_time(metas: dict, ax=None, *, key: str | None = None, logx: bool = False,
+                       legend: str = "inside", mark_folded: bool = False):
     """The mean held-out validation metric of each model against the wall time of its last run (minutes), from the
     metadata histories (``Surrogate.meta``); the minutes of the earlier runs of an ``--init`` chain, whose curves are
     not stored, are given in the legend, so that every curve starts at zero and the axis spans the data. ``key``
     defaults to the metric the histories share (``std_rho_map`` for densities, ``mean_dd`` for Beltrami maps); log y
-    axis (linear when the values span less than a factor of 3); returns the axes."""
+    axis (linear when the values span less than a factor of 3); ``logx`` puts the minutes on a log axis too, so that
+    short and long runs both read; ``legend="outside"`` puts the legend below the axes, ``None`` leaves it out;
+    ``mark_folded`` draws open markers on the states whose maps folded on some held-out field (their plain mean
+    includes the Std of a folded map, which is what makes a curve spike); returns the axes."""
     import matplotlib.pyplot as plt
 
     if key is None:
@@ -224,16 +238,27 @@ def validation_vs_time(metas: dict, ax=None, *, key: str | None = None):
             continue
         earlier = float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) - float(meta.get("wall_time", 0.0))
         label = f"{name} (after {earlier / 60:,.0f} min of earlier runs)" if earlier >= 30 else name
-        ax.semilogy([v["elapsed"] / 60 for v in val], [v[key] for v in val], "o-", color=f"C{k}", ms=3, lw=1.2,
-                    label=label)
+        if logx:
+            val = [v for v in val if v["elapsed"] > 0]
+        xs, ys = [v["elapsed"] / 60 for v in val], [v[key] for v in val]
+        ax.semilogy(xs, ys, "o-", color=f"C{k}", ms=3, lw=1.2, label=label)
+        if mark_folded:
+            _folded_marks(ax, xs, (ys, val), f"C{k}")
     ys = [y for line in ax.get_lines() for y in line.get_ydata()]
     if ys and max(ys) < 3 * min(ys):  # a narrow range reads better on a linear axis
         ax.set_yscale("linear")
     else:
         plain_log_ticks(ax.yaxis)
-    ax.set_xlim(left=0)
+    if logx:
+        ax.set_xscale("log")
+        plain_log_ticks(ax.xaxis)
+    else:
+        ax.set_xlim(left=0)
     ax.set(xlabel="wall time of the last run (min)", ylabel=f"held-out mean {VAL_NAMES.get(key, key)}")
-    ax.legend()
+    if legend == "outside":
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.22), ncols=1, frameon=False)
+    elif legend:
+        ax.legend()
     return ax
 
 

@@ -1,0 +1,18 @@
+"""Headline cells of the U-Net/FNO comparison: folded maps are named, not averaged (rfmap.paper.compare)."""
+from rfmap.paper.compare import folded_cell, side_by_side
+from rfmap.paper.tables import Table
+
+
+def test_a_folded_map_reads_folded_with_its_flips():
+    assert folded_cell(127.0, 8264) == "folded (8,264 flips)"
+    assert folded_cell(0.0652, 0) == "0.0652"
+    assert folded_cell(0.152, 109, 3) == "0.152 (3 folded, 109 flips)"
+    assert folded_cell(None) == "—"
+
+
+def test_side_by_side_marks_the_raw_column_only():
+    t = Table("tab:x", "x", ["raw_std", "std_rho_map", "n_flipped"])
+    t.add("256", "U-Net (native)", {"raw_std": 127.0, "std_rho_map": 0.22, "n_flipped": 8264})
+    md = side_by_side(t, {"raw": ("U-Net (native)", "raw_std"),
+                          "repaired": ("U-Net (native)", "std_rho_map")}, "N")
+    assert md.splitlines()[-1] == "| 256 | folded (8,264 flips) | 0.22 |"
