@@ -6,7 +6,7 @@ a whole as a sentence says it: ``all 4 densities``, ``none of the 4``, ``3 of 4`
 """
 from __future__ import annotations
 
-__all__ = ["counted", "of_count"]
+__all__ = ["counted", "of_count", "of_counts"]
 
 #: plurals that do not add "s" or "es"
 _IRREGULAR = {"vertex": "vertices", "matrix": "matrices"}
@@ -73,3 +73,32 @@ def of_count(k: int, n: int, noun: str = "", plural: str | None = None) -> str:
     if k == 0:
         return f"none of the {n}{tail}"
     return f"{k} of {n}{tail}"
+
+
+def of_counts(parts, nouns) -> str:
+    """Several parts of wholes in one phrase, without repeating a count that says nothing: ``parts`` are ``(k, n)``
+    pairs and ``nouns`` the singular noun of each whole (with its qualifier: ``"density with the cube boundary"``).
+    Where every part is whole the phrase is ``"every one of them (...)"`` with the wholes counted, where none holds
+    ``"none of them (...)"``; otherwise each part through :func:`of_count`, joined by commas and "and".
+
+    Examples
+    --------
+    >>> of_counts([(4, 4), (4, 4), (4, 4)], ["density", "density", "side"])
+    'every one of them (4 densities, 4 densities and 4 sides)'
+    >>> of_counts([(1, 3), (0, 4)], ["density", "side"])
+    '1 of 3 densities and none of the 4 sides'
+    """
+    parts = [(int(k), int(n)) for k, n in parts]
+    nouns = list(nouns)
+    if len(parts) != len(nouns):
+        raise ValueError("one noun per part")
+
+    def join(items):
+        return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
+
+    wholes = join([counted(n, noun) for (_, n), noun in zip(parts, nouns)])
+    if all(k == n for k, n in parts):
+        return f"every one of them ({wholes})"
+    if all(k == 0 for k, _ in parts):
+        return f"none of them ({wholes})"
+    return join([of_count(k, n, noun) for (k, n), noun in zip(parts, nouns)])

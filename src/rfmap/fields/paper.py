@@ -295,3 +295,25 @@ def sample_mu(name: str, n: int | None = None, *, points=None, elements=None) ->
         mesh = grid_mesh(n, 2)
         points, elements = mesh.points, mesh.elements
     return f.mu(element_centroids(points, elements))
+
+
+def prism_peak_readings(n: int, heights=(0.5, 1.0, 1.5, 2.0)) -> dict:
+    r"""Std(:math:`\tilde\rho_{\text{orig}}`) on the ``n``-grid (identity map, as every table's input column) of the
+    two readings of the prism of Eq. (peak-3d): ``"replace"``, the value 1 inside the box as printed (the field
+    ``prism-peak-3d``), and ``"add"``, the background plus a height :math:`h` inside the box, one value per height
+    (a dict ``{h: std}``).  Each input is shifted and scaled as every density (:func:`preprocess_density`)."""
+    from ..core.metrics import compute_metrics
+
+    mesh = grid_mesh(n, 3)
+    pts = grid_points(n, 3)
+    x = pts.reshape((n,) * 3 + (3,))
+    inside = ((x[..., 0] > 0.6) & (x[..., 0] < 1.0) & (x[..., 1] > 0.0) & (x[..., 1] < 0.4)
+              & (x[..., 2] > 0.4) & (x[..., 2] < 0.8))
+    background = _multi_freq_3d(x)
+
+    def std(raw):
+        dens = preprocess_density(raw).reshape(-1)
+        return float(compute_metrics(mesh.points, mesh.points, mesh.elements, density=dens).std_rho_orig)
+
+    return {"replace": std(np.where(inside, 1.0, background)),
+            "add": {float(h): std(background + h * inside) for h in heights}}

@@ -6,7 +6,7 @@ import numpy as np
 
 from .figures import ColorScale, color_scale, save_figure, style
 
-__all__ = ["element_rho", "plot_mesh", "plot_slice_outline", "plot_density", "plot_mu", "plot_map_row",
+__all__ = ["element_rho", "plot_mesh", "repair_figure", "plot_slice_outline", "plot_density", "plot_mu", "plot_map_row",
            "plot_beltrami_row", "vertex_error_panels", "population_figure", "map_rows_figure", "beltrami_figure",
            "extreme_figure", "TEXT_WIDTH_IN"]
 
@@ -273,8 +273,11 @@ def beltrami_figure(rows: dict, *, width: float = TEXT_WIDTH_IN, bins: int = 40,
 
 def extreme_figure(original, maps: dict, *, width: float = TEXT_WIDTH_IN, max_lines: int = 20):
     r"""The paper's Fig. 10: (a) :math:`\tilde\rho` of a density on the original grid, then each map of ``maps``
-    (``{label: MapResult}``, two of them: (b), (c)), and below, per map, histograms of :math:`\tilde\rho` on the
-    mapped mesh (d, e) and of :math:`|\mu|` (f, g) on shared axes.
+    (``{label: MapResult}``, two of them: (b), (c)), with its folded triangles filled in red, and below, per map,
+    histograms of :math:`\tilde\rho` on the mapped mesh (d, e) and of :math:`|\mu|` (f, g) on shared axes.  The
+    histograms cover every triangle (the :math:`\tilde\rho` axis reaches the largest value of either map, the
+    :math:`|\mu|` axis 1 or beyond where a folded triangle has :math:`|\mu| > 1`) and count on a logarithmic scale,
+    so that a thin tail stays visible.
 
     Parameters
     ----------
@@ -298,21 +301,55 @@ def extreme_figure(original, maps: dict, *, width: float = TEXT_WIDTH_IN, max_li
     top.colorbar(im, ax=ax[0], location="bottom", shrink=0.9, label=r"$\tilde\rho$ (mean 1)")
     letters = iter("bcdefg")
     for a, (label, r) in zip(ax[1:], maps.items()):
-        plot_mesh(a, r.mapped_points, el, n=_grid_side(r), max_lines=max_lines, title=f"({next(letters)}) {label} map")
+        title = f"({next(letters)}) {label} map"
+        p = np.asarray(r.mapped_points)
+        folded = _folded(p, el)
+        plot_mesh(a, p, el, n=_grid_side(r), max_lines=max_lines,
+                  title=title + (f", {len(folded)} folded (red)" if len(folded) else ""))
+        for t in folded:
+            a.fill(*p[el[t]].T, color="red", zorder=5)
     _frameless(ax)
     hax = bottom.subplots(1, 2 * len(maps))
-    hists = [(r"$\tilde\rho$", lambda r: element_rho(r), (0, 3), "tab:green"),
-             (r"$|\mu|$", lambda r: np.abs(r.mu()), (0, 1), "tab:purple")]
-    for j, (name, value, rng, color) in enumerate(hists):
-        for i, (label, r) in enumerate(maps.items()):
+    values = {"rho": {k: element_rho(r) for k, r in maps.items()}, "mu": {k: np.abs(r.mu()) for k, r in maps.items()}}
+    top_rho = max(3.0, float(np.ceil(max(v.max() for v in values["rho"].values()))))
+    top_mu = max(1.0, float(max(v.max() for v in values["mu"].values())))
+    hists = [(r"$\tilde\rho$", values["rho"], (0, top_rho), "tab:green"),
+             (r"$|\mu|$", values["mu"], (0, top_mu), "tab:purple")]
+    for j, (name, vals, rng, color) in enumerate(hists):
+        for i, label in enumerate(maps):
             a = hax[j * len(maps) + i]
-            a.hist(value(r), bins=50, range=rng, color=color)
+            a.hist(vals[label], bins=50, range=rng, color=color)
+            a.set_yscale("log")
             a.set_title(f"({next(letters)}) {name}, {label}")
             a.set_xlim(*rng)
-            a.set_yticks([])
         pair = hax[j * len(maps):(j + 1) * len(maps)]
         top = max(a.get_ylim()[1] for a in pair)  # one count scale per quantity
         for a in pair:
-            a.set_ylim(0, top)
-    bottom.supylabel("triangles")
+            a.set_ylim(0.8, top)
+    bottom.supylabel("triangles (log scale)")
+    return fig
+
+
+def _folded(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
+    """Indices of the triangles whose mapped orientation is reversed or degenerate (signed area <= 0)."""
+    a, b, c = (points[elements[:, k]] for k in range(3))
+    area = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    return np.flatnonzero(area <= 0)
+
+
+def repair_figure(before, after, elements, *, n: int | None = None, titles=("folded map", "repaired map"),
+                  width: float = TEXT_WIDTH_IN):
+    """Two 2D maps of one mesh side by side, a folded one and its repair, each with its folded triangles filled in
+    red and counted in its title (appendix A's example).  ``before``, ``after``: mapped points, shape (n, 2)."""
+    import matplotlib.pyplot as plt
+
+    elements = np.asarray(elements)
+    fig, axes = plt.subplots(1, 2, figsize=(width, width / 2), layout="constrained")
+    for ax, pts, title in zip(axes, (before, after), titles):
+        pts = np.asarray(pts)
+        folded = _folded(pts, elements)
+        plot_mesh(ax, pts, elements, n=n, title=f"{title}: {len(folded)} folded (red)")
+        for t in folded:
+            ax.fill(*pts[elements[t]].T, color="red", zorder=5)
+    _frameless(axes)
     return fig

@@ -141,19 +141,20 @@ def render_slices(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), window
     return img
 
 
-def volume_rows(results: dict, labels, fig_label: str, *, clim=(0.0, 2.5)):
+def volume_rows(results: dict, labels, fig_label: str | None, *, clim=(0.0, 2.5)):
     r"""The paper's 3D figures, one row per result (keyed by ``labels``): filled slices through the original mesh
     coloured by the input's :math:`\tilde\rho` and through the mapped mesh coloured by the :math:`\tilde\rho` the
     map leaves (:func:`render_slices`: one colour where the map equalizes), and the grid itself on the same three
     slices as the map moves it, coloured by the input's density carried along (:func:`render_lattice`,
     ``carried=True``); one camera (:data:`CAMERA_3D`) and one colour scale with its colour bar.  Saved under
-    ``fig_label`` (7.2 inches wide, readable in the book's text column); returns the figure."""
+    ``fig_label`` (7.2 inches wide, readable in the book's text column; not saved when it is ``None``); returns
+    the figure."""
     import matplotlib.pyplot as plt
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
 
     labels = list(labels)
-    titles = [r"input: $\tilde\rho$ on three slices", r"mapped: $\tilde\rho$ left", "the map: the grid moved"]
+    titles = [r"input: $\tilde\rho$ on three slices", r"mapped: $\tilde\rho$ remaining", "the map: the grid moved"]
     with style():
         fig, axes = plt.subplots(len(labels), 3, figsize=(7.2, 2.25 * len(labels) + 0.9), layout="constrained",
                                  squeeze=False)
@@ -172,5 +173,6 @@ def volume_rows(results: dict, labels, fig_label: str, *, clim=(0.0, 2.5)):
             ax.set_title(t)
         fig.colorbar(ScalarMappable(Normalize(*clim), "viridis"), ax=axes, location="bottom", shrink=0.7,
                      aspect=30, label=r"$\tilde\rho$ (the grid: the input's, carried along)")
-        save_figure(fig, fig_label)
+        if fig_label is not None:
+            save_figure(fig, fig_label)
     return fig
