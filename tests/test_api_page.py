@@ -185,3 +185,25 @@ def test_no_machine_path_in_documented_values():
         shown += [f"{page}: {name}" for name, v in values
                   if isinstance(v, Path) or str(ROOT) in repr(v) or "PosixPath" in repr(v)]
     assert not shown, f"values that print a path of this machine: {shown}"
+
+
+def test_a_reexported_class_or_function_is_documented_where_it_is_defined():
+    """A bare ``:members:`` documents a module's ``__all__``, re-exports included: a class or function that a module
+    imports from another documented module is excluded there (``:exclude-members:``), so that each is documented
+    once, where it is defined (a package's own page of "start here" names excepted)."""
+    homes = {target for _, kind, target, options in _directives() if kind == "automodule" and ":members:" in options}
+    twice = []
+    for page, kind, target, options in _directives():
+        if kind != "automodule" or not re.search(r":members:[ \t]*\n", options):
+            continue
+        mod = importlib.import_module(target)
+        if not hasattr(mod, "__all__") or hasattr(mod, "__path__") and target.count(".") < 2:
+            continue
+        excluded = re.search(r":exclude-members:[ \t]*(.*)\n", options)
+        excluded = {n.strip() for n in excluded.group(1).split(",")} if excluded else set()
+        for name in mod.__all__:
+            obj = getattr(mod, name)
+            home = getattr(obj, "__module__", target) if callable(obj) else target
+            if home != target and home in homes and name not in excluded:
+                twice.append(f"{page}: {target}.{name} (defined in {home})")
+    assert not twice, "documented again where re-exported:\n" + "\n".join(twice)

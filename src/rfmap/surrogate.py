@@ -177,10 +177,10 @@ class Surrogate:
         ``self``.
 
         A trace runs the same operations on the same parameters (shared, not copied: the outputs are equal bit for
-        bit) without the Python overhead of the module calls, about 1.8 ms per evaluation of the shipped U-Nets on
-        a 2-core CPU (2D N = 51: 7.0 -> 5.2 ms; 3D N = 48: 67 -> 62 ms).  Tracing a new shape costs about 0.2 s
-        once (traces are kept, also while tracing is off, until :meth:`to` moves the network), so it pays for many
-        maps of one size (a batch of fields, an animation, a benchmark), not for one.
+        bit) without the Python overhead of the module calls; the saving is a fixed time per evaluation, so it
+        matters most for small grids.  Tracing a new shape costs a one-off compilation (traces are kept, also while
+        tracing is off, until :meth:`to` moves the network), so it pays for many maps of one size (a batch of
+        fields, an animation, a benchmark), not for one.
         A network that cannot be traced (e.g. the FNO, whose padding looks shapes up in a dict) runs eagerly.
         """
         self._tracing = bool(enable)

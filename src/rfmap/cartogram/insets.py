@@ -215,7 +215,7 @@ def cartogram_insets(collection, value: str, insets, options: CartogramOptions |
     Raises
     ------
     ValueError
-        For bad input (:func:`rfmap.cartogram.resize.read_regions`), an unknown inset name, or insets not one per region.
+        For bad input (:func:`rfmap.cartogram.regions.read_regions`), an unknown inset name, or insets not one per region.
     """
     import shapely
 
