@@ -316,3 +316,20 @@ def test_element_population_on_the_grid_path_equals_the_element_list(dim, n):
     a = element_population(mesh.points, mesh.elements, dens)
     b = element_population(mesh.points, mesh.elements, dens, grid_n=n)
     torch.testing.assert_close(a, b, rtol=0, atol=1e-15)
+
+
+def test_residual_scales_weights_each_vertex_mean_by_the_reference_measures():
+    r"""Two triangles of areas 1/2 and 5/2 sharing the edge BC, identity map, density 1 at A, B, C and 4 at D:
+    element densities 1 and 2 (mean 3/2), residuals r = -1/3 and 1/3.  The smooth part at B and C is the
+    measure-weighted mean (1/2 (-1/3) + 5/2 (1/3)) / 3 = 2/9 (a plain mean of the two elements would give 0), at A
+    and D the one element's residual; ``smooth`` is their standard deviation (ddof 0), ``std`` that of r (ddof 1)."""
+    from rfmap.core.metrics import residual_scales
+
+    pts = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [3.0, 3.0]])  # A, B, C, D
+    el = np.array([[0, 1, 2], [1, 3, 2]])
+    s = residual_scales(pts, pts, el, np.array([1.0, 1.0, 1.0, 4.0]))
+    smooth = np.array([-1 / 3, 2 / 9, 2 / 9, 1 / 3])
+    std = math.sqrt(2 / 9)  # of (-1/3, 1/3), ddof 1
+    assert s["std"] == pytest.approx(std, rel=1e-12)
+    assert s["smooth"] == pytest.approx(smooth.std(), rel=1e-12)
+    assert s["element_fraction"] == pytest.approx(1 - smooth.std() ** 2 / std**2, rel=1e-12)

@@ -796,3 +796,65 @@ def test_time_to_accuracy_warms_every_method_up_once(monkeypatch):
         assert [r["field"] for r in rows] == ["random-0", "random-1"] and len(calls) == runs
         if warmup:
             np.testing.assert_array_equal(calls[0], calls[1])  # the warm-up ran on the first field
+
+
+@pytest.mark.parametrize("k,sigma", [(1, 0.05), (3, 0.1), (6, 0.04)])
+def test_gaussian_blur_damps_each_cosine_mode_by_the_gaussians_transform(k, sigma):
+    r"""A Gaussian of standard deviation :math:`\sigma` (mirror walls) multiplies the mode :math:`\cos(\pi k x)` by
+    its Fourier transform at :math:`\omega = \pi k`, :math:`e^{-\pi^2 k^2 \sigma^2 / 2}` (the heat kernel at time
+    :math:`\sigma^2/2`), and leaves the mean alone: exact on the grid's cosine modes, in 2D and 3D; a kernel at
+    time :math:`\sigma^2` would damp it to the square of that factor."""
+    x = np.linspace(0.0, 1.0, 33)
+    factor = math.exp(-0.5 * (math.pi * k * sigma) ** 2)
+    mode = np.cos(math.pi * k * x)[:, None] * np.cos(math.pi * 2 * x)[None, :]  # (k, 2)
+    want = factor * math.exp(-0.5 * (math.pi * 2 * sigma) ** 2) * mode
+    np.testing.assert_allclose(gaussian_blur(1.5 + mode, sigma), 1.5 + want, rtol=0, atol=1e-12)
+    cube = np.cos(math.pi * k * x)[None, None, :] + np.zeros((33, 33, 33))
+    np.testing.assert_allclose(gaussian_blur(cube, sigma), factor * cube, rtol=0, atol=1e-12)
+
+
+def test_a_warm_free_boundary_fills_its_sea_with_the_domains_total_density():
+    r"""From a warm start with a free boundary the residual raster's sea holds the mapped domain's density taken
+    together, total population over total mapped measure :math:`\sum_e p_e / \sum_e |T(e)|`, relative to the
+    mean element density :math:`\operatorname{mean}_e(p_e/|T(e)|)`: checked at the box's corner (deep in the sea)
+    on a map whose elements have unequal measures, where the plain mean of the element densities differs by 3 %."""
+    import torch
+
+    from rfmap.core.geometry import signed_measures
+    from rfmap.core.metrics import element_population
+    from rfmap.solvers.flow import FlowOptions, _Box, _Equality, _Run
+
+    n = 9
+    dens = sample_density("exp-log", n)
+    mesh = grid_mesh(n, 2)
+    x, y = mesh.points[:, 0], mesh.points[:, 1]
+    mapped = np.stack([x + 0.08 * np.sin(np.pi * x) * (1 + y), y + 0.05 * np.sin(np.pi * y)], 1)
+    opts = FlowOptions(boundary="free").checked(2)
+    box, eq = _Box(mesh.points, n, opts), _Equality(dens.reshape(-1), n, 2)
+    run = _Run(dens, mesh.elements, opts, box, warm=True)
+    raster = run.residual_raster(mapped, box.project((mapped + box.shift) / box.scale), eq)
+    pop = element_population(mesh.points, mesh.elements, dens.reshape(-1)).numpy()
+    meas = signed_measures(torch.as_tensor(mapped), torch.as_tensor(mesh.elements)).numpy()
+    rho = pop / meas
+    assert abs(rho.mean() / (pop.sum() / meas.sum()) - 1) > 0.02  # the two means differ here
+    assert raster[0, 0] == pytest.approx(pop.sum() / meas.sum() / rho.mean(), rel=1e-10)
+
+
+@pytest.mark.parametrize("m", [9, 33])
+def test_a_flow_pass_ends_at_the_mean_its_poisson_solve_leaves_out(m):
+    r"""A pass's density runs from :math:`\rho_0` to :math:`\bar\rho = a_0`, the zero cosine coefficient of the raster
+    (its trapezoidal mean), the mode that the Poisson solve :math:`\Delta\phi = \bar\rho - \rho_0` leaves out; so at
+    :math:`t = 1` the velocity is the flux over :math:`a_0` everywhere.  The plain mean of the raster's nodes differs
+    from :math:`a_0` by the half-weighted walls (here about 1 %)."""
+    from rfmap.core.mesh import interpolate
+    from rfmap.solvers.flow import _FlowPass
+
+    s = np.linspace(0.0, 1.0, m)
+    raster = 2.0 + np.cos(np.pi * s)[:, None] + 0.5 * s[None, :] ** 2
+    a0 = cosine_coefficients(raster)[0, 0]
+    fp = _FlowPass(raster)
+    assert fp.mean == pytest.approx(a0, rel=1e-14)
+    assert abs(raster.mean() / a0 - 1) > 1e-3
+    pts = np.random.default_rng(6).uniform(0.0, 1.0, size=(50, 2))
+    flux = interpolate(poisson_flux(raster)[None], pts)[0]  # -grad phi, sampled bilinearly (the pass: in float32)
+    np.testing.assert_allclose(fp.velocity(1.0, pts), flux / a0, rtol=0, atol=1e-5 * np.abs(flux / a0).max())

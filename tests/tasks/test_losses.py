@@ -267,3 +267,29 @@ def test_weighted_mean():
     w = torch.tensor([[1.0, 3.0], [5.0, 1.0]])
     # per row (1 + 9) / 4 = 2.5 and 2, averaged over the batch
     assert float(L.weighted_mean(v, w)) == pytest.approx(2.25)
+
+
+@pytest.mark.parametrize("tangent", [False, True])
+def test_element_density_floors_a_collapsed_element_at_one_percent_of_its_measure(tangent):
+    r"""An element squeezed to :math:`10^{-3}` of its reference measure (and one turned over) counts as holding 1 %
+    of it: :math:`\tilde\rho_i = (p_i / a_0) / (P/A)` with :math:`a_0 = 0.01\,|T_i|`, or along the tangent
+    :math:`p_i/a_0\,(2 - A_i/a_0)`; elements above the floor keep :math:`p_i/A_i`.  :math:`P/A` is the total
+    population over the total mapped measure, the floored elements' true measures included."""
+    ref, el = mesh_t(5)
+    rho = density_on(ref, bump)
+    ref_meas = signed_measures(ref, el)[0]
+    mapped = ref.clone()
+    k = 10  # an interior triangle: its first vertex moved onto the line of the other two, all but a thousandth
+    i, j, m = (int(v) for v in el[k])
+    mapped[0, i] = 0.5 * (ref[0, j] + ref[0, m]) + 1e-3 * (ref[0, i] - 0.5 * (ref[0, j] + ref[0, m]))
+    meas = signed_measures(mapped, el)[0]
+    assert float(meas[k]) == pytest.approx(1e-3 * float(ref_meas[k]), rel=1e-9)
+    pop = rho[0, el].mean(-1) * ref_meas
+    floor = 0.01 * ref_meas
+    want = torch.where(meas >= floor, pop / meas, pop / floor * (2 - meas / floor) if tangent else pop / floor)
+    want = want / (pop.sum() / meas.sum())
+    got, w = L.element_density(ref, mapped, el, rho, tangent=tangent)
+    torch.testing.assert_close(got[0], want, rtol=1e-12, atol=0)
+    assert float(got[0, k]) == pytest.approx(float(pop[k] / floor[k] * (2 - 0.1 if tangent else 1)
+                                                   / (pop.sum() / meas.sum())), rel=1e-12)
+    torch.testing.assert_close(w[0], ref_meas)

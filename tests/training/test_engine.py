@@ -463,3 +463,25 @@ def test_weight_average_follows_its_recursion_and_is_what_ships(tmp_path):
     for name, t in ck["average"]["shadow"].items():
         assert torch.allclose(shipped[name], t.float(), atol=1e-6, rtol=0), name
     assert any(not torch.allclose(shipped[k], ck["model"][k].float()) for k in ck["average"]["shadow"])
+
+
+def test_family_score_weighs_every_family_the_same_however_many_fields_it_has(monkeypatch):
+    """Six validation fields fall into four families, two with two fields (smooth-0 and smooth-4, steps-1 and
+    steps-5) and two with one: the family score is the mean of the four family means of Std(map)/Std(orig), not
+    the mean over the six fields (which would weigh smooth and steps twice)."""
+    from types import SimpleNamespace
+
+    import rfmap.training.validation as V
+
+    sur = Surrogate.untrained(get_config("deq2d-square", "ci").task, base=4, depth=2, n_range=[17, 25])
+    ratios = iter([0.1, 0.5, 0.2, 0.9, 0.3, 0.7])  # smooth-0, steps-1, peak-2, ramp-3, smooth-4, steps-5
+
+    def raw_map(s, field, n, repair=False, native=False):
+        r = next(ratios)
+        return SimpleNamespace(metrics=lambda: SimpleNamespace(std_rho_map=r, std_rho_orig=1.0, n_flipped=0,
+                                                               min_jacobian=0.5))
+
+    monkeypatch.setattr(V, "_held_out_map", raw_map)
+    m = V.evaluate(sur, (17,), count=6)["mean"]
+    assert m["families"] == pytest.approx({"smooth": 0.2, "steps": 0.6, "peak": 0.2, "ramp": 0.9}, rel=1e-12)
+    assert m["family_score"] == pytest.approx((0.2 + 0.6 + 0.2 + 0.9) / 4, rel=1e-12)  # 0.475; per field: 0.45
