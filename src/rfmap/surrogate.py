@@ -83,8 +83,9 @@ class PredictOptions:
     alpha : sequence of d floats, optional
         A fixed stretching vector of a network's map (ignored with ``refine``).
     preprocess : bool
-        Apply the paper's density preprocessing (shift to minimum 0.1, unit mass) to raw values; with ``False`` a
-        positive density is only scaled to unit mass.
+        Apply the density preprocessing to raw values: shift to minimum 0.1 (the paper says only "positive"; 0.1 is
+        an inference from its Std(ρ̃_orig), see :mod:`rfmap.core.inputs`), then unit mass; with ``False`` a positive
+        density is only scaled to unit mass.
     symmetrize : bool or str
         Average a network's displacement over symmetries of the square or cube (:mod:`rfmap.nn.symmetry`).
     """
@@ -418,8 +419,9 @@ class Surrogate:
         alpha : sequence of d floats, optional
             A fixed stretching vector (ignored when ``refine``).
         preprocess : bool
-            Apply the paper's density preprocessing (shift to minimum 0.1, unit mass) to raw values; with
-            ``False`` a positive density is only scaled to unit mass.
+            Apply the density preprocessing to raw values: shift to minimum 0.1 (the paper says only
+            "positive"; 0.1 is an inference from its Std(ρ̃_orig), see :mod:`rfmap.core.inputs`), then unit
+            mass; with ``False`` a positive density is only scaled to unit mass.
         refine_bounds : (float, float), optional
             Search interval of every component of :math:`\\alpha` (default :data:`rfmap.finish.refine.REFINE`).
         repair : bool

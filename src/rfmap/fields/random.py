@@ -61,9 +61,10 @@ class RandomDensityConfig:
         Probability that the field is a *hard* one instead: a single steep ramp
         :math:`1 + \tfrac{k-1}{2}(1 + \tanh((x\cdot n - o)/w))` or a single narrow peak
         :math:`1 + t\cdot(x - \tfrac12) + h\,e^{-|x-c|^2/2w^2}` (equal chances) over a faint copy of the
-        random modes. After the paper's preprocessing (minimum shifted to 0.1) half of the domain of a ramp
-        carries 1/(10k - 9) of the density of the other half, so the equalizing map must shrink that half to a
-        few per cent of its measure: the kind of field where an untrained map folds.  0 by default.
+        random modes. After the density preprocessing (minimum shifted to 0.1, an inference from the paper's
+        Std(ρ̃_orig), see :mod:`rfmap.core.inputs`) half of the domain of a ramp carries 1/(10k - 9) of the
+        density of the other half, so the equalizing map must shrink that half to a few per cent of its measure:
+        the kind of field where an untrained map folds.  0 by default.
     hard_contrast : (float, float)
         Uniform range of a hard ramp's height ratio :math:`k` (raw values from 1 to k); a hard peak's height
         :math:`h` is log-uniform in [1, 2(k_max - 1)].

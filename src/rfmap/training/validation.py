@@ -9,8 +9,9 @@ The set mixes kinds, sharp ones included, so that folds show up during training:
 
 * density tasks: ``smooth`` (a random training-style density without sharp parts), ``steps`` (box steps and
   high-frequency patches), ``peak`` (a narrow Gaussian peak of height 1–8 over a gently tilted background) and
-  ``ramp`` (a steep tanh ramp of height 1–4 across a random direction); after the paper's preprocessing (minimum
-  shifted to 0.1) their largest-to-smallest density ratios lie within those of the training fields (up to ~80);
+  ``ramp`` (a steep tanh ramp of height 1–4 across a random direction); after the density preprocessing (minimum
+  shifted to 0.1, an inference from the paper's Std(ρ̃_orig), see :mod:`rfmap.core.inputs`) their
+  largest-to-smallest density ratios lie within those of the training fields (up to ~80);
 * Beltrami tasks: random boundary-fixing maps (:class:`rfmap.fields.RandomMap`) with their exact image, at sup-norm
   levels of :math:`|\mu|` spread over [0.1, 0.85]; the metric is the mean vertex distance to the exact map.  A
   second set of low-frequency maps (1-4 slow modes) serves reports only.
