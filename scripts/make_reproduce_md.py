@@ -4,8 +4,9 @@
 Usage: python scripts/make_reproduce_md.py [--check]
 
 For every weight file of src/rfmap/weights/ (NAME.safetensors with NAME.json) the section gives the one command that
-trains it again from its parent and, folded, every run of its chain (rfmap.training.lineage: the recorded commands,
-each started from the file the run before it wrote); then the same for every chain of runs that is not shipped yet
+trains it again from its parent and, folded, every run of its chain that a repeat needs (rfmap.training.lineage: the
+recorded commands, each started from the file the run before it wrote; a last run that kept its parent's weights is
+named, not repeated); then the same for every chain of runs that is not shipped yet
 (src/rfmap/data/chains/NAME/state.json).  The section is written between the BEGIN and END lines of the page; the rest
 of the page is prose.  With --check nothing is written; the exit status is 1 when the page differs from what would be
 written.
@@ -19,7 +20,8 @@ import sys
 import textwrap
 from pathlib import Path
 
-from rfmap.training.lineage import Run, chain, load_metadata, repeat_commands, shipped_ancestor, shipped_hashes
+from rfmap.training.lineage import (Run, chain, idle_runs, load_metadata, repeat_commands, shipped_ancestor,
+                                    shipped_hashes, source_run)
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET = Path("book/reproduce.md")
@@ -93,11 +95,11 @@ def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], 
     """A model's facts (its chain, what validation kept, its parent), the command that trains it from its parent
     and, folded, every run of the chain that a repeat needs."""
     runs = chain(meta)
-    last = runs[-1]
+    last, source, idle = runs[-1], source_run(meta), idle_runs(meta)
     steps, seconds = _totals(meta)
     repeat = repeat_commands(meta, model, shipped)
     start = shipped_ancestor(meta, shipped)
-    parent = runs[-2] if len(runs) > 1 else None
+    parent = runs[source.index - 2] if source.index > 1 else None
     lines = [f"({label})=", f"{level} {model}", "",
              f"- **Chain:** {len(runs)} run{'s' if len(runs) != 1 else ''}, {steps:,} steps, {_hours(seconds)}; "
              f"the last run: {last.steps:,} steps on {_threads(meta)}."]
@@ -105,6 +107,11 @@ def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], 
         lines.append("- **Kept:** its parent's weights (no validated state of the last run improved on them)."
                      if last.kept == 0 else
                      f"- **Kept:** the weights of step {last.kept:,} (the best validated state).")
+    if idle:
+        which = (f"Run {idle[0].index}" if len(idle) == 1 else f"Runs {idle[0].index} to {idle[-1].index}")
+        lines.append(f"- **Not needed to reproduce the weights:** {which} kept {'its' if len(idle) == 1 else 'their'} "
+                     f"parent's weights, so the shipped weights are those run {source.index} trained. A repeat ends "
+                     f"with run {source.index}; the commands below leave {which.lower()} out.")
     if parent is None:
         lines.append("- **Parent:** none (freshly initialised weights).")
     elif start and start[0] == parent.index:
@@ -113,7 +120,7 @@ def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], 
         lines.append(f"- **Parent:** the shipped `{start[1]}`{grown}.")
     else:
         lines.append(f"- **Parent:** the weights of run {parent.index}, not shipped.")
-    if start and start[0] != len(runs) - 1:
+    if start and start[0] != source.index - 1:
         lines.append(f"- **Runs 1 to {start[0]}:** those of the shipped `{start[1]}`, so a repeat starts from that "
                      "file.")
     if notes:
@@ -139,14 +146,15 @@ def section(root: Path = ROOT) -> str:
         runs = chain(meta)
         steps, seconds = _totals(meta)
         start = shipped_ancestor(meta, shipped)
-        todo = len(runs) - (start[0] if start else 0)
+        todo = source_run(meta).index - (start[0] if start else 0)
         source = f"the shipped `{start[1]}`" if start else "scratch"
         lines.append(f"| [{model}](retrain-{model}) | {len(runs)} | {steps:,} | {_hours(seconds)} | "
                      f"{todo} run{'s' if todo != 1 else ''} from {source} |")
     lines += ["", "Under each model: its chain, what validation kept of the last run, the parent it starts from, the "
               "one command that trains it from that parent and, folded, every run a repeat needs. Each command "
-              "writes to `runs/retrain/MODEL/run-K`; copy the last run's `MODEL.safetensors` and `MODEL.json` into "
-              "`src/rfmap/weights/` to ship it.", ""]
+              "writes to `runs/retrain/MODEL/run-K`; copy the last repeated run's `MODEL.safetensors` and `MODEL.json` "
+              "into `src/rfmap/weights/` to ship it. A run that kept its parent's weights (validation chose none of "
+              "its states) changed nothing, so where a chain ends with one, the repeat stops before it.", ""]
     for model, meta in metas.items():
         lines += _model_section(f"retrain-{model}", model, meta, shipped)
     if chains:

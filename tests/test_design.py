@@ -3,14 +3,15 @@
 from __future__ import annotations
 
 import importlib.util
+import re
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
 
-from rfmap.paper.design import (DESIGN_PATH, current_value, load_decisions, record, remeasure_command, stale_values,
-                                to_markdown)
+from rfmap.paper.design import (DESIGN_PATH, current_value, display_name, finding, load_decisions, readable_value,
+                                record, remeasure_command, stale_values, to_markdown)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -84,6 +85,50 @@ def test_the_page_says_how_to_re_measure_and_what_is_historical():
             assert f"`{remeasure_command(d)}`" in page
     assert page.count("**Historical record, not re-measured.**") == sum(not d.get("remeasure")
                                                                          for d in load_decisions())
+
+
+def test_headings_and_the_table_of_decisions_show_no_python_reprs():
+    """A section's heading is the constant's name; its value appears in the body, in words (no dict or tuple repr,
+    no quoted strings, no e-notation)."""
+    page = to_markdown()
+    headings = [line for line in page.splitlines() if line.startswith("#")]
+    glance = page[page.index("## At a glance"):page.index("## ", page.index("## At a glance") + 3)]
+    for text in headings + glance.splitlines():
+        assert " = " not in text and "{" not in text and not re.search(r"'\w+'|\de-\d", text), text
+    for d in load_decisions():
+        assert f"### {display_name(d)}\n\n**Value:** {readable_value(d)}\n" in page
+    by = {d["constant"]: d for d in load_decisions()}
+    assert readable_value(by["SMOOTH_PASSES"]).startswith("2D, square boundary: 2; 3D, square boundary: 8")
+    assert readable_value(by["RTOL"]) == "2D: 0.2; 3D: 0.4" and readable_value(by["HYBRID_POLISH"]) == "10⁻⁹"
+    assert readable_value(by["DIFFUSION_SETTINGS"]) == "`refine=1`, `tol_end=0.01`"
+    assert display_name(by["_HARD2 (p_hard)"]) == "`_HARD2` (p_hard)"
+    assert display_name(by["validation score"]) == "validation score"
+
+
+#: decisions whose recorded numbers contradict the chosen value
+CONTRADICTED = ["one grid_sample batch entry per thread", "BATCH_POINTS", "SCAN_POINTS", "_FOLD_HARD3 (fold weight)",
+                "_HARD2 (p_hard)"]
+
+
+def test_findings_say_where_the_numbers_do_not_support_the_value():
+    """A finding is shown in its section with the rows it rests on, their load, and that the constant waits for a
+    new measurement; the page says once that timings under load are not conclusive."""
+    page = to_markdown()
+    assert page.count("Timings recorded under load are not conclusive") == 1
+    by = {d["constant"]: d for d in load_decisions()}
+    assert {c for c, d in by.items() if d.get("finding")} == set(CONTRADICTED)
+    for name in CONTRADICTED:
+        d = by[name]
+        text = "\n".join(finding(d))
+        assert text in page and "does not support the choice" in text
+        for case in d["finding"]["rows"]:
+            row = next(r for r in d["results"] if r["case"] == case)
+            assert case in text and all(str(row[k]) in text for k in ("chosen", "alternative") if row.get(k))
+        if d.get("remeasure"):
+            assert f"load average {d['measured']['load']}" in text and "idle machine" in text
+    broken = {**by["BATCH_POINTS"], "finding": {"text": "x", "rows": ["no such case"]}}
+    with pytest.raises(KeyError):
+        finding(broken)
 
 
 def test_design_record_updates_one_entry(tmp_path):

@@ -5,8 +5,8 @@ import shlex
 
 from rfmap.surrogate import WEIGHTS_DIR
 from rfmap.training.cli import build_parser
-from rfmap.training.lineage import (chain, load_metadata, repeat_command, repeat_commands, retrain_command,
-                                    shipped_ancestor, shipped_hashes)
+from rfmap.training.lineage import (chain, idle_runs, load_metadata, repeat_command, repeat_commands, retrain_command,
+                                    shipped_ancestor, shipped_hashes, source_run)
 
 
 def _meta() -> dict:
@@ -56,6 +56,39 @@ def test_repeat_commands_start_each_run_from_the_previous_runs_file():
     assert retrain_command(_meta(), "m") == steps[-1][1]
 
 
+def _meta_kept_parent() -> dict:
+    """Three runs of one configuration, the last of which kept its parent's weights (selected_step 0)."""
+    return {
+        "lineage": [
+            {"command": "rfmap train --config m --preset full", "steps": 100, "wall_time": 60.0, "sha256": "aa",
+             "preset": "full"},
+            {"command": "rfmap train --config m --preset full --init m", "steps": 500, "wall_time": 120.0,
+             "sha256": "bb", "preset": "full"},
+        ],
+        "command": "rfmap train --config m --preset full --lr 1e-05 --init m",
+        "steps": 300, "wall_time": 30.0, "selected_step": 0, "preset": "full",
+    }
+
+
+def test_a_last_run_that_kept_its_parents_weights_is_not_repeated():
+    meta = _meta_kept_parent()
+    assert source_run(meta).index == 2 and [r.index for r in idle_runs(meta)] == [3]
+    steps = repeat_commands(meta, "m")
+    assert [r.index for r, _ in steps] == [1, 2]
+    assert retrain_command(meta, "m") == steps[-1][1]
+    assert shlex.split(steps[-1][1])[-1] == "runs/retrain/m/run-2" and "--lr" not in shlex.split(steps[-1][1])
+    # a shipped ancestor is looked for before the run that trained the weights
+    assert [r.index for r, _ in repeat_commands(meta, "m", {"aa": "base"})] == [2]
+    # the run's weights count as its parent's only where the parent was not widened (then they hold other tensors)
+    assert source_run(_meta()).index == 3 and idle_runs(_meta()) == []
+    grown = _meta_kept_parent()
+    grown["lineage"][1]["grown"] = {"from": {"base": 8}, "to": {"base": 16}}
+    assert source_run(grown).index == 3
+    other = _meta_kept_parent()
+    other["command"] = "rfmap train --config m2 --preset full --init m"
+    assert source_run(other).index == 3  # another configuration: its weights have another name
+
+
 def test_a_shipped_ancestor_shortens_the_repeat():
     shipped = {"aa": "base-model"}
     assert shipped_ancestor(_meta(), shipped) == (1, "base-model")
@@ -76,7 +109,9 @@ def test_every_shipped_model_has_a_command_that_rfmap_train_accepts():
     parser = build_parser()
     for name, meta in metas.items():
         steps = repeat_commands(meta, name, shipped)
-        assert steps and steps[-1][0].index == len(chain(meta))
+        assert steps and steps[-1][0] == source_run(meta)
+        assert [r.index for r in idle_runs(meta)] == list(range(source_run(meta).index + 1, len(chain(meta)) + 1))
+        assert all(r.kept == 0 for r in idle_runs(meta))  # a run left out kept its parent's weights
         for run, command in steps:
             words = shlex.split(command)
             assert words[:2] == ["rfmap", "train"] and "--resume" not in words

@@ -4,7 +4,11 @@ The record is ``src/rfmap/data/design.json``: one entry per decision with the ``
 chosen ``value`` (as ``repr`` prints it), where to read it (``attribute``: a dotted path in the module, a dict key
 as a path component, ``null`` for a choice that is not a constant), what it sets (``what``), the ``alternatives``
 tried, the ``criterion``, the ``data`` it was measured on, the ``results`` (rows ``case``, ``chosen``,
-``alternative``), ``notes`` and the ``benchmark`` that measures it.
+``alternative``), ``notes`` and the ``benchmark`` that measures it.  Two keys are optional: ``value_keys`` names
+what the keys of a dict value (or the items of a tuple) are, ``"dimension"``, ``"boundary"`` or ``"option"``, so
+that the page can show the value readably (:func:`readable_value`); ``finding`` records where the numbers do not
+support the chosen value: its ``text``, the ``rows`` (by ``case``) that show it and, optionally, ``next``, what is to
+be done before the constant is changed.  The page shows a finding in the decision's section (:func:`finding`).
 
 A decision is either *re-measurable* or a *historical record*.  A re-measurable one names its case of
 ``benchmarks/design.py`` (``remeasure``); that script prints the table again and, with ``--record``, stores the rows
@@ -18,13 +22,17 @@ longer the one in the code.
 """
 from __future__ import annotations
 
+import ast
 import importlib
 import json
+import re
 from pathlib import Path
 from typing import Any
 
+from rfmap.paper.tables import power_of_ten, printed_digits
+
 __all__ = ["DESIGN_PATH", "AREAS", "load_decisions", "current_value", "stale_values", "record", "area",
-           "remeasure_command", "to_markdown"]
+           "remeasure_command", "display_name", "readable_value", "finding", "load_range", "to_markdown"]
 
 #: the record of the design decisions
 DESIGN_PATH = Path(__file__).resolve().parent.parent / "data" / "design.json"
@@ -96,6 +104,112 @@ def remeasure_command(decision: dict[str, Any]) -> str | None:
     return f"{REMEASURE} {key}" if key else None
 
 
+#: how a key of a dict value reads, by the name ``value_keys`` gives it
+_KEY_TEXT = {"dimension": lambda k: f"{k}D", "boundary": lambda k: f"{k} boundary"}
+
+
+def _number(v: Any) -> str:
+    """A scalar of a constant as the page shows it: integers with thousands separators, small and large floats as a
+    power of ten, strings without quotes."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        return str(v)
+    if isinstance(v, int):
+        return f"{v:,}"
+    if v != 0 and not 1e-3 <= abs(v) < 1e5:
+        text = power_of_ten(v, printed_digits(v))
+        return text.removeprefix("1 × ") if v > 0 else text  # 10⁻⁹, not 1 × 10⁻⁹
+    return f"{int(v):,}" if v.is_integer() else repr(v)
+
+
+def _code_words(text: str) -> str:
+    """``text`` with its calls (``score()``) and its names with an underscore (``grid_sample``) as inline code."""
+    return re.sub(r"([A-Za-z_][\w.]*\([\w=, ]*\)|\b[A-Za-z]\w*_\w*\b)", r"`\1`", text)
+
+
+def display_name(d: dict[str, Any]) -> str:
+    """The decision's name for headings and the table of decisions: the constant as inline code (``_HARD2`` (p_hard))
+    where it is one, else its words, never its value."""
+    m = re.fullmatch(r"([A-Za-z_]\w*)(?: \((.*)\))?", d["constant"])
+    if m and (d.get("attribute") or "_" in m.group(1) or m.group(1).isupper()):
+        return f"`{m.group(1)}`" + (f" ({m.group(2)})" if m.group(2) else "")
+    return _code_words(d["constant"])
+
+
+def readable_value(d: dict[str, Any]) -> str:
+    """The decision's value in words: a dict as ``2D: 0.2; 3D: 0.4`` (its keys named by ``value_keys``), settings as
+    ``refine=1``, numbers without e-notation; a value that is not a Python literal as it is recorded, its calls as
+    code."""
+    try:
+        v = ast.literal_eval(d["value"])
+    except (ValueError, SyntaxError):
+        return _code_words(d["value"])
+    names = list(d.get("value_keys") or [])
+
+    def key(k: Any) -> str:
+        parts = k if isinstance(k, tuple) else (k,)
+        names_ = names + [""] * (len(parts) - len(names))
+        return ", ".join(_KEY_TEXT.get(n, str)(p) for n, p in zip(names_, parts))
+
+    if isinstance(v, dict):
+        if names == ["option"]:
+            return ", ".join(f"`{k}={x!r}`" for k, x in v.items())
+        return "; ".join(f"{key(k)}: {_number(x)}" for k, x in v.items())
+    if isinstance(v, (tuple, list)):
+        return ", ".join(key(x) if names else _number(x) for x in v) + (" only" if len(v) == 1 and names else "")
+    if isinstance(v, bool):
+        return f"`{v}`"
+    return _number(v)
+
+
+def _cores(machine: str) -> str:
+    m = re.search(r"(\d+) cores?", machine or "")
+    return f"{m.group(1)} cores" if m else (machine or "an unnamed machine")
+
+
+def load_range(decisions: list[dict[str, Any]] | None = None) -> tuple[float, float, str] | None:
+    """``(lowest, highest load average, cores)`` of the re-measured runs that recorded their load (``None`` when
+    none did); the cores are those of the machines named, joined where they differ."""
+    decisions = load_decisions() if decisions is None else decisions
+    runs = [d["measured"] for d in decisions if (d.get("measured") or {}).get("load") is not None]
+    if not runs:
+        return None
+    loads = [float(m["load"]) for m in runs]
+    cores = " or ".join(dict.fromkeys(_cores(m.get("machine", "")) for m in runs))
+    return min(loads), max(loads), cores
+
+
+def _row_text(r: dict[str, Any]) -> str:
+    parts = [f"chosen value: {r['chosen']}" if r.get("chosen") else "",
+             f"alternatives: {r['alternative']}" if r.get("alternative") else ""]
+    return f"- *{r.get('case')}* — " + "; ".join(p for p in parts if p) + "."
+
+
+def finding(d: dict[str, Any]) -> list[str]:
+    """The section's finding, where the record's numbers do not support the chosen value (``finding`` of the
+    decision): what they show, the rows that show it, how and under what load they were measured, and what is to be
+    done before the constant is changed.  Empty without a finding."""
+    f = d.get("finding")
+    if not f:
+        return []
+    rows = {r.get("case"): r for r in d.get("results") or []}
+    missing = [c for c in f.get("rows", []) if c not in rows]
+    if missing:
+        raise KeyError(f"{d['constant']}: the finding names rows that the record does not hold: {missing}")
+    m = d.get("measured") or {}
+    kind = "re-measurement" if d.get("remeasure") else "record"
+    text = f"**Finding: the {kind} does not support the choice.** {f['text'][0].upper()}{f['text'][1:]}."
+    shown = [_row_text(rows[c]) for c in f.get("rows", [])]
+    if shown:
+        text += " " + ("The row that shows it:" if len(shown) == 1 else "The rows that show it:")
+    end = ""
+    if m.get("load") is not None:
+        end += f"Measured under load average {m['load']} on {_cores(m.get('machine', ''))}. "
+    nxt = f.get("next") or ("to be re-measured on an idle machine before it is changed" if d.get("remeasure")
+                            else "to be measured again before it is changed")
+    end += f"The constant is left as it is, {nxt}."
+    return [":::{warning}", text, ""] + (shown + [""] if shown else []) + [end, ":::", ""]
+
+
 def _cell(text: Any) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ") if text not in (None, "") else "—"
 
@@ -140,7 +254,9 @@ def _status(d: dict[str, Any]) -> list[str]:
 
 
 def _details(d: dict[str, Any]) -> list[str]:
-    lines = [f"({_label(d)})=", f"### `{d['constant']}` = `{d['value']}`", "", f"In `{d['module']}`. {d['what']}", ""]
+    lines = [f"({_label(d)})=", f"### {display_name(d)}", "", f"**Value:** {readable_value(d)}", "",
+             f"In `{d['module']}`. {d['what']}", ""]
+    lines += finding(d)
     if d.get("alternatives"):
         lines += [f"**Alternatives:** {'; '.join(d['alternatives'])}.", ""]
     lines += [f"**Criterion:** {d['criterion']}.", ""]
@@ -166,6 +282,28 @@ def _groups(decisions: list[dict[str, Any]]) -> list[tuple[str, list[dict[str, A
     return [(h, by[h]) for h in order if h in by]
 
 
+def _load_note(decisions: list[dict[str, Any]]) -> list[str]:
+    """The page's one statement on timings under load, with the load range of the runs shown and the decisions
+    whose numbers do not support their value."""
+    loads = load_range(decisions)
+    flagged = [d for d in decisions if d.get("finding")]
+    if not loads and not flagged:
+        return []
+    text = "**Timings recorded under load are not conclusive.**"
+    if loads:
+        lo, hi, cores = loads
+        spread = f"{lo}" if lo == hi else f"{lo} to {hi}"
+        text += (f" The re-measured runs on this page were made at load average {spread} on a machine with "
+                 f"{cores}: other work competed for the cores, and a difference between a chosen value and an "
+                 "alternative can come from that load rather than from the choice.")
+    if flagged:
+        names = ", ".join(f"[{display_name(d)}]({_label(d)})" for d in flagged)
+        text += (f" Where the numbers do not support the chosen value, the section says so under *Finding* "
+                 f"({names}); such a constant stays as it is until it has been measured again (timings on an idle "
+                 "machine).")
+    return [text, ""]
+
+
 def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "src/rfmap/data/design.json") -> str:
     """The page *Design decisions*: how to read it, a table of every decision, then one section per decision."""
     decisions = load_decisions() if decisions is None else decisions
@@ -186,6 +324,7 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
              "- **Historical record**: numbers written down once, when the value was chosen, with the commit that "
              "set the value and the commit that entered the numbers here. No script repeats them; the code has "
              "changed since, so they explain the choice but do not show that it still holds.", "",
+             ] + _load_note(decisions) + [
              "To refresh the re-measurable decisions and this page:", "",
              "```bash",
              "python benchmarks/design.py --record        # every case; or --only NAME [NAME ...]",
@@ -201,7 +340,9 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
             else:
                 entered = (d.get("recorded") or {}).get("entered")
                 how = "historical" + (f" ({entered['date']})" if entered else "")
-            lines.append(f"| [`{d['constant']}`]({_label(d)}) | `{_cell(d['value'])}` | {how} |")
+            if d.get("finding"):
+                how += f"; [**not supported**]({_label(d)})"
+            lines.append(f"| [{_cell(display_name(d))}]({_label(d)}) | {_cell(readable_value(d))} | {how} |")
     lines += ["", f"{len(scripted)} of the {len(decisions)} decisions can be measured again by "
               "`benchmarks/design.py`; the others are historical records.", ""]
     for heading, group in _groups(decisions):

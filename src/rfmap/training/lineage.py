@@ -8,7 +8,9 @@ day", which is no longer the file of that name; :func:`repeat_commands` therefor
 ``k`` starts from the file run ``k - 1`` wrote, and :func:`retrain_command` gives the one command that trains the
 weights again from their parent: a shipped file where the parent's SHA-256 is that of a shipped file, else the
 output of the repeated chain's previous run.  Where an earlier run of the chain wrote weights that are shipped
-(another model's, or an earlier version kept under its own name), the repeat starts from that file.
+(another model's, or an earlier version kept under its own name), the repeat starts from that file.  Where the last
+run kept its parent's weights (validation chose none of its states), the weights are those of the run before it:
+:func:`source_run` is the run that trained them, and the runs after it (:func:`idle_runs`) are not repeated.
 
 A repeat trains with the recorded options and seed.  A run with a ``--time-limit`` stops on the clock and its
 learning-rate schedule follows the elapsed time, so on another machine it trains as long, not for the same steps;
@@ -24,8 +26,8 @@ import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["Run", "chain", "repeat_command", "repeat_commands", "retrain_command", "shipped_ancestor",
-           "shipped_hashes", "load_metadata", "REPEAT_ROOT"]
+__all__ = ["Run", "chain", "source_run", "idle_runs", "repeat_command", "repeat_commands", "retrain_command",
+           "shipped_ancestor", "shipped_hashes", "load_metadata", "REPEAT_ROOT"]
 
 #: where the repeated runs of a chain write their weights: ``runs/retrain/MODEL/run-K``
 REPEAT_ROOT = "runs/retrain"
@@ -105,6 +107,24 @@ def chain(meta: dict) -> list[Run]:
     return runs + [_run(len(runs) + 1, meta, None)]
 
 
+def source_run(meta: dict) -> Run:
+    """The run that trained the weights of metadata ``meta``: the last run of the chain, or, where the last runs each
+    kept their parent's weights (``kept == 0``: validation chose no state of theirs), the latest run before them.  A
+    run counts as keeping its parent's weights only where it trained the same configuration from a parent that was
+    not widened (``grown``), so that its file holds exactly the parent's tensors."""
+    runs = chain(meta)
+    k = len(runs)
+    while k > 1 and runs[k - 1].kept == 0 and runs[k - 1].config == runs[k - 2].config and not runs[k - 2].grown:
+        k -= 1
+    return runs[k - 1]
+
+
+def idle_runs(meta: dict) -> list[Run]:
+    """The runs after :func:`source_run`: each kept its parent's weights, so none is needed to train the weights
+    again (empty where the last run trained them)."""
+    return chain(meta)[source_run(meta).index:]
+
+
 def repeat_command(command: str, *, init: str | None = None, out: str | None = None,
                    preset: str | None = None) -> str:
     """``command`` as a fresh run: ``--resume`` and ``--finish`` dropped, ``--init`` set to ``init`` (or dropped),
@@ -131,9 +151,9 @@ def repeat_command(command: str, *, init: str | None = None, out: str | None = N
 
 
 def shipped_ancestor(meta: dict, shipped: dict[str, str] | None) -> tuple[int, str] | None:
-    """``(k, name)`` of the latest run ``k`` of the chain whose weights are a shipped file (their SHA-256 is that of
-    ``shipped``, ``{sha256: name}``, :func:`shipped_hashes`), or ``None``."""
-    for run in reversed(chain(meta)[:-1]):
+    """``(k, name)`` of the latest run ``k`` before :func:`source_run` whose weights are a shipped file (their SHA-256
+    is that of ``shipped``, ``{sha256: name}``, :func:`shipped_hashes`), or ``None``."""
+    for run in reversed(chain(meta)[:source_run(meta).index - 1]):
         if run.sha256 and run.sha256 in (shipped or {}):
             return run.index, shipped[run.sha256]
     return None
@@ -143,11 +163,12 @@ def repeat_commands(meta: dict, model: str, shipped: dict[str, str] | None = Non
                     root: str = REPEAT_ROOT) -> list[tuple[Run, str]]:
     """The runs that train the weights again and their commands, in order: run ``k`` writes ``ROOT/MODEL/run-k`` and
     starts from the weights run ``k - 1`` wrote there.  Where an earlier run's weights are shipped
-    (:func:`shipped_ancestor`), the list starts after it, from the shipped file (``--init NAME``)."""
+    (:func:`shipped_ancestor`), the list starts after it, from the shipped file (``--init NAME``).  It ends with
+    :func:`source_run`: runs after it kept their parent's weights and are left out (:func:`idle_runs`)."""
     runs = chain(meta)
     start = shipped_ancestor(meta, shipped)
     out = []
-    for run in runs[start[0] if start else 0:]:
+    for run in runs[start[0] if start else 0:source_run(meta).index]:
         if start and run.index == start[0] + 1:
             init = start[1]
         elif run.index > 1:
@@ -162,8 +183,8 @@ def repeat_commands(meta: dict, model: str, shipped: dict[str, str] | None = Non
 def retrain_command(meta: dict, model: str, shipped: dict[str, str] | None = None,
                     root: str = REPEAT_ROOT) -> str:
     """The one command that trains weights ``model`` (metadata ``meta``) again from their parent: the last of
-    :func:`repeat_commands`, whose ``--init`` is a shipped model where the parent is shipped, else the weights the
-    repeated previous run writes (none for a chain of one run)."""
+    :func:`repeat_commands` (the command of :func:`source_run`), whose ``--init`` is a shipped model where the parent
+    is shipped, else the weights the repeated previous run writes (none for a chain of one run)."""
     return repeat_commands(meta, model, shipped, root)[-1][1]
 
 
