@@ -48,9 +48,9 @@ def test_summary_table_is_one_table_of_every_method_and_findings_quote_the_cases
     lines = table.to_markdown().splitlines()
     assert len(table.rows) == 2 * 5 and sum(line.startswith("|---") for line in lines) == 1
     found = hybrid_findings(rows, dict(zip((2, 3), CASES)))
-    assert found["flow_speed2"] == "10" and found["guard_warm"] == 2 and found["guard_worse"] == 0
-    assert found["hyb_time3"] == "0.4" and found["hyb_std3"] == "1"
+    assert found["flow_speed2"] == "10.0" and found["guard_warm"] == 2 and found["guard_worse"] == 0
+    assert found["hyb_time3"] == "0.400" and found["hyb_std3"] == "1.00"
     # against the flow (0.1 s, Std 0.1): the surrogate 0.05 s at Std 0.3, the hybrid 0.4 s; times with their unit
-    assert (found["sur_vs_flow2"], found["sur_abs2"], found["sur_std_vs_flow2"]) == ("0.5", "0.3", "3")
-    assert found["hyb_vs_flow3"] == "4" and found["ng_vs_flow3"] == "2" and found["flow_wall2"] == "100 ms"
+    assert (found["sur_vs_flow2"], found["sur_abs2"], found["sur_std_vs_flow2"]) == ("0.500", "0.300", "3.00")
+    assert found["hyb_vs_flow3"] == "4.00" and found["ng_vs_flow3"] == "2.00" and found["flow_wall2"] == "100 ms"
     assert (found["n_methods"], found["method_names"]) == (4, "diffusion, flow, surrogate, hybrid")

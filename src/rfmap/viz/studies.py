@@ -40,7 +40,7 @@ def time_accuracy_figure(rows: list[dict], *, title: str | None = None, ncols: i
     markers = dict(zip(methods, "osD^v*<>ph"))
     ncols = max(1, min(ncols, len(cases)))
     nrows = -(-len(cases) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(3.6 * ncols, 2.9 * nrows + 0.4), layout="constrained",
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.6 * ncols, 3.3 * nrows + 0.4), layout="constrained",
                              squeeze=False)
     for ax, case in zip(axes.flat, cases):
         for k, method in enumerate(methods):
@@ -48,7 +48,7 @@ def time_accuracy_figure(rows: list[dict], *, title: str | None = None, ncols: i
             if rs:
                 ax.loglog([r["time"] for r in rs], [r["std_rho_map"] for r in rs], markers[method], color=f"C{k}",
                           alpha=0.8, mfc="none")
-        ax.set_title(f"{case[0]}D, N = {case[1]}, {case[2]}")
+        ax.set_title(f"{case[0]}D, N = {case[1]}, {case[2]}", fontsize="medium", pad=8)
         plain_log_ticks(ax.xaxis)
         plain_log_ticks(ax.yaxis)
         ax.set_xlabel("wall time (s)")
