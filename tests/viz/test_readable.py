@@ -33,7 +33,7 @@ def test_learning_curves_count_the_whole_chain():
                                                                                     "loss": [0.1, 0.05]}}},
                               {"chain": 1000, "single": 4000})
         loss, val = fig.axes[0], fig.axes[1]
-        assert loss.get_title() == "chain: 4,000 steps,\n400 % of the paper's"
+        assert loss.get_title() == "chain: 4,000 steps,\n400 % of the paper's epochs as steps"
         assert list(loss.lines[0].get_xdata()) == [3710, 3800, 4000]
         lo, hi = loss.get_xlim()
         assert 3600 < lo < 3710 and 4000 < hi < 4100 and "3,700" in loss.get_xlabel()
