@@ -17,7 +17,8 @@ from shapely.geometry import mapping
 pytest.importorskip("plotly")
 
 from rfmap.cartogram.resize import cartogram  # noqa: E402
-from rfmap.cartogram.html import HtmlOptions, cartogram_page, page_figure, series_page  # noqa: E402
+from rfmap.cartogram.html import (  # noqa: E402
+    HtmlOptions, cartogram_page, figure_html, page_figure, series_page)
 from rfmap.cartogram.series import cartogram_series  # noqa: E402
 
 KEYS = ("a", "b")
@@ -198,3 +199,11 @@ def test_a_page_that_is_not_html_is_bad_input(grid_map, tmp_path):
     proc = _cli(src, "--value", "a", "--out", tmp_path / "out.geojson", "--html", tmp_path / "page.txt")
     assert proc.returncode == 2 and proc.stderr.count("\n") == 1 and "--html must name a .html file" in proc.stderr
     assert not (tmp_path / "out.geojson").exists()
+
+
+def test_figure_html_is_a_captioned_self_contained_figure(series):
+    fig = page_figure([f.carto for f in series.frames], list(KEYS))
+    text = figure_html(fig, "Beyond the paper: a <small> map & its frames.", name="fig-x", height=400)
+    assert text.startswith('<figure class="align-default" id="fig-x">') and text.endswith("</figure>")
+    assert text.count("<figcaption>") == 1 and "a &lt;small&gt; map &amp; its frames." in text
+    assert "400px" in text and "plotly.js" in text.lower() and '<script src="http' not in text

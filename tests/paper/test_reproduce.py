@@ -340,3 +340,11 @@ def test_a_range_or_a_change_whose_ends_print_alike_is_said_as_one_value():
     assert span_text(5.04, 5.1, ".2g") == "5 to 5.1" and span_text(5.14, 5.1, ".2g") == "5.1"
     assert change_text(1.08313, 0.11620) == "goes from 1.0831 to 0.1162"
     assert change_text(0.192344, 0.192305) == "stays at 0.1923 (to the digits shown)"
+
+
+def test_agreement_text_says_identical_for_zero_and_never_uses_e_notation():
+    from rfmap.paper.tables import agreement_text
+
+    assert agreement_text(0.0) == agreement_text(-0.0) == "identical (largest difference 0)"
+    assert agreement_text(2.384e-08) == "equal to within 2.4 × 10⁻⁸"
+    assert agreement_text(0.0123) == "equal to within 0.012"

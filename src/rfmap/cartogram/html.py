@@ -19,7 +19,7 @@ import numpy as np
 
 from .data import atomic_write
 
-__all__ = ["HtmlOptions", "cartogram_page", "series_page", "page_figure", "write_page"]
+__all__ = ["HtmlOptions", "cartogram_page", "series_page", "page_figure", "figure_html", "write_page"]
 
 
 @dataclass
@@ -161,6 +161,20 @@ def _play(frame_ms: int) -> dict:
             "pad": {"t": 30, "r": 10},
             "buttons": [{"label": "play", "method": "animate", "args": [None, play]},
                         {"label": "pause", "method": "animate", "args": [[None], pause]}]}
+
+
+def figure_html(fig, caption: str, *, name: str | None = None, height: int = 620) -> str:
+    """The plotly figure ``fig`` as a captioned HTML fragment for a notebook's output or a book page: a
+    ``<figure>`` (with the id ``name``) that holds the figure, plotly.js embedded so that it draws without a
+    network, ``height`` pixels high (an output area has no height of its own), and a ``<figcaption>`` with
+    ``caption`` as plain text (escaped), marked up as the book's captions are."""
+    import html
+
+    fig.update_layout(height=height)
+    body = fig.to_html(include_plotlyjs=True, full_html=False, default_height=f"{height}px")
+    ident = f' id="{html.escape(name, quote=True)}"' if name else ""
+    return (f'<figure class="align-default"{ident}>{body}<figcaption><p><span class="caption-text">'
+            f"{html.escape(caption, quote=False)}</span></p></figcaption></figure>")
 
 
 def write_page(fig, path) -> None:

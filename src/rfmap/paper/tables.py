@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Table", "Headline", "headline", "format_sig", "power_of_ten", "printed_digits", "paper_table",
-           "format_value", "span_text", "change_text",
+           "format_value", "span_text", "change_text", "agreement_text",
            "glue_all", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
 
 
@@ -267,6 +267,16 @@ def change_text(before: float, after: float, fmt: str = ".4f") -> str:
     shown)"`` where both values print the same.  ``fmt``: the format of each value."""
     a, b = format(float(before), fmt), format(float(after), fmt)
     return f"goes from {a} to {b}" if a != b else f"stays at {a} (to the digits shown)"
+
+
+def agreement_text(difference: float, digits: int = 2) -> str:
+    """How close two results that should agree are, for the book's text: ``"identical (largest difference 0)"``
+    where the largest difference is exactly zero, else ``"equal to within 2.4 × 10⁻⁸"`` (:func:`format_sig`, never
+    e-notation)."""
+    difference = abs(float(difference))
+    if difference == 0:
+        return "identical (largest difference 0)"
+    return f"equal to within {format_sig(difference, digits)}"
 
 
 def glue_all(values: dict, prefix: str) -> None:

@@ -17,12 +17,12 @@ import importlib
 #: the module (relative to this package) of each exported name
 _HOME = {
     "..core.result": ("setup_pyvista", "to_pyvista"),
-    ".architecture": ("architecture_diagram",),
+    ".architecture": ("architecture_diagram", "encoding_figure"),
     ".cartograms": ("area_error_histograms", "cartogram_figure", "cartogram_panels", "plot_regions"),
     ".figures": ("STYLE", "figures_dir", "repository_root", "save_figure", "style"),
     ".meshes": ("beltrami_figure", "element_rho", "extreme_figure", "map_rows_figure", "plot_beltrami_row",
-                "plot_density", "plot_map_row", "plot_mesh", "plot_mu", "plot_slice_outline", "population_figure",
-                "vertex_error_panels"),
+                "jitter_figure", "plot_density", "plot_map_row", "plot_mesh", "plot_mu", "plot_slice_outline",
+                "population_figure", "random_fields_figure", "vertex_error_panels"),
     ".studies": ("displacement_demand_figure", "shorten_curve", "table_lines", "time_accuracy_figure"),
     ".training": ("LOSS_TERMS", "learning_curves", "plot_batch", "plot_learning_rates", "plot_loss_terms",
                   "training_curves", "validation_vs_time"),

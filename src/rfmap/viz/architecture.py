@@ -1,7 +1,7 @@
 """The network's encoder-decoder structure drawn from its own modules."""
 from __future__ import annotations
 
-__all__ = ["architecture_diagram"]
+__all__ = ["architecture_diagram", "encoding_figure"]
 
 #: inches per unit of the drawing (a box is 1.2 units wide) and the size of its text: readable at the book's width
 UNIT_INCHES, FONT_PT = 0.56, 9
@@ -90,3 +90,28 @@ def architecture_diagram(model, ax=None):
     ax.set_aspect("equal")
     ax.set_axis_off()
     return ax
+
+
+def encoding_figure(encodings, names, *, width: float = 7.2):
+    """The channels of encoded inputs (:func:`rfmap.tasks.encode`), one row per input and one panel per channel,
+    each with its colour bar: the coordinate channels in viridis, the field's channels in a diverging map.
+
+    ``encodings``: tensors or arrays of shape (1, C, N, N), one per row; ``names``: the channel names of each row
+    (the panels are titled "c: name").  Unused panels of a shorter row are left blank.  Returns the figure.
+    """
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    cols = max(len(row) for row in names)
+    fig, axes = plt.subplots(len(encodings), cols, figsize=(width, 2.0 * len(encodings)), layout="constrained",
+                             squeeze=False)
+    for row, (enc, row_names) in enumerate(zip(encodings, names)):
+        enc = np.asarray(enc)
+        for c, name in enumerate(row_names):
+            ax = axes[row, c]
+            im = ax.imshow(enc[0, c].T, origin="lower", extent=(0, 1, 0, 1), cmap="viridis" if c < 2 else "RdBu_r")
+            ax.set_title(f"{c}: {name}")
+            fig.colorbar(im, ax=ax, shrink=0.8)
+        for ax in axes[row, len(row_names):]:
+            ax.set_axis_off()
+    return fig

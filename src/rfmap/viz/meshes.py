@@ -8,7 +8,7 @@ from .figures import ColorScale, color_scale, save_figure, style
 
 __all__ = ["element_rho", "plot_mesh", "repair_figure", "plot_slice_outline", "plot_density", "plot_mu", "plot_map_row",
            "plot_beltrami_row", "vertex_error_panels", "population_figure", "map_rows_figure", "beltrami_figure",
-           "extreme_figure", "TEXT_WIDTH_IN"]
+           "extreme_figure", "random_fields_figure", "jitter_figure", "TEXT_WIDTH_IN"]
 
 
 #: width of a figure that fills the book's text column with its 9 pt text shown at 9 pt (``rfmap.viz.figures``)
@@ -352,4 +352,47 @@ def repair_figure(before, after, elements, *, n: int | None = None, titles=("fol
         for t in folded:
             ax.fill(*pts[elements[t]].T, color="red", zorder=5)
     _frameless(axes)
+    return fig
+
+
+def random_fields_figure(mesh, densities: dict, mu_panels: dict, maps: dict, *, n: int, width: float = TEXT_WIDTH_IN,
+                         max_lines: int = 16):
+    r"""Random training fields on one grid mesh, four panels a row: the densities (a title and the values at the
+    mesh's vertices per panel, four a row), then a row of Beltrami fields, :math:`|\mu|` per vertex
+    (``mu_panels``) followed by mapped grids (``maps``: title to mapped points of the ``n``-grid, drawn with at
+    most ``max_lines`` grid lines per direction so that a fine grid stays readable).  Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    dens = list(densities.items())
+    rows = -(-len(dens) // 4) + 1
+    fig, axes = plt.subplots(rows, 4, figsize=(width, 2.0 * rows), layout="constrained", squeeze=False)
+    for ax, (title, values) in zip(axes[:-1].ravel(), dens):
+        plot_density(ax, mesh.points, mesh.elements, values, title=title)
+    last = list(axes[-1])
+    for title, values in mu_panels.items():
+        plot_density(last.pop(0), mesh.points, mesh.elements, values, cmap="magma", vmin=0, title=title)
+    for title, points in maps.items():
+        plot_mesh(last.pop(0), points, n=n, max_lines=max_lines, title=title)
+    for ax in last + list(axes[:-1].ravel()[len(dens):]):
+        ax.set_axis_off()
+    return fig
+
+
+def jitter_figure(mesh, jittered, h: float, window=(0.45, 0.75, 0.1, 0.4), *, width: float = TEXT_WIDTH_IN):
+    """Sobol-jittered sampling of a grid mesh: the offset of every vertex in grid spacings ``h`` (left), and a zoom
+    on ``window`` = (x0, x1, y0, y1) with the regular mesh in grey under the jittered one in black (right).
+    Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    jittered = np.asarray(jittered)
+    offset = np.linalg.norm(jittered - mesh.points, axis=1) / h
+    fig, axes = plt.subplots(1, 2, figsize=(width, width / 2), layout="constrained")
+    plot_density(axes[0], mesh.points, mesh.elements, offset, cmap="magma", vmin=0,
+                 title="offset $|x_{jit} - x| / h$")
+    axes[1].triplot(mesh.points[:, 0], mesh.points[:, 1], mesh.elements, color="0.75", lw=0.6)
+    axes[1].triplot(jittered[:, 0], jittered[:, 1], mesh.elements, color="k", lw=0.7)
+    axes[1].set_xlim(window[:2])
+    axes[1].set_ylim(window[2:])
+    axes[1].set_aspect("equal")
+    axes[1].set_title("zoom: regular (grey),\njittered (black)")
     return fig
