@@ -440,6 +440,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
     n, tol, split, accelerate = plan.n, plan.tol, plan.split, plan.accelerate
     shapely = _shapely()
     current, inverse = _distinct_vertices(regions)
+    stale = False  # whether regions changed since current and inverse were taken from them
     mapped = regions
     big = judged(values, plan.min_share)  # the regions the stopping rule counts
     # the others are raised towards the judged share, so that none collapses into a sliver that folds; their errors
@@ -460,7 +461,10 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
         cell = 1.0 / min(n, max(SPLIT_MAX_N, grids[0]))
         if split and results and _longest_edge(mapped) > SPLIT_EDGE * cell:  # stretched edges: split again
             regions = shapely.segmentize(mapped, cell)
+            stale = True
+        if stale:  # once per pass: a repair's regions that this pass splits again are not taken first
             current, inverse = _distinct_vertices(regions)
+            stale = False
         if accelerate:
             area = shapely.area(mapped)
             now = np.log(np.maximum(area, 1e-300) / (weights / weights.sum() * area.sum()))
@@ -480,7 +484,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
         if bad.size and split:  # a region the pass made cross itself: its valid part, whose area the next pass fixes
             mapped[bad] = valid_polygons(mapped[bad])
             regions = mapped
-            current, inverse = _distinct_vertices(regions)
+            stale = True
         area = shapely.area(mapped)
         history.append(float(np.abs(area / (values / values.sum() * area.sum()) - 1.0)[big].max()))
         if best is None or history[-1] < best[0]:
