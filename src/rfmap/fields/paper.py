@@ -20,6 +20,7 @@ import torch
 from ..core.geometry import beltrami_from_jacobian
 from ..core.inputs import preprocess_density
 from ..core.mesh import check_n, element_centroids, grid_mesh, grid_points
+from ..core.metrics import compute_metrics
 
 __all__ = [
     "DensityField",
@@ -302,8 +303,6 @@ def prism_peak_readings(n: int, heights=(0.5, 1.0, 1.5, 2.0)) -> dict:
     two readings of the prism of Eq. (peak-3d): ``"replace"``, the value 1 inside the box as printed (the field
     ``prism-peak-3d``), and ``"add"``, the background plus a height :math:`h` inside the box, one value per height
     (a dict ``{h: std}``).  Each input is shifted and scaled as every density (:func:`preprocess_density`)."""
-    from ..core.metrics import compute_metrics
-
     mesh = grid_mesh(n, 3)
     pts = grid_points(n, 3)
     x = pts.reshape((n,) * 3 + (3,))

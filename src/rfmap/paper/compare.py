@@ -23,6 +23,7 @@ from ..fields.paper import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
 from ..training import train
 from .generalization import generalization_table
+from .comparison import format_time
 from .tables import Table, format_sig
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
@@ -220,8 +221,6 @@ def side_by_side(table: Table, columns: dict, case_title: str) -> str:
         if v is None or v.get(column) is None:
             return "—"
         if column == "time":
-            from .comparison import format_time
-
             return format_time(v[column])
         flips = int(v.get("n_flipped") or 0)
         if "folded" in v:

@@ -9,9 +9,8 @@ lower is better.  For each case this module puts four values side by side:
     the network run on the requested grid itself, then the paper's weight refinement (Sec. 4.3), nothing else:
     ``Surrogate.map(field, n, native=True, refine=True, repair=False)``;
 ``delivered``
-    what the project returns by default with its options on: the network on its working grid (the requested side
-    clipped to the training range, the displacement interpolated), averaged over the symmetries of the square or
-    cube, refined, and repaired where it folds: ``Surrogate.map(field, n, refine=True, symmetrize=True)``;
+    ``Surrogate.map(field, n, refine=True, symmetrize=True)``: the network on its working grid, averaged over the
+    symmetries of the square or cube, refined, and repaired where it folds;
 ``classical``
     the fastest classical solver of the project on the same mesh: the flow-based density-equalizing map
     (``solve_dem(..., method="flow")``) or the Linear Beltrami Solver.
@@ -61,8 +60,7 @@ METRIC_TITLES = {"std_rho_map": "Std(ρ̃_map)", "std_rho_orig": "Std(ρ̃_orig)
                  "time": "time", "network_time": "network time", "work_n": "network grid", "alpha": "α",
                  "mu_ratio": "mean |μ|, DEQ / DEM"}
 
-#: Quantities the paper prints, lower being better, that the verdict does not score
-#: (:data:`rfmap.paper.verdicts.SCORED_METRICS`): the scoreboard shows them beside the scored ones.
+#: Quantities the paper prints, lower being better, that the verdict does not score (shown beside the scored ones).
 SHOWN = ("max_mu",)
 
 #: significant digits of every number of the comparison tables and the scoreboard

@@ -93,7 +93,7 @@ def architecture_diagram(model, ax=None):
 
 
 def encoding_figure(encodings, names, *, width: float = 7.2):
-    """The channels of encoded inputs (:func:`rfmap.tasks.encode`), one row per input and one panel per channel,
+    """The channels of encoded inputs (:func:`rfmap.tasks.base.encode`), one row per input and one panel per channel,
     each with its colour bar: the coordinate channels in viridis, the field's channels in a diverging map.
 
     ``encodings``: tensors or arrays of shape (1, C, N, N), one per row; ``names``: the channel names of each row
