@@ -88,6 +88,8 @@ def page_problems(page: Path) -> list[str]:
 
 #: a glue role and its target: {glue:text}`key:fmt`, {glue}`key`, {glue:text}`../notebooks/NB.ipynb::key:fmt`
 GLUE_ROLE = re.compile(r"\{glue(?::\w+)?\}`([^`]+)`")
+#: code the page shows rather than runs (fenced blocks and double-backtick spans): a role there is an example
+SHOWN_CODE = re.compile(r"^```.*?^```|``.+?``", re.DOTALL | re.MULTILINE)
 
 
 def glue_refs(source: Path) -> list[tuple[str, str]]:
@@ -99,7 +101,7 @@ def glue_refs(source: Path) -> list[tuple[str, str]]:
     else:
         text = source.read_text(encoding="utf-8")
     out = []
-    for target in GLUE_ROLE.findall(text):
+    for target in GLUE_ROLE.findall(SHOWN_CODE.sub("", text)):
         path, _, key = target.rpartition("::")
         stem = Path(path).stem if path else source.stem
         out.append((stem, key.split(":", 1)[0]))

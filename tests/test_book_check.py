@@ -176,3 +176,21 @@ def test_the_text_check_fails_on_a_missing_glue_key(text_check, tmp_path, monkey
     monkeypatch.setattr(text_check, "book_sources", lambda: [nb, page])
     assert text_check.main(["--html", str(html), "--glue", str(glue)]) == 1
     assert "FAIL glue: figures.md: missing glue key 't7_verdict'" in capsys.readouterr().out
+
+
+def test_a_glue_role_shown_as_code_is_an_example_not_a_use(text_check, tmp_path, monkeypatch):
+    """A page that shows the role syntax inside a code span or a fenced block (book/reproduce.md does) refers to
+    no key; a real role beside it is still checked."""
+    import json
+
+    page = tmp_path / "reproduce.md"
+    page.write_text("the paste ``{glue:text}`../notebooks/06_dem_deq_2d.ipynb::sq_met:s` `` shown\n\n"
+                    "```md\n{glue:text}`../notebooks/06_dem_deq_2d.ipynb::other:s`\n```\n\n"
+                    "real: {glue:text}`../notebooks/06_dem_deq_2d.ipynb::t6_verdict:s`\n")
+    glue = tmp_path / "glue"
+    glue.mkdir()
+    (glue / "06_dem_deq_2d.glue.json").write_text(json.dumps({"t6_other": {}}))
+    monkeypatch.setattr(text_check, "ROOT", tmp_path)
+    assert text_check.glue_refs(page) == [("06_dem_deq_2d", "t6_verdict")]
+    assert text_check.glue_problems([page], glue) == [
+        "reproduce.md: missing glue key 't6_verdict' of 06_dem_deq_2d"]
