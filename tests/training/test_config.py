@@ -29,3 +29,22 @@ def test_presets_of_a_base_and_derived_presets():
     assert d.full == replace(p.full, name="y", description="Another.", lr=1e-3, steps=10)
     with pytest.raises(TypeError):  # a misspelt field is an error, not a silent default
         p.derive(name="z", description="", stpes=1)
+
+
+def test_hard_share_overrides_the_density_fields_and_is_recorded():
+    from rfmap.training.cli import _command_line, _structured_overrides, build_parser
+    from rfmap.training.config import get_config
+
+    cfg = get_config("dem3d-cube-native", "full")
+    args = build_parser().parse_args(["--config", "dem3d-cube-native", "--hard-share", "0.3"])
+    over = _structured_overrides(cfg, args)
+    assert over["density_field"].p_hard == 0.3
+    assert over["density_field"].p_ramp == cfg.density_field.p_ramp  # the rest of the mix kept
+    assert "--hard-share 0.3" in _command_line(args)
+    for bad in ("1.5", "-0.1", "nan"):
+        args = build_parser().parse_args(["--config", "dem3d-cube-native", "--hard-share", bad])
+        with pytest.raises(ValueError, match="hard-share"):
+            _structured_overrides(cfg, args)
+    args = build_parser().parse_args(["--config", "beltrami2d", "--hard-share", "0.3"])
+    with pytest.raises(ValueError, match="no density fields"):
+        _structured_overrides(get_config("beltrami2d", "full"), args)

@@ -57,6 +57,9 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
                         "target beside the data-free losses (rfmap.tasks.teacher; default: the config's, none)")
     p.add_argument("--teacher-share", type=float, default=None, help="share of each batch with a target (0, 1]")
     p.add_argument("--teacher-weight", type=float, default=None, help="weight of the teacher's displacement loss")
+    p.add_argument("--hard-share", type=float, default=None, metavar="P",
+                   help="density configs: override the share of hard training fields (a single steep ramp or narrow "
+                        "peak, RandomDensityConfig.p_hard), e.g. to weigh the fields whose maps fold more")
     p.add_argument("--base", type=int, default=None, help="override the U-Net's base width (channels)")
     p.add_argument("--depth", type=int, default=None, help="override the U-Net's number of levels")
     p.add_argument("--grow", type=int, default=None, metavar="BASE",
@@ -137,6 +140,13 @@ def _structured_overrides(cfg: TrainConfig, args) -> dict:
             raise ValueError(f"--teacher: config {cfg.name!r} maps a {cfg.task.task.title} field; a classical "
                              "teacher applies to density configs only")
     over.update(_size_overrides(args))
+    hard = getattr(args, "hard_share", None)
+    if hard is not None:
+        if cfg.density_field is None:
+            raise ValueError(f"--hard-share: config {cfg.name!r} draws no density fields")
+        if not (math.isfinite(hard) and 0.0 <= hard <= 1.0):
+            raise ValueError(f"--hard-share must lie in [0, 1], got {hard}")
+        over["density_field"] = _replace(cfg.density_field, p_hard=hard)
     grow = getattr(args, "grow", None)
     if grow is not None:
         if not getattr(args, "init", None):
@@ -200,6 +210,7 @@ def _command_line(args) -> str:
                       ("--teacher", getattr(args, "teacher", None)),
                       ("--teacher-share", getattr(args, "teacher_share", None)),
                       ("--teacher-weight", getattr(args, "teacher_weight", None)),
+                      ("--hard-share", getattr(args, "hard_share", None)),
                       ("--base", getattr(args, "base", None)), ("--depth", getattr(args, "depth", None)),
                       ("--grow", getattr(args, "grow", None)),
                       ("--n-range", " ".join(map(str, args.n_range)) if getattr(args, "n_range", None) else None),
