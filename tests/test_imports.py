@@ -34,7 +34,7 @@ LAYERS: dict[str, int] = {
     "rfmap.solvers": 1, "rfmap.solvers.lbs": 1, "rfmap.solvers.diffusion": 1, "rfmap.solvers.flow": 1,
     "rfmap.solvers.spectral": 1, "rfmap.solvers.raster": 1, "rfmap.solvers.cartoflow": 1,
     "rfmap.solvers.cartodiffusion": 1, "rfmap.solvers.cosine": 1, "rfmap.solvers.heun": 1, "rfmap.solvers.bs32": 1,
-    "rfmap.solvers.heatflow": 1, "rfmap.solvers.locate": 1,
+    "rfmap.solvers.heatflow": 1, "rfmap.solvers.heatfield": 1, "rfmap.solvers.locate": 1,
     "rfmap.solvers.residual": 1,
     "rfmap.nn": 1, "rfmap.nn.blocks": 1, "rfmap.nn.model": 1, "rfmap.nn.grow": 1, "rfmap.nn.fno": 1, "rfmap.nn.registry": 1,
     "rfmap.tasks.losses": 1, "rfmap.nn.symmetry": 1,

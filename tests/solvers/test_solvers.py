@@ -18,7 +18,9 @@ from rfmap.core.geometry import beltrami_coefficient
 from rfmap.core.mesh import element_measures, grid_mesh
 from rfmap.core.result import MapResult
 from rfmap.solvers import SOLVERS, get_solver, solve_dem, solve_lbs
-from rfmap.solvers.diffusion import CosineDiffusion, cosine_coefficients, p1_upsample
+from rfmap.solvers.diffusion import p1_upsample
+from rfmap.solvers.heatfield import HeatField
+from rfmap.solvers.spectral import cosine_coefficients
 from rfmap.solvers.lbs import _Factor, assemble_stiffness, beltrami_matrices, grid_dissection_order
 
 
@@ -247,13 +249,13 @@ def test_cosine_interpolant_and_p1_upsample():
         v = rng.uniform(0.5, 2.0, (6,) * d)
         fine = p1_upsample(v, 3)
         assert np.array_equal(fine[(slice(None, None, 3),) * d], v)
-        cd = CosineDiffusion(fine)
-        fields = cd.fields(0.0).numpy()
+        cd = HeatField(fine)
+        fields = cd.fields(0.0)
         np.testing.assert_allclose(fields[0], fine, atol=1e-13)  # interpolates at t = 0
         # walls: zero normal derivative exactly
         assert (fields[1][0] == 0).all() and (fields[1][-1] == 0).all()
         # t -> infinity: the mean (a_0), no gradient
-        late = cd.fields(50.0).numpy()
+        late = cd.fields(50.0)
         np.testing.assert_allclose(late[0], cosine_coefficients(fine).flat[0], rtol=1e-12)
         assert np.abs(late[1:]).max() < 1e-12
     # 2D P1 upsample is linear on the mesh triangles: the centre of a cell is the mean of the diagonal vertices
@@ -263,16 +265,16 @@ def test_cosine_interpolant_and_p1_upsample():
 
 def test_cosine_gradient_matches_finite_differences():
     rng = np.random.default_rng(1)
-    cd = CosineDiffusion(rng.uniform(0.5, 2.0, (9, 9)))
+    cd = HeatField(rng.uniform(0.5, 2.0, (9, 9)))
     t = 1e-3
     x = np.linspace(0, 1, 9)
     k = np.arange(9)
-    a = cosine_coefficients(cd.fields(0.0).numpy()[0]) * np.exp(-np.pi**2 * (k[:, None] ** 2 + k[None] ** 2) * t)
+    a = cosine_coefficients(cd.fields(0.0)[0]) * np.exp(-np.pi**2 * (k[:, None] ** 2 + k[None] ** 2) * t)
     # exact derivative at a grid point from the series
     i, j = 3, 5
     gx = sum(a[p, q] * -np.pi * p * np.sin(np.pi * p * x[i]) * np.cos(np.pi * q * x[j])
              for p in range(9) for q in range(9))
-    assert cd.fields(t).numpy()[1][i, j] == pytest.approx(gx, rel=1e-10)
+    assert cd.fields(t)[1][i, j] == pytest.approx(gx, rel=1e-10)
 
 
 # --------------------------------------------------------------------------------------------------- DEM
@@ -363,7 +365,9 @@ def test_dem_random_densities_invariants(n, seed, dim):
 def test_dem_stays_fold_free_on_a_density_sharper_than_the_mesh(boundary):
     """A hard density (sharp peaks beside near-zero regions, p_min/p_max down to 1e-3) folds the vertex
     trajectories of the plain integration; with the fold guard (the default) the flow is redone from a blurred
-    start and the map is fold-free, and on these fields also more equal than the folded one."""
+    start and the map is fold-free, and on these fields more equal than the input and than the folded one.  (The
+    folded map itself is not compared with the input: once its trajectories cross, the plain integration's steps
+    hang on round-off, and a matrix product rounded by another BLAS kernel moves its Std(rho~) from 1.3 to 15.)"""
     from rfmap.fields.hard import hard_density
 
     p = hard_density(np.random.default_rng(31), 33, 2)
@@ -373,7 +377,7 @@ def test_dem_stays_fold_free_on_a_density_sharper_than_the_mesh(boundary):
     m = guarded.metrics()
     assert m.n_flipped == 0 and m.min_jacobian > 0
     assert guarded.info["fold_blurs"] and guarded.info["fold_stop"] is None
-    assert m.std_rho_map < plain.metrics().std_rho_map < m.std_rho_orig
+    assert m.std_rho_map < min(plain.metrics().std_rho_map, m.std_rho_orig)
 
 
 def test_dem_progress_bar(capsys):

@@ -12,8 +12,9 @@ Conventions (shared by every part of :mod:`rfmap`):
 
 The split of one grid cell is :func:`rfmap.core.geometry.grid_cell_simplices`; the mesh here and the strided grid
 operators of :mod:`rfmap.core.geometry` both use it, so their element orders agree.  Beside the mesh: the vertex
-quadrature weights (:func:`vertex_weights`), element centroids, multilinear interpolation of grid fields and the
-Sobol-jittered vertices used in training (:func:`jittered_points`).
+quadrature weights (:func:`vertex_weights`), element centroids, multilinear interpolation of grid fields
+(:func:`interpolate` in torch, :func:`multilinear` in numpy) and the Sobol-jittered vertices used in training
+(:func:`jittered_points`).
 """
 from __future__ import annotations
 
@@ -41,6 +42,7 @@ __all__ = [
     "vertex_weights",
     "grid_vertex_weights",
     "interpolate",
+    "multilinear",
     "jittered_points",
     "check_n",
     "check_dim",
@@ -324,6 +326,60 @@ def grid_vertex_weights(n: int, dim: int) -> np.ndarray:
     w = vertex_weights(mesh.points, mesh.elements)
     w.setflags(write=False)
     return w
+
+
+def multilinear(planes: np.ndarray, u: np.ndarray) -> np.ndarray:
+    r"""Multilinear (bi-/trilinear) interpolant of grid planes at points given in grid index units, in numpy.
+
+    With :math:`u = i + f` (:math:`i` the cell's lower corner, :math:`0 \le f \le 1` per axis), plane :math:`c` at
+    :math:`u` is
+
+    .. math:: \sum_{b \in \{0, 1\}^d} p_c[i + b] \prod_{j=1}^d \bigl(b_j f_j + (1 - b_j)(1 - f_j)\bigr),
+
+    the corners summed in C order (last axis fastest).  Coordinates are clamped to the grid; a point on the upper
+    wall of an axis is interpolated in the last cell.  The classical solvers' interpolation of their tables (the
+    diffusion's heat field, :class:`rfmap.solvers.heatfield.HeatField`, and the cartogram flow,
+    :func:`rfmap.solvers.cartoflow.bilinear`); :func:`interpolate` is its torch form for batches of fields.
+
+    Parameters
+    ----------
+    planes : ndarray, shape (C, W_1, ..., W_d), d in {2, 3}
+        ``C`` fields on a grid of ``W_1 x ... x W_d`` nodes (every ``W_j >= 2``), C-contiguous.
+    u : ndarray, shape (P, d), float64
+        Points in index units: node :math:`(i_1, \dots, i_d)` is at :math:`u = (i_1, \dots, i_d)`.  Overwritten
+        (clamped, then reduced to the offsets in the cell).
+
+    Returns
+    -------
+    ndarray, shape (P, C)
+        In Fortran order (each channel contiguous), as :func:`interpolate` returns it: the reductions over the
+        points that the solvers take of a velocity, and of the points it moves, run along contiguous columns.
+    """
+    shape = planes.shape[1:]
+    d = len(shape)
+    flat = planes.reshape(planes.shape[0], -1)
+    top = np.asarray(shape) - 1
+    np.clip(u, 0.0, top, out=u)
+    i = np.minimum(u.astype(np.intp), top - 1)
+    u -= i
+    strides = [int(np.prod(shape[j + 1:], dtype=np.int64)) for j in range(d)]  # C order: (W_2, 1) in 2D
+    k = i[:, 0] * strides[0]
+    for j in range(1, d):
+        k += i[:, j] * strides[j]
+    corners: list[tuple[int, np.ndarray | None]] = [(0, None)]  # (offset, weight), C order
+    for j in range(d):
+        f = u[:, j]
+        g = 1.0 - f
+        corners = [(off + b * strides[j], (f if b else g) if w is None else w * (f if b else g))
+                   for off, w in corners for b in (0, 1)]
+    idx = [k if off == 0 else k + off for off, _ in corners]
+    out = np.empty((len(flat), len(u)))  # channel by channel: returned transposed
+    for plane, acc in zip(flat, out):
+        np.take(plane, idx[0], out=acc)
+        acc *= corners[0][1]
+        for at, (_, w) in zip(idx[1:], corners[1:]):
+            acc += np.take(plane, at) * w
+    return out.T
 
 
 def interpolate(values, points, *, tol: float = 1e-9, check: bool = True):

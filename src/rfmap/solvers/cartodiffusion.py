@@ -6,24 +6,22 @@ density diffuses, :math:`\partial_t\rho = \Delta\rho` with no-flux walls, and po
 :mod:`rfmap.solvers.cartoflow`, it is one pass of a cartogram (:func:`rfmap.cartogram.resize.cartogram` with
 ``method="diffusion"``) and carries a cartogram's distinct polygon vertices themselves, or the ``N``-grid's vertices.
 
-The flow itself is the map solver's (:func:`rfmap.solvers.heatflow.diffuse`: its driver, stopping rule and
-blurred start); what is the cartogram's own is its heat field and its integrator:
+The flow and its heat field are the map solver's (:func:`rfmap.solvers.heatflow.diffuse`: its driver, stopping
+rule and blurred start; :class:`rfmap.solvers.heatfield.HeatField`: the exact cosine solution of the diffusion
+equation, evaluated by separable products); what is the cartogram's own is how it sets them:
 
-* The density's cosine coefficients :math:`c_k` come from one type-I cosine transform of the vertex values
-  (:func:`rfmap.solvers.spectral.half_coefficients` on the ``numpy.fft`` transforms of
-  :class:`rfmap.solvers.cosine.CosineTransforms`); at time :math:`t` they are :math:`c_k e^{-\pi^2|k|^2 t}`, and
-  :math:`\rho`, :math:`-\partial_x\rho`, :math:`-\partial_y\rho` on the vertex grid are their cosine and sine
-  syntheses (five transforms along one axis each; :func:`rfmap.solvers.spectral.flux_synthesis`, the flow's).
-* The velocity at a point divides the bilinear interpolants of those three planes
-  (:func:`rfmap.solvers.cartoflow.bilinear`).
+* The raster is the vertex grid itself (a cartogram's raster holds cell means; the maps refine theirs), its cosine
+  coefficients from one type-I cosine transform by ``numpy.fft``
+  (:class:`rfmap.solvers.cosine.CosineTransforms`).
+* The velocity at a point divides the bilinear interpolants of :math:`\nabla\rho` and :math:`\rho`
+  (``divide="points"``; the maps divide on the raster and interpolate the velocity).
 * Time steps are predictor--corrector (Heun) pairs (:func:`rfmap.solvers.heun.heun_flow`, the cartogram flow's):
   a step is accepted when :math:`\max|x' - x^*|` is at most ``rtol`` grid spacings (for the grid, also when no
   triangle turned over), the next step scaled by the error.  Integration stops when the remaining displacement,
   estimated as :math:`\max|v| / \pi^2` (:class:`rfmap.solvers.heatflow.Settling`), is below ``tol_end`` grid
   spacings, or at ``t_max``.
 
-The map solver's field (dense torch products on a refined raster) and integrator (Bogacki--Shampine 3(2)) are not
-used here: this module must not import PyTorch, and each path keeps its results bit for bit (see
+The map solver's integrator (Bogacki--Shampine 3(2)) is not used here: each path keeps its results (see
 :mod:`rfmap.solvers.heatflow`).
 
 PyTorch is never imported here (nor ``scipy.fft``): the classical cartogram methods run without either.
@@ -35,11 +33,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .cartoflow import GridFlow, _bilinear_planes, _grid_turned_over, _project, square_inputs
+from .cartoflow import GridFlow, _grid_turned_over, _project, square_inputs
 from .cosine import CosineTransforms
+from .heatfield import HeatField
 from .heatflow import Settling, blur_start, diffuse
 from .heun import HeunOptions
-from .spectral import damp, flux_synthesis, half_coefficients, heat_factor
 
 __all__ = ["CartoDiffusionOptions", "diffusion_square"]
 
@@ -69,29 +67,6 @@ class CartoDiffusionOptions:
     t_max: float = 2.0
     max_steps: int = 10_000
     blur: float = 0.0
-
-
-class _Heat:
-    r""":math:`\rho(\cdot, t)` and its flux :math:`-\nabla\rho` on the vertex grid, from the half cosine coefficients
-    of :math:`\rho_0` (:func:`rfmap.solvers.spectral.half_coefficients`): the cartogram's heat field of
-    :func:`rfmap.solvers.heatflow.diffuse`."""
-
-    def __init__(self, dens: np.ndarray):
-        self.n = dens.shape[0]
-        self.ct = CosineTransforms(self.n)  # its buffers serve every evaluation
-        self.coef = half_coefficients(dens, transforms=self.ct)  # synthesis: the same transforms
-
-    def planes(self, t: float) -> np.ndarray:
-        r"""(3, N*N): :math:`-\partial_x\rho`, :math:`-\partial_y\rho`, :math:`\rho` at time ``t``: the decayed
-        coefficients (:func:`rfmap.solvers.spectral.heat_factor`) synthesised as a flux and its potential
-        (:func:`rfmap.solvers.spectral.flux_synthesis`)."""
-        b = damp(self.coef, heat_factor(self.n, t))
-        return flux_synthesis(b, self.ct, value=True).reshape(3, -1)
-
-    def velocity_at(self, t: float, pts: np.ndarray) -> np.ndarray:
-        r""":math:`-\nabla\rho/\rho` at points (P, 2): the three planes interpolated, then divided."""
-        f = _bilinear_planes(self.planes(t), self.n, pts)
-        return f[:, :2] / f[:, 2:]
 
 
 def diffusion_square(density: np.ndarray, options: CartoDiffusionOptions | None = None, *,
@@ -128,7 +103,8 @@ def diffusion_square(density: np.ndarray, options: CartoDiffusionOptions | None 
     project = (lambda p: _project(p, n)) if grid else (lambda p: np.clip(p, 0.0, 1.0, out=p))
     stepping = HeunOptions(opts.rtol * h, t0=blur_start(opts.blur, n), t_end=opts.t_max, first_step=0.1 * h * h,
                            max_steps=opts.max_steps, stall_dt=0.0)
-    mapped, info = diffuse(_Heat(dens), np.clip(ref, 0.0, 1.0), project, stepping, Settling(opts.tol_end * h),
+    field = HeatField(dens, divide="points", transforms=CosineTransforms(n))
+    mapped, info = diffuse(field, np.clip(ref, 0.0, 1.0), project, stepping, Settling(opts.tol_end * h),
                            _grid_turned_over(n) if grid else None)
     info.update(method="diffusion", passes=1, n=n, grid=grid)
     return GridFlow(ref_points=ref, mapped_points=mapped, time=time.perf_counter() - t0, info=info)

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.mesh import multilinear
 from .cosine import CosineTransforms
 from .heun import STALL_BLURS, HeunOptions, Stalled, heun_flow
 from .spectral import box_mean, flow_planes
@@ -108,23 +109,9 @@ def bilinear(table: np.ndarray, pts: np.ndarray) -> np.ndarray:
 
 
 def _bilinear_planes(planes: np.ndarray, n: int, pts: np.ndarray) -> np.ndarray:
-    """:func:`bilinear` of channel planes (C, N*N): the cell and weights once, then one gather per corner and
-    channel (faster than gathering rows of an interleaved table)."""
-    u = pts * (n - 1)
-    np.clip(u, 0.0, n - 1, out=u)
-    i = np.minimum(u.astype(np.intp), n - 2)
-    u -= i
-    fx, fy = u[:, 0], u[:, 1]
-    gx, gy = 1.0 - fx, 1.0 - fy
-    k = i[:, 0] * n + i[:, 1]
-    corners = ((k, gx * gy), (k + 1, gx * fy), (k + n, fx * gy), (k + n + 1, fx * fy))
-    out = np.empty((len(pts), len(planes)))
-    for c, plane in enumerate(planes):
-        acc = plane[k] * corners[0][1]
-        for idx, w in corners[1:]:
-            acc += plane[idx] * w
-        out[:, c] = acc
-    return out
+    """:func:`bilinear` of channel planes (C, N*N): :func:`rfmap.core.mesh.multilinear` at the points in grid
+    units (the cell and weights once, then one gather per corner and channel)."""
+    return multilinear(planes.reshape(len(planes), n, n), pts * (n - 1))
 
 
 def min_triangle_area(y: np.ndarray) -> float:

@@ -23,19 +23,20 @@ Numerical method:
 
        \rho(x, t) = \sum_{k \in \{0..M-1\}^d} a_k \prod_{i=1}^d \cos(\pi k_i x_i)\; e^{-\pi^2 |k|^2 t},
 
-   with :math:`a_k` from a type-I discrete cosine transform (:func:`cosine_coefficients`), so that
-   :math:`\rho(\cdot, 0)` interpolates the fine-grid values.
+   with :math:`a_k` from a type-I discrete cosine transform, so that :math:`\rho(\cdot, 0)` interpolates the
+   fine-grid values.
 3. **Velocity.**  :math:`\rho` and :math:`\nabla\rho` are evaluated on the fine grid by separable products with
    cosine / sine tables (dense matrix products, :math:`O(M^{d} K)` per evaluation with :math:`K \le M` the modes
    not yet decayed below 1e-17), :math:`v = -\nabla\rho/\rho` is formed there and interpolated multilinearly at the
-   current vertex positions (:func:`rfmap.core.mesh.interpolate`).
+   current vertex positions.  Steps 2 and 3 are the diffusion's heat field,
+   :class:`rfmap.solvers.heatfield.HeatField` (numpy), which the cartogram diffusion evaluates too, on its own
+   raster and dividing at the points.
 4. **Time integration.**  :math:`\dot x = v(x, t)` is integrated with the embedded Bogacki–Shampine 3(2) pair
    (:func:`rfmap.solvers.bs32.bs32_flow`: FSAL, 3 evaluations per step) with the local error per step bounded by
    ``rtol`` times the grid spacing, until the remaining displacement, estimated as :math:`\max|v| / \lambda_1` with
    :math:`\lambda_1 = \pi^2` the decay rate of the slowest mode, falls below ``tol_end`` times the grid spacing.
    The flow's driver, this stopping rule and the blurred starts below are the cartogram diffusion's too
-   (:mod:`rfmap.solvers.heatflow`); its field (step 3) and its integrator are this solver's own, as the results of
-   both are kept bit for bit and the cartogram's must not import PyTorch.
+   (:mod:`rfmap.solvers.heatflow`); its integrator is this solver's own (the cartogram passes take Heun steps).
 5. **Fold guard.**  A step after which an element of the mesh would be turned over is rejected and retried with half
    the step.  The exact flow is a diffeomorphism, but its image of a straight-sided element is not straight, and
    where the density varies faster than the mesh resolves (a sharp peak beside a near-empty region) the vertex
@@ -68,133 +69,26 @@ import time
 from dataclasses import dataclass, replace
 
 import numpy as np
-import torch
 
 from ..core.device import torch_threads
 from ..core.inputs import is_uniform
 from ..core.geometry import grid_min_measure
-from ..core.mesh import grid_mesh, interpolate
+from ..core.mesh import grid_mesh
 from ..core.result import MapResult
 from .bs32 import BS32Options
+from .cosine import ScipyTransforms, fft_workers
+from .heatfield import HeatField, blas_threads
 from .heatflow import SLOWEST_RATE, Settling, blur_start, diffuse
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
-from .spectral import cosine_coefficients, fft_workers
+from .spectral import cosine_coefficients
 
 __all__ = [
     "solve_dem",
     "DiffusionOptions",
-    "CosineDiffusion",
     "cosine_coefficients",
     "p1_upsample",
     "DEM_BOUNDARIES",
 ]
-
-
-class CosineDiffusion:
-    r"""Exact solution of the diffusion equation with no-flux walls on :math:`[0,1]^d` in the cosine basis.
-
-    :math:`\rho(x,t) = \sum_k a_k \prod_i \cos(\pi k_i x_i)\, e^{-\pi^2 |k|^2 t}`, :math:`0 \le k_i \le M-1`,
-    with :math:`a_k` such that :math:`\rho(\cdot, 0)` interpolates the grid values: with the unnormalised type-I DCT
-    :math:`y = \mathrm{DCT\text{-}I}(p)` (``scipy.fft.dctn(p, type=1)``),
-    :math:`a_k = y_k \prod_i c_{k_i} / (2(M-1))^d` where :math:`c_0 = c_{M-1} = 1` and :math:`c_k = 2` otherwise.
-    :math:`\rho` and :math:`\nabla\rho` are evaluated on the same grid by separable products with the tables
-    :math:`\cos(\pi k x_j)` and :math:`-\pi k \sin(\pi k x_j)`; modes whose per-axis decay factor
-    :math:`e^{-\pi^2 k^2 t}` has dropped below ``1e-17`` are skipped, so late evaluations are cheap.
-
-    Parameters
-    ----------
-    values : ndarray, shape (M,)*d
-        Grid values of the initial density at :math:`j/(M-1)` (positive).
-    """
-
-    def __init__(self, values: np.ndarray):
-        self.dim = values.ndim
-        self.m = m = values.shape[0]
-        self.coef = torch.from_numpy(cosine_coefficients(values, workers=fft_workers()))
-        k = np.arange(m)
-        x = np.linspace(0.0, 1.0, m)
-        arg = math.pi * np.outer(x, k)
-        dsin = -math.pi * k[None, :] * np.sin(arg)  # d/dx cos(pi k x), (M, K)
-        dsin[0] = dsin[-1] = 0.0  # exact zero normal derivative on the walls
-        self.cos = torch.from_numpy(np.cos(arg))  # (M, K)
-        self.dsin = torch.from_numpy(dsin)
-        self.k2 = torch.from_numpy((math.pi * k) ** 2)  # per-axis decay rates
-
-    def n_modes(self, t: float) -> int:
-        """Modes per axis still significant at time ``t`` (per-axis decay factor above 1e-17)."""
-        if t <= 0:
-            return self.m
-        return int(min(self.m, max(2, math.ceil(math.sqrt(39.2 / (math.pi**2 * t))) + 1)))
-
-    def fields(self, t: float, window: tuple[tuple[int, int], ...] | None = None) -> torch.Tensor:
-        r""":math:`\rho` and :math:`\nabla\rho` at time ``t`` on the grid (or on a window of it).
-
-        Parameters
-        ----------
-        t : float
-            Time (box units).
-        window : tuple of d (start, stop) index pairs, optional
-            Evaluate only on the grid nodes ``start <= j < stop`` along each axis (the whole grid by default).
-
-        Returns
-        -------
-        Tensor, float64, shape (d+1, W_1, ..., W_d)
-            ``[rho, d rho/dx_1, ..., d rho/dx_d]``; ``W_i = stop_i - start_i`` (``M`` without a window).
-        """
-        d = self.dim
-        if window is None:
-            window = ((0, self.m),) * d
-        kk = self.n_modes(t)
-        decay = torch.exp(-self.k2[:kk] * t)  # separable time factor
-        C = [self.cos[lo:hi, :kk] * decay for lo, hi in window]  # per-axis (W_i, K) tables
-        S = [self.dsin[lo:hi, :kk] * decay for lo, hi in window]
-        w = [hi - lo for lo, hi in window]
-        a = self.coef[(slice(0, kk),) * d]
-        if d == 2:
-            out = torch.empty(3, w[0], w[1], dtype=torch.float64)
-            ac = a @ C[1].T  # (K, W_2): last axis transformed
-            torch.mm(C[0], ac, out=out[0])
-            torch.mm(S[0], ac, out=out[1])
-            torch.mm(C[0], a @ S[1].T, out=out[2])
-            return out
-        out = torch.empty(4, w[0], w[1] * w[2], dtype=torch.float64)
-        zc = a @ C[2].T  # (K, K, W_3)
-        zs = a @ S[2].T
-        plane = w[1] * w[2]
-        ycc = torch.matmul(C[1], zc).reshape(kk, plane)  # (K, W_2, W_3) -> (K, W_2 W_3)
-        torch.mm(C[0], ycc, out=out[0])
-        torch.mm(S[0], ycc, out=out[1])
-        torch.mm(C[0], torch.matmul(S[1], zc).reshape(kk, plane), out=out[2])
-        torch.mm(C[0], torch.matmul(C[1], zs).reshape(kk, plane), out=out[3])
-        return out.reshape(4, *w)
-
-    def velocity(self, t: float, window: tuple[tuple[int, int], ...] | None = None) -> torch.Tensor:
-        r"""The Gastner–Newman velocity :math:`v = -\nabla\rho/\rho` on the grid (or a window, see :meth:`fields`).
-
-        Returns
-        -------
-        Tensor, float64, shape (d, W_1, ..., W_d)
-        """
-        f = self.fields(t, window)
-        inv = f[0].reciprocal_().neg_()
-        return f[1:].mul_(inv)
-
-    def velocity_at(self, t: float, points: np.ndarray) -> np.ndarray:
-        r""":math:`v(x, t)` at arbitrary points (P, d) of the unit box: multilinear interpolation of the grid velocity.
-
-        The velocity is evaluated only on the window of grid nodes that covers the points' bounding box (much
-        cheaper when the points occupy a small part of the box, as with the free boundary).
-
-        Returns
-        -------
-        ndarray, shape (P, d)
-        """
-        top = self.m - 1
-        lo = np.clip(np.floor(points.min(axis=0) * top).astype(int), 0, top - 1)
-        hi = np.clip(np.ceil(points.max(axis=0) * top).astype(int), lo + 1, top)
-        window = tuple((int(a), int(b) + 1) for a, b in zip(lo, hi))
-        local = (points * top - lo) / (hi - lo)
-        return interpolate(self.velocity(t, window)[None], local, check=False)[0].numpy()
 
 
 #: fold rejections after which the diffusion flow is stopped at its last fold-free state
@@ -229,7 +123,7 @@ class _Progress:
             self.bar.close()
 
 
-def _flow(field: CosineDiffusion, y: np.ndarray, project, stepping: BS32Options, tol: float, turned_over,
+def _flow(field: HeatField, y: np.ndarray, project, stepping: BS32Options, tol: float, turned_over,
           label: str | None) -> tuple[np.ndarray, dict]:
     r"""The vertices ``y`` carried by the diffusion flow (:func:`rfmap.solvers.heatflow.diffuse`, Bogacki--Shampine
     steps) until the remaining displacement is at most ``tol`` (box units), with a progress bar when ``label`` is
@@ -271,7 +165,8 @@ class DiffusionOptions:
     max_steps : int
         Maximum number of (accepted + rejected) time steps; ``RuntimeError`` if exceeded.
     num_threads : int, optional
-        Torch threads for the dense transforms during the solve (restored afterwards).  Default: 1 in 2D (the
+        Threads of the solve (restored afterwards): the heat field's matrix products
+        (:func:`rfmap.solvers.heatfield.blas_threads`) and transform, and torch's fold check.  Default: 1 in 2D (the
         products are too small to gain from threads, which only add synchronisation cost), torch's setting in 3D.
     fold_guard : bool
         Keep the mesh fold-free (default): a time step that would turn an element over is rejected and retried
@@ -387,8 +282,8 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
                 "fold_rejections": 0, "fold_stop": None, "fold_blurs": []}
     else:
         threads = opts.num_threads if opts.num_threads is not None else (1 if d == 2 else None)
-        with torch_threads(threads):
-            field = CosineDiffusion(fine)
+        with torch_threads(threads), blas_threads(fft_workers()):  # the threads torch runs with, now set
+            field = HeatField(fine, divide="grid", transforms=ScipyTransforms(workers=fft_workers()))
             h = 1.0 / (nb - 1)
             # from the decay time of the fastest mode, which the step control grows
             stepping = BS32Options(float(opts.rtol) * h, first_step=1.0 / (SLOWEST_RATE * (field.m - 1) ** 2),

@@ -5,12 +5,14 @@ cosine basis solves exactly,
 
 .. math:: \rho(x, t) = \sum_k a_k \prod_i \cos(\pi k_i x_i)\, e^{-\pi^2 |k|^2 t},
 
-with the coefficients :math:`a_k` of the initial density (:func:`rfmap.solvers.spectral.half_coefficients`,
-:func:`rfmap.solvers.spectral.cosine_coefficients`) decaying by :func:`rfmap.solvers.spectral.heat_factor`; points
-follow :math:`\dot x = v = -\nabla\rho/\rho` until the flow has settled.  One implementation here, for
+with the coefficients :math:`a_k` of the initial density; points follow :math:`\dot x = v = -\nabla\rho/\rho` until
+the flow has settled.  One implementation here and in :mod:`rfmap.solvers.heatfield`, for
 :func:`rfmap.solvers.diffusion.solve_dem` (maps of the square and cube) and
 :func:`rfmap.solvers.cartodiffusion.diffusion_square` (a cartogram's pass):
 
+* the heat field, :class:`rfmap.solvers.heatfield.HeatField`: :math:`\rho`, :math:`\nabla\rho` and :math:`v`
+  from the cosine series, on the raster a solver gives it and divided where it says (the maps on their refined
+  raster's nodes, the cartograms at the points);
 * the driver, :func:`diffuse`: velocity evaluations counted, the time integrator a strategy chosen by its options
   (:data:`INTEGRATORS`);
 * the end of the flow, :class:`Settling`: the slowest mode decays at the rate :math:`\pi^2`
@@ -20,19 +22,11 @@ follow :math:`\dot x = v = -\nabla\rho/\rho` until the flow has settled.  One im
   :math:`\sigma` vertex spacings, at :math:`t_0 = (\sigma h)^2/2` (the map's retries of a folding flow, the
   cartogram's ``blur``).
 
-What stays two, and why.  A solver hands :func:`diffuse` a heat field (an object with ``velocity_at(t, points)``)
-and its integrator's options; each solver keeps its own, because merging them would change results that are
-reproduced bit for bit (``tests/test_reference_outputs.py`` and the numbers of the book):
-
-* the fields: :class:`rfmap.solvers.diffusion.CosineDiffusion` (maps) evaluates :math:`\rho` and
-  :math:`\nabla\rho` by dense products in torch with cosine and sine tables on the refined raster, in any dimension,
-  skipping decayed modes and only on the window of the raster around the points, forms :math:`v` there and
-  interpolates it; the cartogram's field (:mod:`rfmap.solvers.cartodiffusion`) synthesises them with ``numpy.fft``
-  (:func:`rfmap.solvers.spectral.flux_synthesis`) on the 2D vertex grid, interpolates :math:`\rho` and its flux
-  and divides at the points.  They round differently, and the cartogram's must not import PyTorch;
-* the integrators: the maps take Bogacki--Shampine 3(2) steps (:func:`rfmap.solvers.bs32.bs32_flow`, error
-  ``1e-2`` grid spacings, stopped after repeated folds), the cartogram passes Heun pairs
-  (:func:`rfmap.solvers.heun.heun_flow`, ``0.2`` spacings, the cartogram flow's), with their own first steps.
+What stays two is the integrator, chosen by the options a solver hands :func:`diffuse`: the maps take
+Bogacki--Shampine 3(2) steps (:func:`rfmap.solvers.bs32.bs32_flow`, error ``1e-2`` grid spacings, stopped after
+repeated folds), the cartogram passes Heun pairs (:func:`rfmap.solvers.heun.heun_flow`, ``0.2`` spacings, the
+cartogram flow's), with their own first steps; merging them would change results that are reproduced
+(``tests/test_reference_outputs.py`` and the numbers of the book).
 
 numpy only.
 """

@@ -3,11 +3,11 @@ cartograms alike.
 
 A grid field :math:`p_j` at the nodes :math:`j/(M-1)` has the cosine interpolant :math:`\sum_k a_k \prod_i
 \cos(\pi k_i x_i)`, :math:`0 \le k_i \le M-1`, whose coefficients a type-I DCT gives (:func:`cosine_coefficients`,
-:func:`half_coefficients`).  On them the diffusion solvers evolve the density exactly (:func:`damp` by
-:func:`heat_factor`; ``rfmap.solvers.diffusion.CosineDiffusion`` and ``rfmap.solvers.cartodiffusion``), the flow
-solvers solve the Poisson equation (:func:`poisson_flux`, :func:`flow_planes`: :func:`divide_by_laplacian`,
-:func:`flux_synthesis`) and blur (:func:`gaussian_blur`, :func:`blur_factor`); both integrate the interpolant over
-boxes (:func:`box_mean`, :func:`interval_weights`).
+:func:`half_coefficients`).  On them the diffusion solvers evolve the density exactly (:func:`heat_factor`;
+:class:`rfmap.solvers.heatfield.HeatField`, the maps' and the cartograms' heat field), the flow solvers solve the
+Poisson equation (:func:`poisson_flux`, :func:`flow_planes`: :func:`divide_by_laplacian`, :func:`flux_synthesis`)
+and blur (:func:`gaussian_blur`, :func:`blur_factor`); both integrate the interpolant over boxes (:func:`box_mean`,
+:func:`interval_weights`).
 
 Every function takes the transforms it runs on (:mod:`rfmap.solvers.cosine`): by default ``scipy.fft`` in any
 dimension and precision (:class:`rfmap.solvers.cosine.ScipyTransforms`, the maps of :mod:`rfmap.solvers.flow` and
@@ -123,8 +123,7 @@ def divide_by_laplacian(b: np.ndarray, rows: int = 256) -> np.ndarray:
     return b
 
 
-def flux_synthesis(b: np.ndarray, transforms=None, out: np.ndarray | None = None,
-                   value: bool = False) -> np.ndarray:
+def flux_synthesis(b: np.ndarray, transforms=None, out: np.ndarray | None = None) -> np.ndarray:
     r"""The flux :math:`-\nabla\psi` at the grid nodes of :math:`\psi = \sum_k e_k b_k \prod_i \cos(\pi k_i x_i)`
     given by its half coefficients ``b`` (:func:`half_coefficients`; consumed).
 
@@ -138,19 +137,17 @@ def flux_synthesis(b: np.ndarray, transforms=None, out: np.ndarray | None = None
     b : ndarray, shape (M,)*d, d in {2, 3}
     transforms : optional
         As in :func:`half_coefficients` (a :class:`rfmap.solvers.cosine.CosineTransforms` in 2D only).
-    out : ndarray, shape (d, M..) (or (d + 1, M..) with ``value``), optional
-    value : bool
-        Also :math:`\psi` itself, as the last component (2D only).
+    out : ndarray, shape (d, M, ..., M), optional
 
     Returns
     -------
-    ndarray, shape (d, M, ..., M) (d + 1 with ``value``), of ``b``'s dtype
+    ndarray, shape (d, M, ..., M), of ``b``'s dtype
     """
     tr = transforms if transforms is not None else ScipyTransforms()
     d, m = b.ndim, b.shape[0]
     k = (math.pi * np.arange(m)).astype(b.dtype)
     if out is None:
-        out = np.empty((d + int(value),) + (m,) * d, dtype=b.dtype)
+        out = np.empty((d,) + (m,) * d, dtype=b.dtype)
 
     def deriv(g: np.ndarray, i: int) -> None:  # out[i]: the sine synthesis along axis i of g * pi k_i (g consumed)
         inner = tuple(slice(1, m - 1) if j == i else slice(None) for j in range(d))
@@ -162,14 +159,9 @@ def flux_synthesis(b: np.ndarray, transforms=None, out: np.ndarray | None = None
         tr.dst(g[inner], i, out=out[i][inner])
 
     if d == 2:
-        c = tr.dct(b, 1)
-        if value:
-            tr.dct(c, 0, out=out[2])
-        deriv(c, 0)
+        deriv(tr.dct(b, 1), 0)
         deriv(tr.dct(b, 0, out=b), 1)
         return out
-    if value:
-        raise ValueError("flux_synthesis(value=True) is 2D only")
     p2 = tr.dct(b, 2)  # cosine along axis 2: shared by components 0 and 1
     deriv(tr.dct(p2, 1), 0)
     deriv(tr.dct(p2, 0, out=p2), 1)
