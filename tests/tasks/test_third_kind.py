@@ -32,13 +32,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 import torch
 
-import rfmap.core.result as results
-import rfmap.tasks.base as tasks_base
 from rfmap.core.mesh import grid_mesh, grid_points, interpolate, jittered_points
 from rfmap.core.result import MapResult
-from rfmap.tasks import Batch, Task, TaskSpec, ValidationField, grid_elements, kinds, register_task
+from rfmap.tasks import Batch, Task, TaskSpec, ValidationField, grid_elements, kinds, registered_task
 from rfmap.tasks.heldout import held_out_rng
-from rfmap.training.config import CONFIGS, Presets, TrainConfig, get_config
+from rfmap.training.config import Presets, TrainConfig, get_config, registered_config
 
 #: the package's files the third kind needed changed (outside tests): the solve command, whose methods were a fixed
 #: list and are now those of the registered kinds
@@ -187,13 +185,10 @@ def poisson_presets() -> Presets:
 
 
 @pytest.fixture
-def poisson_kind(monkeypatch):
-    """The kind registered (in copies of the registries, restored after the test) and its config in CONFIGS."""
-    monkeypatch.setattr(tasks_base, "_TASKS", dict(tasks_base._TASKS))
-    monkeypatch.setattr(results, "_RESULT_KINDS", dict(results._RESULT_KINDS))
-    register_task(PoissonTask)
-    monkeypatch.setitem(CONFIGS, "poisson2d", poisson_presets().configs())
-    return get_config("poisson2d", "ci")
+def poisson_kind():
+    """The kind registered and its config added, both for the test only (the registries restored after it)."""
+    with registered_task(PoissonTask), registered_config(poisson_presets()) as name:
+        yield get_config(name, "ci")
 
 
 # ------------------------------------------------------------------------------------------------------ the tests
@@ -277,3 +272,15 @@ def test_the_package_does_not_name_the_third_kind():
     named = [p for p in src.rglob("*.py") if any(q in p.read_text(encoding="utf-8") for q in quoted)]
     assert not named
     assert len(LIBRARY_FILES) <= 4
+
+
+def test_the_temporary_registrations_leave_the_registries_as_they_were():
+    from rfmap.core.result import result_kinds_snapshot
+    from rfmap.training.config import config_names
+
+    before = kinds(), result_kinds_snapshot(), config_names()
+    with registered_task(PoissonTask) as task, registered_config(poisson_presets()) as name:
+        assert task.kind == "poisson" and "poisson" in kinds() and name in config_names()
+        with pytest.raises(ValueError, match="exists already"), registered_config(poisson_presets()):
+            pass
+    assert (kinds(), result_kinds_snapshot(), config_names()) == before

@@ -13,7 +13,7 @@ import torch
 from .geometry import beltrami_coefficient, signed_measures
 from .metrics import MapMetrics, compute_metrics, element_population
 
-__all__ = ["MapResult", "ResultKind", "register_result_kind", "result_kind", "kind_of_field", "save_npz_atomic",
+__all__ = ["MapResult", "ResultKind", "register_result_kind", "result_kinds_snapshot", "restore_result_kinds", "result_kind", "kind_of_field", "save_npz_atomic",
            "load_result", "to_pyvista", "setup_pyvista"]
 
 
@@ -44,6 +44,17 @@ def register_result_kind(kind: ResultKind) -> ResultKind:
     """Declare a kind of result (every registered task declares its own, :meth:`rfmap.tasks.base.Task.result_kind`)."""
     _RESULT_KINDS[kind.name] = kind
     return kind
+
+
+def result_kinds_snapshot() -> dict[str, ResultKind]:
+    """A copy of the declared kinds, for :func:`restore_result_kinds` (a kind declared for a while)."""
+    return dict(_RESULT_KINDS)
+
+
+def restore_result_kinds(snapshot: dict[str, ResultKind]) -> None:
+    """Declare exactly the kinds of ``snapshot`` again (:func:`result_kinds_snapshot`)."""
+    _RESULT_KINDS.clear()
+    _RESULT_KINDS.update(snapshot)
 
 
 def result_kind(name: str) -> ResultKind:

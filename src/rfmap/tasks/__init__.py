@@ -9,12 +9,14 @@ A new kind of map is a new :class:`Task` subclass with ``@register_task``.
 from __future__ import annotations
 
 from .base import (Batch, LossWeights, MappedBatch, SampleOptions, Task, TaskSpec, batch_loss_terms, draw_samples,
-                   encode, get_task, grid_elements, kinds, make_batch, register_task, sample_batch, task_loss)
+                   encode, get_task, grid_elements, kinds, make_batch, register_task, registered_task,
+                   sample_batch, task_loss)
 from .density import DensityTask  # registered first: the default kind  # isort: skip
 from .beltrami import BeltramiTask  # isort: skip
 from .heldout import STREAMS, VALIDATION_SEED, ValidationField
 
-__all__ = ["Task", "TaskSpec", "Batch", "LossWeights", "MappedBatch", "SampleOptions", "register_task", "get_task",
+__all__ = ["Task", "TaskSpec", "Batch", "LossWeights", "MappedBatch", "SampleOptions", "register_task", "registered_task",
+           "get_task",
            "kinds", "encode", "grid_elements", "draw_samples", "make_batch", "sample_batch", "task_loss",
            "batch_loss_terms",
            "DensityTask", "BeltramiTask", "ValidationField", "VALIDATION_SEED", "STREAMS"]

@@ -12,9 +12,10 @@ The input encoding (paper Sec. 4.1) stacks the vertex coordinates and the task's
 """
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from functools import lru_cache
-from typing import Any, Callable, ClassVar
+from typing import Any, Callable, ClassVar, Iterator
 
 import numpy as np
 import torch
@@ -24,11 +25,11 @@ from . import losses as L
 from ..core.geometry import grid_signed_measures, signed_measures
 from ..core.mesh import grid_mesh, grid_points
 from ..nn.model import BOUNDARIES, apply_displacement
-from ..core.result import ResultKind, register_result_kind
+from ..core.result import ResultKind, register_result_kind, restore_result_kinds, result_kinds_snapshot
 from ..fields.random import RandomBeltramiConfig, RandomDensityConfig
 from .teacher import TeacherConfig, teacher_indices, teacher_loss
 
-__all__ = ["Task", "TaskSpec", "SampleOptions", "Batch", "LossWeights", "register_task", "get_task", "kinds",
+__all__ = ["Task", "TaskSpec", "SampleOptions", "Batch", "LossWeights", "register_task", "registered_task", "get_task", "kinds",
            "encode", "grid_elements", "draw_samples", "make_batch", "sample_batch", "task_loss", "batch_loss_terms"]
 
 _TASKS: dict[str, "Task"] = {}
@@ -41,6 +42,20 @@ def register_task(cls: type["Task"]) -> type["Task"]:
     _TASKS[cls.kind] = task = cls()
     register_result_kind(task.result_kind())
     return cls
+
+
+@contextmanager
+def registered_task(cls: type["Task"]) -> Iterator["Task"]:
+    """Register a :class:`Task` subclass for the duration of a ``with`` block (a kind tried out, or a test's), then
+    restore both registries (task kinds and result kinds) as they were; yields the task instance."""
+    saved = dict(_TASKS), result_kinds_snapshot()
+    try:
+        register_task(cls)
+        yield _TASKS[cls.kind]
+    finally:
+        _TASKS.clear()
+        _TASKS.update(saved[0])
+        restore_result_kinds(saved[1])
 
 
 def kinds() -> tuple[str, ...]:

@@ -11,13 +11,17 @@ from __future__ import annotations
 
 import json
 import os
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
+
+from typing import Iterator
 
 from ..fields import RandomBeltramiConfig, RandomDensityConfig
 from ..tasks import LossWeights, TaskSpec
 from ..tasks.teacher import TeacherConfig
 
-__all__ = ["TrainConfig", "ModelConfig", "Presets", "CONFIGS", "PRESETS", "get_config", "config_names", "scale"]
+__all__ = ["TrainConfig", "ModelConfig", "Presets", "CONFIGS", "PRESETS", "get_config", "config_names", "registered_config",
+           "scale"]
 
 PRESETS = ("ci", "full", "paper")
 #: how the training grid side of a step is drawn from ``n_range`` (:func:`rfmap.training.data.step_size_n`)
@@ -359,6 +363,20 @@ CONFIGS: dict[str, dict[str, TrainConfig]] = {
     for p in (_BELTRAMI2D, _DEQ2D_SQUARE, _DEQ2D_FREE, _DEM2D_SQUARE, _DEM3D_CUBE, _DEM3D_FREE, _FNO_DEQ2D_SQUARE,
               _DEQ2D_SQUARE_NATIVE, _DEM3D_CUBE_NATIVE)
 }
+
+
+@contextmanager
+def registered_config(presets: Presets) -> Iterator[str]:
+    """Add ``presets`` to :data:`CONFIGS` under its name for the duration of a ``with`` block (a configuration tried
+    out, or a test's), then remove it; yields the name.  ``ValueError`` if the name is taken."""
+    name = presets.full.name
+    if name in CONFIGS:
+        raise ValueError(f"config {name!r} exists already")
+    CONFIGS[name] = presets.configs()
+    try:
+        yield name
+    finally:
+        CONFIGS.pop(name, None)
 
 
 def config_names() -> list[str]:
