@@ -19,7 +19,7 @@ _HOME = {
     "..core.result": ("setup_pyvista", "to_pyvista"),
     ".architecture": ("architecture_diagram", "encoding_figure"),
     ".cartograms": ("area_error_histograms", "cartogram_figure", "cartogram_panels", "plot_regions"),
-    ".figures": ("STYLE", "figures_dir", "repository_root", "save_figure", "style"),
+    ".figures": ("STYLE", "colorbar", "figures_dir", "frameless", "repository_root", "save_figure", "style"),
     ".meshes": ("beltrami_figure", "element_rho", "extreme_figure", "map_rows_figure", "plot_beltrami_row",
                 "jitter_figure", "plot_density", "plot_map_row", "plot_mesh", "plot_mu", "plot_slice_outline",
                 "population_figure", "random_fields_figure", "vertex_error_panels"),

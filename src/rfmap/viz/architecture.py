@@ -1,6 +1,8 @@
 """The network's encoder-decoder structure drawn from its own modules."""
 from __future__ import annotations
 
+from .figures import colorbar as add_colorbar
+
 __all__ = ["architecture_diagram", "encoding_figure"]
 
 #: inches per unit of the drawing (a box is 1.2 units wide) and the size of its text: readable at the book's width
@@ -111,7 +113,7 @@ def encoding_figure(encodings, names, *, width: float = 7.2):
             ax = axes[row, c]
             im = ax.imshow(enc[0, c].T, origin="lower", extent=(0, 1, 0, 1), cmap="viridis" if c < 2 else "RdBu_r")
             ax.set_title(f"{c}: {name}")
-            fig.colorbar(im, ax=ax, shrink=0.8)
+            add_colorbar(im, fig=fig, ax=ax, shrink=0.8)
         for ax in axes[row, len(row_names):]:
             ax.set_axis_off()
     return fig

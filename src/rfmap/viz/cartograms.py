@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .figures import save_figure
+from .figures import colorbar as add_colorbar
 
 __all__ = ["RegionStyle", "FigureOptions", "plot_regions", "cartogram_figure", "cartogram_panels", "area_error_histograms", "column_style",
            "neighbour_colours", "region_colours", "area_legend", "format_amount", "series_grid", "TEXT_COLUMN_IN",
@@ -60,7 +61,7 @@ def plot_regions(ax, geoms, values=None, *, title: str | None = None, colorbar: 
     if title:
         ax.set_title(title)
     if colorbar and values is not None:
-        plt.colorbar(coll, ax=ax, fraction=0.046, pad=0.03, label=label)
+        add_colorbar(coll, ax=ax, fraction=0.046, pad=0.03, label=label)
     return coll
 
 
@@ -246,7 +247,7 @@ def cartogram_figure(carto, options: FigureOptions | None = None, *, label: str 
         if legend:
             area_legend(axes[1], float(carto.values.sum()), float(sum(g.area for g in after)), unit=unit or title)
         if isinstance(face, np.ndarray):
-            fig.colorbar(coll, ax=axes, fraction=0.03, pad=0.01, label="input density / mean")
+            add_colorbar(coll, fig=fig, ax=axes, fraction=0.03, pad=0.01, label="input density / mean")
         if key:
             from matplotlib.patches import Patch
 

@@ -6,8 +6,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-__all__ = ["ColorScale", "color_scale", "STYLE", "style", "repository_root", "figures_dir", "save_figure", "display_font_sizes", "MIN_DISPLAY_PT",
-           "TEXT_COLUMN_PX", "MAX_FIGURE_PX"]
+__all__ = ["ColorScale", "color_scale", "STYLE", "style", "colorbar", "frameless", "COLORBAR_TICKS", "repository_root",
+           "figures_dir", "save_figure", "display_font_sizes", "MIN_DISPLAY_PT", "TEXT_COLUMN_PX", "MAX_FIGURE_PX"]
 
 
 STYLE = {
@@ -60,6 +60,36 @@ def style():
 
     with plt.rc_context(STYLE):
         yield
+
+
+#: the most labelled ticks on a colour bar (at round steps): fewer, shorter labels, set at the text size of the figure
+COLORBAR_TICKS = 5
+
+
+def colorbar(mappable, *, ax, fig=None, **kw):
+    """A colour bar for ``mappable`` beside ``ax`` (an axis or a list of axes; ``kw`` as for
+    ``Figure.colorbar``), with at most :data:`COLORBAR_TICKS` labelled ticks set at the figure's text size
+    (``font.size`` of the book's :data:`STYLE`), never smaller: short bars otherwise crowd many small labels."""
+    import matplotlib as mpl
+    import numpy as np
+    from matplotlib.ticker import MaxNLocator
+
+    fig = fig or (ax if hasattr(ax, "figure") else np.ravel(ax)[0]).figure
+    cb = fig.colorbar(mappable, ax=ax, **kw)
+    if not isinstance(getattr(mappable, "norm", None), mpl.colors.LogNorm):
+        cb.locator = MaxNLocator(COLORBAR_TICKS, steps=[1, 2, 2.5, 5, 10])
+        cb.update_ticks()
+    cb.ax.tick_params(labelsize=max(float(mpl.rcParams["font.size"]), float(STYLE["font.size"])))
+    return cb
+
+
+def frameless(ax) -> None:
+    """An image-like panel (a mesh, a field on the square, a rendering) without ticks and without the frame's
+    spines, which say nothing there."""
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for side in ax.spines.values():
+        side.set_visible(False)
 
 
 def _is_book_root(path: Path) -> bool:

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .figures import ColorScale, color_scale, save_figure, style
+from .figures import ColorScale, color_scale, frameless, save_figure, style
+from .figures import colorbar as add_colorbar
 
 __all__ = ["element_rho", "plot_mesh", "repair_figure", "plot_slice_outline", "plot_density", "plot_mu", "plot_map_row",
            "plot_beltrami_row", "vertex_error_panels", "population_figure", "map_rows_figure", "beltrami_figure",
@@ -41,8 +42,7 @@ def plot_mesh(ax, points, elements=None, *, n: int | None = None, max_lines: int
     else:
         ax.triplot(points[:, 0], points[:, 1], elements, color=color, lw=lw * 0.6)
     ax.set_aspect("equal")
-    ax.set_xticks([])
-    ax.set_yticks([])
+    frameless(ax)
     if title:
         ax.set_title(title)
 
@@ -59,8 +59,7 @@ def plot_slice_outline(ax, points, n: int, k: int | None = None, *, title: str |
     loop = np.concatenate([P[:, 0], P[-1, 1:], P[-2::-1, -1], P[0, -2::-1]])
     ax.plot(loop[:, 0], loop[:, 1], color="C3", lw=2 * lw + 0.5)
     ax.set_aspect("equal")
-    ax.set_xticks([])
-    ax.set_yticks([])
+    frameless(ax)
     if title:
         ax.set_title(title)
 
@@ -68,8 +67,6 @@ def plot_slice_outline(ax, points, n: int, k: int | None = None, *, title: str |
 def plot_density(ax, points, elements, values, *, title=None, colorbar=True, scale: ColorScale | None = None, **kw):
     """Per-element (length m) or per-vertex (length n) values on a 2D mesh, coloured by ``scale``
     (:class:`rfmap.viz.figures.ColorScale`; its fields ``vmin``, ``vmax``, ``cmap`` may be given as keywords)."""
-    import matplotlib.pyplot as plt
-
     sc = color_scale(scale, **kw)
     vmin, vmax, cmap = sc.vmin, sc.vmax, sc.cmap
     values = np.asarray(values)
@@ -79,12 +76,11 @@ def plot_density(ax, points, elements, values, *, title=None, colorbar=True, sca
         im = ax.tripcolor(points[:, 0], points[:, 1], elements, values, shading="gouraud", vmin=vmin, vmax=vmax,
                           cmap=cmap)
     ax.set_aspect("equal")
-    ax.set_xticks([])
-    ax.set_yticks([])
+    frameless(ax)
     if title:
         ax.set_title(title)
     if colorbar:
-        plt.colorbar(im, ax=ax, fraction=0.046, pad=0.03)
+        add_colorbar(im, ax=ax, fraction=0.046, pad=0.03)
     return im
 
 
@@ -158,7 +154,7 @@ def vertex_error_panels(results: dict, exact, *, n: int, title: str = ""):
         im = ax.imshow(e.T, origin="lower", extent=(0, 1, 0, 1), vmin=0, vmax=hi, cmap="magma")
         ax.set_title(f"{title} {name}: mean {e.mean():.2e}".strip())
         ax.set_aspect("equal")
-    fig.colorbar(im, ax=axes[0].tolist(), shrink=0.85, label="vertex error")
+    add_colorbar(im, fig=fig, ax=axes[0].tolist(), shrink=0.85, label="vertex error")
     return fig
 
 
@@ -208,9 +204,9 @@ def map_rows_figure(results: dict, *, rho_range=(0.0, 2.5), width: float = TEXT_
     for ax, title in zip(axes[0], ["mapped mesh", r"$\tilde\rho$ original", r"$\tilde\rho$ mapped",
                                    r"$|\mu|$ mapped"]):
         ax.set_title(title)
-    fig.colorbar(im_rho, ax=axes[:, 1:3].ravel().tolist(), location="bottom", shrink=0.8, aspect=30,
+    add_colorbar(im_rho, fig=fig, ax=axes[:, 1:3].ravel().tolist(), location="bottom", shrink=0.8, aspect=30,
                  label=r"$\tilde\rho$ (mean 1)", extend="max" if rho_top > rho_range[1] else "neither")
-    fig.colorbar(im_mu, ax=axes[:, 3].tolist(), location="bottom", shrink=0.95, aspect=12,
+    add_colorbar(im_mu, fig=fig, ax=axes[:, 3].tolist(), location="bottom", shrink=0.95, aspect=12,
                  label=r"$|\mu|$", extend="max" if mu_top > mu_hi else "neither")
     return fig
 
@@ -265,7 +261,7 @@ def beltrami_figure(rows: dict, *, width: float = TEXT_WIDTH_IN, bins: int = 40,
     _frameless(axes[:, :4])
     for a, title in zip(axes[0], [r"$|\mu|$", "exact map", "LBS", "surrogate", r"$|\mu_{exact}-\mu|$"]):
         a.set_title(title)
-    fig.colorbar(im, ax=axes[:, 0].tolist(), location="bottom", shrink=0.95, aspect=12, label=r"$|\mu|$")
+    add_colorbar(im, fig=fig, ax=axes[:, 0].tolist(), location="bottom", shrink=0.95, aspect=12, label=r"$|\mu|$")
     handles, labels = axes[0, 4].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower right", ncols=2, title="error histograms")
     return fig
@@ -298,7 +294,7 @@ def extreme_figure(original, maps: dict, *, width: float = TEXT_WIDTH_IN, max_li
     rho0 = np.asarray(original.field).reshape(-1)[el].mean(1)
     im = plot_density(ax[0], original.ref_points, el, rho0 / rho0.mean(), title=r"(a) $\tilde\rho$ original",
                       colorbar=False)
-    top.colorbar(im, ax=ax[0], location="bottom", shrink=0.9, label=r"$\tilde\rho$ (mean 1)")
+    add_colorbar(im, fig=top, ax=ax[0], location="bottom", shrink=0.9, label=r"$\tilde\rho$ (mean 1)")
     letters = iter("bcdefg")
     for a, (label, r) in zip(ax[1:], maps.items()):
         title = f"({next(letters)}) {label} map"
