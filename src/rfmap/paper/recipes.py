@@ -2,7 +2,7 @@ r"""How the shipped models were trained, from their metadata: the training field
 from __future__ import annotations
 
 from ..tasks import get_task
-from .tables import Table
+from .tables import Table, decimal_text, rate_text
 
 __all__ = ["training_fields_text", "recipe_table", "recipe_differences", "differences_text", "differences_table"]
 
@@ -22,9 +22,15 @@ def recipe_table(surs: dict) -> Table:
     map, where recorded, else the capped or the plain mean; which maps were scored: ``raw`` network output or the maps
     as ``Surrogate.map`` ``delivered`` them, a folded map regridded or repaired (``TrainConfig.val_repair``); how many
     held-out maps the network itself folded; :func:`rfmap.training.validation.evaluate`).  Older weights were validated on
-    fewer sides, so their numbers are not comparable with those of later runs."""
+    fewer sides, so their numbers are not comparable with those of later runs.
+
+    Each column of the Markdown table is in one notation: rates as powers of ten (:func:`rate_text`), steps with
+    thousands separators, minutes whole, the held-out scores with three significant digits in positional notation
+    (:func:`decimal_text`)."""
     t = Table("tab:recipes", "How the models were trained",
-              ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "scored", "folded_maps"])
+              ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "scored", "folded_maps"],
+              formats={"lr": rate_text, "steps": lambda v: f"{int(v):,}", "train_time": lambda v: f"{float(v):,.0f}",
+                       "held_out": decimal_text})
     for name, s in surs.items():
         meta = s.meta
         cfg = meta.get("config") or {}

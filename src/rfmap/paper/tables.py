@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Table", "Headline", "headline", "format_sig", "power_of_ten", "printed_digits", "paper_table",
-           "format_value", "span_text", "change_text", "agreement_text",
+__all__ = ["Table", "Headline", "headline", "format_sig", "power_of_ten", "printed_digits", "rate_text", "decimal_text",
+           "paper_table", "format_value", "span_text", "change_text", "agreement_text",
            "glue_all", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
 
 
@@ -92,6 +92,15 @@ class Table:
     title: str
     columns: list[str]
     rows: list[tuple[str, str, dict]] = field(default_factory=list)
+    #: Markdown cells of a column in one notation throughout, ``{column: function of the value}`` (a missing value
+    #: is an em dash); the other columns by :func:`format_value`, and the CSV always so
+    formats: dict = field(default_factory=dict)
+
+    def cell(self, value, column: str) -> str:
+        """One Markdown cell: by the column's entry of :attr:`formats`, else :func:`format_value`."""
+        if value is not None and column in self.formats:
+            return self.formats[column](value)
+        return format_value(value, column)
 
     def add(self, case: str, method: str, values: dict) -> None:
         self.rows.append((str(case), method, dict(values)))
@@ -103,7 +112,7 @@ class Table:
         raise KeyError((case, method, column))
 
     def to_markdown(self, max_columns: int | None = MAX_COLUMNS) -> str:
-        """The table as Markdown (cells by :func:`format_value`).  With more than ``max_columns`` data columns
+        """The table as Markdown (cells by :meth:`cell`).  With more than ``max_columns`` data columns
         it is wrapped: the further columns follow in another table with the same ``case`` and ``method``
         columns."""
         cols = list(self.columns)
@@ -115,7 +124,7 @@ class Table:
             head = ["case", "method"] + [COLUMN_TITLES.get(c, c).replace("|", "\\|") for c in chunk]
             lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
             for case, method, vals in self.rows:
-                lines.append("| " + " | ".join([case, method] + [format_value(vals.get(c), c) for c in chunk]) + " |")
+                lines.append("| " + " | ".join([case, method] + [self.cell(vals.get(c), c) for c in chunk]) + " |")
             parts.append("\n".join(lines))
         return "\n\n".join(parts)
 
@@ -159,6 +168,25 @@ def printed_digits(v: float) -> int:
     if float(v) == 0 or not np.isfinite(float(v)):
         return 1
     return len(Decimal(repr(abs(float(v)))).normalize().as_tuple().digits)
+
+
+def rate_text(v) -> str:
+    """A learning rate or a weight decay as papers print it, always as a power of ten with the digits it was given
+    with (:func:`printed_digits`): ``5e-4`` is ``"5 × 10⁻⁴"``, ``0.001`` ``"1 × 10⁻³"``, so that a column or a
+    sentence of rates never mixes ``0.0005`` with ``1e-05``; zero is ``"0"``."""
+    v = float(v)
+    return "0" if v == 0 else power_of_ten(v, printed_digits(v))
+
+
+def decimal_text(v, digits: int = 3) -> str:
+    """A number with ``digits`` significant digits in positional notation, never in powers of ten
+    (``0.0006288`` is ``"0.000629"``, ``0.07308`` ``"0.0731"``, ``761.3`` ``"761"``): one notation for a column whose
+    values span several orders of magnitude below 1000."""
+    v = float(v)
+    if v == 0 or not np.isfinite(v):
+        return format_sig(v, digits)
+    out = np.format_float_positional(v, precision=digits, unique=False, fractional=False, trim="-")
+    return out.rstrip(".")
 
 
 def format_sig(v, digits: int = 3) -> str:
