@@ -63,7 +63,7 @@ def test_to_markdown_formats_integers_and_small_numbers():
 
     df = pd.DataFrame({"steps": [3190, 900], "score": [0.44344, 3.8e-05], "run": ["x", "y"]}).set_index("run")
     md = S.to_markdown(df)
-    assert "| x | 3,190 | 0.443 |" in md and "| y | 900 | 3.80e-05 |" in md
+    assert "| x | 3,190 | 0.443 |" in md and "| y | 900 | 3.80 × 10⁻⁵ |" in md
 
 
 def test_stored_studies_load_and_unknown_ones_are_refused():

@@ -16,6 +16,7 @@ from pathlib import Path
 from ..core.inputs import preprocess_density
 from ..core.mesh import grid_points
 from ..finish import quiet_quality
+from ..paper.tables import format_sig
 from ..tasks.teacher import teacher_map
 from .validation import validation_fields
 
@@ -174,14 +175,15 @@ def budget_table(metas: dict, paper_steps: dict, paper_batch: dict):
 
 def to_markdown(df) -> str:
     """A table of this module as Markdown: integers with thousands separators, other numbers with three
-    significant digits (scientific notation below 1e-3), the index as the first column."""
+    significant digits (as powers of ten below 10⁻³, ``2.3 × 10⁻⁴``, never e-notation: :func:`format_sig`), the index as
+    the first column."""
     def fmt(v):
         if isinstance(v, bool) or not isinstance(v, (int, float)) and not hasattr(v, "dtype"):
             return str(v)
         if not isinstance(v, float) and float(v).is_integer():
             return f"{int(v):,}"
         v = float(v)
-        return f"{v:.3g}" if v == 0 or abs(v) >= 1e-3 else f"{v:.2e}"
+        return format_sig(v, 3)
 
     cols = [df.index.name or ""] + [str(c) for c in df.columns]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
