@@ -9,7 +9,7 @@ from .figures import colorbar as add_colorbar
 
 __all__ = ["element_rho", "plot_mesh", "repair_figure", "plot_slice_outline", "plot_density", "plot_mu", "plot_map_row",
            "plot_beltrami_row", "vertex_error_panels", "population_figure", "map_rows_figure", "beltrami_figure",
-           "extreme_figure", "random_fields_figure", "jitter_figure", "TEXT_WIDTH_IN"]
+           "beltrami_case_figure", "extreme_figure", "random_fields_figure", "jitter_figure", "TEXT_WIDTH_IN"]
 
 
 #: width of a figure that fills the book's text column with its 9 pt text shown at 9 pt (``rfmap.viz.figures``)
@@ -264,6 +264,40 @@ def beltrami_figure(rows: dict, *, width: float = TEXT_WIDTH_IN, bins: int = 40,
     add_colorbar(im, fig=fig, ax=axes[:, 0].tolist(), location="bottom", shrink=0.95, aspect=12, label=r"$|\mu|$")
     handles, labels = axes[0, 4].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower right", ncols=2, title="error histograms")
+    return fig
+
+
+def beltrami_case_figure(label: str, exact, lbs, ours, *, width: float = TEXT_WIDTH_IN, bins: int = 40,
+                         max_lines: int = 20):
+    r"""One reconstruction test of :func:`beltrami_figure` drawn large, for a single case a chapter discusses: the
+    domain coloured by the exact :math:`|\mu|` (with its colour bar), the exact map and the Linear Beltrami
+    Solver's map in the first row; the surrogate's map and the histograms of :math:`|\mu_{\text{exact}} - \mu|`
+    over the triangles for both solvers (log counts, axes labelled) in the second.  ``label`` names the case in the
+    first panel's title; the arguments are those of one row of :func:`beltrami_figure`.  Returns the figure,
+    ``width`` inches wide."""
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    fig = plt.figure(figsize=(width, 0.68 * width), layout="constrained")
+    grid = fig.add_gridspec(2, 3)
+    maps = [fig.add_subplot(grid[0, i]) for i in range(3)] + [fig.add_subplot(grid[1, 0])]
+    hist = fig.add_subplot(grid[1, 1:])
+    mu_t, n = exact.field, _grid_side(exact)
+    plot_density(maps[0], exact.ref_points, exact.elements, np.abs(mu_t), vmin=0, cmap="magma",
+                 title=f"{label}: $|\\mu|$")
+    for a, r, title in zip(maps[1:], (exact, lbs, ours), ("exact map", "LBS", "surrogate")):
+        plot_mesh(a, r.mapped_points, r.elements, n=n, max_lines=max_lines, title=title)
+    errs = {"LBS": np.abs(mu_t - lbs.mu()), "surrogate": np.abs(mu_t - ours.mu())}
+    hi = max(float(e.max()) for e in errs.values()) or 1.0
+    for (name, e), color in zip(errs.items(), ("tab:blue", "tab:orange")):
+        hist.hist(e, bins=bins, range=(0, hi), histtype="step", lw=1.5, color=color, label=name)
+    hist.set_yscale("log")  # counts labelled at 1, 2, 5 times the powers of ten, as plain numbers
+    hist.yaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+    hist.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:,.0f}"))
+    hist.yaxis.set_minor_formatter(NullFormatter())
+    hist.set_xlabel(r"$|\mu_{exact} - \mu|$ per triangle")
+    hist.set_ylabel("triangles")
+    hist.legend(title="error of")
     return fig
 
 
