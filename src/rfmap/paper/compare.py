@@ -109,6 +109,7 @@ def resolution_table(surs: dict, ns=(32, 51, 64, 128, 256), field: str = "multi-
     return t
 
 
+@quiet_quality()
 def points_table(surs: dict, field: str = "sin-cos", n: int = 51, seed: int = 0) -> Table:
     """The map at query points instead of the grid: ``n**2`` points jittered off the grid (Sobol jitter of
     strength 0.2) and as many points scattered uniformly (plus the square's corners); the metrics are taken on the
