@@ -142,9 +142,10 @@ def test_metrics_find_overlaps_and_invalid_polygons():
 
 
 
-def test_overlaps_checks_only_pairs_with_an_unmatched_edge_and_finds_every_kind():
+def test_overlaps_measures_only_pairs_whose_interiors_meet_and_finds_every_kind():
     """``overlaps`` against the intersection areas of every pair: a coverage whose borders match (no pair), an
-    overlap across a border that matches elsewhere, a region inside another, a duplicate; invalid regions skipped."""
+    overlap across a border that matches elsewhere, a region inside another, a duplicate; invalid regions skipped;
+    regions that touch at a corner or along a border drawn with other vertices (no pair)."""
     from rfmap.cartogram.metrics import overlaps
 
     tiles = [shapely.box(i, j, i + 1, j + 1) for i in range(3) for j in range(3)]
@@ -164,6 +165,9 @@ def test_overlaps_checks_only_pairs_with_an_unmatched_edge_and_finds_every_kind(
                 want[(i, j)] = a
     assert set(found) == set(want) == {(0, 1), (2, 3), (0, 4), (1, 4)}
     assert all(found[k] == pytest.approx(want[k], rel=1e-12) for k in want)
+    corner = shapely.box(1, 1, 2, 2)  # meets tile 0 at (1, 1) only
+    split = shapely.Polygon([(1, 0), (1, 0.25), (1, 0.5), (1, 1), (2, 1), (2, 0)])  # tile 0's border, more vertices
+    assert overlaps(np.array([tiles[0], corner, split], dtype=object))[0].size == 0
 
 # ----------------------------------------------------------------------------------------------- equal-area plane
 def lonlat_box(lon0, lat0, lon1, lat1):

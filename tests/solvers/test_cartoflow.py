@@ -361,6 +361,29 @@ def test_longest_edge_of_rings():
     assert _longest_edge(parts[:1]) == pytest.approx(3.0, abs=1e-12)
 
 
+def test_longest_edges_per_region():
+    from rfmap.cartogram.regions import _longest_edges
+
+    square = shapely.Polygon([(0, 0), (3, 0), (3, 2), (0, 2)], holes=[[(1, 1), (1.5, 1), (1.5, 1.5)]])
+    parts = np.array([square, shapely.MultiPolygon([shapely.box(5, 5, 5.5, 9), shapely.box(7, 0, 12, 0.1)]),
+                      shapely.Polygon()], dtype=object)
+    assert np.allclose(_longest_edges(parts), [3.0, 5.0, 0.0], atol=1e-12)  # 0 for a region without edges
+
+
+def test_segmentize_splits_only_the_long_regions_as_segmentize_does():
+    from rfmap.cartogram.regions import _longest_edges
+    from rfmap.cartogram.resize import _segmentize
+
+    geoms = np.array([shapely.box(0, 0, 1, 1), shapely.MultiPolygon([shapely.box(2, 0, 2.1, 0.1)]),
+                      shapely.MultiPolygon([shapely.box(3, 0, 3.1, 0.1), shapely.box(4, 0, 4.5, 0.1)]),
+                      shapely.box(5, 0, 5.3, 0.2)], dtype=object)
+    for cell in (0.05, 0.25, 0.3, 2.0):  # 0.3: an edge exactly a cell long, which segmentize leaves whole
+        want = shapely.segmentize(geoms, cell)
+        got = _segmentize(geoms, cell, _longest_edges(geoms) >= cell * (1.0 - 1e-9))
+        assert all(shapely.equals_exact(a, b, 0.0) for a, b in zip(want, got))
+        assert np.array_equal(shapely.get_type_id(want), shapely.get_type_id(got))  # a one-part MultiPolygon: Polygon
+
+
 # ----------------------------------------------------------------------------------------------- command line
 def test_flow_cartogram_command_exit_codes(tmp_path, capsys):
     from rfmap.cli import main

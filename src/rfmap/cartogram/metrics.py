@@ -124,19 +124,18 @@ def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: fl
 
 def overlaps(mapped: np.ndarray, valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The pairs ``i < j`` of valid regions whose interiors overlap, and the areas of their intersections (shapes
-    (K,)).  Regions whose every edge is matched by a neighbour's or meets none (``shapely.coverage_invalid_edges``:
-    a border drawn with the same vertices on both sides, as the cartogram's passes keep it) cannot overlap another
-    such region, so intersections are computed only for the pairs that hold a region with an unmatched edge."""
+    (K,)).  Intersections are computed only for the pairs whose interiors meet (``shapely.relate_pattern``
+    ``"T********"``, asked only of the pairs that intersect at all): neighbours that share a border, as the
+    cartogram's passes keep them, merely touch."""
     shapely = _shapely()
     valid = shapely.is_valid(mapped) if valid is None else valid
     idx = np.flatnonzero(valid)
-    flagged = np.zeros(len(mapped), dtype=bool)
-    if idx.size:
-        flagged[idx] = ~shapely.is_empty(shapely.coverage_invalid_edges(mapped[idx]))
-    left, right = shapely.STRtree(mapped[idx]).query(mapped[idx], predicate="intersects")
-    left, right = idx[left], idx[right]
-    keep = (left < right) & (flagged[left] | flagged[right])
-    left, right = left[keep], right[keep]
+    left, right = shapely.STRtree(mapped[idx]).query(mapped[idx])  # the pairs whose boxes meet
+    keep = left < right
+    left, right = idx[left[keep]], idx[right[keep]]
+    for meet in (shapely.intersects, lambda a, b: shapely.relate_pattern(a, b, "T********")):
+        keep = meet(mapped[left], mapped[right]) if left.size else np.zeros(0, dtype=bool)
+        left, right = left[keep], right[keep]
     inter = shapely.area(shapely.intersection(mapped[left], mapped[right])) if left.size else np.zeros(0)
     pos = inter > 0
     return left[pos], right[pos], inter[pos]

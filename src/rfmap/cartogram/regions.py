@@ -412,11 +412,21 @@ def _distinct_vertices(regions: np.ndarray, merge: float = MERGE) -> tuple[np.nd
 
 def _longest_edge(regions: np.ndarray) -> float:
     """The longest edge of any ring of ``regions`` (consecutive coordinates of one ring)."""
+    return float(_longest_edges(regions).max(initial=0.0))
+
+
+def _longest_edges(regions: np.ndarray) -> np.ndarray:
+    """The longest edge of every region's rings (consecutive coordinates of one ring), shape (R,); 0 for a region
+    without edges."""
     shapely = _shapely()
-    rings = shapely.get_rings(shapely.get_parts(regions))
+    parts, part_of = shapely.get_parts(regions, return_index=True)
+    rings, ring_of = shapely.get_rings(parts, return_index=True)
     xy, idx = shapely.get_coordinates(rings, return_index=True)
     step = np.hypot(*np.diff(xy, axis=0).T)
-    return float(step[idx[1:] == idx[:-1]].max(initial=0.0))
+    same = idx[1:] == idx[:-1]
+    out = np.zeros(len(regions))
+    np.maximum.at(out, part_of[ring_of[idx[1:][same]]], step[same])
+    return out
 
 
 def _listify(obj):

@@ -70,7 +70,7 @@ from .methods import DIFFUSION_SETTINGS, FLOW_BLUR, FLOW_MAX_N, FLOW_SETTINGS, H
 from .passmap import at_points as _at_points
 from .output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
 from .projection import PlanarFrame
-from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edge, \
+from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edges, \
     _shapely, density_grid, fit_outlines, montreal_election, read_regions, world_countries
 from .data import atomic_write
 
@@ -459,8 +459,9 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
             n *= 2  # slow progress: regions down to a few cells (slivers, islands); twice the resolution
         grids.append(n)
         cell = 1.0 / min(n, max(SPLIT_MAX_N, grids[0]))
-        if split and results and _longest_edge(mapped) > SPLIT_EDGE * cell:  # stretched edges: split again
-            regions = shapely.segmentize(mapped, cell)
+        longest = _longest_edges(mapped) if split and results else None
+        if longest is not None and longest.max(initial=0.0) > SPLIT_EDGE * cell:  # stretched edges: split again
+            regions = _segmentize(mapped, cell, longest >= cell * (1.0 - 1e-9))  # as segmentize measures them
             stale = True
         if stale:  # once per pass: a repair's regions that this pass splits again are not taken first
             current, inverse = _distinct_vertices(regions)
@@ -506,6 +507,18 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
         mapped, kept = best[1], best[2]
     return mapped, {"iterations": len(results), "kept": kept, "max_error": history, "results": results,
                     "sea": sea, "grids": grids, "timed_out": timed_out}, map_time
+
+
+def _segmentize(regions: np.ndarray, cell: float, long: np.ndarray) -> np.ndarray:
+    """``shapely.segmentize(regions, cell)`` given the regions with an edge longer than ``cell`` (``long``, boolean
+    (R,)): only those are split; the others come out as segmentize leaves them (a one-part MultiPolygon as its
+    Polygon)."""
+    shapely = _shapely()
+    out = regions.copy()
+    out[long] = shapely.segmentize(regions[long], cell)
+    one = ~long & (shapely.get_type_id(regions) == 6) & (shapely.get_num_geometries(regions) == 1)
+    out[one] = shapely.get_geometry(regions[one], 0)
+    return out
 
 
 def _largest_error(mapped: np.ndarray, values: np.ndarray, min_share: float) -> float:
