@@ -305,6 +305,29 @@ def test_distinct_vertices_merges_pairs_that_straddle_a_rounding_edge():
     assert len(uniq) == 5 and inverse[0] == inverse[3] and inverse[0] != inverse[5]
 
 
+def test_distinct_vertices_keep_first_points_in_order_and_merge_chains():
+    """Repeats and near points (a chain 0.6e-12 apart, merged transitively) become the vertex of their first
+    occurrence; the vertices come in the order of their first occurrences."""
+    from rfmap.cartogram.regions import _distinct_vertices
+
+    pts = np.array([(0.3, 0.2), (0.1, 0.1), (0.3, 0.2), (0.5, 0.5), (0.5 + 0.6e-12, 0.5), (0.5 + 1.2e-12, 0.5),
+                    (0.1, 0.4), (0.1, 0.1)])
+    uniq, inverse = _distinct_vertices(np.array([shapely.MultiPoint(pts)], dtype=object))
+    assert np.array_equal(uniq, pts[[0, 1, 3, 6]])
+    assert inverse.tolist() == [0, 1, 0, 2, 2, 2, 3, 1]
+
+
+def test_near_in_x_and_sort_within_runs():
+    from rfmap.cartogram.regions import _near_in_x, _sort_within
+
+    assert _near_in_x(np.array([0.0, 1.0, 1.0 + 1e-12, 2.0, 3.0, 3.0]), 2e-12).tolist() == \
+        [False, True, True, False, True, True]
+    key = np.array([1, 1, 2, 2, 2, 2, 5, 5, 7, 7, 7, 7, 7, 7])
+    x = np.array([0.9, 0.1, 0.4, 0.3, 0.8, 0.2, 0.5, 0.6, 6.0, 1.0, 5.0, 2.0, 4.0, 3.0])
+    want = x[np.lexsort((x, key))]
+    assert np.array_equal(_sort_within(key, x.copy()), want)
+
+
 # ----------------------------------------------------------------------------------------------- real maps
 @pytest.mark.parametrize("name,n", [("South America", 128), ("asia-pacific", 128)])
 def test_flow_cartogram_of_real_maps_within_one_percent(name, n):

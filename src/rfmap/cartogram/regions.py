@@ -241,11 +241,12 @@ def _scanline_rows(geoms: np.ndarray, weights: tuple, n: int, s: int) -> list[np
     ty = ((r + 0.5) / s - 0.5) * h
     a, b = p0[e], p1[e]
     x = a[:, 0] + (ty - a[:, 1]) * (b[:, 0] - a[:, 0]) / (b[:, 1] - a[:, 1])
-    g = reg[e]
-    order = np.argsort(x)  # by region, line and x: x first, then a stable sort by (region, line)
-    order = order[np.argsort((g * m + r)[order], kind="stable")]
-    x, r, g = x[order], r[order], g[order]
-    xa, xb, r, g = x[0::2], x[1::2], r[0::2], g[0::2]  # every (region, line) holds an even number of crossings
+    key = reg[e] * m + r
+    order = np.argsort(key, kind="stable")  # by region and line (runs: the lines of every edge come in order)
+    key, x = key[order], x[order]
+    x = _sort_within(key, x)  # then by x
+    key = key[0::2]
+    xa, xb, r, g = x[0::2], x[1::2], key % m, key // m  # every (region, line) holds an even number of crossings
     ty = ((r + 0.5) / s - 0.5) * h
     keep = (ty >= 0) & (ty <= 1)  # scanlines beyond the square do not count
     # cell units: cell c spans [c, c + 1), the square [1/2, N - 1/2]
@@ -267,6 +268,21 @@ def _scanline_rows(geoms: np.ndarray, weights: tuple, n: int, s: int) -> list[np
         np.cumsum(d, axis=1, out=d)  # in place: at a 2049 raster every table is 34 MB
         out.append(d[:, :n])
     return out
+
+
+def _sort_within(key: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``x`` (K,) sorted within every run of equal ``key`` (K,), a sorted array: a run of two (a region's two
+    crossings of a scanline, most of them) by a swap, the longer runs by one sort of their entries."""
+    start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    size = np.diff(np.r_[start, len(key)])
+    two = start[size == 2]
+    lo, hi = np.minimum(x[two], x[two + 1]), np.maximum(x[two], x[two + 1])
+    x[two], x[two + 1] = lo, hi
+    long = np.repeat(size > 2, size)
+    if long.any():
+        sub = x[long]
+        x[long] = sub[np.lexsort((sub, key[long]))]
+    return x
 
 
 def clean_coverage(regions: np.ndarray) -> np.ndarray:
@@ -394,20 +410,29 @@ def _distinct_vertices(regions: np.ndarray, merge: float = MERGE) -> tuple[np.nd
     if len(xy) == 0:
         return xy, np.zeros(0, dtype=np.intp)
     exact, first = _runs(xy[:, 0] + 1j * xy[:, 1])
-    pts = xy[first]
+    label = first.copy()  # every distinct point's smallest index among its repeats
+    near = _near_in_x(xy[first, 0], 2.0 * merge)  # the others share no grid cell with any point
+    pts, sub = xy[first[near]], label[near]
     grids = [_grid_groups(pts, merge, s) for s in ((0.0, 0.0), (0.5, 0.0), (0.0, 0.5), (0.5, 0.5))]
-    label = first  # every distinct point's smallest index among its repeats
-    while True:
-        new = label
+    while sub.size:
+        new = sub
         for g in grids:
             low = np.full(g.max() + 1, len(xy))
             np.minimum.at(low, g, new)
             new = low[g]
-        if np.array_equal(new, label):
+        if np.array_equal(new, sub):
             break
-        label = new
-    keep, inverse = np.unique(label[exact], return_inverse=True)
-    return xy[keep], inverse.reshape(-1)
+        sub = new
+    label[near] = sub
+    used = np.zeros(len(xy), dtype=bool)  # the kept points, in the order of their indices (np.unique's)
+    used[label] = True
+    return xy[used], (np.cumsum(used) - 1)[label[exact]]
+
+
+def _near_in_x(x: np.ndarray, gap: float) -> np.ndarray:
+    """Which of the sorted values ``x`` (P,) lie within ``gap`` of another (boolean, (P,))."""
+    close = np.diff(x) <= gap
+    return np.r_[close, False] | np.r_[False, close]
 
 
 def _longest_edge(regions: np.ndarray) -> float:
