@@ -271,15 +271,16 @@ def _scanline_rows(geoms: np.ndarray, weights: tuple, n: int, s: int) -> list[np
 
 
 def _sort_within(key: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``x`` (K,) sorted within every run of equal ``key`` (K,), a sorted array: a run of two (a region's two
-    crossings of a scanline, most of them) by a swap, the longer runs by one sort of their entries."""
-    start = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
-    size = np.diff(np.r_[start, len(key)])
-    two = start[size == 2]
-    lo, hi = np.minimum(x[two], x[two + 1]), np.maximum(x[two], x[two + 1])
-    x[two], x[two + 1] = lo, hi
-    long = np.repeat(size > 2, size)
-    if long.any():
+    """``x`` (K,) sorted within every run of equal ``key`` (K,), a sorted array whose runs are of even length (a
+    region's crossings of a scanline): the pairs ``x[2i], x[2i + 1]`` ordered by a swap (a run of two, most of
+    them), then the longer runs by one sort of their entries; in place."""
+    a, b = x[0::2].copy(), x[1::2]
+    np.minimum(a, b, out=x[0::2])
+    np.maximum(a, b, out=x[1::2])
+    k = key[0::2]
+    same = k[1:] == k[:-1]  # pairs of one longer run
+    if same.any():
+        long = np.repeat(np.r_[same, False] | np.r_[False, same], 2)
         sub = x[long]
         x[long] = sub[np.lexsort((sub, key[long]))]
     return x
