@@ -42,8 +42,9 @@ def _cut(grid, clip):
     return grid
 
 
-#: where :func:`_label_axes` writes the names of the axes: beside the three edges of the unit cube that meet at the
-#: corner (1, 0, 0) nearest the camera of :data:`CAMERA_3D` (x3 beside the vertical edge through the origin)
+#: where :func:`render_lattice` and :func:`render_slices` name the axes when seen from :data:`CAMERA_3D`: beside the
+#: edges of the unit cube along x1 and x2 from the corner (1, 0, 0) nearest the camera, and x3 beside the vertical
+#: edge through the origin
 AXIS_LABELS = {"x1": (0.5, -0.1, 0.0), "x2": (1.1, 0.5, 0.0), "x3": (-0.04, -0.04, 0.5)}
 
 #: the size of the axis names in the rendered image (pixels of a 420-pixel window)
@@ -51,8 +52,8 @@ AXIS_LABEL_SIZE = 24
 
 
 def _label_axes(pl) -> None:
-    """Write ``x1``, ``x2``, ``x3`` beside the edges of the unit cube that run along the three axes from
-    (1, 0, 0) (:data:`AXIS_LABELS`; they suit :data:`CAMERA_3D`)."""
+    """Write ``x1``, ``x2``, ``x3`` beside edges of the unit cube along the three axes (:data:`AXIS_LABELS`; their
+    places suit :data:`CAMERA_3D`)."""
     pl.add_point_labels(np.array(list(AXIS_LABELS.values())), list(AXIS_LABELS), font_size=AXIS_LABEL_SIZE,
                         shape=None, show_points=False, always_visible=True, text_color="black",
                         justification_horizontal="center", justification_vertical="center")
@@ -66,8 +67,7 @@ RHO_SCALE = ColorScale(0.0, 2.5)
 
 
 def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", clip: bool | str = True,
-                  window_size=(420, 420), show_edges: bool = False, camera="iso", scale: ColorScale = RHO_SCALE,
-                  axes: bool = False, **kw):
+                  window_size=(420, 420), show_edges: bool = False, camera="iso", scale: ColorScale = RHO_SCALE, **kw):
     r"""Render a 3D result off screen and return the image (H, W, 3).
 
     ``scalars`` names an array of :func:`rfmap.core.result.to_pyvista` (``"rho"`` per element, ``"density"`` at the
@@ -76,8 +76,7 @@ def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", c
     the half in front of :data:`CUT_PLANE`.  ``camera`` is a PyVista camera position (``'iso'`` fits the view to the
     mesh, a fixed one such as :data:`CAMERA_3D` makes several renderings comparable).  ``scale``
     (:class:`rfmap.viz.figures.ColorScale`, default :data:`RHO_SCALE`) colours the scalars; its fields may be given as
-    keywords (``clim=(lo, hi)``, ``cmap=...``).  ``axes`` names the three axes beside the cube's edges (for
-    :data:`CAMERA_3D`).
+    keywords (``clim=(lo, hi)``, ``cmap=...``).
     """
     sc = color_scale(scale, **kw)
     clim, cmap = sc.clim, sc.cmap
@@ -89,8 +88,6 @@ def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", c
     pl = pv.Plotter(off_screen=True, window_size=list(window_size))
     pl.add_mesh(pv.Box(bounds=(0, 1, 0, 1, 0, 1)).outline(), color="gray", line_width=1)
     pl.add_mesh(grid, scalars=scalars, clim=clim, cmap=cmap, show_edges=show_edges, show_scalar_bar=False)
-    if axes:
-        _label_axes(pl)
     pl.camera_position = camera
     pl.background_color = "white"
     img = pl.screenshot(return_img=True)
@@ -113,13 +110,13 @@ def _vertex_rho(result, mapped: bool) -> np.ndarray:
 
 
 def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines: int = 13, window_size=(420, 420),
-                   camera=CAMERA_3D, scale: ColorScale = RHO_SCALE, carried: bool = False, axes: bool = False, **kw):
+                   camera=CAMERA_3D, scale: ColorScale = RHO_SCALE, carried: bool = False, **kw):
     """Render the grid lines of a 3D grid result on a few horizontal slices (:math:`x_3` = ``slices`` in the
     reference cube) off screen, coloured by :math:`\\tilde\\rho` at the vertices, inside the outline of the unit
     cube; returns the image (H, W, 3).  The original lattice (``mapped=False``) is drawn flat; the mapped one shows
     where the map moves each slice, coloured by the density left on the mapped mesh, or with ``carried`` by the
-    input's normalised density carried along with the vertices.  ``scale`` and ``axes`` as in
-    :func:`render_volume`."""
+    input's normalised density carried along with the vertices.  ``scale`` as in :func:`render_volume`.  Seen
+    from :data:`CAMERA_3D`, the axes are named beside the cube's edges (:data:`AXIS_LABELS`)."""
     sc = color_scale(scale, **kw)
     clim, cmap = sc.clim, sc.cmap
     pv = _pyvista()
@@ -145,7 +142,7 @@ def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines
     pl.add_mesh(pv.Box(bounds=(0, 1, 0, 1, 0, 1)).outline(), color="gray", line_width=1)
     pl.add_mesh(mesh, scalars="rho", clim=clim, cmap=cmap, line_width=LATTICE_LINE_WIDTH,
                 show_scalar_bar=False)
-    if axes:
+    if camera == CAMERA_3D:  # the labels' places suit this camera only
         _label_axes(pl)
     pl.camera_position = camera
     pl.background_color = "white"
@@ -155,12 +152,12 @@ def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines
 
 
 def render_slices(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), window_size=(420, 420),
-                  camera=CAMERA_3D, scale: ColorScale = RHO_SCALE, axes: bool = False, **kw):
+                  camera=CAMERA_3D, scale: ColorScale = RHO_SCALE, **kw):
     r"""Filled horizontal slices (:math:`x_3` = ``slices``) through a 3D result's mesh, every piece coloured by the
     :math:`\tilde\rho` of the tetrahedron it cuts: on the original mesh (``mapped=False``) the input's normalised
     density, on the mapped mesh the density the map leaves there, one colour where the map equalizes; inside the
-    outline of the unit cube, off screen; returns the image (H, W, 3).  ``scale`` and ``axes`` as in
-    :func:`render_volume`."""
+    outline of the unit cube, off screen; returns the image (H, W, 3).  ``scale`` as in :func:`render_volume`;
+    the axes named as in :func:`render_lattice`."""
     sc = color_scale(scale, **kw)
     pv = _pyvista()
     grid = to_pyvista(result, mapped=mapped)
@@ -170,7 +167,7 @@ def render_slices(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), window
         cut = grid.slice(normal="z", origin=(0.5, 0.5, float(z)))
         if cut.n_cells:
             pl.add_mesh(cut, scalars="rho", preference="cell", clim=sc.clim, cmap=sc.cmap, show_scalar_bar=False)
-    if axes:
+    if camera == CAMERA_3D:  # the labels' places suit this camera only
         _label_axes(pl)
     pl.camera_position = camera
     pl.background_color = "white"
