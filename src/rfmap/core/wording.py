@@ -3,10 +3,14 @@
 Reports, warnings and errors count things ("2 folded elements", "1 region without data"); :func:`counted` writes
 the number and the noun that agrees with it, so that no message reads "pass(es)".  :func:`of_count` writes a part of
 a whole as a sentence says it: ``all 4 densities``, ``none of the 4``, ``3 of 4``, never ``4 of 4`` or ``0 of 4``.
+:func:`power_of_ten` and :func:`format_sig` write numbers without e-notation (``2.6 × 10⁻⁵``), for every layer of
+the package (:mod:`rfmap.paper.tables` offers them too).
 """
 from __future__ import annotations
 
-__all__ = ["counted", "of_count", "of_counts"]
+import numpy as np
+
+__all__ = ["counted", "of_count", "of_counts", "power_of_ten", "format_sig"]
 
 #: plurals that do not add "s" or "es"
 _IRREGULAR = {"vertex": "vertices", "matrix": "matrices"}
@@ -102,3 +106,32 @@ def of_counts(parts, nouns) -> str:
     if all(k == 0 for k, _ in parts):
         return f"none of them ({wholes})"
     return join([of_count(k, n, noun) for (k, n), noun in zip(parts, nouns)])
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
+
+
+def power_of_ten(v: float, digits: int = 3) -> str:
+    """``v`` to ``digits`` significant digits as a power of ten in Unicode (no e-notation, safe in HTML and in
+    a glued phrase): ``power_of_ten(2.5716e-05, 2)`` is ``"2.6 × 10⁻⁵"``, ``power_of_ten(6e-06, 1)``
+    ``"6 × 10⁻⁶"``."""
+    mantissa, exponent = f"{float(v):.{max(digits, 1) - 1}e}".split("e")
+    return f"{mantissa} × 10{str(int(exponent)).translate(_SUPERSCRIPT)}"
+
+
+def format_sig(v, digits: int = 3) -> str:
+    """A number for a headline table: ``digits`` significant digits, in scientific notation (``3.81 × 10⁻⁵``) when
+    its magnitude is below 10⁻³ or at least 10⁵; integers exactly; ``None`` or NaN as an em dash."""
+    if v is None:
+        return "—"
+    if isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)):
+        return str(int(v))
+    v = float(v)
+    if not np.isfinite(v):
+        return "—"
+    if v != 0 and not 1e-3 <= abs(v) < 1e5:
+        return power_of_ten(v, digits)
+    rounded = float(f"{v:.{digits}g}")
+    if abs(rounded) >= 10 ** digits:  # 12,345 to three digits: 12,300, never 1.23e+04
+        return f"{rounded:,.0f}"
+    return f"{v:.{digits}g}"

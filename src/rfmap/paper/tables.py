@@ -14,7 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["Table", "Headline", "headline", "format_sig", "power_of_ten", "printed_digits", "rate_text", "decimal_text",
+from ..core.wording import format_sig, power_of_ten  # noqa: F401  (the book imports them from here too)
+
+__all__ = ["Table", "Headline", "headline", "printed_digits", "rate_text", "decimal_text",
            "paper_table", "format_value", "span_text", "change_text", "agreement_text",
            "glue_all", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
 
@@ -151,17 +153,6 @@ class Table:
         return [md, cs]
 
 
-_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
-
-
-def power_of_ten(v: float, digits: int = 3) -> str:
-    """``v`` to ``digits`` significant digits as a power of ten in Unicode (no e-notation, safe in HTML and in
-    a glued phrase): ``power_of_ten(2.5716e-05, 2)`` is ``"2.6 × 10⁻⁵"``, ``power_of_ten(6e-06, 1)``
-    ``"6 × 10⁻⁶"``."""
-    mantissa, exponent = f"{float(v):.{max(digits, 1) - 1}e}".split("e")
-    return f"{mantissa} × 10{str(int(exponent)).translate(_SUPERSCRIPT)}"
-
-
 def printed_digits(v: float) -> int:
     """The significant digits of the shortest text of ``v`` (``0.000006``: 1, ``0.082541``: 5): the digits a
     published value was printed with, where it is stored as the float of that text."""
@@ -187,24 +178,6 @@ def decimal_text(v, digits: int = 3) -> str:
         return format_sig(v, digits)
     out = np.format_float_positional(v, precision=digits, unique=False, fractional=False, trim="-")
     return out.rstrip(".")
-
-
-def format_sig(v, digits: int = 3) -> str:
-    """A number for a headline table: ``digits`` significant digits, in scientific notation (``3.81 × 10⁻⁵``) when
-    its magnitude is below 10⁻³ or at least 10⁵; integers exactly; ``None`` or NaN as an em dash."""
-    if v is None:
-        return "—"
-    if isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_)):
-        return str(int(v))
-    v = float(v)
-    if not np.isfinite(v):
-        return "—"
-    if v != 0 and not 1e-3 <= abs(v) < 1e5:
-        return power_of_ten(v, digits)
-    rounded = float(f"{v:.{digits}g}")
-    if abs(rounded) >= 10 ** digits:  # 12,345 to three digits: 12,300, never 1.23e+04
-        return f"{rounded:,.0f}"
-    return f"{v:.{digits}g}"
 
 
 @dataclass

@@ -15,8 +15,8 @@ from pathlib import Path
 
 from ..core.inputs import preprocess_density
 from ..core.mesh import grid_points
+from ..core.wording import format_sig
 from ..finish import quiet_quality
-from ..paper.tables import format_sig
 from ..tasks.teacher import teacher_map
 from .validation import validation_fields
 
