@@ -201,12 +201,18 @@ def _verdicts() -> tuple[str, str]:
     return "**Verdict.** " + VERDICT_RULE, "**Scored metrics.** " + SCORED_METRICS
 
 
+#: the MyST target of the rules above the introduction's scoreboard, which book/figures.md links to
+RULES_TARGET = "scoreboard-rules"
+
+
 def _preamble() -> list[str]:
+    """The criterion, the verdict's rule and the scored metrics, stated once above the introduction's scoreboard."""
     rule, metrics = _verdicts()
-    return [CRITERION, "", rule, "", metrics + (
+    return [f"({RULES_TARGET})=", CRITERION, "", rule, "", metrics + (
         " The rows *max |μ| (shown, not scored)* give its means and the number of cases in which the paper's "
         "method is at most the paper's value; where that number falls short of all cases, scoring max |μ| "
-        "would lower the verdict."), ""]
+        "would lower the verdict. min det J is not shown: what matters in it is its sign, and the chapters count "
+        "the folded elements (det J ≤ 0) of every map instead."), ""]
 
 
 def scoreboard(root: Path = ROOT) -> str:
@@ -217,11 +223,13 @@ def scoreboard(root: Path = ROOT) -> str:
     numbers, in_toc = paper_numbers(items), toc_documents(root)
     scored, shown_with = _scored(items)
     refs, defs = _footnotes(scored)
-    head = ["Paper item", "Verdict", "Metric", "Paper", "Paper's method (cases met)", "Delivered", "Classical"]
+    head = ["Paper item", "Verdict", "Metric", "Cases met", "Paper", "Paper's method", "Delivered", "Classical"]
     lines = _preamble() + [
-             "Values are means over the paper's cases (four test fields, or four grid sides) whose input is the "
-             "paper's: the cases the verdict counts.", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+             "The column *Cases met* counts the cases in which the paper's method is at most the paper's value; "
+             "the verdict reads these counts. The values beside it are means over the same cases (four test fields, "
+             "or four grid sides, whose input is the paper's). One case with large values can carry such a mean, "
+             "so a mean below the paper's does not say that most cases meet it: {doc}`figures` gives every case.",
+             "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for it in scored:
         score, nb = it["score"], it["notebook"]
         figs = [numbers[f] for f in shown_with.get(it["label"], [])]
@@ -233,8 +241,9 @@ def scoreboard(root: Path = ROOT) -> str:
             k = f"{score['key']}_{metric}"
             cells = [item if i == 0 else "", paste(f"**{{{score['key']}_verdict}}**", nb) if i == 0 else "",
                      _cell(title), paste(f"{{{k}_paper}}", nb)]
-            met = f" ({{{k}_met}})" if score.get("cases") else ""
-            cells += [paste(f"{{{k}_native}}{met}", nb), paste(f"{{{k}_delivered}}", nb),
+            met = paste(f"{{{k}_met}}", nb) if score.get("cases") else "—"
+            cells = cells[:3] + [met] + cells[3:]
+            cells += [paste(f"{{{k}_native}}", nb), paste(f"{{{k}_delivered}}", nb),
                       paste(f"{{{k}_classical}}", nb)]
             lines.append("| " + " | ".join(cells) + " |")
     others = [numbers[it["label"]] for it in items if (it.get("score") or {}).get("kind") == "illustration"]
@@ -252,7 +261,9 @@ def full_scoreboard(root: Path = ROOT) -> str:
     scored, _ = _scored(items)
     refs, defs = _footnotes(scored)
     head = ["Paper item", "Case, metric", "Paper", "Paper's method", "Delivered", "Classical", "Met"]
-    lines = _preamble() + ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = [f"The criterion, the verdict's rule and the metrics it scores are stated above the "
+             f"{{ref}}`results at a glance <{RULES_TARGET}>` of the introduction.", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for it in scored:
         score, nb = it["score"], it["notebook"]
         item = (f"{_chapter_link(it, root, in_toc, numbers[it['label']])}{refs[it['label']]}: "
@@ -301,8 +312,9 @@ def reproduction(root: Path = ROOT) -> str:
     for scale in ("ci", "full"):
         info = times.get(scale) or {}
         if info.get("seconds"):
-            how = f"measured with {info.get('how', '?')} on {info.get('date', '?')}, {info.get('machine', '?')}"
-            lines.append(f"* `{scale}`: {_cell(how)}." + (f" {_cell(info['note'])}" if info.get("note") else ""))
+            where = ", beside the test suite" if scale == "ci" else ""
+            lines.append(f"* `{scale}`: {_cell(info.get('machine', '?'))}, {info.get('date', '?')}{where}; "
+                         f"all chapters together {_duration(sum(info['seconds'].values()))}.")
         else:
             lines.append(f"* `{scale}`: not measured yet (`python scripts/chapter_times.py collect --scale {scale} "
                          f"...`).")
@@ -362,9 +374,9 @@ def render(root: Path = ROOT) -> str:
         "environment, `RFMAP_SCALE` as given: `full` is the default); the executed copy, with its outputs, goes to "
         "`_build/chapters/`, and the chapter writes its figures and tables to `book/figures/`: "
         "`make chapter NB=05_beltrami_reconstruction RFMAP_SCALE=full` reruns chapter 05, and the column `NB=` "
-        "gives the name of each. The times are wall times of the whole chapter, on the machines named below; the "
-        "`ci` times were measured while the test suite ran beside the chapters on the same cores, so they can "
-        "exceed the `full` ones.",
+        "gives the name of each. The times are wall times of the whole chapter; the `ci` times were measured while "
+        "the tests ran beside the chapters on the same cores, so they can exceed the `full` ones. "
+        "{doc}`reproduce` tells how they were measured.",
         "",
         reproduction(root).rstrip("\n"),
     ]

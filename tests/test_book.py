@@ -209,7 +209,7 @@ def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
         assert f"::{key}:s`" in full, key  # pasted by a glue role, not left as text
     for text in (board, full):  # every placeholder became a glue role (a key with a hyphen too)
         left = re.sub(r"\{glue:text\}`[^`]*`", "", text)
-        left = re.sub(r"\{(doc|term)\}`[^`]*`", "", left)
+        left = re.sub(r"\{(doc|term|ref)\}`[^`]*`", "", left)
         assert not mod.PLACEHOLDER.search(left), mod.PLACEHOLDER.search(left)
     refs, defs = mod._footnotes([it for it in _items() if it["score"]["kind"] == "score"])
     assert len({d.split("]:")[0] for d in defs}) == len(defs)  # a caveat two items share is defined once
