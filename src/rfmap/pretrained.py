@@ -11,16 +11,28 @@ from pathlib import Path
 from .training.config import get_config, scale
 from .surrogate import Surrogate
 
-__all__ = ["load_or_train"]
+__all__ = ["load_or_train", "STUDY_WEIGHTS", "study_models"]
+
+#: weights trained for one of the book's studies (an ablation, an equal-budget partner), not offered as models:
+#: ``NAME.safetensors`` and ``NAME.json`` from ``rfmap train --config NAME --preset full``
+STUDY_WEIGHTS = Path(__file__).resolve().parent / "data" / "studies" / "weights"
+
+
+def study_models() -> list[str]:
+    """The names of the study weights (:data:`STUDY_WEIGHTS`), each a training config's name."""
+    return sorted(p.stem for p in STUDY_WEIGHTS.glob("*.json") if p.with_suffix(".safetensors").exists())
 
 
 def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progress: bool = False) -> Surrogate:
-    """The model a chapter of the book uses: the shipped weights at ``full`` scale; at ``ci`` scale a tiny model
+    """The model a chapter of the book uses: the shipped weights at ``full`` scale (a shipped model's, or else a
+    study's, :data:`STUDY_WEIGHTS`); at ``ci`` scale a tiny model
     trained on the spot with the named config's ``ci`` preset (seconds; cached in the temporary directory and
     reused while the configuration is unchanged), so every notebook runs end to end on a laptop CPU.
     ``preset`` defaults to :func:`rfmap.training.config.scale`."""
     preset = preset or scale()
     if preset == "full":
+        if name in study_models():
+            return Surrogate.load(STUDY_WEIGHTS / f"{name}.safetensors")
         return Surrogate.pretrained(name)
     cfg = get_config(name, preset)
     out = Path(out_dir or Path(tempfile.gettempdir()) / "rfmap-ci-models" / name)

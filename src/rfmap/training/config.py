@@ -337,6 +337,21 @@ _FNO_DEQ2D_SQUARE = _DEQ2D_SQUARE.derive(
     ci=dict(model=ModelConfig(arch="fno", modes=4, width=8, layers=2)),
     full=dict(n_range=(64, 96), model=ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125)),
     paper=dict(model=ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125)))
+#: the FNO's partner at equal budget (book chapter 12): fno-deq2d-square's task, losses, fields, schedule and steps
+#: with deq2d-square's U-Net in place of the FNO, trained once from scratch (study weights, not a shipped model)
+_UNET_FNO_BUDGET = _FNO_DEQ2D_SQUARE.derive(
+    name="unet-fno-budget",
+    description="deq2d-square's U-Net trained exactly as fno-deq2d-square (same task, losses, fields, schedule and "
+                "6,000 steps): the equal-budget partner of the FNO.",
+    model=ModelConfig(), ci=dict(model=_CI["model"]), full=dict(model=ModelConfig(), time_limit=0.0),
+    paper=dict(model=ModelConfig()))
+#: the Beltrami weight alone (book chapter 8): one recipe, trained from scratch twice, once with lambda = 0 (a DEM)
+#: and once with lambda = 0.1 (a DEQ); nothing else differs (study weights, not shipped models)
+_ABLATION = {lam: _density2d(
+    f"ablation-lambda-{tag}", "square", beltrami=lam, steps=3000, time_limit=0.0,
+    description=f"The Beltrami-weight ablation: deq2d-square's recipe (fields, fold penalty, schedule) from "
+                f"scratch for 3,000 steps with lambda = {lam:g}; its partner differs only in lambda.")
+    for lam, tag in ((0.0, "0"), (0.1, "0.1"))}
 #: deq2d-square trained across the sizes the paper tests, to run natively at every side from 32 to 256: log-uniform
 #: sides (every octave a third of the steps) at about the same cost per step (batch_points), validated natively at
 #: both ends of the range, from deq2d-square's weights (the lineage)
@@ -361,7 +376,7 @@ _DEM3D_CUBE_NATIVE = _across_sizes(
 CONFIGS: dict[str, dict[str, TrainConfig]] = {
     p.full.name: p.configs()
     for p in (_BELTRAMI2D, _DEQ2D_SQUARE, _DEQ2D_FREE, _DEM2D_SQUARE, _DEM3D_CUBE, _DEM3D_FREE, _FNO_DEQ2D_SQUARE,
-              _DEQ2D_SQUARE_NATIVE, _DEM3D_CUBE_NATIVE)
+              _DEQ2D_SQUARE_NATIVE, _DEM3D_CUBE_NATIVE, _UNET_FNO_BUDGET, *_ABLATION.values())
 }
 
 
