@@ -23,3 +23,16 @@ def test_differences_table_has_a_row_per_setting_and_a_column_per_model():
     assert "| weight average decay | — | 0.999 |" in lines
     assert "| training grid sides | 48 to 96 | 64 to 96 |" in lines
     assert lines[-1] == "| training steps (cumulative) | 1,000 | 20 |"
+
+
+def test_a_network_section_shows_only_the_settings_of_its_architecture():
+    from rfmap.paper.recipes import recipe_differences
+
+    unet = {"model": {"arch": "unet", "base": 16, "depth": 3, "attention": True, "modes": 12, "width": 32}}
+    fno = {"model": {"arch": "fno", "base": 16, "depth": 3, "attention": True, "modes": 16, "width": 24}}
+    diff = {k: (x, y) for k, x, y in recipe_differences(unet, fno)}
+    assert diff["model.arch"] == ("unet", "fno")
+    assert diff["model.modes"] == (None, 16) and diff["model.width"] == (None, 24)  # not the U-Net's
+    assert diff["model.base"] == (16, None) and "model.depth" in diff
+    same = {"model": {"arch": "unet", "base": 16, "depth": 3, "attention": True, "modes": 12}}
+    assert recipe_differences(same, {"model": {**same["model"], "modes": 99}}) == []  # unused field ignored
