@@ -78,8 +78,8 @@ class PredictOptions:
         A network's working grid side (default :meth:`Surrogate.work_n`; then, in 3D and without ``polish``, a
         folded map is first tried on coarser working grids).  Given explicitly, it is used as given.
     native : bool
-        Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried): the paper's
-        method.  Excludes ``work_n``.
+        Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried), as the paper
+        does; with ``refine=True`` (and ``repair=False``) this is the paper's method.  Excludes ``work_n``.
     alpha : sequence of d floats, optional
         A fixed stretching vector of a network's map (ignored with ``refine``).
     preprocess : bool
@@ -413,9 +413,9 @@ class Surrogate:
             map is first tried on coarser working grids, :data:`REGRID_DIMS`).  Given explicitly, it is used as
             given.
         native : bool
-            Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried): the
-            paper's method, which evaluates the one network on whatever grid the field comes on.  Excludes
-            ``work_n``.
+            Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried), as the
+            paper evaluates the one network on whatever grid the field comes on; with ``refine=True`` (and
+            ``repair=False``) this is the paper's method.  Excludes ``work_n``.
         alpha : sequence of d floats, optional
             A fixed stretching vector (ignored when ``refine``).
         preprocess : bool
@@ -429,10 +429,11 @@ class Surrogate:
             ``points`` the map of the working grid is repaired first and then interpolated.  A density map of the
             output grid (without ``polish``) that is then still no more equal than the input is shortened to the
             most equal fold-free map between the identity and itself (:func:`rfmap.finish.shorten.shorten_map`;
-            ``info["shorten"]``), so the delivered map never leaves the density less equal than it was.  A density
+            ``info["shorten"]``), so the returned map never leaves the density less equal than it was.  A density
             map of query ``points`` is shortened by the scale its working grid's map would be shortened by (the
             judgement is made there; :func:`rfmap.finish.query.shorten_query`), so that grid and points deliver one
-            map.  ``False`` returns the raw network map.
+            map.  ``False`` skips the repair and the shortening: with the other options at their defaults it
+            returns the raw network map (with ``refine`` a refined one).
         polish : bool or float
             Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
             (:func:`rfmap.finish.stages.polish`, :func:`rfmap.finish.polish.polish_map`), started from the map of the network's
@@ -493,7 +494,7 @@ class Surrogate:
     def _map_one(self, inp: _Input, n: int, points, opts: MapOptions, group: str | None, given=None) -> MapResult:
         """Predict, then finish: the network's map of the output mesh (:meth:`_predict`, refined when asked), tried
         on coarser working grids when it folds (:func:`rfmap.finish.stages.regrid`, :data:`REGRID_DIMS`), then the stages
-        of :func:`rfmap.finish.pipeline.finish`; a :class:`PoorMapWarning` when the delivered density map is poor.
+        of :func:`rfmap.finish.pipeline.finish`; a :class:`PoorMapWarning` when the returned density map is poor.
         ``given``: the network's output on the default working grid from a batched evaluation (:meth:`_predict`)."""
         # the network's map is refined as it is predicted (every working grid tried is), not by the finishing stages
         stages = replace(opts.finishing, refine=False)

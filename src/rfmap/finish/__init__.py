@@ -1,4 +1,4 @@
-r"""Finishing a computed map: the stages between a network's (or a classical solver's) map and the delivered one.
+r"""Finishing a computed map: the stages between a network's (or a classical solver's) map and the one returned.
 
 A map is predicted (:meth:`rfmap.Surrogate.map`: field, displacement, map of the output mesh) or solved
 (:mod:`rfmap.solvers`); then a sequence of stages, each a function from a :class:`Draft` (the map and the report
@@ -13,7 +13,7 @@ of what was done to it) to the next, finishes it:
 * :func:`~rfmap.finish.stages.shorten` -- if not, shortened towards the identity until it is.
 
 :func:`finish` composes them as :meth:`rfmap.Surrogate.map` does, with :class:`FinishOptions`; :func:`finish_map`
-applies them to a classical map.  The report is typed (:class:`MapReport`) and the delivered map's ``info`` is its
+applies them to a classical map.  The report is typed (:class:`MapReport`) and the returned map's ``info`` is its
 read-only view (:class:`InfoView`), with the keys that ``info`` has always had.  Maps of query points go back to
 their working grid (:mod:`~rfmap.finish.query`).
 

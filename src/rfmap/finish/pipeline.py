@@ -1,4 +1,4 @@
-"""The stages composed: what happens to a computed map before it is delivered, for network and classical maps."""
+"""The stages composed: what happens to a computed map before it is returned, for network and classical maps."""
 from __future__ import annotations
 
 from dataclasses import dataclass

@@ -68,7 +68,7 @@ def repair_query(draft: Draft, **kw: Any) -> tuple[np.ndarray, dict[str, Any], W
 def shorten_query(draft: Draft) -> tuple[np.ndarray, dict[str, Any] | None]:
     r"""Shorten a network's density map of query points as its working grid's map would be shortened.
 
-    The delivered map of an output grid is shortened (:func:`rfmap.finish.shorten.shorten_map`) when it leaves the density
+    The returned map of an output grid is shortened (:func:`rfmap.finish.shorten.shorten_map`) when it leaves the density
     no more equal than it was.  Query points have no grid to judge on, so the judgement is made on the working grid:
     its repaired map (:func:`working_grid_map`) and the input density there.  When that map is shortened to
     :math:`u_s = x + s\,(u - x)`, the query map is shortened by the same :math:`s` unless that folds an element of
@@ -79,7 +79,7 @@ def shorten_query(draft: Draft) -> tuple[np.ndarray, dict[str, Any] | None]:
     (points, report or None)
         ``report`` (``None`` when the working grid's map is more equal than the input) is that of
         :func:`rfmap.finish.shorten.shorten_map` with ``decided_on``, ``work_n``, ``query_mesh`` and ``quality``
-        (:func:`rfmap.finish.quality.density_quality` of the working grid's delivered map, with ``shortened_from``).
+        (:func:`rfmap.finish.quality.density_quality` of the working grid's returned map, with ``shortened_from``).
     """
     res = draft.result
     ref, mapped, elements = res.ref_points, res.mapped_points, res.elements

@@ -1,7 +1,7 @@
 r"""What the stages did to a map: a typed report, and its read-only view as ``MapResult.info``.
 
 Each stage of :mod:`rfmap.finish` returns the map and a new :class:`MapReport` with its own field filled in; the
-network's prediction fills :class:`NetworkReport` and ``alpha``.  A delivered map carries the report as
+network's prediction fills :class:`NetworkReport` and ``alpha``.  A returned map carries the report as
 ``result.info``, an :class:`InfoView`: a read-only mapping with the flat keys of the reports that the stages write
 (``info["work_n"]``, ``info["alpha"]``, ``info["repair"]``, ``info["polish"]``, ...) next to those of the solver
 that made the map, and the typed report itself as ``result.info.report``.
@@ -97,7 +97,7 @@ class MapReport:
         The report of :func:`rfmap.finish.polish.polish_map` (for a network's map with ``smooth_passes``, ``smooth_edges``
         and ``output_passes``).
     quality : dict, optional
-        :func:`rfmap.finish.quality.density_quality` of the delivered map of a grid (with ``shortened_from`` after
+        :func:`rfmap.finish.quality.density_quality` of the returned map of a grid (with ``shortened_from`` after
         shortening).
     shorten : dict, optional
         The report of :func:`rfmap.finish.shorten.shorten_map` when the map was shortened (at query points with

@@ -1,6 +1,6 @@
 r"""Shortening a map towards the identity: the most equal fold-free map on the segment from the identity to a map.
 
-Not a repair (a fold-free map may be shortened too): a delivered density map is never less equal than no map at
+Not a repair (a fold-free map may be shortened too): a returned density map is never less equal than no map at
 all (:func:`shorten_map`).
 """
 from __future__ import annotations

@@ -26,7 +26,7 @@ no more.
 With ``evaluate(..., repair=True)`` (``TrainConfig.val_repair``, the 3D models) the maps scored are those that
 ``Surrogate.map`` returns by default: a folded network map is first tried on coarser working grids and then
 repaired, so a steep ramp that the network folds counts with the fold-free map a user would get rather than as the
-identity.  A delivered map that is worse than no map counts as the identity.  Why these rules, with the
+identity.  A returned map that is worse than no map counts as the identity.  Why these rules, with the
 measurements: the book's page *Design decisions*.
 """
 from __future__ import annotations
@@ -83,8 +83,8 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False, native: bool = F
         mean counts a folded map as no better than no map (a map with non-finite points counts as folded).
         ``penalized``: the mean metric with each folded map's
         value replaced by that of the identity map (a folded map is worth no more than no map, even where its own
-        value is lower); the selection score.  With ``repair`` the metrics are those of the delivered maps (and in
-        ``penalized`` a delivered map that is worse than the identity counts as the identity), every record gains
+        value is lower); the selection score.  With ``repair`` the metrics are those of the default maps (and in
+        ``penalized`` a default map that is worse than the identity counts as the identity), every record gains
         ``raw_folded`` (the network's own map was folded) and ``"mean"`` gains ``"path": "repaired"``
         and ``raw_folded_fields``.
     """
@@ -101,7 +101,7 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False, native: bool = F
             broken = bool(rec["n_flipped"]) or not np.isfinite(value)
             primary.append(value)
             capped.append(min(value, baseline) if broken else value)
-            # delivered maps are fold-free; one that leaves the field less equal than it was (a repair can) is
+            # default maps are fold-free; one that leaves the field less equal than it was (a repair can) is
             # worth no more than no map
             penalized.append(baseline if broken else (min(value, baseline) if repair else value))
             relative.setdefault(family(vf.label), []).append(penalized[-1] / baseline if baseline > 0 else 1.0)
