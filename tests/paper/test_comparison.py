@@ -201,3 +201,42 @@ def test_verdict_words_follow_the_stated_rule():
     from rfmap.paper.verdicts import VERDICTS, verdict
 
     assert [verdict(f) for f in ([True] * 3, [True, False, None], [False, None], [None, None])] == list(VERDICTS)
+
+
+def test_full_table_sets_the_methods_as_columns():
+    """Every quantity measured, a row per quantity in each case's block and a column per method: as narrow as the
+    paper-shaped table however many quantities there are."""
+    c = _comparison()
+    c.values[("a", "native")].update(network_time=0.004, alpha=(0.5, 0.25), n_flipped=2)
+    lines = c.full_markdown().splitlines()
+    assert lines[0] == "| case | quantity | paper | paper's method | delivered | flow solver |"
+    assert lines[2:7] == ["| a | Std(ρ̃_map) | 0.08 | 0.05000 | 0.04000 | 0.01000 |",
+                          "|  | flips | — | 2 | — | — |",
+                          "|  | α | — | 0.5, 0.25 | — | — |",
+                          "|  | time | 10.0 ms | 20.0 ms | 10.0 ms | 10.0 ms |",
+                          "|  | network time | — | 4.00 ms | — | — |"]
+    assert len(lines) == 2 + 2 * 5
+
+
+def test_a_raw_column_and_no_empty_paper_column():
+    c = _comparison()
+    for name in ("a", "b"):
+        del c.values[(name, "paper")]
+        c.values[(name, "raw")] = {"std_rho_map": 0.5, "time": None}
+    assert c.methods() == ["raw", "native", "delivered", "classical"]
+    lines = c.to_markdown().splitlines()
+    assert lines[0] == "| case | quantity | raw network | paper's method | delivered | flow solver |"
+    assert lines[2] == "| a | Std(ρ̃_map) | 0.5000 | 0.05000 | 0.04000 | 0.01000 |"
+
+
+def test_side_by_side_of_a_quantity_that_is_shown_not_scored():
+    a, b = _comparison(), _comparison()
+    for t in (a, b):
+        for name in ("a", "b"):
+            for method in ("paper", "native", "classical"):
+                t.values[(name, method)]["max_mu"] = 0.4
+    lines = native_side_by_side({"old": a, "new": b}, "max_mu").splitlines()
+    assert lines[0] == "| case | paper max \\|μ\\| | old, paper's method | new, paper's method | flow solver |"
+    assert lines[2] == "| a | 0.4000 | 0.4000 | 0.4000 | 0.4000 |"  # no met mark: max |mu| is not scored
+    with pytest.raises(ValueError, match="differs"):
+        native_side_by_side({"old": a, "new": _comparison()}, "max_mu")

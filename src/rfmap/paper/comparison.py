@@ -262,21 +262,6 @@ class Comparison:
         vals = [self.value(c.name, method, quantity) for c in self.cases]
         return None if any(v is None for v in vals) else float(np.median(vals))
 
-    def speed_sentence(self, metric: str) -> str:
-        """The speed of the paper's method and of the delivered map against the classical solver, on the same
-        cases in the same run, with the accuracy of each in ``metric`` (means over the cases)."""
-        tc, tn, td = (self.median_time(m) for m in ("classical", "native", "delivered"))
-        tnet = self.median_time("native", "network_time")
-        ratio = float(np.median([1 / s for s in self.speed("native").values()]))
-        kc, mc = self.classical_better(metric)
-        acc = {m: format_number(self.mean(m, metric)) for m in ("classical", "native", "delivered")}
-        return (f"On this machine the {self.classical} takes a median {format_time(tc)} per case; the paper's method "
-                f"takes {format_time(tn)} (the network alone {format_time(tnet)}), {ratio:.3g} times the "
-                f"{self.classical}'s time, and the delivered map {format_time(td)}. The {self.classical} does "
-                f"better on {of_count(kc, mc, 'case')}: averaged over the cases, {METRIC_TITLES[metric]} is "
-                f"{acc['classical']} for the {self.classical}, {acc['native']} for the paper's method and "
-                f"{acc['delivered']} delivered.")
-
     def native_lesson(self, metric: str = "std_rho_map", tol: float = 1.1) -> str:
         """A sentence on the cases where the paper's method runs the network on another grid than the delivered
         map (outside the training range): whether there its ``metric`` is more than ``tol`` times the delivered
@@ -328,24 +313,40 @@ class Comparison:
             return []
         return [q for q in SHOWN if q in columns and q not in self.metrics]
 
+    def methods(self) -> list[str]:
+        """The columns that hold values, in order: those of :data:`METHODS`, and ``"raw"`` (the network's map
+        without refinement, where it was measured) before the paper's method."""
+        return [m for m in ("paper", "raw") + METHODS[1:] if any((c.name, m) in self.values for c in self.cases)]
+
     def heads(self) -> list[str]:
-        return ["paper", "paper's method", "delivered", self.classical]
+        names = {"paper": "paper", "raw": "raw network", "native": "paper's method", "delivered": "delivered"}
+        return [names.get(m, self.classical) for m in self.methods()]
+
+    def _cell(self, case: str, method: str, q: str) -> str:
+        v = self.value(case, method, q)
+        if q in ("time", "network_time"):
+            return format_time(v)
+        if isinstance(v, (list, tuple)):
+            return ", ".join(f"{float(a):.3g}" for a in v)
+        return format_number(v, printed=method == "paper")
+
+    def _markdown(self, quantities: list[str], met: bool) -> str:
+        head = ["N" if self.case_prefix else "case", "quantity"] + self.heads() + (["met"] if met else [])
+        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+        for c in self.cases:
+            for i, q in enumerate(quantities):
+                cells = [c.title() if i == 0 else "", METRIC_TITLES[q].replace("|", "\\|")]
+                cells += [self._cell(c.name, m, q) for m in self.methods()]
+                if met:
+                    cells.append(self._case_met(c.name, q) if q in self.metrics else "")
+                lines.append("| " + " | ".join(cells) + " |")
+        return "\n".join(lines)
 
     def to_markdown(self) -> str:
         """The table in the paper's shape: one block of rows per case (the scored metrics, then the time), a column
-        per method of :data:`METHODS` and the verdict; every number by :func:`format_number`."""
-        head = ["case" if not self.case_prefix else "N", "quantity"] + self.heads() + ["met"]
-        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        for c in self.cases:
-            for i, q in enumerate(self.metrics + ["time"]):
-                cells = [c.title() if i == 0 else "", METRIC_TITLES[q].replace("|", "\\|")]
-                if q == "time":
-                    cells += [format_time(self.value(c.name, m, q)) for m in METHODS] + [""]
-                else:
-                    cells += [format_number(self.value(c.name, m, q), printed=m == "paper") for m in METHODS]
-                    cells.append(self._case_met(c.name, q))
-                lines.append("| " + " | ".join(cells) + " |")
-        return "\n".join(lines)
+        per method that holds values (:meth:`methods`) and, with a paper column, the verdict; every number by
+        :func:`format_number`."""
+        return self._markdown(self.metrics + ["time"], met="paper" in self.methods())
 
     def verdict(self) -> str:
         """One sentence per metric: how many cases meet the paper (criterion named), and how many the classical
@@ -361,31 +362,15 @@ class Comparison:
 
     def full_quantities(self) -> list[str]:
         present = {q for v in self.values.values() for q in v}
-        order = ["time", "network_time", "std_rho_orig", "std_rho_map", "mean_dd", "mean_dmu", "mean_dmu_pl",
-                 "min_jacobian", "n_flipped", "max_mu", "mean_mu", "work_n", "alpha"]
+        order = ["std_rho_orig", "std_rho_map", "mean_dd", "mean_dmu", "mean_dmu_pl", "mean_mu", "max_mu",
+                 "min_jacobian", "n_flipped", "work_n", "alpha", "time", "network_time"]
         return [q for q in order if q in present]
 
     def full_markdown(self) -> str:
-        """Every quantity measured, one row per case and method (the paper's columns as columns)."""
-        qs = self.full_quantities()
-        head = ["case", "method"] + [METRIC_TITLES[q].replace("|", "\\|") for q in qs]
-        lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-        for c in self.cases:
-            for m, title in zip(METHODS, self.heads()):
-                vals = self.values.get((c.name, m))
-                if not vals:
-                    continue
-                cells = [c.title(self.case_prefix), title]
-                for q in qs:
-                    v = vals.get(q)
-                    if q in ("time", "network_time"):
-                        cells.append(format_time(v))
-                    elif isinstance(v, (list, tuple)):
-                        cells.append(", ".join(f"{float(a):.3g}" for a in v))
-                    else:
-                        cells.append(format_number(v, printed=m == "paper"))
-                lines.append("| " + " | ".join(cells) + " |")
-        return "\n".join(lines)
+        """Every quantity measured (:meth:`full_quantities`), in the shape of :meth:`to_markdown`: one block of rows
+        per case, one row per quantity and a column per method, so that the table keeps the width of the text
+        column however many quantities there are."""
+        return self._markdown(self.full_quantities(), met=False)
 
     def to_csv(self) -> str:
         """Every value, one row per case and method; times in seconds, numbers by :func:`format_number`."""
@@ -394,7 +379,7 @@ class Comparison:
         w = csv.writer(buf)
         w.writerow(["case", "n", "method"] + qs)
         for c in self.cases:
-            for m in METHODS:
+            for m in self.methods():
                 vals = self.values.get((c.name, m))
                 if vals:
                     w.writerow([c.name, c.n, m] + [_csv_cell(vals.get(q)) for q in qs])
@@ -490,7 +475,7 @@ def compare_beltrami(sur, cases: list[Case], label: str, title: str, *, case_pre
 
 
 @quiet_quality()
-def compare_models(models: dict, field, n: int, label: str, title: str) -> Comparison:
+def compare_models(models: dict, field, n: int, label: str, title: str, *, raw: bool = False) -> Comparison:
     """One density mapped by several density surrogates with one boundary, the cases named by the keys of
     ``models`` (the paper's Fig. 10: the DEM and the DEQ model), each by the paper's method and delivered, beside
     the flow solver's map of the same density (the same in every case).  Scored: Std(ρ̃_map) and mean ``|μ|``; there
@@ -503,6 +488,9 @@ def compare_models(models: dict, field, n: int, label: str, title: str) -> Compa
         A built-in density or a callable on points (P, 2), as :meth:`rfmap.Surrogate.map` takes it.
     n : int
     label, title : str
+    raw : bool
+        Also map each density by the network alone on the requested grid, without refinement or repair (the
+        ``"raw"`` column, untimed).
     """
     name = field if isinstance(field, str) else getattr(field, "__name__", "field")
     cmp = Comparison(label, title, ["std_rho_map", "mean_mu"], [Case(k, name, n) for k in models], "flow solver")
@@ -517,6 +505,11 @@ def compare_models(models: dict, field, n: int, label: str, title: str) -> Compa
         cmp.values[(key, "delivered")] = _network_values(delivered, density_values(delivered, True))
         cmp.values[(key, "classical")] = density_values(flow, True)
         cmp.maps[key] = {"native": native, "delivered": delivered, "classical": flow}
+        if raw:
+            bare = sur.map(field, n, native=True, refine=False, repair=False)
+            cmp.values[(key, "raw")] = {**_network_values(bare, density_values(bare, True)), "time": None,
+                                        "network_time": None}
+            cmp.maps[key]["raw"] = bare
     return cmp
 
 
@@ -572,7 +565,8 @@ def beltrami_resolution_comparison(sur, ns: dict | None = None) -> Comparison:
 def native_side_by_side(tables: dict[str, Comparison], metric: str = "std_rho_map") -> str:
     """The paper's method of several models side by side, one row per case of the same paper table (Markdown):
     the paper's value, each model's native value (``{model: comparison}``, in order) with whether it meets the
-    paper, and the classical solver of the first comparison.
+    paper, and the classical solver of the first comparison.  ``metric`` may be any quantity the paper's method
+    measured in every comparison; whether a value meets the paper is marked for the scored metrics only.
 
     Raises
     ------
@@ -583,7 +577,8 @@ def native_side_by_side(tables: dict[str, Comparison], metric: str = "std_rho_ma
         raise ValueError("native_side_by_side needs at least one comparison")
     first = next(iter(tables.values()))
     for name, t in tables.items():
-        if [c.name for c in t.cases] != [c.name for c in first.cases] or metric not in t.metrics:
+        if [c.name for c in t.cases] != [c.name for c in first.cases] or \
+                any(t.value(c.name, "native", metric) is None for c in t.cases):
             raise ValueError(f"comparison {name!r} differs from the first in its cases or lacks {metric!r}")
     title = METRIC_TITLES[metric].replace("|", "\\|")
     head = [first.case_prefix.strip(" =") or "case", f"paper {title}"]
@@ -592,7 +587,7 @@ def native_side_by_side(tables: dict[str, Comparison], metric: str = "std_rho_ma
     for c in first.cases:
         cells = [c.name, format_number(first.value(c.name, "paper", metric))]
         for t in tables.values():
-            met = t.met(c.name, metric)
+            met = t.met(c.name, metric) if metric in t.metrics else None
             mark = "" if met is None else (" (met)" if met else " (missed)")
             cells.append(format_number(t.value(c.name, "native", metric)) + mark)
         cells.append(format_number(first.value(c.name, "classical", metric)))
