@@ -11,7 +11,8 @@ import pytest  # noqa: E402
 from rfmap.core.mesh import grid_mesh  # noqa: E402
 from rfmap.paper.reproduce import exact_beltrami_result  # noqa: E402
 from rfmap.core.result import MapResult  # noqa: E402
-from rfmap.viz import beltrami_figure, extreme_figure, map_rows_figure, style  # noqa: E402
+from rfmap.viz import (beltrami_figure, extreme_figure, folded_maps_figure, map_rows_figure,  # noqa: E402
+                       query_points_figure, style)
 from rfmap.viz.figures import MAX_FIGURE_PX, MIN_DISPLAY_PT, TEXT_COLUMN_PX, display_font_sizes  # noqa: E402
 
 
@@ -59,4 +60,36 @@ def test_extreme_figure_labels_panels_a_to_g():
         _readable(fig)
     titles = sorted(t for t in (ax.get_title() for ax in fig.axes) if t.startswith("("))
     assert [t[:3] for t in titles] == [f"({c})" for c in "abcdefg"]
+    plt.close(fig)
+
+
+def test_map_rows_figure_gives_the_mapped_density_a_scale_of_its_own():
+    with style():
+        fig = map_rows_figure({f"f{i}": _map(17, 0.02 * (i + 1)) for i in range(2)}, mapped_range=(0.8, 1.2))
+        _readable(fig)
+    bars = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    assert sorted(ax.get_xlabel() for ax in bars) == [r"$\tilde\rho$ mapped", r"$\tilde\rho$ original", r"$|\mu|$"]
+    mapped = next(ax for ax in bars if ax.get_xlabel() == r"$\tilde\rho$ mapped")
+    assert mapped.get_xlim() == pytest.approx((0.8, 1.2))
+    plt.close(fig)
+
+
+def test_folded_maps_figure_counts_the_folds_of_each_map():
+    folded = _map(17, 0.0)
+    folded.mapped_points[[0, 1]] = folded.mapped_points[[1, 0]]  # two swapped vertices turn triangles over
+    with style():
+        fig = folded_maps_figure({"raw": folded, "refined": _map(17, 0.02)}, ncols=2)
+        _readable(fig)
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles[1] == "refined\n0 folded (red)" and not titles[0].endswith("\n0 folded (red)")
+    plt.close(fig)
+
+
+def test_query_points_figure_draws_the_cloud_and_both_histograms():
+    grid = _map(17, 0.02)
+    with style():
+        fig = query_points_figure(grid, grid)
+        _readable(fig)
+    assert [ax.get_title() for ax in fig.axes[:2]] == ["query cloud", "mapped cloud"]
+    assert [t.get_text() for t in fig.axes[2].get_legend().get_texts()] == ["cloud", "grid N = 17"]
     plt.close(fig)

@@ -9,7 +9,8 @@ from .figures import colorbar as add_colorbar
 
 __all__ = ["element_rho", "plot_mesh", "repair_figure", "plot_slice_outline", "plot_density", "plot_mu", "plot_map_row",
            "plot_beltrami_row", "vertex_error_panels", "population_figure", "map_rows_figure", "beltrami_figure",
-           "beltrami_case_figure", "extreme_figure", "random_fields_figure", "jitter_figure", "TEXT_WIDTH_IN"]
+           "beltrami_case_figure", "extreme_figure", "folded_maps_figure", "query_points_figure", "random_fields_figure",
+           "jitter_figure", "TEXT_WIDTH_IN"]
 
 
 #: width of a figure that fills the book's text column with its 9 pt text shown at 9 pt (``rfmap.viz.figures``)
@@ -169,13 +170,16 @@ def _grid_side(result) -> int | None:
     return n if n * n == len(result.ref_points) else None
 
 
-def map_rows_figure(results: dict, *, rho_range=(0.0, 2.5), width: float = TEXT_WIDTH_IN, max_lines: int = 20):
+def map_rows_figure(results: dict, *, rho_range=(0.0, 2.5), width: float = TEXT_WIDTH_IN, max_lines: int = 20,
+                    mapped_range=None):
     r"""One row per 2D map of ``results`` (``{row label: MapResult}``): the mapped mesh (at most ``max_lines``
     grid lines per direction), :math:`\tilde\rho` on the
     original and on the mapped mesh, and :math:`|\mu|` on the mapped mesh (the paper's Figs. 7-9 without their
-    panel of the original grid).  The two density panels share one colour bar (``rho_range``), the :math:`|\mu|`
-    panels another (0 to the largest :math:`|\mu|`, at most 1), so the rows compare at a glance; the figure is
-    ``width`` inches wide, readable in the book's text column.
+    panel of the original grid).  The two density panels share one colour bar (``rho_range``), or, with
+    ``mapped_range`` (say ``(0.8, 1.2)``), the mapped density gets a narrow scale and a colour bar of its own, so
+    that what is left of the input's variation shows; the :math:`|\mu|` panels have another (0 to the largest
+    :math:`|\mu|`, at most 1), so the rows compare at a glance; the figure is ``width`` inches wide, readable in
+    the book's text column.
 
     Returns
     -------
@@ -188,24 +192,33 @@ def map_rows_figure(results: dict, *, rho_range=(0.0, 2.5), width: float = TEXT_
     mus = {label: np.abs(r.mu()) for label, r in results.items()}
     mu_top = max(float(m.max()) for m in mus.values())
     mu_hi = min(1.0, mu_top) or 1.0
-    rho_top = 0.0
+    mapped = rho_range if mapped_range is None else mapped_range
+    rho_top, low, high = 0.0, np.inf, -np.inf
     for row, (label, r) in zip(axes, results.items()):
         el = r.elements
         rho0 = np.asarray(r.field).reshape(-1)[el].mean(1)
         rho0, rho1 = rho0 / rho0.mean(), element_rho(r)
         rho_top = max(rho_top, float(rho0.max()), float(rho1.max()))
+        low, high = min(low, float(rho1.min())), max(high, float(rho1.max()))
         plot_mesh(row[0], r.mapped_points, el, n=_grid_side(r), max_lines=max_lines)
         row[0].set_ylabel(label)
         im_rho = plot_density(row[1], r.ref_points, el, rho0, vmin=rho_range[0], vmax=rho_range[1], colorbar=False)
-        plot_density(row[2], r.mapped_points, el, rho1, vmin=rho_range[0], vmax=rho_range[1], colorbar=False)
+        im_map = plot_density(row[2], r.mapped_points, el, rho1, vmin=mapped[0], vmax=mapped[1], colorbar=False)
         im_mu = plot_density(row[3], r.mapped_points, el, mus[label], vmin=0, vmax=mu_hi, cmap="magma",
                              colorbar=False)
     _frameless(axes)
     for ax, title in zip(axes[0], ["mapped mesh", r"$\tilde\rho$ original", r"$\tilde\rho$ mapped",
                                    r"$|\mu|$ mapped"]):
         ax.set_title(title)
-    add_colorbar(im_rho, fig=fig, ax=axes[:, 1:3].ravel().tolist(), location="bottom", shrink=0.8, aspect=30,
-                 label=r"$\tilde\rho$ (mean 1)", extend="max" if rho_top > rho_range[1] else "neither")
+    if mapped_range is None:
+        add_colorbar(im_rho, fig=fig, ax=axes[:, 1:3].ravel().tolist(), location="bottom", shrink=0.8, aspect=30,
+                     label=r"$\tilde\rho$ (mean 1)", extend="max" if rho_top > rho_range[1] else "neither")
+    else:
+        ends = {(True, True): "both", (True, False): "min", (False, True): "max", (False, False): "neither"}
+        add_colorbar(im_rho, fig=fig, ax=axes[:, 1].tolist(), location="bottom", shrink=0.95, aspect=12,
+                     label=r"$\tilde\rho$ original", extend="max" if rho_top > rho_range[1] else "neither")
+        add_colorbar(im_map, fig=fig, ax=axes[:, 2].tolist(), location="bottom", shrink=0.95, aspect=12,
+                     label=r"$\tilde\rho$ mapped", extend=ends[low < mapped[0], high > mapped[1]])
     add_colorbar(im_mu, fig=fig, ax=axes[:, 3].tolist(), location="bottom", shrink=0.95, aspect=12,
                  label=r"$|\mu|$", extend="max" if mu_top > mu_hi else "neither")
     return fig
@@ -305,9 +318,10 @@ def extreme_figure(original, maps: dict, *, width: float = TEXT_WIDTH_IN, max_li
     r"""The paper's Fig. 10: (a) :math:`\tilde\rho` of a density on the original grid, then each map of ``maps``
     (``{label: MapResult}``, two of them: (b), (c)), with its folded triangles filled in red, and below, per map,
     histograms of :math:`\tilde\rho` on the mapped mesh (d, e) and of :math:`|\mu|` (f, g) on shared axes.  The
-    histograms cover every triangle (the :math:`\tilde\rho` axis reaches the largest value of either map, the
-    :math:`|\mu|` axis 1 or beyond where a folded triangle has :math:`|\mu| > 1`) and count on a logarithmic scale,
-    so that a thin tail stays visible.
+    histograms cover the triangles (the :math:`\tilde\rho` axis ends at the 99th percentile of either map, at
+    least 3, and the last bin holds every larger value; folded triangles, whose :math:`\tilde\rho` is negative,
+    fall outside it; the :math:`|\mu|` axis reaches 1 or beyond where a folded
+    triangle has :math:`|\mu| > 1`) and count on a logarithmic scale, so that a thin tail stays visible.
 
     Parameters
     ----------
@@ -341,7 +355,9 @@ def extreme_figure(original, maps: dict, *, width: float = TEXT_WIDTH_IN, max_li
     _frameless(ax)
     hax = bottom.subplots(1, 2 * len(maps))
     values = {"rho": {k: element_rho(r) for k, r in maps.items()}, "mu": {k: np.abs(r.mu()) for k, r in maps.items()}}
-    top_rho = max(3.0, float(np.ceil(max(v.max() for v in values["rho"].values()))))
+    # the rho axis ends at the 99th percentile of either map (the rarer, larger values fall in the last bin)
+    top_rho = max(3.0, float(np.ceil(max(np.percentile(v, 99) for v in values["rho"].values()))))
+    values["rho"] = {k: np.clip(v, None, top_rho) for k, v in values["rho"].items()}
     top_mu = max(1.0, float(max(v.max() for v in values["mu"].values())))
     hists = [(r"$\tilde\rho$", values["rho"], (0, top_rho), "tab:green"),
              (r"$|\mu|$", values["mu"], (0, top_mu), "tab:purple")]
@@ -351,6 +367,8 @@ def extreme_figure(original, maps: dict, *, width: float = TEXT_WIDTH_IN, max_li
             a.hist(vals[label], bins=50, range=rng, color=color)
             a.set_yscale("log")
             a.set_title(f"({next(letters)}) {name}, {label}")
+            if j == 0:
+                a.set_xlabel(f"last bin: ≥ {top_rho - (rng[1] - rng[0]) / 50:.3g}")
             a.set_xlim(*rng)
         pair = hax[j * len(maps):(j + 1) * len(maps)]
         top = max(a.get_ylim()[1] for a in pair)  # one count scale per quantity
@@ -382,6 +400,45 @@ def repair_figure(before, after, elements, *, n: int | None = None, titles=("fol
         for t in folded:
             ax.fill(*pts[elements[t]].T, color="red", zorder=5)
     _frameless(axes)
+    return fig
+
+
+def folded_maps_figure(maps: dict, *, ncols: int = 2, width: float = TEXT_WIDTH_IN, max_lines: int = 20):
+    """2D maps of one grid side by side, ``ncols`` a row (``{title: MapResult}``), each with its folded triangles
+    filled in red and counted under its title; at most ``max_lines`` grid lines per direction.  Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    rows = -(-len(maps) // ncols)
+    fig, axes = plt.subplots(rows, ncols, figsize=(width, (width / ncols + 0.45) * rows), layout="constrained",
+                             squeeze=False)
+    for ax, (title, r) in zip(axes.ravel(), maps.items()):
+        p, el = np.asarray(r.mapped_points), np.asarray(r.elements)
+        folded = _folded(p, el)
+        plot_mesh(ax, p, el, n=_grid_side(r), max_lines=max_lines, title=f"{title}\n{len(folded)} folded (red)")
+        for t in folded:
+            ax.fill(*p[el[t]].T, color="red", zorder=5)
+    for ax in axes.ravel()[len(maps):]:
+        ax.set_axis_off()
+    return fig
+
+
+def query_points_figure(cloud, grid, *, width: float = TEXT_WIDTH_IN, bins: int = 50):
+    r"""A map evaluated at scattered points: the points' Delaunay mesh (``cloud.ref_points`` and
+    ``cloud.elements``), its image under the map, and the histograms of :math:`\tilde\rho` on the mapped cloud and
+    on the mapped grid of ``grid`` (a map of the same density on a grid), as densities.  Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(width, 0.375 * width), layout="constrained", width_ratios=[1, 1, 1.3])
+    for ax, pts, title in ((axes[0], cloud.ref_points, "query cloud"), (axes[1], cloud.mapped_points, "mapped cloud")):
+        ax.triplot(pts[:, 0], pts[:, 1], cloud.elements, lw=0.2, color="0.3")
+        ax.set_aspect("equal")
+        ax.set_title(title)
+        frameless(ax)
+    n = _grid_side(grid)
+    for r, label in ((cloud, "cloud"), (grid, f"grid N = {n}" if n else "grid")):
+        axes[2].hist(element_rho(r), bins=bins, alpha=0.6, label=label, density=True)
+    axes[2].set(title=r"$\tilde\rho$ on the mapped mesh", yticks=[])
+    axes[2].legend()
     return fig
 
 
