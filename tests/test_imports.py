@@ -49,7 +49,7 @@ LAYERS: dict[str, int] = {
     "rfmap.finish.repair.lbs": 2, "rfmap.finish.repair.local": 2, "rfmap.finish.repair.scale": 2, "rfmap.finish.repair.embedding": 2,
     "rfmap.finish.shorten": 2, "rfmap.training.validation": 2, "rfmap.tasks.teacher": 2, "rfmap.training.selection": 2, "rfmap.finish.polish": 2, "rfmap.tasks.objectives": 2,
     # the paper layer, the applications and plotting, then the command line and the package's front door
-    "rfmap.viz": 3, "rfmap.viz.figures": 3, "rfmap.viz.meshes": 3, "rfmap.viz.volumes": 3, "rfmap.viz.architecture": 3,
+    "rfmap.viz": 3, "rfmap.viz.figures": 3, "rfmap.viz.meshes": 3, "rfmap.viz.volumes": 3, "rfmap.viz.diffusion": 3, "rfmap.viz.architecture": 3,
     "rfmap.viz.training": 3, "rfmap.viz.cartograms": 3, "rfmap.viz.studies": 3,
     "rfmap.paper": 3, "rfmap.paper.tables": 3, "rfmap.paper.reproduce": 3,
     "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,

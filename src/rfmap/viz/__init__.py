@@ -1,7 +1,8 @@
 """Plotting: one matplotlib style for the 2D figures, PyVista (off screen) for the 3D ones, VTK export.
 
 One module per kind of figure: :mod:`~rfmap.viz.figures` (the style and where figures are saved),
-:mod:`~rfmap.viz.meshes` (2D maps), :mod:`~rfmap.viz.volumes` (3D maps), :mod:`~rfmap.viz.architecture` (the
+:mod:`~rfmap.viz.meshes` (2D maps), :mod:`~rfmap.viz.volumes` (3D maps), :mod:`~rfmap.viz.diffusion` (the
+figures of the diffusion chapter), :mod:`~rfmap.viz.architecture` (the
 network), :mod:`~rfmap.viz.training` (batches, loss terms, learning curves), :mod:`~rfmap.viz.cartograms` and
 :mod:`~rfmap.viz.studies` (the studies' tables and reports).  Every name is importable from :mod:`rfmap.viz`,
 with :func:`rfmap.core.result.to_pyvista` and :func:`rfmap.core.result.setup_pyvista`.
@@ -19,6 +20,7 @@ _HOME = {
     "..core.result": ("setup_pyvista", "to_pyvista"),
     ".architecture": ("architecture_diagram", "encoding_figure"),
     ".cartograms": ("area_error_histograms", "cartogram_figure", "cartogram_panels", "plot_regions"),
+    ".diffusion": ("dem_steps_figure", "overview_figure"),
     ".figures": ("STYLE", "colorbar", "figures_dir", "frameless", "repository_root", "save_figure", "style"),
     ".meshes": ("beltrami_case_figure", "beltrami_figure", "element_rho", "extreme_figure", "folded_maps_figure",
                 "map_rows_figure", "query_points_figure",

@@ -1,0 +1,108 @@
+"""The figures of chapter 02: the classical density-equalizing map step by step (the paper's Fig. 3) and the
+overview of the two kinds of field-driven map, drawn with the shipped surrogates (the paper's Fig. 1)."""
+from __future__ import annotations
+
+import numpy as np
+
+from .figures import colorbar, frameless
+from .meshes import TEXT_WIDTH_IN, plot_density, plot_mesh
+from .volumes import CAMERA_3D, render_lattice, render_slices
+
+__all__ = ["dem_steps_figure", "overview_figure"]
+
+
+def dem_steps_figure(densities: dict, meshes: dict, rho0, elements, *, n: int, lines: int = 12):
+    r"""The paper's Fig. 3: the diffusing density and the mesh it carries.
+
+    ``densities`` maps a time to the density on a regular grid (an image, the first axis x); ``meshes`` maps a time
+    to the vertex positions of the ``n`` x ``n`` grid mesh at that time, its last entry the final map (one entry
+    fewer than ``densities``: the last column holds the histogram).  The top row
+    draws each density on one colour scale; the bottom row draws each mesh, its triangles coloured by their initial
+    normalised density ``rho0`` (one value per element of ``elements``) on a second scale, with every k-th grid
+    line (at most ``lines`` a direction) drawn so that a cell's growth is seen at the page's width, and beside them
+    the histogram of :math:`\tilde\rho` on the original and the final mesh.  Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    times, stages = list(densities), list(meshes)
+    fig, axes = plt.subplots(2, len(times), figsize=(TEXT_WIDTH_IN, 4.6), layout="constrained")
+    vmax = float(max(np.max(r) for r in densities.values()))
+    for ax, t in zip(axes[0], times):
+        im = ax.imshow(np.asarray(densities[t]).T, origin="lower", extent=(0, 1, 0, 1), vmin=0, vmax=vmax,
+                       cmap="viridis")
+        ax.set_title(f"$\\rho$ at t = {t:g}")
+        frameless(ax)
+    colorbar(im, ax=axes[0, :], shrink=0.8, label=r"$\rho$")
+    top = float(np.max(rho0))
+    for i, (ax, t) in enumerate(zip(axes[1, :-1], stages)):
+        last = i == len(stages) - 1
+        pts = meshes[t]
+        tri = plot_density(ax, pts, elements, rho0, vmin=0, vmax=top, colorbar=False,
+                           title="final map" if last else f"mesh at t = {t:g}")
+        plot_mesh(ax, pts, n=n, max_lines=lines, color="w", lw=0.7)
+    colorbar(tri, ax=axes[1, :-1], location="bottom", shrink=0.6, aspect=30,
+             label=r"initial $\tilde\rho$ of each triangle, carried by the map")
+    hist = axes[1, -1]
+    mapped = rho0 / _areas(meshes[stages[-1]], elements)  # the grid's triangles all have one area
+    bins = np.linspace(0, 1.02 * top, 41)
+    hist.hist(rho0, bins=bins, alpha=0.6, label="original")
+    hist.hist(mapped / mapped.mean(), bins=bins, alpha=0.8, label="mapped")
+    hist.set_yscale("log")
+    hist.set_xlabel(r"$\tilde\rho$")
+    hist.set_ylabel("triangles")
+    # ticks and label on the right, where the colour bar of the row above sits, so that the columns stay even
+    hist.yaxis.tick_right()
+    hist.yaxis.set_label_position("right")
+    hist.set_title(r"$\tilde\rho$ per triangle")
+    hist.legend()
+    return fig
+
+
+def _areas(points, elements) -> np.ndarray:
+    p = np.asarray(points)[np.asarray(elements)]
+    a, b = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    return 0.5 * np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
+
+
+def _arrow(ax, label: str) -> None:
+    ax.annotate("", xy=(1.0, 0.5), xytext=(0.0, 0.5), xycoords="axes fraction",
+                arrowprops=dict(arrowstyle="-|>", lw=2, color="0.3"))
+    ax.text(0.5, 0.62, label, ha="center", va="bottom", fontsize=9, transform=ax.transAxes)
+    ax.text(0.5, 0.4, "$u = x + \\mathcal{B}\\odot\\psi$", ha="center", va="top", fontsize=9,
+            transform=ax.transAxes)
+    ax.set_axis_off()
+
+
+def overview_figure(beltrami, density, *, name: str = "T4", slices=(0.25, 0.75), clim=(0.2, 1.8)):
+    r"""The paper's Fig. 1: two field-driven maps made by a surrogate.
+
+    ``beltrami`` is a 2D map from a Beltrami coefficient (its ``field`` the coefficient per triangle, ``name`` the
+    name of the field in the titles); ``density`` a 3D map of the cube from a density.  The first row draws
+    :math:`|\mu|` on the square and the mapped grid; the second the density on the horizontal slices
+    :math:`x_3` = ``slices`` of the cube (:func:`rfmap.viz.volumes.render_slices`) and the same slices of the grid
+    as the map moves them (:func:`rfmap.viz.volumes.render_lattice`, coloured by the initial density carried
+    along), both seen from the one camera :data:`rfmap.viz.volumes.CAMERA_3D`, on the colour scale ``clim``.
+    Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    before = render_slices(density, mapped=False, slices=slices, clim=clim, camera=CAMERA_3D)
+    after = render_lattice(density, mapped=True, carried=True, slices=slices, clim=clim, camera=CAMERA_3D)
+    cut = " and ".join(f"{s:g}" for s in slices)
+    fig = plt.figure(figsize=(TEXT_WIDTH_IN, 5.8), layout="constrained")
+    grid = fig.add_gridspec(2, 3, width_ratios=[1, 0.55, 1])
+    n = round(len(beltrami.ref_points) ** 0.5)
+    ax = fig.add_subplot(grid[0, 0])
+    plot_density(ax, beltrami.ref_points, beltrami.elements, np.abs(beltrami.field), cmap="magma", vmin=0,
+                 title=f"(a) $|\\mu|$ of {name} on the square")
+    ax = fig.add_subplot(grid[0, 2])
+    plot_mesh(ax, beltrami.mapped_points, n=n, max_lines=24, title="the quasi-conformal map")
+    ax = fig.add_subplot(grid[1, 0])
+    ax.imshow(before)
+    ax.set_title(f"(b) density $\\rho$ in the cube,\nslices $x_3$ = {cut}")
+    ax.set_axis_off()
+    ax = fig.add_subplot(grid[1, 2])
+    ax.imshow(after)
+    ax.set_title("the density-equalizing map: the\nsame slices moved (colour: initial $\\rho$)")
+    ax.set_axis_off()
+    _arrow(fig.add_subplot(grid[0, 1]), "field $\\mu$\n$\\downarrow$\nsurrogate $\\mathcal{N}_\\theta$")
+    _arrow(fig.add_subplot(grid[1, 1]), "field $\\rho$\n$\\downarrow$\nsurrogate $\\mathcal{N}_\\theta$")
+    return fig
