@@ -240,3 +240,14 @@ def test_side_by_side_of_a_quantity_that_is_shown_not_scored():
     assert lines[2] == "| a | 0.4000 | 0.4000 | 0.4000 | 0.4000 |"  # no met mark: max |mu| is not scored
     with pytest.raises(ValueError, match="differs"):
         native_side_by_side({"old": a, "new": _comparison()}, "max_mu")
+
+
+def test_paper_shaped_table_with_chosen_rows_keeps_the_verdict():
+    """``to_markdown(quantities)``: the rows asked for in each case's block, the met column only on scored rows."""
+    c = _comparison()
+    c.values[("a", "native")]["min_jacobian"] = 0.25
+    lines = c.to_markdown(["std_rho_map", "min_jacobian"]).splitlines()
+    assert lines[0] == "| case | quantity | paper | paper's method | delivered | flow solver | met |"
+    assert lines[2] == "| a | Std(ρ̃_map) | 0.08 | 0.05000 | 0.04000 | 0.01000 | yes |"
+    assert lines[3] == "|  | min det J | — | 0.2500 | — | — |  |"
+    assert len(lines) == 2 + 2 * 2

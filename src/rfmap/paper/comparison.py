@@ -342,11 +342,12 @@ class Comparison:
                 lines.append("| " + " | ".join(cells) + " |")
         return "\n".join(lines)
 
-    def to_markdown(self) -> str:
-        """The table in the paper's shape: one block of rows per case (the scored metrics, then the time), a column
-        per method that holds values (:meth:`methods`) and, with a paper column, the verdict; every number by
+    def to_markdown(self, quantities: list[str] | None = None) -> str:
+        """The table in the paper's shape: one block of rows per case (the scored metrics, then the time, or the
+        rows of ``quantities``, e.g. :meth:`full_quantities`), a column per method that holds values
+        (:meth:`methods`) and, with a paper column, the verdict of each scored metric; every number by
         :func:`format_number`."""
-        return self._markdown(self.metrics + ["time"], met="paper" in self.methods())
+        return self._markdown(quantities or self.metrics + ["time"], met="paper" in self.methods())
 
     def verdict(self) -> str:
         """One sentence per metric: how many cases meet the paper (criterion named), and how many the classical
