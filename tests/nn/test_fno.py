@@ -151,3 +151,22 @@ def test_wins_counts_the_best_method_per_case():
     t.add("4", "a", {"x": 1.0})
     t.add("4", "b", {"x": 2.0})
     assert compare.wins(t, "x") == {"a": 3, "b": 2}
+
+
+def test_speed_against_flow_times_every_model_and_the_flow_solver():
+    from rfmap.solvers import solve_dem
+    from rfmap.fields import sample_density
+
+    surs = {"A": tiny_fno(0), "B": tiny_fno(1)}
+    out = compare.speed_against_flow(surs, n=17, repeats=2)
+    assert list(out) == ["A", "B", "flow solver"]
+    assert all(v["time"] > 0 for v in out.values())
+    flow = solve_dem(sample_density("multi-freq", 17), method="flow").metrics().std_rho_map
+    assert out["flow solver"]["std_rho_map"] == pytest.approx(flow, rel=1e-12)
+    from rfmap.finish import quiet_quality
+
+    with quiet_quality():
+        plain = surs["A"].map("multi-freq", 17, repair=False).metrics().std_rho_map
+    assert out["A"]["std_rho_map"] == pytest.approx(plain, rel=1e-6)
+    with pytest.raises(ValueError, match="repeats"):
+        compare.speed_against_flow(surs, n=17, repeats=0)

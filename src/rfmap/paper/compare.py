@@ -14,20 +14,20 @@ spectral weights act on frequencies and can be run on the requested grid itself 
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 
 from ..core.mesh import jittered_points
+from ..fields import sample_density
 from ..fields.paper import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
-from ..training import train
+from ..solvers import solve_dem
 from .generalization import generalization_table
 from .comparison import format_time
 from .tables import Table, format_sig
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
-           "generalization_tables", "inference_table", "race", "wins", "folded_cell", "side_by_side"]
+           "generalization_tables", "inference_table", "speed_against_flow", "wins", "folded_cell", "side_by_side"]
 
 
 def parameter_count(model) -> int:
@@ -167,15 +167,28 @@ def inference_table(surs: dict, ns=(51, 128, 256), field: str = "multi-freq", re
     return t
 
 
-def race(configs: dict, seconds: float, out_dir, *, progress: bool = False) -> dict:
-    """Train each configuration from scratch for the same wall-clock budget (``time_limit = seconds``), one after
-    the other on this machine; returns ``{name: Surrogate}`` (their metadata holds the learning curves)."""
-    out = Path(out_dir)
-    result = {}
-    for name, cfg in configs.items():
-        cfg = cfg.with_overrides(time_limit=float(seconds), steps=max(cfg.steps, 10**6))
-        result[name] = train(cfg, out / cfg.name, progress=progress)
-    return result
+def speed_against_flow(surs: dict, n: int = 51, field: str = "multi-freq", repeats: int = 9) -> dict:
+    """Median wall time of one raw map per model (encoding, network, resampling; no refinement, no repair) and of
+    the flow solver (:func:`rfmap.solvers.solve_dem` with ``method="flow"``, the fastest classical solver) on the
+    same field and grid, each after an untimed first run, with the Std(ρ̃_map) each leaves:
+    ``{name: {"time": s, "std_rho_map": v}}``, the models first, then ``"flow solver"``."""
+    _check(surs)
+    if repeats < 1:
+        raise ValueError(f"repeats must be at least 1, got {repeats}")
+    rho = sample_density(field, int(n))
+    runs = {name: (lambda s=s: s.map(field, n, repair=False)) for name, s in surs.items()}
+    runs["flow solver"] = lambda: solve_dem(rho, method="flow")
+    out = {}
+    with quiet_quality():  # the result reports each map's Std itself
+        for name, run in runs.items():
+            r = run()  # untimed first run
+            ts = []
+            for _ in range(repeats):
+                t0 = time.perf_counter()
+                run()
+                ts.append(time.perf_counter() - t0)
+            out[name] = {"time": float(np.median(ts)), "std_rho_map": float(r.metrics().std_rho_map)}
+    return out
 
 
 def wins(table: Table, column: str = "std_rho_map", *, lower: bool = True) -> dict[str, int]:
