@@ -214,7 +214,7 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     """The recipe table states each model's training fields, fold penalty, learning rate, budget and recorded
     validation exactly as its metadata holds them."""
     from rfmap.training.config import get_config
-    from rfmap.paper.recipes import recipe_table, training_fields_text
+    from rfmap.paper.recipes import recipe_markdown, recipe_table, training_fields_text
 
     cfg = get_config("deq2d-square", "full").with_overrides(lr=2e-4).to_dict()
     cfg["density_field"]["ramp_scale"] = 2.5
@@ -238,6 +238,13 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     # the selection score where the metadata records it: a folded map counted as the identity, not its huge Std
     sur.meta["final_metrics"]["mean"].update({"std_rho_map": 40.0, "capped": 0.2, "penalized": 0.25})
     assert recipe_table({"new": sur}).value("new", "unet", "held_out") == 0.25
+    assert recipe_table({"new": sur}).value("new", "unet", "score_kind") == "mean Std, folds as no map"
+    # the family score of Std ratios, where recorded, is the score that chose the weights
+    sur.meta["final_metrics"]["mean"]["family_score"] = 0.4
+    by_family = recipe_table({"new": sur})
+    assert by_family.value("new", "unet", "held_out") == 0.4
+    assert "| new | 51/128 | 0.4 | Std ratio by family |" in recipe_markdown(by_family)
+    del sur.meta["final_metrics"]["mean"]["family_score"]
     # scored on the delivered maps (val_repair): the maps the network itself folded are counted apart
     sur.meta["final_metrics"]["mean"].update({"folded_fields": 0, "path": "repaired", "raw_folded_fields": 3})
     again = recipe_table({"new": sur})

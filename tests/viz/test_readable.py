@@ -25,7 +25,7 @@ def _readable(fig):
 def test_learning_curves_count_the_whole_chain():
     """A warm-started run is drawn after its ancestors' steps, on an axis that spans the stored steps (the earlier
     runs named in its label, not drawn as an empty stretch), one axis per quantity (no twin axes); the title gives
-    the chain's share of the paper's budget in whole per cent from 10 % on (never as 4e+02 %)."""
+    the chain's steps as a multiple of the paper's budget (4×), or a share in per cent below it (never as 4e+02 %)."""
     meta = {"steps": 300, "cumulative_steps": 4000, "history": {"step": [10, 100, 300], "loss": [1.0, 0.5, 0.2],
                                                                 "validation": [{"step": 300, "std_rho_map": 0.2}]}}
     with style():
@@ -33,7 +33,7 @@ def test_learning_curves_count_the_whole_chain():
                                                                                     "loss": [0.1, 0.05]}}},
                               {"chain": 1000, "single": 4000})
         loss, val = fig.axes[0], fig.axes[1]
-        assert loss.get_title() == "chain: 4,000 steps,\n400 % of the paper's epochs as steps"
+        assert loss.get_title() == "chain: 4,000 steps,\n4× the paper's epochs as steps"
         assert list(loss.lines[0].get_xdata()) == [3710, 3800, 4000]
         lo, hi = loss.get_xlim()
         assert 3600 < lo < 3710 and 4000 < hi < 4100 and "3,700" in loss.get_xlabel()

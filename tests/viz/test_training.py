@@ -19,7 +19,7 @@ def test_learning_curves_mark_the_budget_and_tolerate_old_metadata():
              "old": {"steps": 50, "history": {"step": [10, 50], "loss": [0.1, 0.05], "validation": []}}}
     fig = learning_curves(metas, {"new": 250, "old": 4000})
     loss_new, val_new, loss_old, val_old = fig.axes
-    assert "120 % of the paper's" in loss_new.get_title() and "1.2 % of the paper's" in loss_old.get_title()
+    assert "1.2× the paper's" in loss_new.get_title() and "1.2 % of the paper's" in loss_old.get_title()
     # the paper's budget (250 steps) falls inside the stored steps of "new": dashed on both of its panels
     for ax in (loss_new, val_new):
         dashed = [ln for ln in ax.lines if ln.get_linestyle() == "--"]
@@ -29,6 +29,28 @@ def test_learning_curves_mark_the_budget_and_tolerate_old_metadata():
     assert loss_old.get_xlim()[1] < 100
     assert not val_old.axison  # the old metadata has no validation: said in words, no empty axes
     plt.close(fig)
+
+
+def test_learning_curves_can_draw_the_selection_score():
+    """With ``score`` the validation panel draws the score that chose the kept weights, not the plain mean that a
+    folded map inflates, and a star marks the kept weights at their step with the value the metadata records."""
+    val = [{"step": 0, "std_rho_map": 9.0, "penalized": 0.3, "capped": 0.3},
+           {"step": 100, "std_rho_map": 0.2, "penalized": 0.2, "capped": 0.2},
+           {"step": 200, "std_rho_map": 40.0, "penalized": 0.35, "capped": 0.3},
+           {"step": 200, "std_rho_map": 0.2, "penalized": 0.2, "capped": 0.2}]
+    meta = {"steps": 200, "cumulative_steps": 1200, "selected_step": 100,
+            "history": {"step": [50, 200], "loss": [1.0, 0.5], "validation": val}}
+    fig = learning_curves({"m": meta}, {"m": 100}, score=True)
+    ax_val = fig.axes[1]
+    line, star = ax_val.lines[:2]
+    assert list(line.get_ydata()) == [0.3, 0.2, 0.35] and list(line.get_xdata()) == [1000, 1100, 1200]
+    assert list(star.get_xdata()) == [1100] and list(star.get_ydata()) == [0.2] and star.get_marker() == "*"
+    assert "folds as no map" in ax_val.get_ylabel()
+    small = {"steps": 10, "selected_step": 10, "history": {"step": [10], "loss": [1.0], "validation": [
+        {"step": 0, "mean_dd": 7e-4, "penalized": 7e-4}, {"step": 10, "mean_dd": 6e-4, "penalized": 6e-4}]}}
+    ax_small = learning_curves({"b": small}, {"b": 100}, score=True).axes[1]
+    assert "×10⁻⁴" in ax_small.get_ylabel() and abs(ax_small.lines[1].get_ydata()[0] - 6.0) < 1e-9
+    plt.close("all")
 
 
 def test_training_curves_give_every_quantity_its_own_axis(tmp_path):

@@ -4,7 +4,8 @@ from __future__ import annotations
 from ..tasks import get_task
 from .tables import Table, decimal_text, rate_text
 
-__all__ = ["training_fields_text", "recipe_table", "recipe_differences", "differences_text", "differences_table"]
+__all__ = ["training_fields_text", "recipe_table", "recipe_markdown", "recipe_differences", "differences_text",
+           "differences_table"]
 
 
 def training_fields_text(config: dict) -> str:
@@ -18,8 +19,9 @@ def recipe_table(surs: dict) -> Table:
     penalty (weight, from :math:`\det J < \tau`), the peak learning rate of the last run, the decay of its weight
     average (``ema``; ``None`` when it shipped the weights as trained), the cumulative steps
     and minutes over its ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end
-    of training (grid sides; the selection score, i.e. the mean metric with every folded map counted as the identity
-    map, where recorded, else the capped or the plain mean; which maps were scored: ``raw`` network output or the maps
+    of training (grid sides; the score that chose the kept weights, as :func:`_selection` reads it, and what that
+    score is: the family score of Std ratios, or the mean metric with every folded map counted as the identity
+    map, else the capped or the plain mean; which maps were scored: ``raw`` network output or the maps
     as ``Surrogate.map`` ``delivered`` them, a folded map regridded or repaired (``TrainConfig.val_repair``); how many
     held-out maps the network itself folded; :func:`rfmap.training.validation.evaluate`).  Older weights were validated on
     fewer sides, so their numbers are not comparable with those of later runs.
@@ -28,7 +30,8 @@ def recipe_table(surs: dict) -> Table:
     thousands separators, minutes whole, the held-out scores with three significant digits in positional notation
     (:func:`decimal_text`)."""
     t = Table("tab:recipes", "How the models were trained",
-              ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "scored", "folded_maps"],
+              ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "score_kind", "scored",
+               "folded_maps"],
               formats={"lr": rate_text, "steps": lambda v: f"{int(v):,}", "train_time": lambda v: f"{float(v):,.0f}",
                        "held_out": decimal_text})
     for name, s in surs.items():
@@ -36,7 +39,7 @@ def recipe_table(surs: dict) -> Table:
         cfg = meta.get("config") or {}
         loss = cfg.get("loss") or {}
         val = (meta.get("final_metrics") or {}).get("mean") or {}
-        metric = val.get("penalized", val.get("capped", val.get("mean_dd", val.get("std_rho_map"))))
+        metric, kind = _selection(val)
         t.add(name, s.model.kwargs().get("arch", "unet"), {
             "fields": training_fields_text(cfg) if cfg else None,
             "fold": f"{loss.get('fold', 10.0):g} from {loss.get('fold_threshold', 0.02):g}" if cfg else None,
@@ -46,10 +49,53 @@ def recipe_table(surs: dict) -> Table:
             "train_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 60.0,
             "val_n": "/".join(str(n) for n in (cfg.get("val_sizes") or [cfg.get("val_n", "?")])) if cfg else None,
             "held_out": None if metric is None else float(metric),
+            "score_kind": kind,
             "scored": ("delivered" if val.get("path") == "repaired" else "raw") if val else None,
             "folded_maps": (int(val["raw_folded_fields"]) if "raw_folded_fields" in val else
                             int(val["folded_fields"]) if "folded_fields" in val else None)})
     return t
+
+
+#: the recipe table in three narrow parts (what a model learned from, how it was optimised, how it was validated):
+#: each part's columns with their headers
+RECIPE_PARTS = {
+    "Training fields and fold penalty": {"fields": "training fields", "fold": "fold penalty"},
+    "Optimisation over the whole chain (learning rate and weight average of the last run)":
+        {"lr": "peak lr", "ema": "weight average", "steps": "steps", "train_time": "minutes"},
+    "Held-out validation of the kept weights":
+        {"val_n": "N", "held_out": "score", "score_kind": "what the score is", "scored": "maps scored",
+         "folded_maps": "folded maps"},
+}
+
+
+def recipe_markdown(table: Table) -> str:
+    """A :func:`recipe_table` as three Markdown tables of a few columns each (:data:`RECIPE_PARTS`), one row per
+    model, so that each fits the width of a book page."""
+    out = []
+    for title, cols in RECIPE_PARTS.items():
+        lines = [f"**{title}**", "", "| model | " + " | ".join(cols.values()) + " |", "|" + "---|" * (len(cols) + 1)]
+        for case, _, values in table.rows:
+            cells = [table.cell(values.get(c), c).replace("|", "\\|") for c in cols]
+            lines.append(f"| {case} | " + " | ".join(cells) + " |")
+        out.append("\n".join(lines))
+    return "\n\n".join(out)
+
+
+def _selection(val: dict) -> tuple[float | None, str | None]:
+    """The score that chose the kept weights, from a validation summary, and what it is, ranked as
+    :func:`rfmap.training.validation.score` ranks them: the family score (each field's Std(ρ̃_map) relative to its
+    Std(ρ̃_orig), averaged by family) where recorded, else the mean metric with every folded map counted as no map,
+    else the capped or the plain mean."""
+    if not val:
+        return None, None
+    metric = "|Δd|" if "mean_dd" in val else "Std"
+    if "family_score" in val:
+        return float(val["family_score"]), "Std ratio by family"
+    for key in ("penalized", "capped"):
+        if key in val:
+            return float(val[key]), f"mean {metric}, folds as no map"
+    plain = val.get("mean_dd", val.get("std_rho_map"))
+    return (None, None) if plain is None else (float(plain), f"mean {metric}")
 
 
 #: settings of a stored training configuration that name or time a run rather than shape what it learns

@@ -28,8 +28,8 @@ _HOME = {
                 "plot_slice_outline",
                 "population_figure", "random_fields_figure", "vertex_error_panels"),
     ".studies": ("displacement_demand_figure", "shorten_curve", "table_lines", "time_accuracy_figure"),
-    ".training": ("LOSS_TERMS", "learning_curves", "plot_batch", "plot_learning_rates", "plot_loss_terms",
-                  "training_curves", "validation_vs_time"),
+    ".training": ("LOSS_TERMS", "learning_curves", "loss_terms_figure", "plot_batch", "plot_learning_rates",
+                  "plot_loss_terms", "training_curves", "validation_vs_time"),
     ".volumes": ("CAMERA_3D", "render_lattice", "render_volume", "volume_rows"),
 }
 _MODULE_OF = {name: module for module, names in _HOME.items() for name in names}

@@ -3,11 +3,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.wording import format_sig
 from .meshes import plot_density, plot_mesh
 from .studies import plain_log_ticks
 
-__all__ = ["LOSS_TERMS", "VAL_NAMES", "plot_batch", "plot_loss_terms", "training_curves", "learning_curves",
-           "validation_vs_time", "race_bars", "plot_learning_rates"]
+__all__ = ["LOSS_TERMS", "VAL_NAMES", "plot_batch", "plot_loss_terms", "loss_terms_figure", "training_curves",
+           "learning_curves", "validation_vs_time", "race_bars", "plot_learning_rates"]
 
 
 #: the loss terms of training (keys of :func:`rfmap.tasks.base.task_loss` and :func:`rfmap.tasks.losses.loss_integrands`)
@@ -54,9 +55,15 @@ def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: 
         value = float((vals * w).sum() / w.sum()) if isinstance(vals, torch.Tensor) else float(
             np.sum(vals * w) / np.sum(w))
         vals = np.asarray(vals)
-        title = f"{LOSS_TERMS[key]}\n= {value:.3g}"
-        if float(vals.max()) > 0:
-            plot_density(ax, pts, el, vals, cmap="magma", vmin=0, vmax=float(vals.max()), title=title)
+        title = f"{LOSS_TERMS[key]}\n= {format_sig(value, 3)}"
+        top = float(vals.max())
+        if top > 0:
+            # a colour bar of small values in units of a power of ten, named in the title
+            scale = int(np.floor(np.log10(top))) if top < 1e-2 else 0
+            if scale:
+                vals, top = vals / 10.0 ** scale, top / 10.0 ** scale
+                title += f"  (bar ×10{str(scale).translate(_SUPERSCRIPT)})"
+            plot_density(ax, pts, el, vals, cmap="magma", vmin=0, vmax=top, title=title)
         else:  # a colour map of zeros says nothing: say it in words
             plot_mesh(ax, pts, el, n=n, title=title, color="0.75")
             ax.text(0.5, 0.5, "0 on every\nelement", transform=ax.transAxes, ha="center", va="center",
@@ -64,6 +71,23 @@ def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: 
             ax.set_aspect("equal")
         ax.set_xticks([])
         ax.set_yticks([])
+
+
+def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0):
+    """Side by side, the loss terms of one sample of several models (:func:`plot_loss_terms`), one column each:
+    ``columns`` maps a column title (``"DEQ model"``) to ``(mapped, elements, terms, keys)`` as
+    :func:`rfmap.tasks.batch_loss_terms` returns them, with the terms to draw; the map on top, one term per row
+    below, 7.2 inches wide. Returns the figure."""
+    import matplotlib.pyplot as plt
+
+    rows = 1 + max(len(keys) for *_, keys in columns.values())
+    fig, axes = plt.subplots(rows, len(columns), figsize=(7.2, 2.875 * rows), layout="constrained", squeeze=False)
+    for col, (title, (mapped, elements, terms, keys)) in zip(axes.T, columns.items()):
+        plot_loss_terms(col, mapped, elements, terms, sample=sample, n=n, keys=keys)
+        col[0].set_title(f"{title}: the map $u$")
+        for ax in col[1 + len(keys):]:
+            ax.set_axis_off()
+    return fig
 
 
 def _read_log(log_path) -> tuple[list[dict], list[dict]]:
@@ -122,9 +146,11 @@ def _val_key(val: list[dict]) -> str | None:
 VAL_NAMES = {"std_rho_map": r"Std($\tilde\rho_{map}$)", "mean_dd": r"mean $|\Delta d|$"}
 
 
-def _percent(x: float) -> str:
-    """A share in per cent for a title: whole numbers from 10 % (``2230 %``), two digits below (``1.2 %``)."""
-    return f"{x:.0f} %" if x >= 10 else f"{x:.2g} %"
+def _times(ratio: float) -> str:
+    """A multiple for a title, ``22×`` or ``1.5×`` from 1 on, a share in per cent below (``57 % of``)."""
+    if ratio >= 1:
+        return f"{ratio:.0f}×" if ratio >= 10 else f"{ratio:.2g}×"
+    return f"{100 * ratio:.2g} % of"
 
 
 def _chain_axis(ax, xs, offset: int, budget: int):
@@ -143,15 +169,22 @@ def _chain_axis(ax, xs, offset: int, budget: int):
     ax.set_xlabel("step of the chain" + (f" (0 to {offset:,}: earlier runs)" if offset else ""))
 
 
-def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: bool = False):
+def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: bool = False,
+                    score: bool = False):
     r"""The learning curves of trained models from their metadata (``Surrogate.meta``): for each model one panel
     for the running mean of the loss and one for the mean held-out validation metric of its last run (log scales),
     against the step counted over its whole ``--init`` chain. The step axis spans the stored steps: the
     ``cumulative_steps - steps`` steps of the earlier runs, whose curves are not stored, are named in its label,
     and the paper's budget of steps (``budgets[name]``) is dashed where it falls inside. The loss panel's title
-    gives the chain's steps and their share of the paper's, as the training chapter's budget table counts them.
+    gives the chain's steps as a multiple of the paper's (``22× the paper's epochs``), or a share below it, as the
+    training chapter's budget table counts them.
     ``ncols`` models per row (two panels each), 7.2 inches wide in all; ``mark_folded`` draws open markers on the
-    validated states whose maps folded on some held-out field; returns the figure."""
+    validated states whose maps folded on some held-out field. With ``score`` the validation panel draws the score
+    that chose the kept weights (:func:`rfmap.training.validation.score`: the family score where recorded, else
+    the mean with every folded map counted as no map) instead of the plain mean, which one folded map can inflate
+    without bound, and a star marks the kept weights at their step, the value the recipe table records; where only
+    the plain mean is stored, open circles mark the states with a folded map, which ranked behind every fold-free
+    one. Values below 0.01 are drawn in units of a power of ten named on the axis. Returns the figure."""
     import matplotlib.pyplot as plt
 
     names = list(metas)
@@ -169,12 +202,14 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
         xs = [s + offset for s in hist.get("step", [])]
         ax.semilogy(xs, hist.get("loss", []), color="tab:blue", lw=1.2)
         plain_log_ticks(ax.yaxis)
-        ax.set_title(f"{name}: {total:,} steps,\n{_percent(100 * total / budget)} of the paper's epochs as steps")
+        ax.set_title(f"{name}: {total:,} steps,\n{_times(total / budget)} the paper's epochs as steps")
         ax.set_ylabel("loss (running mean)")
         _chain_axis(ax, xs, offset, budget)
         val = hist.get("validation", [])
         key = _val_key(val)
-        if key:
+        if key and score:
+            _score_panel(ax_val, meta, val, key, offset, budget)
+        elif key:
             vx = [v["step"] + offset for v in val]
             ax_val.semilogy(vx, [v[key] for v in val], "o-", color="tab:orange", ms=3, lw=1)
             if mark_folded:
@@ -189,6 +224,52 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
     for ax in list(axes.flat)[2 * len(names):]:
         ax.set_axis_off()
     return fig
+
+
+def _selection_value(record: dict, key: str) -> tuple[float, str]:
+    """The score that chose among a run's validated weights, from one validation record of a history, and what it
+    is: the family score (``"Std ratio"``) where recorded, else the mean metric with every folded map counted as no
+    map (``penalized``), else the capped or the plain mean, as :func:`rfmap.training.validation.score` ranks them."""
+    if "family_score" in record:
+        return float(record["family_score"]), "score: Std ratio"
+    for k in ("penalized", "capped"):
+        if k in record:
+            return float(record[k]), f"{VAL_NAMES[key]}, folds as no map"
+    return float(record[key]), VAL_NAMES[key]
+
+
+def _score_panel(ax, meta: dict, val: list[dict], key: str, offset: int, budget: int) -> None:
+    """The validation panel of :func:`learning_curves` with ``score``: the selection score of every validation
+    but the last (the kept weights validated once more as the run ended), and a star at the kept weights' step."""
+    values = [_selection_value(v, key) for v in val]
+    ys = np.array([v for v, _ in values])
+    label = values[-1][1]
+    scale = 0
+    if ys.max() < 1e-2:  # small values in units of a power of ten, not long strings of digits
+        scale = int(np.floor(np.log10(ys.max())))
+        ys = ys / 10.0 ** scale
+    vx = [v["step"] + offset for v in val]
+    ax.plot(vx[:-1], ys[:-1], "o-", color="tab:orange", ms=3, lw=1)
+    kept = meta.get("selected_step")
+    kx = offset + int(kept) if kept is not None else vx[-1]
+    ax.plot([kx], [ys[-1]], "*", color="tab:red", ms=10, zorder=3)
+    title = "validation (★ kept weights)"
+    if label == VAL_NAMES[key]:  # the plain mean: a state with a folded map ranked behind every fold-free one
+        folded = [(x, y) for x, y, v in zip(vx[:-1], ys[:-1], val) if v.get("folded_fields", v.get("n_flipped", 0))]
+        if folded:
+            ax.plot(*zip(*folded), "o", ms=6, mfc="white", mec="tab:orange", mew=1.2, zorder=3)
+            title = "validation (★ kept, ○ folded)"
+    ax.set_yscale("log")
+    plain_log_ticks(ax.yaxis)
+    unit = f" (×10{str(scale).translate(_SUPERSCRIPT)})" if scale else ""
+    if len(label) > 24:  # two lines: the metric, then how folded maps count
+        label = label.replace(", ", ",\n")
+    ax.set_ylabel(f"held-out {label}{unit}")
+    ax.set_title(title)
+    _chain_axis(ax, vx + [kx], offset, budget)
+
+
+_SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 
 def race_bars(metas: dict, ax=None, *, key: str = "std_rho_map"):
