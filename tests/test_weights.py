@@ -116,3 +116,22 @@ def test_pretrained_model_maps_without_folding(name):
             m = raw.metrics(exact_points=BELTRAMI_MAPS[field](raw.ref_points))
             # mean |Δd| measured 0.0030 at both sizes; the identity map has 0.0465 at N = 33
             assert m.n_flipped == 0 and m.mean_dd < 0.01
+
+
+@pytest.mark.parametrize("name", __import__("rfmap.pretrained", fromlist=["study_models"]).study_models())
+def test_study_weights_are_their_configs_full_run(name):
+    """A study's weights (rfmap.pretrained.STUDY_WEIGHTS) come from `rfmap train --config NAME --preset full`:
+    the stored configuration is the named preset's, up to how the run was executed, and they load."""
+    from rfmap.pretrained import STUDY_WEIGHTS, load_or_train
+
+    meta = json.loads((STUDY_WEIGHTS / f"{name}.json").read_text())
+    assert meta["command"].startswith(f"rfmap train --config {name} --preset full")
+    stored, expected = dict(meta["config"]), get_config(name, "full").to_dict()
+    for key in ("threads", "workers", "time_limit"):
+        stored.pop(key, None)
+        expected.pop(key, None)
+    assert stored == json.loads(json.dumps(expected))
+    assert meta["steps"] == expected["steps"] and meta.get("wall_time", 0) > 0
+    assert name not in models()  # a study's weights are not offered as a model
+    sur = load_or_train(name, "full")
+    assert sur.name == name and sur.meta["config"]["name"] == name
