@@ -220,6 +220,8 @@ def test_scanline_raster_matches_the_exact_lengths_on_its_lines():
         want[:, b] = sea + acc / ((x1 - x0) * len(lines))
     assert np.abs(dens - want).max() < 1e-12 * want.max()
     assert sea == pytest.approx(values.sum() / shapely.area(geoms).sum())
+    again, sea2 = density_grid(geoms, values, n, supersample=s, areas=shapely.area(geoms))  # areas measured already
+    assert np.array_equal(again, dens) and sea2 == sea
 
 
 # ----------------------------------------------------------------------------------------------- stopping rule

@@ -321,7 +321,7 @@ def _polygons(g):
 
 def _cut_overlap(a, b, f: float):
     """Regions ``a`` and ``b`` with their overlap shared out: ``a`` gives up the share ``f`` of it (by area, the part
-    on one side of a line across the overlap's long axis) and ``b`` the rest; ``None`` when a result is not a valid
+    on one side of a line across the overlap's long axis) and ``b`` the rest; ``None`` when a cut region is not a valid
     (Multi)Polygon."""
     shapely = _shapely()
     if f >= 1.0:
@@ -335,7 +335,9 @@ def _cut_overlap(a, b, f: float):
         first = _area_split(inter, f)
         pieces = (_polygons(shapely.difference(a, first)),
                   _polygons(shapely.difference(b, shapely.difference(inter, first))))
-    ok = all(shapely.is_valid(g) and not shapely.is_empty(g) and shapely.get_type_id(g) in (3, 6) for g in pieces)
+    # a region left whole is valid already (overlaps pairs valid regions; every cut is checked)
+    ok = all(g is k or (shapely.is_valid(g) and not shapely.is_empty(g) and shapely.get_type_id(g) in (3, 6))
+             for g, k in zip(pieces, (a, b)))
     return pieces if ok else None
 
 

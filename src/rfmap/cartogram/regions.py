@@ -146,7 +146,8 @@ def _feature_name(feat, k: int) -> str:
     return f"#{k}" + (f" ({name})" if isinstance(name, str) else "")
 
 
-def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: int = 4) -> tuple[np.ndarray, float]:
+def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: int = 4,
+                 areas: np.ndarray | None = None) -> tuple[np.ndarray, float]:
     r"""Vertex densities of the ``N``-grid of the unit square: the mean over each vertex's cell of
     :math:`\rho = v_i / a_i` inside region :math:`i` and the sea density :math:`\bar\rho = \sum v_i / \sum a_i`
     elsewhere.
@@ -168,6 +169,8 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
         :math:`h = 1/(N-1)` around it (clipped to the unit square).
     supersample : int
         Scanlines per cell, at :math:`y = (j - 1/2 + (k + 1/2)/s) h`, :math:`k < s`.
+    areas : ndarray, shape (R,), optional
+        ``shapely.area(geoms)``, when the caller has measured it already.
 
     Returns
     -------
@@ -180,7 +183,7 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     s = int(supersample)
     if s < 1:
         raise ValueError(f"supersample must be a positive integer, got {supersample!r}")
-    areas = shapely.area(geoms)
+    areas = shapely.area(geoms) if areas is None else areas
     rho = values / areas
     sea = float(values.sum() / areas.sum())
     # excess density (above the sea) and 1 times the covered length, summed over each cell's scanlines (the density

@@ -246,9 +246,10 @@ class Cartogram:
             out.append(f"the largest area error {m.max_error:.4f} is above the tolerance {self.tol:g} after "
                        f"{counted(self.info['iterations'], 'pass')}" +
                        (": the passes stopped at the time limit" if self.info.get("timed_out") else ""))
-        valid = _shapely().is_valid  # in the plane of the metrics, and as written (output_geometries)
-        for bad, where in ((~valid(self.frame.equal_area(self.mapped)), ""),
-                           (~valid(self.geometries), f" in the written coordinates ({self.output})")):
+        valid = _shapely().is_valid  # in the plane of the metrics (measured there: none, or which), and as written
+        checks = [(lambda: ~valid(self.frame.equal_area(self.mapped)), "")] if m.n_invalid else []
+        for check, where in (*checks, (lambda: ~valid(self.geometries), f" in the written coordinates ({self.output})")):
+            bad = check()
             names = ", ".join(_feature_name(self.input_features[i], int(i)) for i in np.flatnonzero(bad)[:10])
             if bad.any():
                 out.append(f"{counted(bad.sum(), 'invalid region')}{where}: {names}{', ...' if bad.sum() > 10 else ''}")
@@ -450,6 +451,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
     best = None  # (largest area error, polygons, pass) of the best pass so far
     log_err, gain = None, np.zeros(len(values))  # the last pass's log area errors and log weight boosts
     timed_out, misses = False, 0  # misses: passes in a row that did not lower the largest error
+    area = shapely.area(mapped)  # of the current polygons, measured once each pass
     for _ in range(plan.passes):
         if results and plan.deadline is not None and time.perf_counter() >= plan.deadline:
             timed_out = True
@@ -467,11 +469,10 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
             current, inverse = _distinct_vertices(regions)
             stale = False
         if accelerate:
-            area = shapely.area(mapped)
             now = np.log(np.maximum(area, 1e-300) / (weights / weights.sum() * area.sum()))
             gain = boost(now, log_err, gain) if log_err is not None else gain
             log_err = now
-        dens, sea = density_grid(mapped, weights * np.exp(-gain), n + 1, supersample=plan.supersample)
+        dens, sea = density_grid(mapped, weights * np.exp(-gain), n + 1, supersample=plan.supersample, areas=area)
         np.clip(dens, sea / PASS_CONTRAST, sea * PASS_CONTRAST, out=dens)
         res = method.grid_map(dens, current)
         current = _at_points(res, current)
