@@ -18,7 +18,7 @@ import importlib
 #: the module (relative to this package) of each exported name
 _HOME = {
     "..core.result": ("setup_pyvista", "to_pyvista"),
-    ".architecture": ("architecture_diagram", "encoding_figure"),
+    ".architecture": ("architecture_diagram", "displacement_grids_figure", "encoding_figure"),
     ".cartograms": ("area_error_histograms", "cartogram_figure", "cartogram_panels", "plot_regions"),
     ".diffusion": ("dem_steps_figure", "overview_figure"),
     ".figures": ("STYLE", "colorbar", "figures_dir", "frameless", "repository_root", "save_figure", "style"),

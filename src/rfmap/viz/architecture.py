@@ -1,9 +1,10 @@
-"""The network's encoder-decoder structure drawn from its own modules."""
+"""The network's encoder-decoder structure drawn from its own modules, its encoded inputs and its outputs."""
 from __future__ import annotations
 
 from .figures import colorbar as add_colorbar
+from .figures import frameless
 
-__all__ = ["architecture_diagram", "encoding_figure"]
+__all__ = ["architecture_diagram", "encoding_figure", "displacement_grids_figure"]
 
 #: inches per unit of the drawing (a box is 1.2 units wide) and the size of its text: readable at the book's width
 UNIT_INCHES, FONT_PT = 0.56, 9
@@ -116,4 +117,24 @@ def encoding_figure(encodings, names, *, width: float = 7.2):
             add_colorbar(im, fig=fig, ax=ax, shrink=0.8)
         for ax in axes[row, len(row_names):]:
             ax.set_axis_off()
+    return fig
+
+
+def displacement_grids_figure(rows: dict, sizes, *, limit: float = 0.05, width: float = 7.4):
+    r"""The first component :math:`\psi_1` of a network's displacement on grids of several sizes: one row per
+    way of obtaining it (``rows`` maps a row's name to ``{N: psi}``, each ``psi`` of shape (2, N, N)), one panel per
+    side in ``sizes``, all on one diverging colour scale from ``-limit`` to ``limit`` with one colour bar.  Returns
+    the figure."""
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, axes = plt.subplots(len(rows), len(sizes), figsize=(width, 2.0 * len(rows)), layout="constrained",
+                             squeeze=False)
+    for ax_row, (label, source) in zip(axes, rows.items()):
+        for ax, n in zip(ax_row, sizes):
+            im = ax.imshow(np.asarray(source[n][0]).T, origin="lower", extent=(0, 1, 0, 1), cmap="RdBu_r",
+                           vmin=-limit, vmax=limit)
+            ax.set_title(f"{label}, N = {n}")
+            frameless(ax)
+    add_colorbar(im, fig=fig, ax=axes, shrink=0.6, extend="both", label=r"$\psi_1$")
     return fig
