@@ -54,3 +54,38 @@ def test_summary_table_is_one_table_of_every_method_and_findings_quote_the_cases
     assert (found["sur_vs_flow2"], found["sur_abs2"], found["sur_std_vs_flow2"]) == ("0.500", "0.300", "3.00")
     assert found["hyb_vs_flow3"] == "4.00" and found["ng_vs_flow3"] == "2.00" and found["flow_wall2"] == "100 ms"
     assert (found["n_methods"], found["method_names"]) == (4, "diffusion, flow, surrogate, hybrid")
+
+
+def test_targets_table_is_one_row_per_case_with_the_hybrid_against_the_flow():
+    from rfmap.paper.benchmarks import targets_table
+
+    checks = target_checks(summarize(_rows(0.1, 1.0, 0.4, 1.0)), CASES)
+    assert checks[0]["hybrid_vs_flow"] == pytest.approx(4.0)
+    md = targets_table(checks)._repr_markdown_()
+    lines = [line for line in md.splitlines() if line.startswith("| ")]
+    assert len(lines) == 1 + len(CASES)
+    assert "hybrid time / flow" in lines[0] and f"(≤ {FLOW_TIME:g})" in lines[0]
+    assert lines[1] == "| 2D, N = 33, square | 0.1 (met) | 1 (met) | 0.4 (met) | 1 (met) | 4 |"
+
+
+def test_method_tables_pivot_methods_into_columns():
+    from rfmap.paper.benchmarks import method_tables
+
+    std, time = method_tables(summarize(_rows(0.1, 1.0, 0.4, 1.0)))
+    head = std.text.splitlines()[0]
+    assert head == f"| case | diffusion | flow | surrogate | {UNGUARDED} | hybrid |"
+    assert std.text.splitlines()[2] == "| 2D, N = 33, square | 0.1 | 0.1 | 0.3 | 0.1 | 0.1 |"
+    assert time.text.splitlines()[2].startswith("| 2D, N = 33, square | 1 s | 100 ms | 50 ms |")
+
+
+def test_findings_say_where_refinement_raised_the_std_and_why():
+    rows = _rows(0.1, 1.0, 0.4, 1.0)
+    extra = []
+    for r in rows:
+        if r["method"] == "surrogate":
+            r["coarser"] = r["dim"] == 3  # the 3D network map folded: the default map came from a coarser grid
+            extra.append(dict(r, method="surrogate+refine", coarser=False,
+                              std_rho_map=0.35 if r["dim"] == 3 else 0.25))
+    found = hybrid_findings(rows + extra, dict(zip((2, 3), CASES)))
+    assert found["ref_worse_fields"] == "1 of 2 fields" and found["ref_worse_coarser"] == 1
+    assert found["ref_effect3"] == "raises it from 0.300 to 0.350"

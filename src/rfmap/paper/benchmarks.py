@@ -3,6 +3,7 @@ r"""Classical, neural and hybrid maps side by side: the benchmark fields, time t
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -16,11 +17,11 @@ from ..solvers import solve_dem
 from ..surrogate import Surrogate
 from ..training.validation import DENSITY_KINDS, validation_fields
 from .comparison import format_time
-from .tables import Table, headline
+from .tables import Table, format_value, headline
 
 __all__ = ["METHODS", "ROWS", "WARM_MODELS", "STD_TOL", "FLOW_TIME", "HYBRID_TIME", "compare_methods",
            "benchmark_fields", "time_to_accuracy", "summarize", "target_checks", "targets_headline", "summary_table",
-           "hybrid_findings"]
+           "targets_table", "method_tables", "CaseTable", "hybrid_findings"]
 
 #: The methods compared by :func:`compare_methods`.
 METHODS = ("diffusion", "flow", "surrogate", "surrogate+refine", "hybrid")
@@ -53,8 +54,9 @@ def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "squ
     Returns
     -------
     list of dict
-        One row per method: ``method``, ``std_rho_map``, ``n_flipped``, ``time`` (s, the result's own ``time``) and,
-        for the hybrid, ``start`` (warm or cold) and ``kept`` (the map the guard kept); the hybrid's run adds the
+        One row per method: ``method``, ``std_rho_map``, ``n_flipped``, ``time`` (s, the result's own ``time``); for
+        the surrogate's two rows ``coarser`` (the network's map folded, and a fold-free map from a coarser working
+        grid was taken, :func:`rfmap.finish.stages.regrid`); for the hybrid, ``start`` (warm or cold) and ``kept`` (the map the guard kept); the hybrid's run adds the
         row :data:`rfmap.finish.polish.UNGUARDED` before its own: its warm flow's map, timed without the guard's cold flow.
     """
     rows = []
@@ -71,6 +73,8 @@ def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "squ
                                 polish=method == "hybrid")
         m = res.metrics()
         row = {"method": method, "std_rho_map": m.std_rho_map, "n_flipped": m.n_flipped, "time": res.time}
+        if method in ("surrogate", "surrogate+refine"):  # the network's map folded; one from a coarser grid taken
+            row["coarser"] = (res.info.get("regrid") or {}).get("work_n") is not None
         if method == "hybrid":
             p = res.info["polish"]
             row.update(start=p["start"], kept=p["kept"])
@@ -168,7 +172,8 @@ def target_checks(summary: list[dict[str, Any]], cases) -> list[dict[str, Any]]:
     list of dict
         One row per case: ``case`` (a label), ``dim``, ``n``, ``boundary``, ``flow_time`` and ``flow_std`` (flow
         over diffusion), ``hybrid_time`` and ``hybrid_std`` (hybrid over the best classical solver),
-        ``best_classical``, ``flow_met`` and ``hybrid_met``.
+        ``hybrid_vs_flow`` (the hybrid's time over the flow's, which no target bounds), ``best_classical``,
+        ``flow_met`` and ``hybrid_met``.
     """
     out = []
     for case in cases:
@@ -176,7 +181,7 @@ def target_checks(summary: list[dict[str, Any]], cases) -> list[dict[str, Any]]:
         row = {"case": f"{case[0]}D N = {case[1]} {case[2]}", "dim": case[0], "n": case[1], "boundary": case[2],
                "flow_time": flow["time"] / diff["time"], "flow_std": flow["std_rho_map"] / diff["std_rho_map"],
                "hybrid_time": hyb["time_ratio"], "hybrid_std": hyb["std_ratio"],
-               "best_classical": hyb["best_classical"]}
+               "hybrid_vs_flow": hyb["time"] / flow["time"], "best_classical": hyb["best_classical"]}
         row["flow_met"] = bool(row["flow_time"] <= FLOW_TIME and row["flow_std"] <= STD_TOL)
         row["hybrid_met"] = bool(row["hybrid_time"] <= HYBRID_TIME and row["hybrid_std"] <= STD_TOL)
         out.append(row)
@@ -196,6 +201,58 @@ def targets_headline(checks: list[dict[str, Any]]):
             target[f"{c['case']}: {name}"] = limit
     return headline("The speed and accuracy targets", "Ratios of the means over each case's fields (target: at most)",
                     ours, target, labels={"ours": "measured", "paper": "target"})
+
+
+@dataclass
+class CaseTable:
+    """A Markdown table with its title, shown as a cell's value (``_repr_markdown_``)."""
+
+    title: str
+    text: str
+
+    def _repr_markdown_(self) -> str:
+        return f"**{self.title}**\n\n{self.text}"
+
+
+def _case_label(dim: int, n: int, boundary: str) -> str:
+    return f"{dim}D, N = {n}, {boundary}"
+
+
+def targets_table(checks: list[dict[str, Any]]) -> CaseTable:
+    """The targets of :func:`target_checks` in one row per case: each measured ratio with whether it meets its
+    target (the target in the column's head), and the hybrid's time over the flow solver's, which has no target."""
+    cols = (("flow_time", f"flow time / diffusion (≤ {FLOW_TIME:g})", FLOW_TIME),
+            ("flow_std", f"flow Std / diffusion (≤ {STD_TOL:g})", STD_TOL),
+            ("hybrid_time", f"hybrid time / best classical (≤ {HYBRID_TIME:g})", HYBRID_TIME),
+            ("hybrid_std", f"hybrid Std / best classical (≤ {STD_TOL:g})", STD_TOL),
+            ("hybrid_vs_flow", "hybrid time / flow", None))
+    lines = ["| case | " + " | ".join(c[1] for c in cols) + " |", "|---|" + "---|" * len(cols)]
+    for c in checks:
+        cells = []
+        for key, _, limit in cols:
+            text = f"{c[key]:.3g}"
+            if limit is not None:
+                text += " (met)" if c[key] <= limit else " (missed)"
+            cells.append(text)
+        lines.append(f"| {_case_label(c['dim'], c['n'], c['boundary'])} | " + " | ".join(cells) + " |")
+    return CaseTable("The speed and accuracy targets", "\n".join(lines))
+
+
+def method_tables(summary: list[dict[str, Any]]) -> tuple[CaseTable, CaseTable]:
+    """The rows of :func:`summarize` as two tables with one row per case and one column per method: the mean
+    Std(rho~_map) over the case's fields, and the mean time."""
+    cases = list(dict.fromkeys((r["dim"], r["n"], r["boundary"]) for r in summary))
+    methods = [m for m in ROWS if any(r["method"] == m for r in summary)]
+    by = {(r["dim"], r["n"], r["boundary"], r["method"]): r for r in summary}
+    out = []
+    for key, title in (("std_rho_map", "Mean Std(ρ̃_map) over each case's fields"),
+                       ("time", "Mean time over each case's fields")):
+        lines = ["| case | " + " | ".join(methods) + " |", "|---|" + "---|" * len(methods)]
+        for case in cases:
+            cells = [format_value(by[(*case, m)][key], key) if (*case, m) in by else "—" for m in methods]
+            lines.append(f"| {_case_label(*case)} | " + " | ".join(cells) + " |")
+        out.append(CaseTable(title, "\n".join(lines)))
+    return out[0], out[1]
 
 
 def summary_table(summary: list[dict[str, Any]]):
@@ -225,7 +282,7 @@ def _refine_effect(before: float, after: float) -> str:
         return f"leaves it at {a} (to three digits)"
     if after < before:
         return f"lowers it from {a} to {b}"
-    return f"raises it from {a} to {b}: here refinement makes the map less equal, not more"
+    return f"raises it from {a} to {b}"
 
 
 #: the rows of each quoted case that the text sets against the flow solver, and the prefix of their keys
@@ -260,7 +317,9 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
         Std; absent for a method that was not run), ``sur_std_vs_flow{d}`` (the surrogate's Std over the flow's);
         and the hybrid against the best classical solver, ``hyb_time{d}`` and ``hyb_std{d}``; ``ref_effect{d}`` (what
         weight refinement does to the surrogate's Std, as a phrase) and ``ref_worse_cases`` (the cases, of those
-        run with refinement, in which refinement raised the Std: ``"2 of 8 cases"``).
+        run with refinement, in which refinement raised the Std: ``"2 of 8 cases"``); ``ref_worse_fields`` (the
+        fields on which it raised the Std, of those mapped both ways) and ``ref_worse_coarser`` (how many of those,
+        an int, had a default map taken from a coarser working grid, because the network's own map folded).
     """
     summary = summarize(rows)
     methods = [m for m in dict.fromkeys(r["method"] for r in rows) if m != UNGUARDED]
@@ -296,6 +355,12 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
              for c in dict.fromkeys((r["dim"], r["n"], r["boundary"]) for r in summary)
              if any((r["dim"], r["n"], r["boundary"], r["method"]) == (*c, "surrogate+refine") for r in summary)]
     out["ref_worse_cases"] = of_count(sum(b["std_rho_map"] > a["std_rho_map"] for a, b in pairs), len(pairs), "case")
+    # field by field: where refinement raised the Std, and whether the default map there came from a coarser grid
+    both = [(r, by[r["dim"], r["n"], r["boundary"], r["field"], "surrogate+refine"]) for r in rows
+            if r["method"] == "surrogate" and (r["dim"], r["n"], r["boundary"], r["field"], "surrogate+refine") in by]
+    worse = [(a, b) for a, b in both if b["std_rho_map"] > a["std_rho_map"]]
+    out["ref_worse_fields"] = of_count(len(worse), len(both), "field")
+    out["ref_worse_coarser"] = sum(bool(a.get("coarser")) for a, _ in worse)
     for d, case in targets.items():
         sur, ref = (next((r for r in summary if (r["dim"], r["n"], r["boundary"], r["method"]) == (*case, m)), None)
                     for m in ("surrogate", "surrogate+refine"))
