@@ -399,21 +399,48 @@ def _folded(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
 
 
 def repair_figure(before, after, elements, *, n: int | None = None, titles=("folded map", "repaired map"),
-                  width: float = TEXT_WIDTH_IN):
+                  width: float = TEXT_WIDTH_IN, zoom: float | None = 3.0):
     """Two 2D maps of one mesh side by side, a folded one and its repair, each with its folded triangles filled in
-    red and counted in its title (appendix A's example).  ``before``, ``after``: mapped points, shape (n, 2)."""
+    red and counted in its title (appendix A's example).  ``before``, ``after``: mapped points, shape (n, 2).
+
+    ``zoom``: a second row draws both maps around the folds of ``before`` (a square ``zoom`` times as wide as
+    their bounding box, marked on the first row), where a few folded triangles are large enough to see; ``None``
+    draws the first row only, as does a ``before`` without folds."""
     import matplotlib.pyplot as plt
 
     elements = np.asarray(elements)
-    fig, axes = plt.subplots(1, 2, figsize=(width, width / 2), layout="constrained")
-    for ax, pts, title in zip(axes, (before, after), titles):
-        pts = np.asarray(pts)
+    before, after = np.asarray(before), np.asarray(after)
+    box = _fold_box(before, elements, zoom) if zoom else None
+    rows = 1 if box is None else 2
+    fig, axes = plt.subplots(rows, 2, figsize=(width, rows * width / 2), layout="constrained", squeeze=False)
+    for col, (pts, title) in enumerate(zip((before, after), titles)):
         folded = _folded(pts, elements)
-        plot_mesh(ax, pts, elements, n=n, title=f"{title}: {len(folded)} folded (red)")
-        for t in folded:
-            ax.fill(*pts[elements[t]].T, color="red", zorder=5)
+        for row in range(rows):
+            ax = axes[row, col]
+            head = f"{title}: {len(folded)} folded (red)" if row == 0 else f"{title}, around the folds"
+            plot_mesh(ax, pts, elements, n=None if row else n, title=head)
+            for t in folded:  # translucent in the close-up, where the folded triangles' edges can be seen
+                ax.fill(*pts[elements[t]].T, color="red", alpha=0.5 if row else 1.0, zorder=5)
+            if row:
+                ax.set_xlim(box[0], box[2])
+                ax.set_ylim(box[1], box[3])
+        if box is not None:
+            axes[0, col].add_patch(plt.Rectangle(box[:2], box[2] - box[0], box[3] - box[1], fill=False, lw=1.2,
+                                                 ec="tab:blue", zorder=6))
     _frameless(axes)
     return fig
+
+
+def _fold_box(points: np.ndarray, elements: np.ndarray, factor: float):
+    """A square around the folded triangles of ``points`` (xmin, ymin, xmax, ymax), ``factor`` times as wide as
+    their bounding box; ``None`` when nothing is folded."""
+    folded = _folded(points, elements)
+    if not len(folded):
+        return None
+    corners = points[elements[folded]].reshape(-1, 2)
+    lo, hi = corners.min(0), corners.max(0)
+    mid, half = (lo + hi) / 2, factor * max(float((hi - lo).max()), 1e-12) / 2
+    return np.array([mid[0] - half, mid[1] - half, mid[0] + half, mid[1] + half])
 
 
 def folded_maps_figure(maps: dict, *, ncols: int = 2, width: float = TEXT_WIDTH_IN, max_lines: int = 20):
