@@ -1,10 +1,13 @@
 r"""What weight refinement does to the paper's test cases: the network run natively with :math:`\alpha = 1` against
 the same map refined (the paper's method, Sec. 4.3).
 
-Refinement minimises an objective over the stretching vector :math:`\alpha` (the model's training loss on the map:
-the density loss, with the Beltrami energy for a DEQ model, or the Beltrami residual), starting from
-:math:`\alpha = 1`; it never returns a larger objective than :math:`\alpha = 1`.  The paper's tables score other
-numbers (Std(ρ̃_map), mean ``|Δd|``), which refinement may raise: :func:`refinement_study` measures both.
+Refinement minimises an objective over the stretching vector :math:`\alpha`, starting from :math:`\alpha = 1`, and
+never returns a larger objective than :math:`\alpha = 1`.  The objective is not the training loss: for every density
+model, DEM and DEQ alike, it is Std(ρ̃_map) plus :math:`\lambda` times the share of flipped elements
+(:func:`rfmap.tasks.objectives.density_objective`, no Beltrami term); for a Beltrami model it is the mean
+:math:`|\mu(u_\alpha) - \mu_{\text{in}}|` plus the same fold term (:func:`rfmap.tasks.objectives.beltrami_objective`).
+On a fold-free density map the objective is the Std(ρ̃_map) the paper's tables score; the Beltrami tables score the
+mean ``|Δd|``, which refinement does not minimise and may raise: :func:`refinement_study` measures both.
 """
 from __future__ import annotations
 

@@ -16,7 +16,8 @@ from ..training.validation import validation_fields
 from .reproduce import METHOD_TITLES, SYM, SYM_REF
 from .tables import COLUMN_TITLES, Table, format_sig
 
-__all__ = ["generalization_table", "generalization_summary", "distortion_table", "displacement_demand"]
+__all__ = ["generalization_table", "generalization_summary", "pivot_markdown", "columns_markdown",
+           "distortion_table", "displacement_demand"]
 
 
 @quiet_quality()
@@ -76,7 +77,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
             if vals:
                 v = np.array([x[0] for x in vals])
                 table.add(k, method, {"mean": float(v.mean()), "median": float(np.median(v)),
-                                      "worst": float(v.max()),
+                                      "worst": float(v.max()), "fields": len(v),
                                       "n_flipped": int(sum(x[1] for x in vals)),
                                       "folded": int(sum(x[1] > 0 for x in vals)),
                                       "time": float(np.mean([x[2] for x in vals]))})
@@ -101,6 +102,43 @@ def generalization_summary(table: Table, column: str = "mean") -> str:
             cells += [format_sig(ref), f"{best / ref:.3g}×" if ref else "—"]
         lines.append("| " + " | ".join(cells) + " |")
     return f"**{table.title}**: {column} per kind of field, lower is better\n\n" + "\n".join(lines)
+
+
+def pivot_markdown(columns: dict, column: str = "mean", title: str = "") -> str:
+    """Several :func:`generalization_table` results side by side as one Markdown table: a row per kind of field
+    (and ``all``) with its number of fields ``n``, a column per entry of ``columns`` (``{heading: (table,
+    method)}``) holding that method's ``column`` (the mean metric by default) to three significant digits.  The
+    kinds and their counts are those of the first table; every table must hold the same fields."""
+    first = next(iter(columns.values()))[0]
+    head = ["fields", "n"] + list(columns)
+    lines = ["| " + " | ".join(h.replace("|", "\\|") for h in head) + " |", "|" + "---|" * len(head)]
+    for kind in dict.fromkeys(c for c, _, _ in first.rows):
+        n = next(v.get("fields") for c, _, v in first.rows if c == kind)
+        cells = [kind, "—" if n is None else str(n)]
+        cells += [format_sig(t.value(kind, m, column)) for t, m in columns.values()]
+        lines.append("| " + " | ".join(cells) + " |")
+    return (f"**{title}**\n\n" if title else "") + "\n".join(lines)
+
+
+def columns_markdown(table: Table, columns: dict, *, method: str | None = None, case: str | None = None,
+                     first: str = "case", title: str | None = None) -> str:
+    """Chosen columns of a :class:`~rfmap.paper.tables.Table` as one Markdown table, to three significant digits:
+    ``columns`` is ``{column: heading}``; one row per row of the table (only those of ``method`` when given,
+    labelled by their case; only those of ``case`` when given, labelled by their method; else by case and method,
+    or by case where no case repeats); ``first`` heads the label column; ``title`` (default the
+    table's) is set in bold above it, ``""`` for none."""
+    rows = [(c, m, v) for c, m, v in table.rows
+            if (method is None or m == method) and (case is None or c == case)]
+    head = [first] + list(columns.values())
+    lines = ["| " + " | ".join(h.replace("|", "\\|") for h in head) + " |", "|" + "---|" * len(head)]
+    for c, m, v in rows:
+        if case is not None:
+            label = m
+        else:
+            label = c if method is not None or len({c for c, _, _ in rows}) == len(rows) else f"{c}, {m}"
+        lines.append("| " + " | ".join([label] + [format_sig(v.get(k)) for k in columns]) + " |")
+    title = table.title if title is None else title
+    return (f"**{title}**\n\n" if title else "") + "\n".join(lines)
 
 
 @quiet_quality()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.wording import format_sig
 from .figures import ColorScale, color_scale, frameless, save_figure, style
 from .figures import colorbar as add_colorbar
 
@@ -153,7 +154,7 @@ def vertex_error_panels(results: dict, exact, *, n: int, title: str = ""):
     fig, axes = plt.subplots(1, len(errs), figsize=(3.3 * len(errs), 3.0), squeeze=False)
     for ax, (name, e) in zip(axes[0], errs.items()):
         im = ax.imshow(e.T, origin="lower", extent=(0, 1, 0, 1), vmin=0, vmax=hi, cmap="magma")
-        ax.set_title(f"{title} {name}: mean {e.mean():.2e}".strip())
+        ax.set_title(f"{title} {name}: mean {format_sig(float(e.mean()), 3)}".strip())
         ax.set_aspect("equal")
     add_colorbar(im, fig=fig, ax=axes[0].tolist(), shrink=0.85, label="vertex error")
     return fig

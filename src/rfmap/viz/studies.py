@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["time_accuracy_figure", "displacement_demand_figure", "table_lines", "shorten_curve", "COLUMN_NAMES",
-           "plain_log_ticks"]
+           "plain_log_ticks", "decade_ticks"]
 
 
 #: axis names of table columns
@@ -25,6 +25,16 @@ def plain_log_ticks(axis) -> None:
     else:
         axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0), numticks=12))
     axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def decade_ticks(axis) -> None:
+    """Label a log ``axis`` at its powers of ten only, in plain numbers (``0.1``, ``1``, ``100``), no minor labels:
+    for a narrow panel over several decades, where :func:`plain_log_ticks` would crowd its labels."""
+    from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+
+    axis.set_major_locator(LogLocator(subs=(1.0,), numticks=12))
+    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:g}"))
     axis.set_minor_formatter(NullFormatter())
 
 
