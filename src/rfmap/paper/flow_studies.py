@@ -14,10 +14,12 @@ from ..fields.paper import sample_density
 from ..solvers import solve_dem
 from ..solvers.flow import solve_flow
 from ..training.validation import validation_fields
-from .benchmarks import benchmark_fields
+from ..core.wording import format_sig
+from .benchmarks import CaseTable, benchmark_fields
+from .tables import format_value
 
 __all__ = ["sea_blend_study", "SEA_TOL", "residual_floor", "CONVERGENCE_SETTINGS", "flow_convergence",
-           "warm_start_residuals"]
+           "warm_start_residuals", "floor_table", "convergence_table", "rotation_table", "sea_table", "warm_table"]
 
 #: A flow "ends higher" than another on a field when its final Std(rho~_map) is more than this factor above.
 SEA_TOL = 1.05
@@ -187,3 +189,67 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
             rows.append({"n": n, "method": method, "std": sc["std"], "smooth": sc["smooth"],
                          "element_fraction": sc["element_fraction"], "time": float(res.time)})
     return rows
+
+
+def _table(title: str, head: list[str], rows: list[list[str]]) -> CaseTable:
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(r) + " |" for r in rows]
+    return CaseTable(title, "\n".join(lines))
+
+
+def floor_table(rows: list[dict[str, Any]]) -> CaseTable:
+    """The rows of :func:`residual_floor` as a table: per grid side and method the final Std(rho~_map), its smooth
+    part, the element-scale share of its variance, the time and the folded elements (small numbers as powers of
+    ten)."""
+    return _table("Where the last residual sits",
+                  ["N", "method", "Std(ρ̃_map)", "smooth part", "element-scale share", "time", "folded"],
+                  [[str(r["n"]), r["method"], format_sig(r["std"], 4), format_sig(r["smooth"], 3),
+                    f"{100 * r['element_fraction']:.1f} %", format_value(r["time"], "time"), str(r["n_flipped"])]
+                   for r in rows])
+
+
+def _settings(rows: list[dict[str, Any]]) -> tuple[list[str], list[str], dict]:
+    settings = list(dict.fromkeys(r["setting"] for r in rows))
+    fields = list(dict.fromkeys(r["field"] for r in rows))
+    return settings, fields, {(r["field"], r["setting"]): r for r in rows}
+
+
+def convergence_table(rows: list[dict[str, Any]]) -> CaseTable:
+    """The rows of :func:`flow_convergence` as a table: one row per field, one column per setting, each cell the
+    flow's final Std(rho~_map) and time, both over the diffusion solver's on the same field."""
+    settings, fields, cv = _settings(rows)
+    return _table("Is the flow converged? Std and time over the diffusion solver's",
+                  ["field"] + [f"{s}: Std / time" for s in settings],
+                  [[f] + [f"{cv[f, s]['std_ratio']:.3g} / {cv[f, s]['time_ratio']:.2g}" for s in settings]
+                   for f in fields])
+
+
+def rotation_table(rows: list[dict[str, Any]]) -> CaseTable:
+    """The default-setting rows of :func:`flow_convergence` as a table: per field the flow's Std over the diffusion
+    solver's, the rotational share of each solver's displacement, and the ratio of the two shares."""
+    _, fields, cv = _settings(rows)
+    out = []
+    for f in fields:
+        r = cv[f, "default"]
+        out.append([f, f"{r['std_ratio']:.3g}", format_sig(r["rotation_diffusion"], 3), format_sig(r["rotation"], 3),
+                    f"{r['rotation'] / r['rotation_diffusion']:.3g}"])
+    return _table("How the two maps differ",
+                  ["field", "Std: flow / diffusion", "rotational share: diffusion", "flow", "flow / diffusion"], out)
+
+
+def sea_table(rows: list[dict[str, Any]]) -> CaseTable:
+    """The rows of :func:`sea_blend_study` as a table: per field the three flows' final Std(rho~_map) over the
+    diffusion solver's, whether the abrupt sea stalled, and the shift of the blended flow's map in grid spacings."""
+    return _table("A dense coast: the flows' Std over the diffusion solver's",
+                  ["field", "abrupt sea, blurred retries", "default", "blended sea", "stalled", "shift (spacings)"],
+                  [[r["field"], f"{r['ratio_abrupt']:.3g}", f"{r['ratio_default']:.3g}", f"{r['ratio_blended']:.3g}",
+                    "yes" if r["stalled"] else "no", f"{r['shift']:.3g}"] for r in rows])
+
+
+def warm_table(rows: list[dict[str, Any]]) -> CaseTable:
+    """The rows of :func:`warm_start_residuals` as a table: per grid side and map the final Std(rho~_map), its
+    smooth part, the element-scale share of its variance and the time."""
+    return _table("Why the warm start stops short",
+                  ["N", "map", "Std(ρ̃_map)", "smooth part", "element-scale share", "time"],
+                  [[str(r["n"]), r["method"], format_sig(r["std"], 4), format_sig(r["smooth"], 3),
+                    f"{100 * r['element_fraction']:.1f} %", format_value(r["time"], "time")] for r in rows])
