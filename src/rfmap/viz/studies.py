@@ -62,9 +62,11 @@ def time_accuracy_figure(rows: list[dict], *, title: str | None = None, ncols: i
         plain_log_ticks(ax.xaxis)
         plain_log_ticks(ax.yaxis)
         ax.set_xlabel("wall time (s)")
-        ax.set_ylabel(r"Std($\tilde\rho_{map}$)")
+        ax.set_ylabel(r"Std($\tilde\rho_{\mathrm{map}}$)")
     for ax in list(axes.flat)[len(cases):]:
         ax.set_axis_off()
+    # room between a panel's axis label and the title of the panel below it
+    fig.get_layout_engine().set(h_pad=0.2)
     handles = [Line2D([], [], ls="none", marker=markers[m], color=f"C{k}", mfc="none", label=m)
                for k, m in enumerate(methods)]
     if len(cases) < axes.size:  # the legend in the first empty panel
