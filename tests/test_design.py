@@ -10,8 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from rfmap.paper.design import (DESIGN_PATH, current_value, display_name, finding, load_decisions, readable_value,
-                                record, remeasure_command, stale_values, to_markdown)
+from rfmap.paper.design import (DESIGN_PATH, current_value, display_name, finding, kept_text, load_decisions,
+                                plain_numbers, readable_value, record, remeasure_command, stale_values, to_markdown)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -111,10 +111,13 @@ CONTRADICTED = ["one grid_sample batch entry per thread", "BATCH_POINTS", "SCAN_
 
 
 def test_findings_say_where_the_numbers_do_not_support_the_value():
-    """A finding is shown in its section with the rows it rests on, their load, and that the constant waits for a
-    new measurement; the page says once that timings under load are not conclusive."""
+    """A finding is shown in its section with the rows it rests on and that the constant waits for a new
+    measurement, and the table of decisions says plainly that the numbers do not support the value; the page says
+    once that timings taken under load can mislead, without load averages or commits in its text."""
     page = to_markdown()
-    assert page.count("Timings recorded under load are not conclusive") == 1
+    assert page.count("can come from that load rather than from the setting") == 1
+    assert "load average" not in page and "commit" not in page
+    assert page.count("**Not supported by the") == len(CONTRADICTED)
     by = {d["constant"]: d for d in load_decisions()}
     assert {c for c, d in by.items() if d.get("finding")} == set(CONTRADICTED)
     for name in CONTRADICTED:
@@ -124,11 +127,26 @@ def test_findings_say_where_the_numbers_do_not_support_the_value():
         for case in d["finding"]["rows"]:
             row = next(r for r in d["results"] if r["case"] == case)
             assert case in text and all(str(row[k]) in text for k in ("chosen", "alternative") if row.get(k))
+        assert kept_text(d) in page and kept_text(d).startswith("**Not supported by the")
         if d.get("remeasure"):
-            assert f"load average {d['measured']['load']}" in text and "idle machine" in text
+            assert "idle machine" in text and "idle machine" in kept_text(d)
     broken = {**by["BATCH_POINTS"], "finding": {"text": "x", "rows": ["no such case"]}}
     with pytest.raises(KeyError):
         finding(broken)
+
+
+def test_every_decision_says_in_plain_words_what_it_is_for_and_why_it_stays():
+    """The table of decisions: what each controls, what the measurement showed and why the value is kept (or that
+    the numbers do not support it), in words; numbers of the record written as powers of ten, not e-notation."""
+    page = to_markdown()
+    glance = page[page.index("## At a glance"):page.index("## The decisions one by one")]
+    assert glance.count("\n| [") == len(load_decisions())
+    for d in load_decisions():
+        assert d.get("purpose") and d.get("outcome") and (d.get("kept") or d.get("finding")), d["constant"]
+        words = re.sub(r"\b[23]D\b|chapter \d+|counted as 1", "", d["purpose"] + d["outcome"] + d.get("kept", ""))
+        assert not re.search(r"\d", words), (d["constant"], words)  # measured numbers come from the record
+    assert not re.search(r"\d\.?\d*e-\d", page)
+    assert plain_numbers("at most 8.9e-16, about 1e-7") == "at most 8.9 × 10⁻¹⁶, about 10⁻⁷"
 
 
 def test_design_record_updates_one_entry(tmp_path):

@@ -8,7 +8,9 @@ tried, the ``criterion``, the ``data`` it was measured on, the ``results`` (rows
 what the keys of a dict value (or the items of a tuple) are, ``"dimension"``, ``"boundary"`` or ``"option"``, so
 that the page can show the value readably (:func:`readable_value`); ``finding`` records where the numbers do not
 support the chosen value: its ``text``, the ``rows`` (by ``case``) that show it and, optionally, ``next``, what is to
-be done before the constant is changed.  The page shows a finding in the decision's section (:func:`finding`).
+be done before the constant is changed.  The page shows a finding in the decision's section (:func:`finding`).  Every decision also
+says in plain words what it controls (``purpose``), what the measurement showed (``outcome``) and, unless it has a
+finding, why the value is kept (``kept``): the page's one table of decisions (:func:`kept_text`).
 
 A decision is either *re-measurable* or a *historical record*.  A re-measurable one names its case of
 ``benchmarks/design.py`` (``remeasure``); that script prints the table again and, with ``--record``, stores the rows
@@ -29,10 +31,13 @@ import re
 from pathlib import Path
 from typing import Any
 
+from rfmap.core.wording import counted
 from rfmap.paper.tables import power_of_ten, printed_digits
 
 __all__ = ["DESIGN_PATH", "AREAS", "load_decisions", "current_value", "stale_values", "record", "area",
-           "remeasure_command", "display_name", "readable_value", "finding", "load_range", "to_markdown"]
+           "remeasure_command", "display_name", "readable_value", "finding", "kept_text", "plain_numbers",
+           "load_range",
+           "to_markdown"]
 
 #: the record of the design decisions
 DESIGN_PATH = Path(__file__).resolve().parent.parent / "data" / "design.json"
@@ -178,16 +183,49 @@ def load_range(decisions: list[dict[str, Any]] | None = None) -> tuple[float, fl
     return min(loads), max(loads), cores
 
 
+_E_NOTATION = re.compile(r"(?<![\w.])(\d+(?:\.\d+)?)e([-+]?\d+)\b")
+
+
+def plain_numbers(text: str) -> str:
+    """``text`` with its numbers in e-notation written as powers of ten (``8.9e-16`` as ``8.9 × 10⁻¹⁶``, ``1e-7``
+    as ``10⁻⁷``)."""
+    def power(m: re.Match) -> str:
+        v = float(m.group(0))
+        out = power_of_ten(v, printed_digits(m.group(1)) if "." in m.group(1) else 1)
+        return out.removeprefix("1 × ")
+
+    return _E_NOTATION.sub(power, text)
+
+
 def _row_text(r: dict[str, Any]) -> str:
     parts = [f"chosen value: {r['chosen']}" if r.get("chosen") else "",
              f"alternatives: {r['alternative']}" if r.get("alternative") else ""]
-    return f"- *{r.get('case')}* — " + "; ".join(p for p in parts if p) + "."
+    return plain_numbers(f"- *{r.get('case')}* — " + "; ".join(p for p in parts if p) + ".")
+
+
+def _kind(d: dict[str, Any]) -> str:
+    return "re-measurement" if d.get("remeasure") else "record"
+
+
+def _waits(d: dict[str, Any]) -> str:
+    """Until when a constant whose numbers do not support it stays: the finding's ``next``, else a new measurement
+    (on an idle machine for a timing that can be re-measured)."""
+    f = d.get("finding") or {}
+    return f.get("next") or ("measured again on an idle machine" if d.get("remeasure") else "measured again")
+
+
+def kept_text(d: dict[str, Any]) -> str:
+    """The table's *kept because* cell: the decision's ``kept``, or, where the numbers do not support the value
+    (a ``finding``), that plainly, with what the constant waits for."""
+    if d.get("finding"):
+        return f"**Not supported by the {_kind(d)}**; kept until {_waits(d)}"
+    return d.get("kept", "")
 
 
 def finding(d: dict[str, Any]) -> list[str]:
     """The section's finding, where the record's numbers do not support the chosen value (``finding`` of the
-    decision): what they show, the rows that show it, how and under what load they were measured, and what is to be
-    done before the constant is changed.  Empty without a finding."""
+    decision): what they show, the rows that show it, and that the constant stays until it is measured again.
+    Empty without a finding."""
     f = d.get("finding")
     if not f:
         return []
@@ -195,18 +233,11 @@ def finding(d: dict[str, Any]) -> list[str]:
     missing = [c for c in f.get("rows", []) if c not in rows]
     if missing:
         raise KeyError(f"{d['constant']}: the finding names rows that the record does not hold: {missing}")
-    m = d.get("measured") or {}
-    kind = "re-measurement" if d.get("remeasure") else "record"
-    text = f"**Finding: the {kind} does not support the choice.** {f['text'][0].upper()}{f['text'][1:]}."
+    text = f"**The {_kind(d)} does not support the choice.** {f['text'][0].upper()}{f['text'][1:]}."
     shown = [_row_text(rows[c]) for c in f.get("rows", [])]
     if shown:
         text += " " + ("The row that shows it:" if len(shown) == 1 else "The rows that show it:")
-    end = ""
-    if m.get("load") is not None:
-        end += f"Measured under load average {m['load']} on {_cores(m.get('machine', ''))}. "
-    nxt = f.get("next") or ("to be re-measured on an idle machine before it is changed" if d.get("remeasure")
-                            else "to be measured again before it is changed")
-    end += f"The constant is left as it is, {nxt}."
+    end = f"The constant is left as it is until it has been {_waits(d)}."
     return [":::{warning}", text, ""] + (shown + [""] if shown else []) + [end, ":::", ""]
 
 
@@ -220,56 +251,40 @@ def _label(d: dict[str, Any]) -> str:
     return "design-" + "-".join(part for part in slug.split("-") if part)
 
 
-def _commit(entry: dict[str, str]) -> str:
-    return f"commit `{entry['commit']}` ({entry['date']})"
-
-
 def _status(d: dict[str, Any]) -> list[str]:
-    """What kind of numbers the section shows: how to measure them again, or where they come from."""
+    """What kind of numbers the section shows: how to measure them again, or when they were written down."""
     command = remeasure_command(d)
     if command:
         m = d.get("measured") or {}
-        lines = [f"**Re-measure:** `{command}` (add `--record` to store the new rows here)."]
+        text = f"**Measure it again:** `{command}`."
         if m:
-            took = f"; the run took {m['seconds']} s" if m.get("seconds") is not None else ""
-            load = f", load average {m['load']}" if m.get("load") is not None else ""
-            lines[0] += (f" The table below is that script's run of {m['date']} ({m['code']}; {m['machine']}{load}"
-                         f"{took}).")
-        return lines + [""]
-    rec = d.get("recorded") or {}
+            text += f" The numbers below are that script's run of {m['date']} on a machine with {_cores(m.get('machine', ''))}."
+        return [text, ""]
+    entered = (d.get("recorded") or {}).get("entered") or {}
     text = "**Historical record, not re-measured.**"
-    if rec.get("value_set"):
-        text += f" The value was set in {_commit(rec['value_set'])}."
-    if rec.get("entered"):
-        text += (f" The numbers below were written down when it was chosen and entered "
-                 f"this record in {_commit(rec['entered'])}.")
-    text += " The code has changed since: they show why the value was chosen, not that they still hold."
-    bench = str(d.get("benchmark", ""))
-    if bench.startswith("not scripted"):
-        why = bench.partition(":")[2].strip()
-        text += f" No script repeats them{'; ' + why if why else ''}."
-    elif bench:
-        text += f" Related measurement: {bench}."
+    text += (f" The numbers below were written down when the value was chosen"
+             f"{' (' + entered['date'] + ')' if entered.get('date') else ''}. The code has changed since: they show "
+             "why the value was chosen, not that they still hold.")
     return [text, ""]
 
 
 def _details(d: dict[str, Any]) -> list[str]:
+    """One decision's section: its name and value, what it is for, and the numbers folded below."""
     lines = [f"({_label(d)})=", f"### {display_name(d)}", "", f"**Value:** {readable_value(d)}", "",
-             f"In `{d['module']}`. {d['what']}", ""]
+             f"{d.get('purpose') or d['what']}.", ""]
     lines += finding(d)
+    lines += ["::::{dropdown} The measurement", ""]
     if d.get("alternatives"):
         lines += [f"**Alternatives:** {'; '.join(d['alternatives'])}.", ""]
     lines += [f"**Criterion:** {d['criterion']}.", ""]
     lines += _status(d)
     if d.get("data"):
-        lines += [f"**Measured on:** {d['data'].rstrip('.')}.", ""]
+        lines += [f"**Measured on:** {plain_numbers(d['data'].rstrip('.'))}.", ""]
     if d.get("results"):
-        lines += ["| Case | Chosen value | Alternatives |", "| --- | --- | --- |"]
-        lines += [f"| {_cell(r.get('case'))} | {_cell(r.get('chosen'))} | {_cell(r.get('alternative'))} |"
-                  for r in d["results"]]
-        lines.append("")
+        lines += [_row_text(r) for r in d["results"]] + [""]
     if d.get("notes"):
-        lines += [d["notes"], ""]
+        lines += [plain_numbers(d["notes"]), ""]
+    lines += [f"In the code: `{d['module']}`. {plain_numbers(d['what'])}", "", "::::", ""]
     return lines
 
 
@@ -282,69 +297,55 @@ def _groups(decisions: list[dict[str, Any]]) -> list[tuple[str, list[dict[str, A
     return [(h, by[h]) for h in order if h in by]
 
 
-def _load_note(decisions: list[dict[str, Any]]) -> list[str]:
-    """The page's one statement on timings under load, with the load range of the runs shown and the decisions
-    whose numbers do not support their value."""
-    loads = load_range(decisions)
-    flagged = [d for d in decisions if d.get("finding")]
-    if not loads and not flagged:
-        return []
-    text = "**Timings recorded under load are not conclusive.**"
-    if loads:
-        lo, hi, cores = loads
-        spread = f"{lo}" if lo == hi else f"{lo} to {hi}"
-        text += (f" The re-measured runs on this page were made at load average {spread} on a machine with "
-                 f"{cores}: other work competed for the cores, and a difference between a chosen value and an "
-                 "alternative can come from that load rather than from the choice.")
-    if flagged:
-        names = ", ".join(f"[{display_name(d)}]({_label(d)})" for d in flagged)
-        text += (f" Where the numbers do not support the chosen value, the section says so under *Finding* "
-                 f"({names}); such a constant stays as it is until it has been measured again (timings on an idle "
-                 "machine).")
-    return [text, ""]
+def _glance(decisions: list[dict[str, Any]]) -> list[str]:
+    """The page's one table: per decision its name and value, what it controls, the alternatives tried, what the
+    measurement showed and why the value is kept (or that the numbers do not support it)."""
+    lines = ["| Decision: value | What it controls | Alternatives tried | Measured outcome | Kept because |",
+             "| --- | --- | --- | --- | --- |"]
+    for heading, group in _groups(decisions):
+        lines.append(f"| **{heading}** | | | | |")
+        for d in group:
+            name = f"[{_cell(display_name(d))}]({_label(d)}): {_cell(readable_value(d))}"
+            alternatives = "; ".join(d.get("alternatives") or []) or "none recorded"
+            lines.append(f"| {name} | {_cell(d.get('purpose') or d['what'])} | {_cell(alternatives)} | "
+                         f"{_cell(d.get('outcome'))} | {_cell(kept_text(d))} |")
+    return lines + [""]
 
 
 def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "src/rfmap/data/design.json") -> str:
-    """The page *Design decisions*: how to read it, a table of every decision, then one section per decision."""
+    """The page *Design decisions*: how to read it, one table of every decision, then one short section per
+    decision with its numbers folded."""
     decisions = load_decisions() if decisions is None else decisions
     scripted = [d for d in decisions if d.get("remeasure")]
+    flagged = [d for d in decisions if d.get("finding")]
     lines = [f"<!-- Generated by scripts/make_design_md.py from {source}: edit the JSON, then rerun. -->", "",
              "# Design decisions", "",
-             "A *design decision* here is a constant or a rule of the package whose value was chosen by measuring "
-             "it against alternatives: a solver's step tolerance, how many smoothing passes a finishing stage runs, "
-             "how much memory the input checks reserve per grid vertex. The code keeps one line of rationale beside "
-             f"each; this page keeps the measurements, read from `{source}`. A test checks that every value "
-             "recorded here is the one in the code, so a changed constant fails the tests until it is measured "
-             "again.", "",
-             "Each decision says which of two kinds its numbers are:", "",
-             "- **Re-measure**: a case of `benchmarks/design.py` measures it again at a small size and prints the "
-             "table shown (`python benchmarks/design.py --list` lists the cases). The "
-             "section names the command, the date, the code version and the machine of the run shown. Timings "
-             "depend on the machine and its load; compare the chosen value with the alternatives within one run.",
-             "- **Historical record**: numbers written down once, when the value was chosen, with the commit that "
-             "set the value and the commit that entered the numbers here. No script repeats them; the code has "
-             "changed since, so they explain the choice but do not show that it still holds.", "",
-             ] + _load_note(decisions) + [
-             "To refresh the re-measurable decisions and this page:", "",
-             "```bash",
-             "python benchmarks/design.py --record        # every case; or --only NAME [NAME ...]",
-             "make pages                                  # regenerate this page from the record",
-             "```", "",
-             "## At a glance", "",
-             "| Decision | Value | Numbers |", "| --- | --- | --- |"]
-    for heading, group in _groups(decisions):
-        lines.append(f"| **{heading}** | | |")
-        for d in group:
-            if d.get("remeasure"):
-                how = f"re-measure: `--only {d['remeasure']}`"
-            else:
-                entered = (d.get("recorded") or {}).get("entered")
-                how = "historical" + (f" ({entered['date']})" if entered else "")
-            if d.get("finding"):
-                how += f"; [**not supported**]({_label(d)})"
-            lines.append(f"| [{_cell(display_name(d))}]({_label(d)}) | {_cell(readable_value(d))} | {how} |")
-    lines += ["", f"{len(scripted)} of the {len(decisions)} decisions can be measured again by "
-              "`benchmarks/design.py`; the others are historical records.", ""]
+             "Besides the paper's method, the package has a number of settings that nobody prescribes: how large a "
+             "step the flow solver takes, how much a network's map is smoothed before the solver finishes it, how "
+             "the checkpoint of a training run is chosen. Each was set by comparing a few values on a stated "
+             "criterion. The table below gives, for each, what it controls, what was tried instead, what the "
+             "measurement showed and why the value stays. Below the table, each decision has a short section "
+             "whose numbers are folded.", "",
+             f"The numbers are of two kinds. For {counted(len(scripted), 'decision')} a script "
+             "(`benchmarks/design.py`) measures the choice again and prints the same numbers; the others are "
+             "records written down when the value was chosen, and the code has changed since, so they explain the "
+             "choice without showing that it still holds.", ""]
+    loads = load_range(decisions)
+    if loads:
+        lines[-2] += (f" The re-measured timings were taken on a shared machine with {loads[2]} while other work "
+                      "was running, so a small difference in time between two settings can come from that load "
+                      "rather than from the setting.")
+    if flagged:
+        lines += [f"For {counted(len(flagged), 'decision')} the numbers do not support the value chosen. The "
+                  "table says so in its last column, and the constant stays as it is until it has been measured "
+                  "again: changing it would change every result of the book.", ""]
+    lines += ["## At a glance", ""] + _glance(decisions)
+    lines += ["## The decisions one by one", "",
+              "To measure the re-measurable decisions again and regenerate this page:", "",
+              "```bash",
+              "python benchmarks/design.py --record        # every case; or --only NAME [NAME ...]",
+              "make pages                                  # regenerate this page from the record",
+              "```", ""]
     for heading, group in _groups(decisions):
         lines += [f"## {heading}", ""]
         for d in group:
