@@ -135,6 +135,38 @@ def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], 
     return lines
 
 
+def _threads_of(command: str) -> int | None:
+    words = command.split()
+    return int(words[words.index("--threads") + 1]) if "--threads" in words[:-1] else None
+
+
+def _repeat_cost(metas: dict, shipped: dict[str, str]) -> list[str]:
+    """What a repeat of every shipped model from its shipped parent costs, and why it gives comparable, not
+    identical, weights: the runs to repeat, their wall time, and their CPU time where the runs recorded their
+    threads."""
+    repeats = {model: repeat_commands(meta, model, shipped) for model, meta in metas.items()}
+    runs = [(run, command) for rep in repeats.values() for run, command in rep]
+    per_model = [len(rep) for rep in repeats.values()]
+    wall = sum(run.wall_time for run, _ in runs)
+    known = [(run.wall_time, _threads_of(command)) for run, command in runs if _threads_of(command)]
+    unknown = [run.wall_time for run, command in runs if not _threads_of(command)]
+    cpu = sum(w * t for w, t in known)
+    text = ("Retraining a shipped model is not one command run for a fixed number of steps. Each model is the end "
+            "of a chain of runs, each started from the weights of the one before, with its options (learning rate, "
+            "seed, threads, time limit) chosen run by run, and the runs stop at a wall-time limit, not after a set "
+            "number of steps. A repeat, on another machine or on the same machine under another load, trains each "
+            "run for as long but not for as many steps: it gives comparable weights of the same recipe, not "
+            "identical ones, and step counts that differ from those in the table. "
+            f"Repeating every model from its shipped parent means repeating {len(runs)} runs "
+            f"({min(per_model)} to {max(per_model)} per model), {_hours(wall)} of wall time in all. "
+            f"The {len(known)} runs that recorded their thread count used {_hours(cpu)} of CPU time "
+            f"({_hours(sum(w for w, _ in known))} of wall time)")
+    if unknown:
+        text += (f"; the other {len(unknown)} ran {_hours(sum(unknown))} on PyTorch's default threads, all the "
+                 "cores of their machine")
+    return [text + ".", ""]
+
+
 def section(root: Path = ROOT) -> str:
     """The generated part of book/reproduce.md."""
     metas = load_metadata(root / WEIGHTS)
@@ -150,7 +182,8 @@ def section(root: Path = ROOT) -> str:
         source = f"the shipped `{start[1]}`" if start else "scratch"
         lines.append(f"| [{model}](retrain-{model}) | {len(runs)} | {steps:,} | {_hours(seconds)} | "
                      f"{todo} run{'s' if todo != 1 else ''} from {source} |")
-    lines += ["", "Under each model: its chain, what validation kept of the last run, the parent it starts from, the "
+    lines += [""] + _repeat_cost(metas, shipped)
+    lines += ["Under each model: its chain, what validation kept of the last run, the parent it starts from, the "
               "one command that trains it from that parent and, folded, every run a repeat needs. Each command "
               "writes to `runs/retrain/MODEL/run-K`; copy the last repeated run's `MODEL.safetensors` and `MODEL.json` "
               "into `src/rfmap/weights/` to ship it. A run that kept its parent's weights (validation chose none of "

@@ -62,3 +62,18 @@ def test_the_gpu_section_states_device_train_defaults():
         assert words[words.index(flag) + 1] == defaults[var], (flag, defaults[var])
         assert f"`{var}`" in text
     assert "--no-validate" in words and "--no-validate" in script
+
+
+def test_the_page_says_what_a_repeat_gives_and_costs():
+    """Retraining repeats chains of runs stopped on the clock: comparable weights, not identical ones, and the wall
+    and CPU time of the runs to repeat, computed from the metadata; no build-tool internals in the prose."""
+    mod = _script()
+    text = PAGE.read_text(encoding="utf-8")
+    metas, shipped = load_metadata(WEIGHTS_DIR), shipped_hashes(WEIGHTS_DIR)
+    cost = "\n".join(mod._repeat_cost(metas, shipped))
+    assert cost.strip() in text and "not identical" in cost and "CPU time" in cost
+    runs = sum(len(mod.repeat_commands(m, name, shipped)) for name, m in metas.items())
+    assert f"repeating {runs} runs" in cost
+    assert "untimed first run" not in text
+    for internal in ("environment.pickle", ".doctrees", "{glue:text}", ".installed"):
+        assert internal not in text, internal
