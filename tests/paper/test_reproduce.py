@@ -245,10 +245,10 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     assert by_family.value("new", "unet", "held_out") == 0.4
     assert "| new | 51/128 | 0.4 | Std ratio by family |" in recipe_markdown(by_family)
     del sur.meta["final_metrics"]["mean"]["family_score"]
-    # scored on the delivered maps (val_repair): the maps the network itself folded are counted apart
+    # scored on the default maps (val_repair): the maps the network itself folded are counted apart
     sur.meta["final_metrics"]["mean"].update({"folded_fields": 0, "path": "repaired", "raw_folded_fields": 3})
     again = recipe_table({"new": sur})
-    assert again.value("new", "unet", "scored") == "delivered" and again.value("new", "unet", "folded_maps") == 3
+    assert again.value("new", "unet", "scored") == "default" and again.value("new", "unet", "folded_maps") == 3
     assert "| new | unet | modes, steps" in t.to_markdown()
     bel = get_config("beltrami2d", "full")
     for low, text in ((0.0, "random boundary-fixing maps"), (0.3, "random boundary-fixing maps, low-frequency 30 %")):

@@ -21,8 +21,9 @@ def recipe_table(surs: dict) -> Table:
     and minutes over its ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end
     of training (grid sides; the score that chose the kept weights, as :func:`_selection` reads it, and what that
     score is: the family score of Std ratios, or the mean metric with every folded map counted as the identity
-    map, else the capped or the plain mean; which maps were scored: ``raw`` network output or the maps
-    as ``Surrogate.map`` ``delivered`` them, a folded map regridded or repaired (``TrainConfig.val_repair``); how many
+    map, else the capped or the plain mean; which maps were scored: ``raw`` network output or the
+    ``default`` maps, as a plain ``Surrogate.map`` returns them, a folded map regridded or repaired
+    (``TrainConfig.val_repair``); how many
     held-out maps the network itself folded; :func:`rfmap.training.validation.evaluate`).  Older weights were validated on
     fewer sides, so their numbers are not comparable with those of later runs.
 
@@ -50,7 +51,7 @@ def recipe_table(surs: dict) -> Table:
             "val_n": "/".join(str(n) for n in (cfg.get("val_sizes") or [cfg.get("val_n", "?")])) if cfg else None,
             "held_out": None if metric is None else float(metric),
             "score_kind": kind,
-            "scored": ("delivered" if val.get("path") == "repaired" else "raw") if val else None,
+            "scored": ("default" if val.get("path") == "repaired" else "raw") if val else None,
             "folded_maps": (int(val["raw_folded_fields"]) if "raw_folded_fields" in val else
                             int(val["folded_fields"]) if "folded_fields" in val else None)})
     return t
