@@ -207,3 +207,16 @@ def test_figure_html_is_a_captioned_self_contained_figure(series):
     assert text.startswith('<figure class="align-default" id="fig-x">') and text.endswith("</figure>")
     assert text.count("<figcaption>") == 1 and "a &lt;small&gt; map &amp; its frames." in text
     assert "400px" in text and "plotly.js" in text.lower() and '<script src="http' not in text
+
+
+def test_figure_html_fits_its_height_to_the_map(series):
+    """A wide map gets a low figure: no empty band above or below it at the page's width."""
+    from rfmap.cartogram.html import PAGE_WIDTH_PX, fitted_height
+
+    fig = page_figure([f.carto for f in series.frames], list(KEYS))
+    fig.update_layout(xaxis={"range": [0.0, 3.0]}, yaxis={"range": [0.0, 1.0], "scaleratio": 1.0})
+    lay = fig.layout
+    plot = (PAGE_WIDTH_PX - lay.margin.l - lay.margin.r) / 3
+    assert fitted_height(fig) == max(300, round(plot + lay.margin.t + lay.margin.b + 110))
+    fig.update_layout(yaxis={"range": [0.0, 3.0]})
+    assert f"{fitted_height(fig)}px" in figure_html(fig, "a map")

@@ -19,7 +19,8 @@ import numpy as np
 
 from .data import atomic_write
 
-__all__ = ["HtmlOptions", "cartogram_page", "series_page", "page_figure", "figure_html", "write_page"]
+__all__ = ["HtmlOptions", "cartogram_page", "series_page", "page_figure", "figure_html", "fitted_height",
+           "write_page", "PAGE_WIDTH_PX"]
 
 
 @dataclass
@@ -163,13 +164,32 @@ def _play(frame_ms: int) -> dict:
                         {"label": "pause", "method": "animate", "args": [[None], pause]}]}
 
 
-def figure_html(fig, caption: str, *, name: str | None = None, height: int = 620) -> str:
+#: the width in pixels of a book page's text column, for which :func:`figure_html` sizes a figure's height
+PAGE_WIDTH_PX = 660
+
+
+def fitted_height(fig, width: int = PAGE_WIDTH_PX) -> int:
+    """The height in pixels at which the plotly figure ``fig`` of :func:`page_figure`, ``width`` pixels wide, holds
+    its map with no empty band above or below it: the map's extent at its aspect, the layout's margins, and room
+    for the slider and buttons of a series."""
+    lay = fig.layout
+    dx = float(np.diff(lay.xaxis.range)[0])
+    dy = float(np.diff(lay.yaxis.range)[0]) * float(lay.yaxis.scaleratio or 1.0)
+    margin = lay.margin
+    plot = (width - (margin.l or 0) - (margin.r or 0)) * dy / dx
+    controls = 110 if lay.sliders else 0
+    return int(round(min(max(plot + (margin.t or 0) + (margin.b or 0) + controls, 300), 900)))
+
+
+def figure_html(fig, caption: str, *, name: str | None = None, height: int | None = None) -> str:
     """The plotly figure ``fig`` as a captioned HTML fragment for a notebook's output or a book page: a
     ``<figure>`` (with the id ``name``) that holds the figure, plotly.js embedded so that it draws without a
-    network, ``height`` pixels high (an output area has no height of its own), and a ``<figcaption>`` with
-    ``caption`` as plain text (escaped), marked up as the book's captions are."""
+    network, ``height`` pixels high (an output area has no height of its own; default: :func:`fitted_height` for
+    the book's text column), and a ``<figcaption>`` with ``caption`` as plain text (escaped), marked up as the
+    book's captions are."""
     import html
 
+    height = fitted_height(fig) if height is None else height
     fig.update_layout(height=height)
     body = fig.to_html(include_plotlyjs=True, full_html=False, default_height=f"{height}px")
     ident = f' id="{html.escape(name, quote=True)}"' if name else ""
