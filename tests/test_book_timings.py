@@ -11,7 +11,7 @@ NOTE = ("*Times are wall-clock on the machine that built this page and vary with
         "within one table ({ref}`how to read the timings <reading-timings>`).*")
 #: the chapters whose tables give times
 TIMED_CHAPTERS = ["05_beltrami_reconstruction", "06_dem_deq_2d", "07_resolution_2d", "08_dem_vs_deq", "09_dem_3d",
-                  "11_fast_classical_and_hybrid", "12_unet_vs_fno", "13_cartogram"]
+                  "11_fast_classical_and_hybrid", "13_cartogram"]
 
 
 def test_the_reproduce_page_says_how_to_read_the_timings():
