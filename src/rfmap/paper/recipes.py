@@ -114,11 +114,24 @@ def recipe_differences(a: dict, b: dict, prefix: str = "") -> list[tuple[str, ob
         if key in RUN_SETTINGS:
             continue
         va, vb = a.get(key), b.get(key)
+        if f"{prefix}{key}" == "model" and isinstance(va, dict) and isinstance(vb, dict):
+            va, vb = _network_settings(va), _network_settings(vb)
         if isinstance(va, dict) and isinstance(vb, dict):
             out += recipe_differences(va, vb, f"{prefix}{key}.")
         elif va != vb:
             out.append((f"{prefix}{key}", va, vb))
     return out
+
+
+#: the settings of each network that apply to it (a stored model section holds every architecture's fields)
+_NETWORK_SETTINGS = {"unet": ("arch", "base", "depth", "attention"),
+                     "fno": ("arch", "modes", "width", "layers", "padding")}
+
+
+def _network_settings(model: dict) -> dict:
+    """The part of a stored ``model`` section that its architecture uses (unknown architectures: all of it)."""
+    keep = _NETWORK_SETTINGS.get(model.get("arch", "unet"))
+    return dict(model) if keep is None else {k: model[k] for k in keep if k in model}
 
 
 def differences_text(metas: dict) -> str:
