@@ -51,6 +51,7 @@ LAYERS: dict[str, int] = {
     # the paper layer, the applications and plotting, then the command line and the package's front door
     "rfmap.viz": 3, "rfmap.viz.figures": 3, "rfmap.viz.meshes": 3, "rfmap.viz.volumes": 3, "rfmap.viz.diffusion": 3, "rfmap.viz.architecture": 3,
     "rfmap.viz.training": 3, "rfmap.viz.cartograms": 3, "rfmap.viz.studies": 3,
+    "rfmap.viz.repairs": 3, "rfmap.viz.wall_time": 3,
     "rfmap.paper": 3, "rfmap.paper.tables": 3, "rfmap.paper.reproduce": 3,
     "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,
     "rfmap.paper.flow_studies": 3, "rfmap.paper.design": 3, "rfmap.paper.cartograms": 3, "rfmap.paper.comparison": 3,
