@@ -86,3 +86,11 @@ def test_cartogram_column_width_follows_the_books_text_column():
     from rfmap.viz.figures import TEXT_COLUMN_PX
 
     assert TEXT_COLUMN_IN == TEXT_COLUMN_PX / 96
+
+
+def test_folded_states_are_read_from_old_and_new_histories():
+    from rfmap.viz.training import _folded_state
+
+    assert _folded_state({"folded_fields": 2, "n_flipped": 0})
+    assert not _folded_state({"folded_fields": 0, "n_flipped": 5})  # counted fields win
+    assert _folded_state({"n_flipped": 3}) and not _folded_state({"n_flipped": 0}) and not _folded_state({})

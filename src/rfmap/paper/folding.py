@@ -35,7 +35,7 @@ def repaired_mu(raw, repaired) -> dict:
     of one mesh): ``moved``, the triangles with a vertex the repair moved; ``same_outside``, whether :math:`\mu` is
     unchanged on every other triangle; ``max_mu``, the largest :math:`|\mu|` of the repaired map on the moved
     triangles; ``over_cap``, how many of them end above the repair's cap :math:`1 - \delta`
-    (:data:`rfmap.finish.repair.DELTA`), which the rebuilt map need not meet exactly."""
+    (``rfmap.finish.repair.DELTA``), which the rebuilt map need not meet exactly."""
     ref, el = torch.as_tensor(raw.ref_points), torch.as_tensor(raw.elements)
     mu = [np.abs(beltrami_coefficient(ref, torch.as_tensor(r.mapped_points), el).numpy()) for r in (raw, repaired)]
     moved = (np.abs(repaired.mapped_points - raw.mapped_points).max(1) > 0)[raw.elements].any(1)

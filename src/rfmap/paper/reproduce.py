@@ -377,7 +377,7 @@ def _cell(v, column: str) -> str:
 def cases_markdown(table: Table, case_title: str = "") -> str:
     """A whole :class:`~rfmap.paper.tables.Table` as Markdown narrow enough for the book's text column: one table
     per case, with a row per column of ``table`` and a column per method (short names of :data:`METHOD_TITLES`),
-    numbers to three significant digits (:func:`~rfmap.paper.tables.format_sig`), times with their unit."""
+    numbers to three significant digits (:func:`~rfmap.core.wording.format_sig`), times with their unit."""
     parts = []
     for case in dict.fromkeys(c for c, _, _ in table.rows):
         rows = [(m, v) for c, m, v in table.rows if c == case]

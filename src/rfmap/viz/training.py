@@ -76,7 +76,7 @@ def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: 
 def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0):
     """Side by side, the loss terms of one sample of several models (:func:`plot_loss_terms`), one column each:
     ``columns`` maps a column title (``"DEQ model"``) to ``(mapped, elements, terms, keys)`` as
-    :func:`rfmap.tasks.batch_loss_terms` returns them, with the terms to draw; the map on top, one term per row
+    ``rfmap.tasks.batch_loss_terms`` returns them, with the terms to draw; the map on top, one term per row
     below, 7.2 inches wide. Returns the figure."""
     import matplotlib.pyplot as plt
 
@@ -273,7 +273,7 @@ _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 
 def race_bars(metas: dict, ax=None, *, key: str = "std_rho_map"):
-    """The outcome of a race of models trained for the same wall time (:func:`rfmap.paper.compare.race`), one bar per
+    """The outcome of a race of models trained for the same wall time (``rfmap train --time-limit``), one bar per
     model: the held-out validation metric ``key`` of its final weights (``meta["final_metrics"]["mean"]``), labelled
     with the steps it made; returns the axes."""
     import matplotlib.pyplot as plt
@@ -289,9 +289,16 @@ def race_bars(metas: dict, ax=None, *, key: str = "std_rho_map"):
     return ax
 
 
+def _folded_state(record: dict) -> bool:
+    """Whether a validation record's maps folded on some held-out field: its ``folded_fields`` count, or in older
+    histories, which do not record it, its ``n_flipped`` count of flipped elements."""
+    return (record.get("folded_fields", record.get("n_flipped")) or 0) > 0
+
+
 def _folded_marks(ax, xs, val, color):
-    """Open markers on the validated states whose maps folded on some held-out field (``folded_fields`` > 0)."""
-    pts = [(x, y) for x, y, v in zip(xs, *val) if v.get("folded_fields", 0) > 0]
+    """Open markers on the validated states whose maps folded on some held-out field (``folded_fields`` > 0, or
+    in older histories, which do not count folded fields, ``n_flipped`` > 0)."""
+    pts = [(x, y) for x, y, v in zip(xs, *val) if _folded_state(v)]
     if pts:
         ax.plot(*zip(*pts), "o", ms=5, mfc="white", mec=color, mew=1.2, zorder=3)
 
