@@ -345,7 +345,7 @@ _UNET_FNO_BUDGET = _FNO_DEQ2D_SQUARE.derive(
                 "6,000 steps): the equal-budget partner of the FNO.",
     model=ModelConfig(), ci=dict(model=_CI["model"]), full=dict(model=ModelConfig(), time_limit=0.0),
     paper=dict(model=ModelConfig()))
-#: the Beltrami weight alone (book chapter 8): one recipe, trained from scratch twice, once with lambda = 0 (a DEM)
+#: the Beltrami weight alone (for chapter 8's Fig. 10 study): one recipe, trained from scratch twice, once with lambda = 0 (a DEM)
 #: and once with lambda = 0.1 (a DEQ); nothing else differs (study weights, not shipped models)
 _ABLATION = {lam: _density2d(
     f"ablation-lambda-{tag}", "square", beltrami=lam, steps=3000, time_limit=0.0,
