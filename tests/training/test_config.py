@@ -48,3 +48,20 @@ def test_hard_share_overrides_the_density_fields_and_is_recorded():
     args = build_parser().parse_args(["--config", "beltrami2d", "--hard-share", "0.3"])
     with pytest.raises(ValueError, match="no density fields"):
         _structured_overrides(get_config("beltrami2d", "full"), args)
+
+
+def test_fold_weight_overrides_the_loss_and_is_recorded():
+    from rfmap.training.cli import _command_line, _structured_overrides, build_parser
+    from rfmap.training.config import get_config
+
+    cfg = get_config("dem3d-cube-native", "full")
+    args = build_parser().parse_args(["--config", "dem3d-cube-native", "--fold-weight", "1000"])
+    over = _structured_overrides(cfg, args)
+    assert over["loss"].fold == 1000.0
+    assert over["loss"].fold_threshold == cfg.loss.fold_threshold  # the rest of the loss kept
+    assert over["loss"].density_tangent == cfg.loss.density_tangent
+    assert "--fold-weight 1000" in _command_line(args)
+    for bad in ("-1", "nan", "inf"):
+        args = build_parser().parse_args(["--config", "dem3d-cube-native", "--fold-weight", bad])
+        with pytest.raises(ValueError, match="fold-weight"):
+            _structured_overrides(cfg, args)

@@ -60,6 +60,9 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--hard-share", type=float, default=None, metavar="P",
                    help="density configs: override the share of hard training fields (a single steep ramp or narrow "
                         "peak, RandomDensityConfig.p_hard), e.g. to weigh the fields whose maps fold more")
+    p.add_argument("--fold-weight", type=float, default=None, metavar="W",
+                   help="override the weight of the fold penalty (LossWeights.fold), e.g. stronger against maps "
+                        "that fold on steep ramps")
     p.add_argument("--base", type=int, default=None, help="override the U-Net's base width (channels)")
     p.add_argument("--depth", type=int, default=None, help="override the U-Net's number of levels")
     p.add_argument("--grow", type=int, default=None, metavar="BASE",
@@ -147,6 +150,11 @@ def _structured_overrides(cfg: TrainConfig, args) -> dict:
         if not (math.isfinite(hard) and 0.0 <= hard <= 1.0):
             raise ValueError(f"--hard-share must lie in [0, 1], got {hard}")
         over["density_field"] = _replace(cfg.density_field, p_hard=hard)
+    fold = getattr(args, "fold_weight", None)
+    if fold is not None:
+        if not (math.isfinite(fold) and fold >= 0.0):
+            raise ValueError(f"--fold-weight must be finite and non-negative, got {fold}")
+        over["loss"] = _replace(cfg.loss, fold=fold)
     grow = getattr(args, "grow", None)
     if grow is not None:
         if not getattr(args, "init", None):
@@ -211,6 +219,7 @@ def _command_line(args) -> str:
                       ("--teacher-share", getattr(args, "teacher_share", None)),
                       ("--teacher-weight", getattr(args, "teacher_weight", None)),
                       ("--hard-share", getattr(args, "hard_share", None)),
+                      ("--fold-weight", getattr(args, "fold_weight", None)),
                       ("--base", getattr(args, "base", None)), ("--depth", getattr(args, "depth", None)),
                       ("--grow", getattr(args, "grow", None)),
                       ("--n-range", " ".join(map(str, args.n_range)) if getattr(args, "n_range", None) else None),
