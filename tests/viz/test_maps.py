@@ -96,3 +96,16 @@ def test_query_points_figure_draws_the_cloud_and_both_histograms():
     assert [ax.get_title() for ax in fig.axes[:2]] == ["query cloud", "mapped cloud"]
     assert [t.get_text() for t in fig.axes[2].get_legend().get_texts()] == ["cloud", "grid N = 17"]
     plt.close(fig)
+
+
+@pytest.mark.parametrize("per_element", [True, False])
+def test_plot_density_draws_its_triangles_unsnapped(per_element):
+    """Snapped to the pixel grid, the triangles along a straight edge leave a saw-tooth of background there."""
+    from rfmap.viz import plot_density
+
+    m = grid_mesh(17, 2)
+    values = np.ones(len(m.elements) if per_element else len(m.points))
+    fig, ax = plt.subplots()
+    im = plot_density(ax, m.points, m.elements, values, colorbar=False)
+    plt.close(fig)
+    assert im.get_snap() is False

@@ -68,15 +68,19 @@ def plot_slice_outline(ax, points, n: int, k: int | None = None, *, title: str |
 
 def plot_density(ax, points, elements, values, *, title=None, colorbar=True, scale: ColorScale | None = None, **kw):
     """Per-element (length m) or per-vertex (length n) values on a 2D mesh, coloured by ``scale``
-    (:class:`rfmap.viz.figures.ColorScale`; its fields ``vmin``, ``vmax``, ``cmap`` may be given as keywords)."""
+    (:class:`rfmap.viz.figures.ColorScale`; its fields ``vmin``, ``vmax``, ``cmap`` may be given as keywords).
+
+    The triangles are drawn unsnapped (``snap=False``): snapped to the pixel grid, the row of triangles along a
+    straight edge of the domain rounds to alternate pixels and leaves a saw-tooth of background along it."""
     sc = color_scale(scale, **kw)
     vmin, vmax, cmap = sc.vmin, sc.vmax, sc.cmap
     values = np.asarray(values)
     if values.shape[0] == len(elements):
-        im = ax.tripcolor(points[:, 0], points[:, 1], elements, facecolors=values, vmin=vmin, vmax=vmax, cmap=cmap)
+        im = ax.tripcolor(points[:, 0], points[:, 1], elements, facecolors=values, vmin=vmin, vmax=vmax, cmap=cmap,
+                          snap=False)
     else:
         im = ax.tripcolor(points[:, 0], points[:, 1], elements, values, shading="gouraud", vmin=vmin, vmax=vmax,
-                          cmap=cmap)
+                          cmap=cmap, snap=False)
     ax.set_aspect("equal")
     frameless(ax)
     if title:
