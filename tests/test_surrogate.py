@@ -554,11 +554,33 @@ def test_a_map_that_undoes_equalization_warns():
         warnings.simplefilter("error")
         with S.quiet_quality():
             tiny(head_seed=3).map(flat, 21)
-        good = tiny().map(bump, 21)  # the untrained network: the identity, no worse than the input
-    assert not good.info["quality"]["worse"]
+            ident = tiny().map(bump, 21)  # the untrained network: the identity, no worse than the input
+    assert not ident.info["quality"]["worse"] and ident.info["quality"]["no_gain"]
     with pytest.warns(S.PoorMapWarning, match="shortened to 0 of itself"):  # query points: judged on the grid
         cloud = tiny(head_seed=3).map(flat, points=grid_points(21, 2)[::7])
     assert "quality" not in cloud.info and cloud.info["shorten"]["scale"] == 0.0
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_density_quality_flags_the_identity_on_every_grid(d):
+    """The identity leaves Std(rho~) as it was, up to round-off that differs from grid to grid: within the stated
+    tolerance GAIN_RTOL it brings no gain on every grid, and it is never worse."""
+    for n in ([17, 33, 51, 64, 97] if d == 2 else [9, 12, 17]):
+        ref = grid_points(n, d)
+        dens = 1.0 + 0.8 * np.sin(2 * np.pi * ref[:, 0]) * np.cos(2 * np.pi * ref[:, 1])
+        q = S.density_quality(ref, dens, n)
+        assert abs(q["std_rho_map"] / q["std_rho_orig"] - 1.0) < 1e-5  # equal up to round-off
+        assert q["no_gain"] and not q["worse"], n
+
+
+def test_the_untrained_networks_identity_map_is_flagged_on_every_grid():
+    """Surrogate.map warns for the identity map of a density on every grid side, and leaves it unshortened."""
+    sur = tiny()
+    for n in (17, 21, 33, 51):
+        with pytest.warns(S.PoorMapWarning, match=r"does not make this density more equal"):
+            r = sur.map("sin-cos", n)
+        np.testing.assert_array_equal(r.mapped_points, r.ref_points)
+        assert r.info["quality"]["no_gain"] and "shorten" not in r.info
 
 
 def test_query_points_are_shortened_as_their_working_grid_map():

@@ -31,7 +31,7 @@ from .core.device import resolve_device
 from .finish import Draft, FinishOptions, InfoView, MapReport, NetworkReport, Prediction, displacement_at, finish, \
     poor_map_message
 from .finish.stages import refine, regrid
-from .finish.quality import QUALITY_MARGIN, PoorMapWarning, density_quality, quality_message, quiet_quality
+from .finish.quality import GAIN_RTOL, QUALITY_MARGIN, PoorMapWarning, density_quality, quality_message, quiet_quality
 from .nn.model import MultiResUNet, apply_displacement
 from .nn.registry import build_model, from_tensor_state, tensor_state
 from .fields.paper import PAPER_N, BeltramiMap, DensityField, get_field
@@ -39,7 +39,7 @@ from .core.result import MapResult
 from .nn.symmetry import resolve_symmetry, symmetrized_displacement
 from .tasks import TaskSpec, encode
 
-__all__ = ["Surrogate", "models", "MapOptions", "PredictOptions", "PoorMapWarning", "QUALITY_MARGIN",
+__all__ = ["Surrogate", "models", "MapOptions", "PredictOptions", "PoorMapWarning", "QUALITY_MARGIN", "GAIN_RTOL",
            "quiet_quality", "density_quality", "quality_message", "WEIGHTS_DIR", "REGRID_DIMS", "REGRID_STEP"]
 
 #: Dimensions in which a folded network map of a grid (with ``repair``, the default working grid and no query points)

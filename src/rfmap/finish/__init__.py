@@ -27,10 +27,10 @@ from __future__ import annotations
 
 from .draft import Draft, Prediction, WorkingGridMap, displacement_at
 from .pipeline import FinishOptions, finish, finish_map
-from .quality import QUALITY_MARGIN, PoorMapWarning, density_quality, poor_map_message, quality_message, \
+from .quality import GAIN_RTOL, QUALITY_MARGIN, PoorMapWarning, density_quality, poor_map_message, quality_message, \
     quiet_quality
 from .report import InfoView, MapReport, NetworkReport, RefineReport, RegridReport
 
 __all__ = ["Draft", "Prediction", "WorkingGridMap", "displacement_at", "FinishOptions", "finish", "finish_map",
-           "QUALITY_MARGIN", "PoorMapWarning", "density_quality", "poor_map_message", "quality_message",
+           "QUALITY_MARGIN", "GAIN_RTOL", "PoorMapWarning", "density_quality", "poor_map_message", "quality_message",
            "quiet_quality", "InfoView", "MapReport", "NetworkReport", "RefineReport", "RegridReport"]

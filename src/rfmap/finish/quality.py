@@ -1,7 +1,8 @@
 r"""Judging a density map: is the density more equal after it than before, and a warning when it is not.
 
-A density map that leaves :math:`\mathrm{Std}(\tilde\rho)` above the input's undid more than it did
-(:func:`density_quality`); :class:`PoorMapWarning` says so with the numbers and the remedies
+A density map that leaves :math:`\mathrm{Std}(\tilde\rho)` above the input's undid more than it did, and one that
+does not lower it by at least the fraction :data:`GAIN_RTOL` brought no gain (:func:`density_quality`);
+:class:`PoorMapWarning` says so with the numbers and the remedies
 (:func:`quality_message`, :func:`poor_map_message`), and :func:`quiet_quality` silences it where the metrics are
 reported anyway.
 """
@@ -20,17 +21,28 @@ from ..core.metrics import density_std
 from ..solvers.flow import F32_MARGIN
 from .report import MapReport
 
-__all__ = ["QUALITY_MARGIN", "PoorMapWarning", "quiet_quality", "density_quality", "quality_message",
+__all__ = ["QUALITY_MARGIN", "GAIN_RTOL", "PoorMapWarning", "quiet_quality", "density_quality", "quality_message",
            "poor_map_message"]
 
 #: :func:`density_quality` calls a map worse than the input when its Std(rho~_map) exceeds Std(rho~_orig) by more
 #: than this fraction (far above the single-precision measures' error, so that the identity never counts as worse)
 QUALITY_MARGIN = 1e-4
 
+#: :func:`density_quality` says a map brought no gain when it lowered Std(rho~) by less than this fraction of
+#: Std(rho~_orig): the identity, whose two spreads differ only by round-off, is always such a map
+GAIN_RTOL = 1e-3
+
 
 class PoorMapWarning(RuntimeWarning):
-    """A density map that left the density less equal than it was (:func:`density_quality`); issued by
-    :meth:`rfmap.Surrogate.map` and :func:`rfmap.finish.pipeline.finish_map` with the measured numbers and the remedies."""
+    r"""A density map that did not make the density more equal (:func:`density_quality`); issued by
+    :meth:`rfmap.Surrogate.map` and :func:`rfmap.finish.pipeline.finish_map` with the measured numbers and the remedies.
+
+    The check has a stated relative tolerance :math:`t` = :data:`GAIN_RTOL` (one in a thousand): a map is flagged
+    unless :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) < (1 - t)\,\mathrm{Std}(\tilde\rho_{\text{orig}})`, and
+    also when it had to be shortened (:func:`rfmap.finish.shorten.shorten_map`).  The identity map of a density that
+    is not uniform is therefore flagged on every grid: its two spreads are equal up to round-off, which lies far
+    inside the tolerance.
+    """
 
 
 @contextlib.contextmanager
@@ -62,14 +74,17 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     Returns
     -------
     dict
-        ``std_rho_orig``, ``std_rho_map``, ``min_jacobian`` and ``worse``: whether Std(rho~_map) exceeds
+        ``std_rho_orig``, ``std_rho_map``, ``min_jacobian``; ``worse``: whether Std(rho~_map) exceeds
         Std(rho~_orig) by more than the fraction :data:`QUALITY_MARGIN` and 1e-5 (or the map is not finite), i.e.
-        the map undid more than it did.
+        the map undid more than it did; and ``no_gain``: whether Std(rho~_map) is not below
+        ``(1 - GAIN_RTOL) * Std(rho~_orig)`` (:data:`GAIN_RTOL`; or the map is not finite), i.e. the map did not make
+        the density measurably more equal.  A map that is worse brings no gain; the identity brings none either, on
+        every grid, whatever the round-off of the two spreads.
     """
     d = mapped.shape[1]
     if not np.isfinite(mapped).all():
         return {"std_rho_orig": float("nan"), "std_rho_map": float("nan"), "min_jacobian": float("nan"),
-                "worse": True}
+                "worse": True, "no_gain": True}
     # every element of the N-grid has the same reference measure; the mapped measures in single precision (faster;
     # book: Design decisions) unless an element is too thin for it (as rfmap.solvers.flow.F32_MARGIN)
     ref_measure = 1.0 / ((n - 1) ** d * math.factorial(d))
@@ -80,7 +95,8 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     orig = float((mean / mean.mean()).std())  # density_std with equal measures
     new = density_std(mean * ref_measure, meas)
     return {"std_rho_orig": orig, "std_rho_map": new, "min_jacobian": float(meas.min()) / ref_measure,
-            "worse": bool(not new <= orig * (1.0 + QUALITY_MARGIN) + 1e-5)}  # float32 round-off: ~1e-6
+            "worse": bool(not new <= orig * (1.0 + QUALITY_MARGIN) + 1e-5),  # float32 round-off: ~1e-6
+            "no_gain": bool(not new < orig * (1.0 - GAIN_RTOL))}
 
 
 def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish: str = "polish=True",
@@ -98,19 +114,26 @@ def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish
                 f"itself (Std(rho~_map) {quality['std_rho_map']:.3g}, smallest Jacobian "
                 f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
                 f"refinement) or {polish} ({finish}) can help")
-    return (f"the network's map leaves this density less equal than it was (Std(rho~_map) "
-            f"{quality['std_rho_map']:.3g} > Std(rho~_orig) {quality['std_rho_orig']:.3g}, smallest Jacobian "
-            f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
-            f"refinement) or {polish} ({finish}) can help")
+    if quality["worse"]:
+        return (f"the network's map leaves this density less equal than it was (Std(rho~_map) "
+                f"{quality['std_rho_map']:.3g} > Std(rho~_orig) {quality['std_rho_orig']:.3g}, smallest Jacobian "
+                f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
+                f"refinement) or {polish} ({finish}) can help")
+    return (f"the network's map does not make this density more equal (Std(rho~_map) "
+            f"{quality['std_rho_map']:.4g}, Std(rho~_orig) {quality['std_rho_orig']:.4g}: less than "
+            f"{GAIN_RTOL:.1%} lower; smallest Jacobian {quality['min_jacobian']:.3g}): the field is probably unlike "
+            f"the training fields, or the network is untrained; {refine} (weight refinement) or {polish} ({finish}) "
+            f"can help")
 
 
 
 def poor_map_message(report: MapReport, refine: str = "refine=True", polish: str = "polish=True") -> str | None:
-    """The :func:`quality_message` of a finished density map that left the density less equal than it was or had to
-    be shortened not to, else ``None``.  A map of a grid is judged by ``report.quality``; a map of query points, which
+    """The :func:`quality_message` of a finished density map that did not make the density more equal (``no_gain``
+    of :func:`density_quality`, within :data:`GAIN_RTOL`) or had to be shortened not to leave it less equal, else
+    ``None``.  A map of a grid is judged by ``report.quality``; a map of query points, which
     has no grid of its own, by the working grid's judgement in ``report.shorten``."""
     if report.quality is not None:
-        if report.quality["worse"] or report.shorten is not None:
+        if report.quality["worse"] or report.quality.get("no_gain", False) or report.shorten is not None:
             return quality_message(report.quality, refine, polish, report.shorten)
         return None
     if report.shorten is not None:

@@ -87,7 +87,7 @@ def shorten_query(draft: Draft) -> tuple[np.ndarray, dict[str, Any] | None]:
     nw, grid, u = work.n, work.points, work.mapped
     dens = draft.prediction.work_field.reshape(-1)
     q = density_quality(u, dens, nw)
-    if q["std_rho_map"] < q["std_rho_orig"]:
+    if q["std_rho_map"] < q["std_rho_orig"] or np.array_equal(u, grid):  # more equal, or the identity
         return mapped, None
     u_s, report = shorten_map(grid, u, dens, nw, boundary=draft.boundary)
     q_after = density_quality(u_s, dens, nw)

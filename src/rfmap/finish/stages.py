@@ -229,7 +229,8 @@ def shorten(draft: Draft) -> Draft:
         return draft.then(mapped, time.perf_counter() - t0, shorten=report)
     n = draft.grid_n
     quality = draft.report.quality or density_quality(res.mapped_points, res.field, n)
-    if quality["std_rho_map"] < quality["std_rho_orig"]:
+    if quality["std_rho_map"] < quality["std_rho_orig"] or np.array_equal(res.mapped_points, res.ref_points):
+        # more equal already, or the identity: nothing to shorten (the identity is judged, as no gain)
         return draft.then(seconds=time.perf_counter() - t0, quality=quality)
     mapped, report = shorten_map(res.ref_points, res.mapped_points, res.field, n, boundary=draft.boundary)
     after = density_quality(mapped, res.field, n)
