@@ -512,7 +512,8 @@ def random_fields_figure(mesh, densities: dict, mu_panels: dict, maps: dict, *, 
 
 def jitter_figure(mesh, jittered, h: float, window=(0.45, 0.75, 0.1, 0.4), *, width: float = TEXT_WIDTH_IN):
     """Sobol-jittered sampling of a grid mesh: the offset of every vertex in grid spacings ``h`` (left), and a zoom
-    on ``window`` = (x0, x1, y0, y1) with the regular mesh in grey under the jittered one in black (right).
+    on ``window`` = (x0, x1, y0, y1) with the regular mesh in wide light grey lines under the jittered one in thin
+    black lines (right).
     Returns the figure."""
     import matplotlib.pyplot as plt
 
@@ -521,10 +522,11 @@ def jitter_figure(mesh, jittered, h: float, window=(0.45, 0.75, 0.1, 0.4), *, wi
     fig, axes = plt.subplots(1, 2, figsize=(width, width / 2), layout="constrained")
     plot_density(axes[0], mesh.points, mesh.elements, offset, cmap="magma", vmin=0,
                  title="offset $|x_{jit} - x| / h$")
-    axes[1].triplot(mesh.points[:, 0], mesh.points[:, 1], mesh.elements, color="0.75", lw=0.6)
-    axes[1].triplot(jittered[:, 0], jittered[:, 1], mesh.elements, color="k", lw=0.7)
+    # the regular mesh wide and light under the jittered one thin and dark, so that both stay visible
+    axes[1].triplot(mesh.points[:, 0], mesh.points[:, 1], mesh.elements, color="0.7", lw=2.2)
+    axes[1].triplot(jittered[:, 0], jittered[:, 1], mesh.elements, color="k", lw=0.6)
     axes[1].set_xlim(window[:2])
     axes[1].set_ylim(window[2:])
     axes[1].set_aspect("equal")
-    axes[1].set_title("zoom: regular (grey),\njittered (black)")
+    axes[1].set_title("zoom: regular (wide grey),\njittered (thin black)")
     return fig
