@@ -98,3 +98,24 @@ def test_learning_rates_are_drawn_on_a_log_axis_one_line_per_schedule():
     assert list(ax.lines[1].get_xdata()) == [2, 3]  # the zero rate is left out of the log axis
     assert [t.get_text() for t in ax.get_legend().get_texts()] == ["step decay", "warm-up"]
     plt.close(fig)
+
+
+def test_plot_batch_can_draw_the_jittered_meshes():
+    import numpy as np
+
+    from rfmap.training.config import get_config
+
+    cfg = get_config("deq2d-square", "ci")
+    batch = sample_batch(cfg.task, seed=0, step=0, indices=range(2), n=9, jitter=cfg.jitter,
+                         density_cfg=cfg.density_field)
+    fig, axes = plt.subplots(1, 4)
+    plot_batch(axes[:2], batch)
+    plot_batch(axes[2:], batch, mesh=True)
+    for ax in axes[:2]:
+        assert not ax.lines
+    for i, ax in enumerate(axes[2:]):  # the edges drawn through the sample's own jittered vertices
+        xs = np.concatenate([line.get_xdata() for line in ax.lines])
+        xs = xs[np.isfinite(xs)]
+        assert np.isin(xs, batch.ref[i].numpy()[:, 0]).all()
+        assert not np.allclose(batch.ref[i].numpy(), batch.ref[1 - i].numpy())
+    plt.close(fig)

@@ -17,9 +17,22 @@ LOSS_TERMS = {"density": r"density mismatch $L(\tilde\rho - 1)$", "mu2": r"Beltr
               "area": "area constraint"}
 
 
-def plot_batch(axes, batch, *, title: str = "sample"):
+def plot_batch(axes, batch, *, title: str = "sample", mesh: bool = False):
     """The random fields of a training batch (:class:`rfmap.tasks.base.Batch`, 2D), one per axes, on their jittered
-    mesh: the unit-mass density at the vertices, or :math:`|\\mu|` per triangle for a Beltrami batch."""
+    mesh: the unit-mass density at the vertices, or :math:`|\\mu|` per triangle for a Beltrami batch.
+
+    Parameters
+    ----------
+    axes : iterable of matplotlib Axes
+        One per sample drawn, from the first.
+    batch : rfmap.tasks.base.Batch
+        A 2D batch (:func:`rfmap.tasks.sample_batch`).
+    title : str
+        Start of every panel's title, followed by the sample's index, what is drawn and the grid side.
+    mesh : bool
+        Also draw the edges of each sample's jittered mesh, in thin white lines over the colours, so that the
+        irregular point set the network sees shows.
+    """
     el = batch.elements.numpy()
     for i, ax in enumerate(axes):
         ref = batch.ref[i].numpy()
@@ -28,6 +41,8 @@ def plot_batch(axes, batch, *, title: str = "sample"):
         else:
             plot_density(ax, ref, el, batch.mu_target[i].abs().numpy(), cmap="magma", vmin=0,
                          title=f"{title} {i}: $|\\mu|$, N = {batch.n}")
+        if mesh:
+            ax.triplot(ref[:, 0], ref[:, 1], el, color="white", lw=0.3, alpha=0.8)
         ax.set_xticks([])
         ax.set_yticks([])
 
