@@ -16,3 +16,18 @@ def test_side_by_side_marks_the_raw_column_only():
     md = side_by_side(t, {"raw": ("U-Net (native)", "raw_std"),
                           "repaired": ("U-Net (native)", "std_rho_map")}, "N")
     assert md.splitlines()[-1] == "| 256 | folded (8,264 flips) | 0.22 |"
+
+
+def test_side_by_side_shows_as_a_table_when_it_is_a_cells_value():
+    t = Table("tab:x", "x", ["raw_std"])
+    t.add("32", "FNO", {"raw_std": 0.2})
+    md = side_by_side(t, {"raw": ("FNO", "raw_std")}, "N")
+    assert isinstance(md, str) and md._repr_markdown_() == str(md)
+
+
+def test_speed_table_gives_each_methods_time_with_its_unit():
+    from rfmap.paper.compare import speed_table
+
+    md = speed_table({"U-Net": {"time": 0.0123, "std_rho_map": 0.08},
+                      "flow solver": {"time": 1.5, "std_rho_map": 0.01}})
+    assert md.splitlines()[2:] == ["| U-Net | 12.3 ms | 0.08 |", "| flow solver | 1.50 s | 0.01 |"]

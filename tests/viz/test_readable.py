@@ -123,3 +123,33 @@ def test_render_volume_cuts_along_flat_faces(clip):
     # a flat cut: the kept volume is exactly that of the half-space (plane) or of the cube less an octant
     expected = 0.5 if clip == "plane" else 7 / 8
     assert cut.volume == pytest.approx(expected, abs=1e-9)
+
+
+def test_validation_against_time_can_give_each_runs_minutes():
+    from rfmap.viz import validation_vs_time
+
+    meta = {"wall_time": 2688.0,
+            "history": {"validation": [{"elapsed": e, "std_rho_map": 0.2} for e in (60.0, 2688.0)]}}
+    with style():
+        ax = validation_vs_time({"U-Net": meta}, minutes=True)
+        assert [t.get_text() for t in ax.get_legend().get_texts()] == ["U-Net, 44.8 min"]
+    plt.close(ax.figure)
+
+
+def test_resolution_panels_mark_a_folded_raw_map_instead_of_plotting_it():
+    """A folded raw map (Std 127) is a cross at the top of the raw panel, not a point that stretches the axis."""
+    from rfmap.paper.tables import Table
+    from rfmap.viz import resolution_panels
+
+    t = Table("tab:x", "x", ["raw_std", "std_rho_map", "n_flipped"])
+    for n, raw, flips in ((32, 0.1, 0), (64, 0.12, 0), (256, 127.0, 8264)):
+        t.add(str(n), "U-Net (native)", {"raw_std": raw, "std_rho_map": 0.1, "n_flipped": flips})
+    with style():
+        fig = resolution_panels(t)
+        raw = fig.axes[0]
+        values = [y for line in raw.get_lines() if line.get_transform() == raw.transData for y in line.get_ydata()]
+        assert max(values) < 1 and raw.get_ylim()[1] < 10
+        assert "folded (not plotted)" in [t.get_text() for t in raw.get_legend().get_texts()]
+        assert fig.axes[1].get_legend() is None
+        _readable(fig)
+    plt.close(fig)

@@ -27,7 +27,8 @@ from .comparison import format_time
 from .tables import Table, format_sig
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
-           "generalization_tables", "inference_table", "speed_against_flow", "wins", "folded_cell", "side_by_side"]
+           "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins", "folded_cell", "side_by_side",
+           "MarkdownText"]
 
 
 def parameter_count(model) -> int:
@@ -51,7 +52,8 @@ def model_table(surs: dict) -> Table:
     """Architecture, parameters, training steps and wall time (cumulative over ``--init`` chains) and the final
     held-out validation metric of each model (its selection score where recorded), from its metadata."""
     _check(surs)
-    t = Table("tab:models", "The models", ["parameters", "steps", "train_time", "validation"])
+    t = Table("tab:models", "The models", ["parameters", "steps", "train_time", "validation"],
+              heads=("model", "network"))
     for name, s in surs.items():
         meta = s.meta
         mean = (meta.get("final_metrics") or {}).get("mean") or {}
@@ -191,6 +193,14 @@ def speed_against_flow(surs: dict, n: int = 51, field: str = "multi-freq", repea
     return out
 
 
+def speed_table(speed: dict) -> "MarkdownText":
+    """The result of :func:`speed_against_flow` as a Markdown table (one row per model and the flow solver: the
+    median time with its unit and the Std(ρ̃_map) the map leaves), shown as a table when it is a cell's value."""
+    lines = ["| method | time of one map | Std ρ̃ map |", "|---|---|---|"]
+    lines += [f"| {name} | {format_time(v['time'])} | {format_sig(v['std_rho_map'])} |" for name, v in speed.items()]
+    return MarkdownText("\n".join(lines))
+
+
 def wins(table: Table, column: str = "std_rho_map", *, lower: bool = True) -> dict[str, int]:
     """How many cases of ``table`` each method wins on ``column`` (ties go to both); methods are the table's
     distinct ``method`` labels, compared case by case."""
@@ -220,8 +230,17 @@ def folded_cell(value, flips: int = 0, folded: int | None = None) -> str:
     return format_sig(value)
 
 
-def side_by_side(table: Table, columns: dict, case_title: str) -> str:
-    """One row per case of a comparison table, one column per (method, column) pair, as Markdown.
+class MarkdownText(str):
+    """Markdown text that a notebook shows rendered when it is a cell's value (``_repr_markdown_``); otherwise a
+    plain ``str``."""
+
+    def _repr_markdown_(self) -> str:
+        return str(self)
+
+
+def side_by_side(table: Table, columns: dict, case_title: str) -> MarkdownText:
+    """One row per case of a comparison table, one column per (method, column) pair, as Markdown that a notebook
+    shows as a table when it is the cell's value.
 
     ``columns`` maps a header to ``(method, column)``.  A raw map that folds (``n_flipped`` > 0 in a row of
     :func:`paper_fields_table`, :func:`resolution_table` or :func:`points_table`) reads ``folded (n flips)``
@@ -244,4 +263,4 @@ def side_by_side(table: Table, columns: dict, case_title: str) -> str:
     head = [case_title, *columns]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join([c] + [cell(c, m, col) for m, col in columns.values()]) + " |" for c in cases]
-    return "\n".join(lines)
+    return MarkdownText("\n".join(lines))

@@ -97,6 +97,8 @@ class Table:
     #: Markdown cells of a column in one notation throughout, ``{column: function of the value}`` (a missing value
     #: is an em dash); the other columns by :func:`format_value`, and the CSV always so
     formats: dict = field(default_factory=dict)
+    #: the Markdown heads of the ``case`` and ``method`` columns
+    heads: tuple[str, str] = ("case", "method")
 
     def cell(self, value, column: str) -> str:
         """One Markdown cell: by the column's entry of :attr:`formats`, else :func:`format_value`."""
@@ -123,7 +125,7 @@ class Table:
         parts = []
         for i in range(0, max(len(cols), 1), step):
             chunk = cols[i:i + step]
-            head = ["case", "method"] + [COLUMN_TITLES.get(c, c).replace("|", "\\|") for c in chunk]
+            head = list(self.heads) + [COLUMN_TITLES.get(c, c).replace("|", "\\|") for c in chunk]
             lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
             for case, method, vals in self.rows:
                 lines.append("| " + " | ".join([case, method] + [self.cell(vals.get(c), c) for c in chunk]) + " |")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["time_accuracy_figure", "displacement_demand_figure", "table_lines", "shorten_curve", "COLUMN_NAMES",
+__all__ = ["time_accuracy_figure", "displacement_demand_figure", "table_lines", "resolution_panels", "shorten_curve", "COLUMN_NAMES",
            "plain_log_ticks", "decade_ticks"]
 
 
@@ -117,21 +117,33 @@ def displacement_demand_figure(records: list[dict], *, title: str | None = None)
     return fig
 
 
-def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = True):
+def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = True, mark_folded: bool = False):
     """One line per ``method`` of an :class:`rfmap.paper.tables.Table` whose cases are numbers (e.g. grid sides):
-    ``column`` against the case; returns the axes."""
+    ``column`` against the case; returns the axes.
+
+    With ``mark_folded``, a row whose raw map folded (``n_flipped`` > 0, for the ``raw_std`` column) is not
+    plotted as a value, since the Std of a map with negative areas is not a spread of the density: it is marked by
+    a cross at the top of the axes, in its method's colour, and the legend names the mark "folded"."""
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
     from matplotlib.ticker import NullLocator
 
     if ax is None:
         _, ax = plt.subplots(figsize=(5.2, 3.4), layout="constrained")
     methods = list(dict.fromkeys(m for _, m, _ in table.rows))
+    folded_any = False
     for k, method in enumerate(methods):
-        pts = sorted((float(c), v[column]) for c, m, v in table.rows if m == method and v.get(column) is not None)
+        color = f"C{k // 2 if len(methods) > 2 else k}"
+        rows = [(float(c), v) for c, m, v in table.rows if m == method and v.get(column) is not None]
+        folded = [c for c, v in rows if mark_folded and column == "raw_std" and (v.get("n_flipped") or 0) > 0]
+        pts = sorted((c, v[column]) for c, v in rows if c not in folded)
+        ls = "--" if "native" in method else "-"
         if pts:
-            ls = "--" if "native" in method else "-"
-            ax.plot(*zip(*pts), ls, marker="o", ms=3, lw=1.2, color=f"C{k // 2 if len(methods) > 2 else k}",
-                    label=method)
+            ax.plot(*zip(*pts), ls, marker="o", ms=3, lw=1.2, color=color, label=method)
+        if folded:
+            folded_any = True
+            ax.plot(folded, [0.96] * len(folded), "x", ms=7, mew=1.6, color=color,
+                    transform=ax.get_xaxis_transform(), clip_on=False)
     if logx:
         ax.set_xscale("log", base=2)
         ns = sorted({float(c) for c, _, _ in table.rows})
@@ -140,8 +152,29 @@ def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = Tru
     ax.set_yscale("log")
     plain_log_ticks(ax.yaxis)
     ax.set(xlabel="N", ylabel=COLUMN_NAMES.get(column, column))
-    ax.legend()
+    handles, labels = ax.get_legend_handles_labels()
+    if folded_any:
+        handles.append(Line2D([], [], ls="", marker="x", ms=7, mew=1.6, color="0.3"))
+        labels.append("folded (not plotted)")
+    ax.legend(handles, labels)
     return ax
+
+
+def resolution_panels(table, *, title: str | None = None):
+    """Two panels of a resolution table (:func:`rfmap.paper.compare.resolution_table`) against the grid side:
+    the raw network map (left; a folded map is marked by a cross, not plotted, see :func:`table_lines`) and the map
+    after the bijectivity repair (right), on one y axis, with one legend; returns the figure."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(7.2, 3.3), layout="constrained", sharey=True)
+    table_lines(table, "raw_std", axes[0], mark_folded=True)
+    table_lines(table, "std_rho_map", axes[1])
+    axes[0].set(title="raw network map", ylabel=COLUMN_NAMES["std_rho_map"])
+    axes[1].set(title="after bijectivity repair", ylabel="")
+    axes[1].get_legend().remove()
+    if title:
+        fig.suptitle(title)
+    return fig
 
 
 def shorten_curve(report: dict, ax=None, *, title: str | None = None):

@@ -319,7 +319,7 @@ def _folded_marks(ax, xs, val, color):
 
 
 def validation_vs_time(metas: dict, ax=None, *, key: str | None = None, logx: bool = False,
-                       legend: str = "inside", mark_folded: bool = False):
+                       legend: str = "inside", mark_folded: bool = False, minutes: bool = False):
     """The mean held-out validation metric of each model against the wall time of its last run (minutes), from the
     metadata histories (``Surrogate.meta``); the minutes of the earlier runs of an ``--init`` chain, whose curves are
     not stored, are given in the legend, so that every curve starts at zero and the axis spans the data. ``key``
@@ -327,7 +327,8 @@ def validation_vs_time(metas: dict, ax=None, *, key: str | None = None, logx: bo
     axis (linear when the values span less than a factor of 3); ``logx`` puts the minutes on a log axis too, so that
     short and long runs both read; ``legend="outside"`` puts the legend below the axes, ``None`` leaves it out;
     ``mark_folded`` draws open markers on the states whose maps folded on some held-out field (their plain mean
-    includes the Std of a folded map, which is what makes a curve spike); returns the axes."""
+    includes the Std of a folded map, which is what makes a curve spike); ``minutes`` adds the wall time of each
+    model's last run to its legend entry; returns the axes."""
     import matplotlib.pyplot as plt
 
     if key is None:
@@ -341,6 +342,8 @@ def validation_vs_time(metas: dict, ax=None, *, key: str | None = None, logx: bo
             continue
         earlier = float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) - float(meta.get("wall_time", 0.0))
         label = f"{name} (after {earlier / 60:,.0f} min of earlier runs)" if earlier >= 30 else name
+        if minutes:
+            label += f", {float(meta.get('wall_time', 0.0)) / 60:.3g} min"
         if logx:
             val = [v for v in val if v["elapsed"] > 0]
         xs, ys = [v["elapsed"] / 60 for v in val], [v[key] for v in val]
