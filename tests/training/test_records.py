@@ -34,6 +34,10 @@ def test_collect_reads_curves_and_keeps_the_final_point_only_for_the_last_state(
     assert b["step"] == [10, 12] and b["total_steps"] == 12 and b["total_time"] == 9.0
     v = S.study_values(data)
     assert v["winner"] == "A" and v["margin"] == pytest.approx(0.6 / 0.4) and v["run1_steps"] == 12
+    assert v["run0_best_at_end"] and v["run1_best_at_end"] and v["still_improving"]  # both best at the end
+    data["runs"]["B"]["score"] = [0.6, 0.7]
+    v = S.study_values(data)
+    assert v["run0_best_at_end"] and not v["run1_best_at_end"] and not v["still_improving"]
     table = S.study_table(data)
     assert table.loc["A", "at step"] == 20 and table.loc["B", "best score"] == 0.6
 

@@ -97,22 +97,25 @@ def study_table(study: dict):
 def study_values(study: dict) -> dict:
     """The numbers a page quotes from a study: per run (its position ``i`` in the study) ``run{i}_best`` (the best
     score of the run's own states, after step 0), ``run{i}_last``, ``run{i}_steps`` and ``run{i}_minutes``,
-    ``run{i}_label``; ``start`` (the score at step 0, where validated: the weights a continued run started from);
-    ``winner`` (the label of the run with the lowest best score), ``loser``, ``margin`` (the loser's best score over
-    the winner's) and ``minutes``."""
+    ``run{i}_label``, ``run{i}_best_at_end`` (whether the run's best score is that of its last validation, i.e. it
+    was still improving when it stopped); ``start`` (the score at step 0, where validated: the weights a continued
+    run started from); ``winner`` (the label of the run with the lowest best score), ``loser``, ``margin`` (the
+    loser's best score over the winner's), ``still_improving`` (every run's best at its end) and ``minutes``."""
     out: dict = {}
     best = {}
     for i, (label, r) in enumerate(study["runs"].items()):
         # a run's own states: not the weights it started from (validated at step 0 when it continues others)
         own = [v for st, v in zip(r["step"], r["score"]) if st > 0] or r["score"]
         out.update({f"run{i}_label": label, f"run{i}_best": min(own), f"run{i}_last": r["score"][-1],
-                    f"run{i}_steps": r["total_steps"], f"run{i}_minutes": r["total_time"] / 60.0})
+                    f"run{i}_steps": r["total_steps"], f"run{i}_minutes": r["total_time"] / 60.0,
+                    f"run{i}_best_at_end": r["score"][-1] <= min(own)})
         if r["step"] and r["step"][0] == 0:
             out["start"] = r["score"][0]
         best[label] = min(own)
     order = sorted(best, key=best.get)
     out.update(winner=order[0], loser=order[-1], margin=best[order[-1]] / best[order[0]],
-               minutes=max(r["total_time"] for r in study["runs"].values()) / 60.0)
+               minutes=max(r["total_time"] for r in study["runs"].values()) / 60.0,
+               still_improving=all(out[f"run{i}_best_at_end"] for i in range(len(best))))
     return out
 
 
