@@ -94,3 +94,29 @@ def test_folded_states_are_read_from_old_and_new_histories():
     assert _folded_state({"folded_fields": 2, "n_flipped": 0})
     assert not _folded_state({"folded_fields": 0, "n_flipped": 5})  # counted fields win
     assert _folded_state({"n_flipped": 3}) and not _folded_state({"n_flipped": 0}) and not _folded_state({})
+
+
+def test_the_diffusion_chapters_figures_draw_their_data():
+    from rfmap.core.mesh import grid_mesh
+    from rfmap.core.result import MapResult
+    from rfmap.viz import boundaries_figure, grid_convergence_figure, solve_cost_figure, volume_panels_figure
+
+    fig = grid_convergence_figure([9, 17, 33], [0.1, 0.03, 0.01], title="t")
+    ax = fig.axes[0]
+    assert ax.get_xscale() == ax.get_yscale() == "log"
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["1/8", "1/16", "1/32"]
+    np.testing.assert_allclose(ax.lines[0].get_xdata(), [1 / 8, 1 / 16, 1 / 32])
+    plt.close(fig)
+    fig = solve_cost_figure({2: [(17, 289, 0.1), (33, 1089, 0.3)], 3: [(5, 125, 0.2, 7), (9, 729, 1.0, 9)]})
+    ax = fig.axes[0]
+    assert [line.get_label() for line in ax.lines] == ["2D", "3D"]
+    np.testing.assert_allclose(ax.lines[1].get_ydata(), [0.2, 1.0])
+    plt.close(fig)
+    m = grid_mesh(9, 2)
+    res = MapResult(m.points, m.points * 1.1, m.elements, np.ones(len(m.points)), kind="density")
+    fig = boundaries_figure({"a": res, "b": res}, np.ones(len(m.elements)), n=9)
+    assert [ax.get_title() for ax in fig.axes] == ["a", "b"]
+    plt.close(fig)
+    fig = volume_panels_figure([np.zeros((4, 4, 3))] * 3, ["x", "y", "z"], clim=(0, 2), label="rho")
+    assert [ax.get_title() for ax in fig.axes[:3]] == ["x", "y", "z"] and fig.axes[3].get_xlabel() == "rho"
+    plt.close(fig)

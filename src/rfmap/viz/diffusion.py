@@ -6,9 +6,11 @@ import numpy as np
 
 from .figures import colorbar, frameless
 from .meshes import TEXT_WIDTH_IN, plot_density, plot_mesh
+from .studies import plain_log_ticks
 from .volumes import CAMERA_3D, render_lattice, render_slices
 
-__all__ = ["dem_steps_figure", "overview_figure"]
+__all__ = ["dem_steps_figure", "overview_figure", "grid_convergence_figure", "solve_cost_figure",
+           "boundaries_figure", "volume_panels_figure"]
 
 
 def dem_steps_figure(densities: dict, meshes: dict, rho0, elements, *, n: int, lines: int = 12):
@@ -53,7 +55,10 @@ def dem_steps_figure(densities: dict, meshes: dict, rho0, elements, *, n: int, l
     hist.yaxis.tick_right()
     hist.yaxis.set_label_position("right")
     hist.set_title(r"$\tilde\rho$ per triangle")
-    hist.legend()
+    # head room above the tallest bar on the log axis, where the legend sits without hiding a bar
+    low, high = hist.get_ylim()
+    hist.set_ylim(low, high * 40)
+    hist.legend(loc="upper right", framealpha=0.9)
     return fig
 
 
@@ -105,4 +110,133 @@ def overview_figure(beltrami, density, *, name: str = "T4", slices=(0.25, 0.75),
     ax.set_axis_off()
     _arrow(fig.add_subplot(grid[0, 1]), "field $\\mu$\n$\\downarrow$\nsurrogate $\\mathcal{N}_\\theta$")
     _arrow(fig.add_subplot(grid[1, 1]), "field $\\rho$\n$\\downarrow$\nsurrogate $\\mathcal{N}_\\theta$")
+    return fig
+
+
+def grid_convergence_figure(sides, values, *, title: str = "",
+                            ylabel: str = r"Std($\tilde\rho$) on the mapped mesh"):
+    r"""A quantity against the grid spacing :math:`h = 1/(N-1)` of the grid sides ``sides``, on log axes, with a
+    tick at every spacing of the study labelled ``1/(N-1)``.  Returns the figure.
+
+    Parameters
+    ----------
+    sides : sequence of int
+        The grid sides :math:`N`.
+    values : sequence of float
+        The quantity at each side (positive), by default Std(rho~) of the mapped mesh.
+    title, ylabel : str
+        The axes' title and the label of the quantity.
+    """
+    import matplotlib.pyplot as plt
+
+    sides = np.asarray(sides)
+    h = 1.0 / (sides - 1)
+    fig, ax = plt.subplots(figsize=(4.4, 3.3), layout="constrained")
+    ax.loglog(h, np.asarray(values), "o-")
+    ax.set_xticks(h, [f"1/{n - 1}" for n in sides])
+    ax.xaxis.set_minor_locator(plt.NullLocator())
+    plain_log_ticks(ax.yaxis)
+    ax.set_xlabel("grid spacing $h$")
+    ax.set_ylabel(ylabel)
+    if title:
+        ax.set_title(title)
+    return fig
+
+
+def solve_cost_figure(cost: dict, *, title: str = ""):
+    """Wall time against the number of vertices, one line per dimension, on log axes with plain tick labels.
+
+    Parameters
+    ----------
+    cost : dict
+        Maps a dimension (2, 3) to its rows ``(N, vertices, seconds, ...)``; further entries of a row are ignored.
+    title : str
+        The axes' title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(4.6, 3.4), layout="constrained")
+    for (d, rows), marker in zip(sorted(cost.items()), ["o-", "s-", "^-"]):
+        ax.loglog([r[1] for r in rows], [r[2] for r in rows], marker, label=f"{d}D")
+    plain_log_ticks(ax.xaxis)
+    plain_log_ticks(ax.yaxis)
+    ax.set_xlabel("number of vertices")
+    ax.set_ylabel("time (s)")
+    if title:
+        ax.set_title(title)
+    ax.legend()
+    return fig
+
+
+def boundaries_figure(results: dict, rho0, *, n: int, vmax: float | None = None, lines: int = 40):
+    r"""Mapped meshes side by side, each panel's triangles coloured by their initial :math:`\tilde\rho` ``rho0`` on
+    one colour scale, with the grid lines in white and the unit square dashed, so that a free boundary's outline
+    shows against the fixed one.
+
+    Parameters
+    ----------
+    results : dict
+        Maps a panel title to a 2D map of the ``n``-grid (:class:`rfmap.core.result.MapResult`).
+    rho0 : ndarray, shape (m,)
+        The value of every triangle, carried by the maps.
+    n : int
+        Grid side.
+    vmax : float, optional
+        Top of the colour scale (default: the largest value).
+    lines : int
+        At most this many grid lines a direction.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(results), figsize=(TEXT_WIDTH_IN, TEXT_WIDTH_IN / 2), layout="constrained",
+                             squeeze=False)
+    top = float(np.max(rho0)) if vmax is None else vmax
+    for ax, (title, res) in zip(axes[0], results.items()):
+        plot_density(ax, res.mapped_points, res.elements, rho0, vmin=0, vmax=top, colorbar=False, title=title)
+        plot_mesh(ax, res.mapped_points, n=n, max_lines=lines, color="w", lw=0.25)
+        ax.plot([0, 1, 1, 0, 0], [0, 0, 1, 1, 0], "k--", lw=0.6)
+        ax.set_axis_off()
+    return fig
+
+
+def volume_panels_figure(images, titles, *, clim, label: str, cmap: str = "viridis"):
+    """Rendered images side by side (:func:`rfmap.viz.volumes.render_volume`, :func:`render_lattice`) with their
+    titles and one colour bar below them for the colour scale ``clim`` they were rendered on.
+
+    Parameters
+    ----------
+    images : sequence of ndarray
+        RGB(A) images.
+    titles : sequence of str
+        One title per image.
+    clim : (float, float)
+        The colour scale of the renders.
+    label : str
+        Label of the colour bar.
+    cmap : str
+        The colour map of the renders.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+
+    fig, axes = plt.subplots(1, len(images), figsize=(TEXT_WIDTH_IN, 3.1), layout="constrained", squeeze=False)
+    for ax, img, title in zip(axes[0], images, titles):
+        ax.imshow(img)
+        ax.set_title(title)
+        ax.set_axis_off()
+    colorbar(ScalarMappable(Normalize(*clim), cmap), ax=axes[0], location="bottom", shrink=0.6, aspect=30,
+             label=label)
     return fig
