@@ -206,13 +206,26 @@ RULES_TARGET = "scoreboard-rules"
 
 
 def _preamble() -> list[str]:
-    """The criterion, the verdict's rule and the scored metrics, stated once above the introduction's scoreboard."""
+    """The criterion, the verdict's rule and the scored metrics in full, stated once above the case-by-case
+    scoreboard of book/figures.md (the target the introduction and the glossary link to)."""
     rule, metrics = _verdicts()
     return [f"({RULES_TARGET})=", CRITERION, "", rule, "", metrics + (
         " The rows *max |μ| (shown, not scored)* give its means and the number of cases in which the paper's "
         "method is at most the paper's value; where that number falls short of all cases, scoring max |μ| "
         "would lower the verdict. min det J is not shown: what matters in it is its sign, and the chapters count "
         "the folded elements (det J ≤ 0) of every map instead."), ""]
+
+
+#: the rules in brief, above the introduction's scoreboard (in full: :func:`_preamble`, on book/figures.md)
+RULES_SHORT = (
+    "**How to read it.** A case is *met* when the paper's method run here (the network on the requested grid, then "
+    "the paper's weight refinement: `Surrogate.map(field, n, native=True, refine=True, repair=False)`) is at most "
+    "the paper's value. The verdict is *reproduced* when every scored case is met, *partly* when some are, *not "
+    "reproduced* when none is, and *not comparable* when no case has the paper's input. Scored are the mean "
+    "measures the paper's losses drive down: |Δd| and |Δμ|, Std(ρ̃_map), and mean |μ| for DEQ maps; times are not "
+    "scored. *Cases met* counts the cases; the values beside it are means over them, which one large case can "
+    "carry. The rules in full, and every case: {ref}`the scoreboard <" + RULES_TARGET + ">`."
+)
 
 
 def scoreboard(root: Path = ROOT) -> str:
@@ -224,12 +237,7 @@ def scoreboard(root: Path = ROOT) -> str:
     scored, shown_with = _scored(items)
     refs, defs = _footnotes(scored)
     head = ["Paper item", "Verdict", "Metric", "Cases met", "Paper", "Paper's method", "Delivered", "Classical"]
-    lines = _preamble() + [
-             "The column *Cases met* counts the cases in which the paper's method is at most the paper's value; "
-             "the verdict reads these counts. The values beside it are means over the same cases (four test fields, "
-             "or four grid sides, whose input is the paper's). One case with large values can carry such a mean, "
-             "so a mean below the paper's does not say that most cases meet it: {doc}`figures` gives every case.",
-             "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = [RULES_SHORT, "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for it in scored:
         score, nb = it["score"], it["notebook"]
         figs = [numbers[f] for f in shown_with.get(it["label"], [])]
@@ -261,9 +269,7 @@ def full_scoreboard(root: Path = ROOT) -> str:
     scored, _ = _scored(items)
     refs, defs = _footnotes(scored)
     head = ["Paper item", "Case, metric", "Paper", "Paper's method", "Delivered", "Classical", "Met"]
-    lines = [f"The criterion, the verdict's rule and the metrics it scores are stated above the "
-             f"{{ref}}`results at a glance <{RULES_TARGET}>` of the introduction.", "",
-             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines = _preamble() + ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for it in scored:
         score, nb = it["score"], it["notebook"]
         item = (f"{_chapter_link(it, root, in_toc, numbers[it['label']])}{refs[it['label']]}: "

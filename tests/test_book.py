@@ -199,12 +199,15 @@ def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
     n_metrics = sum(len(it["score"]["metrics"]) + len(it["score"].get("shown", {}))
                     for it in _items() if it["score"]["kind"] == "score")
     assert len(rows) == 1 + n_metrics <= 19
-    assert board.count("**Criterion.**") == 1 and "is at most the paper's value" in board
-    assert board.count("**Verdict.**") == 1 and "*not comparable*" in board
+    # the rules in brief above the table, in full (once) above the case-by-case scoreboard
+    assert board.count("**How to read it.**") == 1 and "is at most the paper's value" in board
+    assert "*not comparable*" in board and f"<{mod.RULES_TARGET}>" in board
     head = rows[0]
     for col in ("Verdict", "Paper", "Paper's method", "Delivered", "Classical"):
         assert col in head
     full = mod.full_scoreboard(ROOT)
+    assert full.count("**Criterion.**") == 1 and full.count("**Verdict.**") == 1
+    assert full.count(f"({mod.RULES_TARGET})=") == 1
     for key in ("t4_std_rho_map_rect-peak_native", "t9_std_rho_map_64_met", "t7_verdict", "f10_verdict"):
         assert f"::{key}:s`" in full, key  # pasted by a glue role, not left as text
     for text in (board, full):  # every placeholder became a glue role (a key with a hyphen too)

@@ -214,8 +214,8 @@ class Comparison:
 
     def _case_met(self, case: str, metric: str) -> str:
         """The met cell of a case: ``yes`` / ``no`` / ``—``, or for an input that is not the paper's ``n/c`` with
-        the Std ratios (ours, the paper's) of :func:`rfmap.paper.verdicts.std_ratio` for Std(rho~_map), as ``not
-        comparable (ours 0.125, the paper's 0.194)``."""
+        the Std ratios (the paper's method run here, the paper) of :func:`rfmap.paper.verdicts.std_ratio` for
+        Std(rho~_map), as ``n/c; Std ratio: paper's method 0.125, paper 0.194``."""
         if self.comparable(case):
             met = self.met(case, metric)
             return "—" if met is None else ("yes" if met else "no")
@@ -225,7 +225,7 @@ class Comparison:
                        for m in ("native", "paper"))
         if ours is None or paper is None:
             return "n/c"
-        return f"not comparable (ours {ours:.3g}, the paper's {paper:.3g} as Std(ρ̃_map) / Std(ρ̃_orig))"
+        return f"n/c; Std ratio: paper's method {ours:.3g}, paper {paper:.3g}"
 
     def count(self, metric: str, test: Callable[[str], bool | None] | None = None) -> tuple[int, int]:
         """``(k, m)``: the cases where ``test(case)`` holds (default: :meth:`met`) among the ``m`` it decides."""
