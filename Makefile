@@ -15,7 +15,8 @@
 #                    print its wall time and record it in _build/chapters/NB.time.json
 #   make pages       regenerate the generated book pages (book/figures.md and the scoreboard of book/intro.md from
 #                    src/rfmap/data/figures.json; book/design.md from src/rfmap/data/design.json; the retraining
-#                    commands of book/reproduce.md from the shipped weights' metadata)
+#                    commands of book/reproduce.md from the shipped weights' metadata; the option tables of
+#                    book/api/cli.md from the parsers of rfmap.cli)
 #   make lab         start JupyterLab in the repository root with the book's environment (RFMAP_SCALE, default full)
 #   make clean       remove build outputs (make distclean also removes .venv)
 
@@ -80,6 +81,7 @@ pages: install
 	$(BIN)/python scripts/make_figures_md.py
 	$(BIN)/python scripts/make_design_md.py
 	$(BIN)/python scripts/make_reproduce_md.py
+	$(BIN)/python scripts/make_cli_md.py
 
 lab: install
 	$(NB_ENV) RFMAP_SCALE=$(RFMAP_SCALE) $(BIN)/jupyter lab --ServerApp.root_dir="$(CURDIR)" \

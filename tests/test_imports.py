@@ -65,6 +65,7 @@ LAYERS: dict[str, int] = {
     "rfmap.cartogram.methods.neural": 3, "rfmap.paper.verdicts": 3,
     "rfmap.cartogram.regions": 3, "rfmap.cartogram.projection": 3, "rfmap.paper.compare": 3, "rfmap.training.records": 3,
     "rfmap.cli": 4, "rfmap.cli.__main__": 4, "rfmap.cli.commands": 4, "rfmap.cli.base": 4, "rfmap.cli.cartogram": 4, "rfmap.cli.lazy_parser": 4,
+    "rfmap.cli.reference": 4,
     "rfmap": 4,
 }
 

@@ -316,11 +316,11 @@ def _add_classical(sub) -> None:
     s.add_argument("--boundary", choices=["square", "free", "fixed"], default=None,
                    help="diffusion and flow: square (default) or free; lbs: fixed (default) or square")
     s.add_argument("--out", required=True, help="output .npz")
-    s.add_argument("--quiet", action="store_true")
+    s.add_argument("--quiet", action="store_true", help="print neither progress nor the summary line")
     s.set_defaults(func=cmd_solve)
 
     s = sub.add_parser("metrics", help="print the metrics of a result file as JSON")
-    s.add_argument("file")
+    s.add_argument("file", help="a result file (.npz) written by rfmap solve, map or Surrogate.save")
     s.add_argument("--exact", default=None, help="Beltrami test map to measure |Δd| and |Δμ| against")
     s.set_defaults(func=cmd_metrics)
 
@@ -397,7 +397,7 @@ def _add_training(sub) -> None:
                    help="run each network on the validation grids themselves (default: the config's val_native)")
     s.add_argument("--ship", default=None, metavar="DIR", help="write the best as DIR/NAME.safetensors + .json")
     s.add_argument("--name", default=None, help="file name of the shipped weights (default: the config's name)")
-    s.add_argument("--no-progress", action="store_true")
+    s.add_argument("--no-progress", action="store_true", help="print no progress bar")
     s.set_defaults(func=cmd_validate)
 
 
@@ -419,6 +419,19 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Run one ``rfmap`` sub-command.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after ``rfmap`` (default: those of the process), e.g. ``["models"]``.
+
+    Returns
+    -------
+    int
+        The exit status: 0 on success, 1 where the sub-command says its result falls short (``rfmap cartogram``),
+        2 on bad input (one line on stderr naming the problem, no partial output file left), 130 when interrupted.
+    """
     argv = sys.argv[1:] if argv is None else list(argv)
     args = build_parser(argv[0] if argv else None).parse_args(argv)
     out = getattr(args, "out", None)
@@ -437,17 +450,17 @@ def main(argv=None) -> int:
         return 130
 
 
-#: the sub-commands whose process ends without the interpreter's teardown (:func:`entry`): every file they write is
-#: closed before they return, and they register nothing to run at exit
+# the sub-commands whose process ends without the interpreter's teardown (entry): every file they write is closed
+# before they return, and they register nothing to run at exit
 QUICK_EXIT = ("cartogram",)
 
 
 def entry() -> None:
-    """The ``rfmap`` program (console script and ``python -m rfmap.cli``): :func:`main`, and the process's exit.
-
-    After a sub-command of :data:`QUICK_EXIT`, the process exits at once (``os._exit``, streams flushed) instead of
-    tearing the interpreter down, which frees every module's objects one by one: on a small map that teardown takes
-    a noticeable share of the whole command."""
+    """The ``rfmap`` program (console script and ``python -m rfmap.cli``): runs :func:`main` on the process's
+    arguments and exits with its status."""
+    # after a sub-command of QUICK_EXIT the process exits at once (os._exit, streams flushed) instead of tearing
+    # the interpreter down, which frees every module's objects one by one: on a small map that teardown takes a
+    # noticeable share of the whole command
     argv = sys.argv[1:]
     code = main(argv)
     if argv[:1] and argv[0] in QUICK_EXIT:

@@ -85,7 +85,7 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--no-validate", action="store_true",
                    help="no validation during or after the run (e.g. on an accelerator); score the snapshots "
                         "afterwards with rfmap validate")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--no-progress", action="store_true", help="print no progress bar")
     return p
 
 
