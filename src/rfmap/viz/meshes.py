@@ -459,7 +459,8 @@ def folded_maps_figure(maps: dict, *, ncols: int = 2, width: float = TEXT_WIDTH_
     for ax, (title, r) in zip(axes.ravel(), maps.items()):
         p, el = np.asarray(r.mapped_points), np.asarray(r.elements)
         folded = _folded(p, el)
-        plot_mesh(ax, p, el, n=_grid_side(r), max_lines=max_lines, title=f"{title}\n{len(folded)} folded (red)")
+        count = f"{len(folded)} folded (red)" if len(folded) else "none folded"
+        plot_mesh(ax, p, el, n=_grid_side(r), max_lines=max_lines, title=f"{title}\n{count}")
         for t in folded:
             ax.fill(*p[el[t]].T, color="red", zorder=5)
     for ax in axes.ravel()[len(maps):]:
