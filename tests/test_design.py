@@ -140,7 +140,7 @@ def test_every_decision_says_in_plain_words_what_it_is_for_and_why_it_stays():
     the numbers do not support it), in words; numbers of the record written as powers of ten, not e-notation."""
     page = to_markdown()
     glance = page[page.index("## At a glance"):page.index("## The decisions one by one")]
-    assert glance.count("\n| [") == len(load_decisions())
+    assert glance.count("\n- [") == len(load_decisions())
     for d in load_decisions():
         assert d.get("purpose") and d.get("outcome") and (d.get("kept") or d.get("finding")), d["constant"]
         words = re.sub(r"\b[23]D\b|chapter \d+|counted as 1", "", d["purpose"] + d["outcome"] + d.get("kept", ""))

@@ -198,9 +198,15 @@ def plain_numbers(text: str) -> str:
 
 
 def _row_text(r: dict[str, Any]) -> str:
-    parts = [f"chosen value: {r['chosen']}" if r.get("chosen") else "",
-             f"alternatives: {r['alternative']}" if r.get("alternative") else ""]
-    return plain_numbers(f"- *{r.get('case')}* — " + "; ".join(p for p in parts if p) + ".")
+    """One row of a decision's numbers as a line of a Markdown table: its case, the chosen value's result and the
+    alternatives' (an em dash where the row has none)."""
+    return plain_numbers("| " + " | ".join(_cell(r.get(k)) for k in ("case", "chosen", "alternative")) + " |")
+
+
+def _rows_table(rows: list[dict[str, Any]]) -> list[str]:
+    """A decision's numbers as a table: per case, what the chosen value gave and what the alternatives gave."""
+    return ["| case | with the chosen value | with the alternatives |", "| --- | --- | --- |"] + \
+        [_row_text(r) for r in rows]
 
 
 def _kind(d: dict[str, Any]) -> str:
@@ -234,11 +240,11 @@ def finding(d: dict[str, Any]) -> list[str]:
     if missing:
         raise KeyError(f"{d['constant']}: the finding names rows that the record does not hold: {missing}")
     text = f"**The {_kind(d)} does not support the choice.** {f['text'][0].upper()}{f['text'][1:]}."
-    shown = [_row_text(rows[c]) for c in f.get("rows", [])]
+    shown = [rows[c] for c in f.get("rows", [])]
     if shown:
         text += " " + ("The row that shows it:" if len(shown) == 1 else "The rows that show it:")
     end = f"The constant is left as it is until it has been {_waits(d)}."
-    return [":::{warning}", text, ""] + (shown + [""] if shown else []) + [end, ":::", ""]
+    return [":::{warning}", text, ""] + (_rows_table(shown) + [""] if shown else []) + [end, ":::", ""]
 
 
 def _cell(text: Any) -> str:
@@ -281,7 +287,7 @@ def _details(d: dict[str, Any]) -> list[str]:
     if d.get("data"):
         lines += [f"**Measured on:** {plain_numbers(d['data'].rstrip('.'))}.", ""]
     if d.get("results"):
-        lines += [_row_text(r) for r in d["results"]] + [""]
+        lines += _rows_table(d["results"]) + [""]
     if d.get("notes"):
         lines += [plain_numbers(d["notes"]), ""]
     lines += [f"In the code: `{d['module']}`. {plain_numbers(d['what'])}", "", "::::", ""]
@@ -298,18 +304,28 @@ def _groups(decisions: list[dict[str, Any]]) -> list[tuple[str, list[dict[str, A
 
 
 def _glance(decisions: list[dict[str, Any]]) -> list[str]:
-    """The page's one table: per decision its name and value, what it controls, the alternatives tried, what the
-    measurement showed and why the value is kept (or that the numbers do not support it)."""
-    lines = ["| Decision: value | What it controls | Alternatives tried | Measured outcome | Kept because |",
-             "| --- | --- | --- | --- | --- |"]
+    """The page's overview: per group of decisions a list, one item per decision with its name and value, what it
+    controls, the alternatives tried, what the measurement showed and why the value is kept (or that the numbers do
+    not support it). A list rather than a five-column table, whose columns the page's text width would squeeze to a
+    word or two per line."""
+    lines = []
     for heading, group in _groups(decisions):
-        lines.append(f"| **{heading}** | | | | |")
+        lines += [f"**{heading}**", ""]
         for d in group:
-            name = f"[{_cell(display_name(d))}]({_label(d)}): {_cell(readable_value(d))}"
             alternatives = "; ".join(d.get("alternatives") or []) or "none recorded"
-            lines.append(f"| {name} | {_cell(d.get('purpose') or d['what'])} | {_cell(alternatives)} | "
-                         f"{_cell(d.get('outcome'))} | {_cell(kept_text(d))} |")
-    return lines + [""]
+            lines.append(f"- [{display_name(d)}]({_label(d)}): {readable_value(d)}. "
+                         f"{_sentence(d.get('purpose') or d['what'])} *Tried instead:* {_sentence(alternatives)} "
+                         f"*Outcome:* {_sentence(d.get('outcome'))} *Kept because:* {_sentence(kept_text(d))}")
+        lines.append("")
+    return lines
+
+
+def _sentence(text: Any) -> str:
+    """``text`` as a sentence: a capital first letter and a full stop; an em dash where there is none."""
+    text = str(text or "").strip()
+    if not text:
+        return "—."
+    return text[0].upper() + text[1:] + ("" if text.endswith((".", "!", "?")) else ".")
 
 
 def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "src/rfmap/data/design.json") -> str:
@@ -323,8 +339,8 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
              "Besides the paper's method, the package has a number of settings that nobody prescribes: how large a "
              "step the flow solver takes, how much a network's map is smoothed before the solver finishes it, how "
              "the checkpoint of a training run is chosen. Each was set by comparing a few values on a stated "
-             "criterion. The table below gives, for each, what it controls, what was tried instead, what the "
-             "measurement showed and why the value stays. Below the table, each decision has a short section "
+             "criterion. The overview below gives, for each, what it controls, what was tried instead, what the "
+             "measurement showed and why the value stays. Below the overview, each decision has a short section "
              "whose numbers are folded.", "",
              f"The numbers are of two kinds. For {counted(len(scripted), 'decision')} a script "
              "(`benchmarks/design.py`) measures the choice again and prints the same numbers; the others are "
@@ -337,7 +353,7 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
                       "rather than from the setting.")
     if flagged:
         lines += [f"For {counted(len(flagged), 'decision')} the numbers do not support the value chosen. The "
-                  "table says so in its last column, and the constant stays as it is until it has been measured "
+                  "overview says so under *Kept because*, and the constant stays as it is until it has been measured "
                   "again: changing it would change every result of the book.", ""]
     lines += ["## At a glance", ""] + _glance(decisions)
     lines += ["## The decisions one by one", "",
