@@ -50,7 +50,7 @@ def test_beltrami_figure_draws_a_row_per_case_and_both_error_histograms():
         _readable(fig)
     hist_axes = [ax for ax in fig.axes if ax.get_yscale() == "log"]
     assert len(hist_axes) == 2 and all(len(ax.patches) == 2 for ax in hist_axes)  # one step outline per solver
-    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["LBS", "paper's method"]
+    assert [t.get_text() for t in hist_axes[-1].get_legend().get_texts()] == ["LBS", "paper's method"]
     assert all(ax.get_ylabel() == "triangles" for ax in hist_axes) and "mu" in hist_axes[-1].get_xlabel()
     # the paper's metric per vertex, on one colour bar in units of a power of ten
     assert any("Delta d" in ax.get_xlabel() and "times 10" in ax.get_xlabel() for ax in fig.axes)

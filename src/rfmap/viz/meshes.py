@@ -294,7 +294,10 @@ def beltrami_figure(rows: dict, *, width: float = TEXT_WIDTH_IN, bins: int = 40,
     add_colorbar(im_dd, fig=fig, ax=axes[:, 3].tolist(), location="bottom", shrink=0.95, aspect=12,
                  label=rf"$|\Delta d|$ ($\times 10^{{{power}}}$)")
     handles, labels = axes[0, 4].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower right", ncols=1, title="error histograms")
+    # under the last histogram, level with the colour bars of the other columns, not below everything: left out
+    # of the layout, so that the colour bars stay just under the panels
+    legend = axes[-1, 4].legend(handles, labels, loc="upper center", bbox_to_anchor=(0.5, -0.38), ncols=1)
+    legend.set_in_layout(False)
     return fig
 
 
