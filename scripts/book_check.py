@@ -10,7 +10,10 @@ unresolved placeholders and raw reprs as scripts/book_text_check.py finds them),
 paths of the machine that built it (a printed ``PosixPath``, the repository's folder, a temporary file), and
 for broken figures: an image whose file is missing or cannot be read, or a blank one (every pixel the same, up to a
 standard deviation of BLANK_STD grey levels). Each page is then captured whole, from top to bottom, by headless
-Chromium driven over the DevTools protocol, into the screenshot folder.
+Chromium driven over the DevTools protocol, into the screenshot folder. The viewport is set to the page's
+full height and captured as it is laid out (Chromium's capture "beyond the viewport" re-renders the page and has
+shifted its content sideways, hiding the sidebar); a capture whose page title is not drawn where the laid-out page
+places it (:func:`title_problem`) fails the check.
 
 Every figure a chapter saves must be on its page. A chapter saves a figure under a label ``fig:...`` (a string
 constant passed to ``rfmap.viz.save_figure`` or to a plotting helper that saves under it), which names the file
@@ -121,6 +124,45 @@ def image_problem(data: bytes, name: str) -> str | None:
         return f"unreadable image {name} ({e})"
     if grey.size == 0 or float(grey.std()) < BLANK_STD:
         return f"blank image {name} ({grey.shape[1]}x{grey.shape[0]} pixels, one grey level)"
+    return None
+
+
+#: JavaScript: the box (CSS pixels, from the top left of the page) of the text of the page's title, its first shown
+#: ``<h1>``, or null
+TITLE_BOX = """(() => {
+  const h = [...document.querySelectorAll('h1')].find(e => e.getBoundingClientRect().width > 0);
+  if (!h) return null;
+  const range = document.createRange();
+  range.selectNodeContents(h.firstChild || h);
+  const b = range.getBoundingClientRect();
+  return {left: b.left + window.scrollX, top: b.top + window.scrollY, width: b.width, height: b.height};
+})()"""
+#: a grey level below this is ink (the title's text)
+INK = 128
+
+
+def title_problem(png: bytes, box: dict | None) -> str | None:
+    """Why a page's screenshot ``png`` does not show the page as laid out, or None: the title's text, whose box
+    (:data:`TITLE_BOX`) the browser reports, must start at that box's left edge, with ink just inside it and none in
+    the strip just left of it. A capture shifted sideways (no sidebar, text cut at the left edge) draws the title's
+    letters across that strip, or elsewhere altogether."""
+    if not box or box["width"] < 8 or box["height"] < 8:
+        return None
+    import numpy as np
+    from PIL import Image
+
+    with Image.open(io.BytesIO(png)) as im:
+        grey = np.asarray(im.convert("L"), dtype=np.float64)
+    top, bottom = int(box["top"]), int(math.ceil(box["top"] + box["height"]))
+    left = int(round(box["left"]))
+    if bottom > grey.shape[0] or left + 8 > grey.shape[1]:
+        return "the screenshot does not reach the page's title"
+    rows = grey[top:bottom]
+    inside = rows[:, left:left + min(40, int(box["width"]))]
+    outside = rows[:, max(0, left - 28):max(0, left - 4)]
+    if not (inside < INK).any() or (outside.size and (outside < INK).any()):
+        return (f"the title is not drawn where the page places it (x = {left} px): the capture is shifted "
+                "sideways or cut")
     return None
 
 
@@ -440,7 +482,7 @@ def _metrics(height: int) -> dict:
 
 async def _capture(port: int, url: str, timeout: float) -> list[bytes]:
     """Load ``url`` in the browser listening on ``port`` and capture the whole page (DevTools protocol), as PNG
-    tiles from top to bottom."""
+    tiles from top to bottom, with the box of the page's title (:data:`TITLE_BOX`)."""
     page = await DevTools.open(port, timeout)
     try:
         await page.call("Page.enable")
@@ -453,14 +495,18 @@ async def _capture(port: int, url: str, timeout: float) -> list[bytes]:
             ".then(() => new Promise(r => setTimeout(r, 500)))")
         size = (await page.call("Page.getLayoutMetrics"))["cssContentSize"]
         height = max(1, math.ceil(size["height"]))
+        # the viewport covers the whole page, so the capture needs nothing beyond it: captureBeyondViewport makes
+        # Chromium lay the page out again for the capture, which has drawn it shifted sideways
         await page.call("Emulation.setDeviceMetricsOverride", **_metrics(height))
+        await page.evaluate("window.scrollTo(0, 0); new Promise(r => requestAnimationFrame(() => setTimeout(r, 200)))")
+        box = await page.evaluate(TITLE_BOX)
         tiles = []
         for top in range(0, height, MAX_HEIGHT):
-            shot = await page.call("Page.captureScreenshot", format="png", captureBeyondViewport=True,
+            shot = await page.call("Page.captureScreenshot", format="png", captureBeyondViewport=False,
                                    clip={"x": 0, "y": top, "width": WIDTH, "height": min(MAX_HEIGHT, height - top),
                                          "scale": 1})
             tiles.append(base64.b64decode(shot["data"]))
-        return tiles
+        return tiles, box
     finally:
         page.close()
 
@@ -470,7 +516,7 @@ def screenshot(browser: str, page: Path, out: Path, timeout: float = 120.0) -> s
     None."""
     try:
         with chromium(browser) as port:
-            tiles = asyncio.run(asyncio.wait_for(_capture(port, page.resolve().as_uri(), timeout), timeout))
+            tiles, box = asyncio.run(asyncio.wait_for(_capture(port, page.resolve().as_uri(), timeout), timeout))
     except ChromiumError as e:
         return str(e)
     except (asyncio.TimeoutError, TimeoutError):
@@ -484,7 +530,9 @@ def screenshot(browser: str, page: Path, out: Path, timeout: float = 120.0) -> s
             return "no PNG screenshot returned"
         (out if k == 0 else out.with_name(f"{out.stem}-{k + 1}.png")).write_bytes(png)
     why = image_problem(tiles[0], out.name)
-    return f"the page renders {why}" if why else None
+    if why:
+        return f"the page renders {why}"
+    return title_problem(tiles[0], box) if box and box["top"] + box["height"] <= MAX_HEIGHT else None
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -194,3 +194,30 @@ def test_a_glue_role_shown_as_code_is_an_example_not_a_use(text_check, tmp_path,
     assert text_check.glue_refs(page) == [("06_dem_deq_2d", "t6_verdict")]
     assert text_check.glue_problems([page], glue) == [
         "reproduce.md: missing glue key 't6_verdict' of 06_dem_deq_2d"]
+
+
+def _titled(shift: int = 0) -> bytes:
+    """A white page with a dark title block at x = 288..700, y = 135..230, drawn ``shift`` pixels to the left."""
+    page = np.full((400, 1280), 255)
+    page[140:225, 288 - shift:700 - shift] = 30
+    return _png(page)
+
+
+def test_a_capture_shows_the_title_where_the_page_places_it(book_check):
+    box = {"left": 288, "top": 135, "width": 412, "height": 95}
+    assert book_check.title_problem(_titled(), box) is None
+    assert book_check.title_problem(_titled(), None) is None  # a page without a title is not judged
+
+
+@pytest.mark.parametrize("shift", [208, 600])
+def test_a_capture_shifted_sideways_is_reported(book_check, shift):
+    """Chromium has drawn a page shifted to the left (no sidebar, the title cut at the left edge)."""
+    box = {"left": 288, "top": 135, "width": 412, "height": 95}
+    why = book_check.title_problem(_titled(shift), box)
+    assert why and "shifted sideways" in why
+
+
+def test_the_capture_uses_the_laid_out_viewport(book_check):
+    """The whole page is the viewport; the capture does not ask Chromium to render beyond it again."""
+    source = (ROOT / "scripts" / "book_check.py").read_text(encoding="utf-8")
+    assert "captureBeyondViewport=False" in source and "captureBeyondViewport=True" not in source
