@@ -27,8 +27,8 @@ from .comparison import format_time
 from .tables import Table, format_sig
 
 __all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
-           "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins", "folded_cell", "side_by_side",
-           "MarkdownText"]
+           "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins", "folded_cell",
+           "side_by_side", "MarkdownText"]
 
 
 def parameter_count(model) -> int:

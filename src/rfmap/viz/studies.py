@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["time_accuracy_figure", "displacement_demand_figure", "table_lines", "resolution_panels", "shorten_curve", "COLUMN_NAMES",
+__all__ = ["time_accuracy_figure", "displacement_demand_figure", "table_lines", "resolution_panels", "shorten_curve",
+           "COLUMN_NAMES",
            "plain_log_ticks", "decade_ticks"]
 
 
