@@ -96,6 +96,7 @@ def test_query_points_figure_draws_the_cloud_and_both_histograms():
         _readable(fig)
     assert [ax.get_title() for ax in fig.axes[:2]] == ["query cloud", "mapped cloud"]
     assert [t.get_text() for t in fig.axes[2].get_legend().get_texts()] == ["cloud", "grid N = 17"]
+    assert fig.axes[2].get_ylabel() and len(fig.axes[2].get_yticks()) > 1  # the histograms' axis is labelled
     plt.close(fig)
 
 

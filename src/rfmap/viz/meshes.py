@@ -486,7 +486,8 @@ def query_points_figure(cloud, grid, *, width: float = TEXT_WIDTH_IN, bins: int 
     n = _grid_side(grid)
     for r, label in ((cloud, "cloud"), (grid, f"grid N = {n}" if n else "grid")):
         axes[2].hist(element_rho(r), bins=bins, alpha=0.6, label=label, density=True)
-    axes[2].set(title=r"$\tilde\rho$ on the mapped mesh", yticks=[])
+    axes[2].set(title=r"$\tilde\rho$ on the mapped mesh", xlabel=r"$\tilde\rho$",
+                ylabel="share of triangles\n(density)")
     axes[2].legend()
     return fig
 
