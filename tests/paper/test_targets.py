@@ -89,3 +89,15 @@ def test_findings_say_where_refinement_raised_the_std_and_why():
     found = hybrid_findings(rows + extra, dict(zip((2, 3), CASES)))
     assert found["ref_worse_fields"] == "1 of 2 fields" and found["ref_worse_coarser"] == 1
     assert found["ref_effect3"] == "raises it from 0.300 to 0.350"
+
+
+def test_findings_word_the_counts_as_sentences():
+    from rfmap.paper.benchmarks import _refine_worse_text
+
+    assert _refine_worse_text(3, 40, 3) == ("Field by field, refinement raised the Std on 3 of 40 fields; on all 3 the "
+                                            "network's own map folded and the default map came from a coarser grid.")
+    assert _refine_worse_text(0, 40, 0) == "Field by field, refinement raised the Std on none of the 40 fields."
+    assert _refine_worse_text(2, 40, 1).endswith("on 1 of them the network's own map folded and the default map "
+                                                 "came from a coarser grid.")
+    found = hybrid_findings(_rows(0.1, 1.0, 0.4, 1.0), dict(zip((2, 3), CASES)))
+    assert found["flow_hybrid_flips_text"] == "Neither the flow nor the hybrid folded an element in any case."

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ..core.inputs import preprocess_density
-from ..core.wording import of_count
+from ..core.wording import counted, of_count
 from ..core.mesh import grid_points
 from ..fields.paper import TEST_FIELDS, sample_density
 from ..finish.polish import UNGUARDED
@@ -218,6 +218,20 @@ def _case_label(dim: int, n: int, boundary: str) -> str:
     return f"{dim}D, N = {n}, {boundary}"
 
 
+def _refine_worse_text(worse: int, fields: int, coarser: int) -> str:
+    """The sentence on the fields where weight refinement raised the Std, and on how many of them the default map
+    came from a coarser working grid (the network's own map folded)."""
+    text = f"Field by field, refinement raised the Std on {of_count(worse, fields, 'field')}"
+    if worse == 0:
+        return text + "."
+    those = "that one" if worse == 1 else "both" if worse == 2 else f"all {worse}"
+    if coarser == worse:
+        return text + f"; on {those} the network's own map folded and the default map came from a coarser grid."
+    if coarser == 0:
+        return text + "; the network's own map folded on none of them."
+    return text + f"; on {coarser} of them the network's own map folded and the default map came from a coarser grid."
+
+
 def targets_table(checks: list[dict[str, Any]]) -> CaseTable:
     """The targets of :func:`target_checks` in one row per case: each measured ratio with whether it meets its
     target (the target in the column's head), and the hybrid's time over the flow solver's, which has no target."""
@@ -319,7 +333,9 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
         weight refinement does to the surrogate's Std, as a phrase) and ``ref_worse_cases`` (the cases, of those
         run with refinement, in which refinement raised the Std: ``"2 of 8 cases"``); ``ref_worse_fields`` (the
         fields on which it raised the Std, of those mapped both ways) and ``ref_worse_coarser`` (how many of those,
-        an int, had a default map taken from a coarser working grid, because the network's own map folded).
+        an int, had a default map taken from a coarser working grid, because the network's own map folded), with
+        ``ref_worse_text``, the sentence that says both, and ``flow_hybrid_flips_text``, the sentence on the folds
+        of the flow and the hybrid.
     """
     summary = summarize(rows)
     methods = [m for m in dict.fromkeys(r["method"] for r in rows) if m != UNGUARDED]
@@ -361,6 +377,10 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
     worse = [(a, b) for a, b in both if b["std_rho_map"] > a["std_rho_map"]]
     out["ref_worse_fields"] = of_count(len(worse), len(both), "field")
     out["ref_worse_coarser"] = sum(bool(a.get("coarser")) for a, _ in worse)
+    out["ref_worse_text"] = _refine_worse_text(len(worse), len(both), out["ref_worse_coarser"])
+    folds = out["flow_hybrid_flips"]
+    out["flow_hybrid_flips_text"] = ("Neither the flow nor the hybrid folded an element in any case." if not folds else
+                                     f"Over all cases the flow and the hybrid folded {counted(folds, 'element')}.")
     for d, case in targets.items():
         sur, ref = (next((r for r in summary if (r["dim"], r["n"], r["boundary"], r["method"]) == (*case, m)), None)
                     for m in ("surrogate", "surrogate+refine"))
