@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["counted", "of_count", "of_counts", "power_of_ten", "format_sig"]
+__all__ = ["counted", "of_count", "of_counts", "at_values", "power_of_ten", "format_sig"]
 
 #: plurals that do not add "s" or "es"
 _IRREGULAR = {"vertex": "vertices", "matrix": "matrices"}
@@ -106,6 +106,27 @@ def of_counts(parts, nouns) -> str:
     if all(k == 0 for k, _ in parts):
         return f"none of them ({wholes})"
     return join([of_count(k, n, noun) for (k, n), noun in zip(parts, nouns)])
+
+
+def at_values(hits, total: int, name: str = "N", noun: str = "side") -> str:
+    """Where something holds, by the values themselves rather than by a count: ``hits`` are the values at which it
+    holds (grid sides, say) out of ``total`` values tried.
+
+    Examples
+    --------
+    >>> at_values([64], 4), at_values([32, 64], 4), at_values([32, 51, 64], 4)
+    ('at N = 64 only', 'at N = 32 and 64', 'at N = 32, 51 and 64')
+    >>> at_values([], 4), at_values([32, 51, 128, 256], 4)
+    ('at no side', 'at every side')
+    """
+    hits = [str(v) for v in hits]
+    if not hits:
+        return f"at no {noun}"
+    if len(hits) == int(total):
+        return f"at every {noun}"
+    if len(hits) == 1:
+        return f"at {name} = {hits[0]} only"
+    return f"at {name} = " + ", ".join(hits[:-1]) + " and " + hits[-1]
 
 
 _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
