@@ -153,3 +153,31 @@ def test_resolution_panels_mark_a_folded_raw_map_instead_of_plotting_it():
         assert fig.axes[1].get_legend() is None
         _readable(fig)
     plt.close(fig)
+
+
+def test_displacement_demand_legend_sits_below_the_panels():
+    from rfmap.viz import displacement_demand_figure
+
+    records = [{"group": g, "demand": d, "reach": 0.9 * d, "left_net": 0.3, "left_classical": 0.05}
+               for g, ds in (("training", (0.1, 0.2, 0.3)), ("ramp", (0.39, 0.4))) for d in ds]
+    with style():
+        fig = displacement_demand_figure(records)
+        assert all(ax.get_legend() is None for ax in fig.axes) and len(fig.legends) == 1
+        fig.canvas.draw()
+        legend_box = fig.legends[0].get_window_extent()
+        assert all(legend_box.y1 <= ax.get_window_extent().y0 + 1 for ax in fig.axes)
+        _readable(fig)
+    plt.close(fig)
+
+
+def test_a_cartogram_title_says_over_which_regions_its_error_is_taken():
+    from types import SimpleNamespace
+
+    from rfmap.viz.cartograms import _error_title
+
+    judged = SimpleNamespace(max_error=0.0035, n_minor=17, max_error_minor=5462.4)
+    title = _error_title(SimpleNamespace(min_share=1e-4), judged)
+    assert title.startswith("cartogram: max area error 0.0035\n")
+    assert "at least 0.01 % of the total" in title and "up to 5462" in title
+    plain = SimpleNamespace(max_error=0.0049, n_minor=0, max_error_minor=0.0)
+    assert _error_title(SimpleNamespace(min_share=0.0), plain) == "cartogram: max area error 0.0049"

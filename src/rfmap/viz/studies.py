@@ -83,7 +83,7 @@ def displacement_demand_figure(records: list[dict], *, title: str | None = None)
     """Left: the network map's largest displacement (reach) against the classical map's (demand), one marker per
     field, with the line reach = demand; right: the fraction of the non-uniformity each map leaves,
     Std(rho~_map) / Std(rho~_orig), against the demand.  The band marks the demand of 90 % of the training draws
-    (records of :func:`rfmap.paper.generalization.displacement_demand`)."""
+    (records of :func:`rfmap.paper.generalization.displacement_demand`); the legend is below the panels."""
     import matplotlib.pyplot as plt
 
     groups = list(dict.fromkeys(r["group"] for r in records))
@@ -107,7 +107,9 @@ def displacement_demand_figure(records: list[dict], *, title: str | None = None)
     a.set_ylim(0, top)
     a.set_xlabel("demand: classical map's\nlargest displacement")
     a.set_ylabel("reach: network map's\nlargest displacement")
-    a.legend()
+    # below the panels, where it covers no marker
+    handles, labels = a.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), frameon=False)
     b.set_xlim(0, top)
     b.set_yscale("log")
     plain_log_ticks(b.yaxis)
