@@ -111,3 +111,14 @@ def test_plot_density_draws_its_triangles_unsnapped(per_element):
     im = plot_density(ax, m.points, m.elements, values, colorbar=False)
     plt.close(fig)
     assert im.get_snap() is False
+
+
+def test_grid_lines_end_at_the_mesh():
+    """Grid lines are drawn with butt caps, so that no cap pokes past the corners of the mesh."""
+    from rfmap.viz import plot_mesh
+
+    m = grid_mesh(9, 2)
+    fig, ax = plt.subplots()
+    plot_mesh(ax, m.points, n=9, color="w", lw=2)
+    assert ax.lines and all(line.get_solid_capstyle() == "butt" for line in ax.lines)
+    plt.close(fig)

@@ -25,6 +25,8 @@ def element_rho(result) -> np.ndarray:
 
 
 def _grid_lines(ax, pts, n, step, **kw):
+    # butt caps: a projecting cap pokes past the mesh's corners as a stray grey dot
+    kw.setdefault("solid_capstyle", "butt")
     P = pts.reshape(n, n, 2)
     idx = list(range(0, n, step))
     if idx[-1] != n - 1:
