@@ -26,6 +26,18 @@ class RegionStyle:
     lw: float = 0.4
 
 
+def _error_title(carto, m) -> str:
+    """The cartogram panel's title: its largest area error, and where regions under the judged share of the total
+    are left out of it, over which regions it is taken and how far the smaller ones are off."""
+    from ..core.wording import format_sig
+
+    head = f"cartogram: max area error {format_sig(m.max_error, 2)}"
+    if m.n_minor:
+        head += (f"\nover the regions holding at least {100 * carto.min_share:.2g} % of the total"
+                 f" (the smaller ones: up to {format_sig(m.max_error_minor, 4)})")
+    return head
+
+
 def plot_regions(ax, geoms, values=None, *, title: str | None = None, colorbar: bool = False, label: str | None = None,
                  style: RegionStyle | None = None, **kw):
     """Draw shapely Polygons / MultiPolygons (holes included), filled by ``values`` (one per geometry) or grey, as
@@ -228,8 +240,7 @@ def cartogram_figure(carto, options: FigureOptions | None = None, *, label: str 
     shape = ((2, 1), (width, 2 * width * aspect * 1.2 + 0.8)) if stacked else ((1, 2), (width, 0.5 * width))
     with plt.rc_context(column_style(width, svg_text=svg)):
         fig, axes = plt.subplots(*shape[0], figsize=shape[1], layout="constrained")
-        for ax, geoms, head in ((axes[0], before, "input map"),
-                                (axes[1], after, f"cartogram: max area error {m.max_error:.3f}")):
+        for ax, geoms, head in ((axes[0], before, "input map"), (axes[1], after, _error_title(carto, m))):
             if isinstance(face, np.ndarray):
                 coll = plot_regions(ax, geoms, face, vmin=0.0, vmax=float(np.quantile(face, 0.98)), lw=0.3)
             else:
