@@ -7,6 +7,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from ..core.wording import format_sig
 from .figures import save_figure
 from .figures import colorbar as add_colorbar
 
@@ -29,8 +30,6 @@ class RegionStyle:
 def _error_title(carto, m) -> str:
     """The cartogram panel's title: its largest area error, and where regions under the judged share of the total
     are left out of it, over which regions it is taken and how far the smaller ones are off."""
-    from ..core.wording import format_sig
-
     head = f"cartogram: max area error {format_sig(m.max_error, 2)}"
     if m.n_minor:
         head += (f"\nover the regions holding at least {100 * carto.min_share:.2g} % of the total"
