@@ -75,8 +75,10 @@ def format_number(v, digits: int = DIGITS, *, printed: bool = False) -> str:
 
     Examples
     --------
-    >>> format_number(0.0825411), format_number(3.8104e-05), format_number(7), format_number(6e-06, printed=True)
-    ('0.08254', '3.810 × 10⁻⁵', '7', '6 × 10⁻⁶')
+    >>> format_number(0.0825411), format_number(3.8104e-05)
+    ('0.08254', '3.810 × 10⁻⁵')
+    >>> format_number(7), format_number(6e-06, printed=True)
+    ('7', '6 × 10⁻⁶')
     """
     if v is None:
         return "—"

@@ -240,7 +240,8 @@ def headline(title: str, metric: str, ours: dict, paper: dict | None = None, cla
 
     Examples
     --------
-    >>> h = headline("Square boundary", "Std ρ̃ map", {"ring": 0.041}, {"ring": 0.0488}, {"ring": 0.012})
+    >>> h = headline("Square boundary", "Std ρ̃ map", {"ring": 0.041},
+    ...              {"ring": 0.0488}, {"ring": 0.012})
     >>> h.met
     1
     """

@@ -78,8 +78,10 @@ def verdict(met: list[bool | None]) -> str:
 
     Examples
     --------
-    >>> verdict([True, True]), verdict([True, False]), verdict([False]), verdict([None]), verdict([])
-    ('reproduced', 'partly', 'not reproduced', 'not comparable', 'not comparable')
+    >>> verdict([True, True]), verdict([True, False]), verdict([False])
+    ('reproduced', 'partly', 'not reproduced')
+    >>> verdict([None]), verdict([])
+    ('not comparable', 'not comparable')
     """
     flags = [m for m in met if m is not None]
     if not flags:
