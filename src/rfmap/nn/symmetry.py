@@ -23,7 +23,7 @@ axes permutes the components and transposes the array).  The boundary factor :ma
 over a set :math:`S` of symmetries is exact wherever :math:`\psi` is, and averages out the part of the error that
 changes with :math:`g`; it costs :math:`|S|` network evaluations.  Measured on the held-out validation fields
 (never the paper's test fields) the average lowers Std(rho~_map) by 5-25 % (:data:`DEFAULT_SYMMETRY`) and folds
-the steep ramps less often; chapter 9 reports it on the paper's 3D tests.
+the steep ramps less often; the chapter on density-equalizing maps in 3D reports it on the paper's 3D tests.
 """
 from __future__ import annotations
 

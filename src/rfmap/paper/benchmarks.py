@@ -304,7 +304,7 @@ _AGAINST_FLOW = (("surrogate", "sur"), ("surrogate+refine", "ref"), ("hybrid", "
 
 
 def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]:
-    """The numbers that the book's text quotes from a time-to-accuracy run (chapter 11): counts, ratios and times,
+    """The numbers that the book's text quotes from a time-to-accuracy run (the chapter on fast classical maps and neural warm starts): counts, ratios and times,
     each formatted as the text prints it (ratios to three significant digits, times with their unit).
 
     Parameters

@@ -1,4 +1,4 @@
-"""The figures of chapter 02: the classical density-equalizing map step by step (the paper's Fig. 3) and the
+"""The figures of the chapter on diffusion and density-equalizing maps: the classical density-equalizing map step by step (the paper's Fig. 3) and the
 overview of the two kinds of field-driven map, drawn with the shipped surrogates (the paper's Fig. 1)."""
 from __future__ import annotations
 

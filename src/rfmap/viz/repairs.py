@@ -1,4 +1,4 @@
-"""The figures of chapter 10: a folded 2D map beside its repair, and a bent cube whose boundary surface crosses
+"""The figures of the chapter on repairing folded maps: a folded 2D map beside its repair, and a bent cube whose boundary surface crosses
 itself beside its repair."""
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ __all__ = ["fold_repair_figure", "surface_crossing_figure"]
 
 
 def fold_repair_figure(raw, repaired, n: int, *, margin: float = 0.06):
-    """A folded 2D map and its repair (chapter 10): (a) the raw map with its flipped triangles circled, (b) the
+    """A folded 2D map and its repair (the chapter on repairing folded maps): (a) the raw map with its flipped triangles circled, (b) the
     repaired map, (c) both around the folds (``margin`` beyond the folds' centroids), in the book's style.
     ``raw``, ``repaired``: :class:`rfmap.core.result.MapResult` of one ``n``-grid.  Returns the figure."""
     import matplotlib.pyplot as plt
@@ -39,7 +39,7 @@ def fold_repair_figure(raw, repaired, n: int, *, margin: float = 0.06):
 def surface_crossing_figure(bent, repaired, n: int, turns: float, scale: float):
     """The middle slice of a bent cube whose boundary surface crosses itself (``bent``, mapped points of the
     ``n``-grid, bent through ``turns`` turns) beside its repair (``repaired``, the displacement kept at ``scale``),
-    in the book's style (chapter 10).  Returns the figure."""
+    in the book's style (the chapter on repairing folded maps).  Returns the figure."""
     import matplotlib.pyplot as plt
 
 
