@@ -24,3 +24,16 @@ def test_repair_figure_adds_a_close_up_of_the_folds():
     flat = repair_figure(x, x, mesh.elements, n=9)
     assert len(flat.axes) == 2  # nothing folded: no close-up
     plt.close(flat)
+
+
+def test_surface_crossing_panels_share_one_scale():
+    from rfmap.fields.hard import self_crossing_map
+    from rfmap.finish.repair import repair_map
+    from rfmap.viz.repairs import surface_crossing_figure
+
+    ref, bent, el = self_crossing_map(9, 1.3)
+    fixed, rep = repair_map(ref, bent, el, boundary="free", grid_n=9)
+    fig = surface_crossing_figure(bent, fixed, 9, 1.3, rep["surface_scale"])
+    a, b = fig.axes
+    assert a.get_xlim() == b.get_xlim() and a.get_ylim() == b.get_ylim()
+    plt.close(fig)

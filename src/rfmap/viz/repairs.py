@@ -39,7 +39,8 @@ def fold_repair_figure(raw, repaired, n: int, *, margin: float = 0.06):
 def surface_crossing_figure(bent, repaired, n: int, turns: float, scale: float):
     """The middle slice of a bent cube whose boundary surface crosses itself (``bent``, mapped points of the
     ``n``-grid, bent through ``turns`` turns) beside its repair (``repaired``, the displacement kept at ``scale``),
-    in the book's style (the chapter on repairing folded maps).  Returns the figure."""
+    in the book's style (the chapter on repairing folded maps), both panels on the same axes' limits.  Returns the
+    figure."""
     import matplotlib.pyplot as plt
 
 
@@ -47,4 +48,9 @@ def surface_crossing_figure(bent, repaired, n: int, turns: float, scale: float):
         fig, axes = plt.subplots(1, 2, figsize=(7.0, 3.9), layout="constrained")
         plot_slice_outline(axes[0], bent, n, title=f"(a) raw: bent through {turns:g} turns,\nthe ends overlap")
         plot_slice_outline(axes[1], repaired, n, title=f"(b) repaired: displacement\n× {scale:.3f}")
+        # one scale for both panels, so that the repaired bar is seen as nearly straight beside the bent one
+        x0, x1 = min(a.get_xlim()[0] for a in axes), max(a.get_xlim()[1] for a in axes)
+        y0, y1 = min(a.get_ylim()[0] for a in axes), max(a.get_ylim()[1] for a in axes)
+        for a in axes:
+            a.set(xlim=(x0, x1), ylim=(y0, y1))
     return fig
