@@ -33,8 +33,13 @@ def _names(action: argparse.Action) -> str:
     return ", ".join(f"`{o}{value}`" for o in action.option_strings)
 
 
+#: characters of a help text that Markdown (or MyST's dollar math) would read as markup
+_MARKUP = str.maketrans({c: "\\" + c for c in "\\`*_$<>[]|"})
+
+
 def _cell(text: str) -> str:
-    return " ".join(text.split()).replace("|", "\\|")
+    """A help text as one Markdown table cell, its markup characters escaped so that it reads as written."""
+    return " ".join(text.split()).translate(_MARKUP)
 
 
 def _description(action: argparse.Action) -> str:
