@@ -6,9 +6,11 @@ Quick start::
     from rfmap.solvers import solve_dem
     from rfmap import Surrogate, models
 
-    res = solve_dem(sample_density("sin-cos", 51))      # classical diffusion DEM
+    # the classical diffusion DEM
+    res = solve_dem(sample_density("sin-cos", 51))
     print(res.metrics())
-    sur = Surrogate.pretrained(models()[0])               # a shipped neural surrogate
+    # a shipped neural surrogate
+    sur = Surrogate.pretrained(models()[0])
 
 The neural names (:class:`Surrogate`, :func:`models`, :func:`load_or_train`) are imported on first use, so that the
 classical paths (``rfmap cartogram``, :mod:`rfmap.cartogram.resize`) run without loading PyTorch.
