@@ -26,7 +26,7 @@ def plot_batch(axes, batch, *, title: str = "sample", mesh: bool = False):
     axes : iterable of matplotlib Axes
         One per sample drawn, from the first.
     batch : rfmap.tasks.base.Batch
-        A 2D batch (:func:`rfmap.tasks.sample_batch`).
+        A 2D batch (:func:`rfmap.tasks.base.sample_batch`).
     title : str
         Start of every panel's title, followed by the sample's index, what is drawn and the grid side.
     mesh : bool
