@@ -152,7 +152,9 @@ def _chapter_cell(item: dict, root: Path, in_toc: set[str]) -> str:
     nb = Path(item["notebook"])
     title = chapter_title(item["notebook"], root)
     if nb.suffix == ".md":
-        return f"{{doc}}`{nb.stem}`" if nb.parent.as_posix() == "book" else title
+        if nb.parent.as_posix() == "book":  # the introduction's title is the book's: name it as a page
+            return f"{{doc}}`the introduction <{nb.stem}>`" if nb.stem == "intro" else f"{{doc}}`{nb.stem}`"
+        return title
     return _chapter_link(item, root, in_toc, title)
 
 
@@ -358,7 +360,7 @@ def render(root: Path = ROOT) -> str:
         "Every number is pasted from the chapter that computes it, executed in the same build as this page and at "
         "its scale (`RFMAP_SCALE`): at `ci` scale tiny models run on small grids, the numbers only show that the "
         "code runs, and a grid side the chapter runs in place of the paper's is named in the chapter's table. The "
-        "introduction shows the same scoreboard in one screen, as means over the cases.",
+        "introduction shows the same scoreboard in short, as means over the cases.",
         "",
         full_scoreboard(root).rstrip("\n"),
         "",
