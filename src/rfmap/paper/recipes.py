@@ -5,7 +5,7 @@ from ..tasks import get_task
 from .tables import Table, decimal_text, rate_text
 
 __all__ = ["training_fields_text", "recipe_table", "recipe_markdown", "recipe_differences", "differences_text",
-           "differences_table"]
+           "differences_table", "training_settings", "settings_markdown"]
 
 
 def training_fields_text(config: dict) -> str:
@@ -167,4 +167,34 @@ def differences_table(metas: dict) -> str:
     rows.append(("training steps (cumulative)", f"{steps[0]:,}", f"{steps[1]:,}"))
     lines = [f"| setting | `{na}` | `{nb}` |", "|---|---|---|"]
     lines += [f"| {k} | {x} | {y} |" for k, x, y in rows]
+    return "\n".join(lines)
+
+
+def training_settings(meta: dict) -> dict[str, str]:
+    """The settings of a model's training that chapter 08 compares, in words, from its metadata
+    (``Surrogate.meta``): the Beltrami weight λ, the decay of the weight average, the peak learning rate and the seed
+    of the last run, and the steps over its ``--init`` chain (``cumulative_steps``; its earlier runs are ``lineage``).
+
+    Examples
+    --------
+    >>> meta = {"config": {"loss": {"beltrami": 0.1}, "ema": 0.0, "lr": 5e-4, "seed": 0}, "steps": 3000}
+    >>> training_settings(meta)["training steps"]
+    '3,000 in 1 run'
+    """
+    cfg = meta["config"]
+    runs = len(meta.get("lineage", [])) + 1
+    steps = meta.get("cumulative_steps", meta["steps"])
+    return {"Beltrami weight λ": f"{cfg['loss']['beltrami']:g}",
+            "weight average (EMA decay)": f"{cfg['ema']:g}" if cfg.get("ema") else "none",
+            "peak learning rate of the last run": rate_text(cfg["lr"]),
+            "seed of the last run": str(cfg["seed"]),
+            "training steps": f"{steps:,} in {runs} run" + ("s" if runs != 1 else "")}
+
+
+def settings_markdown(metas: dict) -> str:
+    """A Markdown table of :func:`training_settings`, one column per model (``{name: meta}``)."""
+    rows = {name: training_settings(m) for name, m in metas.items()}
+    first = next(iter(rows.values()))
+    lines = ["| setting | " + " | ".join(rows) + " |", "|---" * (len(rows) + 1) + "|"]
+    lines += [f"| {k} | " + " | ".join(r[k] for r in rows.values()) + " |" for k in first]
     return "\n".join(lines)
