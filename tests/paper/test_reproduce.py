@@ -244,6 +244,10 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     by_family = recipe_table({"new": sur})
     assert by_family.value("new", "unet", "held_out") == 0.4
     assert "| new | 51/128 | 0.4 | Std ratio by family |" in recipe_markdown(by_family)
+    # every part of the table is followed by the legend of its columns
+    from rfmap.paper.recipes import RECIPE_LEGENDS
+    md = recipe_markdown(by_family)
+    assert all(legend in md for legend in RECIPE_LEGENDS.values()) and "*folded maps*" in md
     del sur.meta["final_metrics"]["mean"]["family_score"]
     # scored on the default maps (val_repair): the maps the network itself folded are counted apart
     sur.meta["final_metrics"]["mean"].update({"folded_fields": 0, "path": "repaired", "raw_folded_fields": 3})

@@ -69,15 +69,33 @@ RECIPE_PARTS = {
 }
 
 
+#: what the columns of each part of :data:`RECIPE_PARTS` mean, printed under its table
+RECIPE_LEGENDS = {
+    "Training fields and fold penalty":
+        "*fold penalty*: its weight, then the det J below which it acts (1 from 0.02: weight 1 below det J = 0.02).",
+    "Optimisation over the whole chain (learning rate and weight average of the last run)":
+        "*peak lr*: the top of the last run's learning-rate schedule; *weight average*: the decay of the "
+        "exponential moving average of the weights it shipped (none: the weights as trained); *steps* and "
+        "*minutes*: summed over every run of the chain.",
+    "Held-out validation of the kept weights":
+        "*N*: the held-out grid sides; *score*: the validation score of the kept weights, lower is better; "
+        "*maps scored*: the raw network maps, or the default maps a plain Surrogate.map returns; *folded maps*: "
+        "held-out maps the network itself folded at the kept weights (the default maps repair them; the chapter "
+        "on bijectivity shows how).",
+}
+
+
 def recipe_markdown(table: Table) -> str:
     """A :func:`recipe_table` as three Markdown tables of a few columns each (:data:`RECIPE_PARTS`), one row per
-    model, so that each fits the width of a book page."""
+    model, so that each fits the width of a book page, each followed by the legend of its columns
+    (:data:`RECIPE_LEGENDS`)."""
     out = []
     for title, cols in RECIPE_PARTS.items():
         lines = [f"**{title}**", "", "| model | " + " | ".join(cols.values()) + " |", "|" + "---|" * (len(cols) + 1)]
         for case, _, values in table.rows:
             cells = [table.cell(values.get(c), c).replace("|", "\\|") for c in cols]
             lines.append(f"| {case} | " + " | ".join(cells) + " |")
+        lines += ["", RECIPE_LEGENDS[title]]
         out.append("\n".join(lines))
     return "\n\n".join(out)
 
