@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .figures import colorbar, frameless
+from .figures import color_scale, colorbar, frameless
 from .meshes import TEXT_WIDTH_IN, plot_density, plot_mesh
 from .studies import plain_log_ticks
-from .volumes import CAMERA_3D, render_lattice, render_slices
+from .volumes import CAMERA_3D, RHO_SCALE, render_lattice, render_slices
 
 __all__ = ["dem_steps_figure", "overview_figure", "grid_convergence_figure", "solve_cost_figure",
            "boundaries_figure", "volume_panels_figure"]
@@ -87,6 +87,7 @@ def overview_figure(beltrami, density, *, name: str = "T4", slices=(0.25, 0.75),
     as the map moves them (:func:`rfmap.viz.volumes.render_lattice`, coloured by the initial density carried
     along), both seen from the one camera :data:`rfmap.viz.volumes.CAMERA_3D`, on the colour scale ``clim``.
     Returns the figure."""
+    import matplotlib as mpl
     import matplotlib.pyplot as plt
 
     before = render_slices(density, mapped=False, slices=slices, clim=clim, camera=CAMERA_3D)
@@ -104,10 +105,14 @@ def overview_figure(beltrami, density, *, name: str = "T4", slices=(0.25, 0.75),
     ax.imshow(before)
     ax.set_title(f"(b) density $\\rho$ in the cube,\nslices $x_3$ = {cut}")
     ax.set_axis_off()
-    ax = fig.add_subplot(grid[1, 2])
-    ax.imshow(after)
-    ax.set_title("the density-equalizing map: the\nsame slices moved (colour: initial $\\rho$)")
-    ax.set_axis_off()
+    ax2 = fig.add_subplot(grid[1, 2])
+    ax2.imshow(after)
+    ax2.set_title("the density-equalizing map: the\nsame slices moved (colour: initial $\\rho$)")
+    ax2.set_axis_off()
+    # the renderings' colour scale, as a bar under the row
+    sc = color_scale(RHO_SCALE, clim=clim)
+    bar = mpl.cm.ScalarMappable(norm=mpl.colors.Normalize(sc.vmin, sc.vmax), cmap=sc.cmap)
+    colorbar(bar, ax=[ax, ax2], location="bottom", shrink=0.5, aspect=30, label=r"density $\rho$")
     _arrow(fig.add_subplot(grid[0, 1]), "field $\\mu$\n$\\downarrow$\nsurrogate $\\mathcal{N}_\\theta$")
     _arrow(fig.add_subplot(grid[1, 1]), "field $\\rho$\n$\\downarrow$\nsurrogate $\\mathcal{N}_\\theta$")
     return fig
