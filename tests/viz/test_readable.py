@@ -181,3 +181,16 @@ def test_a_cartogram_title_says_over_which_regions_its_error_is_taken():
     assert "at least 0.01 % of the total" in title and "up to 5462" in title
     plain = SimpleNamespace(max_error=0.0049, n_minor=0, max_error_minor=0.0)
     assert _error_title(SimpleNamespace(min_share=0.0), plain) == "cartogram: max area error 0.0049"
+
+
+def test_encoding_figure_says_what_a_shorter_row_holds():
+    import matplotlib.pyplot as plt
+
+    from rfmap.viz import encoding_figure, style
+
+    dens, belt = np.zeros((1, 3, 5, 5)), np.zeros((1, 4, 5, 5))
+    with style():
+        fig = encoding_figure([dens, belt], [["x1", "x2", "log p"], ["x1", "x2", "Re mu", "Im mu"]])
+    texts = [t.get_text() for ax in fig.axes for t in ax.texts]
+    assert texts == ["3 channels:\n2 coordinates,\n1 field channel"]
+    plt.close(fig)

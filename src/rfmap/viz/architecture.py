@@ -100,7 +100,8 @@ def encoding_figure(encodings, names, *, width: float = 7.2):
     each with its colour bar: the coordinate channels in viridis, the field's channels in a diverging map.
 
     ``encodings``: tensors or arrays of shape (1, C, N, N), one per row; ``names``: the channel names of each row
-    (the panels are titled "c: name").  Unused panels of a shorter row are left blank.  Returns the figure.
+    (the panels are titled "c: name").  The free panels of a shorter row say how many channels it has.  Returns
+    the figure.
     """
     import matplotlib.pyplot as plt
     import numpy as np
@@ -115,8 +116,11 @@ def encoding_figure(encodings, names, *, width: float = 7.2):
             im = ax.imshow(enc[0, c].T, origin="lower", extent=(0, 1, 0, 1), cmap="viridis" if c < 2 else "RdBu_r")
             ax.set_title(f"{c}: {name}")
             add_colorbar(im, fig=fig, ax=ax, shrink=0.8)
-        for ax in axes[row, len(row_names):]:
+        for ax in axes[row, len(row_names):]:  # a shorter row says in its free panel what it holds
             ax.set_axis_off()
+            field = len(row_names) - 2
+            ax.text(0.5, 0.5, f"{len(row_names)} channels:\n2 coordinates,\n{field} field channel"
+                    + ("s" if field != 1 else ""), ha="center", va="center", transform=ax.transAxes)
     return fig
 
 
