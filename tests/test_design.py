@@ -83,8 +83,14 @@ def test_the_page_says_how_to_re_measure_and_what_is_historical():
     for d in load_decisions():
         if d.get("remeasure"):
             assert f"`{remeasure_command(d)}`" in page
-    assert page.count("**Historical record, not re-measured.**") == sum(not d.get("remeasure")
-                                                                         for d in load_decisions())
+    records = [d for d in load_decisions() if not d.get("remeasure")]
+    assert page.count(", not re-measured.**") == len(records)
+    for d in records:
+        date = ((d.get("recorded") or {}).get("entered") or {}).get("date")
+        if date:
+            assert f"**Record of {date}, not re-measured.**" in page
+    # what a record means is said once, not in every section
+    assert page.count("code has changed since") == 1
 
 
 def test_headings_and_the_table_of_decisions_show_no_python_reprs():

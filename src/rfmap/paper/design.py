@@ -257,6 +257,11 @@ def _label(d: dict[str, Any]) -> str:
     return "design-" + "-".join(part for part in slug.split("-") if part)
 
 
+#: the tag of a section whose numbers were written down when the value was chosen and are not measured again
+#: (what that means is said once, in the page's introduction)
+RECORD_TAG = "**Record{date}, not re-measured.**"
+
+
 def _status(d: dict[str, Any]) -> list[str]:
     """What kind of numbers the section shows: how to measure them again, or when they were written down."""
     command = remeasure_command(d)
@@ -267,11 +272,8 @@ def _status(d: dict[str, Any]) -> list[str]:
             text += f" The numbers below are that script's run of {m['date']} on a machine with {_cores(m.get('machine', ''))}."
         return [text, ""]
     entered = (d.get("recorded") or {}).get("entered") or {}
-    text = "**Historical record, not re-measured.**"
-    text += (f" The numbers below were written down when the value was chosen"
-             f"{' (' + entered['date'] + ')' if entered.get('date') else ''}. The code has changed since: they show "
-             "why the value was chosen, not that they still hold.")
-    return [text, ""]
+    date = f" of {entered['date']}" if entered.get("date") else ""
+    return [f"{RECORD_TAG.format(date=date)}", ""]
 
 
 def _details(d: dict[str, Any]) -> list[str]:
@@ -345,7 +347,8 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
              f"The numbers are of two kinds. For {counted(len(scripted), 'decision')} a script "
              "(`benchmarks/design.py`) measures the choice again and prints the same numbers; the others are "
              "records written down when the value was chosen, and the code has changed since, so they explain the "
-             "choice without showing that it still holds.", ""]
+             "choice without showing that it still holds. Each such section is marked *Record of* its date, *not "
+             "re-measured*.", ""]
     loads = load_range(decisions)
     if loads:
         lines[-2] += (f" The re-measured timings were taken on a shared machine with {loads[2]} while other work "
