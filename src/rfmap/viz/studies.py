@@ -166,7 +166,8 @@ def table_lines(table, column: str = "std_rho_map", ax=None, *, logx: bool = Tru
 def resolution_panels(table, *, title: str | None = None):
     """Two panels of a resolution table (:func:`rfmap.paper.compare.resolution_table`) against the grid side:
     the raw network map (left; a folded map is marked by a cross, not plotted, see :func:`table_lines`) and the map
-    after the bijectivity repair (right), on one y axis, with one legend; returns the figure."""
+    after the bijectivity repair (right), on one y axis, with one legend below both panels, where it hides no
+    point; returns the figure."""
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(7.2, 3.3), layout="constrained", sharey=True)
@@ -174,7 +175,11 @@ def resolution_panels(table, *, title: str | None = None):
     table_lines(table, "std_rho_map", axes[1])
     axes[0].set(title="raw network map", ylabel=COLUMN_NAMES["std_rho_map"])
     axes[1].set(title="after bijectivity repair", ylabel="")
-    axes[1].get_legend().remove()
+    legend = axes[0].get_legend()  # it names the folded mark too
+    handles, labels = legend.legend_handles, [t.get_text() for t in legend.get_texts()]
+    for ax in axes:
+        ax.get_legend().remove()
+    fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), frameon=False)
     if title:
         fig.suptitle(title)
     return fig
