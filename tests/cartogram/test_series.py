@@ -89,6 +89,27 @@ def test_animation_is_written(series, tmp_path):
         save_animation(series[0], tmp_path / "s.png")
 
 
+def test_series_grid_has_a_colour_legend_below_the_frames(series):
+    """With ``key`` the grid carries one legend of the categories (and "no data" for grey regions), below the
+    frames."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from rfmap.viz.cartograms import series_grid
+
+    n = len(series[0].frames[0].carto.projected_geometries())
+    colors = ["tab:red"] * (n - 1) + ["0.85"]
+    fig = series_grid(series[0], [0, len(YEARS) - 1], colors=colors, key={"South America": "tab:red"})
+    (legend,) = fig.legends
+    assert [t.get_text() for t in legend.get_texts()] == ["South America", "no data"]
+    fig.canvas.draw()
+    frames = [ax for ax in fig.axes if ax.has_data()]
+    assert frames and all(legend.get_window_extent().y1 <= ax.get_window_extent().y0 + 1 for ax in frames)
+    plt.close(fig)
+
+
 # ----------------------------------------------------------------------------------------------- command line
 def block(years):
     """Four squares of 1 km in a 2 x 2 block, ids a..d, the fourth growing: ``y<k>`` = (1, 1, 1, 2 + k)."""

@@ -331,12 +331,13 @@ def area_error_histograms(cartos: dict, labels, values, *, label: str | None = N
     return fig
 
 
-def series_grid(series, indices, *, titles=None, colors=None, label: str | None = None, cols: int = 2,
-                width: float = TEXT_COLUMN_IN):
+def series_grid(series, indices, *, titles=None, colors=None, key: dict | None = None, label: str | None = None,
+                cols: int = 2, width: float = TEXT_COLUMN_IN):
     """Frames of a :class:`rfmap.cartogram.series.CartogramSeries` in a grid of ``cols`` columns, all on one extent
     and scale, regions in fixed colours (``colors``, one per region, else :func:`neighbour_colours` of the input
-    map), titled by ``titles`` (default: the frames' keys) with each frame's largest area error; saved under
-    ``label``; returns the figure."""
+    map), titled by ``titles`` (default: the frames' keys) with each frame's largest area error; ``key``
+    (``{category: colour}``, as :func:`region_colours` returns it) adds a legend below the frames, with "no data"
+    for the grey of regions without a category; saved under ``label``; returns the figure."""
     import matplotlib.pyplot as plt
 
     frames = [series.frames[i] for i in indices]
@@ -360,6 +361,13 @@ def series_grid(series, indices, *, titles=None, colors=None, label: str | None 
             ax.axis("off")
         for ax in axes.flat[len(frames):]:
             ax.axis("off")
+        if key:
+            from matplotlib.patches import Patch
+
+            if colors is not None and "0.85" in list(colors):
+                key = {**key, "no data": "0.85"}
+            fig.legend([Patch(color=c) for c in key.values()], list(key), loc="outside lower center",
+                       ncols=min(len(key), 4), frameon=False)
         if label:
             save_figure(fig, label)
     return fig
