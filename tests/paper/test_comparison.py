@@ -55,6 +55,8 @@ def test_native_side_by_side_sets_each_models_method_against_the_paper():
     assert lines[0] == ("| case | paper Std(ρ̃_map) | old, paper's method | new, paper's method | flow solver |")
     assert lines[2] == "| a | 0.08000 | 0.05000 (met) | 0.05000 (met) | 0.01000 |"
     assert lines[3] == "| b | 0.04000 | 0.06000 (missed) | 0.03000 (met) | 0.02000 |"
+    b.comparable = lambda case: case != "b"  # b's input is not the paper's: marked, not scored
+    assert native_side_by_side({"new": b}).splitlines()[3] == "| b | 0.04000 | 0.03000 (n/c) | 0.02000 |"
     b.cases = b.cases[:1]
     with pytest.raises(ValueError, match="differs"):
         native_side_by_side({"old": a, "new": b})

@@ -568,8 +568,9 @@ def beltrami_resolution_comparison(sur, ns: dict | None = None) -> Comparison:
 def native_side_by_side(tables: dict[str, Comparison], metric: str = "std_rho_map") -> str:
     """The paper's method of several models side by side, one row per case of the same paper table (Markdown):
     the paper's value, each model's native value (``{model: comparison}``, in order) with whether it meets the
-    paper, and the classical solver of the first comparison.  ``metric`` may be any quantity the paper's method
-    measured in every comparison; whether a value meets the paper is marked for the scored metrics only.
+    paper (*n/c* where the case's input is not the paper's), and the classical solver of the first comparison.
+    ``metric`` may be any quantity the paper's method measured in every comparison; whether a value meets the paper
+    is marked for the scored metrics only.
 
     Raises
     ------
@@ -591,7 +592,10 @@ def native_side_by_side(tables: dict[str, Comparison], metric: str = "std_rho_ma
         cells = [c.name, format_number(first.value(c.name, "paper", metric))]
         for t in tables.values():
             met = t.met(c.name, metric) if metric in t.metrics else None
-            mark = "" if met is None else (" (met)" if met else " (missed)")
+            if met is not None:
+                mark = " (met)" if met else " (missed)"
+            else:  # a scored metric on an input that is not the paper's
+                mark = " (n/c)" if metric in t.metrics and not t.comparable(c.name) else ""
             cells.append(format_number(t.value(c.name, "native", metric)) + mark)
         cells.append(format_number(first.value(c.name, "classical", metric)))
         lines.append("| " + " | ".join(cells) + " |")

@@ -207,7 +207,7 @@ def volume_rows(results: dict, labels, fig_label: str | None, *, clim=(0.0, 2.5)
         for ax, t in zip(axes[0], titles):
             ax.set_title(t)
         add_colorbar(ScalarMappable(Normalize(*clim), "viridis"), fig=fig, ax=axes, location="bottom", shrink=0.7,
-                     aspect=30, label=r"$\tilde\rho$ (the grid: the input's, carried along)")
+                     aspect=30, label=r"$\tilde\rho$ (grid lines: the input's, carried by the map)")
         if fig_label is not None:
             save_figure(fig, fig_label)
     return fig
