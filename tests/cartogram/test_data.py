@@ -191,6 +191,9 @@ def test_figure_svg_has_the_area_legend(carto, tmp_path):
     svg = tmp_path / "f.svg"
     fig = cartogram_figure(carto, labels=list("ABCD"), unit="people", path=svg)
     text = svg.read_text(encoding="utf-8")
+    # the input panel names the value after its head, not run together with it
+    titled = cartogram_figure(carto, title="people 2007")
+    assert titled.axes[0].get_title() == "input map (people 2007)"
     # the legend square stands for a round amount (1, 2 or 5 times a power of ten) of the 8 people, the largest
     # whose square's side is at most 10 % of the axes' width, at the cartogram's scale (value per unit area)
     import re

@@ -245,7 +245,7 @@ def cartogram_figure(carto, options: FigureOptions | None = None, *, label: str 
             else:
                 coll = plot_regions(ax, geoms, lw=0.3, edgecolor="white")
                 coll.set_facecolor(face)
-            ax.set_title(f"{title} {head}".strip() if ax is axes[0] and title else head)
+            ax.set_title(f"{head} ({title})" if ax is axes[0] and title else head)
         pad = 0.02 * (hi - lo)
         for ax, geoms in zip(axes, (before, after)):
             ax.set(xlim=(lo[0] - pad[0], hi[0] + pad[0]), ylim=(lo[1] - (0.2 if legend else 0.02) * (hi - lo)[1],
