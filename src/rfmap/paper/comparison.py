@@ -215,9 +215,7 @@ class Comparison:
         return f"{verdict(flags)} ({sum(known)} of {len(known)})" if known else verdict(flags)
 
     def _case_met(self, case: str, metric: str) -> str:
-        """The met cell of a case: ``yes`` / ``no`` / ``—``, or for an input that is not the paper's ``n/c`` with
-        the Std ratios (the paper's method run here, the paper) of :func:`rfmap.paper.verdicts.std_ratio` for
-        Std(rho~_map), as ``n/c; Std ratio: paper's method 0.125, paper 0.194``."""
+        """A met cell: ``yes``/``no``/``—``, or ``n/c; Std ratio: paper's method R, paper P`` for an input not the paper's."""
         if self.comparable(case):
             met = self.met(case, metric)
             return "—" if met is None else ("yes" if met else "no")
