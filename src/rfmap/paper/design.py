@@ -132,8 +132,11 @@ def _code_words(text: str) -> str:
 
 
 def display_name(d: dict[str, Any]) -> str:
-    """The decision's name for headings and the table of decisions: the constant as inline code (``_HARD2`` (p_hard))
-    where it is one, else its words, never its value."""
+    """The decision's name for headings and the table of decisions: its ``title`` where it has one (a private
+    constant such as ``_HARD2.p_hard`` is named in words), else the constant as inline code (``RTOL``) where it is
+    one, else its words; never its value."""
+    if d.get("title"):
+        return d["title"]
     m = re.fullmatch(r"([A-Za-z_]\w*)(?: \((.*)\))?", d["constant"])
     if m and (d.get("attribute") or "_" in m.group(1) or m.group(1).isupper()):
         return f"`{m.group(1)}`" + (f" ({m.group(2)})" if m.group(2) else "")
@@ -251,6 +254,11 @@ def _cell(text: Any) -> str:
     return str(text).replace("|", "\\|").replace("\n", " ") if text not in (None, "") else "—"
 
 
+def _where(d: dict[str, Any]) -> str:
+    """Where a decision named by its title lives in the code: `` (`rfmap.training.config._HARD2.p_hard`)``."""
+    return f" (`{d['module']}.{d['attribute']}`)" if d.get("title") and d.get("attribute") else ""
+
+
 def _label(d: dict[str, Any]) -> str:
     """The page's target of a decision's section (``design-walk-fill``)."""
     slug = "".join(c if c.isalnum() else "-" for c in (d.get("remeasure") or d["constant"]).lower())
@@ -278,7 +286,7 @@ def _status(d: dict[str, Any]) -> list[str]:
 
 def _details(d: dict[str, Any]) -> list[str]:
     """One decision's section: its name and value, what it is for, and the numbers folded below."""
-    lines = [f"({_label(d)})=", f"### {display_name(d)}", "", f"**Value:** {readable_value(d)}", "",
+    lines = [f"({_label(d)})=", f"### {display_name(d)}", "", f"**Value:** {readable_value(d)}" + _where(d), "",
              f"{d.get('purpose') or d['what']}.", ""]
     lines += finding(d)
     lines += ["::::{dropdown} The measurement", ""]
