@@ -197,3 +197,21 @@ def test_encoding_figure_says_what_a_shorter_row_holds():
     texts = [t.get_text() for ax in fig.axes for t in ax.texts]
     assert texts == ["3 channels:\n2 coordinates,\n1 field channel"]
     plt.close(fig)
+
+
+@pytest.mark.parametrize("lo, hi", [(0.096, 0.19), (0.085, 0.22), (3.0, 14.0), (0.0502, 0.0508)])
+def test_a_narrow_log_axis_is_labelled_at_round_values(lo, hi):
+    """Data spanning less than a factor of five get two or three labels inside the data's range, at round values
+    (1, 1.5, 2, 3, 4, 5, 6, 8 times a power of ten) where two such values fall inside, never at 0.096 or 0.13."""
+    from rfmap.viz.studies import plain_log_ticks
+
+    fig, ax = plt.subplots()
+    ax.semilogy([0, 1], [lo, hi])
+    plain_log_ticks(ax.yaxis)
+    ticks = [t for t in ax.yaxis.get_majorticklocs() if lo * 0.9 <= t <= hi * 1.1]
+    assert 2 <= len(ticks) <= 3, ticks
+    mantissas = {round(t / 10.0 ** np.floor(np.log10(t)), 6) for t in ticks}
+    round_inside = [m * 10.0**e for e in range(-3, 3) for m in (1, 1.5, 2, 3, 4, 5, 6, 8) if lo <= m * 10.0**e <= hi]
+    if len(round_inside) >= 2:
+        assert mantissas <= {1, 1.5, 2, 3, 4, 5, 6, 8}, ticks
+    plt.close(fig)

@@ -15,18 +15,32 @@ COLUMN_NAMES = {"std_rho_map": r"Std($\tilde\rho_{map}$)", "raw_std": r"raw Std(
 
 def plain_log_ticks(axis) -> None:
     """Label a log ``axis`` (``ax.xaxis`` or ``ax.yaxis``, after plotting) in plain numbers (``0.02``, ``5``,
-    ``1e-05`` when shorter) at 1, 2 and 5 times the powers of ten, or at three values spaced evenly on the log scale
-    where the data span less than a factor of five, with no labels between them, so that labels never overlap."""
+    ``1e-05`` when shorter) at 1, 2 and 5 times the powers of ten, or at up to three round values spaced about
+    evenly on the log scale where the data span less than a factor of five (:func:`_round_log_values`), with no labels between them, so that labels never overlap."""
     from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
 
     axis.axes.autoscale_view()
     lo, hi = sorted(abs(v) for v in axis.get_view_interval())
     if lo > 0 and hi / lo < 5:
-        axis.set_major_locator(FixedLocator(sorted({float(f"{t:.2g}") for t in np.geomspace(lo, hi, 5)[1:-1]})))
+        axis.set_major_locator(FixedLocator(_round_log_values(lo, hi)))
     else:
         axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0), numticks=12))
     axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
     axis.set_minor_formatter(NullFormatter())
+
+
+def _round_log_values(lo: float, hi: float) -> list[float]:
+    """Up to three round values (1, 1.5, 2, 3, 4, 5, 6 or 8 times a power of ten) inside ``[lo, hi]``, each the
+    one nearest on the log scale to a quarter, half and three quarters of the interval; the values rounded to two
+    digits where fewer than two round ones fall inside."""
+    e0, e1 = int(np.floor(np.log10(lo))), int(np.ceil(np.log10(hi)))
+    nice = np.array(sorted(m * 10.0**e for e in range(e0, e1 + 1) for m in (1, 1.5, 2, 3, 4, 5, 6, 8)))
+    nice = nice[(nice >= lo) & (nice <= hi)]
+    targets = np.geomspace(lo, hi, 5)[1:-1]
+    if len(nice) < 2:
+        return sorted({float(f"{t:.2g}") for t in targets})
+    picked = {float(nice[np.argmin(abs(np.log(nice) - np.log(t)))]) for t in targets}
+    return sorted(float(f"{v:.3g}") for v in picked)
 
 
 def decade_ticks(axis) -> None:
