@@ -137,7 +137,7 @@ def test_findings_say_where_the_numbers_do_not_support_the_value():
             row = next(r for r in d["results"] if r["case"] == case)
             assert case in text and all(str(row[k]) in text for k in ("chosen", "alternative") if row.get(k))
         assert kept_text(d) in page and kept_text(d).startswith("**Not supported by the")
-        if d.get("remeasure"):
+        if d.get("remeasure") and not d["finding"].get("next"):  # a timing: it waits for an idle machine
             assert "idle machine" in text and "idle machine" in kept_text(d)
     broken = {**by["BATCH_POINTS"], "finding": {"text": "x", "rows": ["no such case"]}}
     with pytest.raises(KeyError):

@@ -227,7 +227,7 @@ def kept_text(d: dict[str, Any]) -> str:
     """The table's *kept because* cell: the decision's ``kept``, or, where the numbers do not support the value
     (a ``finding``), that plainly, with what the constant waits for."""
     if d.get("finding"):
-        return f"**Not supported by the {_kind(d)}**; kept until {_waits(d)}"
+        return f"**Not supported by the {_kind(d)}**; kept for now, until {_waits(d)}"
     return d.get("kept", "")
 
 
@@ -351,7 +351,7 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
              "the checkpoint of a training run is chosen. Each was set by comparing a few values on a stated "
              "criterion. The overview below gives, for each, what it controls, what was tried instead, what the "
              "measurement showed and why the value stays. Below the overview, each decision has a short section "
-             "whose numbers are folded.", "",
+             "whose numbers sit in a collapsed block (click to open it).", "",
              f"The numbers are of two kinds. For {counted(len(scripted), 'decision')} a script "
              "(`benchmarks/design.py`) measures the choice again and prints the same numbers; the others are "
              "records written down when the value was chosen, and the code has changed since, so they explain the "
