@@ -225,8 +225,10 @@ RULES_SHORT = (
     "the paper's value. The verdict is *reproduced* when every scored case is met, *partly* when some are, *not "
     "reproduced* when none is, and *not comparable* when no case has the paper's input. Scored are the mean "
     "measures the paper's losses drive down: |Δd| and |Δμ|, Std(ρ̃_map), and mean |μ| for DEQ maps; times are not "
-    "scored. *Cases met* counts the cases; the values beside it are means over them, which one large case can "
-    "carry. The rules in full, and every case: {ref}`the scoreboard <" + RULES_TARGET + ">`."
+    "scored. The count beside a verdict is of scored (case, metric) pairs, so a table scored on two metrics counts "
+    "each case twice; a case whose input is not the paper's (*n/c*) is left out of it, and the verdict says whether "
+    "its Std ratio is worse than the paper's. *Cases met* counts the cases; the values beside it are means over "
+    "them, which one large case can carry. The rules in full, and every case: {ref}`the scoreboard <" + RULES_TARGET + ">`."
 )
 
 

@@ -209,10 +209,16 @@ class Comparison:
         return is_comparable(c.field, n, paper_std)
 
     def verdict_word(self) -> str:
-        """The item's verdict (:func:`rfmap.paper.verdicts.verdict`) with its count, e.g. ``'partly (5 of 8)'``."""
+        """The verdict (:func:`rfmap.paper.verdicts.verdict`), its count of (case, metric) pairs and, for each n/c
+        case, whether its Std ratio is worse than the paper's: ``'reproduced (3 of 3; n/c case worse by Std ratio)'``"""
         flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
         known = [f for f in flags if f is not None]
-        return f"{verdict(flags)} ({sum(known)} of {len(known)})" if known else verdict(flags)
+        notes = [f"{sum(known)} of {len(known)}"] if known else []
+        ratios = [[std_ratio(self.value(c.name, m, "std_rho_map"), self.value(c.name, m, "std_rho_orig"))
+                   for m in ("native", "paper")] for c in self.cases if not self.comparable(c.name)]
+        notes += [f"n/c case {'worse' if a > b else 'not worse'} by Std ratio" for a, b in ratios
+                  if a is not None and b is not None and "std_rho_map" in self.metrics]
+        return verdict(flags) + (f" ({'; '.join(notes)})" if notes else "")
 
     def _case_met(self, case: str, metric: str) -> str:
         """A met cell: ``yes``/``no``/``—``, or ``n/c; Std ratio: paper's method R, paper P`` for an input not the paper's."""
@@ -241,9 +247,8 @@ class Comparison:
         return self.count(metric, test)
 
     def mean(self, method: str, metric: str, comparable: bool = False) -> float | None:
-        """The mean of a method's values of ``metric`` over the cases (``None`` if any is missing); with
-        ``comparable``, over the cases whose input is the paper's only (:meth:`comparable`), as the scoreboard
-        counts them."""
+        """The mean of a method's values of ``metric`` over the cases (``None`` if any is missing); with ``comparable``,
+        over the cases whose input is the paper's only (:meth:`comparable`), as the scoreboard counts them."""
         cases = [c for c in self.cases if not comparable or self.comparable(c.name)]
         vals = [self.value(c.name, method, metric) for c in cases]
         return None if not vals or any(v is None for v in vals) else float(np.mean(vals))
@@ -263,20 +268,18 @@ class Comparison:
         return None if any(v is None for v in vals) else float(np.median(vals))
 
     def native_lesson(self, metric: str = "std_rho_map", tol: float = 1.1) -> str:
-        """A sentence on the cases where the paper's method runs the network on another grid than the delivered
-        map (outside the training range): whether there its ``metric`` is more than ``tol`` times the delivered
-        map's."""
+        """A sentence on the cases where the paper's method runs the network on another grid than the delivered map
+        (outside the training range): whether there its ``metric`` is more than ``tol`` times the delivered map's."""
         outside = [c.name for c in self.cases
                    if self.value(c.name, "native", "work_n") != self.value(c.name, "delivered", "work_n")]
         if not outside:
             return "The paper's method and the delivered map run the network on the same grid at every side."
         worse = [c for c in outside
                  if self.value(c, "native", metric) > tol * self.value(c, "delivered", metric)]
-        sides = ", ".join(worse)
         if worse:
-            return (f"Outside the training range (N = {sides}) the network run natively, as the paper runs it, "
-                    f"leaves {METRIC_TITLES[metric]} more than {tol:g} times that of the delivered map, which runs "
-                    "it on the working grid and interpolates: the one network accepts every grid, but it is "
+            return (f"Outside the training range (N = {', '.join(worse)}) the network run natively, as the paper "
+                    f"runs it, leaves {METRIC_TITLES[metric]} more than {tol:g} times that of the delivered map, which "
+                    "runs it on the working grid and interpolates: the one network accepts every grid, but it is "
                     "accurate only near the grids it was trained on.")
         return (f"Outside the training range (N = {', '.join(outside)}) the network run natively, as the paper "
                 f"runs it, leaves {METRIC_TITLES[metric]} within {tol:g} times that of the delivered map, which "
@@ -305,8 +308,8 @@ class Comparison:
         return out
 
     def shown(self) -> list[str]:
-        """The quantities of :data:`SHOWN` that the paper's table prints: the scoreboard shows them beside the
-        scored metrics (means and ``"k of m"`` cases at most the paper's), outside the verdict."""
+        """The quantities of :data:`SHOWN` that the paper's table prints: the scoreboard shows them beside the scored
+        metrics (means and ``"k of m"`` cases at most the paper's), outside the verdict."""
         try:
             columns = paper_table(self.label)["columns"]
         except ValueError:  # a figure: no printed table
@@ -410,9 +413,7 @@ def _csv_cell(v) -> str:
 
 # ------------------------------------------------------------------------------------------------- the runners
 def _network_values(res: MapResult, values: dict) -> dict:
-    info = res.info
-    return {**values, "network_time": info.get("network_time"), "work_n": info.get("work_n"),
-            "alpha": info.get("alpha")}
+    return {**values, **{k: res.info.get(k) for k in ("network_time", "work_n", "alpha")}}
 
 
 def _surrogate_maps(sur, field_, n: int) -> tuple[MapResult, MapResult]:
@@ -437,8 +438,7 @@ def compare_density(sur, cases: list[Case], label: str, title: str, *, case_pref
     label, title : str
     case_prefix : str
     """
-    dim, boundary = sur.spec.dim, ("free" if sur.spec.boundary == "free" else "square")
-    with_mu = dim == 2
+    with_mu, boundary = sur.spec.dim == 2, ("free" if sur.spec.boundary == "free" else "square")
     cmp = Comparison(label, title, ["std_rho_map"] + (["mean_mu"] if with_mu else []), list(cases),
                      "flow solver", case_prefix=case_prefix)
     paper = paper_table(label)["rows"]
