@@ -9,8 +9,9 @@ Quick start::
     # the classical diffusion DEM
     res = solve_dem(sample_density("sin-cos", 51))
     print(res.metrics())
-    # a shipped neural surrogate
-    sur = Surrogate.pretrained(models()[0])
+    # a shipped neural surrogate on the same density
+    sur = Surrogate.pretrained("deq2d-square")
+    print(sur.map("sin-cos", 51).metrics())
 
 The neural names (:class:`Surrogate`, :func:`models`, :func:`load_or_train`) are imported on first use, so that the
 classical paths (``rfmap cartogram``, :mod:`rfmap.cartogram.resize`) run without loading PyTorch.

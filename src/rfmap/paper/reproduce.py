@@ -111,17 +111,17 @@ _BEL_COLS = ["time", "speedup", "mean_dd", "mean_dmu", "mean_dmu_pl", "n_flipped
 
 def beltrami_table(sur, n: int = PAPER_N[2], maps=TEST_FIELDS["beltrami", 2], refine: bool = False,
                    symmetrize: bool | str = False):
-    """tab:reconstruction_results_mu: our model, the Linear Beltrami Solver and the paper on T1–T4 at ``n``;
-    ``refine`` adds the weight-refined map (row ``ours + refinement``, paper Sec. 4.3), ``symmetrize`` the network
-    averaged over symmetries of the square (row :data:`SYM`; with ``refine`` also :data:`SYM_REF`)."""
+    """The paper's Table 2 (``tab:reconstruction_results_mu``): our model, the Linear Beltrami Solver and the paper on
+    T1–T4 at ``n``; ``refine`` adds the weight-refined map (row ``ours + refinement``, paper Sec. 4.3), ``symmetrize``
+    the network averaged over symmetries of the square (row :data:`SYM`; with ``refine`` also :data:`SYM_REF`)."""
     t = Table("tab:reconstruction_results_mu", f"Reconstruction from Beltrami coefficients (N = {n})", _BEL_COLS)
     return _beltrami_rows(sur, t, [(m, m, n) for m in maps], paper_table(t.label), refine, symmetrize)
 
 
 def beltrami_resolution_table(sur, ns=(48, 64, 80, 96), name: str = "T1-res", refine: bool = False,
                               symmetrize: bool | str = False):
-    """tab:reconstruction_results_res: the same model on ``name`` at several resolutions (``refine`` and
-    ``symmetrize`` as in :func:`beltrami_table`)."""
+    """The paper's Table 3 (``tab:reconstruction_results_res``): the same model on ``name`` at several
+    resolutions (``refine`` and ``symmetrize`` as in :func:`beltrami_table`)."""
     t = Table("tab:reconstruction_results_res", f"Reconstruction of {name} at several resolutions", _BEL_COLS)
     return _beltrami_rows(sur, t, [(str(n), name, n) for n in ns], paper_table(t.label), refine, symmetrize)
 
@@ -194,11 +194,12 @@ def _density_rows(sur, table, cases, paper, refine, boundary, classical=True, sy
 
 def population_table(sur, fields=None, n: int | None = None, refine: bool = True, classical: bool = True,
                      symmetrize: bool | str = False):
-    """tab:population_test(_fb) / tab:3d_population_test(_fb): the four population tests.  ``symmetrize`` adds
-    the rows of the network averaged over symmetries of the domain (:data:`SYM`, with ``refine`` also
-    :data:`SYM_REF`; :mod:`rfmap.nn.symmetry`).  The surrogate and the classical solver are timed alike: after an
-    untimed warm-up, the fastest of three runs (one run where the warm-up took more than a second); ``speedup`` is
-    the classical time over the row's."""
+    """The paper's Tables 4, 5, 7 and 8 (``tab:population_test``, ``tab:population_test_fb``,
+    ``tab:3d_population_test``, ``tab:3d_population_test_fb``): the four population tests.  ``symmetrize`` adds the rows
+    of the network averaged over symmetries of the domain (:data:`SYM`, with ``refine`` also :data:`SYM_REF`;
+    :mod:`rfmap.nn.symmetry`).  The surrogate and the classical solver are timed alike: after an untimed warm-up, the
+    fastest of three runs (one run where the warm-up took more than a second); ``speedup`` is the classical time over
+    the row's."""
     d, b = sur.spec.dim, sur.spec.boundary
     fields = list(fields or TEST_FIELDS["density", d])
     n = n or PAPER_N[d]
@@ -213,8 +214,8 @@ def population_table(sur, fields=None, n: int | None = None, refine: bool = True
 
 def resolution_table(sur, ns=None, refine: bool = False, classical: bool = True, work_n=None,
                      symmetrize: bool | str = False):
-    """tab:resolution_test / tab:3d_resolution_test: the multi-frequency field at several resolutions
-    (``symmetrize`` as in :func:`population_table`)."""
+    """The paper's Tables 6 and 9 (``tab:resolution_test``, ``tab:3d_resolution_test``): the multi-frequency field
+    at several resolutions (``symmetrize`` as in :func:`population_table`)."""
     d = sur.spec.dim
     ns = list(ns or ((32, 64, 128, 256) if d == 2 else (32, 40, 56, 64)))
     name = "multi-freq" if d == 2 else "multi-freq-3d"
