@@ -285,7 +285,7 @@ def _status(d: dict[str, Any]) -> list[str]:
 
 
 def _details(d: dict[str, Any]) -> list[str]:
-    """One decision's section: its name and value, what it is for, and the numbers folded below."""
+    """One decision's section: its name and value, what it is for, and the numbers in a collapsed block below (rows quoted by a finding not repeated)."""
     lines = [f"({_label(d)})=", f"### {display_name(d)}", "", f"**Value:** {readable_value(d)}" + _where(d), "",
              f"{d.get('purpose') or d['what']}.", ""]
     lines += finding(d)
@@ -296,8 +296,10 @@ def _details(d: dict[str, Any]) -> list[str]:
     lines += _status(d)
     if d.get("data"):
         lines += [f"**Measured on:** {plain_numbers(d['data'].rstrip('.'))}.", ""]
-    if d.get("results"):
-        lines += _rows_table(d["results"]) + [""]
+    quoted = set((d.get("finding") or {}).get("rows", []))  # shown in the warning above: not repeated here
+    rest = [r for r in d.get("results") or [] if r.get("case") not in quoted]
+    if rest:
+        lines += (["The other rows:", ""] if quoted else []) + _rows_table(rest) + [""]
     if d.get("notes"):
         lines += [plain_numbers(d["notes"]), ""]
     lines += [f"In the code: `{d['module']}`. {plain_numbers(d['what'])}", "", "::::", ""]
