@@ -15,7 +15,6 @@ def fold_repair_figure(raw, repaired, n: int, *, margin: float = 0.06):
     ``raw``, ``repaired``: :class:`rfmap.core.result.MapResult` of one ``n``-grid.  Returns the figure."""
     import matplotlib.pyplot as plt
 
-
     det = element_measures(raw.mapped_points, raw.elements)
     centres = raw.mapped_points[raw.elements[det <= 0]].mean(1)
     with style():
@@ -26,9 +25,11 @@ def fold_repair_figure(raw, repaired, n: int, *, margin: float = 0.06):
         for ax in (axes["a"], axes["b"]):
             ax.spines[["left", "bottom"]].set_visible(False)
         lo, hi = centres.min(0) - margin, centres.max(0) + margin
-        axes["c"].triplot(*repaired.mapped_points.T, repaired.elements, lw=0.9, color="tab:blue",
-                          label="repaired map")
-        axes["c"].triplot(*raw.mapped_points.T, raw.elements, lw=0.5, color="tab:orange", label="raw map")
+        # the raw map first and faint, the repaired map over it: where the two differ, the repair is seen
+        axes["c"].triplot(*raw.mapped_points.T, raw.elements, lw=0.6, ls="--", color="tab:orange", alpha=0.8,
+                          label="raw map", zorder=1)
+        axes["c"].triplot(*repaired.mapped_points.T, repaired.elements, lw=1.1, color="tab:blue",
+                          label="repaired map", zorder=2)
         axes["c"].plot(*centres.T, "o", color="crimson", ms=6, mfc="none", label="flipped (raw map)")
         axes["c"].set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), aspect="equal",
                       title="(c) close-up around the folds")
@@ -42,7 +43,6 @@ def surface_crossing_figure(bent, repaired, n: int, turns: float, scale: float):
     in the book's style (the chapter on repairing folded maps), both panels on the same axes' limits.  Returns the
     figure."""
     import matplotlib.pyplot as plt
-
 
     with style():
         fig, axes = plt.subplots(1, 2, figsize=(7.0, 3.9), layout="constrained")

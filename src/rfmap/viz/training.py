@@ -336,11 +336,13 @@ def validation_vs_time(metas: dict, ax=None, *, key: str | None = None, logx: bo
         key = next((k for k in keys if k), "std_rho_map")
     if ax is None:
         _, ax = plt.subplots(figsize=(5.2, 3.4), layout="constrained")
+    chained = False  # whether some curve is the last run of a chain: the axis is then that run's time
     for k, (name, meta) in enumerate(metas.items()):
         val = [v for v in meta.get("history", {}).get("validation", []) if v.get("elapsed") is not None and key in v]
         if not val:
             continue
         earlier = float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) - float(meta.get("wall_time", 0.0))
+        chained = chained or earlier >= 30
         label = f"{name} (after {earlier / 60:,.0f} min of earlier runs)" if earlier >= 30 else name
         if minutes:
             label += f", {float(meta.get('wall_time', 0.0)) / 60:.3g} min"
@@ -360,7 +362,7 @@ def validation_vs_time(metas: dict, ax=None, *, key: str | None = None, logx: bo
         plain_log_ticks(ax.xaxis)
     else:
         ax.set_xlim(left=0)
-    ax.set(xlabel="wall time of the last run (min)", ylabel=f"held-out mean {VAL_NAMES.get(key, key)}")
+    ax.set(xlabel="wall time of the last run (min)" if chained else "training wall time (min)", ylabel=f"held-out mean {VAL_NAMES.get(key, key)}")
     if legend == "outside":
         ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.22), ncols=1, frameon=False)
     elif legend:
