@@ -45,6 +45,7 @@ def test_table_markdown_and_csv_roundtrip(tmp_path):
 @pytest.mark.parametrize("value, column, text", [
     (0.0198912, "std_rho_map", "0.01989"), (2.432098, "mean_dd", "2.432"), (-0.0123456, "min_jacobian", "-0.01235"),
     (0.0123456, "time", "12.3 ms"), (2.432098, "time", "2.43 s"), (123.456, "time", "123 s"),
+    (0.9997, "time", "1 s"), (0.9994, "time", "999 ms"),
     (41.237, "speedup", "41.2×"), (3, "n_flipped", "3"), (np.int64(7), "n_flipped", "7"), (None, "time", "—"),
     (1.6512e-05, "mean_dd", "1.651 × 10⁻⁵"),
 ])

@@ -66,7 +66,8 @@ def format_value(v, column: str = "", *, unit: bool = True) -> str:
         if not unit:
             return f"{v:.{DIGITS}g}"
         if column == "time":
-            return f"{v * 1e3:.{DIGITS - 1}g} ms" if abs(v) < 1 else f"{v:.{DIGITS - 1}g} s"
+            ms = float(f"{v * 1e3:.{DIGITS - 1}g}")  # rounded first: 0.9997 s is 1 s, not 1e+03 ms
+            return f"{ms:g} ms" if abs(ms) < 1000 else f"{v:.{DIGITS - 1}g} s"
         if column == "speedup":
             return f"{v:.{DIGITS - 1}g}×"
         return format_sig(v, DIGITS)
