@@ -214,7 +214,7 @@ def _preamble() -> list[str]:
     return [f"({RULES_TARGET})=", CRITERION, "", rule, "", metrics + (
         " The rows *max |μ| (shown, not scored)* give its means and the number of cases in which the paper's "
         "method is at most the paper's value; where that number falls short of all cases, scoring max |μ| "
-        "would lower the verdict. min det J is not shown: what matters in it is its sign, and the chapters count "
+        "would lower the count beside the verdict. min det J is not shown: what matters in it is its sign, and the chapters count "
         "the folded elements (det J ≤ 0) of every map instead."), ""]
 
 
