@@ -317,7 +317,7 @@ class Cartogram:
 
 # ----------------------------------------------------------------------------------------------- pipeline
 def cartogram(collection, value: str, options: CartogramOptions | None = None, **kw) -> Cartogram:
-    r"""Diffusion cartogram of GeoJSON regions sized by one value each (see the module docstring).
+    r"""A cartogram of GeoJSON regions sized by one value each, flow-based by default (see the module docstring).
 
     Parameters
     ----------

@@ -150,7 +150,7 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
     of the mean :math:`|\mu|` over triangles, the largest :math:`|\mu|`, the smallest Jacobian and the flipped
     triangles; the last column is each field's mean :math:`|\mu|` divided by that of the first model on the same
     field, averaged over the fields.  A DEQ loss (density + :math:`\lambda\int|\mu|^2`, paper Eq.
-    (beltrami_energy)) should lower the mean :math:`|\mu|` against a pure DEM loss at about the same
+    (3)) should lower the mean :math:`|\mu|` against a pure DEM loss at about the same
     Std(rho~_map).
 
     Parameters

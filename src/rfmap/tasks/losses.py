@@ -119,7 +119,7 @@ def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor,
 
 
 def beltrami_energy(ref: Tensor, mapped: Tensor, elements: Tensor) -> Tensor:
-    r"""Beltrami energy :math:`\int_\Omega |\mu(u)|^2` (paper Eq. (beltrami_energy)); the DEQ regulariser."""
+    r"""Beltrami energy :math:`\int_\Omega |\mu(u)|^2` (paper Eq. (3)); the DEQ regulariser."""
     return weighted_mean(beltrami_coefficient(ref, mapped, elements).abs() ** 2, signed_measures(ref, elements))
 
 

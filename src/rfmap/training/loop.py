@@ -208,7 +208,7 @@ def _finish(st: TrainState) -> Surrogate:
     if st.avg is not None:  # from here on the model holds the averaged weights (the checkpoint keeps both)
         st.model.load_state_dict(st.avg.averaged_state(st.model))
         st.avg = None
-    if not cfg.val_every:  # no validation here (a run on a lent accelerator): rfmap validate scores its snapshots
+    if not cfg.val_every:  # no validation here (a run on a GPU): rfmap validate scores its snapshots
         sur = st.cpu_surrogate()
         sur.meta["selected_step"] = st.step
         sur.meta["history"] = history(st.out / "log.jsonl")

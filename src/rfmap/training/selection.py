@@ -1,6 +1,6 @@
 r"""Choosing among saved weights after training: ``rfmap validate``.
 
-A run on a lent accelerator does not validate while it trains (``rfmap train --no-validate --snapshot-every K``);
+A run on a GPU machine does not validate while it trains (``rfmap train --no-validate --snapshot-every K``);
 it writes self-contained snapshots (weights with their metadata in the file's header,
 ``Surrogate.save(..., embed=True)``).  Back on a CPU, :func:`score_weights` scores each on the held-out validation
 stream of its own configuration (:func:`rfmap.training.validation.evaluate` at the configuration's ``val_ns``,

@@ -1,0 +1,26 @@
+"""The API reference keeps a constant's comment whole when its first line holds a colon."""
+from sphinx.ext.napoleon import Config
+from sphinx.ext.napoleon.docstring import NumpyDocstring
+
+from rfmap.paper._apidocs import GUARD, keep_whole
+
+
+def _rendered(what: str, lines: list[str]) -> list[str]:
+    lines = list(lines)
+    keep_whole(None, what, "X", None, None, lines)
+    return NumpyDocstring(lines, Config(napoleon_use_ivar=True), what=what, name="X").lines()
+
+
+def test_a_comment_with_a_colon_is_not_cut_into_a_type():
+    comment = ["cells per side: the raster's side at which", "the flow is run."]
+    plain = NumpyDocstring(list(comment), Config(napoleon_use_ivar=True), what="data", name="X").lines()
+    assert ":type: cells per side" in plain  # what napoleon alone makes of it
+    out = _rendered("data", comment)
+    assert out == [GUARD, *comment] and not any(line.startswith(":type:") for line in out)
+
+
+def test_functions_and_comments_without_a_colon_are_left_alone():
+    assert _rendered("data", ["the largest side"]) == ["the largest side"]
+    lines = ["Do this: then that."]
+    keep_whole(None, "function", "f", None, None, lines)
+    assert lines == ["Do this: then that."]
