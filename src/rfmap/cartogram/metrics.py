@@ -39,13 +39,17 @@ REPAIR_OVERLAP = 1e-5
 REPAIR_SLIVER = 1e-4
 #: :func:`clean_input_overlaps`: an overlap of two input regions is a sliver when its isoperimetric quotient is under
 #: this (a strip ten times as long as wide: 0.26; a square: 0.79) or it holds under ``SLIVER_SHARE`` of either region
-SLIVER_SHAPE, SLIVER_SHARE = 0.3, 0.01
+SLIVER_SHAPE = 0.3
+#: :func:`clean_input_overlaps`: an overlap holding under this share of either of its two regions is a sliver
+SLIVER_SHARE = 0.01
 #: the width, in cells of the raster, under which an enclosed gap between input regions that :func:`clean_input_overlaps`
 #: makes a coverage is closed (a quarter cell: far below what the raster resolves)
 SLIVER_GAP = 0.25
-#: :func:`boost`: the smallest share of a region's log area error that a pass is taken to remove, and the largest
-#: log weight boost (a factor of :math:`e^{0.4} \approx 1.5`); stronger boosts overshoot, and the passes oscillate
-BOOST_GAIN, BOOST_CAP = 0.25, 0.4
+#: :func:`boost`: the smallest share of a region's log area error that a pass is taken to remove
+BOOST_GAIN = 0.25
+#: :func:`boost`: the largest log weight boost (a factor of :math:`e^{0.4} \approx 1.5`); stronger boosts overshoot,
+#: and the passes oscillate
+BOOST_CAP = 0.4
 
 
 @dataclass
@@ -280,9 +284,11 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float
     return out, cut
 
 
-#: The shares of an overlap that :func:`repair_overlaps` may cut from the first of its two regions, and the increase of
-#: the larger relative area error of the two below which the whole overlap is cut from one of them
-SPLITS, SPLIT_COST = tuple(np.linspace(0.0, 1.0, 11)), 1e-3
+#: The shares of an overlap that :func:`repair_overlaps` may cut from the first of its two regions (0, 0.1, ..., 1)
+SPLITS = tuple(np.linspace(0.0, 1.0, 11))
+#: The increase of the larger relative area error of the two regions below which :func:`repair_overlaps` cuts the whole
+#: overlap from one of them
+SPLIT_COST = 1e-3
 
 
 def valid_polygons(geoms: np.ndarray) -> np.ndarray:
