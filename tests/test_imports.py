@@ -55,7 +55,7 @@ LAYERS: dict[str, int] = {
     "rfmap.paper": 3, "rfmap.paper.tables": 3, "rfmap.paper.reproduce": 3,
     "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,
     "rfmap.paper.flow_studies": 3, "rfmap.paper.design": 3, "rfmap.paper.cartograms": 3, "rfmap.paper.comparison": 3,
-    "rfmap.paper.ablations": 3, "rfmap.paper.folding": 3, "rfmap.paper._execution": 3,
+    "rfmap.paper.ablations": 3, "rfmap.paper.folding": 3, "rfmap.paper._execution": 3, "rfmap.paper._apidocs": 3,
     "rfmap.cartogram": 3, "rfmap.cartogram.resize": 3, "rfmap.cartogram.options": 3,
     "rfmap.cartogram.data": 3, "rfmap.cartogram.series": 3, "rfmap.cartogram.metrics": 3,
     "rfmap.cartogram.synthetic": 3, "rfmap.cartogram.output": 3, "rfmap.cartogram.html": 3,
