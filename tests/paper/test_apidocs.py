@@ -24,3 +24,26 @@ def test_functions_and_comments_without_a_colon_are_left_alone():
     lines = ["Do this: then that."]
     keep_whole(None, "function", "f", None, None, lines)
     assert lines == ["Do this: then that."]
+
+
+def test_the_extension_loads_before_autodoc_in_a_sphinx_build(tmp_path):
+    """_config.yml lists it before sphinx.ext.autodoc: it sets autodoc up itself, and a constant's comment with a
+    colon comes out whole in the built page."""
+    import sys
+
+    from sphinx.application import Sphinx
+
+    (tmp_path / "mod_x.py").write_text('#: cells per side: the raster\'s side\nSIDE = 4\n', encoding="utf-8")
+    (tmp_path / "conf.py").write_text(
+        'extensions = ["rfmap.paper._apidocs", "sphinx.ext.autodoc", "sphinx.ext.napoleon"]\n', encoding="utf-8")
+    (tmp_path / "index.rst").write_text(".. autodata:: mod_x.SIDE\n", encoding="utf-8")
+    sys.path.insert(0, str(tmp_path))
+    try:
+        app = Sphinx(str(tmp_path), str(tmp_path), str(tmp_path / "_build"), str(tmp_path / "_doctrees"), "text",
+                     status=None, warning=None)
+        app.build()
+    finally:
+        sys.path.remove(str(tmp_path))
+        sys.modules.pop("mod_x", None)
+    text = (tmp_path / "_build" / "index.txt").read_text(encoding="utf-8")
+    assert "cells per side: the raster's side" in text and "Type:" not in text

@@ -21,5 +21,6 @@ def keep_whole(app, what: str, name: str, obj, options, lines: list[str]) -> Non
 
 
 def setup(app):
+    app.setup_extension("sphinx.ext.autodoc")  # its event must exist before the handler is connected
     app.connect("autodoc-process-docstring", keep_whole, priority=PRIORITY)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
