@@ -126,6 +126,7 @@ def _train(*args: str, tmp_path, preset: str = "ci") -> subprocess.CompletedProc
     (["--config", "deq2d-square", "--init", "deq2d-square", "--grow", "8"], "larger"),      # smaller target
     (["--config", "deq2d-square", "--init", "deq2d-square", "--grow", "24"], "multiple"),
     (["--config", "deq2d-square", "--grow", "32"], "--init"),
+    (["--config", "deq2d-square", "--val-count", "0"], "--val-count"),
 ])
 def test_grow_on_an_incompatible_parent_is_one_line_and_exit_2(tmp_path, args, match):
     out = tmp_path / "out"
@@ -142,9 +143,11 @@ def test_grow_trains_from_the_parent_and_records_it(tmp_path):
     assert r.returncode == 0, r.stderr
     r = _train("--config", "dem3d-cube", "--out", str(b), "--init", str(a / "dem3d-cube.safetensors"),
                "--grow", "8", "--n-range", "9", "13", "--n-sampling", "log", "--batch-points", "2000",
-               "--val-native", tmp_path=tmp_path)
+               "--val-native", "--val-count", "5", tmp_path=tmp_path)
     assert r.returncode == 0, r.stderr
     meta = json.loads((b / "dem3d-cube.json").read_text())
+    assert meta["config"]["val_count"] == 5 and "--val-count 5" in meta["command"]
+    assert sum(1 for k in meta["final_metrics"] if "@" in k) == 5 * len(meta["config"]["val_sizes"] or [1])
     assert meta["model"]["base"] == 8 and meta["config"]["grow"] and meta["config"]["n_sampling"] == "log"
     grown = meta["lineage"][-1]["grown"]
     assert grown["from"]["base"] == 4 and grown["to"]["base"] == 8

@@ -78,6 +78,10 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
                         "every size (0: always --batch)")
     p.add_argument("--val-sizes", type=int, nargs="+", default=None, metavar="N",
                    help="override the validation grid sides (e.g. the extremes of the range)")
+    p.add_argument("--val-count", type=int, default=None, metavar="K",
+                   help="override the number of held-out validation fields at each side, e.g. more for a steadier "
+                        "score (density: field j is of family j mod 4, so a multiple of 4 weighs them alike; the "
+                        "first K fields are the same at every K)")
     p.add_argument("--val-native", action="store_true",
                    help="validate with the network on each validation grid itself (Surrogate.map(native=True))")
     p.add_argument("--snapshot-every", type=int, default=None, metavar="K",
@@ -182,7 +186,8 @@ def _structured_overrides(cfg: TrainConfig, args) -> dict:
 
 def _size_overrides(args) -> dict:
     """The training and validation grid sides of the command line (``--n-range``, ``--n-sampling``,
-    ``--batch-points``, ``--val-sizes``, ``--val-native``); ``ValueError`` on values out of range."""
+    ``--batch-points``, ``--val-sizes``, ``--val-count``, ``--val-native``); ``ValueError`` on values out of
+    range."""
     over: dict = {}
     rng = getattr(args, "n_range", None)
     if rng is not None:
@@ -202,6 +207,11 @@ def _size_overrides(args) -> dict:
         if min(vs) < 3:
             raise ValueError(f"--val-sizes must be at least 3, got {min(vs)}")
         over["val_sizes"] = tuple(vs)
+    vc = getattr(args, "val_count", None)
+    if vc is not None:
+        if vc < 1:
+            raise ValueError(f"--val-count must be at least 1, got {vc}")
+        over["val_count"] = vc
     if getattr(args, "val_native", False):
         over["val_native"] = True
     return over
@@ -227,6 +237,7 @@ def _command_line(args) -> str:
                       ("--batch-points", getattr(args, "batch_points", None)),
                       ("--val-sizes", " ".join(map(str, args.val_sizes)) if getattr(args, "val_sizes", None)
                        else None),
+                      ("--val-count", getattr(args, "val_count", None)),
                       ("--snapshot-every", getattr(args, "snapshot_every", None))]:
         if val is not None:
             parts.append(f"{flag} {val:g}" if isinstance(val, float) else f"{flag} {val}")
