@@ -24,7 +24,7 @@ _HOME = {
                    "solve_cost_figure", "volume_panels_figure"),
     ".figures": ("STYLE", "colorbar", "figures_dir", "frameless", "repository_root", "save_figure", "style"),
     ".meshes": ("beltrami_case_figure", "beltrami_figure", "element_rho", "extreme_figure", "folded_maps_figure",
-                "map_rows_figure", "query_points_figure",
+                "grid_line_step", "grid_lines_drawn", "map_rows_figure", "query_points_figure",
                 "plot_beltrami_row", "jitter_figure", "plot_density", "plot_map_row", "plot_mesh", "plot_mu",
                 "plot_slice_outline",
                 "population_figure", "random_fields_figure", "vertex_error_panels"),

@@ -36,13 +36,29 @@ def _grid_lines(ax, pts, n, step, **kw):
         ax.plot(P[:, i, 0], P[:, i, 1], **kw)
 
 
+def grid_line_step(n: int, max_lines: int = 40) -> int:
+    """The step between the grid lines that :func:`plot_mesh` draws of an ``n``-grid (1: every line):
+    ``max(1, (n - 1) // max_lines)``, which draws fewer than ``2 * max_lines`` lines per direction."""
+    return max(1, (n - 1) // max_lines)
+
+
+def grid_lines_drawn(n: int, max_lines: int = 40) -> str:
+    """The grid lines :func:`plot_mesh` draws of an ``n``-grid, in words: ``"every grid line"``, ``"every other
+    grid line"`` or ``"every 3rd grid line"``, for a figure's caption."""
+    step = grid_line_step(n, max_lines)
+    if step <= 2:
+        return "every grid line" if step == 1 else "every other grid line"
+    suffix = {1: "st", 2: "nd", 3: "rd"}.get(step % 10 if step % 100 not in (11, 12, 13) else 0, "th")
+    return f"every {step}{suffix} grid line"
+
+
 def plot_mesh(ax, points, elements=None, *, n: int | None = None, max_lines: int = 40, title: str | None = None,
               color="0.2", lw=0.5):
     """Draw a (mapped) 2D grid mesh: grid lines when ``n`` is given (at most ``max_lines`` per direction), else
     the triangle edges."""
     points = np.asarray(points)
     if n is not None and n * n == points.shape[0]:
-        _grid_lines(ax, points, n, max(1, (n - 1) // max_lines), color=color, lw=lw)
+        _grid_lines(ax, points, n, grid_line_step(n, max_lines), color=color, lw=lw)
     else:
         ax.triplot(points[:, 0], points[:, 1], elements, color=color, lw=lw * 0.6)
     ax.set_aspect("equal")
