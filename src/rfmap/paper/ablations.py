@@ -12,7 +12,8 @@ mean ``|Δd|``, which refinement does not minimise and may raise: :func:`refinem
 from __future__ import annotations
 
 from ..finish import quiet_quality
-from .comparison import format_number
+from ..core.wording import power_of_ten
+from .comparison import DIGITS, format_number
 from .tables import Table
 
 __all__ = ["refinement_study", "refinement_summary", "refinement_markdown"]
@@ -70,9 +71,19 @@ def refinement_summary(table: Table) -> dict:
         if a > 0 and r / a - 1 > rise:
             worst, rise = f, r / a - 1
     out["worst"] = "none" if worst is None else (
-        f"{worst}, from {format_number(table.value(worst, 'α = 1', 'metric'))} to "
-        f"{format_number(table.value(worst, 'refined', 'metric'))}")
+        "{}, from {} to {}".format(worst, *_one_notation(table.value(worst, m, "metric")
+                                                        for m in ("α = 1", "refined"))))
     return out
+
+
+def _one_notation(values) -> list[str]:
+    """Numbers by :func:`format_number`, all as powers of ten when any of them is one, so that the two ends of a
+    change read in one notation (``9.931 × 10⁻⁴ to 1.026 × 10⁻³``, not ``9.931 × 10⁻⁴ to 0.001026``)."""
+    values = [float(v) for v in values]
+    texts = [format_number(v) for v in values]
+    if any("×" in t for t in texts):
+        texts = [power_of_ten(v, DIGITS) for v in values]
+    return texts
 
 
 def refinement_markdown(studies: dict) -> str:
