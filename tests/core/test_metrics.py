@@ -333,3 +333,27 @@ def test_residual_scales_weights_each_vertex_mean_by_the_reference_measures():
     assert s["std"] == pytest.approx(std, rel=1e-12)
     assert s["smooth"] == pytest.approx(smooth.std(), rel=1e-12)
     assert s["element_fraction"] == pytest.approx(1 - smooth.std() ** 2 / std**2, rel=1e-12)
+
+
+def test_residual_parts_are_the_residual_and_its_vertex_means():
+    """``residual_parts`` returns r_e = rho~_e - 1 (mean 0 up to rounding) and, at each vertex, the
+    reference-measure-weighted mean of r over the elements around it; ``residual_scales`` is their statistics."""
+    from rfmap.core.metrics import residual_parts, residual_scales
+    from rfmap.core.mesh import grid_mesh
+
+    m = grid_mesh(9, 2)
+    x = m.points
+    rng = np.random.default_rng(1)
+    inner = ~m.boundary_mask()
+    y = x.copy()
+    y[inner] += 0.1 / 8 * rng.uniform(-1, 1, size=(inner.sum(), 2))
+    dens = 1.0 + 0.5 * x[:, 0]
+    r, smooth = residual_parts(x, y, m.elements, dens)
+    assert r.shape == (len(m.elements),) and smooth.shape == (len(x),)
+    rho = compute_metrics(x, y, m.elements, density=dens)
+    assert r.std(ddof=1) == pytest.approx(rho.std_rho_map, rel=1e-12)
+    v = 40  # an interior vertex: the uniform grid's reference measures are all equal, so a plain mean
+    around = np.flatnonzero((m.elements == v).any(1))
+    assert smooth[v] == pytest.approx(r[around].mean(), rel=1e-12)
+    s = residual_scales(x, y, m.elements, dens)
+    assert s["smooth"] == pytest.approx(smooth.std(), rel=1e-12)

@@ -120,3 +120,20 @@ def test_the_diffusion_chapters_figures_draw_their_data():
     fig = volume_panels_figure([np.zeros((4, 4, 3))] * 3, ["x", "y", "z"], clim=(0, 2), label="rho")
     assert [ax.get_title() for ax in fig.axes[:3]] == ["x", "y", "z"] and fig.axes[3].get_xlabel() == "rho"
     plt.close(fig)
+
+
+def test_residual_parts_figure_draws_each_map_and_a_close_up():
+    from rfmap.fields.paper import sample_density
+    from rfmap.solvers import solve_dem
+    from rfmap.viz.diffusion import residual_parts_figure
+
+    res = solve_dem(sample_density("sin-cos", 17))
+    fig = residual_parts_figure({"a": res, "b": res}, cells=4)
+    axes = np.array(fig.axes[:6]).reshape(2, 3)
+    for row in axes:
+        lo, hi = row[2].get_xlim()
+        assert hi - lo == pytest.approx(4 / 16)  # the close-up spans 4 of the 16 cells
+        assert 0.0 <= lo and hi <= 1.0
+    assert [ax.get_title() for ax in axes[0]][0].startswith("residual")
+    assert len(fig.axes) == 8  # six panels and two colour bars
+    plt.close(fig)

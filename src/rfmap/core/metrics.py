@@ -20,7 +20,8 @@ import torch
 from .geometry import beltrami_coefficient, grid_element_mean, grid_signed_measures, signed_measures
 from .mesh import grid_points, grid_size
 
-__all__ = ["MapMetrics", "compute_metrics", "density_std", "element_population", "residual_scales", "rotational_share"]
+__all__ = ["MapMetrics", "compute_metrics", "density_std", "element_population", "residual_parts", "residual_scales",
+           "rotational_share"]
 
 
 @dataclass
@@ -176,15 +177,53 @@ def compute_metrics(
     return out
 
 
+def residual_parts(ref, mapped, elements, density) -> tuple[np.ndarray, np.ndarray]:
+    r"""The residual density of a density-equalizing map and its smooth part (see :func:`residual_scales`).
+
+    Parameters
+    ----------
+    ref, mapped : array, shape (n, d)
+    elements : array of int, shape (m, d+1)
+    density : array, shape (n,)
+        Vertex densities (any positive scale).
+
+    Returns
+    -------
+    r : ndarray, shape (m,)
+        :math:`r_e = \tilde\rho_e - 1` per element, :math:`\tilde\rho` on the mapped mesh.
+    smooth : ndarray, shape (n,)
+        :math:`\bar r_v = \sum_{e \ni v} |e|\, r_e / \sum_{e \ni v} |e|` per vertex, :math:`|e|` the reference
+        measure.
+
+    Raises
+    ------
+    ValueError
+        When the map has folded elements (the residual density is not defined).
+    """
+    ref_t, el = _t(ref), torch.as_tensor(np.asarray(elements), dtype=torch.long)
+    pop = element_population(ref_t, el, _t(density))
+    meas_ref = signed_measures(ref_t, el)
+    meas = signed_measures(_t(mapped), el)
+    if not bool((meas > 0).all()):
+        raise ValueError("the map has folded elements; its residual density is not defined")
+    rho = pop / meas
+    r = (rho / rho.mean() - 1.0).numpy()
+    w = meas_ref.numpy()
+    k = el.shape[1]
+    num = np.bincount(el.reshape(-1).numpy(), np.repeat(r * w, k), minlength=ref_t.shape[0])
+    den = np.bincount(el.reshape(-1).numpy(), np.repeat(w, k), minlength=ref_t.shape[0])
+    return r, num / den
+
+
 def residual_scales(ref, mapped, elements, density) -> dict[str, float]:
     r"""Split the residual density of a density-equalizing map into its element-scale and smooth parts.
 
     With :math:`r_e = \tilde\rho_e - 1` (the residual of :math:`\mathrm{Std}(\tilde\rho_{\text{map}})`), the smooth
     part is its average over the elements around each vertex, weighted by reference measure,
     :math:`\bar r_v = \sum_{e \ni v} |e|\, r_e / \sum_{e \ni v} |e|`, i.e. the residual seen at the scale of one
-    grid cell.  A flow, a Poisson solve, or any smooth correction acts on :math:`\bar r`; what is left,
-    :math:`r - \bar r`, alternates from element to element and is set by how the straight-sided elements
-    approximate the curved image of the map (it shrinks like the grid spacing :math:`h`).
+    grid cell (:func:`residual_parts` returns both).  A flow, a Poisson solve, or any smooth correction acts on
+    :math:`\bar r`; what is left, :math:`r - \bar r`, alternates from element to element and is set by how the
+    straight-sided elements approximate the curved image of the map (it shrinks like the grid spacing :math:`h`).
 
     Parameters
     ----------
@@ -200,19 +239,7 @@ def residual_scales(ref, mapped, elements, density) -> dict[str, float]:
         ``"smooth"``: the standard deviation of :math:`\bar r_v` over the vertices; ``"element_fraction"``: the
         fraction of the residual's variance not in the smooth part, :math:`1 - \mathrm{Var}(\bar r)/\mathrm{Var}(r)`.
     """
-    ref_t, el = _t(ref), torch.as_tensor(np.asarray(elements), dtype=torch.long)
-    pop = element_population(ref_t, el, _t(density))
-    meas_ref = signed_measures(ref_t, el)
-    meas = signed_measures(_t(mapped), el)
-    if not bool((meas > 0).all()):
-        raise ValueError("the map has folded elements; its residual density is not defined")
-    rho = pop / meas
-    r = (rho / rho.mean() - 1.0).numpy()
-    w = meas_ref.numpy()
-    k = el.shape[1]
-    num = np.bincount(el.reshape(-1).numpy(), np.repeat(r * w, k), minlength=ref_t.shape[0])
-    den = np.bincount(el.reshape(-1).numpy(), np.repeat(w, k), minlength=ref_t.shape[0])
-    smooth = num / den
+    r, smooth = residual_parts(ref, mapped, elements, density)
     std = float(r.std(ddof=1))
     sm = float(smooth.std())
     return {"std": std, "smooth": sm, "element_fraction": float(max(0.0, 1.0 - sm**2 / max(std**2, 1e-300)))}

@@ -10,7 +10,7 @@ from .studies import plain_log_ticks
 from .volumes import CAMERA_3D, RHO_SCALE, render_lattice, render_slices
 
 __all__ = ["dem_steps_figure", "overview_figure", "grid_convergence_figure", "solve_cost_figure",
-           "boundaries_figure", "volume_panels_figure"]
+           "boundaries_figure", "volume_panels_figure", "residual_parts_figure"]
 
 
 def dem_steps_figure(densities: dict, meshes: dict, rho0, elements, *, n: int, lines: int = 12):
@@ -244,4 +244,64 @@ def volume_panels_figure(images, titles, *, clim, label: str, cmap: str = "virid
         ax.set_axis_off()
     colorbar(ScalarMappable(Normalize(*clim), cmap), ax=axes[0], location="bottom", shrink=0.6, aspect=30,
              label=label)
+    return fig
+
+
+def residual_parts_figure(results: dict, *, cells: int = 8, quantile: float = 0.99):
+    r"""Where the residual density of density-equalizing maps sits: one row per map, three panels on the reference
+    mesh (the unit square).
+
+    The panels are the residual :math:`r_e = \tilde\rho_e - 1` of every element, its smooth part :math:`\bar r_v`
+    (the reference-measure-weighted mean over the elements around each vertex,
+    :func:`rfmap.core.metrics.residual_parts`), and a close-up of :math:`r_e` on a window of ``cells`` x ``cells``
+    grid cells, with the element edges drawn, centred where the first map's element-scale rest
+    :math:`|r_e - \bar r_e|` is largest (:math:`\bar r_e` the mean of :math:`\bar r_v` over the element's vertices);
+    the same window in every row.  The residual and its close-up share one diverging colour scale, the smooth part
+    has its own; both are symmetric about 0, shared by the rows, and reach the ``quantile`` of their absolute values
+    (a few extreme elements do not wash the rest out).
+
+    Parameters
+    ----------
+    results : dict
+        Maps a row label to a fold-free 2D density-equalizing map of a grid mesh
+        (:class:`rfmap.core.result.MapResult`).
+    cells : int
+        Side of the close-up window in grid cells.
+    quantile : float
+        Top of each colour scale, as a quantile of the absolute values.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
+    import matplotlib.pyplot as plt
+
+    from ..core.metrics import residual_parts
+
+    parts = {label: residual_parts(res.ref_points, res.mapped_points, res.elements, res.field)
+             for label, res in results.items()}
+    first = next(iter(results.values()))
+    r0, s0 = parts[next(iter(parts))]
+    centre = first.ref_points[first.elements[np.argmax(np.abs(r0 - s0[first.elements].mean(1)))]].mean(0)
+    half = cells / (2 * (round(np.sqrt(len(first.ref_points))) - 1))
+    lo = np.clip(centre - half, 0.0, 1.0 - 2 * half)
+    tops = [float(np.quantile(np.abs(np.concatenate([p[k] for p in parts.values()])), quantile)) for k in (0, 1)]
+    fig, axes = plt.subplots(len(results), 3, figsize=(TEXT_WIDTH_IN, 0.36 * TEXT_WIDTH_IN * len(results)),
+                             layout="constrained", squeeze=False)
+    titles = (r"residual $r_e$", r"smooth part $\bar r_v$", f"close-up of $r_e$ ({cells} x {cells} cells)")
+    for i, (label, res) in enumerate(results.items()):
+        r, smooth = parts[label]
+        for k, values in enumerate((r, smooth, r)):
+            ax = axes[i, k]
+            im = plot_density(ax, res.ref_points, res.elements, values, colorbar=False, vmin=-tops[k % 2],
+                              vmax=tops[k % 2], cmap="RdBu_r", title=titles[k] if i == 0 else None)
+            if k == 2:
+                ax.triplot(res.ref_points[:, 0], res.ref_points[:, 1], res.elements, color="0.4", lw=0.3)
+                ax.set_xlim(lo[0], lo[0] + 2 * half)
+                ax.set_ylim(lo[1], lo[1] + 2 * half)
+            if k == 0:
+                ax.text(-0.08, 0.5, label, transform=ax.transAxes, rotation=90, va="center", ha="right")
+                ax.add_patch(plt.Rectangle(lo, 2 * half, 2 * half, fill=False, lw=0.8, color="k"))
+            if i == len(results) - 1 and k < 2:
+                colorbar(im, ax=axes[:, k], shrink=0.8, location="bottom")
     return fig
