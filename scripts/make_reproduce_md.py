@@ -105,23 +105,26 @@ def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], 
     lines = [f"({label})=", f"{level} {model}", "",
              f"- **Chain:** {len(runs)} run{'s' if len(runs) != 1 else ''}, {steps:,} steps, {_hours(seconds)}; "
              f"the last run: {last.steps:,} steps on {_threads(meta)}."]
-    if last.kept is not None:
+    if idle:
+        which = (f"run {idle[0].index}" if len(idle) == 1 else f"runs {idle[0].index} to {idle[-1].index}")
+        lines.append(f"- **Kept:** the weights that run {source.index} trained"
+                     + (f" (step {source.kept:,}, its best validated state)" if source.kept else "")
+                     + f"; {which} kept {'its' if len(idle) == 1 else 'their'} parent's weights (no validated state "
+                     f"improved on them), so a repeat ends with run {source.index} and the commands below leave "
+                     f"{which} out.")
+    elif last.kept is not None:
         lines.append("- **Kept:** its parent's weights (no validated state of the last run improved on them)."
                      if last.kept == 0 else
                      f"- **Kept:** the weights of step {last.kept:,} (the best validated state).")
-    if idle:
-        which = (f"Run {idle[0].index}" if len(idle) == 1 else f"Runs {idle[0].index} to {idle[-1].index}")
-        lines.append(f"- **Not needed to reproduce the weights:** {which} kept {'its' if len(idle) == 1 else 'their'} "
-                     f"parent's weights, so the shipped weights are those run {source.index} trained. A repeat ends "
-                     f"with run {source.index}; the commands below leave {which.lower()} out.")
+    head = f"- **Parent of run {source.index}:**" if len(runs) > 1 else "- **Parent:**"
     if parent is None:
-        lines.append("- **Parent:** none (freshly initialised weights).")
+        lines.append(f"{head} none (freshly initialised weights).")
     elif start and start[0] == parent.index:
         grown = (f", widened from {_arch(parent.grown, 'from')} to {_arch(parent.grown, 'to')} by `--grow`"
                  if parent.grown else "")
-        lines.append(f"- **Parent:** the shipped `{start[1]}`{grown}.")
+        lines.append(f"{head} the shipped `{start[1]}`{grown}.")
     else:
-        lines.append(f"- **Parent:** the weights of run {parent.index}, not shipped.")
+        lines.append(f"{head} the weights of run {parent.index}, not shipped.")
     if start and start[0] != source.index - 1:
         lines.append(f"- **Runs 1 to {start[0]}:** those of the shipped `{start[1]}`, so a repeat starts from that "
                      "file.")
