@@ -47,3 +47,42 @@ def test_the_extension_loads_before_autodoc_in_a_sphinx_build(tmp_path):
         sys.modules.pop("mod_x", None)
     text = (tmp_path / "_build" / "index.txt").read_text(encoding="utf-8")
     assert "cells per side: the raster's side" in text and "Type:" not in text
+
+
+def test_an_entry_naming_several_attributes_becomes_one_entry_each():
+    from rfmap.paper._apidocs import split_attributes
+
+    lines = ["A class.", "", "Attributes", "----------", "regions, mapped : ndarray", "    Before and after.",
+             "tol, min_share : float", "", "Examples", "--------", "a, b : 1"]
+    split_attributes(None, "class", "X", None, None, lines)
+    assert lines == ["A class.", "", "Attributes", "----------", "regions : ndarray", "    Before and after.",
+                     "mapped : ndarray", "    Before and after.", "tol : float", "min_share : float", "",
+                     "Examples", "--------", "a, b : 1"]
+
+
+def test_a_hidden_string_value_is_shown_as_its_text():
+    from rfmap.paper._apidocs import show_text
+
+    lines = ["The rule.", "", ":meta hide-value:"]
+    show_text(None, "data", "X", "*met*: |Δd| under a_ b", None, lines)
+    assert lines[-2] == "*met*: \\|Δd\\| under a\\_ b"
+    plain = ["A constant."]
+    show_text(None, "data", "X", "text", None, plain)
+    assert plain == ["A constant."]
+
+
+def test_factory_defaults_are_written_as_calls():
+    from dataclasses import dataclass, field
+
+    from rfmap.paper._apidocs import factory_defaults
+
+    @dataclass
+    class D:
+        a: int
+        info: dict = field(default_factory=dict)
+        more: list = field(default_factory=lambda: [1])
+
+    sig = "(a: int, info: dict = <factory>, more: list = <factory>)"
+    out = factory_defaults(None, "class", "D", D, None, sig, None)
+    assert out == ("(a: int, info: dict = dict(), more: list = ...)", None)
+    assert factory_defaults(None, "class", "D", D, None, "(a: int)", None) is None

@@ -320,7 +320,7 @@ def _areas(features: list, projection: str) -> np.ndarray:
 def join_values(collection, values: Mapping[str, float], *, key: str = "id", value: str = "value",
                 missing: str = "mean", fallback: Mapping[str, float] | None = None,
                 extra: Mapping[str, Mapping[str, object]] | None = None, projection: str = "auto") -> Join:
-    """Values by id written onto the regions whose ``key`` matches (see the module docstring).
+    """Values by id written onto the regions whose ``key`` matches (see :mod:`rfmap.cartogram.data`).
 
     Parameters
     ----------

@@ -100,11 +100,14 @@ class InsetCartogram:
         ``{side: rfmap.cartogram.resize.Cartogram}``, each in its own projection's plane.
     groups : dict
         ``{side: indices of its regions}`` (:func:`inset_groups`).
-    geometries, regions : ndarray of shapely geometries, shape (R,)
-        The cartogram and the input map, placed (in input order).
+    geometries : ndarray of shapely geometries, shape (R,)
+        The cartogram, its insets placed (in input order).
+    regions : ndarray of shapely geometries, shape (R,)
+        The input map, placed as the cartogram (in input order).
     values : ndarray, shape (R,)
     placement : dict
-        ``{side: (scale, centre, offset)}`` of the cartogram (:func:`_layout`).
+        ``{side: (scale, centre, offset)}``: a point :math:`p` of that inset is placed at :math:`s (p - c) + o`;
+        the main inset (``C``, else the first) stays where it is.
     tol, min_share : float
     """
 
@@ -159,7 +162,7 @@ class InsetCartogram:
 
     def problems(self) -> list[str]:
         """What keeps the cartogram from being right (empty when it is): the placed regions' largest area error
-        above :attr:`tol`, invalid or overlapping regions, and every inset's own problems (prefixed by its side)."""
+        above ``tol``, invalid or overlapping regions, and every inset's own problems (prefixed by its side)."""
         m = self.metrics()
         out = []
         if not m.max_error <= self.tol:
@@ -194,7 +197,7 @@ class InsetCartogram:
 def cartogram_insets(collection, value: str, insets, options: CartogramOptions | None = None,
                      **kw) -> InsetCartogram:
     """A cartogram whose regions are grouped into insets, each computed in its own frame and placed beside the main
-    map on one scale (see the module docstring).
+    map on one scale (see :mod:`rfmap.cartogram.insets`).
 
     Parameters
     ----------

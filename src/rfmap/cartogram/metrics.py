@@ -1,11 +1,11 @@
 r"""Area errors and topology of cartograms: the metrics of the cartogram literature, judged over the regions that hold
 a given share of the total value, and the repair of numerically tiny folds.
 
-The relative area error of region :math:`i` is :math:`|A_i / T_i - 1|` with the target
-:math:`T_i = (v_i / \sum_j v_j) \sum_j A_j`; its mean and maximum are taken over the regions holding at least
-``min_share`` of the total value (:data:`MIN_SHARE` in :func:`rfmap.cartogram.resize.cartogram`), and the others' largest
-error is reported apart.  The topology check asks that every polygon be valid and that no two regions overlap by more
-than ``overlap_tol`` of the total area.
+The relative area error of region :math:`i` is :math:`|A_i / T_i - 1|` with the target :math:`T_i = (v_i / \sum_j v_j)
+\sum_j A_j`; its mean and maximum are taken over the regions holding at least ``min_share`` of the total value
+(:data:`MIN_SHARE` in :func:`~rfmap.cartogram.resize.cartogram`), and the others' largest error is reported apart.  The
+topology check asks that every polygon be valid and that no two regions overlap by more than ``overlap_tol`` of the
+total area.
 """
 from __future__ import annotations
 
@@ -20,9 +20,10 @@ __all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps", "judged", "pass_
            "repair_overlaps", "valid_polygons", "clean_input_overlaps", "boost", "MIN_SHARE", "MINOR_BUDGET", "SPLITS", "SPLIT_COST",
            "REPAIR_AREA", "REPAIR_OVERLAP", "SLIVER_SHAPE", "SLIVER_SHARE", "BOOST_GAIN", "BOOST_CAP"]
 
-#: The share of the total value from which a region's area error is judged (stopping rule, :meth:`Cartogram.metrics`,
-#: tolerance): 0.01 %.  Smaller regions (a world map's uninhabited Antarctica, islands of a few thousand people) are
-#: at most a few grid cells, where no raster resolves 1 %; their errors are reported apart (``max_error_minor``).
+#: The share of the total value from which a region's area error is judged (stopping rule,
+#: :meth:`~rfmap.cartogram.resize.Cartogram.metrics`, tolerance): 0.01 %.  Smaller regions (a world map's uninhabited
+#: Antarctica, islands of a few thousand people) are at most a few grid cells, where no raster resolves 1 %; their
+#: errors are reported apart (``max_error_minor``).
 MIN_SHARE = 1e-4
 #: The most that :func:`pass_weights` adds to the total value by raising the regions under the judged share (a share
 #: of it): every judged region comes out smaller by about this share, so it must stay well below a tolerance of 1 %
@@ -187,7 +188,7 @@ def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tupl
     """Invalid mapped polygons whose fix (``shapely.make_valid``) changes their area by at most ``max_change`` of the
     total area replaced by the fix: a crossing of two edges that the input drew nearly touching, which no map of the
     vertices alone keeps apart.  Returns the polygons and the indices of those fixed; larger folds stay invalid, for
-    :meth:`Cartogram.problems` to report."""
+    :meth:`~rfmap.cartogram.resize.Cartogram.problems` to report."""
     shapely = _shapely()
     bad = np.flatnonzero(~shapely.is_valid(mapped))
     if not bad.size:
@@ -243,7 +244,7 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float
     with :math:`f` the share that keeps the larger of their relative area errors :math:`|A_i / T_i - 1|` (target
     :math:`T_i = (v_i/\sum_j v_j)\sum_j A_j`) lowest; the whole overlap goes to one of them unless that costs more
     than :data:`SPLIT_COST`.  So a cut never takes a small region off its target where its neighbour can spare the
-    sliver.  Larger overlaps stay, for :meth:`Cartogram.problems` to report.
+    sliver.  Larger overlaps stay, for :meth:`~rfmap.cartogram.resize.Cartogram.problems` to report.
 
     Parameters
     ----------

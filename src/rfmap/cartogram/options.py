@@ -26,7 +26,9 @@ class CartogramOptions:
     n : int
         Cells per side ``N`` of the density raster (cartogram-cpp's ``-n``); the maps run on its
         :math:`(N+1)^2` vertices (FFT lengths :math:`2N`: a power of two is fastest).
-    tol, max_iterations : float, int
+    tol : float
+        The stopping tolerance of the passes, see ``max_iterations``.
+    max_iterations : int
         Passes are repeated, each from the previous pass's polygons, until the largest relative area error is at
         most ``tol`` (the usual stopping rule of cartogram tools), a pass no longer lowers it, or ``max_iterations``
         passes are done; the polygons of the pass with the lowest largest error are returned.
@@ -35,48 +37,50 @@ class CartogramOptions:
     margin : float
         Sea around the map: the map's bounding box is fitted into :math:`[\mathrm{margin}, 1-\mathrm{margin}]^2`.
     projection : {"auto", "equal-area", "equirectangular", "none"}
-        The plane the cartogram is computed in (:class:`PlanarFrame`, :mod:`rfmap.cartogram.projection`): ``"auto"`` is
+        The plane the cartogram is computed in (:class:`~rfmap.cartogram.projection.PlanarFrame`): ``"auto"`` is
         ``"equal-area"`` for longitude/latitude input (Lambert azimuthal equal-area centred on the map, Equal Earth
         for a map wider than 180° of longitude) and ``"none"`` (the coordinates as they are) for planar input.
     output : {"auto", "input", "projected"}
         The coordinates of the returned features: the input's (the projection inverted), or the projection's plane
-        (metres for the equal-area projections; its PROJ definition is in :meth:`Cartogram.to_geojson`); ``"auto"``
-        (default) is the input's unless a region left their domain (past a pole, beyond the far side of the Lambert
-        disc), then the plane (:func:`rfmap.cartogram.output.choose_output`).
+        (metres for the equal-area projections; its PROJ definition is in
+        :meth:`~rfmap.cartogram.resize.Cartogram.to_geojson`); ``"auto"`` (default) is the input's unless a region left
+        their domain (past a pole, beyond the far side of the Lambert disc), then the plane
+        (:func:`rfmap.cartogram.output.choose_output`).
     supersample : int
-        Scanlines per grid cell (:func:`density_grid`).
+        Scanlines per grid cell (:func:`~rfmap.cartogram.regions.density_grid`).
     model : str, optional
         Shipped surrogate for ``"surrogate"`` / ``"hybrid"`` (default ``"deq2d-square"``); ``surrogate`` passes a
         loaded :class:`rfmap.Surrogate` instead.  It must map 2D densities with the square's walls fixed, as the
         sea's edge is the unit square.
     floor : float
-        Zero-value floor (:func:`read_regions`).
+        Zero-value floor (:func:`~rfmap.cartogram.regions.read_regions`).
     solver_kw : dict, optional
         Fields of :class:`rfmap.solvers.cartoflow.CartoFlowOptions` (``"flow"``) or
         :class:`rfmap.solvers.cartodiffusion.CartoDiffusionOptions` (``"diffusion"``).
     min_share : float
-        The passes' stopping rule, :meth:`Cartogram.metrics` and the tolerance count only the regions holding at
-        least this share of the total value (default :data:`MIN_SHARE`, 0.01 %: islands of a few people on a world
-        map are left to ``max_iterations``); ``info["max_error"]`` is over those, and the others' errors are
-        reported apart (``CartogramMetrics.max_error_minor``).  The passes raise those others towards this
-        share, so that none (an uninhabited Antarctica) collapses into a sliver that folds.
+        The passes' stopping rule, :meth:`~rfmap.cartogram.resize.Cartogram.metrics` and the tolerance count only the
+        regions holding at least this share of the total value (default :data:`~rfmap.cartogram.metrics.MIN_SHARE`,
+        0.01 %: islands of a few people on a world map are left to ``max_iterations``); ``info["max_error"]`` is over
+        those, and the others' errors are reported apart (``CartogramMetrics.max_error_minor``).  The passes raise
+        those others towards this share, so that none (an uninhabited Antarctica) collapses into a sliver that folds.
     max_n : int, optional
-        A pass that lowers the largest error but leaves more than :data:`SLOW_PASS` of it (regions down to a few
-        cells: slivers, small islands) doubles the raster's resolution, :math:`N \to 2N`, up to ``max_n``
-        (default the larger of ``n`` and :data:`MAX_N`, for the flow :data:`FLOW_MAX_N`; ``n`` turns it off);
-        ``info["grids"]`` lists each pass's ``N``.
+        A pass that lowers the largest error but leaves more than :data:`~rfmap.cartogram.resize.SLOW_PASS` of it
+        (regions down to a few cells: slivers, small islands) doubles the raster's resolution, :math:`N \to 2N`, up to
+        ``max_n`` (default the larger of ``n`` and :data:`~rfmap.cartogram.methods.base.MAX_N`, for the flow
+        :data:`~rfmap.cartogram.methods.flow.FLOW_MAX_N`; ``n`` turns it off); ``info["grids"]`` lists each pass's
+        ``N``.
     points : int, optional
         A budget of polygon vertices: the outlines (already split to edges of at most a grid cell) are simplified,
-        shared borders kept (:func:`rfmap.cartogram.regions.fit_outlines`), or densified to about that many.  Simplifying
-        removes detail finer than the grid (and speeds up maps drawn with far more vertices than the grid resolves);
-        it changes the input's areas slightly.  The budget sets the outlines' detail, not the count of points the
-        flow carries: as for any input, the outlines are then split to edges of at most a grid cell, and edges the
-        classical methods stretch beyond :data:`SPLIT_EDGE` cells are split again between passes, so that straight edges
-        between distant vertices do not cross.
+        shared borders kept (:func:`rfmap.cartogram.regions.fit_outlines`), or densified to about that many.
+        Simplifying removes detail finer than the grid (and speeds up maps drawn with far more vertices than the grid
+        resolves); it changes the input's areas slightly.  The budget sets the outlines' detail, not the count of points
+        the flow carries: as for any input, the outlines are then split to edges of at most a grid cell, and edges the
+        classical methods stretch beyond :data:`~rfmap.cartogram.resize.SPLIT_EDGE` cells are split again between
+        passes, so that straight edges between distant vertices do not cross.
     timeout : float, optional
         Seconds (counted from the parsed input) after which no further pass starts; the best pass so far is
         returned, with ``info["timed_out"]`` set and, when it is not within ``tol``, a problem that says so
-        (:meth:`Cartogram.problems`).  The first pass always runs.
+        (:meth:`~rfmap.cartogram.resize.Cartogram.problems`).  The first pass always runs.
     surrogate : rfmap.Surrogate, optional
         A loaded surrogate for ``"surrogate"`` / ``"hybrid"`` instead of the shipped ``model``.
     """

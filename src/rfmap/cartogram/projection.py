@@ -3,9 +3,9 @@ square.
 
 A cartogram sizes regions by area, so it must be computed where areas are the Earth's.  For longitude/latitude input
 (every point within :math:`|\lambda| \le 180^\circ`, :math:`|\varphi| \le 90^\circ`) the default is an equal-area
-projection of the WGS84 ellipsoid fitted to the map, computed by numpy formulas (:func:`_laea`, :func:`_eqearth`:
-Snyder's, with the authalic latitude, and Šavrič et al.'s, which agree with PROJ's to 1e-9 in the tests) so that
-pyproj is not imported; PROJ through pyproj serves a Lambert projection centred within 0.1° of a pole:
+projection of the WGS84 ellipsoid fitted to the map, computed by numpy formulas (Snyder's for the Lambert
+projection, with the authalic latitude, and Šavrič et al.'s for Equal Earth, which agree with PROJ's to 1e-9 in the
+tests) so that pyproj is not imported; PROJ through pyproj serves a Lambert projection centred within 0.1° of a pole:
 
 * the **Lambert azimuthal equal-area** projection centred on the map, for a regional map: centre longitude
   :math:`\lambda_0` the midpoint of the smallest arc of longitudes that holds every vertex, centre latitude
@@ -443,7 +443,7 @@ class PlanarFrame:
 
     def equal_area(self, geoms: np.ndarray) -> np.ndarray:
         """Unit-square geometries to a plane whose areas are proportional to the Earth's: the unit square itself when
-        the projection is equal-area, else :attr:`area_projection`'s plane."""
+        the projection is equal-area, else ``area_projection``'s plane."""
         import shapely
 
         if self.projection.equal_area:

@@ -1,10 +1,10 @@
 r"""GeoJSON regions in the unit square: reading and checking them, their density raster, and real maps to try.
 
-The input stage of a cartogram (:mod:`rfmap.cartogram.resize`): a FeatureCollection of Polygon / MultiPolygon features with
-a value per region (:func:`read_regions`), fitted into the unit square by an equal-area projection
-(:class:`rfmap.cartogram.projection.PlanarFrame`), and rasterised to the vertex densities of the ``N``-grid with the sea at the
-mean density (:func:`density_grid`).  :func:`montreal_election` (a city) and :func:`world_countries` (the world) are
-real maps to try it on.
+The input stage of a cartogram (:mod:`rfmap.cartogram.resize`): a FeatureCollection of Polygon / MultiPolygon features
+with a value per region (:func:`read_regions`), fitted into the unit square by an equal-area projection
+(:class:`rfmap.cartogram.projection.PlanarFrame`), and rasterised to the densities at the vertices of a grid of ``N``
+cells per side with the sea at the mean density (:func:`density_grid`).  :func:`montreal_election` (a city) and
+:func:`world_countries` (the world) are real maps to try it on.
 """
 from __future__ import annotations
 
@@ -148,15 +148,16 @@ def _feature_name(feat, k: int) -> str:
 
 def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: int = 4,
                  areas: np.ndarray | None = None) -> tuple[np.ndarray, float]:
-    r"""Vertex densities of the ``N``-grid of the unit square: the mean over each vertex's cell of
+    r"""Vertex densities of a grid of ``n`` by ``n`` vertices of the unit square: the mean over each vertex's cell of
     :math:`\rho = v_i / a_i` inside region :math:`i` and the sea density :math:`\bar\rho = \sum v_i / \sum a_i`
-    elsewhere.
+    elsewhere.  ``n`` counts vertices, not cells: a cartogram of ``N`` cells per side (``n`` of
+    :class:`~rfmap.cartogram.options.CartogramOptions`) passes ``N + 1``.
 
     The mean is taken along ``supersample`` horizontal scanlines per cell, each measured exactly: the cell's share of
-    the line that lies in each region (:func:`_scanline_rows`).  Where regions overlap (a border that two neighbours
-    draw apart, a fold), a cell's covered shares :math:`c_i` sum to more than the share of the cell they cover;
-    there the cell takes the mean density of its regions, :math:`\sum_i \rho_i c_i / \sum_i c_i`, over at most the
-    whole cell (:math:`\min(1, \sum_i c_i)`) and the sea over the rest, so that every density is positive (the plain
+    the line that lies in each region (computed for all cells of a row at once).  Where regions overlap (a border that
+    two neighbours draw apart, a fold), a cell's covered shares :math:`c_i` sum to more than the share of the cell they
+    cover; there the cell takes the mean density of its regions, :math:`\sum_i \rho_i c_i / \sum_i c_i`, over at most
+    the whole cell (:math:`\min(1, \sum_i c_i)`) and the sea over the rest, so that every density is positive (the plain
     sum :math:`\bar\rho + \sum_i (\rho_i - \bar\rho) c_i` counts an overlap twice, and two sparse regions overlapping
     over a cell would make it negative).
 
@@ -165,8 +166,8 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
     geoms : ndarray of shapely geometries, shape (R,), inside the unit square
     values : ndarray, shape (R,), positive
     n : int
-        Grid side ``N``; vertex ``(i, j)`` sits at :math:`(i, j)/(N-1)` and its cell is the square of side
-        :math:`h = 1/(N-1)` around it (clipped to the unit square).
+        Vertices per side; vertex ``(i, j)`` sits at :math:`(i, j)/(n-1)` and its cell is the square of side
+        :math:`h = 1/(n-1)` around it (clipped to the unit square).
     supersample : int
         Scanlines per cell, at :math:`y = (j - 1/2 + (k + 1/2)/s) h`, :math:`k < s`.
     areas : ndarray, shape (R,), optional
@@ -174,7 +175,7 @@ def density_grid(geoms: np.ndarray, values: np.ndarray, n: int, *, supersample: 
 
     Returns
     -------
-    density : ndarray, shape (N, N), ``density[i, j]`` at :math:`(i, j)/(N-1)`
+    density : ndarray, shape (n, n), ``density[i, j]`` at :math:`(i, j)/(n-1)`
     sea : float
         :math:`\bar\rho`.
     """

@@ -55,9 +55,10 @@ def cylindrical_equal_area(lonlat: np.ndarray, lat0: float = 0.0) -> np.ndarray:
 
 
 def needles(ring: np.ndarray, angle: float, width: float) -> np.ndarray:
-    r"""Which vertices of a closed ring (k + 1, 2) are needle tips (boolean, (k,)): the angle between the edges to
-    the previous and the next vertex is under ``angle`` degrees and the width :math:`w` (module docstring) under
-    ``width`` (the ring's units).  A vertex on an edge of zero length is none."""
+    r"""Which vertices of a closed ring (k + 1, 2) are needle tips (boolean, (k,)): the angle between the edges to the
+    previous and the next vertex is under ``angle`` degrees and the width :math:`w` (see
+    :mod:`rfmap.cartogram.reprojection`) under ``width`` (the ring's units).  A vertex on an edge of zero length is
+    none."""
     p = ring[:-1]
     u, v = np.roll(p, 1, axis=0) - p, np.roll(p, -1, axis=0) - p
     cross = u[:, 0] * v[:, 1] - u[:, 1] * v[:, 0]
@@ -145,12 +146,12 @@ def _candidates(geoms: np.ndarray, angle: float, width: float) -> np.ndarray:
 
 def remove_needles(geoms: np.ndarray, *, angle: float = NEEDLE_ANGLE, width: float = NEEDLE_WIDTH,
                    max_change: float = NEEDLE_AREA) -> tuple[np.ndarray, dict[int, int]]:
-    r"""Polygons (R,) with their needles removed and their collapsed rings dropped (module docstring): a needle tip's
-    edges meet at under ``angle`` degrees and it is narrower than ``width`` :math:`L`, :math:`L` the longer side of
-    the map's bounding box.  A region is changed only where its area changes by at most ``max_change`` of it and it
-    stays valid (or was invalid already); where it would not, only its narrower needles are removed (``width`` times
-    each of :data:`NARROWER` in turn: those that a reprojection breaks first).  Returns the polygons and
-    ``{region: points removed}`` (a dropped ring's closing point included)."""
+    r"""Polygons (R,) with their needles removed and their collapsed rings dropped (see
+    :mod:`rfmap.cartogram.reprojection`): a needle tip's edges meet at under ``angle`` degrees and it is narrower than
+    ``width`` :math:`L`, :math:`L` the longer side of the map's bounding box.  A region is changed only where its area
+    changes by at most ``max_change`` of it and it stays valid (or was invalid already); where it would not, only its
+    narrower needles are removed (``width`` times each of :data:`NARROWER` in turn: those that a reprojection breaks
+    first).  Returns the polygons and ``{region: points removed}`` (a dropped ring's closing point included)."""
     import shapely
 
     lo_x, lo_y, hi_x, hi_y = shapely.total_bounds(geoms)

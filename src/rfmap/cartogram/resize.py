@@ -1,49 +1,51 @@
-r"""Cartograms of real regions: GeoJSON polygons resized by a value per region (diffusion and flow-based cartograms).
+r"""The cartogram pipeline: GeoJSON polygons resized by a value per region, pass after pass.
 
 A contiguous cartogram redraws every region :math:`i` of a map with an area proportional to its value :math:`v_i`
-(population, votes) while keeping neighbours adjacent.  The diffusion cartogram of Gastner & Newman (2004) is the
-density-equalizing map of the density :math:`\rho = v_i / a_i` (value over area) of the region under each point:
+(population, votes) while keeping neighbours adjacent: it is the density-equalizing map (Gastner & Newman 2004) of
+the density :math:`\rho = v_i / a_i` (value over area) of the region under each point, made in five steps:
 
 1. **Planar frame.**  Longitude/latitude are projected to a plane where areas are the Earth's: the Lambert azimuthal
-   equal-area projection centred on the map, or Equal Earth for a world map (:mod:`rfmap.cartogram.projection`; a map that
-   crosses the antimeridian is centred there).  Long edges are first split along their straight lines in
-   longitude/latitude, so that they bend as the projection bends them.  The map's bounding box is fitted into the
-   unit square leaving a ``margin`` on every side (:class:`PlanarFrame`).
-2. **Density raster.**  The unit square is cut into ``N`` by ``N`` cells (as cartogram programs count their grids),
-   and each of the :math:`(N+1)^2` vertices gets the mean density over its own cell of that size along
-   ``supersample`` scanlines per cell, each measured exactly across the rings (:func:`density_grid`).  The sea has
-   the mean density :math:`\sum_i v_i / \sum_i a_i`, as in cartogram tools: the land keeps its area, coasts move.
+   equal-area projection centred on the map, or Equal Earth for a world map (:mod:`rfmap.cartogram.projection`; a map
+   that crosses the antimeridian is centred there).  Long edges are first split along their straight lines in
+   longitude/latitude, so that they bend as the projection bends them.  The map's bounding box is fitted into the unit
+   square leaving a ``margin`` on every side (:class:`~rfmap.cartogram.projection.PlanarFrame`).
+2. **Density raster.**  The unit square is cut into ``N`` by ``N`` cells (as cartogram programs count their grids), and
+   each of the :math:`(N+1)^2` vertices gets the mean density over its own cell of that size along ``supersample``
+   scanlines per cell, each measured exactly across the rings (:func:`~rfmap.cartogram.regions.density_grid`).  The sea
+   has the mean density :math:`\sum_i v_i / \sum_i a_i`, as in cartogram tools: the land keeps its area, coasts move.
 3. **Map.**  The default, ``"flow"``, is the flow-based method of Gastner, Seguy & More (2018) that today's
    cartogram programs run: the flux of the raster's Poisson problem (walls fixed) carries the distinct polygon
    vertices themselves from :math:`t = 0` to 1 (:func:`rfmap.solvers.cartoflow.flow_square`, numpy only: no
-   PyTorch is loaded), its density blurred over :data:`FLOW_BLUR` vertex spacings in the first pass and half as much
-   in each next one.  The others map the grid and interpolate its displacement bilinearly at the vertices: the
-   classical diffusion DEM of the unit square (:func:`rfmap.solvers.solve_dem` with ``boundary="square"``), or a
-   neural surrogate of the same task (``deq2d-square``) on its working grid, where its output is repaired to be
-   fold-free; the hybrid resamples the network's map to the vertex grid and finishes it there with the flow
-   (``Surrogate.map(polish=...)``, :data:`HYBRID_POLISH`).
-4. **Passes.**  A map computed on a grid smears every coastline and border over a grid cell, so small dense
-   regions come out a little small and sparse ones a little large.  The cartogram is therefore computed again from
-   the mapped polygons, whose densities are now nearly equal, and the maps are composed, until the largest relative
-   area error over the regions holding at least ``min_share`` of the total value (:data:`MIN_SHARE`, 0.01 %) is
-   below ``tol`` (flow-based cartogram programs stop at 1 %, the default).  No pass asks a region to change its
-   area more than :data:`PASS_CONTRAST` times (its raster densities are clipped to that factor of the sea's): a
-   city that must grow a hundredfold grows over several passes, and its neighbours are never squeezed into bands
-   thinner than a cell, whose borders would cross.  The smaller regions are mapped as if
-   they held that share and their errors are reported apart.  A pass that gains little doubles the raster's
-   resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are regions a few cells wide.  Edges that the
-   classical passes stretched beyond :data:`SPLIT_EDGE` cells (of at most a :data:`SPLIT_MAX_N` raster) are split
-   again before the next pass, and (flow) each region's weight is boosted by the share of its error that the last
-   pass left (a secant acceleration of the passes: :func:`rfmap.cartogram.metrics.boost`).  A fold smaller than
-   the overlap tolerance, where the input draws two edges nearly touching, is repaired (:func:`rfmap.cartogram.metrics.repair_folds`), and so is a sliver where
-   neighbours under a cell apart in the input were pressed together (:func:`rfmap.cartogram.metrics.repair_overlaps`).
+   PyTorch is loaded), its density blurred over :data:`~rfmap.cartogram.methods.flow.FLOW_BLUR` vertex spacings in
+   the first pass and half as much in each next one.  The classical diffusion DEM of the unit square
+   (``"diffusion"``, :func:`rfmap.solvers.cartodiffusion.diffusion_square`, numpy only) carries the vertices too.
+   The neural methods map the grid instead and interpolate its displacement bilinearly at the vertices: a neural
+   surrogate of the same task (``deq2d-square``) on its working grid, where its output is repaired to be
+   fold-free, or the hybrid, which resamples the network's map to the vertex grid and finishes it there with the
+   flow (``Surrogate.map(polish=...)``, :data:`~rfmap.cartogram.methods.neural.HYBRID_POLISH`).
+4. **Passes.**  A map computed on a grid smears every coastline and border over a grid cell, so small dense regions come
+   out a little small and sparse ones a little large.  The cartogram is therefore computed again from the mapped
+   polygons, whose densities are now nearly equal, and the maps are composed, until the largest relative area error over
+   the regions holding at least ``min_share`` of the total value (:data:`~rfmap.cartogram.metrics.MIN_SHARE`, 0.01 %) is
+   below ``tol`` (flow-based cartogram programs stop at 1 %, the default).  No pass asks a region to change its area
+   more than :data:`PASS_CONTRAST` times (its raster densities are clipped to that factor of the sea's): a city that
+   must grow a hundredfold grows over several passes, and its neighbours are never squeezed into bands thinner than a
+   cell, whose borders would cross.  The smaller regions are mapped as if they held that share and their errors are
+   reported apart.  A pass that gains little doubles the raster's resolution (:data:`SLOW_PASS`, up to ``max_n``): what
+   is left are regions a few cells wide.  Edges that the classical passes stretched beyond :data:`SPLIT_EDGE` cells (of
+   at most a :data:`SPLIT_MAX_N` raster) are split again before the next pass, and (flow) each region's weight is
+   boosted by the share of its error that the last pass left (a secant acceleration of the passes:
+   :func:`rfmap.cartogram.metrics.boost`).  A fold smaller than the overlap tolerance, where the input draws two edges
+   nearly touching, is repaired (:func:`rfmap.cartogram.metrics.repair_folds`), and so is a sliver where neighbours
+   under a cell apart in the input were pressed together (:func:`rfmap.cartogram.metrics.repair_overlaps`).
 5. **Output.**  Edges longer than a grid cell are first split so that they bend with the map; every vertex is
    mapped once (shared borders stay shared); the polygons come back in the input's coordinates or the projection's
    plane (``output="projected"``) as GeoJSON with the input's properties, its ``"rfmap"`` member saying whether the
    cartogram is within tolerance and valid (:meth:`Cartogram.problems`).
 
-Metrics (:func:`cartogram_metrics`, in an equal-area plane): the relative area error :math:`|A_i / T_i - 1|`,
-:math:`T_i = (v_i / \sum_j v_j) \sum_j A_j`, its mean and maximum over the judged regions, and a topology check.
+Metrics (:func:`~rfmap.cartogram.metrics.cartogram_metrics`, in an equal-area plane): the relative area error
+:math:`|A_i / T_i - 1|`, :math:`T_i = (v_i / \sum_j v_j) \sum_j A_j`, its mean and maximum over the judged regions, and
+a topology check.
 
 References
 ----------
@@ -150,8 +152,10 @@ class Cartogram:
     features : list of dict
         The mapped features (a property, built on first use): ``geometries`` as GeoJSON with the input's
         properties and ids.
-    regions, mapped : ndarray of shapely geometries, shape (R,)
-        The regions before and after mapping, in the unit-square frame.
+    regions : ndarray of shapely geometries, shape (R,)
+        The regions before mapping, in the unit-square frame.
+    mapped : ndarray of shapely geometries, shape (R,)
+        The regions after mapping, in the unit-square frame.
     values : ndarray, shape (R,)
         The values mapped to (zero values floored).
     floored : list of int
@@ -196,7 +200,7 @@ class Cartogram:
 
     @property
     def features(self) -> list:
-        """The mapped features (see the class docstring)."""
+        """The mapped features: ``geometries`` as GeoJSON with the input's properties and ids."""
         if self._features is None:
             self._features = mapped_features(self.input_features, self.geometries)
         return self._features
@@ -219,19 +223,19 @@ class Cartogram:
         return np.abs(a / (self.values / self.values.sum() * a.sum()) - 1.0)
 
     def metrics(self, *, overlap_tol: float = 1e-6) -> CartogramMetrics:
-        """Area errors and topology (:func:`cartogram_metrics`) in the equal-area plane
-        (:meth:`PlanarFrame.equal_area`: the frame itself unless it is equirectangular)."""
+        """Area errors and topology (:func:`~rfmap.cartogram.metrics.cartogram_metrics`) in the equal-area plane
+        (:meth:`~rfmap.cartogram.projection.PlanarFrame.equal_area`: the frame itself unless it is equirectangular)."""
         if overlap_tol not in self._metrics:
             self._metrics[overlap_tol] = cartogram_metrics(self.frame.equal_area(self.mapped), self.values,
                                                            overlap_tol=overlap_tol, min_share=self.min_share)
         return self._metrics[overlap_tol]
 
     def problems(self, *, overlap_tol: float = 1e-6) -> list[str]:
-        """What keeps the cartogram from being right, one sentence each (empty when it is): a largest area error
-        above :attr:`tol` (:meth:`metrics`), invalid regions, overlapping regions, and, for output in the input's
-        coordinates, regions moved where no longitude/latitude lies (:meth:`PlanarFrame.beyond_domain`) and regions
-        valid as written that are invalid in the cylindrical equal-area plane (a reprojection of the file would break
-        them: ``info["repaired_output"].invalid_reprojected``)."""
+        """What keeps the cartogram from being right, one sentence each (empty when it is): a largest area error above
+        ``tol`` (:meth:`metrics`), invalid regions, overlapping regions, and, for output in the input's coordinates,
+        regions moved where no longitude/latitude lies (:meth:`~rfmap.cartogram.projection.PlanarFrame.beyond_domain`)
+        and regions valid as written that are invalid in the cylindrical equal-area plane (a reprojection of the file
+        would break them: ``info["repaired_output"].invalid_reprojected``)."""
         # saving the cartogram asks too: measured once for the same arrays of polygons (replacing one measures again)
         key = (overlap_tol, id(self.geometries), id(self.mapped), self.output)
         if key not in self._problems:
@@ -325,7 +329,7 @@ def cartogram(collection, value: str, options: CartogramOptions | None = None, *
         A GeoJSON FeatureCollection of Polygon / MultiPolygon features.
     value : str
         The property holding each region's value (numbers :math:`\ge 0`; zeros are floored, see
-        :func:`read_regions`).
+        :func:`~rfmap.cartogram.regions.read_regions`).
     options : CartogramOptions, optional
         How the regions are resized (:class:`rfmap.cartogram.options.CartogramOptions`: ``method``, ``n``, ``tol``,
         ``max_iterations``, ``iterations``, ``margin``, ``projection``, ``output``, ``supersample``, ``model``,
@@ -350,8 +354,8 @@ def cartogram(collection, value: str, options: CartogramOptions | None = None, *
     Raises
     ------
     ValueError
-        For bad input (one line: see :func:`read_regions`), an unknown method, projection or output, a surrogate
-        that does not map 2D densities of the square.
+        For bad input (one line: see :func:`~rfmap.cartogram.regions.read_regions`), an unknown method, projection or
+        output, a surrogate that does not map 2D densities of the square.
     ImportError
         For longitude/latitude input centred near a pole in an equal-area projection without pyproj.
     """

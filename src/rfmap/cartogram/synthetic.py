@@ -30,7 +30,7 @@ __all__ = ["TessellationOptions", "tessellate", "synthetic_counties", "synthetic
 
 @dataclass(frozen=True)
 class TessellationOptions:
-    """How :func:`tessellate` cuts an outline (see the module docstring).
+    """How :func:`tessellate` cuts an outline (see :mod:`rfmap.cartogram.synthetic`).
 
     Attributes
     ----------
@@ -132,7 +132,8 @@ def _wiggle(geoms: np.ndarray, amplitude: float, rng: np.random.Generator) -> np
 
 
 def tessellate(outline, options: TessellationOptions | None = None, *, prefix: str = "R") -> dict:
-    """An outline cut into Voronoi regions of very different sizes with a value each (see the module docstring).
+    """An outline cut into Voronoi regions of very different sizes with a value each (see
+    :mod:`rfmap.cartogram.synthetic`).
 
     Parameters
     ----------

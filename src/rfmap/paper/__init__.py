@@ -1,4 +1,4 @@
-r"""The paper layer: what the book shows, built on the library below it.
+r"""The code of the book's chapters and tables, one module per kind of study, built on the library below it.
 
 Each module is named by what it shows: :mod:`~rfmap.paper.tables` (the table formatter, the paper's published
 tables and the glue of numbers into the text), :mod:`~rfmap.paper.comparison` (each paper table as a four-way

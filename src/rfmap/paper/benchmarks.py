@@ -94,8 +94,8 @@ WARM_MODELS = {(2, "square"): "dem2d-square", (2, "free"): "deq2d-free", (3, "sq
 
 
 def benchmark_fields(dim: int, n: int, *, paper: bool = True, random: int = 0) -> list[tuple[str, np.ndarray]]:
-    """Labelled densities on the ``N``-grid: the paper's test fields and ``random`` unseen random fields (the
-    ``report`` stream of :func:`rfmap.training.validation.validation_fields`), preprocessed as the paper does."""
+    """Labelled densities on the ``N``-grid: the paper's test fields and a number ``random`` of unseen random fields
+    (the ``report`` stream of :func:`rfmap.training.validation.validation_fields`), preprocessed as the paper does."""
     out = [(name, sample_density(name, n)) for name in TEST_FIELDS[("density", dim)]] if paper else []
     if random:
         pts = grid_points(n, dim)

@@ -158,7 +158,7 @@ class Case:
 
 @dataclass
 class Comparison:
-    """A paper table as a four-way comparison (module docstring).
+    """A paper table as a four-way comparison (see :mod:`rfmap.paper.comparison`).
 
     Attributes
     ----------
@@ -347,7 +347,7 @@ class Comparison:
 
     def to_markdown(self, quantities: list[str] | None = None) -> str:
         """The table in the paper's shape: one block of rows per case (the scored metrics, then the time, or the
-        rows of ``quantities``, e.g. :meth:`full_quantities`), a column per method that holds values
+        rows of ``quantities``, e.g. ``full_quantities()``), a column per method that holds values
         (:meth:`methods`) and, with a paper column, the verdict of each scored metric; every number by
         :func:`format_number`."""
         return self._markdown(quantities or self.metrics + ["time"], met="paper" in self.methods())
@@ -371,7 +371,7 @@ class Comparison:
         return [q for q in order if q in present]
 
     def full_markdown(self) -> str:
-        """Every quantity measured (:meth:`full_quantities`), in the shape of :meth:`to_markdown`: one block of rows
+        """Every quantity measured (``full_quantities()``), in the shape of :meth:`to_markdown`: one block of rows
         per case, one row per quantity and a column per method, so that the table keeps the width of the text
         column however many quantities there are."""
         return self._markdown(self.full_quantities(), met=False)

@@ -103,7 +103,7 @@ def flow_convergence(dim: int = 2, n: int = 256, boundary: str = "square", *, ra
                      settings=CONVERGENCE_SETTINGS) -> list[dict[str, Any]]:
     r"""Whether the flow-based solver's gap to the diffusion solver is a convergence error.
 
-    On the paper's test densities and ``random`` unseen random fields
+    On the paper's test densities and a number ``random`` of unseen random fields
     (:func:`~rfmap.paper.benchmarks.benchmark_fields`) the diffusion solver runs once and the flow-based solver once
     per entry of ``settings`` (keyword arguments of ``rfmap.solvers.flow.solve_flow``: a tighter step tolerance
     ``rtol``, a finer density raster ``refine``). If the flow's final :math:`\mathrm{Std}(\tilde\rho_{\text{map}})`

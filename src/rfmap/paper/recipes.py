@@ -17,19 +17,19 @@ def training_fields_text(config: dict) -> str:
 def recipe_table(surs: dict) -> Table:
     r"""How each model was trained, from its metadata: the training fields (:func:`training_fields_text`), the fold
     penalty (weight, from :math:`\det J < \tau`), the peak learning rate of the last run, the decay of its weight
-    average (``ema``; ``None`` when it shipped the weights as trained), the cumulative steps
-    and minutes over its ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end
-    of training (grid sides; the score that chose the kept weights, as :func:`_selection` reads it, and what that
-    score is: the family score of Std ratios, or the mean metric with every folded map counted as the identity
-    map, else the capped or the plain mean; which maps were scored: ``raw`` network output or the
+    average (``ema``; ``None`` when it shipped the weights as trained), the cumulative steps and minutes over its
+    ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end of training (grid sides;
+    the score that chose the kept weights, as :func:`rfmap.training.validation.score` ranks the validation summary's
+    scores, and what that score is: the family score of Std ratios, or the mean metric with every folded map counted as
+    the identity map, else the capped or the plain mean; which maps were scored: ``raw`` network output or the
     ``default`` maps, as a plain ``Surrogate.map`` returns them, a folded map regridded or repaired
-    (``TrainConfig.val_repair``); how many
-    held-out maps the network itself folded; :func:`rfmap.training.validation.evaluate`).  Older weights were validated on
-    fewer sides, so their numbers are not comparable with those of later runs.
+    (``TrainConfig.val_repair``); how many held-out maps the network itself folded;
+    :func:`rfmap.training.validation.evaluate`).  Older weights were validated on fewer sides, so their numbers are not
+    comparable with those of later runs.
 
-    Each column of the Markdown table is in one notation: rates as powers of ten (:func:`rate_text`), steps with
-    thousands separators, minutes whole, the held-out scores with three significant digits in positional notation
-    (:func:`decimal_text`)."""
+    Each column of the Markdown table is in one notation: rates as powers of ten
+    (:func:`~rfmap.paper.tables.rate_text`), steps with thousands separators, minutes whole, the held-out scores with
+    three significant digits in positional notation (:func:`~rfmap.paper.tables.decimal_text`)."""
     t = Table("tab:recipes", "How the models were trained",
               ["fields", "fold", "lr", "ema", "steps", "train_time", "val_n", "held_out", "score_kind", "scored",
                "folded_maps"],
@@ -195,8 +195,8 @@ def training_settings(meta: dict) -> dict[str, str]:
 
     Examples
     --------
-    >>> meta = {"config": {"loss": {"beltrami": 0.1}, "ema": 0.0, "lr": 5e-4, "seed": 0}, "steps": 3000}
-    >>> training_settings(meta)["training steps"]
+    >>> config = {"loss": {"beltrami": 0.1}, "ema": 0.0, "lr": 5e-4, "seed": 0}
+    >>> training_settings({"config": config, "steps": 3000})["training steps"]
     '3,000 in 1 run'
     """
     cfg = meta["config"]

@@ -49,7 +49,8 @@ MAX_COLUMNS = 6
 
 
 def format_value(v, column: str = "", *, unit: bool = True) -> str:
-    """One table cell: :data:`DIGITS` significant digits (below 10⁻³ as ``2.572 × 10⁻⁵``, :func:`format_sig`);
+    """One table cell: :data:`DIGITS` significant digits (below 10⁻³ as ``2.572 × 10⁻⁵``,
+    :func:`~rfmap.core.wording.format_sig`);
     times (column ``time``, seconds) as ``12.3 ms`` or
     ``2.43 s`` (without ``unit``: seconds, as a plain number); speed-ups as ``41.2×``; integers exactly; a missing
     value as an em dash (empty without ``unit``)."""
@@ -275,9 +276,9 @@ def change_text(before: float, after: float, fmt: str = ".4f") -> str:
 
 
 def agreement_text(difference: float, digits: int = 2) -> str:
-    """How close two results that should agree are, for the book's text: ``"identical (largest difference 0)"``
-    where the largest difference is exactly zero, else ``"equal to within 2.4 × 10⁻⁸"`` (:func:`format_sig`, never
-    e-notation)."""
+    """How close two results that should agree are, for the book's text: ``"identical (largest difference 0)"`` where
+    the largest difference is exactly zero, else ``"equal to within 2.4 × 10⁻⁸"``
+    (:func:`~rfmap.core.wording.format_sig`, never e-notation)."""
     difference = abs(float(difference))
     if difference == 0:
         return "identical (largest difference 0)"

@@ -33,18 +33,23 @@ __all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "inp
 COMPARABLE_RTOL = 1e-3
 #: the verdict words, best first
 VERDICTS = ("reproduced", "partly", "not reproduced", "not comparable")
-#: the rule of :func:`verdict`, as the scoreboards state it once
+#: The rule of :func:`verdict`, as the scoreboards state it once.
+#:
+#: :meta hide-value:
 VERDICT_RULE = (
     "*reproduced*: the paper's method meets the paper in every scored metric of every case whose input is the "
     "paper's; *partly*: in some of them; *not reproduced*: in none; *not comparable*: no case has the paper's input. "
     "A case's input is the paper's when its Std(ρ̃_orig) on the paper's grid agrees with the paper's to "
     f"within {COMPARABLE_RTOL * 100:g} %; a case whose input differs is marked *not comparable* (*n/c*) and "
     "compared instead by Std(ρ̃_map) / Std(ρ̃_orig), the share of the input's spread the map leaves.")
-#: why the verdict scores the metrics it does, as the scoreboards state it once
+#: Why the verdict scores the metrics it does, as the scoreboards state it once.
+#:
+#: :meta hide-value:
 SCORED_METRICS = (
-    "The verdict scores the mean measures that the paper's losses drive down: the mean errors |Δd| and |Δμ| of a "
-    "Beltrami reconstruction, the density's remaining spread Std(ρ̃_map) and, for DEQ maps, the mean distortion "
-    "mean |μ|. The extremes the paper prints beside them, max |μ| and min det J, are set by a single element each; "
+    "The verdict scores the mean measures that the paper's tables report and its losses target: the mean errors "
+    "|Δμ| (which the Beltrami loss drives down directly) and |Δd| (through it) of a Beltrami reconstruction, the "
+    "density's remaining spread Std(ρ̃_map) and, for DEQ maps, the mean distortion mean |μ|. The extremes the "
+    "paper prints beside them, max |μ| and min det J, are set by a single element each; "
     "max |μ| is shown next to the scored metrics, outside the verdict, and folds are counted in the chapters.")
 
 
@@ -58,8 +63,8 @@ def input_std(field: str, n: int) -> float:
 
 
 def is_comparable(field: str, n: int, paper_std_orig: float | None) -> bool:
-    """Whether the input ``field`` on the paper's grid side ``n`` is the paper's (module docstring); ``True``
-    where the paper prints no Std(rho~_orig) (the Beltrami tables: their inputs are closed-form maps)."""
+    """Whether the input ``field`` on the paper's grid side ``n`` is the paper's (see :mod:`rfmap.paper.verdicts`);
+    ``True`` where the paper prints no Std(ρ̃_orig) (the Beltrami tables: their inputs are closed-form maps)."""
     if paper_std_orig is None:
         return True
     return abs(input_std(field, n) - paper_std_orig) <= COMPARABLE_RTOL * abs(paper_std_orig)
@@ -74,7 +79,7 @@ def std_ratio(std_map: float | None, std_orig: float | None) -> float | None:
 
 def verdict(met: list[bool | None]) -> str:
     """The verdict word of an item from the met flags of its comparable (case, metric) pairs, each ``True``,
-    ``False`` or ``None`` (no paper value); see the module docstring.
+    ``False`` or ``None`` (no paper value); see :mod:`rfmap.paper.verdicts`.
 
     Examples
     --------

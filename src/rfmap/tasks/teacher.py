@@ -1,8 +1,8 @@
 r"""A classical teacher for density surrogates: the solver's map of a training field as a supervised target.
 
-The paper trains its surrogates without labelled data.  A teacher adds, for a share of every batch, the map that a
-classical solver computes for the same field on the same grid as a target of the network's map, *beside* the
-data-free losses (which stay).  The supervised term is the relative displacement error
+The paper trains its density surrogates without labelled data.  A teacher adds, for a share of every batch, the map that
+a classical solver computes for the same field on the same grid as a target of the network's map, *beside* the data-free
+losses (which stay).  The supervised term is the relative displacement error
 
 .. math::
 

@@ -1,4 +1,8 @@
-r"""Data-free training of a surrogate (paper Sec. 5), single-process or data-parallel, on the CPU or a GPU.
+r"""Training of a surrogate (the recipes of paper Sec. 5.1 and 5.2), single-process or data-parallel, on CPU or GPU.
+
+By default training needs no solved maps: a density model learns from its density loss alone, and a Beltrami model
+from the difference between its map's coefficient and the input coefficient (the paper computes ground-truth maps
+for its Beltrami training, though its loss compares coefficients only).
 
 One concept per module: :mod:`~rfmap.training.data` draws the batches (sample ``i`` of step ``t`` seeded by
 ``(seed, t, i)``, on a random grid side in ``n_range``) in a thread or in worker processes;

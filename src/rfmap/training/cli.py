@@ -24,6 +24,7 @@ __all__ = ["build_parser", "run", "main"]
 
 
 def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
+    """The arguments of ``rfmap train`` (:doc:`/book/api/cli`), added to ``parser`` or to a new parser."""
     p = parser or argparse.ArgumentParser(prog="rfmap train", description="Train a surrogate from a named config.")
     p.add_argument("--config", required=True, help=f"one of: {', '.join(config_names())}")
     p.add_argument("--preset", choices=list(PRESETS), default=None,
@@ -94,6 +95,7 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
 
 
 def run(args) -> Surrogate:
+    """Train as the parsed arguments ``args`` of :func:`build_parser` say; returns the trained surrogate."""
     cfg = get_config(args.config, args.preset)
     over = {k: v for k, v in {"steps": args.steps, "batch": args.batch, "time_limit": args.time_limit,
                               "threads": args.threads, "seed": args.seed, "workers": args.workers,

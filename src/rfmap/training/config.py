@@ -4,8 +4,10 @@ r"""Typed training configurations with named ``ci`` and ``full`` presets.
 train tiny models for a few steps (seconds on a laptop CPU, used by the tests and by the notebooks under CI);
 ``full`` presets are the ones that produced the shipped weights; ``paper`` presets are the paper's hyperparameters
 as printed (for a GPU: ``rfmap train --config NAME --preset paper --device cuda``), with the paper's "epoch" read as
-one optimisation step on a freshly drawn batch (the paper draws a new training grid every epoch).  ``RFMAP_SCALE``
-only switches between ``ci`` and ``full``.
+one optimisation step on a freshly drawn batch (the paper draws a new training grid every epoch).  A configuration
+for which the paper has no model (the FNO and its U-Net partner, the variants trained across grid sides) keeps its
+own learning rate or grid sides in its ``paper`` preset; the preset's description gives the paper's recipe and then
+what the preset runs instead.  ``RFMAP_SCALE`` only switches between ``ci`` and ``full``.
 """
 from __future__ import annotations
 
@@ -68,20 +70,23 @@ class ModelConfig:
 class TrainConfig:
     r"""Everything that defines a training run.
 
-    Optimiser defaults follow the paper: AdamW, gradient clipping at 1.0, a random training resolution per step,
-    Sobol-jittered sampling.  ``schedule`` is ``'cosine'`` (linear warm-up then cosine decay), ``'step'``
-    (decay by ``gamma`` every ``step_size`` steps) or ``'restarts'`` (cosine annealing with warm restarts,
-    ``T0``, ``T_mult``).  ``ema`` > 0 keeps an exponential moving average of the weights (Polyak averaging,
-    :class:`rfmap.training.averaging.WeightAverage`) with that decay; validation, the checkpoint choice and the shipped file then
-    use the averaged weights (0, the default: the weights as trained).  ``teacher`` (density tasks,
-    :class:`rfmap.tasks.teacher.TeacherConfig`): a classical solver's map of a share of each batch's fields as a supervised
-    target beside the data-free losses (default: none, data-free as in the paper).  ``snapshot_every`` > 0 writes the
-    weights every that many steps to ``OUT/snapshots/`` (single self-contained files, scored afterwards by
-    ``rfmap validate``).  ``val_repair``: score the held-out maps as
-    ``Surrogate.map`` delivers them (a folded network map regridded or repaired; :func:`rfmap.training.validation.evaluate`)
-    instead of the raw network output; ``val_native``: run the network on the validation grid itself
-    (``Surrogate.map(..., native=True)``) instead of a working grid inside ``n_range``.  A run started with
-    ``init`` validates its parent at step 0, so that the parent competes with every checkpoint.
+    As in the paper: AdamW, gradient clipping at 1.0, a random training resolution per step, and Sobol-jittered
+    sampling, each vertex moved by up to ``jitter`` grid spacings scaled by the field's local gradient magnitude
+    (:func:`rfmap.core.mesh.jittered_points`).  The defaults of the learning rate, weight decay and schedule below
+    are this project's; the ``paper`` presets have the paper's.
+
+    ``schedule`` is ``'cosine'`` (linear warm-up then cosine decay), ``'step'`` (decay by ``gamma`` every ``step_size``
+    steps) or ``'restarts'`` (cosine annealing with warm restarts, ``T0``, ``T_mult``).  ``ema`` > 0 keeps an
+    exponential moving average of the weights (Polyak averaging, :class:`rfmap.training.averaging.WeightAverage`) with
+    that decay; validation, the checkpoint choice and the shipped file then use the averaged weights (0, the default:
+    the weights as trained).  ``teacher`` (density tasks, :class:`rfmap.tasks.teacher.TeacherConfig`): a classical
+    solver's map of a share of each batch's fields as a supervised target beside the data-free losses (default: none,
+    data-free as in the paper).  ``snapshot_every`` > 0 writes the weights every that many steps to ``OUT/snapshots/``
+    (single self-contained files, scored afterwards by ``rfmap validate``).  ``val_repair``: score the held-out maps as
+    ``Surrogate.map`` delivers them (a folded network map regridded or repaired;
+    :func:`rfmap.training.validation.evaluate`) instead of the raw network output; ``val_native``: run the network on
+    the validation grid itself (``Surrogate.map(..., native=True)``) instead of a working grid inside ``n_range``.  A
+    run started with ``init`` validates its parent at step 0, so that the parent competes with every checkpoint.
 
     Training grid sides: ``n_sampling`` ``'uniform'`` (every side in ``n_range`` equally often) or ``'log'``
     (log-uniform: every octave of sizes equally often, a curriculum across the sizes the paper tests) or
@@ -173,7 +178,12 @@ class Presets:
 
     Attributes
     ----------
-    ci, full, paper : TrainConfig
+    ci : TrainConfig
+        The tiny preset of the tests.
+    full : TrainConfig
+        The preset of the shipped weights.
+    paper : TrainConfig
+        The paper's recipe.
     paper_note : str
         The paper's recipe as printed, which the ``paper`` preset's description appends.
     """
@@ -196,15 +206,16 @@ class Presets:
                    paper_note=paper_note)
 
     def derive(self, *, name: str, description: str, ci: dict | None = None, full: dict | None = None,
-               paper: dict | None = None, **shared) -> "Presets":
+               paper: dict | None = None, paper_note: str | None = None, **shared) -> "Presets":
         """Another configuration from these presets: its ``name`` and ``description`` (the ``paper`` preset's with
-        the paper's recipe appended), the fields ``shared`` by the three changed alike, then each preset's own."""
+        ``paper_note`` appended, by default these presets' note), the fields ``shared`` by the three changed alike,
+        then each preset's own."""
         def one(cfg: TrainConfig, own: dict | None, text: str) -> TrainConfig:
             return replace(cfg, name=name, description=text, **{**shared, **(own or {})})
 
+        note = self.paper_note if paper_note is None else paper_note
         return Presets(ci=one(self.ci, ci, description), full=one(self.full, full, description),
-                       paper=one(self.paper, paper, f"{description} Paper preset: {self.paper_note}"),
-                       paper_note=self.paper_note)
+                       paper=one(self.paper, paper, f"{description} Paper preset: {note}"), paper_note=note)
 
     def configs(self) -> dict[str, TrainConfig]:
         """``{"ci": ..., "full": ..., "paper": ...}``."""
@@ -284,8 +295,12 @@ def _across_sizes(parent: Presets, *, name: str, description: str, ci_range: tup
                   full: dict) -> Presets:
     """``parent`` trained from its weights across grid sides (log-uniform), to run natively (the network on the
     requested grid): ``full`` changes the full preset (which runs on one thread), the ``ci`` preset draws sides from
-    ``ci_range`` and validates natively, the paper preset draws the full preset's sides."""
+    ``ci_range`` and validates natively, the paper preset draws the full preset's sides (which its description
+    says after the paper's recipe)."""
+    lo, hi = full["n_range"]
     return parent.derive(name=name, description=description,
+                         paper_note=f"the paper's recipe: {parent.paper_note} This preset draws N log-uniformly from "
+                                    f"[{lo}, {hi}] instead, the sides this configuration is trained to run at.",
                          ci=dict(n_range=ci_range, n_sampling="log", val_native=True),
                          full={**full, "threads": 1, "workers": 0},
                          paper=dict(n_range=full["n_range"], n_sampling="log"))
@@ -336,7 +351,9 @@ _FNO_DEQ2D_SQUARE = _DEQ2D_SQUARE.derive(
     lr=1e-3, loss=LossWeights(beltrami=0.1), density_field=_SHARP2,
     ci=dict(model=ModelConfig(arch="fno", modes=4, width=8, layers=2)),
     full=dict(n_range=(64, 96), model=ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125)),
-    paper=dict(model=ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125)))
+    paper=dict(model=ModelConfig(arch="fno", modes=16, width=24, layers=4, padding=0.125)),
+    paper_note="the paper's recipe for deq2d-square: " + _NOTE_2D + " This preset runs lr 1e-3 instead (the paper "
+               "trains no FNO; this configuration's own rate).")
 #: the FNO's partner at equal budget (book chapter 12): fno-deq2d-square's task, losses, fields, schedule and steps
 #: with deq2d-square's U-Net in place of the FNO, trained once from scratch (study weights, not a shipped model)
 _UNET_FNO_BUDGET = _FNO_DEQ2D_SQUARE.derive(
@@ -344,7 +361,9 @@ _UNET_FNO_BUDGET = _FNO_DEQ2D_SQUARE.derive(
     description="deq2d-square's U-Net trained exactly as fno-deq2d-square (same task, losses, fields, schedule and "
                 "6,000 steps): the equal-budget partner of the FNO.",
     model=ModelConfig(), ci=dict(model=_CI["model"]), full=dict(model=ModelConfig(), time_limit=0.0),
-    paper=dict(model=ModelConfig()))
+    paper=dict(model=ModelConfig()),
+    paper_note="the paper's recipe for deq2d-square: " + _NOTE_2D + " This preset runs lr 1e-3 instead, as "
+               "fno-deq2d-square's does (the paper trains no FNO, nor this partner of it).")
 #: the Beltrami weight alone (for chapter 8's Fig. 10 study): one recipe, trained from scratch twice, once with lambda = 0 (a DEM)
 #: and once with lambda = 0.1 (a DEQ); nothing else differs (study weights, not shipped models)
 _ABLATION = {lam: _density2d(
@@ -372,7 +391,8 @@ _DEM3D_CUBE_NATIVE = _across_sizes(
                 "(log-uniform, about 128,000 grid points a step) and validated natively at 32 and 64: it runs "
                 "natively at every side the paper tests.")
 
-#: every training configuration by name: ``{preset: TrainConfig}`` (:meth:`Presets.configs`)
+#: Every training configuration by name, each a ``{preset: TrainConfig}`` (:meth:`Presets.configs`); the names are
+#: those of :func:`config_names`.
 CONFIGS: dict[str, dict[str, TrainConfig]] = {
     p.full.name: p.configs()
     for p in (_BELTRAMI2D, _DEQ2D_SQUARE, _DEQ2D_FREE, _DEM2D_SQUARE, _DEM3D_CUBE, _DEM3D_FREE, _FNO_DEQ2D_SQUARE,

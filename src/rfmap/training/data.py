@@ -2,7 +2,7 @@ r"""Batches of random fields for training: the grid side and samples of a step, 
 
 Every step draws a fresh batch of random fields (sample ``i`` of step ``t`` is seeded by ``(seed, t, i)``) on a
 random grid size in ``n_range``, with Sobol-jittered vertices.  With ``workers >= 1`` the batches are drawn ahead of
-the step by worker processes (:class:`_ProcessLoader`), otherwise by a thread; the batches, hence the weights, are
+the step by worker processes, otherwise by a thread; the batches, hence the weights, are
 the same for any number of workers.  Rank ``r`` of a data-parallel run draws samples ``r*B .. (r+1)*B - 1``.
 """
 from __future__ import annotations

@@ -92,7 +92,7 @@ class RunOptions:
 
 
 def train(cfg: TrainConfig, out_dir=None, options: RunOptions | None = None, **kw) -> Surrogate:
-    """Train ``cfg``; returns the trained :class:`Surrogate` (also written to ``out_dir``, default ``runs/NAME``).
+    """Train ``cfg``; returns the trained :class:`rfmap.Surrogate` (also written to ``out_dir``, default ``runs/NAME``).
     ``options`` (:class:`RunOptions`) say how the run starts and reports; its fields may be given as keywords
     (``train(cfg, out, init="deq2d-square", progress=False)``)."""
     opts = replace(options or RunOptions(), **kw)

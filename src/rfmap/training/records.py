@@ -179,8 +179,8 @@ def budget_table(metas: dict, paper_steps: dict, paper_batch: dict):
 
 def to_markdown(df) -> str:
     """A table of this module as Markdown: integers with thousands separators, other numbers with three
-    significant digits (as powers of ten below 10⁻³, ``2.3 × 10⁻⁴``, never e-notation: :func:`format_sig`), the index as
-    the first column."""
+    significant digits (as powers of ten below 10⁻³, ``2.3 × 10⁻⁴``, never e-notation:
+    :func:`~rfmap.core.wording.format_sig`), the index as the first column."""
     def fmt(v):
         if isinstance(v, bool) or not isinstance(v, (int, float)) and not hasattr(v, "dtype"):
             return str(v)

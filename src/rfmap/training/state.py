@@ -1,8 +1,8 @@
 r"""The state of a training run: model, optimiser, schedule, step, clock, best validated weights and lineage.
 
-:class:`TrainState` is everything the loop reads and updates; :func:`_build_state` makes it for a fresh, warm-started
-(``--init``) or resumed (``--resume``) run.  A warm start keeps the lineage of the weights it starts from (parent
-name and SHA-256, cumulative steps and wall time, :func:`load_init`); a checkpoint (``checkpoint.pt``: model,
+:class:`TrainState` is everything the loop reads and updates; :func:`rfmap.training.loop.train` builds it for a fresh,
+warm-started (``--init``) or resumed (``--resume``) run.  A warm start keeps the lineage of the weights it starts from
+(parent name and SHA-256, cumulative steps and wall time, :func:`load_init`); a checkpoint (``checkpoint.pt``: model,
 optimiser, scheduler, step, loaded with ``weights_only=True`` onto any device) holds the state of an interrupted run.
 """
 from __future__ import annotations
@@ -70,8 +70,10 @@ def _scheduler(opt, cfg: TrainConfig, clock: Callable[[], float] | None = None):
 
 def learning_rates(cfg: TrainConfig, steps: int | None = None) -> list[float]:
     """The learning rate of each of the first ``steps`` optimiser steps (default ``cfg.steps``) of a run of ``cfg``
-    (its ``schedule``), by the step count alone: a run that reaches its wall-time limit first goes through the same
-    cosine in fewer steps."""
+    (its ``schedule``) that is not stopped by a wall-time limit (``--time-limit``): the rates by the step count
+    alone.  A time-limited run with the ``cosine`` schedule stretches the same cosine over the elapsed time, so it
+    may reach ``lr_min`` in fewer steps; the ``step`` and ``restarts`` schedules follow the step count in every
+    run."""
     opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=cfg.lr)
     sched = _scheduler(opt, cfg)
     rates = []

@@ -16,8 +16,8 @@ The set mixes kinds, sharp ones included, so that folds show up during training:
   levels of :math:`|\mu|` spread over [0.1, 0.85]; the metric is the mean vertex distance to the exact map.  A
   second set of low-frequency maps (1-4 slow modes) serves reports only.
 
-The score of a density model is the mean over field families of each family's mean Std(rho~_map) relative to
-the field's own Std(rho~_orig) (:func:`score`; the per-family values are ``families`` in the summary), with every
+The score of a density model is the mean over field families of each family's mean Std(ρ̃_map) relative to
+the field's own Std(ρ̃_orig) (:func:`score`; the per-family values are ``families`` in the summary), with every
 folded map counted as the identity map (ratio 1); the plain and penalized means over fields are kept in the summary.
 The score of a Beltrami model is the mean vertex distance (``mean_dd``) with every folded map counted as the
 identity map, i.e. as no map at all (``penalized``): a fold costs the model everything it gained on that field, and
@@ -27,7 +27,7 @@ With ``evaluate(..., repair=True)`` (``TrainConfig.val_repair``, the 3D models) 
 ``Surrogate.map`` returns by default: a folded network map is first tried on coarser working grids and then
 repaired, so a steep ramp that the network folds counts with the fold-free map a user would get rather than as the
 identity.  A returned map that is worse than no map counts as the identity.  Why these rules, with the
-measurements: the book's page *Design decisions*.
+measurements: the book's page :doc:`Design decisions </book/design>`.
 """
 from __future__ import annotations
 
@@ -77,8 +77,8 @@ def evaluate(sur, ns, count: int = 16, *, repair: bool = False, native: bool = F
         ``{label@N: {metric: value}}`` per field and size, and ``"mean"``: the mean metric (``std_rho_map`` or
         ``mean_dd``), the total number of flipped elements, the smallest Jacobian determinant, ``folded_fields``
         (how many maps have a flipped element) and ``capped``: the mean metric with each folded map's value
-        replaced by that of doing nothing (the identity map: Std(rho~_orig) of the field, or the identity's
-        distance to the exact Beltrami map) when that is lower.  A folded map's Std(rho~_map) can be arbitrarily
+        replaced by that of doing nothing (the identity map: Std(ρ̃_orig) of the field, or the identity's
+        distance to the exact Beltrami map) when that is lower.  A folded map's Std(ρ̃_map) can be arbitrarily
         large (elements of almost zero measure), so the plain mean is at the mercy of one folded field; the capped
         mean counts a folded map as no better than no map (a map with non-finite points counts as folded).
         ``penalized``: the mean metric with each folded map's
@@ -143,7 +143,7 @@ def score(summary: dict) -> tuple[int, float]:
     """Sort key of a validation summary (``evaluate(...)["mean"]``), lower is better.
 
     Density models: ``(0, family_score)``, the mean over field families (smooth, steps, peak, ramp) of each
-    family's mean of Std(rho~_map) / Std(rho~_orig), a folded map counted as the identity (ratio 1).  Every family
+    family's mean of Std(ρ̃_map) / Std(ρ̃_orig), a folded map counted as the identity (ratio 1).  Every family
     weighs the same and every field counts relative to doing nothing, so the few steep ramps, whose Std is several
     times the others', cannot decide the choice alone.  Beltrami models: ``(0, penalized)``, the mean vertex
     distance with a folded map counted as the identity (see :func:`evaluate`).

@@ -9,9 +9,9 @@ from .base import CartogramMethod
 
 __all__ = ["DiffusionMethod", "DIFFUSION_SETTINGS"]
 
-#: Settings of :func:`rfmap.solvers.solve_dem` on a cartogram's raster (which holds cell means: ``refine=1``, book:
-#: Design decisions); stop at a remaining displacement of 1 % of a cell (``tol_end``, used by the cartograms' own
-#: torch-free diffusion, :func:`rfmap.solvers.cartodiffusion.diffusion_square`, too).
+#: Settings of :func:`rfmap.solvers.solve_dem` on a cartogram's raster (which holds cell means: ``refine=1``,
+#: :doc:`Design decisions </book/design>`); stop at a remaining displacement of 1 % of a cell (``tol_end``, used by the
+#: cartograms' own torch-free diffusion, :func:`rfmap.solvers.cartodiffusion.diffusion_square`, too).
 DIFFUSION_SETTINGS = {"refine": 1, "tol_end": 1e-2}
 
 

@@ -11,7 +11,7 @@ __all__ = ["SurrogateMethod", "HybridMethod", "HYBRID_POLISH"]
 #: The hybrid's polish tolerance on Std(rho~_map) (``Surrogate.map(polish=...)``): far below any raster's variation,
 #: so that every pass runs its flow, for the reason of :data:`rfmap.cartogram.methods.flow.FLOW_SETTINGS`' ``tol=0``.
 #: The polish runs on the raster's vertex grid (the network's map resampled to it), where the area errors are judged
-#: (book: Design decisions).
+#: (:doc:`Design decisions </book/design>`).
 HYBRID_POLISH = 1e-9
 
 
