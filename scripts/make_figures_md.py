@@ -132,6 +132,24 @@ def _chapter_link(item: dict, root: Path, in_toc: set[str], text: str) -> str:
     return text
 
 
+def item_target(item: dict) -> str:
+    """The MyST target a chapter puts above the section of a paper item: ``paper-`` and the item's LaTeX label
+    (``tab:population_test`` → ``paper-tab-population-test``)."""
+    return "paper-" + item["label"].replace(":", "-").replace("_", "-")
+
+
+def _item_link(item: dict, root: Path, in_toc: set[str], text: str) -> str:
+    """``text`` linked to the section of the item's chapter that holds it, where the chapter marks that section
+    with :func:`item_target`, else to the chapter (:func:`_chapter_link`)."""
+    path, target = root / item["notebook"], item_target(item)
+    if path.suffix == ".ipynb" and path.exists() and Path(item["notebook"]).with_suffix("").as_posix() in in_toc:
+        cells = json.loads(path.read_text(encoding="utf-8"))["cells"]
+        if any(line.strip() == f"({target})=" for cell in cells if cell["cell_type"] == "markdown"
+               for line in "".join(cell["source"]).splitlines()):
+            return f"{{ref}}`{text} <{target}>`"
+    return _chapter_link(item, root, in_toc, text)
+
+
 def chapter_title(notebook: str, root: Path = ROOT) -> str:
     """The title of a chapter (its first level-1 heading), prefixed by its number: ``05 Reconstructing maps from
     Beltrami coefficients``; a page of book/ (``book/intro.md``) is the introduction."""
@@ -220,16 +238,21 @@ def _preamble() -> list[str]:
 
 #: the rules in brief, above the introduction's scoreboard (in full: :func:`_preamble`, on book/figures.md)
 RULES_SHORT = (
-    "**How to read it.** A case is *met* when the paper's method run here (the network on the requested grid, then "
-    "the paper's weight refinement: `Surrogate.map(field, n, native=True, refine=True, repair=False)`) is at most "
-    "the paper's value. The verdict is *reproduced* when every scored case is met, *partly* when some are, *not "
-    "reproduced* when none is, and *not comparable* when no case has the paper's input. Scored are the mean "
-    "measures the paper's losses drive down: |Δd| and |Δμ|, Std(ρ̃_map), and mean |μ| for DEQ maps; times are not "
-    "scored. The count beside a verdict is of scored (case, metric) pairs, so a table scored on two metrics counts "
-    "each case twice; a case whose input is not the paper's (*n/c*) is left out of it, and the verdict says whether "
-    "its Std ratio is worse than the paper's. *Cases met* counts the cases; the values beside it are means over "
-    "them, which one large case can carry. The rules in full, and every case: {ref}`the scoreboard <" + RULES_TARGET + ">`."
+    "**How to read it.**\n\n"
+    "* *Met.* A case is met when the paper's method run here (the network on the requested grid, then the paper's "
+    "weight refinement: `Surrogate.map(field, n, native=True, refine=True, repair=False)`) is at most the paper's "
+    "value. Scored are the mean measures the paper's losses drive down: |Δd| and |Δμ|, Std(ρ̃_map), and mean |μ| "
+    "for DEQ maps; times are not scored.\n"
+    "* *Verdict.* *Reproduced* when every scored case is met, *partly* when some are, *not reproduced* when none "
+    "is, *not comparable* when no case has the paper's input.\n"
+    "* *Counts.* The count beside a verdict is of scored (case, metric) pairs, so a table scored on two metrics "
+    "counts each case twice; a case whose input is not the paper's (*n/c*) is left out of it, and the verdict says "
+    "whether its Std ratio is worse than the paper's. *Cases met* counts the cases.\n\n"
+    "The rules in full, and every case: {ref}`the scoreboard <" + RULES_TARGET + ">`."
 )
+#: below the introduction's scoreboard: what its means are
+MEANS_NOTE = ("The values beside *Cases met* are means over the cases, which one large case can carry; "
+              "{doc}`figures` gives every case.")
 
 
 def scoreboard(root: Path = ROOT) -> str:
@@ -246,7 +269,7 @@ def scoreboard(root: Path = ROOT) -> str:
         score, nb = it["score"], it["notebook"]
         figs = [numbers[f] for f in shown_with.get(it["label"], [])]
         name = numbers[it["label"]] + (f" ({', '.join(figs)})" if figs else "")
-        item = f"{_chapter_link(it, root, in_toc, name)}: {_cell(it['short'])}{refs[it['label']]}"
+        item = f"{_item_link(it, root, in_toc, name)}: {_cell(it['short'])}{refs[it['label']]}"
         rows = [(m, t) for m, t in score["metrics"].items()]
         rows += [(m, f"{t} (shown, not scored)") for m, t in score.get("shown", {}).items()]
         for i, (metric, title) in enumerate(rows):
@@ -260,7 +283,7 @@ def scoreboard(root: Path = ROOT) -> str:
             lines.append("| " + " | ".join(cells) + " |")
     others = [numbers[it["label"]] for it in items if (it.get("score") or {}).get("kind") == "illustration"]
     others = sorted(others, key=lambda s: (s.startswith("Fig"), int(s.split()[-1])))
-    lines += ["", f"The paper's {', '.join(others)} illustrate the method and are not scored; {{doc}}`figures` "
+    lines += ["", MEANS_NOTE, "", f"The paper's {', '.join(others)} illustrate the method and are not scored; {{doc}}`figures` "
               "lists every item with the chapter that makes it, and the full scoreboard, case by case."]
     return "\n".join(lines + [""] + defs) + "\n"
 
@@ -276,7 +299,7 @@ def full_scoreboard(root: Path = ROOT) -> str:
     lines = _preamble() + ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for it in scored:
         score, nb = it["score"], it["notebook"]
-        item = (f"{_chapter_link(it, root, in_toc, numbers[it['label']])}{refs[it['label']]}: "
+        item = (f"{_item_link(it, root, in_toc, numbers[it['label']])}{refs[it['label']]}: "
                 + paste(f"**{{{score['key']}_verdict}}**", nb))
         cases = score.get("cases") or [None]
         first = True
@@ -359,8 +382,9 @@ def render(root: Path = ROOT) -> str:
         "",
         "## The scoreboard, case by case",
         "",
-        "Every number is pasted from the chapter that computes it, executed in the same build as this page and at "
-        "its scale (`RFMAP_SCALE`): at `ci` scale tiny models run on small grids, the numbers only show that the "
+        "Every number of the scoreboard is pasted from the chapter that computes it, executed in the same build as "
+        "this page and at its scale (`RFMAP_SCALE`; the chapter times at the end of the page were measured apart, "
+        "on the dates they give): at `ci` scale tiny models run on small grids, the numbers only show that the "
         "code runs, and a grid side the chapter runs in place of the paper's is named in the chapter's table. The "
         "introduction shows the same scoreboard in short, as means over the cases.",
         "",
