@@ -321,7 +321,8 @@ class Cartogram:
 
 # ----------------------------------------------------------------------------------------------- pipeline
 def cartogram(collection, value: str, options: CartogramOptions | None = None, **kw) -> Cartogram:
-    r"""A cartogram of GeoJSON regions sized by one value each, flow-based by default (see the module docstring).
+    r"""A cartogram of GeoJSON regions sized by one value each, flow-based by default (see
+    :mod:`rfmap.cartogram.resize`).
 
     Parameters
     ----------

@@ -1,10 +1,10 @@
 """How the API reference reads the comments of constants and the attribute lists of classes (a Sphinx extension).
 
-A constant is documented by a ``#:`` comment, and ``sphinx.ext.napoleon`` reads the first line of such a docstring
-as ``type: description``: a comment whose first line holds a colon ("cells per side: the raster's ...") comes out
-cut at that colon, its start shown as the constant's type.  The constants' comments are prose, never types, so this
-extension puts an invisible first line (a zero-width space) before napoleon reads them, which leaves the text
-whole.
+A constant is documented by a ``#:`` comment, and ``sphinx.ext.napoleon`` reads the first line of such a docstring as
+``type: description``: a comment whose first line holds a colon ("cells per side: the raster's ...") comes out cut at
+that colon, its start shown as the constant's type (a property's docstring too).  The constants' comments are prose,
+never types, so this extension puts an invisible first line (a zero-width space) before napoleon reads them, which
+leaves the text whole.
 
 A string constant whose comment hides its value (``:meta hide-value:``, for a long text that reads badly as a quoted
 value) is shown with its text as a paragraph instead, its ``*emphasis*`` kept.
@@ -33,8 +33,9 @@ MULTI_NAME = re.compile(r"^(\s*)([A-Za-z_]\w*(?:\s*,\s*[A-Za-z_]\w*)+)\s*(?::\s*
 
 
 def keep_whole(app, what: str, name: str, obj, options, lines: list[str]) -> None:
-    """Before napoleon: a constant's or attribute's docstring gets the :data:`GUARD` line first, in place."""
-    if what in ("data", "attribute") and any(":" in line for line in lines[:1]):
+    """Before napoleon: a constant's, attribute's or property's docstring gets the :data:`GUARD` line first, in
+    place."""
+    if what in ("data", "attribute", "property") and any(":" in line for line in lines[:1]):
         lines.insert(0, GUARD)
 
 

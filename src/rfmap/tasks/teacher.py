@@ -134,7 +134,7 @@ def teacher_targets(points: np.ndarray, n: int, mapped_grid: np.ndarray) -> np.n
 
 
 def teacher_loss(mapped: Tensor, target: Tensor, ref: Tensor, mask: Tensor, n: int) -> Tensor:
-    r""":math:`\mathcal{L}_T` averaged over the samples with ``mask`` set (module docstring).
+    r""":math:`\mathcal{L}_T` averaged over the samples with ``mask`` set (see :mod:`rfmap.tasks.teacher`).
 
     Parameters
     ----------
