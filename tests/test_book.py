@@ -194,7 +194,11 @@ def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
     assert numbers["tab:3d_resolution_test"] == "Table 9" and numbers["fig:3d_resolution_test"] == "Fig. 13"
     board = mod.scoreboard(ROOT)
     assert "tab:" not in board and "fig:" not in board
-    assert "[Table 4 (Fig. 7)](../notebooks/" in board
+    # each item links to its section of the chapter, which marks it with the item's target
+    assert "{ref}`Table 4 (Fig. 7) <paper-tab-population-test>`" in board
+    for it in _items():
+        if it["score"]["kind"] == "score" and it["notebook"].endswith(".ipynb"):
+            assert f"<{mod.item_target(it)}>`" in board, it["label"]
     rows = [line for line in board.splitlines() if line.startswith("| ")]
     n_metrics = sum(len(it["score"]["metrics"]) + len(it["score"].get("shown", {}))
                     for it in _items() if it["score"]["kind"] == "score")
