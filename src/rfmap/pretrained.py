@@ -19,13 +19,13 @@ STUDY_WEIGHTS = Path(__file__).resolve().parent / "data" / "studies" / "weights"
 
 
 def study_models() -> list[str]:
-    """The names of the study weights (:data:`STUDY_WEIGHTS`), each a training config's name."""
+    """The names of the study weights (:data:`~rfmap.pretrained.STUDY_WEIGHTS`), each a training config's name."""
     return sorted(p.stem for p in STUDY_WEIGHTS.glob("*.json") if p.with_suffix(".safetensors").exists())
 
 
 def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progress: bool = False) -> Surrogate:
     """The model a chapter of the book uses: the shipped weights at ``full`` scale (a shipped model's, or else a
-    study's, :data:`STUDY_WEIGHTS`); at ``ci`` scale a tiny model
+    study's, :data:`~rfmap.pretrained.STUDY_WEIGHTS`); at ``ci`` scale a tiny model
     trained on the spot with the named config's ``ci`` preset (seconds; cached in the temporary directory and
     reused while the configuration is unchanged), so every notebook runs end to end on a laptop CPU.
     ``preset`` defaults to :func:`rfmap.training.config.scale`."""

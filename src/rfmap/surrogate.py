@@ -8,7 +8,7 @@ Inference (paper Secs. 4.1–4.3): the input field is sampled on a working grid 
 model was trained on, encoded as :math:`[x, p(x)]`, and mapped to a displacement :math:`\psi` on that grid;
 :math:`\psi` is interpolated (bi/trilinearly) to the requested points :math:`x_q`, which may form any grid or an
 unstructured cloud, and :math:`u(x_q) = x_q + \mathcal{B}(x_q) \odot (\alpha \odot \psi(x_q))`.  That is the
-prediction; :meth:`Surrogate.map` then finishes the map with the stages of :mod:`rfmap.finish` (regrid, refine,
+prediction; :meth:`~rfmap.Surrogate.map` then finishes the map with the stages of :mod:`rfmap.finish` (regrid, refine,
 repair, polish, judge, shorten), which also report what they did (``MapResult.info``).
 """
 from __future__ import annotations
@@ -70,12 +70,12 @@ class _Input:
 @dataclass(frozen=True)
 class PredictOptions:
     """How a network predicts a map: on which working grid (the grid rule), from which input, with which stretching
-    and symmetry.  The surrogate's own part of :class:`MapOptions`.
+    and symmetry.  The surrogate's own part of :class:`~rfmap.surrogate.MapOptions`.
 
     Attributes
     ----------
     work_n : int, optional
-        A network's working grid side (default :meth:`Surrogate.work_n`; then, in 3D and without ``polish``, a
+        A network's working grid side (default :meth:`~rfmap.Surrogate.work_n`; then, in 3D and without ``polish``, a
         folded map is first tried on coarser working grids).  Given explicitly, it is used as given.
     native : bool
         Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried), as the paper
@@ -98,7 +98,7 @@ class PredictOptions:
 
     def working_side(self, n: int, default: Callable[[int], int]) -> int:
         """The grid rule: the network's grid side for an output of side ``n``, ``n`` itself with ``native``, else
-        ``work_n`` as given, else ``default(n)`` (:meth:`Surrogate.work_n`)."""
+        ``work_n`` as given, else ``default(n)`` (:meth:`~rfmap.Surrogate.work_n`)."""
         if self.native:
             if self.work_n is not None and int(self.work_n) != int(n):
                 raise ValueError(f"native runs the network on the requested grid N={n}; work_n={self.work_n} "
@@ -115,7 +115,7 @@ class PredictOptions:
 
 @dataclass(frozen=True)
 class MapOptions(FinishOptions, PredictOptions):
-    """How a field is mapped by a network, listed once: the keywords of :meth:`Surrogate.map` (and ``map_batch``)
+    """How a field is mapped by a network, listed once: the keywords of :meth:`~rfmap.Surrogate.map` (and ``map_batch``)
     and the options of ``rfmap map``.  The prediction's options (:class:`PredictOptions`: the grid rule, the input,
     the stretching, the symmetry) and the finishing stages' (:class:`rfmap.finish.pipeline.FinishOptions`:
     ``refine``, ``refine_bounds``, ``repair``, ``polish``, ``guard``), which the stages receive alone
@@ -391,7 +391,7 @@ class Surrogate:
         return self._forward(x).float().cpu()
 
     def map(self, field, n: int | None = None, points=None, options: MapOptions | None = None, **kw) -> MapResult:
-        """Map one field, as ``options`` say (:class:`MapOptions`, the options of every way to map a field), its
+        """Map one field, as ``options`` say (:class:`.MapOptions`, the options of every way to map a field), its
         fields also given as keywords (``sur.map(field, n, refine=True)``).
 
         Parameters
@@ -410,7 +410,7 @@ class Surrogate:
             Apply weight refinement (paper Sec. 4.3) before returning.
         work_n : int, optional
             Working grid side of the network (default :meth:`work_n`; then, in 3D and without ``polish``, a folded
-            map is first tried on coarser working grids, :data:`REGRID_DIMS`).  Given explicitly, it is used as
+            map is first tried on coarser working grids, :data:`.REGRID_DIMS`).  Given explicitly, it is used as
             given.
         native : bool
             Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried), as the
@@ -461,9 +461,9 @@ class Surrogate:
             ``None``, ``time``), with ``repair`` the report ``info["repair"]`` (see :func:`rfmap.finish.repair.dispatch.repair_map`),
             and with ``polish`` the report ``info["polish"]`` (warm or cold start and both stages' times and
             metrics).  A density map of the output grid without ``polish`` also carries ``info["quality"]``
-            (:func:`density_quality`), and when it leaves the density less equal than it was (a field unlike the
-            training fields), or had to be shortened not to, a :class:`PoorMapWarning` names the numbers and the
-            remedies (``refine``, ``polish``; :func:`quiet_quality` silences it).  A uniform density (a constant,
+            (:func:`.density_quality`), and when it leaves the density less equal than it was (a field unlike the
+            training fields), or had to be shortened not to, a :class:`.PoorMapWarning` names the numbers and the
+            remedies (``refine``, ``polish``; :func:`.quiet_quality` silences it).  A uniform density (a constant,
             e.g. all zeros, after preprocessing: :func:`rfmap.core.inputs.is_uniform`) is equal already: its map is
             the identity, exactly, computed by no stage, and ``info`` holds only ``uniform = True``.
         """
@@ -494,7 +494,7 @@ class Surrogate:
     def _map_one(self, inp: _Input, n: int, points, opts: MapOptions, group: str | None, given=None) -> MapResult:
         """Predict, then finish: the network's map of the output mesh (:meth:`_predict`, refined when asked), tried
         on coarser working grids when it folds (:func:`rfmap.finish.stages.regrid`, :data:`REGRID_DIMS`), then the stages
-        of :func:`rfmap.finish.pipeline.finish`; a :class:`PoorMapWarning` when the returned density map is poor.
+        of :func:`rfmap.finish.pipeline.finish`; a :class:`.PoorMapWarning` when the returned density map is poor.
         ``given``: the network's output on the default working grid from a batched evaluation (:meth:`_predict`)."""
         # the network's map is refined as it is predicted (every working grid tried is), not by the finishing stages
         stages = replace(opts.finishing, refine=False)

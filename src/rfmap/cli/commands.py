@@ -408,7 +408,7 @@ COMMANDS = {"solve": _add_classical, "metrics": _add_classical, "map": _add_map,
 
 
 def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The ``rfmap`` parser: with every sub-command, or, for a ``command`` of :data:`COMMANDS`, with only the
+    """The ``rfmap`` parser: with every sub-command, or, for a ``command`` of ``COMMANDS``, with only the
     sub-commands that its function adds (building every parser's arguments costs more than a small cartogram)."""
     p = argparse.ArgumentParser(prog="rfmap", description="Resolution-free neural surrogates for geometric mapping.")
     sub = p.add_subparsers(dest="cmd", required=True)

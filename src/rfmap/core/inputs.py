@@ -1,7 +1,7 @@
 r"""Checking and normalising input fields: finite values, positivity, :math:`|\mu| < 1`, unit mass.
 
 Densities are normalised to unit mass with the vertex quadrature weights of :func:`rfmap.core.mesh.vertex_weights`
-(:math:`\int p = \sum_v w_v p_v` for the piecewise-linear interpolant); :func:`preprocess_density` shifts a density to
+(:math:`\int p = \sum_v w_v p_v` for the piecewise-linear interpolant); :func:`.preprocess_density` shifts a density to
 minimum 0.1, then scales it to unit mass.  The paper (Sec. 5.2) says only that a density is shifted to be strictly
 positive; the value 0.1 is our inference, supported by the test densities' Std(ρ̃_orig), which then agrees with the
 paper's to all six digits it prints (the chapter on density-equalizing maps in 2D glues the difference).
@@ -50,7 +50,7 @@ def check_mu(mu, *, name: str = "mu") -> np.ndarray:
 
 def is_uniform(density) -> bool:
     """Whether a density is constant (its largest value is its smallest, as any constant is after
-    :func:`preprocess_density`): its density-equalizing map is the identity, which the solvers and the surrogates
+    :func:`.preprocess_density`): its density-equalizing map is the identity, which the solvers and the surrogates
     return exactly, computing nothing."""
     v = np.asarray(density)
     return bool(v.max() == v.min())

@@ -301,7 +301,7 @@ def boundary_crossings(poly: np.ndarray, edges: np.ndarray | None = None) -> np.
     test), or when they touch (a zero orientation with overlapping extents counts as a crossing).
 
     With ``edges``, only the crossings that involve one of these edges are returned: each is tested against
-    every edge directly (the check after moving a few vertices, as in :func:`scale_repair`).
+    every edge directly (the check after moving a few vertices, as in :func:`~rfmap.finish.repair.scale.scale_repair`).
 
     Parameters
     ----------

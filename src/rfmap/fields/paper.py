@@ -5,7 +5,7 @@ shifted to minimum 0.1 and scaled to unit mass (:func:`rfmap.fields.preprocess_d
 (Eqs. T1–T4) are analytic maps of the unit square; their exact Beltrami coefficient :math:`\mu = f_{\bar z}/f_z` is
 computed by automatic differentiation in float64 (exact to round-off).
 
-:data:`TEST_FIELDS` lists the fields of the paper's tables per (kind, dimension) and :data:`PAPER_N` the grid sizes
+``TEST_FIELDS`` lists the fields of the paper's tables per (kind, dimension) and ``PAPER_N`` the grid sizes
 of those tables.
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 r"""Finishing a computed map: the stages between a network's (or a classical solver's) map and the one returned.
 
 A map is predicted (:meth:`rfmap.Surrogate.map`: field, displacement, map of the output mesh) or solved
-(:mod:`rfmap.solvers`); then a sequence of stages, each a function from a :class:`Draft` (the map and the report
+(:mod:`rfmap.solvers`); then a sequence of stages, each a function from a :class:`.Draft` (the map and the report
 of what was done to it) to the next, finishes it:
 
 * :func:`~rfmap.finish.stages.regrid` -- a folded network map tried on coarser working grids;
@@ -12,10 +12,10 @@ of what was done to it) to the next, finishes it:
   (:mod:`~rfmap.finish.quality`);
 * :func:`~rfmap.finish.stages.shorten` -- if not, shortened towards the identity until it is.
 
-:func:`finish` composes them as :meth:`rfmap.Surrogate.map` does, with :class:`FinishOptions`; :func:`finish_map`
-applies them to a classical map.  The report is typed (:class:`MapReport`) and the returned map's ``info`` is its
-read-only view (:class:`InfoView`), with the keys that ``info`` has always had.  Maps of query points go back to
-their working grid (:mod:`~rfmap.finish.query`).
+:func:`~rfmap.finish.pipeline.finish` composes them as :meth:`rfmap.Surrogate.map` does, with :class:`.FinishOptions`;
+:func:`.finish_map` applies them to a classical map.  The report is typed (:class:`.MapReport`) and the returned map's
+``info`` is its read-only view (:class:`.InfoView`), with the keys that ``info`` has always had.  Maps of query points
+go back to their working grid (:mod:`~rfmap.finish.query`).
 
 The stages are functions of :mod:`~rfmap.finish.stages`; each calls the module that does its work:
 :mod:`~rfmap.finish.refine` (the search for :math:`\alpha`), :mod:`~rfmap.finish.repair` (one strategy per module),

@@ -134,7 +134,7 @@ class MapReport:
 
 class InfoView(Mapping):
     """``MapResult.info`` of a finished map: a read-only mapping of the solver's own extras (``base``) and the
-    flat keys of :meth:`MapReport.flat`; the typed report is :attr:`report`."""
+    flat keys of :meth:`MapReport.flat`; the typed report is its ``report``."""
 
     def __init__(self, report: MapReport, base: Mapping[str, Any] | None = None):
         self._report = report

@@ -34,7 +34,7 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
     from the identity to the map, the objective
 
     .. math:: J(s) = \mathrm{Std}(\tilde\rho(u_s)) \text{ if } u_s \text{ is fold-free (and, on a free boundary,
-       embedded; :func:`fold_free`)}, \quad +\infty \text{ otherwise},
+       embedded; :func:`~rfmap.core.folds.fold_free`)}, \quad +\infty \text{ otherwise},
 
     is sampled at ``samples + 1`` equally spaced scales (both ends included) and refined by ``rounds`` golden-section
     steps between the neighbours of the best sample.  The returned map is never less equal than either end: it is at
@@ -53,7 +53,7 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
     n : int, optional
         Grid side (the fast strided measures of the grid mesh).
     boundary : {"fixed", "square", "free"}
-        Selects the embedding check of :func:`fold_free` (free boundaries).
+        Selects the embedding check of :func:`~rfmap.core.folds.fold_free` (free boundaries).
     elements : int ndarray, shape (m, d+1), optional
         The elements of a general mesh (e.g. the Delaunay mesh of query points); exactly one of ``n`` and
         ``elements`` is given.

@@ -110,6 +110,7 @@ class EdgeAwareConv(nn.Module):
         self.detect = Conv(cout, 1, 1)
 
     def forward(self, f: Tensor) -> Tensor:
+        """The edge-aware convolution of the feature map ``f``."""
         loc, edge = self.loc(f), self.edge(f)
         w = torch.sigmoid(self.detect((edge - loc).abs()))
         return w * edge + (1 - w) * loc
@@ -129,6 +130,7 @@ class SpatialAttention(nn.Module):
         self.proj = conv_cls(dim)(4, 1, 1)
 
     def forward(self, f: Tensor) -> Tensor:
+        """``f`` weighted by its spatial attention map (same shape)."""
         s = torch.cat([f.mean(1, keepdim=True), f.amax(1, keepdim=True)], 1)
         pool = F.avg_pool2d if self.dim == 2 else F.avg_pool3d
         # a side shorter than the kernel is averaged whole (what ceil_mode does in 2D; 3D pooling would raise)
@@ -154,6 +156,7 @@ class EnhancedDoubleConv(nn.Module):
         self.act = nn.SiLU()
 
     def forward(self, x: Tensor) -> Tensor:
+        """The block's output for ``x``, ``(B, C_in, *S) -> (B, C_out, *S)``."""
         return self.act(self.attn(self.body(x)) + self.skip(x))
 
 
@@ -173,6 +176,7 @@ class MultiResolutionLift(nn.Module):
         self.mix = Conv(cout * len(scales), cout, 1)
 
     def forward(self, x: Tensor) -> Tensor:
+        """The features of ``x`` lifted at each of the block's scales, concatenated and mixed by a 1x1 convolution."""
         size = tuple(x.shape[2:])
         feats = []
         for s, lift in zip(self.scales, self.lift):

@@ -101,6 +101,7 @@ class FNONet(nn.Module):
         return 4
 
     def forward(self, x: Tensor) -> Tensor:
+        r"""The displacement field :math:`\psi` for the encoded input ``x`` (checked first)."""
         check_input(self, x)
         return self.net(x)
 

@@ -129,7 +129,7 @@ def _load_block(new: nn.Module, old: nn.Module, out_src, in_src, gen) -> None:
 
 @torch.no_grad()
 def grow_unet(parent: MultiResUNet, base: int, seed: int = 0) -> MultiResUNet:
-    r"""A :class:`MultiResUNet` of base width ``base`` that computes the same function as ``parent``.
+    r"""A :class:`~rfmap.nn.MultiResUNet` of base width ``base`` that computes the same function as ``parent``.
 
     Parameters
     ----------

@@ -79,6 +79,7 @@ class MultiResUNet(nn.Module):
         return 2 ** self.depth + 1
 
     def forward(self, x: Tensor) -> Tensor:
+        r"""The displacement field :math:`\psi` for the encoded input ``x`` (checked first)."""
         check_input(self, x)
         pool = F.avg_pool2d if self.dim == 2 else F.avg_pool3d
         h = self.lift(x)

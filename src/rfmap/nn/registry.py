@@ -2,7 +2,7 @@
 
 Two architectures share one interface (input ``(B, d + m, *S)``, output ``(B, d, *S)``, ``kwargs()``,
 ``min_size``): the multi-resolution U-Net of the paper (``arch='unet'``, the default, also for metadata written
-before the choice existed) and ``neuraloperator``'s FNO (``arch='fno'``), each a constructor in :data:`NETWORKS`.
+before the choice existed) and ``neuraloperator``'s FNO (``arch='fno'``), each a constructor in ``NETWORKS``.
 """
 from __future__ import annotations
 

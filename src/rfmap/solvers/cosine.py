@@ -19,7 +19,7 @@ interface (``dct(x, axis, out=None)``, ``dst(x, axis, out=None)``, ``dctn(x)``):
   transform is the real part of the real FFT of the even extension :math:`(x_0, \dots, x_{M-1}, x_{M-2}, \dots,
   x_1)`, the second minus the imaginary part of that of the odd extension :math:`(0, x, 0, -\bar x)` (:math:`\bar x`
   reversed), both of length :math:`2(M-1)` when :math:`K = M - 2` (the interior of an axis).  Tables of a side of
-  at least :data:`SCIPY_SIDE` go to ``scipy.fft`` itself, whose type-I transforms skip the extension (a quarter
+  at least ``SCIPY_SIDE`` go to ``scipy.fft`` itself, whose type-I transforms skip the extension (a quarter
   faster along the first axis of a 2049 table); the smaller ones do not import it, since its import (a few tenths
   of a second) takes longer than a small cartogram.  It keeps the extension and the spectrum of a block of rows in
   two buffers between calls: a table of a few hundred thousand numbers allocated afresh for every transform costs
@@ -95,10 +95,10 @@ class CosineTransforms:
     m : int
         The tables' side ``M`` (>= 3).
     block : int, optional
-        Rows transformed at a time (default: as many as fit :data:`BLOCK_NUMBERS` numbers of extension, at least
+        Rows transformed at a time (default: as many as fit ``BLOCK_NUMBERS`` numbers of extension, at least
         one): the buffers hold ``block`` rows, not ``M``.
     use_scipy : bool, optional
-        Transform by ``scipy.fft`` (default: when ``M`` is at least :data:`SCIPY_SIDE`).
+        Transform by ``scipy.fft`` (default: when ``M`` is at least ``SCIPY_SIDE``).
 
     Notes
     -----

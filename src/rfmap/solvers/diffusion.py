@@ -13,7 +13,7 @@ Numerical method:
 
 1. **Initial density.**  The piecewise-linear (P1) interpolant of the vertex values on the simplicial mesh of
    :func:`rfmap.core.mesh.grid_mesh` -- the density whose element integrals :mod:`rfmap.core.metrics` uses -- is sampled on a
-   grid ``refine`` times finer, with :math:`M = \text{refine}\,(N-1) + 1` points per side (:func:`p1_upsample`).
+   grid ``refine`` times finer, with :math:`M = \text{refine}\,(N-1) + 1` points per side (:func:`.p1_upsample`).
    Starting from the P1 rather than the cosine interpolant of the vertex values avoids Gibbs ringing at steep
    features and lowers the final :math:`\mathrm{Std}(\tilde\rho)` markedly (e.g. 0.041 → 0.026 on rect-peak at
    ``N = 51``).
@@ -214,12 +214,12 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
         any positive scale works).  The dimension is ``density.ndim``; ``N >= 3``.  A constant grid, of any value
         (:func:`rfmap.solvers.raster.check_grid_density`), is mapped to the identity exactly, without integrating.
     options : DiffusionOptions, optional
-        The solver's options (:class:`DiffusionOptions`: ``boundary``, ``rtol``, ``tol_end``, ``refine``,
+        The solver's options (:class:`.DiffusionOptions`: ``boundary``, ``rtol``, ``tol_end``, ``refine``,
         ``margin``, ``max_steps``, ``num_threads``, ``fold_guard``); its defaults when ``None``.
     progress : bool
         Show a ``tqdm`` progress bar over simulated time.
     **kwargs
-        Fields of :class:`DiffusionOptions` that replace those of ``options`` (``solve_dem(d, boundary="free")``).
+        Fields of :class:`.DiffusionOptions` that replace those of ``options`` (``solve_dem(d, boundary="free")``).
     Returns
     -------
     MapResult

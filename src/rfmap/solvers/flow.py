@@ -35,7 +35,7 @@ Numerical method:
    :math:`x' = x + \tfrac{\Delta t}{2}\,(v(x, t) + v(x^*, t + \Delta t))`.  A step is accepted when the
    predictor–corrector difference :math:`\max|x' - x^*|` is at most ``rtol`` grid spacings *and* no element of the
    mesh has turned over (all signed measures stay positive; decided in single precision unless the smallest
-   measure is too close to zero for it, :data:`F32_MARGIN`); otherwise it is retried with a smaller
+   measure is too close to zero for it, ``F32_MARGIN``); otherwise it is retried with a smaller
    :math:`\Delta t`.  The step then grows or shrinks with the usual rule for an embedded first/second-order pair.
    A density jump sharper than the mesh can make the sampled velocity squeeze one element to zero measure in finite
    time, so that no step, however short, is accepted; when the step falls below ``STALL_DT`` the pass is redone
@@ -43,9 +43,9 @@ Numerical method:
    and later passes correct the residual the blur leaves.
 5. **Passes.**  Interpolation and time-stepping leave a residual.  After a pass the density that remains on the
    mapped mesh, :math:`\tilde\rho_e = \text{population}_e / |T(e)|` (population of the element over its mapped
-   measure), is turned into the P1 vertex field whose element means match it (:func:`vertex_residual`) and
+   measure), is turned into the P1 vertex field whose element means match it (:func:`.vertex_residual`) and
    rasterized by locating every raster node in the mapped mesh and interpolating linearly in its element
-   (:func:`rasterize_elements`); the next pass moves the mapped vertices by the flow of that density, composing the
+   (:func:`.rasterize_elements`); the next pass moves the mapped vertices by the flow of that density, composing the
    maps.  Passes stop when :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is below ``tol`` or stops improving (by
    less than ``stall``).
 
@@ -198,12 +198,12 @@ class FlowOptions:
         exactly uniform).
     rtol : float, optional
         Largest predictor–corrector difference of an accepted step, in grid spacings of the raster's box; default
-        :data:`RTOL` of the dimension (0.2 in 2D, 0.4 in 3D).
+        ``RTOL`` of the dimension (0.2 in 2D, 0.4 in 3D).
     refine : int
         The density raster is ``refine`` times finer than the vertex grid (``M = refine (N_box - 1) + 1``).
     margin : float, optional
         Sea width :math:`L` for ``boundary="free"``, rounded to whole grid cells (at least one); default
-        :data:`MARGIN` of the dimension (0.5 in 2D, 0.25 in 3D).
+        ``MARGIN`` of the dimension (0.5 in 2D, 0.25 in 3D).
     sea_blend : float
         For ``boundary="free"``: the width (domain length units) over which the sea blends from the coast's density
         to its balanced level (``rfmap.solvers.raster.balanced_sea``); 0 (the default) starts the sea at the coast,
@@ -214,7 +214,7 @@ class FlowOptions:
         used is ``info["sea_blend"]``.
     stall_blend : float
         For the first pass of a free boundary's cold start with ``sea_blend=0``: when it stalls, it is first redone
-        once with the sea blended over this width (:data:`STALL_BLEND`; ``info["sea_fallback"]``, and
+        once with the sea blended over this width (:data:`.STALL_BLEND`; ``info["sea_fallback"]``, and
         ``info["sea_blend"]`` the width used), and only then, if it stalls again, with blurred densities; 0 skips
         this remedy.
     max_passes : int
@@ -257,7 +257,7 @@ class FlowOptions:
 
     def checked(self, d: int) -> "FlowOptions":
         """These options for a ``d``-dimensional density, with the defaults of the dimension filled in
-        (:data:`RTOL`, :data:`MARGIN`); ``ValueError`` for a value out of range."""
+        (``RTOL``, ``MARGIN``); ``ValueError`` for a value out of range."""
         rtol = RTOL[d] if self.rtol is None else self.rtol
         margin = MARGIN[d] if self.margin is None else self.margin
         for name, val in (("sea_blend", self.sea_blend), ("stall_blend", self.stall_blend), ("tol", self.tol)):

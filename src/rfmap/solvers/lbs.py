@@ -45,7 +45,7 @@ from ..core.result import MapResult
 
 __all__ = ["solve_lbs", "beltrami_matrices", "p1_gradients", "assemble_stiffness", "LBS_BOUNDARIES"]
 
-#: Boundary conditions understood by :func:`solve_lbs`.
+#: Boundary conditions understood by :func:`~rfmap.solvers.solve_lbs`.
 LBS_BOUNDARIES = ("fixed", "square")
 
 MuLike = Union[np.ndarray, Callable[[np.ndarray], np.ndarray]]
@@ -190,7 +190,7 @@ class _Factor:
 
 @functools.lru_cache(maxsize=32)
 def _grid_order(n: int, which: str) -> np.ndarray:
-    """:func:`grid_dissection_order` of the free vertices of the N-grid: ``which`` is ``"interior"`` (every boundary
+    """``grid_dissection_order()`` of the free vertices of the N-grid: ``which`` is ``"interior"`` (every boundary
     vertex fixed) or ``"x"`` / ``"y"`` (the vertices off the walls x = 0, 1 / y = 0, 1); cached, as it depends on
     nothing else."""
     ij = np.rint(grid_mesh(n, 2).points * (n - 1)).astype(np.int64)
@@ -254,10 +254,10 @@ def solve_lbs(
 
     Solves :math:`\nabla\cdot(A\nabla u) = 0` and :math:`\nabla\cdot(A\nabla v) = 0` for the two components of
     :math:`f = u + iv` with P1 finite elements on the ``N``-grid (:func:`rfmap.core.mesh.grid_mesh`), ``A`` from
-    :func:`beltrami_matrices`.  The sparse system is factorised by ``scipy.sparse.linalg.splu`` in the nested-dissection order
-    of :func:`grid_dissection_order`, and the two
-    components are solved as two right-hand sides of one factorisation (``"fixed"``) or with one factorisation
-    per component (``"square"``, where the free vertex sets differ).
+    :func:`.beltrami_matrices`.  The sparse system is factorised by ``scipy.sparse.linalg.splu`` in the
+    nested-dissection order of ``grid_dissection_order()``, and the two components are solved as two right-hand sides of
+    one factorisation (``"fixed"``) or with one factorisation per component (``"square"``, where the free vertex sets
+    differ).
 
     Parameters
     ----------

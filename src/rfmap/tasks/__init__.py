@@ -1,10 +1,10 @@
 """Tasks: what a surrogate maps from, how its inputs are encoded, how training batches are drawn and scored.
 
-Every kind of map is a :class:`Task` registered under its name (:func:`register_task`): :mod:`rfmap.tasks.density`
+Every kind of map is a :class:`.Task` registered under its name (:func:`.register_task`): :mod:`rfmap.tasks.density`
 (density-equalizing maps) and :mod:`rfmap.tasks.beltrami` (maps from their Beltrami coefficient).  A
-:class:`TaskSpec` names a kind, a dimension and a boundary condition; ``spec.task`` is the kind's task object, which
+:class:`.TaskSpec` names a kind, a dimension and a boundary condition; ``spec.task`` is the kind's task object, which
 the training, the surrogate, the finishing stages and the validation ask for everything that depends on the kind.
-A new kind of map is a new :class:`Task` subclass with ``@register_task``.
+A new kind of map is a new :class:`~rfmap.tasks.base.Task` subclass with ``@register_task``.
 """
 from __future__ import annotations
 

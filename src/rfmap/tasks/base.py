@@ -315,7 +315,8 @@ class Task:
 
     def batch(self, spec: TaskSpec, inputs: Tensor, ref: Tensor, params: Tensor, n: int,
               targets: np.ndarray | None) -> Batch:
-        """The :class:`Batch` of drawn samples (``params`` as tensors, ``targets`` a teacher's maps or ``None``)."""
+        """The :class:`~rfmap.tasks.base.Batch` of drawn samples (``params`` as tensors, ``targets`` a teacher's maps or
+        ``None``)."""
         raise NotImplementedError
 
     def loss(self, mb: MappedBatch, weights: LossWeights) -> tuple[Tensor, dict[str, Tensor]]:
@@ -333,14 +334,14 @@ class Task:
         return {"density": None, "mu": None}
 
     def reference(self, grid: np.ndarray, boundary: str | None = None):
-        """The classical reference solver's map (:class:`rfmap.core.result.MapResult`, the first of :attr:`methods`)
+        """The classical reference solver's map (:class:`rfmap.core.result.MapResult`, the first of ``methods``)
         of a user's field on the ``N``-grid's vertices."""
         if not self.methods:
             raise ValueError(f"{self.title} tasks have no classical solver")
         return self.solve(self.solver_input(grid), grid.shape[0], self.methods[0], boundary)
 
     def solve(self, values: np.ndarray, n: int, method: str, boundary: str | None, progress: bool = False):
-        """A classical map (``method`` one of :attr:`methods`) on the ``N``-grid of the solver's input ``values``
+        """A classical map (``method`` one of ``methods``) on the ``N``-grid of the solver's input ``values``
         (:meth:`solver_input`, :meth:`solver_sample`), as ``rfmap solve`` computes it; ``boundary`` ``None``: the
         task's default."""
         raise ValueError(f"{self.title} tasks have no classical solver")
@@ -379,8 +380,8 @@ class Task:
         raise NotImplementedError
 
     def validation_record(self, result, vf) -> tuple[dict, float, float]:
-        """``(record, value, baseline)`` of one validation map: the metrics named by :attr:`metric_names`, the
-        value of :attr:`score_metric`, and that of doing nothing (the identity map)."""
+        """``(record, value, baseline)`` of one validation map: the metrics named by ``metric_names``, the
+        value of ``score_metric``, and that of doing nothing (the identity map)."""
         raise NotImplementedError
 
 

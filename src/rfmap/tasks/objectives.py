@@ -67,7 +67,7 @@ def _measure_coefficients(ref, disp, elements, grid_n):
     \prod_{a \in S} \alpha_a`, where :math:`c_S` is the measure of the element whose coordinates :math:`a \in S`
     come from :math:`D` and the others from :math:`x`.  Returns ``[(S, c_S)]`` (``c_S`` of shape (m,)); one
     objective evaluation is then :math:`2^d` multiply-adds instead of a mesh pass (and one along the lines that
-    :func:`refine_alpha` searches, :class:`MeasurePolynomial`).  ``grid_n``: the mesh is the ``N``-grid
+    :func:`.refine_alpha` searches, :class:`MeasurePolynomial`).  ``grid_n``: the mesh is the ``N``-grid
     (:func:`rfmap.core.geometry.grid_measure_coefficients`).
     """
     if grid_n:
@@ -83,7 +83,7 @@ def _measure_coefficients(ref, disp, elements, grid_n):
 
 
 def _measures_at(coeffs, alpha) -> torch.Tensor:
-    """Evaluate the polynomial of :func:`_measure_coefficients` at ``alpha`` (d,): :math:`2^d - 1` multiply-adds."""
+    """Evaluate the polynomial of ``_measure_coefficients`` at ``alpha`` (d,): :math:`2^d - 1` multiply-adds."""
     total = None
     for subset, c in coeffs:
         w = float(np.prod([alpha[a] for a in subset])) if subset else 1.0
@@ -93,19 +93,19 @@ def _measures_at(coeffs, alpha) -> torch.Tensor:
 
 class MeasurePolynomial:
     r"""The element measures :math:`|T(\alpha)| = \sum_S c_S \prod_{a \in S} \alpha_a` of
-    :func:`_measure_coefficients`, evaluated along the lines that :func:`refine_alpha` searches.
+    ``_measure_coefficients``, evaluated along the lines that :func:`~rfmap.finish.refine.refine_alpha` searches.
 
     Along a line the polynomial collapses: with every component but :math:`\alpha_i` fixed it is affine,
     :math:`A + \alpha_i B`, and on the diagonal :math:`\alpha = t \mathbf{1}` it is the cubic (in 3D)
     :math:`\sum_k t^k \sum_{|S| = k} c_S`.  A call whose ``alpha`` differs from the previous one in a single
     component (or lies on the diagonal) reuses the collapsed coefficients, so a golden-section step costs one
     multiply-add over the elements (or :math:`d`) instead of :math:`2^d - 1`; any other ``alpha`` is evaluated in
-    full.  Values equal :func:`_measures_at` up to rounding.
+    full.  Values equal ``_measures_at`` up to rounding.
 
     Parameters
     ----------
     coeffs : list of (tuple, Tensor)
-        ``[(S, c_S)]`` of :func:`_measure_coefficients`, ``c_S`` of shape (m,).
+        ``[(S, c_S)]`` of ``_measure_coefficients``, ``c_S`` of shape (m,).
     """
 
     def __init__(self, coeffs):

@@ -207,7 +207,7 @@ def cartogram_figure(carto, options: FigureOptions | None = None, *, label: str 
     title : str
         The value's name, for the titles.
     label, path : optional
-        Save under the figure label (:func:`save_figure`) and/or to ``path`` (``.png``, ``.svg``, ``.pdf``; text
+        Save under the figure label (:func:`.save_figure`) and/or to ``path`` (``.png``, ``.svg``, ``.pdf``; text
         stays text in SVG).
     width : float
         Inches (text is scaled by :func:`column_style`).

@@ -213,7 +213,7 @@ def boundaries_figure(results: dict, rho0, *, n: int, vmax: float | None = None,
 
 
 def volume_panels_figure(images, titles, *, clim, label: str, cmap: str = "viridis"):
-    """Rendered images side by side (:func:`rfmap.viz.volumes.render_volume`, :func:`render_lattice`) with their
+    """Rendered images side by side (:func:`rfmap.viz.volumes.render_volume`, :func:`.render_lattice`) with their
     titles and one colour bar below them for the colour scale ``clim`` they were rendered on.
 
     Parameters

@@ -16,7 +16,8 @@ COLUMN_NAMES = {"std_rho_map": r"Std($\tilde\rho_{map}$)", "raw_std": r"raw Std(
 def plain_log_ticks(axis) -> None:
     """Label a log ``axis`` (``ax.xaxis`` or ``ax.yaxis``, after plotting) in plain numbers (``0.02``, ``5``,
     ``1e-05`` when shorter) at 1, 2 and 5 times the powers of ten, or at up to three round values spaced about
-    evenly on the log scale where the data span less than a factor of five (:func:`_round_log_values`), with no labels between them, so that labels never overlap."""
+    evenly on the log scale where the data span less than a factor of five, with no labels between them, so that
+    labels never overlap."""
     from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
 
     axis.axes.autoscale_view()

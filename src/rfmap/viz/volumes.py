@@ -52,7 +52,7 @@ AXIS_LABEL_SIZE = 24
 
 
 def _label_axes(pl) -> None:
-    """Write ``x1``, ``x2``, ``x3`` beside edges of the unit cube along the three axes (:data:`AXIS_LABELS`; their
+    """Write ``x1``, ``x2``, ``x3`` beside edges of the unit cube along the three axes (``AXIS_LABELS``; their
     places suit :data:`CAMERA_3D`)."""
     pl.add_point_labels(np.array(list(AXIS_LABELS.values())), list(AXIS_LABELS), font_size=AXIS_LABEL_SIZE,
                         shape=None, show_points=False, always_visible=True, text_color="black",
@@ -75,7 +75,7 @@ def render_volume(result, *, mapped: bool = True, scalars: str | None = "rho", c
     the volume open along flat faces: ``True`` (or ``"octant"``) removes the octant nearest the camera, ``"plane"``
     the half in front of :data:`CUT_PLANE`.  ``camera`` is a PyVista camera position (``'iso'`` fits the view to the
     mesh, a fixed one such as :data:`CAMERA_3D` makes several renderings comparable).  ``scale``
-    (:class:`rfmap.viz.figures.ColorScale`, default :data:`RHO_SCALE`) colours the scalars; its fields may be given as
+    (:class:`rfmap.viz.figures.ColorScale`, default ``RHO_SCALE``) colours the scalars; its fields may be given as
     keywords (``clim=(lo, hi)``, ``cmap=...``).
     """
     sc = color_scale(scale, **kw)
@@ -116,7 +116,7 @@ def render_lattice(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), lines
     cube; returns the image (H, W, 3).  The original lattice (``mapped=False``) is drawn flat; the mapped one shows
     where the map moves each slice, coloured by the density left on the mapped mesh, or with ``carried`` by the
     input's normalised density carried along with the vertices.  ``scale`` as in :func:`render_volume`.  Seen
-    from :data:`CAMERA_3D`, the axes are named beside the cube's edges (:data:`AXIS_LABELS`)."""
+    from :data:`CAMERA_3D`, the axes are named beside the cube's edges (``AXIS_LABELS``)."""
     sc = color_scale(scale, **kw)
     clim, cmap = sc.clim, sc.cmap
     pv = _pyvista()

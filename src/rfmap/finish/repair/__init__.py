@@ -8,14 +8,14 @@ surface without self-intersection in 3D (:func:`rfmap.core.surface.surface_inter
 triangles, an extra pass on every free 3D map: two far-apart parts of the surface pushed through each other leave
 every tetrahedron positive).
 
-:func:`repair_map` (:mod:`~rfmap.finish.repair.dispatch`) is the entry point; one strategy per module:
+:func:`.repair_map` (:mod:`~rfmap.finish.repair.dispatch`) is the entry point; one strategy per module:
 
 * :mod:`~rfmap.finish.repair.lbs` -- 2D grid meshes: μ-truncation and the Linear Beltrami Solver on the whole grid;
 * :mod:`~rfmap.finish.repair.local` -- the same rebuild on a patch around the folds, tried first;
 * :mod:`~rfmap.finish.repair.scale` -- any mesh in 2D or 3D: fold-free displacement scaling, vertex by vertex;
 * :mod:`~rfmap.finish.repair.embedding` -- 3D free boundary: the displacement shortened until the surface is embedded;
 
-and :mod:`rfmap.core.folds` says whether a map is folded.  :func:`shorten_map`, which trades a map for the most
+and :mod:`rfmap.core.folds` says whether a map is folded.  :func:`.shorten_map`, which trades a map for the most
 equal fold-free map between the identity and itself, is not a repair; it lives in :mod:`rfmap.finish.shorten`.
 """
 from __future__ import annotations

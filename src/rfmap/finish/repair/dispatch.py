@@ -55,9 +55,9 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     mu : complex ndarray (m,), optional
         Target Beltrami coefficient, for ``mean_dmu`` in the report.
     method : {"auto", "local", "lbs", "scale"}
-        ``local``: :func:`local_lbs_repair`, falling back to ``lbs`` when no patch ends fold-free; ``lbs``:
-        :func:`lbs_repair` on the whole grid; ``scale``: :func:`scale_repair`.  Any of them ends with
-        :func:`scale_repair` if its result is still folded.  ``auto``: ``local`` for 2D grid meshes, ``scale``
+        ``local``: :func:`.local_lbs_repair`, falling back to ``lbs`` when no patch ends fold-free; ``lbs``:
+        :func:`.lbs_repair` on the whole grid; ``scale``: :func:`.scale_repair`.  Any of them ends with
+        :func:`.scale_repair` if its result is still folded.  ``auto``: ``local`` for 2D grid meshes, ``scale``
         otherwise.  The LBS repairs truncate :math:`|\mu| \le 1 - \delta` with :math:`\delta` =
         :data:`rfmap.finish.repair.lbs.DELTA`.
 
@@ -68,7 +68,7 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         ``method``, ``n_flipped_before``, ``n_flipped_after``, ``affected`` (triangles with truncated :math:`\mu`
         for the LBS, vertices with a shortened displacement for the scaling), ``time`` (s), ``metrics_before`` and
         ``metrics_after``; for a 3D free boundary also ``surface_crossings_before``/``_after`` (intersecting pairs
-        of boundary triangles) and, when :func:`surface_repair` ran, ``surface_scale``.
+        of boundary triangles) and, when :func:`~rfmap.finish.repair.embedding.surface_repair` ran, ``surface_scale``.
     """
     t0 = time.perf_counter()
     if method not in REPAIR_METHODS:

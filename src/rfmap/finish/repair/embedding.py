@@ -20,7 +20,7 @@ def surface_repair(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *,
 
     :math:`u_s = x + s\,(u - x)`: ``s = 1`` is the input, ``s = 0`` the identity (embedded).  ``s`` is halved until
     :math:`u_s` is fold-free with an embedded boundary, then raised by bisection (``rounds`` steps) between the
-    last passing and the first failing value; every returned state is verified by :func:`fold_free`.
+    last passing and the first failing value; every returned state is verified by :func:`~rfmap.core.folds.fold_free`.
 
     Returns
     -------

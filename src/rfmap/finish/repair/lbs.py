@@ -69,7 +69,7 @@ def untangle_boundary(ref_b: np.ndarray, mapped_b: np.ndarray, *, max_rounds: in
 
     Parameters
     ----------
-    ref_b, mapped_b : ndarray, shape (k, 2), in boundary order (:func:`boundary_loop`)
+    ref_b, mapped_b : ndarray, shape (k, 2), in boundary order (:func:`~rfmap.core.surface.boundary_loop`)
     """
     ref_b, mapped_b = np.asarray(ref_b, np.float64), np.asarray(mapped_b, np.float64)
     t = np.ones(len(ref_b))

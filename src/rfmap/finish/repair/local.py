@@ -30,14 +30,14 @@ LOCAL_RINGS = (2, 4, 8, 16)
 
 
 #: a patch larger than this fraction of the vertices (and than ``LOCAL_MIN_GIVE_UP`` vertices) is given up for the
-#: global :func:`lbs_repair`
+#: global :func:`~rfmap.finish.repair.lbs.lbs_repair`
 LOCAL_MAX_FRACTION = 0.25
 
 
 LOCAL_MIN_GIVE_UP = 2000
 
 
-#: more truncated triangles than this fraction of all (and than 100) go straight to the global :func:`lbs_repair`
+#: more truncated triangles than this fraction of all (and than 100) go straight to the global :func:`.lbs_repair`
 LOCAL_MAX_CAPPED = 0.01
 
 
@@ -46,11 +46,11 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
                      passes: int = 3) -> tuple[np.ndarray, np.ndarray] | None:
     r"""Rebuild a 2D grid map from its truncated Beltrami coefficient on a patch around the folds only.
 
-    The triangles whose :math:`\mu` :func:`cap_mu` changes (flipped, :math:`|\mu| > 1 - \delta`, non-finite) are
+    The triangles whose :math:`\mu` :func:`.cap_mu` changes (flipped, :math:`|\mu| > 1 - \delta`, non-finite) are
     grown by ``r`` vertex rings.  On the patch of triangles touching the grown vertices, the LBS system
     :math:`\nabla\cdot(A\nabla u) = 0` with the truncated :math:`\mu` is solved for the grown vertices off the
     domain boundary; every other vertex of the patch keeps its position (Dirichlet values).  As in
-    :func:`lbs_repair`, up to ``passes`` times the :math:`\mu` of the rebuilt patch is truncated again and the
+    :func:`.lbs_repair`, up to ``passes`` times the :math:`\mu` of the rebuilt patch is truncated again and the
     patch solved again while a triangle is flipped (the discrete LBS has no bijectivity theorem).  Patches of
     ``rings[0]``, ``rings[1]``, ... rings are tried until one ends fold-free (or folds remain that touch no vertex
     of the patch's rim, which a larger patch would not undo).  Outside the patch the map is not touched, and the
@@ -58,10 +58,10 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
 
     Returns
     -------
-    (points, capped) as :func:`lbs_repair`, or ``None`` when more than ``LOCAL_MAX_CAPPED`` of the triangles (and more
+    (points, capped) as :func:`.lbs_repair`, or ``None`` when more than ``LOCAL_MAX_CAPPED`` of the triangles (and more
     than 100) are truncated, when no patch of at most ``rings[-1]`` rings and ``max_fraction`` of the vertices (or
     ``LOCAL_MIN_GIVE_UP`` vertices on small grids) ends fold-free, or when a free boundary crosses itself (boundary
-    vertices keep their positions in a local solve, so only :func:`lbs_repair` can untangle it).
+    vertices keep their positions in a local solve, so only :func:`.lbs_repair` can untangle it).
     """
     mesh = grid_mesh(n, 2)
     el = mesh.elements
