@@ -181,11 +181,11 @@ def _chain_axis(ax, xs, offset: int, budget: int):
         ax.text(budget, 0.97, " paper ", color="tab:red", va="top", ha="left", transform=ax.get_xaxis_transform())
     ax.xaxis.set_major_locator(MaxNLocator(4))
     ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1e3:g}k" if abs(x) >= 1e3 else f"{x:g}"))
-    ax.set_xlabel("step of the chain" + (f" (0 to {offset:,}: earlier runs)" if offset else ""))
+    ax.set_xlabel("step of the chain" + (f" (0–{offset:,}: earlier runs, not shown)" if offset else ""))
 
 
 def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: bool = False,
-                    score: bool = False):
+                    score: bool = False, mark_kept: bool = False):
     r"""The learning curves of trained models from their metadata (``Surrogate.meta``): for each model one panel
     for the running mean of the loss and one for the mean held-out validation metric of its last run (log scales),
     against the step counted over its whole ``--init`` chain. The step axis spans the stored steps: the
@@ -199,7 +199,9 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
     the mean with every folded map counted as no map) instead of the plain mean, which one folded map can inflate
     without bound, and a star marks the kept weights at their step, the value the recipe table records; where only
     the plain mean is stored, open circles mark the states with a folded map, which ranked behind every fold-free
-    one. Values below 0.01 are drawn in units of a power of ten named on the axis. Returns the figure."""
+    one. Values below 0.01 are drawn in units of a power of ten named on the axis. ``mark_kept`` does the same for
+    the plain mean: the last validation (the kept weights validated again as the run ended) becomes a star at the
+    kept weights' step instead of a point at the run's end. Returns the figure."""
     import matplotlib.pyplot as plt
 
     names = list(metas)
@@ -226,12 +228,15 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
             _score_panel(ax_val, meta, val, key, offset, budget)
         elif key:
             vx = [v["step"] + offset for v in val]
-            ax_val.semilogy(vx, [v[key] for v in val], "o-", color="tab:orange", ms=3, lw=1)
+            shown = val[:-1] if mark_kept and len(val) > 1 else val
+            ax_val.semilogy(vx[:len(shown)], [v[key] for v in shown], "o-", color="tab:orange", ms=3, lw=1)
             if mark_folded:
-                _folded_marks(ax_val, vx, ([v[key] for v in val], val), "tab:orange")
+                _folded_marks(ax_val, vx, ([v[key] for v in shown], shown), "tab:orange")
+            if mark_kept:
+                vx = vx[:len(shown)] + [_kept_marker(ax_val, meta, val, key, offset)]
             plain_log_ticks(ax_val.yaxis)
             ax_val.set_ylabel(f"held-out {VAL_NAMES[key]}")
-            ax_val.set_title("validation")
+            ax_val.set_title("validation" + (" (★ kept weights)" if mark_kept else ""))
             _chain_axis(ax_val, vx, offset, budget)
         else:
             ax_val.set_axis_off()
@@ -239,6 +244,15 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
     for ax in list(axes.flat)[2 * len(names):]:
         ax.set_axis_off()
     return fig
+
+
+def _kept_marker(ax, meta: dict, val: list[dict], key: str, offset: int) -> int:
+    """A star at the kept weights (``meta["selected_step"]``, else the run's end) with the value of the last
+    validation, which validated them again; returns its step on the chain's axis."""
+    kept = meta.get("selected_step")
+    kx = offset + (int(kept) if kept is not None else int(val[-1]["step"]))
+    ax.plot([kx], [val[-1][key]], "*", color="tab:red", ms=10, zorder=3)
+    return kx
 
 
 def _selection_value(record: dict, key: str) -> tuple[float, str]:
