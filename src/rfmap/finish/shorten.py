@@ -34,10 +34,11 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
     from the identity to the map, the objective
 
     .. math:: J(s) = \mathrm{Std}(\tilde\rho(u_s)) \text{ if } u_s \text{ is fold-free (and, on a free boundary,
-       embedded; :func:`~rfmap.core.folds.fold_free`)}, \quad +\infty \text{ otherwise},
+       embedded)}, \quad +\infty \text{ otherwise},
 
-    is sampled at ``samples + 1`` equally spaced scales (both ends included) and refined by ``rounds`` golden-section
-    steps between the neighbours of the best sample.  The returned map is never less equal than either end: it is at
+    (fold-free and embedded as :func:`~rfmap.core.folds.fold_free` checks) is sampled at ``samples + 1`` equally spaced
+    scales (both ends included) and refined by ``rounds`` golden-section steps between the neighbours of the best
+    sample.  The returned map is never less equal than either end: it is at
     least as good as the input map when that is fold-free, and as the identity in any case.  Every :math:`u_s`
     keeps the boundary condition of :math:`u` (walls stay walls; the identity and the map both satisfy it and the
     condition is linear).
