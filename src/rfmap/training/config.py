@@ -71,8 +71,8 @@ class TrainConfig:
     r"""Everything that defines a training run.
 
     As in the paper: AdamW, gradient clipping at 1.0, a random training resolution per step, and Sobol-jittered
-    sampling, each vertex moved by up to ``jitter`` grid spacings scaled by the field's local gradient magnitude
-    (:func:`rfmap.core.mesh.jittered_points`).  The defaults of the learning rate, weight decay and schedule below
+    sampling, each vertex moved by up to ``jitter`` grid spacings times the field's local gradient magnitude over its
+    largest (:func:`rfmap.core.mesh.jittered_points`).  The defaults of the learning rate, weight decay and schedule below
     are this project's; the ``paper`` presets have the paper's.
 
     ``schedule`` is ``'cosine'`` (linear warm-up then cosine decay), ``'step'`` (decay by ``gamma`` every ``step_size``
