@@ -72,8 +72,8 @@ class TrainConfig:
 
     As in the paper: AdamW, gradient clipping at 1.0, a random training resolution per step, and Sobol-jittered
     sampling, each vertex moved by up to ``jitter`` grid spacings times the field's local gradient magnitude over its
-    largest (:func:`rfmap.core.mesh.jittered_points`).  The defaults of the learning rate, weight decay and schedule below
-    are this project's; the ``paper`` presets have the paper's.
+    largest (:func:`rfmap.core.mesh.jittered_points`).  The defaults of the learning rate, weight decay and schedule
+    below are this project's; the ``paper`` presets have the paper's.
 
     ``schedule`` is ``'cosine'`` (linear warm-up then cosine decay), ``'step'`` (decay by ``gamma`` every ``step_size``
     steps) or ``'restarts'`` (cosine annealing with warm restarts, ``T0``, ``T_mult``).  ``ema`` > 0 keeps an
