@@ -69,6 +69,9 @@ def test_a_hidden_string_value_is_shown_as_its_text():
     plain = ["A constant."]
     show_text(None, "data", "X", "text", None, plain)
     assert plain == ["A constant."]
+    table = [":meta hide-value:"]
+    show_text(None, "data", "X", {"ours": "ours", "LBS": "a|b"}, None, table)
+    assert table[1:] == ["", "* ``ours``: ours", "* ``LBS``: a\\|b", ""]
 
 
 def test_factory_defaults_are_written_as_calls():

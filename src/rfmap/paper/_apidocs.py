@@ -6,8 +6,8 @@ that colon, its start shown as the constant's type (a property's docstring too).
 never types, so this extension puts an invisible first line (a zero-width space) before napoleon reads them, which
 leaves the text whole.
 
-A string constant whose comment hides its value (``:meta hide-value:``, for a long text that reads badly as a quoted
-value) is shown with its text as a paragraph instead, its ``*emphasis*`` kept.
+A constant whose comment hides its value (``:meta hide-value:``, for a long text or table that reads badly as a quoted
+value) is shown with its value as text instead: a string as a paragraph, its ``*emphasis*`` kept, a dict as a list.
 
 An ``Attributes`` section may name several attributes in one entry (``regions, mapped : ndarray``), as numpy style
 allows for parameters; napoleon would make one attribute of the first name with the others as its type.  Such an
@@ -39,12 +39,25 @@ def keep_whole(app, what: str, name: str, obj, options, lines: list[str]) -> Non
         lines.insert(0, GUARD)
 
 
+def _escaped(text: str) -> str:
+    """``text`` with the characters that reStructuredText reads as markup escaped, ``*emphasis*`` apart."""
+    text = text.replace("\\", "\\\\").replace("|", "\\|").replace("`", "\\`")
+    return re.sub(r"(?<=\w)_(?=\W|$)", r"\\_", text)
+
+
 def show_text(app, what: str, name: str, obj, options, lines: list[str]) -> None:
-    """A string constant whose value is hidden (``:meta hide-value:``) gets its text as a paragraph, in place;
-    characters that reStructuredText reads as markup, other than ``*emphasis*``, are escaped."""
-    if what == "data" and isinstance(obj, str) and any(line.strip() == ":meta hide-value:" for line in lines):
-        text = obj.replace("\\", "\\\\").replace("|", "\\|").replace("`", "\\`")
-        lines += ["", re.sub(r"(?<=\w)_(?=\W|$)", r"\\_", text), ""]
+    """A constant whose value is hidden (``:meta hide-value:``) gets its value as text, in place: a string as a
+    paragraph, a dict or a tuple of pairs as a list of ``key``: value items, a tuple of strings as a list."""
+    if what != "data" or not any(line.strip() == ":meta hide-value:" for line in lines):
+        return
+    if isinstance(obj, str):
+        lines += ["", _escaped(obj), ""]
+        return
+    pairs = list(obj.items()) if isinstance(obj, dict) else list(obj) if isinstance(obj, tuple) else []
+    if pairs and all(isinstance(p, tuple) and len(p) == 2 for p in pairs):
+        lines += [""] + [f"* ``{k}``: {_escaped(str(v))}" for k, v in pairs] + [""]
+    elif pairs and all(isinstance(p, str) for p in pairs):
+        lines += [""] + [f"* ``{p}``" for p in pairs] + [""]
 
 
 def factory_defaults(app, what: str, name: str, obj, options, signature, return_annotation):

@@ -85,7 +85,9 @@ def record(constant: str, *, path: Path = DESIGN_PATH, **fields: Any) -> dict[st
     raise KeyError(f"no decision {constant!r} in {path}")
 
 
-#: the page's groups: a module prefix and the heading of its decisions, in the page's order
+#: The page's groups: a module prefix and the heading of its decisions, in the page's order.
+#:
+#: :meta hide-value:
 AREAS = (("rfmap.solvers", "Classical solvers"), ("rfmap.finish", "Finishing a network's map"),
          ("rfmap.surrogate", "Network inference"), ("rfmap.nn", "Network inference"),
          ("rfmap.core", "Memory and input checks"), ("rfmap.cartogram", "Cartograms"),

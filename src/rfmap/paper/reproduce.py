@@ -363,7 +363,9 @@ def _maybe(table: Table, case: str, method: str, column: str):
         return None
 
 
-#: short names of a table's methods, for column heads
+#: Short names of a table's methods, for column heads.
+#:
+#: :meta hide-value:
 METHOD_TITLES = {"ours": "ours", "ours + refinement": "+ refinement", SYM: "symmetrized",
                  SYM_REF: "symmetrized + refinement", "diffusion DEM": "diffusion DEM", "LBS": "LBS",
                  "paper": "paper", "classical (diffusion DEM)": "diffusion DEM", "classical (LBS)": "LBS"}
