@@ -77,6 +77,17 @@ def test_met_is_the_paper_method_at_most_the_paper():
     assert score_row(None, 0.1, 0.1, 0.1)["met"] == "—"
 
 
+def test_score_values_print_a_metric_in_one_notation():
+    """Where one value of a metric is below 10⁻³ (a power of ten), the scoreboard's column prints every value of
+    that metric as a power of ten, with the digits it had; other metrics and the counts keep theirs."""
+    c = _comparison()
+    c.values[("a", "native")]["std_rho_map"] = 2.8215e-4
+    v = c.score_values()
+    assert v["std_rho_map_a_native"] == "2.822 × 10⁻⁴" and v["std_rho_map_b_delivered"] == "5.000 × 10⁻²"
+    assert v["std_rho_map_a_paper"] == "8 × 10⁻²"  # the paper's value with the digits it was printed with
+    assert v["std_rho_map_met"] == "1 of 2" and v["verdict"] == c.verdict_word()
+
+
 def test_table_is_shaped_like_the_paper_one_block_per_case():
     lines = _comparison().to_markdown().splitlines()
     assert lines[0] == "| case | quantity | paper | paper's method | delivered | flow solver | met |"

@@ -37,7 +37,7 @@ from ..fields.paper import DENSITIES, PAPER_N, TEST_FIELDS, get_field, sample_mu
 from ..core.result import MapResult
 from .reproduce import beltrami_values, density_values, exact_beltrami_result
 from ..core.wording import of_count
-from .tables import paper_table, power_of_ten, printed_digits
+from .tables import one_notation, paper_table, power_of_ten, printed_digits
 from .verdicts import is_comparable, std_ratio, verdict
 
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
@@ -305,7 +305,7 @@ class Comparison:
             out.update({f"{q}_{k}": v for k, v in row.items() if k != "met"})
             out[f"{q}_met"] = of_count(*self.count(q))
         out["verdict"] = self.verdict_word()
-        return out
+        return one_notation(out, self.metrics + self.shown())
 
     def shown(self) -> list[str]:
         """The quantities of :data:`SHOWN` that the paper's table prints: the scoreboard shows them beside the scored

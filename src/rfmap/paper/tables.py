@@ -18,7 +18,7 @@ from ..core.wording import format_sig, power_of_ten  # noqa: F401  (the book imp
 
 __all__ = ["Table", "Headline", "headline", "printed_digits", "rate_text", "decimal_text",
            "paper_table", "format_value", "span_text", "change_text", "agreement_text",
-           "glue_all", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
+           "glue_all", "one_notation", "COLUMN_TITLES", "DIGITS", "MAX_COLUMNS"]
 
 
 DATA = Path(__file__).resolve().parent.parent / "data"
@@ -283,6 +283,45 @@ def agreement_text(difference: float, digits: int = 2) -> str:
     if difference == 0:
         return "identical (largest difference 0)"
     return f"equal to within {format_sig(difference, digits)}"
+
+
+def one_notation(values: dict[str, str], groups: list[str]) -> dict[str, str]:
+    """The formatted numbers of ``values`` in one notation per group, so that a column of the scoreboard reads
+    alike: where any entry of a group (the keys ``{group}_...``, each key in the longest group it starts with) is
+    a power of ten, every positional number of the group becomes one too, with the significant digits it was
+    printed with (``0.001946`` → ``1.946 × 10⁻³`` beside ``2.822 × 10⁻⁴``).  Entries that are not decimal numbers
+    (``"3 of 4"``, ``"—"``, ``"yes"``, integers) are kept as they are.
+
+    Examples
+    --------
+    >>> one_notation({"dd_a": "0.001946", "dd_b": "2.822 × 10⁻⁴", "dd_met": "1 of 2", "mu_a": "0.1200"},
+    ...              ["dd", "mu"])
+    {'dd_a': '1.946 × 10⁻³', 'dd_b': '2.822 × 10⁻⁴', 'dd_met': '1 of 2', 'mu_a': '0.1200'}
+    """
+    def group(key: str) -> str | None:
+        return max((g for g in groups if key.startswith(f"{g}_")), key=len, default=None)
+
+    members: dict[str, list[str]] = {}
+    for key in values:
+        members.setdefault(group(key), []).append(key)
+    out = dict(values)
+    for g, keys in members.items():
+        if g is not None and any("×" in str(values[k]) for k in keys):
+            out.update({k: _power_text(values[k]) for k in keys})
+    return out
+
+
+def _power_text(text):
+    """A positional decimal number as a power of ten with its printed significant digits; anything else as it is."""
+    if not isinstance(text, str) or "." not in text or "×" in text:
+        return text
+    try:
+        d = Decimal(text)
+    except ArithmeticError:
+        return text
+    digits = d.as_tuple().digits
+    significant = len(digits) - next((i for i, x in enumerate(digits) if x), len(digits))
+    return power_of_ten(float(d), significant) if d and significant else text
 
 
 def glue_all(values: dict, prefix: str) -> None:
