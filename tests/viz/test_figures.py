@@ -111,11 +111,19 @@ def test_the_diffusion_chapters_figures_draw_their_data():
     ax = fig.axes[0]
     assert [line.get_label() for line in ax.lines] == ["2D", "3D"]
     np.testing.assert_allclose(ax.lines[1].get_ydata(), [0.2, 1.0])
+    fig.canvas.draw()
+    assert not any("e+" in t.get_text() for t in ax.get_xticklabels())  # 1000, not 1e+03
+    plt.close(fig)
+    # data over less than a decade: labels at 1, 2, 3, 5, 7 times a power of ten cover the range
+    fig = grid_convergence_figure([17, 33, 65, 97], [0.038, 0.02, 0.01, 0.0068])
+    ticks = fig.axes[0].get_yticks()
+    assert len(ticks) >= 3 and max(ticks) >= 0.03 and min(ticks) <= 0.007
     plt.close(fig)
     m = grid_mesh(9, 2)
     res = MapResult(m.points, m.points * 1.1, m.elements, np.ones(len(m.points)), kind="density")
     fig = boundaries_figure({"a": res, "b": res}, np.ones(len(m.elements)), n=9)
-    assert [ax.get_title() for ax in fig.axes] == ["a", "b"]
+    assert [ax.get_title() for ax in fig.axes[:2]] == ["a", "b"]
+    assert "tilde" in fig.axes[2].get_xlabel()  # the colour bar of the carried values
     plt.close(fig)
     fig = volume_panels_figure([np.zeros((4, 4, 3))] * 3, ["x", "y", "z"], clim=(0, 2), label="rho")
     assert [ax.get_title() for ax in fig.axes[:3]] == ["x", "y", "z"] and fig.axes[3].get_xlabel() == "rho"

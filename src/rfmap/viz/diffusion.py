@@ -26,14 +26,15 @@ def dem_steps_figure(densities: dict, meshes: dict, rho0, elements, *, n: int, l
     import matplotlib.pyplot as plt
 
     times, stages = list(densities), list(meshes)
-    fig, axes = plt.subplots(2, len(times), figsize=(TEXT_WIDTH_IN, 4.6), layout="constrained")
+    fig, axes = plt.subplots(2, len(times), figsize=(TEXT_WIDTH_IN, 5.4), layout="constrained")
     vmax = float(max(np.max(r) for r in densities.values()))
     for ax, t in zip(axes[0], times):
         im = ax.imshow(np.asarray(densities[t]).T, origin="lower", extent=(0, 1, 0, 1), vmin=0, vmax=vmax,
                        cmap="viridis")
         ax.set_title(f"$\\rho$ at t = {t:g}")
         frameless(ax)
-    colorbar(im, ax=axes[0, :], shrink=0.8, label=r"$\rho$")
+    # under the row, so that the colour bar sits beside no column of the row below
+    colorbar(im, ax=axes[0, :], location="bottom", shrink=0.6, aspect=30, label=r"density $\rho$")
     top = float(np.max(rho0))
     for i, (ax, t) in enumerate(zip(axes[1, :-1], stages)):
         last = i == len(stages) - 1
@@ -51,7 +52,7 @@ def dem_steps_figure(densities: dict, meshes: dict, rho0, elements, *, n: int, l
     hist.set_yscale("log")
     hist.set_xlabel(r"$\tilde\rho$")
     hist.set_ylabel("triangles")
-    # ticks and label on the right, where the colour bar of the row above sits, so that the columns stay even
+    # ticks and label on the right, outside the row of meshes, so that the columns stay even
     hist.yaxis.tick_right()
     hist.yaxis.set_label_position("right")
     hist.set_title(r"$\tilde\rho$ per triangle")
@@ -141,6 +142,15 @@ def grid_convergence_figure(sides, values, *, title: str = "",
     ax.set_xticks(h, [f"1/{n - 1}" for n in sides])
     ax.xaxis.set_minor_locator(plt.NullLocator())
     plain_log_ticks(ax.yaxis)
+    # labels at 1, 2, 3, 5 and 7 times the powers of ten inside the data's range, so that the range is covered
+    # where it spans less than a few decades
+    lo, hi = sorted(ax.get_ylim())
+    nice = [m * 10.0**e for e in range(int(np.floor(np.log10(lo))), int(np.ceil(np.log10(hi))) + 1)
+            for m in (1, 2, 3, 5, 7)]
+    inside = [v for v in nice if lo <= v <= hi]
+    if 3 <= len(inside) <= 7:
+        ax.set_yticks(inside, [f"{v:.3g}" for v in inside])
+        ax.yaxis.set_minor_formatter(plt.NullFormatter())
     ax.set_xlabel("grid spacing $h$")
     ax.set_ylabel(ylabel)
     if title:
@@ -179,8 +189,8 @@ def solve_cost_figure(cost: dict, *, title: str = ""):
 
 def boundaries_figure(results: dict, rho0, *, n: int, vmax: float | None = None, lines: int = 40):
     r"""Mapped meshes side by side, each panel's triangles coloured by their initial :math:`\tilde\rho` ``rho0`` on
-    one colour scale, with the grid lines in white and the unit square dashed, so that a free boundary's outline
-    shows against the fixed one.
+    one colour scale (its bar under the panels), with the grid lines in white and the unit square dashed, so that a
+    free boundary's outline shows against the fixed one.
 
     Parameters
     ----------
@@ -205,10 +215,13 @@ def boundaries_figure(results: dict, rho0, *, n: int, vmax: float | None = None,
                              squeeze=False)
     top = float(np.max(rho0)) if vmax is None else vmax
     for ax, (title, res) in zip(axes[0], results.items()):
-        plot_density(ax, res.mapped_points, res.elements, rho0, vmin=0, vmax=top, colorbar=False, title=title)
+        im = plot_density(ax, res.mapped_points, res.elements, rho0, vmin=0, vmax=top, colorbar=False,
+                          title=title)
         plot_mesh(ax, res.mapped_points, n=n, max_lines=lines, color="w", lw=0.25)
         ax.plot([0, 1, 1, 0, 0], [0, 0, 1, 1, 0], "k--", lw=0.6)
         ax.set_axis_off()
+    colorbar(im, ax=axes[0, :], location="bottom", shrink=0.5,
+             aspect=30, label=r"initial $\tilde\rho$ of each triangle, carried by the map")
     return fig
 
 

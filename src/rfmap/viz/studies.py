@@ -15,8 +15,8 @@ COLUMN_NAMES = {"std_rho_map": r"Std($\tilde\rho_{map}$)", "raw_std": r"raw Std(
 
 def plain_log_ticks(axis) -> None:
     """Label a log ``axis`` (``ax.xaxis`` or ``ax.yaxis``, after plotting) in plain numbers (``0.02``, ``5``,
-    ``1e-05`` when shorter) at 1, 2 and 5 times the powers of ten, or at up to three round values spaced about
-    evenly on the log scale where the data span less than a factor of five, with no labels between them, so that
+    ``1000``, ``1e-05`` when shorter) at 1, 2 and 5 times the powers of ten, or at up to three round values spaced
+    about evenly on the log scale where the data span less than a factor of five, with no labels between them, so that
     labels never overlap."""
     from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
 
@@ -26,8 +26,15 @@ def plain_log_ticks(axis) -> None:
         axis.set_major_locator(FixedLocator(_round_log_values(lo, hi)))
     else:
         axis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0), numticks=12))
-    axis.set_major_formatter(FuncFormatter(lambda v, _: f"{v:.3g}"))
+    axis.set_major_formatter(FuncFormatter(_plain))
     axis.set_minor_formatter(NullFormatter())
+
+
+def _plain(v: float, _pos=None) -> str:
+    """A tick value in three significant digits, written out in full from 1 to a million (``1000``, not
+    ``1e+03``)."""
+    text = f"{v:.3g}"
+    return f"{v:.0f}" if "e+" in text and abs(v) < 1e6 else text
 
 
 def _round_log_values(lo: float, hi: float) -> list[float]:
