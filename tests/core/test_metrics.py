@@ -357,3 +357,24 @@ def test_residual_parts_are_the_residual_and_its_vertex_means():
     assert smooth[v] == pytest.approx(r[around].mean(), rel=1e-12)
     s = residual_scales(x, y, m.elements, dens)
     assert s["smooth"] == pytest.approx(smooth.std(), rel=1e-12)
+
+
+def test_block_std_pools_cells_of_the_grid():
+    """With one cell per block the blocks are the grid's squares; a map of the (2N - 1)-grid pooled in blocks of
+    2 x 2 cells is measured on the squares of the N-grid: for a density that is linear in x and the identity map,
+    the block densities are the densities of the N-grid's squares."""
+    from rfmap.core.metrics import block_std
+
+    def identity(n):
+        m = grid_mesh(n, 2)
+        dens = 1.0 + m.points[:, 0]
+        return MapResult(m.points, m.points.copy(), m.elements, dens, kind="density")
+
+    coarse, fine = identity(5), identity(9)
+    assert block_std(fine, 2) == pytest.approx(block_std(coarse, 1), rel=1e-12)
+    # the squares' densities: 1 + the x of their centres, constant in y
+    rho = 1.0 + (np.arange(4) + 0.5) / 4
+    rho = np.repeat(rho, 4)
+    assert block_std(coarse, 1) == pytest.approx(rho.std(ddof=1) / rho.mean(), rel=1e-12)
+    with pytest.raises(ValueError):
+        block_std(coarse, 3)

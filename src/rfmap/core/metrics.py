@@ -20,8 +20,8 @@ import torch
 from .geometry import beltrami_coefficient, grid_element_mean, grid_signed_measures, signed_measures
 from .mesh import grid_points, grid_size
 
-__all__ = ["MapMetrics", "compute_metrics", "density_std", "element_population", "residual_parts", "residual_scales",
-           "rotational_share"]
+__all__ = ["MapMetrics", "block_std", "compute_metrics", "density_std", "element_population", "residual_parts",
+           "residual_scales", "rotational_share"]
 
 
 @dataclass
@@ -112,6 +112,39 @@ def density_std(population: torch.Tensor, measure: torch.Tensor, out: torch.Tens
     mean = s1 / m
     var = max(s2 - s1 * mean, 0.0) / (m - 1)
     return math.sqrt(var) / abs(mean)
+
+
+def block_std(result, cells: int) -> float:
+    r""":math:`\mathrm{Std}(\tilde\rho)` of a density map of a grid over blocks of ``cells`` x ``cells`` grid cells.
+
+    Each block pools its elements: its density is the sum of their populations over the sum of their mapped
+    measures.  With ``cells = 1`` the blocks are the grid's squares (cubes); a map of the ``(2N - 1)``-grid with
+    ``cells = 2`` is thus measured on the squares of the ``N``-grid, where it can be set beside a map of that grid.
+
+    Parameters
+    ----------
+    result : rfmap.core.result.MapResult
+        A density map of a regular grid of the unit square or cube (``ref_points`` on the lattice).
+    cells : int
+        Grid cells per block and axis; it must divide ``N - 1``.
+
+    Returns
+    -------
+    float
+        The sample standard deviation (ddof = 1) of the block densities over their mean.
+    """
+    ref, el = np.asarray(result.ref_points), np.asarray(result.elements)
+    d = ref.shape[1]
+    n = round(len(ref) ** (1 / d))
+    if (n - 1) % cells:
+        raise ValueError(f"{cells} cells per block do not divide the {n - 1} cells of the grid")
+    pop = element_population(ref, el, result.field).numpy()
+    meas = signed_measures(_t(result.mapped_points), torch.as_tensor(el).long()).numpy()
+    per_axis = (n - 1) // cells
+    corner = np.floor(ref[el].mean(1) * (n - 1) / cells).astype(int).clip(0, per_axis - 1)
+    block = np.ravel_multi_index(tuple(corner.T), (per_axis,) * d)
+    rho = np.bincount(block, pop, per_axis**d) / np.bincount(block, meas, per_axis**d)
+    return float(rho.std(ddof=1) / rho.mean())
 
 
 def compute_metrics(
