@@ -274,26 +274,37 @@ def cartogram_figure(carto, options: FigureOptions | None = None, *, label: str 
 
 def cartogram_panels(cartos: dict, keys, *, label: str | None = None, cols: int = 3, width: float = TEXT_COLUMN_IN):
     """Cartograms in a grid of ``cols`` columns, one panel per key of ``cartos`` (``{key: Cartogram}``, keys as in
-    :func:`rfmap.cartogram.resize.compare_cartograms`), regions coloured by their input density over the mean, with the
-    input map first, all in the cartogram's plane; ``width`` inches (text by :func:`column_style`); saved under
-    ``label``; returns the figure."""
+    :func:`rfmap.cartogram.resize.compare_cartograms`), with the input map first, all in the cartogram's plane.
+
+    Every panel colours each region by its input density over the mean (the value of its own key; the input map by the
+    value of the first key, named in its title), on one scale from 0 to the largest of the panels' 98th percentiles,
+    shown by one colour bar. ``width`` inches (text by :func:`column_style`); saved under ``label``; returns the
+    figure.
+    """
     import matplotlib.pyplot as plt
 
     keys = list(keys)
     first = cartos[keys[0]]
     rows = -(-(len(keys) + 1) // cols)
     side = width / cols
+    panels = [(first.projected_geometries(mapped=False), first, f"input map ({keys[0][0]})")]
+    panels += [(cartos[k].projected_geometries(), cartos[k], " / ".join(map(str, k))) for k in keys]
+    densities = []
+    for _, c, _ in panels:
+        area = np.array([g.area for g in c.regions])
+        densities.append(c.values / area / (c.values.sum() / area.sum()))
+    vmax = max(float(np.quantile(d, 0.98)) for d in densities)
     with plt.rc_context(column_style(width)):
-        fig, axes = plt.subplots(rows, cols, figsize=(width, 1.1 * side * rows), squeeze=False, layout="constrained")
-        panels = [(first.projected_geometries(mapped=False), first, "input map")]
-        panels += [(cartos[k].projected_geometries(), cartos[k], " / ".join(map(str, k))) for k in keys]
-        for ax, (geoms, c, title) in zip(axes.flat, panels):
-            area = np.array([g.area for g in c.regions])
-            density = c.values / area / (c.values.sum() / area.sum())
-            plot_regions(ax, geoms, density, title=title, vmin=0.0, vmax=float(np.quantile(density, 0.98)), lw=0.2)
+        fig, axes = plt.subplots(rows, cols, figsize=(width, 1.1 * side * rows + 0.5), squeeze=False,
+                                 layout="constrained")
+        for ax, (geoms, _, title), density in zip(axes.flat, panels, densities):
+            coll = plot_regions(ax, geoms, density, title=title, vmin=0.0, vmax=vmax, lw=0.2)
             ax.axis("off")
         for ax in axes.flat[len(panels):]:
             ax.axis("off")
+        cb = add_colorbar(coll, fig=fig, ax=axes, location="bottom", shrink=0.5, aspect=40, pad=0.02,
+                          extend="max", label="input density / mean (value per unit area over the map's mean)")
+        cb.ax.xaxis.set_label_position("bottom")
         if label:
             save_figure(fig, label)
     return fig
