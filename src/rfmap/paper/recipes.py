@@ -81,7 +81,7 @@ RECIPE_LEGENDS = {
         "*N*: the held-out grid sides; *score*: the validation score of the kept weights, lower is better; "
         "*maps scored*: the raw network maps, or the default maps a plain Surrogate.map returns; *folded maps*: "
         "held-out maps the network itself folded at the kept weights (the default maps repair them; the chapter "
-        "on bijectivity shows how).",
+        "on bijectivity shows how). —: not recorded in the model's metadata.",
 }
 
 
