@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.metrics import residual_parts
 from .figures import color_scale, colorbar, frameless
 from .meshes import TEXT_WIDTH_IN, plot_density, plot_mesh
 from .studies import plain_log_ticks
@@ -288,8 +289,6 @@ def residual_parts_figure(results: dict, *, cells: int = 8, quantile: float = 0.
     matplotlib.figure.Figure
     """
     import matplotlib.pyplot as plt
-
-    from ..core.metrics import residual_parts
 
     parts = {label: residual_parts(res.ref_points, res.mapped_points, res.elements, res.field)
              for label, res in results.items()}
