@@ -36,7 +36,8 @@ END = "<!-- end of retraining -->"
 
 def wrap(command: str, width: int = CODE_WIDTH) -> str:
     """A command as shell lines of at most ``width`` characters where it can, broken before an option, continued
-    with a backslash."""
+    with a backslash; an option whose value would not fit on a line of its own (a long ``--init`` path) has the value
+    on the next line."""
     words = shlex.split(command)
     parts: list[str] = []  # an option with its values, or a leading word
     for w in words:
@@ -46,7 +47,11 @@ def wrap(command: str, width: int = CODE_WIDTH) -> str:
             parts[-1] += " " + shlex.quote(w)
     lines = [parts[0]]
     for part in parts[1:]:
-        if len(lines[-1]) + 1 + len(part) + 2 > width:
+        option, _, value = part.partition(" ")
+        if value and 4 + len(part) + 2 > width:  # the option, then its value, each on a line of its own
+            lines += ["    " + option, "    " + value]
+        elif len(lines[-1]) + 1 + len(part) + 2 > width or lines[-1].startswith("    ") and \
+                not lines[-1][4:].startswith("-"):
             lines.append("    " + part)
         else:
             lines[-1] += " " + part
@@ -102,9 +107,15 @@ def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], 
     repeat = repeat_commands(meta, model, shipped)
     start = shipped_ancestor(meta, shipped)
     parent = runs[source.index - 2] if source.index > 1 else None
+    if idle:
+        threads = _threads_of(source.command)
+        where = f" on {threads} CPU thread{'s' if threads != 1 else ''}" if threads else ""
+        ran = f"the last run that changed the weights: run {source.index}, {source.steps:,} steps{where}"
+    else:
+        ran = f"the last run: {last.steps:,} steps on {_threads(meta)}"
     lines = [f"({label})=", f"{level} {model}", "",
              f"- **Chain:** {len(runs)} run{'s' if len(runs) != 1 else ''}, {steps:,} steps, {_hours(seconds)}; "
-             f"the last run: {last.steps:,} steps on {_threads(meta)}."]
+             f"{ran}."]
     if idle:
         which = (f"run {idle[0].index}" if len(idle) == 1 else f"runs {idle[0].index} to {idle[-1].index}")
         lines.append(f"- **Kept:** the weights that run {source.index} trained"
@@ -172,10 +183,31 @@ def _repeat_cost(metas: dict, shipped: dict[str, str]) -> list[str]:
     return [text + ".", ""]
 
 
+def parents_first(metas: dict[str, dict], shipped: dict[str, str]) -> dict[str, dict]:
+    """``metas`` in name order, except that a model whose repeat starts from another shipped model
+    (:func:`rfmap.training.lineage.shipped_ancestor`) comes right after that model."""
+    children: dict[str | None, list[str]] = {}
+    for model, meta in metas.items():
+        start = shipped_ancestor(meta, shipped)
+        parent = start[1] if start and start[1] in metas and start[1] != model else None
+        children.setdefault(parent, []).append(model)
+    order: list[str] = []
+
+    def visit(model: str) -> None:
+        order.append(model)
+        for child in children.get(model, []):
+            visit(child)
+
+    for model in children.get(None, []):
+        visit(model)
+    order += [m for m in metas if m not in order]  # a cycle of parents, which the metadata cannot hold
+    return {m: metas[m] for m in order}
+
+
 def section(root: Path = ROOT) -> str:
     """The generated part of book/reproduce.md."""
-    metas = load_metadata(root / WEIGHTS)
     shipped = shipped_hashes(root / WEIGHTS)
+    metas = parents_first(load_metadata(root / WEIGHTS), shipped)
     chains = {p.parent.name: json.loads(p.read_text(encoding="utf-8"))
               for p in sorted((root / CHAINS).glob("*/state.json"))}
     lines = ["| Model | Runs in its chain | Steps | Wall time | To train it again |", "| --- | --- | --- | --- | --- |"]
