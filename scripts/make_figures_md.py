@@ -247,11 +247,12 @@ RULES_SHORT = (
     "is, *not comparable* when no case has the paper's input.\n"
     "* *Counts.* The count beside a verdict is of scored (case, metric) pairs, so a table scored on two metrics "
     "counts each case twice; a case whose input is not the paper's (*n/c*) is left out of it, and the verdict says "
-    "whether its Std ratio is worse than the paper's. *Cases met* counts the cases.\n\n"
+    "whether its Std ratio is worse than the paper's. *Comparable cases met* counts the cases with the paper's "
+    "input that meet it.\n\n"
     "The rules in full, and every case: {ref}`the scoreboard <" + RULES_TARGET + ">`."
 )
 #: below the introduction's scoreboard: what its means are
-MEANS_NOTE = ("The values beside *Cases met* are means over the cases, which one large case can carry; "
+MEANS_NOTE = ("The values beside *Comparable cases met* are means over the cases, which one large case can carry; "
               "{doc}`figures` gives every case.")
 
 
@@ -263,7 +264,7 @@ def scoreboard(root: Path = ROOT) -> str:
     numbers, in_toc = paper_numbers(items), toc_documents(root)
     scored, shown_with = _scored(items)
     refs, defs = _footnotes(scored)
-    head = ["Paper item", "Verdict", "Metric", "Cases met", "Paper", "Paper's method", "Delivered", "Classical"]
+    head = ["Paper item", "Verdict", "Metric", "Comparable cases met", "Paper", "Paper's method", "Delivered", "Classical"]
     lines = [RULES_SHORT, "", "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for it in scored:
         score, nb = it["score"], it["notebook"]
