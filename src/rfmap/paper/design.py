@@ -208,8 +208,18 @@ def _row_text(r: dict[str, Any]) -> str:
     return plain_numbers("| " + " | ".join(_cell(r.get(k)) for k in ("case", "chosen", "alternative")) + " |")
 
 
+def _one_sided(rows: list[dict[str, Any]]) -> bool:
+    """Whether every row is one setting's result: the chosen value's or an alternative's, never both."""
+    return all(bool(r.get("chosen")) != bool(r.get("alternative")) for r in rows)
+
+
 def _rows_table(rows: list[dict[str, Any]]) -> list[str]:
-    """A decision's numbers as a table: per case, what the chosen value gave and what the alternatives gave."""
+    """A decision's numbers as a table: per case, what the chosen value gave and what the alternatives gave; where
+    every row is the result of one setting or one case, a table of two columns, whose rows name the setting."""
+    if _one_sided(rows):
+        return ["| setting or case | result |", "| --- | --- |"] + \
+            [plain_numbers(f"| {_cell(r.get('case'))} | {_cell(r.get('chosen') or r.get('alternative'))} |")
+             for r in rows]
     return ["| case | with the chosen value | with the alternatives |", "| --- | --- | --- |"] + \
         [_row_text(r) for r in rows]
 
