@@ -11,7 +11,7 @@ from .figures import colorbar as add_colorbar
 __all__ = ["element_rho", "plot_mesh", "repair_figure", "plot_slice_outline", "plot_density", "plot_mu", "plot_map_row",
            "plot_beltrami_row", "vertex_error_panels", "population_figure", "map_rows_figure", "beltrami_figure",
            "beltrami_case_figure", "extreme_figure", "folded_maps_figure", "query_points_figure", "random_fields_figure",
-           "jitter_figure", "TEXT_WIDTH_IN"]
+           "jitter_figure", "TEXT_WIDTH_IN", "grid_line_step", "grid_lines_drawn"]
 
 
 #: width of a figure that fills the book's text column with its 9 pt text shown at 9 pt (``rfmap.viz.figures``)
