@@ -386,8 +386,8 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
     lines += ["## The decisions one by one", "",
               "To measure the re-measurable decisions again and regenerate this page:", "",
               "```bash",
-              "python benchmarks/design.py --record        # every case; or --only NAME [NAME ...]",
-              "make pages                                  # regenerate this page from the record",
+              "python benchmarks/design.py --record  # every case; or --only NAME [NAME ...]",
+              "make pages                            # regenerate this page from the record",
               "```", ""]
     for heading, group in _groups(decisions):
         lines += [f"## {heading}", ""]
