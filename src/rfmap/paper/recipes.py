@@ -2,6 +2,7 @@ r"""How the shipped models were trained, from their metadata: the training field
 from __future__ import annotations
 
 from ..tasks import get_task
+from ..training.validation import score_parts
 from .tables import Table, decimal_text, rate_text
 
 __all__ = ["training_fields_text", "recipe_table", "recipe_markdown", "recipe_differences", "differences_text",
@@ -101,20 +102,19 @@ def recipe_markdown(table: Table) -> str:
 
 
 def _selection(val: dict) -> tuple[float | None, str | None]:
-    """The score that chose the kept weights, from a validation summary, and what it is, ranked as
-    :func:`rfmap.training.validation.score` ranks them: the family score (each field's Std(ρ̃_map) relative to its
-    Std(ρ̃_orig), averaged by family) where recorded, else the mean metric with every folded map counted as no map,
-    else the capped or the plain mean."""
+    """The score that chose the kept weights, from a validation summary, and what it is, as
+    :func:`rfmap.training.validation.score_parts` ranks them: the family score (each field's Std(ρ̃_map) relative to
+    its Std(ρ̃_orig), averaged by family) where recorded, else the mean metric with every folded map counted as no
+    map, else the plain mean."""
     if not val:
         return None, None
     metric = "|Δd|" if "mean_dd" in val else "Std"
-    if "family_score" in val:
-        return float(val["family_score"]), "Std ratio by family"
-    for key in ("penalized", "capped"):
-        if key in val:
-            return float(val[key]), f"mean {metric}, folds as no map"
-    plain = val.get("mean_dd", val.get("std_rho_map"))
-    return (None, None) if plain is None else (float(plain), f"mean {metric}")
+    try:
+        _, value, what = score_parts(val)
+    except KeyError:  # no metric recorded at all
+        return None, None
+    return value, {"family_score": "Std ratio by family", "penalized": f"mean {metric}, folds as no map",
+                   "capped": f"mean {metric}, folds as no map", "mean": f"mean {metric}"}[what]
 
 
 #: settings of a stored training configuration that name or time a run rather than shape what it learns

@@ -38,8 +38,8 @@ from ..tasks import get_task
 from ..tasks.density import DENSITY_KINDS
 from ..tasks.heldout import STREAMS, VALIDATION_SEED, ValidationField
 
-__all__ = ["VALIDATION_SEED", "STREAMS", "ValidationField", "validation_fields", "evaluate", "score", "DENSITY_KINDS",
-           "family", "family_table"]
+__all__ = ["VALIDATION_SEED", "STREAMS", "ValidationField", "validation_fields", "evaluate", "score", "score_parts",
+           "DENSITY_KINDS", "family", "family_table"]
 
 
 def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "validation",
@@ -140,7 +140,8 @@ def family_table(summary: dict) -> str:
 
 
 def score(summary: dict) -> tuple[int, float]:
-    """Sort key of a validation summary (``evaluate(...)["mean"]``), lower is better.
+    """Sort key of a validation summary (``evaluate(...)["mean"]``), lower is better: the first two entries of
+    :func:`score_parts`.
 
     Density models: ``(0, family_score)``, the mean over field families (smooth, steps, peak, ramp) of each
     family's mean of Std(ρ̃_map) / Std(ρ̃_orig), a folded map counted as the identity (ratio 1).  Every family
@@ -150,12 +151,21 @@ def score(summary: dict) -> tuple[int, float]:
 
     Summaries written before these entries existed rank after every summary that has them: ``(1, penalized)``, a
     fold-free one ``(1, mean)``, one with a folded map, whose penalized mean is unknown, ``(2, capped mean)``."""
+    tier, value, _ = score_parts(summary)
+    return tier, value
+
+
+def score_parts(summary: dict) -> tuple[int, float, str]:
+    """:func:`score`'s tier and value of a validation summary, and which entry the value is: ``"family_score"``,
+    ``"penalized"``, ``"capped"`` or ``"mean"`` (the plain mean metric, ``mean_dd`` or ``std_rho_map``)."""
     key = "mean_dd" if "mean_dd" in summary else "std_rho_map"
     if "family_score" in summary:
-        return (0, float(summary["family_score"]))
+        return 0, float(summary["family_score"]), "family_score"
     if "penalized" in summary:
-        return (0 if key == "mean_dd" else 1, float(summary["penalized"]))
+        return (0 if key == "mean_dd" else 1), float(summary["penalized"]), "penalized"
     folded = summary.get("folded_fields", int(summary.get("n_flipped", 0) > 0))
     if not folded:
-        return (0 if key == "mean_dd" else 1, float(summary[key]))
-    return (2, float(summary.get("capped", summary[key])))
+        return (0 if key == "mean_dd" else 1), float(summary[key]), "mean"
+    if "capped" in summary:
+        return 2, float(summary["capped"]), "capped"
+    return 2, float(summary[key]), "mean"
