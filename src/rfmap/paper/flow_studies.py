@@ -239,11 +239,13 @@ def rotation_table(rows: list[dict[str, Any]]) -> CaseTable:
 
 def sea_table(rows: list[dict[str, Any]]) -> CaseTable:
     """The rows of :func:`sea_blend_study` as a table: per field the three flows' final Std(rho~_map) over the
-    diffusion solver's, whether the abrupt sea stalled, and the shift of the blended flow's map in grid spacings."""
+    diffusion solver's, whether the abrupt sea stalled, the default flow's time over the diffusion solver's (a stalled
+    attempt included) and the shift of the blended flow's map in grid spacings."""
     return _table("A dense coast: the flows' Std over the diffusion solver's",
-                  ["field", "abrupt sea, blurred retries", "default", "blended sea", "stalled", "shift (spacings)"],
+                  ["field", "abrupt sea, blurred retries", "default", "blended sea", "stalled",
+                   "default's time / diffusion's", "shift (spacings)"],
                   [[r["field"], f"{r['ratio_abrupt']:.3g}", f"{r['ratio_default']:.3g}", f"{r['ratio_blended']:.3g}",
-                    "yes" if r["stalled"] else "no", f"{r['shift']:.3g}"] for r in rows])
+                    "yes" if r["stalled"] else "no", f"{r['time_default']:.2g}", f"{r['shift']:.3g}"] for r in rows])
 
 
 def warm_table(rows: list[dict[str, Any]]) -> CaseTable:
