@@ -2,6 +2,8 @@
 itself beside its repair."""
 from __future__ import annotations
 
+import numpy as np
+
 from ..core.mesh import element_measures
 from .figures import style
 from .meshes import plot_mesh, plot_slice_outline
@@ -9,31 +11,52 @@ from .meshes import plot_mesh, plot_slice_outline
 __all__ = ["fold_repair_figure", "surface_crossing_figure"]
 
 
-def fold_repair_figure(raw, repaired, n: int, *, margin: float = 0.06):
-    """A folded 2D map and its repair (the chapter on repairing folded maps): (a) the raw map with its flipped triangles circled, (b) the
-    repaired map, (c) both around the folds (``margin`` beyond the folds' centroids), in the book's style.
-    ``raw``, ``repaired``: :class:`rfmap.core.result.MapResult` of one ``n``-grid.  Returns the figure."""
+def fold_repair_figure(raw, repaired, n: int, *, margin: float = 0.03):
+    """A folded 2D map and its repair (the chapter on repairing folded maps), in the book's style.
+
+    Panels: (a) the raw map with its flipped triangles circled, (b) the repaired map, and close-ups around the folds
+    (``margin`` beyond the flipped triangles' centroids), on the same limits: (c) the raw map with its flipped
+    triangles filled and circled (a flipped triangle is often too thin to see), (d) the repaired map with the
+    triangles whose vertices the repair moved filled.
+
+    Parameters
+    ----------
+    raw, repaired : rfmap.core.result.MapResult
+        The raw map and its repair on one ``n``-grid (same ``elements``, (T, 3)).
+    n : int
+        Grid side.
+    margin : float
+        Close-up margin, in the unit square's units.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
 
     det = element_measures(raw.mapped_points, raw.elements)
-    centres = raw.mapped_points[raw.elements[det <= 0]].mean(1)
+    flipped = raw.elements[det <= 0]
+    centres = raw.mapped_points[flipped].mean(1)
+    moved_v = np.linalg.norm(repaired.mapped_points - raw.mapped_points, axis=1) > 1e-9
+    moved = repaired.elements[moved_v[repaired.elements].any(1)]
     with style():
-        fig, axes = plt.subplot_mosaic("ab;cc", figsize=(7.0, 6.6), layout="constrained")
+        fig, axes = plt.subplot_mosaic("ab;cd", figsize=(7.0, 6.0), layout="constrained")
         plot_mesh(axes["a"], raw.mapped_points, n=n, title=f"(a) raw map: {len(centres)} flipped")
         axes["a"].plot(*centres.T, "o", color="crimson", ms=9, mfc="none", mew=1.5)
         plot_mesh(axes["b"], repaired.mapped_points, n=n, title="(b) repaired map")
-        for ax in (axes["a"], axes["b"]):
-            ax.spines[["left", "bottom"]].set_visible(False)
         lo, hi = centres.min(0) - margin, centres.max(0) + margin
-        # the raw map first and faint, the repaired map over it: where the two differ, the repair is seen
-        axes["c"].triplot(*raw.mapped_points.T, raw.elements, lw=0.6, ls="--", color="tab:orange", alpha=0.8,
-                          label="raw map", zorder=1)
-        axes["c"].triplot(*repaired.mapped_points.T, repaired.elements, lw=1.1, color="tab:blue",
-                          label="repaired map", zorder=2)
-        axes["c"].plot(*centres.T, "o", color="crimson", ms=6, mfc="none", label="flipped (raw map)")
-        axes["c"].set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), aspect="equal",
-                      title="(c) close-up around the folds")
-        axes["c"].legend(loc="upper left", bbox_to_anchor=(1.02, 1), borderaxespad=0)
+        close = (("c", raw, flipped, "crimson", "(c) raw map, close-up:\nflipped triangles circled"),
+                 ("d", repaired, moved, "tab:orange", "(d) repaired map, close-up:\ntriangles it moved filled"))
+        for key, res, fill, colour, title in close:
+            ax = axes[key]
+            ax.add_collection(PolyCollection(res.mapped_points[fill], facecolor=colour, alpha=0.45, lw=0))
+            ax.triplot(*res.mapped_points.T, res.elements, lw=0.5, color="tab:blue")
+            if key == "c":
+                ax.plot(*centres.T, "o", color="crimson", ms=14, mfc="none", mew=1.5)
+            ax.set(xlim=(lo[0], hi[0]), ylim=(lo[1], hi[1]), aspect="equal", title=title)
+        for ax in axes.values():
+            ax.spines[["left", "bottom"]].set_visible(False)
     return fig
 
 
