@@ -18,7 +18,7 @@ import numpy as np
 
 from ..tasks.objectives import FLIP_WEIGHT
 
-__all__ = ["golden_section", "refine_alpha", "RefineResult", "RefineConfig", "REFINE"]
+__all__ = ["golden_section", "refine_alpha", "RefineResult", "RefineConfig", "REFINE", "SCAN_POINTS"]
 
 
 @dataclass(frozen=True)
