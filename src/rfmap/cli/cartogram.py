@@ -250,6 +250,12 @@ def _cartogram_figures(args, carto) -> None:
             fig = cartogram_figure(carto, colors=colors, labels=labels, title=args.value, path=path)
             plt.close(fig)
 
+#: the help of ``--inset``, which names cartogram-cpp first on the command line's page
+INSET_HELP = ("the column (or, without --data, the property) naming each region's inset, as the 'Inset' column of "
+              "cartogram-cpp (the C++ program of the flow-based method, Gastner, Seguy & More 2018, "
+              "github.com/mgastner/cartogram-cpp): C or empty (the main map), L, R, T or B (left, right, top, bottom "
+              "of it); each inset is a cartogram in its own frame, put on the main map's scale beside it")
+
 
 def add_cartogram_parser(sub) -> None:
     """Add ``rfmap cartogram`` to the sub-command parsers ``sub``."""
@@ -292,9 +298,7 @@ def add_cartogram_parser(sub) -> None:
     d.add_argument("--label", default=None, metavar="COLUMN",
                    help="label the regions of the figures (and the --html page's hover) by this column")
     d.add_argument("--inset", default=None, metavar="COLUMN",
-                   help="the column (or, without --data, the property) naming each region's inset, as cartogram-cpp's "
-                        "'Inset': C or empty (the main map), L, R, T or B (left, right, top, bottom of it); each inset "
-                        "is a cartogram in its own frame, put on the main map's scale beside it")
+                   help=INSET_HELP)
     d.add_argument("--make-csv", default=None, metavar="OUT.csv",
                    help="only write a CSV template: one row per region with its --id (default: the feature id) and "
                         "an empty --value column")

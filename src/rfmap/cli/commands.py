@@ -367,8 +367,9 @@ def _add_cartogram(sub) -> None:
 def _add_reproduce(sub) -> None:
     """``rfmap reproduce``."""
     s = sub.add_parser("reproduce", help="write the paper's tables (Markdown and CSV)")
-    s.add_argument("experiment", choices=["beltrami", "dem2d", "dem3d"])
-    s.add_argument("--out", default="reproduction", help="output directory")
+    s.add_argument("experiment", choices=["beltrami", "dem2d", "dem3d"],
+                   help="which group of the paper's tables: beltrami, dem2d or dem3d")
+    s.add_argument("--out", default="reproduction", help="output directory (default: reproduction)")
     s.add_argument("--no-refine", action="store_true", help="skip weight refinement")
     s.add_argument("--symmetrize", nargs="?", const=True, default=False, type=_symmetry_arg, metavar="GROUP",
                    help="add the rows of the networks averaged over the domain's symmetries")
