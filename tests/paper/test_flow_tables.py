@@ -19,5 +19,5 @@ def test_convergence_rotation_and_sea_tables_have_one_row_per_field():
         "| field | default: Std / time | rtol=0.02: Std / time |"
     assert rotation_table(conv).text.splitlines()[3] == "| b | 1.1 | 0.02 | 0.05 | 2.5 |"
     sea = [{"field": "ramp-3", "ratio_abrupt": 5.36, "ratio_default": 1.04, "ratio_blended": 1.04,
-            "stalled": True, "shift": 10.4}]
-    assert sea_table(sea).text.splitlines()[2] == "| ramp-3 | 5.36 | 1.04 | 1.04 | yes | 10.4 |"
+            "stalled": True, "time_default": 0.31, "shift": 10.4}]
+    assert sea_table(sea).text.splitlines()[2] == "| ramp-3 | 5.36 | 1.04 | 1.04 | yes | 0.31 | 10.4 |"

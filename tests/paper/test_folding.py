@@ -38,7 +38,10 @@ def test_repaired_mu_keeps_mu_outside_the_moved_triangles():
 def test_chapter_10_figures_draw():
     raw, fixed = _folded_pair()
     fig = fold_repair_figure(raw, fixed, N)
-    assert len(fig.axes) == 3 and fig.axes[0].get_title().startswith("(a) raw map:")
+    assert len(fig.axes) == 4 and fig.axes[0].get_title().startswith("(a) raw map:")
+    # the close-ups: the raw map and the repaired map side by side, on the same limits
+    assert fig.axes[2].get_title().startswith("(c) raw map") and fig.axes[3].get_title().startswith("(d) repaired")
+    assert fig.axes[2].get_xlim() == fig.axes[3].get_xlim()
     cube = grid_mesh(5, 3).points
     fig = surface_crossing_figure(cube, cube, 5, 1.3, 0.5)
     assert "1.3 turns" in fig.axes[0].get_title() and "0.500" in fig.axes[1].get_title()
