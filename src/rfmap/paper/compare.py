@@ -26,9 +26,9 @@ from .generalization import generalization_table
 from .comparison import format_time
 from .tables import Table, format_sig
 
-__all__ = ["parameter_count", "model_table", "paper_fields_table", "resolution_table", "points_table",
-           "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins", "folded_cell",
-           "side_by_side", "MarkdownText"]
+__all__ = ["parameter_count", "model_table", "learning_summary", "paper_fields_table", "resolution_table",
+           "points_table", "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins",
+           "folded_cell", "side_by_side", "MarkdownText"]
 
 
 def parameter_count(model) -> int:
@@ -49,23 +49,67 @@ def _check(surs: dict) -> tuple:
 
 
 def model_table(surs: dict) -> Table:
-    """Architecture, parameters, training steps and wall time (cumulative over ``--init`` chains) and the final
-    held-out validation metric of each model (its selection score where recorded), from its metadata."""
+    """Architecture, parameters, training steps, the step whose weights were kept and wall time (cumulative over
+    ``--init`` chains), and two held-out validation numbers of each model's kept weights, from its metadata.
+
+    ``validation`` is the mean Std(ρ̃_map) over the held-out fields with a folded map counted as the identity (the
+    ``penalized`` entry where recorded, else the plain mean); ``checkpoint score`` is the score that chose the kept
+    weights (:func:`rfmap.training.validation.score`: the mean over field families of Std(ρ̃_map) / Std(ρ̃_orig)),
+    ``None`` where the record predates it and the weights were chosen by the held-out mean.
+    """
     _check(surs)
-    t = Table("tab:models", "The models", ["parameters", "steps", "train_time", "validation"],
+    t = Table("tab:models", "The models",
+              ["parameters", "steps", "kept step", "train_time", "validation", "checkpoint score"],
               heads=("model", "network"))
     for name, s in surs.items():
         meta = s.meta
         mean = (meta.get("final_metrics") or {}).get("mean") or {}
-        # the selection score (a folded map counted as the identity; rfmap.training.validation.score) where recorded: a
-        # plain mean over fields with a folded map is meaningless
+        # a folded map counted as the identity where recorded: a plain mean over fields with a folded map is
+        # meaningless
         val = mean.get("penalized", mean.get("std_rho_map"))
+        kept = meta.get("selected_step")
         t.add(name, s.model.kwargs().get("arch", "unet"),
               {"parameters": parameter_count(s.model),
                "steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
+               "kept step": None if kept is None else int(kept),
                "train_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 60.0,
-               "validation": None if val is None else float(val)})
+               "validation": None if val is None else float(val),
+               "checkpoint score": None if "family_score" not in mean else float(mean["family_score"])})
     return t
+
+
+def learning_summary(meta: dict, last: int = 3) -> dict:
+    """What a model's validation record says about its learning curve.
+
+    Parameters
+    ----------
+    meta : dict
+        A surrogate's metadata (``history["validation"]``: one summary per validation, in order; a repeated last step,
+        the kept state evaluated again, is counted once).
+    last : int
+        How many of the last validations are set against the earlier ones.
+
+    Returns
+    -------
+    dict
+        ``states`` (distinct validated steps), ``folded`` (of them, those whose map folded on some field),
+        ``best`` and ``best_step`` (the lowest plain held-out mean Std(ρ̃_map) and its step), ``last_best`` (the
+        lowest over the last ``last`` validations), ``earlier_best`` (over the others), ``improving`` (whether
+        ``last_best`` is below ``earlier_best``), ``last_range`` ((min, max) over the last ``last``) and ``kept_step``.
+    """
+    seen, hist = set(), []
+    for v in (meta.get("history") or {}).get("validation", []):
+        if v["step"] not in seen:
+            seen.add(v["step"])
+            hist.append(v)
+    means = np.array([float(v["std_rho_map"]) for v in hist])
+    folded = sum((v.get("folded_fields", v.get("n_flipped")) or 0) > 0 for v in hist)
+    i = int(np.argmin(means))
+    tail, head = means[-last:], means[:-last]
+    earlier = float(head.min()) if len(head) else float("inf")
+    return {"states": len(hist), "folded": int(folded), "best": float(means[i]), "best_step": int(hist[i]["step"]),
+            "last_best": float(tail.min()), "earlier_best": earlier, "improving": bool(tail.min() < earlier),
+            "last_range": (float(tail.min()), float(tail.max())), "kept_step": meta.get("selected_step")}
 
 
 def _row(res, raw) -> dict:
@@ -131,15 +175,15 @@ def points_table(surs: dict, field: str = "sin-cos", n: int = 51, seed: int = 0)
 
 def generalization_tables(surs: dict, count: int = 50, n: int | None = None) -> Table:
     """:func:`rfmap.paper.generalization.generalization_table` of every model on the same unseen random fields, merged
-    (the classical solver's rows once)."""
+    (the classical solver's rows and the inputs' Std(rho~_orig), method ``input``, once)."""
     _check(surs)
     merged = None
     for name, s in surs.items():  # the classical solver once: every model sees the same fields and boundary
-        g = generalization_table(s, count=count, n=n, refine=True, classical=merged is None)
+        g = generalization_table(s, count=count, n=n, refine=True, classical=merged is None, inputs=merged is None)
         if merged is None:
             merged = Table("tab:fno-generalization", g.title.split(":", 1)[1].strip(), g.columns)
         for case, method, vals in g.rows:
-            if method.startswith("classical"):
+            if method.startswith("classical") or method == "input":
                 if not any(c == case and m == method for c, m, _ in merged.rows):
                     merged.add(case, method, vals)
             else:

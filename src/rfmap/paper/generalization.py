@@ -23,7 +23,7 @@ __all__ = ["generalization_table", "generalization_summary", "pivot_markdown", "
 @quiet_quality()
 def generalization_table(sur, count: int = 50, n: int | None = None, refine: bool = True,
                          classical: bool = True, low_frequency: bool = False,
-                         symmetrize: bool | str = False) -> Table:
+                         symmetrize: bool | str = False, inputs: bool = False) -> Table:
     """Surrogate against the classical solver on ``count`` seeded random fields that training never drew (the
     ``report`` stream of :mod:`rfmap.training.validation`, used for nothing else), on the same ``N``-grid.
 
@@ -37,7 +37,8 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     ``low_frequency`` (Beltrami models) draws random maps of 1-4 slow modes instead (table
     ``tab:generalization-low-NAME``); ``symmetrize`` (density models) adds the network averaged over symmetries of
     the domain, with refinement and fold handling (:data:`~rfmap.paper.reproduce.SYM_REF`, or
-    :data:`~rfmap.paper.reproduce.SYM` without ``refine``).
+    :data:`~rfmap.paper.reproduce.SYM` without ``refine``); ``inputs`` (density models) adds rows ``input``: the
+    input's Std(rho~_orig), what the identity map leaves.
     """
     spec, task = sur.spec, sur.spec.task
     n = int(n or PAPER_N[spec.dim])
@@ -63,6 +64,8 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
         for method, r in variants:
             rec, value, _ = task.validation_record(r, vf)
             add(kind, method, value, rec["n_flipped"], r.time)
+        if inputs and task.equalizes:
+            add(kind, "input", raw.metrics().std_rho_orig, 0, 0.0)
     low = "low-" if low_frequency else ""
     table = Table(f"tab:generalization-{low}{sur.name}",
                   f"{sur.name}: {count} unseen {'low-frequency ' if low else ''}random fields at N = {n} "
