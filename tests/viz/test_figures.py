@@ -89,7 +89,7 @@ def test_cartogram_column_width_follows_the_books_text_column():
 
 
 def test_folded_states_are_read_from_old_and_new_histories():
-    from rfmap.viz.training import _folded_state
+    from rfmap.training.validation import has_folds as _folded_state
 
     assert _folded_state({"folded_fields": 2, "n_flipped": 0})
     assert not _folded_state({"folded_fields": 0, "n_flipped": 5})  # counted fields win

@@ -39,7 +39,7 @@ from ..tasks.density import DENSITY_KINDS
 from ..tasks.heldout import STREAMS, VALIDATION_SEED, ValidationField
 
 __all__ = ["VALIDATION_SEED", "STREAMS", "ValidationField", "validation_fields", "evaluate", "score", "score_parts",
-           "DENSITY_KINDS", "family", "family_table"]
+           "has_folds", "DENSITY_KINDS", "family", "family_table"]
 
 
 def validation_fields(kind: str, dim: int, count: int = 16, stream: str = "validation",
@@ -155,6 +155,12 @@ def score(summary: dict) -> tuple[int, float]:
     return tier, value
 
 
+def has_folds(summary: dict) -> bool:
+    """Whether a validation summary's maps folded on some held-out field: its ``folded_fields`` count, or in older
+    summaries, which do not record it, its ``n_flipped`` count of flipped elements."""
+    return (summary.get("folded_fields", summary.get("n_flipped")) or 0) > 0
+
+
 def score_parts(summary: dict) -> tuple[int, float, str]:
     """:func:`score`'s tier and value of a validation summary, and which entry the value is: ``"family_score"``,
     ``"penalized"``, ``"capped"`` or ``"mean"`` (the plain mean metric, ``mean_dd`` or ``std_rho_map``)."""
@@ -163,8 +169,7 @@ def score_parts(summary: dict) -> tuple[int, float, str]:
         return 0, float(summary["family_score"]), "family_score"
     if "penalized" in summary:
         return (0 if key == "mean_dd" else 1), float(summary["penalized"]), "penalized"
-    folded = summary.get("folded_fields", int(summary.get("n_flipped", 0) > 0))
-    if not folded:
+    if not has_folds(summary):
         return (0 if key == "mean_dd" else 1), float(summary[key]), "mean"
     if "capped" in summary:
         return 2, float(summary["capped"]), "capped"

@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.wording import format_sig
+from ..training.validation import has_folds
 from .meshes import plot_density, plot_mesh
 from .studies import plain_log_ticks
 
@@ -318,16 +319,10 @@ def race_bars(metas: dict, ax=None, *, key: str = "std_rho_map"):
     return ax
 
 
-def _folded_state(record: dict) -> bool:
-    """Whether a validation record's maps folded on some held-out field: its ``folded_fields`` count, or in older
-    histories, which do not record it, its ``n_flipped`` count of flipped elements."""
-    return (record.get("folded_fields", record.get("n_flipped")) or 0) > 0
-
-
 def _folded_marks(ax, xs, val, color):
     """Open markers on the validated states whose maps folded on some held-out field (``folded_fields`` > 0, or
     in older histories, which do not count folded fields, ``n_flipped`` > 0)."""
-    pts = [(x, y) for x, y, v in zip(xs, *val) if _folded_state(v)]
+    pts = [(x, y) for x, y, v in zip(xs, *val) if has_folds(v)]
     if pts:
         ax.plot(*zip(*pts), "o", ms=5, mfc="white", mec=color, mew=1.2, zorder=3)
 
