@@ -4,12 +4,13 @@ Weights are stored as ``NAME.safetensors`` (tensors only; loading never unpickle
 metadata: model constructor arguments, task, boundary, preset, the full training configuration, rfmap version,
 steps, wall time and final validation metrics.
 
-Inference (paper Secs. 4.1–4.3): the input field is sampled on a working grid whose side lies in the range the
-model was trained on, encoded as :math:`[x, p(x)]`, and mapped to a displacement :math:`\psi` on that grid;
-:math:`\psi` is interpolated (bi/trilinearly) to the requested points :math:`x_q`, which may form any grid or an
-unstructured cloud, and :math:`u(x_q) = x_q + \mathcal{B}(x_q) \odot (\alpha \odot \psi(x_q))`.  That is the
-prediction; :meth:`~rfmap.Surrogate.map` then finishes the map with the stages of :mod:`rfmap.finish` (regrid, refine,
-repair, polish, judge, shorten), which also report what they did (``MapResult.info``).
+Inference (paper Secs. 4.1–4.3): the input field is sampled on a working grid whose side lies in the range the model
+was trained on, encoded as :math:`[x, p(x)]` with :math:`p` in its task's encoding (a density as :math:`\log p`,
+where the paper writes :math:`p`; :mod:`rfmap.tasks.density`), and mapped to a displacement :math:`\psi` on that
+grid; :math:`\psi` is interpolated (bi/trilinearly) to the requested points :math:`x_q`, which may form any grid or
+an unstructured cloud, and :math:`u(x_q) = x_q + \mathcal{B}(x_q) \odot (\alpha \odot \psi(x_q))`. That is the
+prediction; :meth:`~rfmap.Surrogate.map` then finishes the map with the stages of :mod:`rfmap.finish` (regrid,
+refine, repair, polish, judge, shorten), which also report what they did (``MapResult.info``).
 """
 from __future__ import annotations
 
@@ -50,6 +51,7 @@ __all__ = ["Surrogate", "models", "MapOptions", "PredictOptions", "PoorMapWarnin
 #: on the book's page *Design decisions*.  An explicit ``work_n`` is used as given, and with ``polish`` a folded map
 #: starts the flow cold at once.
 REGRID_DIMS = (3,)
+#: The step, in grid sides, between the coarser working grids that a folded map is tried on (:data:`REGRID_DIMS`).
 REGRID_STEP = 4
 
 WEIGHTS_DIR = Path(__file__).resolve().parent / "weights"

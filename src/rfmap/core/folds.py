@@ -30,7 +30,8 @@ def fold_free(points: np.ndarray, elements: np.ndarray, *, grid_n: int | None = 
               boundary: str = "fixed") -> bool:
     """True when every element has positive measure (and, for a free 2D grid boundary, the boundary is simple).
 
-    ``grid_n``: the mesh is :func:`rfmap.core.mesh.grid_mesh` ``(N, d)`` and the strided measures are used (fast path).
+    ``grid_n``: the mesh is :func:`grid_mesh(N, d) <rfmap.core.mesh.grid_mesh>` and the strided measures are used
+    (fast path).
     """
     if not np.isfinite(points).all():
         return False

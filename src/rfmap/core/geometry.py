@@ -178,7 +178,7 @@ def grid_measure_coefficients(ref: Tensor, disp: Tensor, n: int) -> list[tuple[t
     Parameters
     ----------
     ref : Tensor, shape (N**d, d)
-        The vertices of :func:`rfmap.core.mesh.grid_mesh` ``(N, d)`` (a uniform grid, in grid order).
+        The vertices of :func:`grid_mesh(N, d) <rfmap.core.mesh.grid_mesh>` (a uniform grid, in grid order).
     disp : Tensor, shape (N**d, d)
         The displacement :math:`D` at the vertices.
 

@@ -4,7 +4,7 @@ Densities are normalised to unit mass with the vertex quadrature weights of :fun
 (:math:`\int p = \sum_v w_v p_v` for the piecewise-linear interpolant); :func:`.preprocess_density` shifts a density to
 minimum 0.1, then scales it to unit mass.  The paper (Sec. 5.2) says only that a density is shifted to be strictly
 positive; the value 0.1 is our inference, supported by the test densities' Std(ρ̃_orig), which then agrees with the
-paper's to all six digits it prints (the chapter on density-equalizing maps in 2D glues the difference).
+paper's to all six digits it prints (the chapter on density-equalizing maps in 2D reports the difference).
 """
 from __future__ import annotations
 

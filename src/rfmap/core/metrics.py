@@ -86,8 +86,8 @@ def element_population(ref, elements, density, measures: torch.Tensor | None = N
                        grid_n: int | None = None) -> torch.Tensor:
     """Population of every element: mean vertex density times reference measure, shape (..., m).  ``measures``:
     the reference measures (m,) when the caller has them already; ``grid_n``: the mesh is
-    :func:`rfmap.core.mesh.grid_mesh` ``(N, d)`` and ``density`` has shape (N**d,) (the means then come from strided
-    views, :func:`rfmap.core.geometry.grid_element_mean`)."""
+    :func:`grid_mesh(N, d) <rfmap.core.mesh.grid_mesh>` and ``density`` has shape (N**d,) (the means then come from
+    strided views, :func:`rfmap.core.geometry.grid_element_mean`)."""
     ref, dens = _t(ref), _t(density)
     el = torch.as_tensor(np.asarray(elements)).long()
     if grid_n and dens.ndim == 1:

@@ -20,9 +20,9 @@ class FinishOptions:
     Attributes
     ----------
     refine : bool
-        Weight refinement of the map's displacement (paper Sec. 4.3; :func:`rfmap.finish.stages.refine`).  A
-        network's map is refined as it is predicted (every working grid that :func:`rfmap.finish.stages.regrid`
-        tries is), not by :func:`finish`.
+        Weight refinement of the map's displacement (paper Sec. 4.3; :func:`rfmap.finish.stages.refine`).  In
+        :meth:`rfmap.Surrogate.map` a network's map is refined as it is predicted (every working grid that
+        :func:`rfmap.finish.stages.regrid` tries is), not by :func:`finish`; :func:`finish_map` refines any map.
     refine_bounds : (float, float), optional
         Search interval of every component of the stretching vector (default :data:`rfmap.finish.refine.REFINE`).
     repair : bool
@@ -60,6 +60,9 @@ class FinishOptions:
 
 def finish(draft: Draft, options: FinishOptions = FinishOptions()) -> Draft:
     """The stages after the map is computed: refine, repair, then polish, or for a density map judge and shorten.
+
+    :meth:`rfmap.Surrogate.map` calls it with ``refine`` off: a network's map arrives refined when refinement is asked
+    for (``FinishOptions.refine``).
 
     A density map of a grid without ``polish`` is judged (:func:`rfmap.finish.stages.judge`); with ``repair`` a density
     map of a grid or a network's map of query points is shortened when it is no more equal than its input.

@@ -41,6 +41,8 @@ def fno_available() -> bool:
 class FNONet(nn.Module):
     r"""``neuraloperator``'s FNO as a displacement network :math:`\psi = \mathcal{N}_\theta(x, p)`.
 
+    Shapes: ``(B, d + m, *S) -> (B, d, *S)``, any uniform grid with every side >= :attr:`min_size`.
+
     Parameters
     ----------
     dim : int
@@ -55,8 +57,6 @@ class FNONet(nn.Module):
         Number of Fourier layers.
     padding : float
         Zero padding on each side before the Fourier layers, as a fraction of the side (non-periodic domain).
-
-    Shapes: ``(B, d + m, *S) -> (B, d, *S)``, any uniform grid with every side >= :attr:`min_size`.
     """
 
     arch = "fno"

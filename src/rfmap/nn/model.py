@@ -30,10 +30,13 @@ def check_input(net: nn.Module, x: Tensor) -> None:
 class MultiResUNet(nn.Module):
     r"""Resolution-free encoder–decoder :math:`\mathcal{N}_\theta` producing a displacement field :math:`\psi`.
 
-    Input encoding (paper Sec. 4.1): channels :math:`[x_1, \dots, x_d, p_1, \dots, p_m]` on a grid of any size.
+    Input encoding (paper Sec. 4.1): channels :math:`[x_1, \dots, x_d, p_1, \dots, p_m]` on a grid of any size, the
+    field in its task's encoding (:math:`\log p` for a density, :mod:`rfmap.tasks.density`).
     Multi-resolution lifting, ``depth`` encoder stages of :class:`EnhancedDoubleConv` with 2x average pooling,
     transposed-convolution upsampling with interpolation wherever sizes do not match the skip connection, and a
     zero-initialised 1x1 head (so the untrained model is the identity map).
+
+    Shapes: ``(B, d + m, *S) -> (B, d, *S)``, any grid with every side >= :attr:`min_size` (``2 ** depth + 1``).
 
     Parameters
     ----------
@@ -45,8 +48,6 @@ class MultiResUNet(nn.Module):
         Channels of the first stage (doubled at every stage).
     depth : int
         Number of poolings.
-
-    Shapes: (B, d + m, *S) -> (B, d, *S), any S with every side >= 2.
     """
 
     def __init__(self, dim: int = 2, n_params: int = 1, base: int = 16, depth: int = 3, attention: bool = True):

@@ -22,7 +22,7 @@ STYLE = {
 }
 
 
-#: width of the book's text column in CSS pixels: a wider image is shown scaled down to it
+#: width of the book's text column in CSS pixels; a wider image is shown scaled down to it
 TEXT_COLUMN_PX = 720
 
 #: the smallest text a reader should have to read, in points, as the figure is shown in the text column
@@ -62,7 +62,7 @@ def style():
         yield
 
 
-#: the most labelled ticks on a colour bar (at round steps): fewer, shorter labels, set at the text size of the figure
+#: the most labelled ticks on a colour bar (at round steps), so that fewer, shorter labels fit at the figure's text size
 COLORBAR_TICKS = 5
 
 
