@@ -9,8 +9,8 @@ was trained on, encoded as :math:`[x, p(x)]` with :math:`p` in its task's encodi
 where the paper writes :math:`p`; :mod:`rfmap.tasks.density`), and mapped to a displacement :math:`\psi` on that
 grid; :math:`\psi` is interpolated (bi/trilinearly) to the requested points :math:`x_q`, which may form any grid or
 an unstructured cloud, and :math:`u(x_q) = x_q + \mathcal{B}(x_q) \odot (\alpha \odot \psi(x_q))`. That is the
-prediction; :meth:`~rfmap.Surrogate.map` then finishes the map with the stages of :mod:`rfmap.finish` (regrid,
-refine, repair, polish, judge, shorten), which also report what they did (``MapResult.info``).
+prediction; :meth:`~rfmap.Surrogate.map` then finishes the map with the stages of :mod:`rfmap.finish` (refine,
+regrid, repair, polish, judge, shorten), which also report what they did (``MapResult.info``).
 """
 from __future__ import annotations
 

@@ -1,11 +1,12 @@
 r"""Finishing a computed map: the stages between a network's (or a classical solver's) map and the one returned.
 
 A map is predicted (:meth:`rfmap.Surrogate.map`: field, displacement, map of the output mesh) or solved
-(:mod:`rfmap.solvers`); then a sequence of stages, each a function from a :class:`.Draft` (the map and the report
-of what was done to it) to the next, finishes it:
+(:mod:`rfmap.solvers`); then a sequence of stages, in this order, each a function from a :class:`.Draft` (the map
+and the report of what was done to it) to the next, finishes it:
 
-* :func:`~rfmap.finish.stages.regrid` -- a folded network map tried on coarser working grids;
 * :func:`~rfmap.finish.stages.refine` -- weight refinement of the stretching vector (paper Sec. 4.3);
+* :func:`~rfmap.finish.stages.regrid` -- in 3D, a folded network map tried on coarser working grids, each map
+  refined too when refinement is on;
 * :func:`~rfmap.finish.stages.repair` -- the map made fold-free;
 * :func:`~rfmap.finish.stages.polish` -- a density map finished by the flow-based solver;
 * :func:`~rfmap.finish.stages.judge` -- whether a density map is more equal than its input
