@@ -198,9 +198,11 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     assert c.comparable("sin-cos") and not c.comparable("rect-peak")
     assert c.met("rect-peak", "std_rho_map") is None and c.count("std_rho_map") == (1, 1)
     v = c.score_values()
-    assert v["verdict"] == "reproduced (1 of 1; n/c case worse by Std ratio)"  # 0.12 / 0.6 against 0.09 / 0.48
+    # 0.12 / 0.6 against 0.09 / 0.48
+    assert v["verdict"] == "reproduced on the comparable cases (1 of 1); the n/c case is worse by Std ratio"
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.09
-    assert c.verdict_word() == "reproduced (1 of 1; n/c case not worse by Std ratio)"
+    assert c.verdict_word() == (
+        "reproduced on the comparable cases (1 of 1); the n/c case is not worse by Std ratio")
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.12
     # the means beside the verdict are over the comparable case only
     assert (v["std_rho_map_native"], v["std_rho_map_paper"]) == ("0.07000", "0.08000")
@@ -210,7 +212,8 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     assert c.to_markdown().splitlines()[4].endswith(
         "| n/c; Std ratio: paper's method 0.2, paper 0.187 |")
     c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses
-    assert c.score_values()["verdict"] == "not reproduced (0 of 1; n/c case worse by Std ratio)"
+    assert c.score_values()["verdict"] == (
+        "not reproduced on the comparable cases (0 of 1); the n/c case is worse by Std ratio")
 
 
 def test_verdict_words_follow_the_stated_rule():

@@ -38,7 +38,7 @@ from ..core.result import MapResult
 from .reproduce import beltrami_values, density_values, exact_beltrami_result
 from ..core.wording import of_count
 from .tables import one_notation, paper_table, power_of_ten, printed_digits
-from .verdicts import is_comparable, std_ratio, verdict
+from .verdicts import is_comparable, qualified_verdict, std_ratio
 
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
            "timed", "compare_density", "compare_beltrami", "compare_models", "population_comparison",
@@ -209,16 +209,13 @@ class Comparison:
         return is_comparable(c.field, n, paper_std)
 
     def verdict_word(self) -> str:
-        """The verdict (:func:`rfmap.paper.verdicts.verdict`), its count of (case, metric) pairs and, for each n/c
-        case, whether its Std ratio is worse than the paper's: ``'reproduced (3 of 3; n/c case worse by Std ratio)'``"""
+        """The verdict with its count and the n/c qualifier (:func:`rfmap.paper.verdicts.qualified_verdict`):
+        ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'``"""
         flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
-        known = [f for f in flags if f is not None]
-        notes = [f"{sum(known)} of {len(known)}"] if known else []
         ratios = [[std_ratio(self.value(c.name, m, "std_rho_map"), self.value(c.name, m, "std_rho_orig"))
                    for m in ("native", "paper")] for c in self.cases if not self.comparable(c.name)]
-        notes += [f"n/c case {'worse' if a > b else 'not worse'} by Std ratio" for a, b in ratios
-                  if a is not None and b is not None and "std_rho_map" in self.metrics]
-        return verdict(flags) + (f" ({'; '.join(notes)})" if notes else "")
+        worse = [a > b for a, b in ratios if a is not None and b is not None and "std_rho_map" in self.metrics]
+        return qualified_verdict(flags, worse)
 
     def _case_met(self, case: str, metric: str) -> str:
         """A met cell: ``yes``/``no``/``—``, or ``n/c; Std ratio: paper's method R, paper P`` for an input not the paper's."""

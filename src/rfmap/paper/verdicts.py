@@ -26,7 +26,7 @@ from ..core.mesh import grid_mesh
 from ..core.metrics import compute_metrics
 from ..fields.paper import get_field, sample_density
 
-__all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "input_std", "is_comparable", "std_ratio", "verdict"]
+__all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "input_std", "is_comparable", "std_ratio", "verdict", "qualified_verdict"]
 
 #: relative agreement of the input's Std(rho~_orig) with the paper's for a case to count as the paper's input (the
 #: paper prints six digits; the inputs rebuilt from its formulas agree to 3e-4 or better)
@@ -93,3 +93,27 @@ def verdict(met: list[bool | None]) -> str:
         return "not comparable"
     k = sum(flags)
     return "reproduced" if k == len(flags) else ("partly" if k else "not reproduced")
+
+
+def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None) -> str:
+    """The verdict of :func:`verdict` with its count of (case, metric) pairs and, where the item has cases whose
+    input is not the paper's (n/c), the qualifier on the word itself: whether each n/c case's Std ratio
+    (:func:`std_ratio`) is worse than the paper's (``nc_worse``, one flag per n/c case).
+
+    Examples
+    --------
+    >>> qualified_verdict([True, False])
+    'partly (1 of 2)'
+    >>> qualified_verdict([True, True, True], [True])
+    'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'
+    """
+    flags = [m for m in met if m is not None]
+    count = f" ({sum(flags)} of {len(flags)})" if flags else ""
+    if not nc_worse:
+        return verdict(flags) + count
+    if len(nc_worse) == 1:
+        nc = f"the n/c case is {'worse' if nc_worse[0] else 'not worse'}"
+    else:
+        nc = f"{sum(nc_worse)} of the {len(nc_worse)} n/c cases are worse"
+    scope = " on the comparable cases" if flags else ""
+    return f"{verdict(flags)}{scope}{count}; {nc} by Std ratio"
