@@ -67,8 +67,7 @@ from .metrics import MIN_SHARE, SLIVER_GAP, CartogramMetrics, boost, cartogram_m
 from ..core.mesh import check_grid_memory, check_n
 from ..core.wording import counted
 from .options import CartogramOptions
-from .methods import DIFFUSION_SETTINGS, FLOW_BLUR, FLOW_MAX_N, FLOW_SETTINGS, HYBRID_POLISH, MAX_N, METHODS, \
-    CartogramMethod, get_method
+from .methods import FLOW_BLUR, FLOW_MAX_N, HYBRID_POLISH, MAX_N, METHODS, CartogramMethod, get_method
 from .passmap import at_points as _at_points
 from .output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
 from .projection import PlanarFrame
@@ -90,8 +89,6 @@ __all__ = [
     "montreal_election",
     "world_countries",
     "MONTREAL_CANDIDATES",
-    "DIFFUSION_SETTINGS",
-    "FLOW_SETTINGS",
     "HYBRID_POLISH",
     "ZERO_FLOOR",
     "OUTPUTS",

@@ -5,12 +5,12 @@ when they prepare their surrogate."""
 from __future__ import annotations
 
 from .base import MAX_N, CartogramMethod
-from .diffusion import DIFFUSION_SETTINGS, DiffusionMethod
-from .flow import FLOW_BLUR, FLOW_MAX_N, FLOW_SETTINGS, FlowMethod
+from .diffusion import DiffusionMethod
+from .flow import FLOW_BLUR, FLOW_MAX_N, FlowMethod
 from .neural import HYBRID_POLISH, HybridMethod, SurrogateMethod
 
 __all__ = ["METHODS", "ALIASES", "get_method", "CartogramMethod", "MAX_N", "FLOW_MAX_N", "FLOW_BLUR",
-           "FLOW_SETTINGS", "DIFFUSION_SETTINGS", "HYBRID_POLISH"]
+           "HYBRID_POLISH"]
 
 #: The cartogram methods by name, in the order the command line lists them
 METHODS: dict[str, type[CartogramMethod]] = {m.name: m for m in (DiffusionMethod, FlowMethod, SurrogateMethod,

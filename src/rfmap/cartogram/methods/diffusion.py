@@ -7,19 +7,16 @@ import numpy as np
 from ...solvers import cartodiffusion
 from .base import CartogramMethod
 
-__all__ = ["DiffusionMethod", "DIFFUSION_SETTINGS"]
-
-#: Settings of :func:`rfmap.solvers.solve_dem` on a cartogram's raster (which holds cell means: ``refine=1``,
-#: :doc:`Design decisions </book/design>`); stop at a remaining displacement of 1 % of a cell (``tol_end``, used by the
-#: cartograms' own torch-free diffusion, :func:`rfmap.solvers.cartodiffusion.diffusion_square`, too).
-DIFFUSION_SETTINGS = {"refine": 1, "tol_end": 1e-2}
+__all__ = ["DiffusionMethod"]
 
 
 class DiffusionMethod(CartogramMethod):
-    """``"diffusion"`` (also ``"dem"``): the classical diffusion DEM, carrying the vertices."""
+    """``"diffusion"`` (also ``"dem"``): the classical diffusion DEM, carrying the vertices; it stops at a remaining
+    displacement of 1 % of a vertex spacing (the default ``tol_end`` of
+    :class:`rfmap.solvers.cartodiffusion.CartoDiffusionOptions`)."""
 
     name = "diffusion"
 
     def _map(self, density: np.ndarray, points: np.ndarray, solver_kw: dict):
-        opts = cartodiffusion.CartoDiffusionOptions(**{"tol_end": DIFFUSION_SETTINGS["tol_end"], **solver_kw})
+        opts = cartodiffusion.CartoDiffusionOptions(**solver_kw)
         return cartodiffusion.diffusion_square(density, opts, points=points)

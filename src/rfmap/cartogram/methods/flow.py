@@ -7,7 +7,7 @@ import numpy as np
 from ...solvers import cartoflow
 from .base import CartogramMethod
 
-__all__ = ["FlowMethod", "FLOW_MAX_N", "FLOW_BLUR", "FLOW_SETTINGS"]
+__all__ = ["FlowMethod", "FLOW_MAX_N", "FLOW_BLUR"]
 
 #: The default ``max_n`` of the flow method, whose passes cost little more on a finer raster (they carry the
 #: polygons' vertices, whose count ``SPLIT_MAX_N`` of :mod:`rfmap.cartogram.resize` bounds): a county map's smallest judged
@@ -16,10 +16,6 @@ FLOW_MAX_N = 2048
 #: Blur (vertex spacings) of the flow's first pass, halved at every further pass (and none below a quarter): a
 #: coast's jump of density, sampled by the grid, otherwise bends the outline between nearby vertices into folds
 FLOW_BLUR = 1.0
-#: Settings of ``solve_dem(method="flow")`` on a cartogram's raster: one flow per pass (``tol=0``: passes stop on area
-#: errors), on the vertex grid (``refine=1``; :doc:`Design decisions </book/design>`).  The cartogram itself carries the
-#: vertices by the torch-free :func:`rfmap.solvers.cartoflow.flow_square`.
-FLOW_SETTINGS = {"refine": 1, "tol": 0.0}
 
 
 class FlowMethod(CartogramMethod):

@@ -9,7 +9,8 @@ from .base import CartogramMethod
 __all__ = ["SurrogateMethod", "HybridMethod", "HYBRID_POLISH"]
 
 #: The hybrid's polish tolerance on Std(rho~_map) (``Surrogate.map(polish=...)``): far below any raster's variation,
-#: so that every pass runs its flow, for the reason of :data:`rfmap.cartogram.methods.flow.FLOW_SETTINGS`' ``tol=0``.
+#: so that every pass runs its flow: the cartogram's passes stop on the regions' area errors, and a polish that
+#: stopped early on a nearly uniform raster would leave small regions' areas unconverged.
 #: The polish runs on the raster's vertex grid (the network's map resampled to it), where the area errors are judged
 #: (:doc:`Design decisions </book/design>`).
 HYBRID_POLISH = 1e-9
