@@ -2,8 +2,9 @@ r"""The paper's tables as functions: each runs our surrogate and the classical s
 row beside them, returning a :class:`~rfmap.paper.tables.Table` and the computed maps for plotting; :func:`reproduce`
 writes one experiment's tables (``rfmap reproduce``).
 
-Times are wall-clock seconds on the machine that runs them; the paper's times were measured on a GPU, so only
-ratios measured in one run (``speedup`` = classical time / surrogate time) are comparable.
+Times are wall-clock seconds on the machine that runs them.  The paper names an NVIDIA RTX A6000 GPU for its
+training runs but does not say on what hardware the times in its tables were measured, so only ratios measured in
+one run (``speedup`` = classical time / surrogate time) are comparable.
 """
 from __future__ import annotations
 
