@@ -106,6 +106,7 @@ def test_headings_and_the_table_of_decisions_show_no_python_reprs():
     by = {d["constant"]: d for d in load_decisions()}
     assert readable_value(by["SMOOTH_PASSES"]).startswith("2D, square boundary: 2; 3D, square boundary: 8")
     assert readable_value(by["RTOL"]) == "2D: 0.2; 3D: 0.4" and readable_value(by["HYBRID_POLISH"]) == "10⁻⁹"
+    assert "| maps scored (lower is better) | step 7,000 | step 1,000 |" in page, "a decision's own column heads"
     assert display_name(by["_HARD2 (p_hard)"]) == "Share of hard fields in 2D training"
     assert "**Value:** 0.3 (`rfmap.training.config._HARD2.p_hard`)\n" in page
     assert display_name(by["RTOL"]) == "`RTOL`"

@@ -8,7 +8,8 @@ tried, the ``criterion``, the ``data`` it was measured on, the ``results`` (rows
 what the keys of a dict value (or the items of a tuple) are, ``"dimension"``, ``"boundary"`` or ``"option"``, so
 that the page can show the value readably (:func:`readable_value`); ``finding`` records where the numbers do not
 support the chosen value: its ``text``, the ``rows`` (by ``case``) that show it and, optionally, ``next``, what is to
-be done before the constant is changed.  The page shows a finding in the decision's section (:func:`finding`).  Every decision also
+be done before the constant is changed; ``columns`` gives the heads of the decision's table (three, for the rows'
+``case``, ``chosen`` and ``alternative``) where the default heads do not fit its rows.  The page shows a finding in the decision's section (:func:`finding`).  Every decision also
 says in plain words what it controls (``purpose``), what the measurement showed (``outcome``) and, unless it has a
 finding, why the value is kept (``kept``): the page's one table of decisions (:func:`kept_text`).
 
@@ -213,9 +214,12 @@ def _one_sided(rows: list[dict[str, Any]]) -> bool:
     return all(bool(r.get("chosen")) != bool(r.get("alternative")) for r in rows)
 
 
-def _rows_table(rows: list[dict[str, Any]]) -> list[str]:
+def _rows_table(rows: list[dict[str, Any]], columns: list[str] | None = None) -> list[str]:
     """A decision's numbers as a table: per case, what the chosen value gave and what the alternatives gave; where
-    every row is the result of one setting or one case, a table of two columns, whose rows name the setting."""
+    every row is the result of one setting or one case, a table of two columns, whose rows name the setting.
+    ``columns``, the decision's own three heads, replaces the default ones and keeps all three columns."""
+    if columns:
+        return ["| " + " | ".join(columns) + " |", "| --- | --- | --- |"] + [_row_text(r) for r in rows]
     if _one_sided(rows):
         return ["| setting or case | result |", "| --- | --- |"] + \
             [plain_numbers(f"| {_cell(r.get('case'))} | {_cell(r.get('chosen') or r.get('alternative'))} |")
@@ -259,7 +263,7 @@ def finding(d: dict[str, Any]) -> list[str]:
     if shown:
         text += " " + ("The row that shows it:" if len(shown) == 1 else "The rows that show it:")
     end = f"The constant is left as it is until it has been {_waits(d)}."
-    return [":::{warning}", text, ""] + (_rows_table(shown) + [""] if shown else []) + [end, ":::", ""]
+    return [":::{warning}", text, ""] + (_rows_table(shown, d.get("columns")) + [""] if shown else []) + [end, ":::", ""]
 
 
 def _cell(text: Any) -> str:
@@ -311,7 +315,7 @@ def _details(d: dict[str, Any]) -> list[str]:
     quoted = set((d.get("finding") or {}).get("rows", []))  # shown in the warning above: not repeated here
     rest = [r for r in d.get("results") or [] if r.get("case") not in quoted]
     if rest:
-        lines += (["The other rows:", ""] if quoted else []) + _rows_table(rest) + [""]
+        lines += (["The other rows:", ""] if quoted else []) + _rows_table(rest, d.get("columns")) + [""]
     if d.get("notes"):
         lines += [plain_numbers(d["notes"]), ""]
     lines += [f"In the code: `{d['module']}`. {plain_numbers(d['what'])}", "", "::::", ""]
