@@ -4,12 +4,16 @@ By default training needs no solved maps: a density model learns from its densit
 from the difference between its map's coefficient and the input coefficient (the paper computes ground-truth maps
 for its Beltrami training, though its loss compares coefficients only).
 
-One concept per module: :mod:`~rfmap.training.data` draws the batches (sample ``i`` of step ``t`` seeded by
-``(seed, t, i)``, on a random grid side in ``n_range``) in a thread or in worker processes;
-:mod:`~rfmap.training.averaging` keeps an exponential moving average of the weights (``--ema``);
-:mod:`~rfmap.training.state` holds the run's state, its checkpoint and the lineage of warm starts (``--init``);
-:mod:`~rfmap.training.loop` runs the steps, validates, chooses and writes the shipped weights; and
-:mod:`~rfmap.training.cli` is ``rfmap train`` (also ``python -m rfmap.training``).
+One concept per module: :mod:`~rfmap.training.config` holds the configurations and their scale presets;
+:mod:`~rfmap.training.data` draws the batches (sample ``i`` of step ``t`` seeded by ``(seed, t, i)``, on a random
+grid side in ``n_range``) in a thread or in worker processes; :mod:`~rfmap.training.averaging` keeps an exponential
+moving average of the weights (``--ema``); :mod:`~rfmap.training.state` holds the run's state and its checkpoint,
+with the parent a warm start (``--init``) came from; :mod:`~rfmap.training.loop` runs the steps, validates, chooses
+and writes the shipped weights; :mod:`~rfmap.training.validation` draws the held-out fields and scores them;
+:mod:`~rfmap.training.selection` chooses among saved weights after a run (``rfmap validate``);
+:mod:`~rfmap.training.lineage` traces the chain of runs behind a weight file; :mod:`~rfmap.training.records` reads
+the budgets and studies of the book; and :mod:`~rfmap.training.cli` is ``rfmap train`` (also
+``python -m rfmap.training``).
 """
 from ..core.device import resolve_device
 from .averaging import WeightAverage
