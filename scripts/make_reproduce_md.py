@@ -174,13 +174,28 @@ def _repeat_cost(metas: dict, shipped: dict[str, str]) -> list[str]:
             "run for as long but not for as many steps: it gives comparable weights of the same recipe, not "
             "identical ones, and step counts that differ from those in the table. "
             f"Repeating every model from its shipped parent means repeating {len(runs)} runs "
-            f"({min(per_model)} to {max(per_model)} per model), {_hours(wall)} of wall time in all. "
+            f"({min(per_model)} to {max(per_model)} per model), {_hours(wall)} of wall time in all"
+            f"{_from_shipped(metas, shipped)}. "
             f"The {len(known)} runs that recorded their thread count used {_hours(cpu)} of CPU time "
             f"({_hours(sum(w for w, _ in known))} of wall time)")
     if unknown:
         text += (f"; the other {len(unknown)} ran {_hours(sum(unknown))} on PyTorch's default threads, all the "
                  "cores of their machine")
     return [text + ".", ""]
+
+
+def _from_shipped(metas: dict[str, dict], shipped: dict[str, str]) -> str:
+    """The clause that says why the repeat's wall time is less than the sum of the chains' wall times: a model whose
+    repeat starts from another shipped model counts only the runs after that model (empty when there is none)."""
+    later = [m for m, meta in metas.items()
+             if (start := shipped_ancestor(meta, shipped)) and start[1] in metas and start[1] != m]
+    if not later:
+        return ""
+    names = later[0] if len(later) == 1 else ", ".join(later[:-1]) + " and " + later[-1]
+    verb = "counts only the runs after the shipped model it starts from" if len(later) == 1 else \
+        "count only the runs after the shipped model each starts from"
+    return (f" ({names} {verb}, so this is less than the sum of the table's wall times, which count every run of a "
+            "chain)")
 
 
 def parents_first(metas: dict[str, dict], shipped: dict[str, str]) -> dict[str, dict]:
