@@ -38,7 +38,8 @@ VERDICTS = ("reproduced", "partly", "not reproduced", "not comparable")
 #: :meta hide-value:
 VERDICT_RULE = (
     "*reproduced*: the paper's method meets the paper in every scored metric of every case whose input is the "
-    "paper's; *partly*: in some of them; *not reproduced*: in none; *not comparable*: no case has the paper's input. "
+    "paper's; *partly*: in some of them; *not reproduced*: in none; *not comparable*: no case has the paper's "
+    "input, or the paper gives none. "
     "A case's input is the paper's when its Std(ρ̃_orig) on the paper's grid agrees with the paper's to "
     f"within {COMPARABLE_RTOL * 100:g} %; a case whose input differs is marked *not comparable* (*n/c*) and "
     "compared instead by Std(ρ̃_map) / Std(ρ̃_orig), the share of the input's spread the map leaves.")
