@@ -104,7 +104,9 @@ def generalization_summary(table: Table, column: str = "mean") -> str:
             best, ref = min(vals[m] for m in ours if vals.get(m) is not None), vals.get(classical)
             cells += [format_sig(ref), f"{best / ref:.3g}×" if ref else "—"]
         lines.append("| " + " | ".join(cells) + " |")
-    return f"**{table.title}**: {column} per kind of field, lower is better\n\n" + "\n".join(lines)
+    kinds = list(dict.fromkeys(c for c, _, _ in table.rows))
+    over = "over all its fields" if kinds == ["all"] else "per kind of field"
+    return f"**{table.title}**: {column} {over}, lower is better\n\n" + "\n".join(lines)
 
 
 def pivot_markdown(columns: dict, column: str = "mean", title: str = "") -> str:
