@@ -178,6 +178,10 @@ def vertex_error_panels(results: dict, exact, *, n: int, title: str = ""):
         im = ax.imshow(e.T, origin="lower", extent=(0, 1, 0, 1), vmin=0, vmax=hi, cmap="magma")
         ax.set_title(f"{title} {name}: mean {format_sig(float(e.mean()), 3)}".strip())
         ax.set_aspect("equal")
+        ax.set_xticks([0, 0.5, 1], labels=["0", "0.5", "1"])
+        ax.set_yticks([0, 0.5, 1], labels=["0", "0.5", "1"])
+        # the panels share the unit square: the y labels of the first only, so no label meets its neighbour's
+        ax.tick_params(labelleft=ax is axes[0][0])
     add_colorbar(im, fig=fig, ax=axes[0].tolist(), shrink=0.85, label="vertex error")
     return fig
 
