@@ -208,8 +208,9 @@ CRITERION = (
     "on the requested grid, then the paper's weight refinement, nothing else "
     "(`Surrogate.map(field, n, native=True, refine=True, repair=False)`). Beside it stand the {term}`delivered map` "
     "(`Surrogate.map(field, n, refine=True, symmetrize=True)`) and the fastest {term}`classical solver` of the "
-    "project on the same mesh. Times are not scored: the paper's were measured on a GPU; each chapter times the "
-    "network and the classical solver on the same CPU in the same run."
+    "project on the same mesh. Times are not scored: the paper does not say on what hardware its times were "
+    "measured (it names a GPU for training); each chapter times the network and the classical solver on the same "
+    "CPU in the same run."
 )
 
 

@@ -16,8 +16,8 @@ lower is better.  For each case this module puts four values side by side:
     (``solve_dem(..., method="flow")``) or the Linear Beltrami Solver.
 
 A case *meets* the paper when the paper's method is at most the paper's value: :math:`v_{\text{native}} \le
-v_{\text{paper}}`.  Times are kept beside the accuracies (the fastest of a few runs after a warm-up); the paper's
-were measured on a GPU, so only the ratios measured in one run compare.
+v_{\text{paper}}`.  Times are kept beside the accuracies (the fastest of a few runs after a warm-up); the paper
+does not say where its times were measured (it names a GPU for training), so only ratios measured in one run compare.
 """
 from __future__ import annotations
 
