@@ -26,10 +26,12 @@ from ..core.mesh import grid_mesh
 from ..core.metrics import compute_metrics
 from ..fields.paper import get_field, sample_density
 
-__all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "input_std", "is_comparable", "std_ratio", "verdict", "qualified_verdict"]
+__all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "input_std", "is_comparable", "std_ratio",
+           "verdict", "qualified_verdict"]
 
 #: relative agreement of the input's Std(rho~_orig) with the paper's for a case to count as the paper's input (the
-#: paper prints six digits; the inputs rebuilt from its formulas agree to 3e-4 or better)
+#: paper prints six digits; the inputs rebuilt from its complete formulas agree well within it, while the two it
+#: describes too loosely to rebuild, rect-peak and prism-peak-3d, miss it by far and are not comparable)
 COMPARABLE_RTOL = 1e-3
 #: the verdict words, best first
 VERDICTS = ("reproduced", "partly", "not reproduced", "not comparable")
