@@ -260,10 +260,8 @@ def residual_scales(ref, mapped, elements, density) -> dict[str, float]:
 
     Parameters
     ----------
-    ref, mapped : array, shape (n, d)
-    elements : array of int, shape (m, d+1)
-    density : array, shape (n,)
-        Vertex densities (any positive scale).
+    ref, mapped, elements, density
+        As for :func:`residual_parts`.
 
     Returns
     -------
