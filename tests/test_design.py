@@ -108,7 +108,8 @@ def test_headings_and_the_table_of_decisions_show_no_python_reprs():
     assert readable_value(by["RTOL"]) == "2D: 0.2; 3D: 0.4" and readable_value(by["HYBRID_POLISH"]) == "10⁻⁹"
     assert "| maps scored (lower is better) | step 7,000 | step 1,000 |" in page, "a decision's own column heads"
     assert display_name(by["_HARD2 (p_hard)"]) == "Share of hard fields in 2D training"
-    assert "**Value:** 0.3 (`rfmap.training.config._HARD2.p_hard`)\n" in page
+    assert "**Value:** 0.3 (training config key `density_field.p_hard` of " in page
+    assert "._HARD" not in page and "._FOLD" not in page, "a private name on the page"
     assert display_name(by["RTOL"]) == "`RTOL`"
     assert not [h for h in headings if h.startswith("### `_")], "a private name as a heading"
     assert display_name(by["validation score"]) == "validation score"
@@ -151,6 +152,15 @@ def test_every_decision_says_in_plain_words_what_it_is_for_and_why_it_stays():
     page = to_markdown()
     glance = page[page.index("## At a glance"):page.index("## The decisions one by one")]
     assert glance.count("\n- [") == len(load_decisions())
+    assert f"This page records {len(load_decisions())} such decisions." in page
+    # a section gives its criterion and outcome outside the collapsed block, not the overview's one-liner again
+    for d in load_decisions():
+        section = page[page.index(f"### {display_name(d)}\n"):]
+        head = section[:section.index("::::{dropdown}")]
+        assert f"**Criterion:** {d['criterion']}." in head and "**Outcome:**" in head, d["constant"]
+        assert d["purpose"] not in head, d["constant"]
+        if d.get("alternatives_per_case"):
+            assert "**Tried per case:** see the table." in section[:section.index("\n::::\n")]
     for d in load_decisions():
         assert d.get("purpose") and d.get("outcome") and (d.get("kept") or d.get("finding")), d["constant"]
         words = re.sub(r"\b[23]D\b|chapter \d+|counted as 1", "", d["purpose"] + d["outcome"] + d.get("kept", ""))
