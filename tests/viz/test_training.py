@@ -34,9 +34,9 @@ def test_learning_curves_mark_the_budget_and_tolerate_old_metadata():
 def test_learning_curves_can_draw_the_selection_score():
     """With ``score`` the validation panel draws the score that chose the kept weights, not the plain mean that a
     folded map inflates, and a star marks the kept weights at their step with the value the metadata records."""
-    val = [{"step": 0, "std_rho_map": 9.0, "penalized": 0.3, "capped": 0.3},
+    val = [{"step": 0, "std_rho_map": 9.0, "penalized": 0.3, "capped": 0.3, "folded_fields": 1},
            {"step": 100, "std_rho_map": 0.2, "penalized": 0.2, "capped": 0.2},
-           {"step": 200, "std_rho_map": 40.0, "penalized": 0.35, "capped": 0.3},
+           {"step": 200, "std_rho_map": 40.0, "penalized": 0.35, "capped": 0.3, "folded_fields": 2},
            {"step": 200, "std_rho_map": 0.2, "penalized": 0.2, "capped": 0.2}]
     meta = {"steps": 200, "cumulative_steps": 1200, "selected_step": 100,
             "history": {"step": [50, 200], "loss": [1.0, 0.5], "validation": val}}
@@ -46,6 +46,10 @@ def test_learning_curves_can_draw_the_selection_score():
     assert list(line.get_ydata()) == [0.3, 0.2, 0.35] and list(line.get_xdata()) == [1000, 1100, 1200]
     assert list(star.get_xdata()) == [1100] and list(star.get_ydata()) == [0.2] and star.get_marker() == "*"
     assert "folds as no map" in ax_val.get_ylabel()
+    assert len(ax_val.lines) == 2  # no open circles on the penalized score unless asked for
+    ax_marked = learning_curves({"m": meta}, {"m": 100}, score=True, mark_folded=True).axes[1]
+    opened = [ln for ln in ax_marked.lines if ln.get_markerfacecolor() == "white"]
+    assert [list(ln.get_xdata()) for ln in opened] == [[1000, 1200]] and "○" in ax_marked.get_title()
     small = {"steps": 10, "selected_step": 10, "history": {"step": [10], "loss": [1.0], "validation": [
         {"step": 0, "mean_dd": 7e-4, "penalized": 7e-4}, {"step": 10, "mean_dd": 6e-4, "penalized": 6e-4}]}}
     ax_small = learning_curves({"b": small}, {"b": 100}, score=True).axes[1]

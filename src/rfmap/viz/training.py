@@ -200,9 +200,10 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
     the mean with every folded map counted as no map) instead of the plain mean, which one folded map can inflate
     without bound, and a star marks the kept weights at their step, the value the recipe table records; where only
     the plain mean is stored, open circles mark the states with a folded map, which ranked behind every fold-free
-    one. Values below 0.01 are drawn in units of a power of ten named on the axis. ``mark_kept`` does the same for
-    the plain mean: the last validation (the kept weights validated again as the run ended) becomes a star at the
-    kept weights' step instead of a point at the run's end. Returns the figure."""
+    one; with ``mark_folded`` as well, open circles mark them on every score. Values below 0.01 are drawn in units
+    of a power of ten named on the axis. ``mark_kept`` does the same for the plain mean: the last validation (the
+    kept weights validated again as the run ended) becomes a star at the kept weights' step instead of a point at
+    the run's end. Returns the figure."""
     import matplotlib.pyplot as plt
 
     names = list(metas)
@@ -226,7 +227,7 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
         val = hist.get("validation", [])
         key = _val_key(val)
         if key and score:
-            _score_panel(ax_val, meta, val, key, offset, budget)
+            _score_panel(ax_val, meta, val, key, offset, budget, mark_folded)
         elif key:
             vx = [v["step"] + offset for v in val]
             shown = val[:-1] if mark_kept and len(val) > 1 else val
@@ -258,19 +259,23 @@ def _kept_marker(ax, meta: dict, val: list[dict], key: str, offset: int) -> int:
 
 def _selection_value(record: dict, key: str) -> tuple[float, str]:
     """The score that chose among a run's validated weights, from one validation record of a history, and what it
-    is: the family score (``"Std ratio"``) where recorded, else the mean metric with every folded map counted as no
-    map (``penalized``), else the capped or the plain mean, as :func:`rfmap.training.validation.score` ranks them."""
+    is: the family score (``"family score (Std ratio)"``) where recorded, else the mean metric with every folded
+    map counted as no map (``penalized``), else the capped or the plain mean, as
+    :func:`rfmap.training.validation.score` ranks them."""
     if "family_score" in record:
-        return float(record["family_score"]), "score: Std ratio"
+        return float(record["family_score"]), "family score (Std ratio)"
     for k in ("penalized", "capped"):
         if k in record:
             return float(record[k]), f"{VAL_NAMES[key]}, folds as no map"
     return float(record[key]), VAL_NAMES[key]
 
 
-def _score_panel(ax, meta: dict, val: list[dict], key: str, offset: int, budget: int) -> None:
+def _score_panel(ax, meta: dict, val: list[dict], key: str, offset: int, budget: int,
+                 mark_folded: bool = False) -> None:
     """The validation panel of :func:`learning_curves` with ``score``: the selection score of every validation
-    but the last (the kept weights validated once more as the run ended), and a star at the kept weights' step."""
+    but the last (the kept weights validated once more as the run ended), and a star at the kept weights' step;
+    open circles on the states whose maps folded on some held-out field, where the score is the plain mean or
+    ``mark_folded`` asks for them."""
     values = [_selection_value(v, key) for v in val]
     ys = np.array([v for v, _ in values])
     label = values[-1][1]
@@ -282,10 +287,10 @@ def _score_panel(ax, meta: dict, val: list[dict], key: str, offset: int, budget:
     ax.plot(vx[:-1], ys[:-1], "o-", color="tab:orange", ms=3, lw=1)
     kept = meta.get("selected_step")
     kx = offset + int(kept) if kept is not None else vx[-1]
-    ax.plot([kx], [ys[-1]], "*", color="tab:red", ms=10, zorder=3)
+    ax.plot([kx], [ys[-1]], "*", color="tab:red", ms=10, zorder=4)  # over an open circle at the same state
     title = "validation (★ kept weights)"
-    if label == VAL_NAMES[key]:  # the plain mean: a state with a folded map ranked behind every fold-free one
-        folded = [(x, y) for x, y, v in zip(vx[:-1], ys[:-1], val) if v.get("folded_fields", v.get("n_flipped", 0))]
+    if mark_folded or label == VAL_NAMES[key]:  # plain mean: a state with a folded map ranked behind the others
+        folded = [(x, y) for x, y, v in zip(vx[:-1], ys[:-1], val) if has_folds(v)]
         if folded:
             ax.plot(*zip(*folded), "o", ms=6, mfc="white", mec="tab:orange", mew=1.2, zorder=3)
             title = "validation (★ kept, ○ folded)"
