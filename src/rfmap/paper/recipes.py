@@ -154,7 +154,7 @@ def _network_settings(model: dict) -> dict:
 
 def differences_text(metas: dict) -> str:
     """How two shipped models' training differs, in words, from their metadata (``{name: meta}``): every setting of
-    :func:`recipe_differences` and the cumulative steps over each model's warm restarts."""
+    :func:`recipe_differences` and the cumulative steps over each model's chain of continued runs (``--init``)."""
     (na, ma), (nb, mb) = metas.items()
     parts = [f"{SETTING_NAMES.get(k, k)} ({'none' if x is None else x} against {'none' if y is None else y})"
              for k, x, y in recipe_differences(ma.get("config") or {}, mb.get("config") or {})]
@@ -176,8 +176,8 @@ def _setting_value(v) -> str:
 def differences_table(metas: dict) -> str:
     """How two shipped models' training differs, from their metadata (``{name: meta}``), as a Markdown table: one
     row per setting of :func:`recipe_differences` (named as :data:`SETTING_NAMES` names it, else by its dotted
-    key), one column per model ("—": the setting is absent, i.e. off), the cumulative steps over each model's warm
-    restarts last."""
+    key), one column per model ("—": the setting is absent, i.e. off), the cumulative steps over each model's chain
+    of continued runs last."""
     (na, ma), (nb, mb) = metas.items()
     rows = [(SETTING_NAMES.get(k, f"`{k}`"), _setting_value(x), _setting_value(y))
             for k, x, y in recipe_differences(ma.get("config") or {}, mb.get("config") or {})]

@@ -45,7 +45,7 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--batch", type=int, default=None, help="override the per-process batch size")
     p.add_argument("--time-limit", type=float, default=None, help="override the wall-time limit (s; 0: none)")
     p.add_argument("--lr", type=float, default=None,
-                   help="override the peak learning rate (e.g. lower for a gentle warm restart with --init)")
+                   help="override the peak learning rate (e.g. lower for a gentle continued run with --init)")
     p.add_argument("--ema", type=float, default=None, metavar="DECAY",
                    help="keep an exponential moving average of the weights with this decay (e.g. 0.999); validation, "
                         "checkpoint choice and the shipped file use it (0: off, the default)")

@@ -281,7 +281,7 @@ def _density2d(name: str, boundary: str, *, beltrami: float, steps: int, time_li
 
 def _density3d(name: str, boundary: str, *, fold: dict, description: str) -> Presets:
     """A 3D density model on the fields of :data:`_HARD3` with the fold penalty ``fold``; one cosine cycle at lr
-    5e-4 (the paper's warm restarts at 2e-4 are for a GPU; under an hour on a CPU one cycle gets further)."""
+    5e-4 (the paper's cosine annealing with warm restarts at 2e-4 is for a GPU; under an hour on a CPU one cycle gets further)."""
     base = TrainConfig(name=name, task=TaskSpec("density", 3, boundary), description=description,
                        model=ModelConfig(base=8, depth=2), n_range=(32, 48), jitter=0.0, lr=5e-4, weight_decay=5e-5,
                        betas=(0.9, 0.995), schedule="cosine", warmup=200, lr_min=2e-6, val_n=24,

@@ -1,6 +1,6 @@
 r"""The chain of ``rfmap train`` runs behind a weight file, and the commands that train it again.
 
-A shipped model is usually the last run of a chain of warm restarts: each run started (``--init``) from the weights
+A shipped model is usually the last run of a chain of continued runs: each run started (``--init``) from the weights
 the run before it wrote.  The weights' metadata records the chain (``lineage``: one record per earlier run, parents
 first, with its command, steps, wall time and SHA-256) and the last run itself (``command``, ``steps``, ...).  A
 recorded command names its parent as it was then, ``--init deq2d-square`` for "the shipped deq2d-square of that
