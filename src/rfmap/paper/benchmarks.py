@@ -29,7 +29,7 @@ METHODS = ("diffusion", "flow", "surrogate", "surrogate+refine", "hybrid")
 #: (:data:`rfmap.finish.polish.UNGUARDED`; where the flow started cold, the hybrid's own row).
 ROWS = METHODS[:-1] + (UNGUARDED, "hybrid")
 
-#: "As accurate": a final Std(rho~_map) at most this factor above the reference solver's.
+#: "As accurate": a final Std(ρ̃_map) at most this factor above the reference solver's.
 STD_TOL = 1.1
 #: The flow-based solver's target: at most this fraction of the diffusion solver's time.
 FLOW_TIME = 0.2
@@ -39,7 +39,7 @@ HYBRID_TIME = 0.5
 
 def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "square",
                     methods=METHODS) -> list[dict[str, Any]]:
-    r"""Std(rho~_map), folds and wall time of every method on one density of the ``N``-grid, run one after another.
+    r"""Std(ρ̃_map), folds and wall time of every method on one density of the ``N``-grid, run one after another.
 
     Parameters
     ----------
@@ -127,7 +127,7 @@ def time_to_accuracy(dim: int, n: int, boundary: str = "square", *, paper: bool 
 
 
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Per (dim, n, boundary, method): mean Std(rho~_map), mean time, total folds, and the ratios to the best
+    """Per (dim, n, boundary, method): mean Std(ρ̃_map), mean time, total folds, and the ratios to the best
     classical solver of the same case (the one with the lower mean Std; time ratio < 1 means faster)."""
     keys = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
     out = []
@@ -254,7 +254,7 @@ def targets_table(checks: list[dict[str, Any]]) -> CaseTable:
 
 def method_tables(summary: list[dict[str, Any]]) -> tuple[CaseTable, CaseTable]:
     """The rows of :func:`summarize` as two tables with one row per case and one column per method: the mean
-    Std(rho~_map) over the case's fields, and the mean time."""
+    Std(ρ̃_map) over the case's fields, and the mean time."""
     cases = list(dict.fromkeys((r["dim"], r["n"], r["boundary"]) for r in summary))
     methods = [m for m in ROWS if any(r["method"] == m for r in summary)]
     by = {(r["dim"], r["n"], r["boundary"], r["method"]): r for r in summary}
@@ -271,7 +271,7 @@ def method_tables(summary: list[dict[str, Any]]) -> tuple[CaseTable, CaseTable]:
 
 def summary_table(summary: list[dict[str, Any]]):
     """The rows of :func:`summarize` as a :class:`~rfmap.paper.tables.Table`: one case per dimension, grid side
-    and boundary, one row per method, with the mean Std(rho~_map), the mean time, the folds and the ratios to the
+    and boundary, one row per method, with the mean Std(ρ̃_map), the mean time, the folds and the ratios to the
     case's best classical solver."""
     table = Table("tab:time_to_accuracy", "Time to accuracy: means over each case's fields",
                   ["std_rho_map", "time", "n_flipped", "std_ratio", "time_ratio"])

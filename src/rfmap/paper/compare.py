@@ -175,7 +175,7 @@ def points_table(surs: dict, field: str = "sin-cos", n: int = 51, seed: int = 0)
 
 def generalization_tables(surs: dict, count: int = 50, n: int | None = None) -> Table:
     """:func:`rfmap.paper.generalization.generalization_table` of every model on the same unseen random fields, merged
-    (the classical solver's rows and the inputs' Std(rho~_orig), method ``input``, once)."""
+    (the classical solver's rows and the inputs' Std(ρ̃_orig), method ``input``, once)."""
     _check(surs)
     merged = None
     for name, s in surs.items():  # the classical solver once: every model sees the same fields and boundary

@@ -199,7 +199,7 @@ class Comparison:
         return _met(self.value(case, "native", metric), self.value(case, "paper", metric))
 
     def comparable(self, case: str) -> bool:
-        """Whether the case's input is the paper's (:func:`rfmap.paper.verdicts.is_comparable`: its Std(rho~_orig)
+        """Whether the case's input is the paper's (:func:`rfmap.paper.verdicts.is_comparable`: its Std(ρ̃_orig)
         on the paper's grid, a grid side named by the case or the table's, agrees with the paper's)."""
         c = next(c for c in self.cases if c.name == str(case))
         paper_std = self.value(c.name, "paper", "std_rho_orig")

@@ -21,7 +21,7 @@ from .tables import format_value
 __all__ = ["sea_blend_study", "SEA_TOL", "residual_floor", "CONVERGENCE_SETTINGS", "flow_convergence",
            "warm_start_residuals", "floor_table", "convergence_table", "rotation_table", "sea_table", "warm_table"]
 
-#: A flow "ends higher" than another on a field when its final Std(rho~_map) is more than this factor above.
+#: A flow "ends higher" than another on a field when its final Std(ρ̃_map) is more than this factor above.
 SEA_TOL = 1.05
 
 
@@ -39,7 +39,7 @@ def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float 
     -------
     list of dict
         One row per field: ``field``, ``kind``, ``std_diffusion``, ``ratio_abrupt``, ``ratio_default`` and
-        ``ratio_blended`` (the flows' final Std(rho~_map) over the diffusion solver's), ``stalled`` (whether the
+        ``ratio_blended`` (the flows' final Std(ρ̃_map) over the diffusion solver's), ``stalled`` (whether the
         abrupt sea's first pass stalled), ``fallback`` (whether the default flow redid it with a blended sea),
         ``shift`` (the largest distance between the blended and the abrupt flows' mapped vertices, in grid
         spacings: how far the blend moves the map, its coastline included), ``time_default`` (the default flow's
@@ -77,7 +77,7 @@ def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: s
     -------
     list of dict
         One row per ``N`` and method (``"diffusion"``, ``"flow"``, ``"flow + second pass"``): ``n``, ``method``,
-        ``std`` (= Std(rho~_map)), ``smooth``, ``element_fraction``, ``time`` (s; the second pass alone) and
+        ``std`` (= Std(ρ̃_map)), ``smooth``, ``element_fraction``, ``time`` (s; the second pass alone) and
         ``n_flipped``.  The second pass's own map is reported, even where it is worse than its start.
     """
     rows = []
@@ -198,7 +198,7 @@ def _table(title: str, head: list[str], rows: list[list[str]]) -> CaseTable:
 
 
 def floor_table(rows: list[dict[str, Any]]) -> CaseTable:
-    """The rows of :func:`residual_floor` as a table: per grid side and method the final Std(rho~_map), its smooth
+    """The rows of :func:`residual_floor` as a table: per grid side and method the final Std(ρ̃_map), its smooth
     part, the element-scale share of its variance, the time and the folded elements (small numbers as powers of
     ten)."""
     return _table("Where the last residual sits",
@@ -216,7 +216,7 @@ def _settings(rows: list[dict[str, Any]]) -> tuple[list[str], list[str], dict]:
 
 def convergence_table(rows: list[dict[str, Any]]) -> CaseTable:
     """The rows of :func:`flow_convergence` as a table: one row per field, one column per setting, each cell the
-    flow's final Std(rho~_map) and time, both over the diffusion solver's on the same field."""
+    flow's final Std(ρ̃_map) and time, both over the diffusion solver's on the same field."""
     settings, fields, cv = _settings(rows)
     return _table("Is the flow converged? Std and time over the diffusion solver's",
                   ["field"] + [f"{s}: Std / time" for s in settings],
@@ -238,7 +238,7 @@ def rotation_table(rows: list[dict[str, Any]]) -> CaseTable:
 
 
 def sea_table(rows: list[dict[str, Any]]) -> CaseTable:
-    """The rows of :func:`sea_blend_study` as a table: per field the three flows' final Std(rho~_map) over the
+    """The rows of :func:`sea_blend_study` as a table: per field the three flows' final Std(ρ̃_map) over the
     diffusion solver's, whether the abrupt sea stalled, the default flow's time over the diffusion solver's (a stalled
     attempt included) and the shift of the blended flow's map in grid spacings."""
     return _table("A dense coast: the flows' Std over the diffusion solver's",
@@ -249,7 +249,7 @@ def sea_table(rows: list[dict[str, Any]]) -> CaseTable:
 
 
 def warm_table(rows: list[dict[str, Any]]) -> CaseTable:
-    """The rows of :func:`warm_start_residuals` as a table: per grid side and map the final Std(rho~_map), its
+    """The rows of :func:`warm_start_residuals` as a table: per grid side and map the final Std(ρ̃_map), its
     smooth part, the element-scale share of its variance and the time."""
     return _table("Why the warm start stops short",
                   ["N", "map", "Std(ρ̃_map)", "smooth part", "element-scale share", "time"],

@@ -27,7 +27,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     """Surrogate against the classical solver on ``count`` seeded random fields that training never drew (the
     ``report`` stream of :mod:`rfmap.training.validation`, used for nothing else), on the same ``N``-grid.
 
-    Density models: Std(rho~_map) of the raw network map, of the map with weight refinement (and what
+    Density models: Std(ρ̃_map) of the raw network map, of the map with weight refinement (and what
     ``Surrogate.map`` does by default about folds: coarser working grids in 3D, then the repair), and of the
     classical diffusion DEM with the model's boundary; Beltrami models: mean vertex distance (``mean_dd``) to the
     exact random map, ours against the Linear Beltrami Solver.  Rows: each kind of field and ``all``; columns: mean,
@@ -38,7 +38,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
     ``tab:generalization-low-NAME``); ``symmetrize`` (density models) adds the network averaged over symmetries of
     the domain, with refinement and fold handling (:data:`~rfmap.paper.reproduce.SYM_REF`, or
     :data:`~rfmap.paper.reproduce.SYM` without ``refine``); ``inputs`` (density models) adds rows ``input``: the
-    input's Std(rho~_orig), what the identity map leaves.
+    input's Std(ρ̃_orig), what the identity map leaves.
     """
     spec, task = sur.spec, sur.spec.task
     n = int(n or PAPER_N[spec.dim])
@@ -151,12 +151,12 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
     r"""Density equalization against angular distortion of several 2D density models on the same ``count`` unseen
     random fields (the ``report`` stream of :mod:`rfmap.training.validation`), raw network maps on the ``N``-grid.
 
-    For each model and each kind of field (and ``all``): the mean, median and worst Std(rho~_map), the mean over fields
+    For each model and each kind of field (and ``all``): the mean, median and worst Std(ρ̃_map), the mean over fields
     of the mean :math:`|\mu|` over triangles, the largest :math:`|\mu|`, the smallest Jacobian and the flipped
     triangles; the last column is each field's mean :math:`|\mu|` divided by that of the first model on the same
     field, averaged over the fields.  A DEQ loss (density + :math:`\lambda\int|\mu|^2`, paper Eq.
     (3)) should lower the mean :math:`|\mu|` against a pure DEM loss at about the same
-    Std(rho~_map).
+    Std(ρ̃_map).
 
     Parameters
     ----------
@@ -224,7 +224,7 @@ def displacement_demand(sur, count: int = 16, train_count: int = 60, n: int | No
     -------
     (table, records)
         The table has one row per group and kind: the median and 90th percentile of the demand, the median reach
-        over demand, the median fraction of the non-uniformity left (Std(rho~_map) / Std(rho~_orig)) by the
+        over demand, the median fraction of the non-uniformity left (Std(ρ̃_map) / Std(ρ̃_orig)) by the
         network and by the classical map.  ``records`` holds one dict per field (``group``, ``label``,
         ``demand``, ``reach``, ``left_net``, ``left_classical``, ``n_flipped``) for
         :func:`rfmap.viz.studies.displacement_demand_figure`.

@@ -40,7 +40,11 @@ COLUMN_TITLES = {
 }
 
 
-#: significant digits of every number in a table (times: one fewer, with their unit)
+#: significant digits of the numbers in a :class:`Table`'s Markdown and CSV (times: one fewer, with their unit),
+#: trailing zeros dropped (``0.13``); the comparison tables of :mod:`rfmap.paper.comparison` print as many digits
+#: with trailing zeros kept (``0.1300``), and the short summary tables of
+#: :func:`~rfmap.paper.generalization.pivot_markdown`, :func:`~rfmap.paper.generalization.columns_markdown` and
+#: :class:`Headline` print three (:func:`~rfmap.core.wording.format_sig`), trailing zeros dropped
 DIGITS = 4
 
 
@@ -294,9 +298,12 @@ def one_notation(values: dict[str, str], groups: list[str]) -> dict[str, str]:
 
     Examples
     --------
-    >>> one_notation({"dd_a": "0.001946", "dd_b": "2.822 × 10⁻⁴", "dd_met": "1 of 2", "mu_a": "0.1200"},
-    ...              ["dd", "mu"])
-    {'dd_a': '1.946 × 10⁻³', 'dd_b': '2.822 × 10⁻⁴', 'dd_met': '1 of 2', 'mu_a': '0.1200'}
+    >>> out = one_notation({"dd_a": "0.001946", "dd_b": "2.822 × 10⁻⁴",
+    ...                     "dd_met": "1 of 2", "mu_a": "0.1200"}, ["dd", "mu"])
+    >>> out["dd_a"], out["dd_b"]
+    ('1.946 × 10⁻³', '2.822 × 10⁻⁴')
+    >>> out["dd_met"], out["mu_a"]
+    ('1 of 2', '0.1200')
     """
     def group(key: str) -> str | None:
         return max((g for g in groups if key.startswith(f"{g}_")), key=len, default=None)
