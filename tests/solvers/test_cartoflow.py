@@ -518,3 +518,27 @@ def test_edges_are_split_to_cells_of_at_most_the_split_raster(monkeypatch):
         assert max(c.info["grids"]) > 96  # refined beyond the split raster
         counts[cap] = shapely.get_num_coordinates(c.mapped).sum()
     assert counts[96] < 0.9 * counts[4096], counts
+
+
+def test_map_and_cartogram_passes_share_one_velocity():
+    r"""The map solver's pass (float32 ``grid_sample``) and the cartogram pass (float64 bilinear) evaluate one
+    :class:`rfmap.solvers.spectral.FlowVelocity` of the same tables: on a density of a few cosine modes they agree
+    to the float32 tables' precision at random points and times, and at :math:`t = 1` the velocity is the flux over
+    the box mean :math:`\bar\rho`, the formula's denominator."""
+    from rfmap.solvers import cartoflow, flow, spectral
+    n = 33
+    x = np.linspace(0.0, 1.0, n)
+    dens = 2.0 + np.cos(np.pi * x)[:, None] * np.cos(2 * np.pi * x)[None, :] + 0.5 * np.cos(3 * np.pi * x)[:, None]
+    cart = cartoflow._velocity(dens)
+    mapped = flow._FlowPass(dens).velocity
+    assert isinstance(cart, spectral.FlowVelocity) and isinstance(mapped, spectral.FlowVelocity)
+    pts = np.random.default_rng(0).random((200, 2))
+    for t in (0.0, 0.3, 1.0):
+        a, b = cart(t, pts), mapped(t, pts)
+        assert a.dtype == b.dtype == np.float64
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-6 * np.abs(a).max())
+    flux = spectral.flow_planes(dens)[:2]
+    nodes = np.stack(np.meshgrid(x, x, indexing="ij"), -1).reshape(-1, 2)
+    np.testing.assert_allclose(cart(1.0, nodes), np.moveaxis(flux, 0, -1).reshape(-1, 2) / spectral.box_mean(dens),
+                               rtol=1e-12, atol=1e-14)
+    assert cart.evaluations == 4 and mapped.evaluations == 3

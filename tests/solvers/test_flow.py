@@ -853,7 +853,7 @@ def test_a_flow_pass_ends_at_the_mean_its_poisson_solve_leaves_out(m):
     raster = 2.0 + np.cos(np.pi * s)[:, None] + 0.5 * s[None, :] ** 2
     a0 = cosine_coefficients(raster)[0, 0]
     fp = _FlowPass(raster)
-    assert fp.mean == pytest.approx(a0, rel=1e-14)
+    assert fp.velocity.mean == pytest.approx(a0, rel=1e-14)
     assert abs(raster.mean() / a0 - 1) > 1e-3
     pts = np.random.default_rng(6).uniform(0.0, 1.0, size=(50, 2))
     flux = interpolate(poisson_flux(raster)[None], pts)[0]  # -grad phi, sampled bilinearly (the pass: in float32)

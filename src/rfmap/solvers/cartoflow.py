@@ -34,7 +34,7 @@ import numpy as np
 from ..core.mesh import multilinear
 from .cosine import CosineTransforms
 from .heun import STALL_BLURS, HeunOptions, Stalled, heun_flow
-from .spectral import box_mean, flow_planes
+from .spectral import FlowVelocity, box_mean, flow_planes
 
 __all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "bilinear", "min_triangle_area", "square_inputs"]
 
@@ -126,22 +126,12 @@ def min_triangle_area(y: np.ndarray) -> float:
     return float(min(first, (cx * dy - cy * dx).min()))
 
 
-class _Velocity:
-    r""":math:`v(x, t) = -\nabla\phi(x) / ((1-t)\rho_0(x) + t\bar\rho)` of one density on the vertex grid."""
-
-    def __init__(self, dens: np.ndarray, sigma: float = 0.0):
-        """``sigma``: blur width in vertex spacings."""
-        self.n = n = dens.shape[0]
-        # flux x, flux y, density (3, N*N), blurred with mirror walls when sigma > 0
-        self.planes = flow_planes(dens, sigma / (n - 1), transforms=CosineTransforms(n)).reshape(3, -1)
-        self.mean = box_mean(dens)  # the box mean of the cosine interpolant, which the blur keeps
-        self.evaluations = 0
-
-    def __call__(self, t: float, pts: np.ndarray) -> np.ndarray:
-        self.evaluations += 1
-        f = _bilinear_planes(self.planes, self.n, pts)
-        rho = f[:, 2:] * (1.0 - t) + t * self.mean
-        return f[:, :2] / rho
+def _velocity(dens: np.ndarray, sigma: float = 0.0) -> FlowVelocity:
+    r""":class:`rfmap.solvers.spectral.FlowVelocity` of one density on the (N, N) vertex grid, blurred over
+    ``sigma`` vertex spacings with mirror walls, its tables read bilinearly in double precision."""
+    n = dens.shape[0]
+    planes = flow_planes(dens, sigma / (n - 1), transforms=CosineTransforms(n)).reshape(3, -1)  # flux x, y, density
+    return FlowVelocity(lambda pts: _bilinear_planes(planes, n, pts), box_mean(dens))
 
 
 def _project(p: np.ndarray, n: int) -> np.ndarray:
@@ -210,7 +200,7 @@ def flow_square(density: np.ndarray, options: CartoFlowOptions | None = None, *,
     project = (lambda p: _project(p, n)) if grid else (lambda p: np.clip(p, 0.0, 1.0, out=p))
     stepping = HeunOptions(opts.rtol * (1.0 / (n - 1)), first_step=opts.first_step, max_steps=opts.max_steps)
     while True:
-        vel = _Velocity(dens, width)
+        vel = _velocity(dens, width)
         try:
             mapped, info = heun_flow(vel, np.clip(ref, 0.0, 1.0), project, stepping,
                                      _grid_turned_over(n) if grid else None)

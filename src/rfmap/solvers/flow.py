@@ -86,7 +86,7 @@ from .heun import STALL_BLURS, STALL_DT, HeunOptions, Stalled, heun_flow
 from .locate import rasterize_elements
 from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsample
 from .residual import lumped_residual, residual_density, vertex_residual
-from .spectral import box_mean, flow_planes
+from .spectral import FlowVelocity, box_mean, flow_planes
 
 __all__ = ["STALL_BLEND", "STALL_DT", "STALL_BLURS", "FlowOptions", "solve_flow", "rasterize_elements",
            "residual_density", "lumped_residual", "vertex_residual"]
@@ -128,16 +128,15 @@ class _FlowPass:
     def __init__(self, raster: np.ndarray, sigma: float = 0.0):
         self.dim = raster.ndim
         self.m = raster.shape[0]
-        self.mean = box_mean(raster)  # the box mean of the cosine interpolant, which the blur keeps
         # the velocity table in single precision: torch's grid_sample is vectorised for float32 only (book: Design
         # decisions), and its error is far below the step's tolerance; the positions are integrated in float64.
         # Channels first, grid axes reversed: grid_sample takes the last point coordinate along the last grid axis
         self.grid = torch.from_numpy(flow_planes(raster, sigma, np.float32))[None]  # (1, d+1, M..): flux, density
-        self.evaluations = 0
+        # the box mean of the cosine interpolant, which the blur keeps
+        self.velocity = FlowVelocity(self._sample, box_mean(raster))
 
-    def velocity(self, t: float, y: np.ndarray) -> np.ndarray:
-        r""":math:`v(y, t) = -\nabla\phi(y) / ((1-t)\rho_0(y) + t\bar\rho)` at points (P, d) of the box."""
-        self.evaluations += 1
+    def _sample(self, y: np.ndarray) -> np.ndarray:
+        """The tables at points (P, d) of the box, bilinear (multilinear in 3D), float32, shape (P, d + 1)."""
         q = torch.from_numpy(y).float().flip(-1).mul_(2.0).sub_(1.0)  # float32 arithmetic: the table's precision
         # grid_sample runs its batch in parallel but one batch entry on one thread: split the points into one
         # batch entry per thread over the same (expanded, not copied) table (book: Design decisions)
@@ -148,9 +147,7 @@ class _FlowPass:
         q = q.reshape(k, *([1] * (self.dim - 1)), rows, self.dim)
         f = torch.nn.functional.grid_sample(self.grid.expand(k, *self.grid.shape[1:]), q, mode="bilinear",
                                             padding_mode="border", align_corners=True)
-        f = f.reshape(k, self.dim + 1, rows).permute(0, 2, 1).reshape(k * rows, self.dim + 1)[:p]
-        rho = f[:, -1] * (1.0 - t) + t * self.mean
-        return (f[:, :-1] / rho[:, None]).numpy().astype(np.float64)
+        return f.reshape(k, self.dim + 1, rows).permute(0, 2, 1).reshape(k * rows, self.dim + 1)[:p].numpy()
 
     def run(self, y: np.ndarray, turned_over, project, *, h: float, rtol: float, max_steps: int,
             bar) -> tuple[np.ndarray, dict]:
@@ -358,7 +355,7 @@ class _Run:
                 y_next, info = fp.run(y, lambda x: _turned_over(x, n), box.project, h=1.0 / (box.nb - 1),
                                       rtol=float(opts.rtol), max_steps=int(opts.max_steps), bar=bar)
             except Stalled as exc:
-                self.totals["evaluations"] += fp.evaluations
+                self.totals["evaluations"] += fp.velocity.evaluations
                 if (not box.square and not self.warm and passes == 0 and self.sea_blend == 0
                         and opts.stall_blend > 0 and not self.fallback_tried):
                     self.fallback_tried = True
@@ -379,7 +376,7 @@ class _Run:
             break
         for k in ("steps", "rejected", "fold_rejections"):
             self.totals[k] += info[k]
-        self.totals["evaluations"] += fp.evaluations
+        self.totals["evaluations"] += fp.velocity.evaluations
         return y_next
 
 

@@ -5,8 +5,8 @@ A grid field :math:`p_j` at the nodes :math:`j/(M-1)` has the cosine interpolant
 \cos(\pi k_i x_i)`, :math:`0 \le k_i \le M-1`, whose coefficients a type-I DCT gives (:func:`cosine_coefficients`,
 :func:`half_coefficients`).  On them the diffusion solvers evolve the density exactly (:func:`heat_factor`;
 :class:`rfmap.solvers.heatfield.HeatField`, the maps' and the cartograms' heat field), the flow solvers solve the
-Poisson equation (:func:`poisson_flux`, :func:`flow_planes`: :func:`divide_by_laplacian`, :func:`flux_synthesis`)
-and blur (:func:`gaussian_blur`, :func:`blur_factor`); both integrate the interpolant over boxes (:func:`box_mean`,
+Poisson equation (:func:`poisson_flux`, :func:`flow_planes`: :func:`divide_by_laplacian`, :func:`flux_synthesis`; the velocity read from them,
+:class:`FlowVelocity`) and blur (:func:`gaussian_blur`, :func:`blur_factor`); both integrate the interpolant over boxes (:func:`box_mean`,
 :func:`interval_weights`).
 
 Every function takes the transforms it runs on (:mod:`rfmap.solvers.cosine`): by default ``scipy.fft`` in any
@@ -24,7 +24,7 @@ from .cosine import ScipyTransforms, fft_workers
 
 __all__ = ["fft_workers", "cosine_coefficients", "half_coefficients", "laplacian_eigenvalues", "divide_by_laplacian",
            "flux_synthesis", "poisson_flux", "flow_planes", "heat_factor", "blur_factor", "damp", "gaussian_blur",
-           "box_mean", "interval_weights", "contract"]
+           "box_mean", "interval_weights", "contract", "FlowVelocity"]
 
 
 def _edge_factors(m: int, dtype) -> np.ndarray:
@@ -226,6 +226,47 @@ def flow_planes(values: np.ndarray, sigma: float = 0.0, dtype=np.float64, transf
         planes[d] = values
     flux_synthesis(divide_by_laplacian(b), tr, out=planes[:d])
     return planes
+
+
+class FlowVelocity:
+    r"""The velocity of a flow-based map, :math:`v(y, t) = -\nabla\phi(y) / ((1-t)\rho_0(y) + t\bar\rho)`, from
+    the tables of :func:`flow_planes` read at the points by an interpolation the solver chooses: the one formula of
+    the map solver (:mod:`rfmap.solvers.flow`, any dimension) and the cartogram passes
+    (:mod:`rfmap.solvers.cartoflow`, torch-free).
+
+    Parameters
+    ----------
+    lookup : callable
+        ``lookup(y)`` with points ``y``, shape (P, d), in :math:`[0,1]^d`, returns the tables there, shape
+        (P, d + 1): the flux :math:`-\nabla\phi`, then the density :math:`\rho_0`. The velocity is computed in
+        its precision.
+    mean : float
+        :math:`\bar\rho`, the box mean of the density (:func:`box_mean`).
+
+    Attributes
+    ----------
+    evaluations : int
+        How many times the velocity was evaluated.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> v = FlowVelocity(lambda y: np.tile([0.5, 0.0, 2.0], (len(y), 1)), mean=1.0)
+    >>> v(0.0, np.zeros((1, 2))), v(1.0, np.zeros((1, 2)))
+    (array([[0.25, 0.  ]]), array([[0.5, 0. ]]))
+    """
+
+    def __init__(self, lookup, mean: float):
+        self.lookup = lookup
+        self.mean = float(mean)
+        self.evaluations = 0
+
+    def __call__(self, t: float, y: np.ndarray) -> np.ndarray:
+        """The velocity (P, d), float64, at time ``t`` in [0, 1] and points ``y`` (P, d)."""
+        self.evaluations += 1
+        f = self.lookup(y)
+        rho = f[:, -1] * (1.0 - t) + t * self.mean
+        return (f[:, :-1] / rho[:, None]).astype(np.float64, copy=False)
 
 
 def heat_factor(m: int, t: float, dtype=np.float64) -> np.ndarray:
