@@ -5,9 +5,9 @@ A grid field :math:`p_j` at the nodes :math:`j/(M-1)` has the cosine interpolant
 \cos(\pi k_i x_i)`, :math:`0 \le k_i \le M-1`, whose coefficients a type-I DCT gives (:func:`cosine_coefficients`,
 :func:`half_coefficients`).  On them the diffusion solvers evolve the density exactly (:func:`heat_factor`;
 :class:`rfmap.solvers.heatfield.HeatField`, the maps' and the cartograms' heat field), the flow solvers solve the
-Poisson equation (:func:`poisson_flux`, :func:`flow_planes`: :func:`divide_by_laplacian`, :func:`flux_synthesis`; the velocity read from them,
-:class:`FlowVelocity`) and blur (:func:`gaussian_blur`, :func:`blur_factor`); both integrate the interpolant over boxes (:func:`box_mean`,
-:func:`interval_weights`).
+Poisson equation (:func:`poisson_flux`, :func:`flow_planes`: :func:`divide_by_laplacian`, :func:`flux_synthesis`),
+read their velocity from its tables (:class:`FlowVelocity`) and blur (:func:`gaussian_blur`, :func:`blur_factor`);
+both integrate the interpolant over boxes (:func:`box_mean`, :func:`interval_weights`).
 
 Every function takes the transforms it runs on (:mod:`rfmap.solvers.cosine`): by default ``scipy.fft`` in any
 dimension and precision (:class:`rfmap.solvers.cosine.ScipyTransforms`, the maps of :mod:`rfmap.solvers.flow` and
