@@ -295,6 +295,24 @@ def velocity_table(n, repeat, threads):
                  f"float64: {_ms(t64)}; largest difference {rel:.0e} of the largest value")]
 
 
+def lookup_engine(n, repeat, threads):
+    """One velocity lookup of the 3D flow with the map solver's engine (torch ``grid_sample``, float32 table) and
+    with the cartogram's (numpy :func:`rfmap.core.mesh.multilinear`, float64 table), one thread: whether the two
+    solvers could share one lookup without torch."""
+    from rfmap.core.mesh import multilinear
+
+    n = n or 48
+    t32_table, q, m = _velocity_setup(n, np.float32)
+    planes = t32_table[0].double().numpy()  # (4, M, M, M) in grid_sample's axis order
+    u = ((q.double().numpy() + 1.0) / 2.0 * (m - 1))[:, ::-1].copy()  # (P, 3) index units, planes' axis order
+    t_torch, f = best_time(lambda: _sample(t32_table, q, 1), max(3, repeat))
+    t_np, g = best_time(lambda: multilinear(planes, u.copy()), max(3, repeat))
+    rel = float(np.abs(f.double().numpy() - g).max() / np.abs(g).max())
+    return [_row(f"3D N = {n}, M = {m}: one lookup at {len(q):,} points", f"grid_sample, float32: {_ms(t_torch)}",
+                 f"numpy multilinear, float64: {_ms(t_np)} ({t_np / t_torch:.1f} times); largest difference "
+                 f"{rel:.0e} of the largest value")]
+
+
 def batch_per_thread(n, repeat, threads):
     """One velocity evaluation of the 3D flow on ``threads`` threads, the points split into one grid_sample batch
     entry per thread over the same table or left in one entry."""
@@ -485,6 +503,8 @@ CASES: dict[str, Case] = {
                                      f"{max(3, r)}"),
     "velocity-table-float32": Case(velocity_table, "3D N = 48", lambda n, r, t: f"the flow's first velocity table of "
                                    f"sin-cos-3d at N = {n or 48} (M = {2 * (n or 48) - 1}), best of {max(3, r)}"),
+    "flow-lookup-engine": Case(lookup_engine, "3D N = 48", lambda n, r, t: f"as velocity-table-float32, one "
+                               f"thread, best of {max(3, r)}"),
     "grid-sample-per-thread": Case(batch_per_thread, "3D N = 48", lambda n, r, t: f"as velocity-table-float32, "
                                    f"{t} threads, best of {max(5, r)}"),
     "BATCH_POINTS": Case(batch_points, "2D N = 51 to 256", lambda n, r, t: "deq2d-square, the 8 symmetries of "
