@@ -21,7 +21,7 @@ from .tables import Table, format_value, headline
 
 __all__ = ["METHODS", "ROWS", "WARM_MODELS", "STD_TOL", "FLOW_TIME", "HYBRID_TIME", "compare_methods",
            "benchmark_fields", "time_to_accuracy", "summarize", "target_checks", "targets_headline", "summary_table",
-           "targets_table", "method_tables", "CaseTable", "hybrid_findings"]
+           "targets_table", "method_tables", "CaseTable", "hybrid_findings", "refinement_fields"]
 
 #: The methods compared by :func:`compare_methods`.
 METHODS = ("diffusion", "flow", "surrogate", "surrogate+refine", "hybrid")
@@ -372,9 +372,7 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
              if any((r["dim"], r["n"], r["boundary"], r["method"]) == (*c, "surrogate+refine") for r in summary)]
     out["ref_worse_cases"] = of_count(sum(b["std_rho_map"] > a["std_rho_map"] for a, b in pairs), len(pairs), "case")
     # field by field: where refinement raised the Std, and whether the default map there came from a coarser grid
-    both = [(r, by[r["dim"], r["n"], r["boundary"], r["field"], "surrogate+refine"]) for r in rows
-            if r["method"] == "surrogate" and (r["dim"], r["n"], r["boundary"], r["field"], "surrogate+refine") in by]
-    worse = [(a, b) for a, b in both if b["std_rho_map"] > a["std_rho_map"]]
+    both, worse = _refine_pairs(rows)
     out["ref_worse_fields"] = of_count(len(worse), len(both), "field")
     out["ref_worse_coarser"] = sum(bool(a.get("coarser")) for a, _ in worse)
     out["ref_worse_text"] = _refine_worse_text(len(worse), len(both), out["ref_worse_coarser"])
@@ -388,6 +386,33 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
             out[f"ref_effect{d}"] = _refine_effect(sur["std_rho_map"], ref["std_rho_map"])
     out.update(_roughest_field(by, rows, tuple(targets[min(targets)])))
     return out
+
+
+def _refine_pairs(rows: list[dict[str, Any]]) -> tuple[list[tuple[dict, dict]], list[tuple[dict, dict]]]:
+    """The (default map, refined map) rows of :func:`time_to_accuracy` of every field mapped both ways, and those
+    of the fields on which refinement raised the Std."""
+    by = {(r["dim"], r["n"], r["boundary"], r["field"], r["method"]): r for r in rows}
+    both = [(r, by[r["dim"], r["n"], r["boundary"], r["field"], "surrogate+refine"]) for r in rows
+            if r["method"] == "surrogate" and (r["dim"], r["n"], r["boundary"], r["field"], "surrogate+refine") in by]
+    return both, [(a, b) for a, b in both if b["std_rho_map"] > a["std_rho_map"]]
+
+
+def refinement_fields(rows: list[dict[str, Any]]) -> CaseTable:
+    """The fields on which weight refinement raised the surrogate's Std(ρ̃_map), from the rows of
+    :func:`time_to_accuracy`: one row per such field with its case, the default map's Std and the refined map's,
+    and whether the default map came from a coarser working grid (the network's own map folded on the requested
+    one); the title counts them among the fields mapped both ways, as ``ref_worse_text`` of
+    :func:`hybrid_findings` does."""
+    both, worse = _refine_pairs(rows)
+    title = (f"Weight refinement, field by field: it raised Std(ρ̃_map) on {of_count(len(worse), len(both), 'field')}"
+             " mapped both ways")
+    lines = ["| case | field | default map | with refinement | default map from a coarser grid |",
+             "|---|---|---|---|---|"]
+    for a, b in worse:
+        lines.append(f"| {_case_label(a['dim'], a['n'], a['boundary'])} | {a['field']} | "
+                     f"{format_value(a['std_rho_map'], 'std_rho_map')} | "
+                     f"{format_value(b['std_rho_map'], 'std_rho_map')} | {'yes' if a.get('coarser') else 'no'} |")
+    return CaseTable(title, "\n".join(lines) if worse else "No field.")
 
 
 def _roughest_field(by: dict, rows: list[dict[str, Any]], case: tuple) -> dict[str, Any]:
