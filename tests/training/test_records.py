@@ -40,6 +40,13 @@ def test_collect_reads_curves_and_keeps_the_final_point_only_for_the_last_state(
     assert v["run0_best_at_end"] and not v["run1_best_at_end"] and not v["still_improving"]
     table = S.study_table(data)
     assert table.loc["A", "at step"] == 20 and table.loc["B", "best score"] == 0.6
+    # two narrower tables for a page: the runs' scores, then the families at the best state
+    runs, families = S.study_table(data, "runs"), S.study_table(data, "families")
+    assert list(runs.columns) + list(families.columns) == list(table.columns)
+    assert list(runs.columns)[-1] == "last score"
+    assert list(families.columns) == ["smooth (best)", "ramp (best)", "folded (best)"]
+    with pytest.raises(ValueError, match="part"):
+        S.study_table(data, "scores")
 
 
 def test_training_budget_counts_every_run_of_a_chain():

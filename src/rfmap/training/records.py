@@ -4,8 +4,9 @@ option, trained side by side for the same wall time, and their validation curves
 ``benchmarks/train_study.py`` starts the runs at once (one thread each, so that they share the machine alike),
 and writes their validation histories (:func:`collect`) to ``src/rfmap/data/studies/NAME.json``; the book reads
 them with :func:`load_study` and draws them with :func:`plot_study`.  The score is the validation stream's
-(:func:`rfmap.training.validation.score`: per field family, Std(rho~_map) relative to Std(rho~_orig), averaged over the
-families), never the paper's test fields.
+(:func:`rfmap.training.validation.score`: per field family, :math:`\mathrm{Std}(\tilde\rho_{\text{map}})`
+relative to :math:`\mathrm{Std}(\tilde\rho_{\text{orig}})`, averaged over the families), never the paper's test
+fields.
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from pathlib import Path
 
 from ..core.inputs import preprocess_density
 from ..core.mesh import grid_points
+from ..core.result import MapResult
 from ..core.wording import format_sig
 from ..finish import quiet_quality
 from ..tasks.teacher import teacher_map
@@ -74,11 +76,15 @@ def load_study(name: str) -> dict:
     return json.loads(path.read_text())
 
 
-def study_table(study: dict):
+def study_table(study: dict, part: str = "all"):
     """One row per run: steps and minutes trained, the score at step 0 (where validated), the best score of the
     run's own states (after step 0) and its step, the last score, and the families at the best (a
-    :class:`pandas.DataFrame`)."""
+    :class:`pandas.DataFrame`). ``part="runs"`` keeps the columns up to the last score, ``part="families"`` the
+    score of each family and the folded fields at the best state: two narrower tables for a page."""
     import pandas as pd
+
+    if part not in ("all", "runs", "families"):
+        raise ValueError(f"part must be 'all', 'runs' or 'families', got {part!r}")
 
     rows = []
     for label, r in study["runs"].items():
@@ -91,7 +97,9 @@ def study_table(study: dict):
                      "best score": r["score"][i], "at step": r["step"][i], "last score": r["score"][-1],
                      **{f"{k} (best)": v for k, v in r["families"][i].items()},
                      "folded (best)": r["folded_fields"][i]})
-    return pd.DataFrame(rows).set_index("run")
+    table = pd.DataFrame(rows).set_index("run")
+    cut = list(table.columns).index("last score") + 1
+    return {"all": table, "runs": table.iloc[:, :cut], "families": table.iloc[:, cut:]}[part]
 
 
 def study_values(study: dict) -> dict:
@@ -221,11 +229,11 @@ def map_gap(sur, n: int, count: int = 4, stream: str = "report"):
     r"""How far a surrogate's map lies from the classical maps of the same fields, against how far the two classical
     solvers lie from each other (a :class:`pandas.DataFrame`, one row per field of the held-out ``stream``).
 
-    Columns: Std(rho~) of the input, of the network's raw map and of the diffusion map, and the relative squared
-    distances :math:`\sum_v |a_v - b_v|^2 / \sum_v |b_v - x_v|^2` (the teacher's loss, :mod:`rfmap.tasks.teacher`) of
-    the network's map and of the flow map to the diffusion map.  Every density-equalizing map composed with a
-    measure-preserving one equalizes as well, so the data-free losses do not single out one map: a distance near 1
-    or above means the network found another of them.
+    Columns: :math:`\mathrm{Std}(\tilde\rho)` of the input, of the network's raw map and of the diffusion map, and
+    the relative squared distances :math:`\sum_v |a_v - b_v|^2 / \sum_v |b_v - x_v|^2` (the teacher's loss,
+    :mod:`rfmap.tasks.teacher`) of the network's map and of the flow map to the diffusion map.  Every
+    density-equalizing map composed with a measure-preserving one equalizes as well, so the data-free losses do
+    not single out one map: a distance near 1 or above means the network found another of them.
     """
     import numpy as np
     import pandas as pd
@@ -245,7 +253,9 @@ def map_gap(sur, n: int, count: int = 4, stream: str = "report"):
             continue
         scale = float(((diff - pts) ** 2).sum())
         m = net.metrics()
+        std_diff = MapResult(net.ref_points, diff, net.elements, net.field).metrics().std_rho_map
         rows.append({"field": vf.label, "Std input": m.std_rho_orig, "Std network": m.std_rho_map,
+                     "Std diffusion": std_diff,
                      "network to diffusion": float(((net.mapped_points - diff) ** 2).sum()) / scale,
                      "flow to diffusion": float(((flow - diff) ** 2).sum()) / scale})
     return pd.DataFrame(rows).set_index("field")
