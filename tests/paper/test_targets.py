@@ -2,8 +2,8 @@
 import pytest
 
 from rfmap.finish.polish import UNGUARDED
-from rfmap.paper.benchmarks import (FLOW_TIME, HYBRID_TIME, STD_TOL, hybrid_findings, summarize, summary_table,
-                                    target_checks, targets_headline)
+from rfmap.paper.benchmarks import (FLOW_TIME, HYBRID_TIME, STD_TOL, hybrid_findings, refinement_fields, summarize,
+                                    summary_table, target_checks, targets_headline)
 
 
 def _rows(flow_time: float, flow_std: float, hybrid_time: float, hybrid_std: float) -> list[dict]:
@@ -89,6 +89,10 @@ def test_findings_say_where_refinement_raised_the_std_and_why():
     found = hybrid_findings(rows + extra, dict(zip((2, 3), CASES)))
     assert found["ref_worse_fields"] == "1 of 2 fields" and found["ref_worse_coarser"] == 1
     assert found["ref_effect3"] == "raises it from 0.300 to 0.350"
+    # the chapter's table of those fields counts them as the sentence does and lists each with both Stds
+    table = refinement_fields(rows + extra)._repr_markdown_()
+    assert "on 1 of 2 fields mapped both ways" in table
+    assert "| 3D, N = 16, square | f | 0.3 | 0.35 | yes |" in table and "2D, N = 33" not in table
 
 
 def test_findings_word_the_counts_as_sentences():
