@@ -37,8 +37,8 @@ from ..fields.paper import DENSITIES, PAPER_N, TEST_FIELDS, get_field, sample_mu
 from ..core.result import MapResult
 from .reproduce import beltrami_values, density_values, exact_beltrami_result
 from ..core.wording import of_count
-from .tables import one_notation, paper_table, power_of_ten, printed_digits
-from .verdicts import is_comparable, qualified_verdict, std_ratio
+from .tables import _csv_cell, one_notation, paper_table, power_of_ten, printed_digits
+from .verdicts import is_comparable, median_ratio, met_text, qualified_verdict, ratio_text, std_ratio
 
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
            "timed", "compare_density", "compare_beltrami", "compare_models", "population_comparison",
@@ -162,9 +162,8 @@ class Comparison:
 
     Attributes
     ----------
-    label : str
-        The paper's table (``tab:...``).
-    title : str
+    label, title : str
+        The paper's table (``tab:...``) and the table's title.
     metrics : list of str
         The scored metrics (lower is better), keys of :data:`METRIC_TITLES`.
     cases : list of Case
@@ -208,17 +207,22 @@ class Comparison:
         n = int(c.name) if c.name.isdigit() else PAPER_N[get_field(c.field).dim]
         return is_comparable(c.field, n, paper_std)
 
-    def verdict_word(self) -> str:
-        """The verdict with its count and the n/c qualifier (:func:`rfmap.paper.verdicts.qualified_verdict`):
-        ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'``"""
-        flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
+    def _nc_ratios(self) -> list[tuple[float, float]]:
+        """Per case whose input is not the paper's: its Std ratio by the paper's method and the paper's."""
         ratios = [[std_ratio(self.value(c.name, m, "std_rho_map"), self.value(c.name, m, "std_rho_orig"))
                    for m in ("native", "paper")] for c in self.cases if not self.comparable(c.name)]
-        worse = [a > b for a, b in ratios if a is not None and b is not None and "std_rho_map" in self.metrics]
-        return qualified_verdict(flags, worse)
+        return [(a, b) for a, b in ratios if a is not None and b is not None and "std_rho_map" in self.metrics]
+
+    def verdict_word(self, short: bool = False) -> str:
+        """The verdict with its count and the n/c qualifier (:func:`rfmap.paper.verdicts.qualified_verdict`):
+        ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'``; with ``short``
+        the word and its count only."""
+        flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
+        return qualified_verdict(flags, [a > b for a, b in self._nc_ratios()], short=short)
 
     def _case_met(self, case: str, metric: str) -> str:
-        """A met cell: ``yes``/``no``/``—``, or ``n/c; Std ratio: paper's method R, paper P`` for an input not the paper's."""
+        """A met cell of a chapter's table: ``yes``/``no``/``—``, or ``n/c; Std ratio: paper's method R, paper P``
+        for an input not the paper's."""
         if self.comparable(case):
             met = self.met(case, metric)
             return "—" if met is None else ("yes" if met else "no")
@@ -252,8 +256,7 @@ class Comparison:
 
     def speed(self, method: str = "native") -> dict[str, float]:
         """Per case the classical solver's time over ``method``'s (above 1: ``method`` is faster)."""
-        return {c.name: self.value(c.name, "classical", "time") / self.value(c.name, method, "time")
-                for c in self.cases}
+        return {c.name: self.value(c.name, "classical", "time") / self.value(c.name, method, "time") for c in self.cases}
 
     def total(self, method: str, quantity: str = "n_flipped"):
         """The sum over the cases of a method's ``quantity`` (default: its flipped elements)."""
@@ -284,25 +287,33 @@ class Comparison:
 
     def score_values(self) -> dict[str, str]:
         """The numbers the scoreboard pastes, as formatted text: for every metric ``{metric}_{col}`` (the mean over
-        the comparable cases of each column of :data:`METHODS`, those the counts and the verdict judge),
-        ``{metric}_met`` and ``{metric}_classical_better`` (``"3 of 4"``, ``"all 4"``, ``"none of the 4"``:
-        :func:`rfmap.core.wording.of_count`), and per case ``{metric}_{case}_{col}`` and ``{metric}_{case}_met``."""
-        out: dict[str, str] = {}
-        for metric in self.metrics:
+        the comparable cases of each column of :data:`METHODS`), ``{metric}_{col}_ratio`` (the median over them of
+        the ratio to the paper, :func:`rfmap.paper.verdicts.median_ratio`), ``{metric}_met`` and
+        ``{metric}_classical_better`` (``"3 of 4"``, ``"all 4"``: :func:`rfmap.core.wording.of_count`), per case
+        ``{metric}_{case}_{col}`` and ``{metric}_{case}_met`` (:func:`rfmap.paper.verdicts.met_text`, ``n/c`` for
+        an input not the paper's); ``verdict`` (short) and ``nc``, the n/c cases' Std ratios (``—`` for none)."""
+        out, texts = {}, {}  # numbers, put in one notation per metric; texts (ratios, met cells) as they are
+        comparable = [c.name for c in self.cases if self.comparable(c.name)]
+        for metric in self.metrics + self.shown():
             row = score_row(*(self.mean(m, metric, comparable=True) for m in METHODS), published=False)
             out.update({f"{metric}_{k}": v for k, v in row.items() if k != "met"})
-            out[f"{metric}_met"] = of_count(*self.count(metric))
-            out[f"{metric}_classical_better"] = of_count(*self.classical_better(metric))
+            texts[f"{metric}_met"] = of_count(*self.count(metric))
+            for m in METHODS[1:]:
+                pairs = [(self.value(c, m, metric), self.value(c, "paper", metric)) for c in comparable]
+                texts[f"{metric}_{m}_ratio"] = ratio_text(median_ratio(pairs))
+            if metric in self.shown():
+                continue
+            texts[f"{metric}_classical_better"] = of_count(*self.classical_better(metric))
             for c in self.cases:
                 row = score_row(*(self.value(c.name, m, metric) for m in METHODS))
-                row["met"] = self._case_met(c.name, metric)
-                out.update({f"{metric}_{c.name}_{k}": v for k, v in row.items()})
-        for q in self.shown():
-            row = score_row(*(self.mean(m, q, comparable=True) for m in METHODS), published=False)
-            out.update({f"{q}_{k}": v for k, v in row.items() if k != "met"})
-            out[f"{q}_met"] = of_count(*self.count(q))
-        out["verdict"] = self.verdict_word()
-        return one_notation(out, self.metrics + self.shown())
+                out.update({f"{metric}_{c.name}_{k}": v for k, v in row.items() if k != "met"})
+                ours, paper = (self.value(c.name, m, metric) for m in ("native", "paper"))
+                texts[f"{metric}_{c.name}_met"] = met_text(ours, paper) if c.name in comparable else "n/c"
+        texts["verdict"] = self.verdict_word(short=True)
+        texts["nc"] = "; ".join(f"paper's method {a:.3g}, paper {b:.3g} ({'worse' if a > b else 'not worse'})"
+                                for a, b in self._nc_ratios()) or "—"
+        out = one_notation(out, self.metrics + self.shown()) | texts
+        return {k: v.replace(" × ", "\u00a0×\u00a0") for k, v in out.items()}  # 9.4 × 10⁻³ never split
 
     def shown(self) -> list[str]:
         """The quantities of :data:`SHOWN` that the paper's table prints: the scoreboard shows them beside the scored
@@ -398,14 +409,6 @@ class Comparison:
 
     def _repr_markdown_(self) -> str:
         return f"**{self.title}**\n\n{self.to_markdown()}"
-
-
-def _csv_cell(v) -> str:
-    if v is None:
-        return ""
-    if isinstance(v, (list, tuple)):
-        return " ".join(f"{float(a):.6g}" for a in v)
-    return str(int(v)) if isinstance(v, (int, np.integer)) else f"{float(v):.6g}"
 
 
 # ------------------------------------------------------------------------------------------------- the runners

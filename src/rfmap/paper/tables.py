@@ -337,3 +337,12 @@ def glue_all(values: dict, prefix: str) -> None:
 
     for key, value in values.items():
         glue(f"{prefix}_{key}", value, display=False)
+
+
+def _csv_cell(v) -> str:
+    """A value of a comparison's CSV: six significant digits, integers exactly, a list space-separated."""
+    if v is None:
+        return ""
+    if isinstance(v, (list, tuple)):
+        return " ".join(f"{float(a):.6g}" for a in v)
+    return str(int(v)) if isinstance(v, (int, np.integer)) else f"{float(v):.6g}"

@@ -22,12 +22,16 @@ from __future__ import annotations
 
 from functools import lru_cache
 
+import numpy as np
+
 from ..core.mesh import grid_mesh
 from ..core.metrics import compute_metrics
+from ..core.wording import of_count
 from ..fields.paper import get_field, sample_density
 
 __all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "input_std", "is_comparable", "std_ratio",
-           "verdict", "qualified_verdict"]
+           "verdict", "qualified_verdict", "nc_clause", "ratio_text", "met_text", "median_ratio", "every_or_count",
+           "classical_lead", "times_lower"]
 
 #: relative agreement of the input's Std(ρ̃_orig) with the paper's for a case to count as the paper's input (the
 #: paper prints six digits): the inputs rebuilt from formulas that the paper gives completely agree with its values
@@ -99,10 +103,11 @@ def verdict(met: list[bool | None]) -> str:
     return "reproduced" if k == len(flags) else ("partly" if k else "not reproduced")
 
 
-def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None) -> str:
+def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None, *, short: bool = False) -> str:
     """The verdict of :func:`verdict` with its count of (case, metric) pairs and, where the item has cases whose
     input is not the paper's (n/c), the qualifier on the word itself: whether each n/c case's Std ratio
-    (:func:`std_ratio`) is worse than the paper's (``nc_worse``, one flag per n/c case).
+    (:func:`std_ratio`) is worse than the paper's (``nc_worse``, one flag per n/c case); with ``short`` the word
+    and its count only (the scoreboards give the n/c clause, :func:`nc_clause`, in a footnote).
 
     Examples
     --------
@@ -113,14 +118,114 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     'reproduced on the comparable cases (3 of 3)'
     >>> nc
     'the n/c case is worse by Std ratio'
+    >>> qualified_verdict([True, True, True], [True], short=True)
+    'reproduced (3 of 3)'
     """
     flags = [m for m in met if m is not None]
     count = f" ({sum(flags)} of {len(flags)})" if flags else ""
-    if not nc_worse:
+    if not nc_worse or short:
         return verdict(flags) + count
-    if len(nc_worse) == 1:
-        nc = f"the n/c case is {'worse' if nc_worse[0] else 'not worse'}"
-    else:
-        nc = f"{sum(nc_worse)} of the {len(nc_worse)} n/c cases are worse"
     scope = " on the comparable cases" if flags else ""
-    return f"{verdict(flags)}{scope}{count}; {nc} by Std ratio"
+    return f"{verdict(flags)}{scope}{count}; {nc_clause(nc_worse)}"
+
+
+def nc_clause(nc_worse: list[bool]) -> str:
+    """Whether the n/c cases' Std ratios are worse than the paper's, one flag per n/c case (``""`` for none).
+
+    Examples
+    --------
+    >>> nc_clause([False]), nc_clause([True, False])
+    ('the n/c case is not worse by Std ratio', '1 of the 2 n/c cases are worse by Std ratio')
+    """
+    if not nc_worse:
+        return ""
+    if len(nc_worse) == 1:
+        return f"the n/c case is {'worse' if nc_worse[0] else 'not worse'} by Std ratio"
+    return f"{sum(nc_worse)} of the {len(nc_worse)} n/c cases are worse by Std ratio"
+
+
+def ratio_text(r: float | None) -> str:
+    """A ratio as the scoreboards print it, three significant digits and a times sign: ``0.452×``, ``1.001×``
+    (more where three would print a ratio other than 1 as ``1.00×``); ``None`` as an em dash.
+
+    Examples
+    --------
+    >>> ratio_text(0.45213), ratio_text(1.00127), ratio_text(None)
+    ('0.452×', '1.001×', '—')
+    """
+    if r is None or not np.isfinite(r):
+        return "—"
+    for digits in range(3, 7):  # enough digits that a ratio other than 1 does not print as 1
+        text = f"{r:#.{digits}g}"
+        if (float(text) > 1) == (r > 1) and (float(text) < 1) == (r < 1):
+            break
+    return text.rstrip(".") + "×"
+
+
+def met_text(ours: float | None, paper: float | None) -> str:
+    """The *Met* cell of a scoreboard case: ``yes`` where ``ours`` is at most ``paper``, else ``no`` with the ratio
+    ours / paper, so that a near miss reads as one (``no (1.001×)``); ``—`` without a value.
+
+    Examples
+    --------
+    >>> met_text(0.07, 0.08), met_text(0.07902, 0.07892), met_text(None, 0.08)
+    ('yes', 'no (1.001×)', '—')
+    """
+    if ours is None or paper is None:
+        return "—"
+    return "yes" if ours <= paper else f"no ({ratio_text(ours / paper)})"
+
+
+def median_ratio(pairs) -> float | None:
+    """The median over ``(ours, paper)`` pairs of ours / paper (``None`` if a value is missing or none is given):
+    below 1 where ours is below the paper's in more than half the cases, which a ratio of means is not.
+
+    Examples
+    --------
+    >>> median_ratio([(0.125, 0.275), (0.0775, 0.0737), (0.0921, 0.0638)])  # doctest: +ELLIPSIS
+    1.05...
+    """
+    pairs = list(pairs)
+    if not pairs or any(a is None or not b for a, b in pairs):
+        return None
+    return float(np.median([a / b for a, b in pairs]))
+
+
+def every_or_count(k: int, m: int, noun: str) -> str:
+    """``every density`` where ``k == m``, else :func:`rfmap.core.wording.of_count` (``3 of 4 densities``).
+
+    Examples
+    --------
+    >>> every_or_count(8, 8, "density"), every_or_count(7, 8, "grid side")
+    ('every density', '7 of 8 grid sides')
+    """
+    return f"every {noun}" if m and k == m else of_count(k, m, noun)
+
+
+def classical_lead(counts, noun: str = "case") -> str:
+    """Over several tables, on how many cases the classical solver is ahead of the paper's method, from the
+    ``(k, m)`` of each (:meth:`rfmap.paper.comparison.Comparison.classical_better`), by :func:`every_or_count`.
+
+    Examples
+    --------
+    >>> classical_lead([(4, 4), (4, 4)], "density"), classical_lead([(3, 4), (4, 4)])
+    ('every density', '7 of 8 cases')
+    """
+    counts = list(counts)
+    return every_or_count(sum(k for k, _ in counts), sum(m for _, m in counts), noun)
+
+
+def times_lower(ratios) -> str:
+    """How many times a classical solver's values are below the paper's method's, from the ratios ours / classical
+    of the cases, to two digits: ``20 to 350 times lower than``; ``not in every case lower than`` where a ratio is
+    at most 1.
+
+    Examples
+    --------
+    >>> times_lower([19.7, 51.2, 346.0]), times_lower([0.8, 150.0])
+    ('20 to 350 times lower than', 'not in every case lower than')
+    """
+    ratios = list(ratios)
+    if min(ratios) <= 1:
+        return "not in every case lower than"
+    return f"{float(f'{min(ratios):.2g}'):g} to {float(f'{max(ratios):.2g}'):g} times lower than"
