@@ -256,7 +256,7 @@ class Comparison:
 
     def speed(self, method: str = "native") -> dict[str, float]:
         """Per case the classical solver's time over ``method``'s (above 1: ``method`` is faster)."""
-        return {c.name: self.value(c.name, "classical", "time") / self.value(c.name, method, "time") for c in self.cases}
+        return {c.name: self.value(c.name, "classical", "time")/self.value(c.name, method, "time") for c in self.cases}
 
     def total(self, method: str, quantity: str = "n_flipped"):
         """The sum over the cases of a method's ``quantity`` (default: its flipped elements)."""
@@ -372,11 +372,11 @@ class Comparison:
                          f"{of_count(kc, mc)}.")
         return " ".join(parts)
 
-    def full_quantities(self) -> list[str]:
-        present = {q for v in self.values.values() for q in v}
-        order = ["std_rho_orig", "std_rho_map", "mean_dd", "mean_dmu", "mean_dmu_pl", "mean_mu", "max_mu",
-                 "min_jacobian", "n_flipped", "work_n", "alpha", "time", "network_time"]
-        return [q for q in order if q in present]
+    def full_quantities(self, leave_out=()) -> list[str]:
+        """Every quantity measured, in the tables' order, but those of ``leave_out``."""
+        present = {q for v in self.values.values() for q in v} - set(leave_out)
+        return [q for q in ["std_rho_orig", "std_rho_map", "mean_dd", "mean_dmu", "mean_dmu_pl", "mean_mu", "max_mu",
+                            "min_jacobian", "n_flipped", "work_n", "alpha", "time", "network_time"] if q in present]
 
     def full_markdown(self) -> str:
         """Every quantity measured (``full_quantities()``), in the shape of :meth:`to_markdown`: one block of rows
