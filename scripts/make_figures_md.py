@@ -276,7 +276,8 @@ RULES_SHORT = (
     "* *Ratios.* *Paper's method*, *Delivered* (this project's map: network on its working grid, symmetry average, "
     "refinement, repair) and *Classical* (the fastest classical solver on the same mesh) give, for each, the median "
     "over the comparable cases of its value divided by the paper's: 0.5× is half the paper's value. Unlike a ratio "
-    "of means, which one large case can carry, the median is below 1 only when at least half the cases are.\n\n"
+    "of means, which one large case can carry, the median is below 1 only when at least half the cases are below "
+    "the paper's value.\n\n"
     "The rules in full, and every case with its values: {ref}`the scoreboard <" + RULES_TARGET + ">`."
 )
 #: below the introduction's scoreboard: where the values are
