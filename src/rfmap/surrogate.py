@@ -442,7 +442,7 @@ class Surrogate:
             displacement smoothed on the working grid (``rfmap.finish.polish.smooth_displacement``,
             ``rfmap.finish.polish.smooth_passes`` passes, edges per ``rfmap.finish.polish.SMOOTH_EDGES``, and on a finer output
             grid ``rfmap.finish.polish.OUTPUT_PASSES`` more passes there; all recorded in ``info["polish"]``) where that is
-            fold-free; a number is the tolerance on Std(rho~_map).  ``time`` then covers both stages.  A folded
+            fold-free; a number is the tolerance on Std(ρ̃_map).  ``time`` then covers both stages.  A folded
             network map is not repaired first (``info["repair"]["skipped"]``): the polish then starts cold from the
             identity, and the repair would be thrown away.
         guard : bool

@@ -195,7 +195,7 @@ def cmd_map(args) -> int:
     if "polish" in res.info:
         p = res.info["polish"]
         st = p["stages"]
-        print(f"polish: {p['start']} start{' (' + p['reason'] + ')' if p['reason'] else ''}, Std(rho~_map) "
+        print(f"polish: {p['start']} start{' (' + p['reason'] + ')' if p['reason'] else ''}, Std(ρ̃_map) "
               f"{st['surrogate']['std_rho_map']:.4g} -> {st['polish']['std_rho_map']:.4g}, network "
               f"{st['surrogate']['time']:.3f} s + flow {p['time']:.3f} s")
         if "cold" in st:
@@ -344,7 +344,7 @@ def _add_map(sub) -> None:
                    help="return the raw network map, without removing folded elements or shortening a map that "
                         "leaves the density less equal than it was")
     s.add_argument("--polish", nargs="?", const="default", default=None, type=_polish_arg, metavar="TOL",
-                   help="finish the density map with the flow-based solver (optionally to Std(rho~_map) <= TOL)")
+                   help="finish the density map with the flow-based solver (optionally to Std(ρ̃_map) <= TOL)")
     s.add_argument("--no-guard", action="store_true",
                    help="with --polish: return the warm flow's map without also running the cold flow and keeping "
                         "the better one")

@@ -26,7 +26,7 @@ class ResultKind:
     name : str
         The kind, as in ``MapResult.kind``.
     vertex_density : bool
-        The field is a vertex density: the density metrics (Std(rho~)) and the VTK export's ``density`` and ``rho``
+        The field is a vertex density: the density metrics (Std(ρ̃)) and the VTK export's ``density`` and ``rho``
         apply.
     complex_field : bool
         The field is complex (a Beltrami coefficient per element).

@@ -30,7 +30,7 @@ class FinishOptions:
         more equal than its input (:func:`rfmap.finish.stages.shorten`).  ``False`` returns the raw map.
     polish : bool or float
         Finish a density map of a grid with the flow-based solver (:func:`rfmap.finish.stages.polish`); a number
-        is the tolerance on Std(rho~_map).  A polished map is not judged or shortened: the flow equalizes it.
+        is the tolerance on Std(ρ̃_map).  A polished map is not judged or shortened: the flow equalizes it.
     guard : bool
         With ``polish``: keep the better of the warm and the cold flow (:data:`rfmap.finish.polish.GUARD`).
     """
@@ -47,7 +47,7 @@ class FinishOptions:
 
     @property
     def tol(self) -> float | None:
-        """The polish's tolerance on Std(rho~_map) (``None``: the solver's default)."""
+        """The polish's tolerance on Std(ρ̃_map) (``None``: the solver's default)."""
         return polish_tolerance(self.polish) if self.polish is not False else None
 
     def check(self, task, on_grid: bool) -> None:

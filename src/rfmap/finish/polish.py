@@ -66,12 +66,12 @@ WARM_STEPS = 500
 #: decisions).
 GUARD = True
 
-#: A network map is *poor* when its Std(rho~_map) is above this fraction of the input's Std(rho~_orig).
+#: A network map is *poor* when its Std(ρ̃_map) is above this fraction of the input's Std(ρ̃_orig).
 POOR = 0.5
 
 
 #: Binomial-filter passes of :func:`smooth_displacement` before a polish, per (dimension, boundary), when the output
-#: grid is the working grid: the best polished / cold-flow Std(rho~_map) on validation fields (book: Design decisions).
+#: grid is the working grid: the best polished / cold-flow Std(ρ̃_map) on validation fields (book: Design decisions).
 SMOOTH_PASSES = {(2, "square"): 2, (3, "square"): 8, (2, "free"): 2, (3, "free"): 2}
 #: Passes per boundary when the map is resampled onto a finer output grid (followed by :data:`OUTPUT_PASSES` on the
 #: output grid), chosen as :data:`SMOOTH_PASSES` (book: Design decisions).
@@ -148,11 +148,11 @@ def smooth_displacement(psi, passes: int = 2, edges: str = "replicate"):
 
 def polish_tolerance(polish) -> float | None:
     """The flow's stopping tolerance for ``Surrogate.map(polish=...)``: ``True`` gives the solver's default
-    (``None``), a positive number is the tolerance on Std(rho~_map); ``ValueError`` otherwise."""
+    (``None``), a positive number is the tolerance on Std(ρ̃_map); ``ValueError`` otherwise."""
     if polish is True:
         return None
     if isinstance(polish, bool) or not isinstance(polish, (int, float, np.floating)) or not 0 < polish < np.inf:
-        raise ValueError(f"polish must be True, False or a positive tolerance on Std(rho~_map), got {polish!r}")
+        raise ValueError(f"polish must be True, False or a positive tolerance on Std(ρ̃_map), got {polish!r}")
     return float(polish)
 
 
@@ -207,7 +207,7 @@ class PolishOptions:
         :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` (:data:`GUARD` explains why no cheaper test will do), so that
         the result is never worse than the flow-based solver alone; ``False`` returns the warm flow's map.
     poor : float
-        Start cold when Std(rho~_map) of :math:`u_0` exceeds ``poor`` times Std(rho~_orig).
+        Start cold when Std(ρ̃_map) of :math:`u_0` exceeds ``poor`` times Std(ρ̃_orig).
     progress : bool
         Progress bar of the flow.
     """
@@ -262,8 +262,8 @@ def polish_map(result, *, n: int, boundary: str, options: PolishOptions = Polish
     if before["n_flipped"]:
         reason = f"the network's map has {counted(before['n_flipped'], 'folded element')}"
     elif not before["std_rho_map"] <= poor * before["std_rho_orig"]:
-        reason = (f"the network's map is poor: Std(rho~_map) {before['std_rho_map']:.3g} > {poor:g} x "
-                  f"Std(rho~_orig) {before['std_rho_orig']:.3g}")
+        reason = (f"the network's map is poor: Std(ρ̃_map) {before['std_rho_map']:.3g} > {poor:g} x "
+                  f"Std(ρ̃_orig) {before['std_rho_orig']:.3g}")
     elif boundary == "free" and not _in_box(mapped, boundary, n):
         reason = "the network's map leaves the sea box"
     kw = {} if tol is None else {"tol": tol}

@@ -24,12 +24,12 @@ from .report import MapReport
 __all__ = ["QUALITY_MARGIN", "GAIN_RTOL", "PoorMapWarning", "quiet_quality", "density_quality", "quality_message",
            "poor_map_message"]
 
-#: :func:`density_quality` calls a map worse than the input when its Std(rho~_map) exceeds Std(rho~_orig) by more
+#: :func:`density_quality` calls a map worse than the input when its Std(ρ̃_map) exceeds Std(ρ̃_orig) by more
 #: than this fraction (far above the single-precision measures' error, so that the identity never counts as worse)
 QUALITY_MARGIN = 1e-4
 
-#: :func:`density_quality` says a map brought no gain when it lowered Std(rho~) by less than this fraction of
-#: Std(rho~_orig): the identity, whose two spreads differ only by round-off, is always such a map
+#: :func:`density_quality` says a map brought no gain when it lowered Std(ρ̃) by less than this fraction of
+#: Std(ρ̃_orig): the identity, whose two spreads differ only by round-off, is always such a map
 GAIN_RTOL = 1e-3
 
 
@@ -74,10 +74,10 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     Returns
     -------
     dict
-        ``std_rho_orig``, ``std_rho_map``, ``min_jacobian``; ``worse``: whether Std(rho~_map) exceeds
-        Std(rho~_orig) by more than the fraction :data:`QUALITY_MARGIN` and 1e-5 (or the map is not finite), i.e.
-        the map undid more than it did; and ``no_gain``: whether Std(rho~_map) is not below
-        ``(1 - GAIN_RTOL) * Std(rho~_orig)`` (:data:`GAIN_RTOL`; or the map is not finite), i.e. the map did not make
+        ``std_rho_orig``, ``std_rho_map``, ``min_jacobian``; ``worse``: whether Std(ρ̃_map) exceeds
+        Std(ρ̃_orig) by more than the fraction :data:`QUALITY_MARGIN` and 1e-5 (or the map is not finite), i.e.
+        the map undid more than it did; and ``no_gain``: whether Std(ρ̃_map) is not below
+        ``(1 - GAIN_RTOL) * Std(ρ̃_orig)`` (:data:`GAIN_RTOL`; or the map is not finite), i.e. the map did not make
         the density measurably more equal.  A map that is worse brings no gain; the identity brings none either, on
         every grid, whatever the round-off of the two spreads.
     """
@@ -108,19 +108,19 @@ def quality_message(quality: dict[str, Any], refine: str = "refine=True", polish
     finish = "the flow-based finish, on a grid only" if grid_only else "the flow-based finish"
     if shorten is not None:
         before = shorten["std_before"]
-        return (f"the network's map left this density less equal than it was (Std(rho~_map) "
-                f"{'folded' if not math.isfinite(before) else format(before, '.3g')} >= Std(rho~_orig) "
+        return (f"the network's map left this density less equal than it was (Std(ρ̃_map) "
+                f"{'folded' if not math.isfinite(before) else format(before, '.3g')} >= Std(ρ̃_orig) "
                 f"{quality['std_rho_orig']:.3g}); its displacement was shortened to {shorten['scale']:.3g} of "
-                f"itself (Std(rho~_map) {quality['std_rho_map']:.3g}, smallest Jacobian "
+                f"itself (Std(ρ̃_map) {quality['std_rho_map']:.3g}, smallest Jacobian "
                 f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
                 f"refinement) or {polish} ({finish}) can help")
     if quality["worse"]:
-        return (f"the network's map leaves this density less equal than it was (Std(rho~_map) "
-                f"{quality['std_rho_map']:.3g} > Std(rho~_orig) {quality['std_rho_orig']:.3g}, smallest Jacobian "
+        return (f"the network's map leaves this density less equal than it was (Std(ρ̃_map) "
+                f"{quality['std_rho_map']:.3g} > Std(ρ̃_orig) {quality['std_rho_orig']:.3g}, smallest Jacobian "
                 f"{quality['min_jacobian']:.3g}): the field is probably unlike the training fields; {refine} (weight "
                 f"refinement) or {polish} ({finish}) can help")
-    return (f"the network's map does not make this density more equal (Std(rho~_map) "
-            f"{quality['std_rho_map']:.4g}, Std(rho~_orig) {quality['std_rho_orig']:.4g}: less than "
+    return (f"the network's map does not make this density more equal (Std(ρ̃_map) "
+            f"{quality['std_rho_map']:.4g}, Std(ρ̃_orig) {quality['std_rho_orig']:.4g}: less than "
             f"{GAIN_RTOL:.1%} lower; smallest Jacobian {quality['min_jacobian']:.3g}): the field is probably unlike "
             f"the training fields, or the network is untrained; {refine} (weight refinement) or {polish} ({finish}) "
             f"can help")

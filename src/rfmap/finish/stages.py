@@ -72,7 +72,7 @@ def regrid(draft: Draft, remap: Callable[[int], Draft], sides: Sequence[int]) ->
 
 
 def _improves(draft: Draft) -> bool:
-    """Whether a fold-free map is more equal than the input: Std(rho~_map) < Std(rho~_orig) for a density map
+    """Whether a fold-free map is more equal than the input: Std(ρ̃_map) < Std(ρ̃_orig) for a density map
     (always true for tasks that do not equalize a density)."""
     if not draft.task.equalizes:
         return True
@@ -159,7 +159,7 @@ def polish(draft: Draft, tol: float | None = None, guard: bool = GUARD) -> Draft
     draft : Draft
         A density map of the ``N``-grid.
     tol : float, optional
-        The flow's tolerance on Std(rho~_map) (:func:`rfmap.finish.polish.polish_tolerance`).
+        The flow's tolerance on Std(ρ̃_map) (:func:`rfmap.finish.polish.polish_tolerance`).
     guard : bool
         After a warm flow also run the cold flow and keep the better map (:data:`rfmap.finish.polish.GUARD`).
 

@@ -22,7 +22,7 @@ axes permutes the components and transposes the array).  The boundary factor :ma
 
 over a set :math:`S` of symmetries is exact wherever :math:`\psi` is, and averages out the part of the error that
 changes with :math:`g`; it costs :math:`|S|` network evaluations. Measured on the held-out validation fields (never
-the paper's test fields) the average of :data:`DEFAULT_SYMMETRY` lowers the mean Std(rho~_map) by about 5 % in 2D and
+the paper's test fields) the average of :data:`DEFAULT_SYMMETRY` lowers the mean Std(ρ̃_map) by about 5 % in 2D and
 18 % in 3D and folds the steep ramps less often (the book's page *Design decisions*); the chapter on
 density-equalizing maps in 3D reports it on the paper's 3D tests.
 """

@@ -55,7 +55,7 @@ domain keeps its measure (``rfmap.solvers.raster.balanced_sea``), and later pass
 residual density.  The flow's velocity :math:`-\nabla\phi/\rho_t` carries the density's jumps into the map, and a steep
 jump from a dense coast to the sea can squeeze a coastal element to zero measure: on held-out fields with a steep ramp
 against the coast (``rfmap.training.validation``) the pass stalls, its blurred retries (below) leave much of the density
-unequalized, and the flow ends 9-24 times above the diffusion solver's Std(rho~_map) at 2D N = 256 and 4-5 times at 3D
+unequalized, and the flow ends 9-24 times above the diffusion solver's Std(ρ̃_map) at 2D N = 256 and 4-5 times at 3D
 N = 48.  A stalled first pass of a free boundary is therefore first redone with a sea that starts at the coast's own
 density and blends to its level (``stall_blend``); ``sea_blend`` asks for that sea from the start (see ``solve_flow``).
 
@@ -107,7 +107,7 @@ def _turned_over(x: np.ndarray, n: int) -> bool:
 
 
 #: default step tolerance per dimension (grid spacings): 3D steps cost about ten times 2D ones, so 3D takes a coarser
-#: tolerance for nearly the same Std(rho~_map) (book: Design decisions)
+#: tolerance for nearly the same Std(ρ̃_map) (book: Design decisions)
 RTOL = {2: 0.2, 3: 0.4}
 
 
@@ -117,7 +117,7 @@ MARGIN = {2: 0.5, 3: 0.25}
 
 
 #: Sea blend (``solve_flow(stall_blend=...)``) of the first remedy for a stalled first pass of a free boundary's cold
-#: start, tried before the blurred retries (``STALL_BLURS``): the width with the lowest mean Std(rho~_map) on the
+#: start, tried before the blurred retries (``STALL_BLURS``): the width with the lowest mean Std(ρ̃_map) on the
 #: validation stream (book: Design decisions).  A pass that does not stall keeps the diffusion solver's sea.
 STALL_BLEND = 0.25
 

@@ -8,7 +8,7 @@ r"""The density task: a density-equalizing map (DEM, DEQ) of the unit square or 
   area constraint on a free boundary;
 * refinement objective: :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m`
   (:func:`rfmap.tasks.objectives.density_objective`);
-* validation: Std(rho~_map) on four families of held-out densities, relative to the field's own Std(rho~_orig);
+* validation: Std(ρ̃_map) on four families of held-out densities, relative to the field's own Std(ρ̃_orig);
 * reference solver: the diffusion method (:func:`rfmap.solvers.solve_dem`).
 """
 from __future__ import annotations

@@ -130,7 +130,7 @@ def grid_convergence_figure(sides, values, *, title: str = "",
     sides : sequence of int
         The grid sides :math:`N`.
     values : sequence of float
-        The quantity at each side (positive), by default Std(rho~) of the mapped mesh.
+        The quantity at each side (positive), by default Std(ρ̃) of the mapped mesh.
     title, ylabel : str
         The axes' title and the label of the quantity.
     """

@@ -8,7 +8,7 @@ from .base import CartogramMethod
 
 __all__ = ["SurrogateMethod", "HybridMethod", "HYBRID_POLISH"]
 
-#: The hybrid's polish tolerance on Std(rho~_map) (``Surrogate.map(polish=...)``): far below any raster's variation,
+#: The hybrid's polish tolerance on Std(ρ̃_map) (``Surrogate.map(polish=...)``): far below any raster's variation,
 #: so that every pass runs its flow: the cartogram's passes stop on the regions' area errors, and a polish that
 #: stopped early on a nearly uniform raster would leave small regions' areas unconverged.
 #: The polish runs on the raster's vertex grid (the network's map resampled to it), where the area errors are judged
@@ -31,7 +31,7 @@ class SurrogateMethod(CartogramMethod):
     def _map(self, density: np.ndarray, points: np.ndarray, solver_kw: dict):
         from ...finish import quiet_quality
 
-        # the raster's Std(rho~) counts the sea and every region's edge; the cartogram judges a pass by its area errors
+        # the raster's Std(ρ̃) counts the sea and every region's edge; the cartogram judges a pass by its area errors
         with quiet_quality():
             return self._network_map(density)
 

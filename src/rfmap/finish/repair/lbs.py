@@ -107,7 +107,7 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
         neighbour along a wall, the walls slide instead (:func:`rfmap.solvers.solve_lbs`, ``boundary="square"``).
         Keeping the map's own boundary needs one factorisation for both components, where sliding walls need one
         per component: at N = 160 on folded ``deq2d-square`` outputs, half the time and a 2 % lower
-        Std(rho~_map) than sliding walls.
+        Std(ρ̃_map) than sliding walls.
 
     Returns
     -------
