@@ -291,3 +291,17 @@ def test_the_classical_lead_over_several_tables_reads_every_or_a_count():
     assert times_lower(ratios) == "3 to 5 times lower than"  # 0.06 / 0.02 and 0.05 / 0.01
     b.values[("b", "classical")]["std_rho_map"] = 0.07  # above the paper's method's 0.06
     assert classical_lead([t.classical_better("std_rho_map") for t in (a, b)], "density") == "3 of 4 densities"
+
+
+def test_a_table_of_unscored_quantities_has_no_empty_columns():
+    """Rows the paper does not report (flips, the network's grid) get no paper column and no verdict column; a
+    table with a scored metric keeps both."""
+    cases = [Case("sin-cos", "sin-cos", 9)]
+    c = Comparison("tab:population_test", "t", ["std_rho_map"], cases, "flow solver")
+    c.values[("sin-cos", "paper")] = {"std_rho_map": 0.08}
+    for method in ("native", "delivered", "classical"):
+        c.values[("sin-cos", method)] = {"std_rho_map": 0.07, "n_flipped": 0, "time": 0.01}
+    details = c.to_markdown(["n_flipped"]).splitlines()
+    assert details[0] == "| case | quantity | paper's method | delivered | flow solver |"
+    assert all(line.count("|") == 6 for line in details)
+    assert c.to_markdown().splitlines()[0] == "| case | quantity | paper | paper's method | delivered | flow solver | met |"

@@ -111,9 +111,7 @@ def format_time(seconds) -> str:
 
 
 def _met(native, paper) -> bool | None:
-    if native is None or paper is None:
-        return None
-    return bool(native <= paper)
+    return None if native is None or paper is None else bool(native <= paper)
 
 
 def score_row(paper, native, delivered, classical, *, published: bool = True) -> dict[str, str]:
@@ -122,8 +120,8 @@ def score_row(paper, native, delivered, classical, *, published: bool = True) ->
     ``published`` value but, say, a mean of them), ``met`` ``yes`` / ``no`` (``—`` without a paper value)."""
     met = _met(native, paper)
     return {"paper": format_number(paper, printed=published), "native": format_number(native),
-            "delivered": format_number(delivered),
-            "classical": format_number(classical), "met": "—" if met is None else ("yes" if met else "no")}
+            "delivered": format_number(delivered), "classical": format_number(classical),
+            "met": "—" if met is None else ("yes" if met else "no")}
 
 
 def timed(run: Callable[[], MapResult], warm: Callable[[], object] | None = None, repeats: int = 3,
@@ -342,22 +340,24 @@ class Comparison:
         return format_number(v, printed=method == "paper")
 
     def _markdown(self, quantities: list[str], met: bool) -> str:
-        head = ["N" if self.case_prefix else "case", "quantity"] + self.heads() + (["met"] if met else [])
+        """The rows of ``quantities``; the columns that hold one of them, ``met`` only with a scored metric."""
+        heads = dict(zip(self.methods(), self.heads()))
+        shown = [m for m in heads if any(self.value(c.name, m, q) is not None for c in self.cases for q in quantities)]
+        met = met and bool(set(quantities) & set(self.metrics))
+        head = ["N" if self.case_prefix else "case", "quantity"] + [heads[m] for m in shown] + (["met"] if met else [])
         lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
         for c in self.cases:
             for i, q in enumerate(quantities):
                 cells = [c.title() if i == 0 else "", METRIC_TITLES[q].replace("|", "\\|")]
-                cells += [self._cell(c.name, m, q) for m in self.methods()]
+                cells += [self._cell(c.name, m, q) for m in shown]
                 if met:
                     cells.append(self._case_met(c.name, q) if q in self.metrics else "")
                 lines.append("| " + " | ".join(cells) + " |")
         return "\n".join(lines)
 
     def to_markdown(self, quantities: list[str] | None = None) -> str:
-        """The table in the paper's shape: one block of rows per case (the scored metrics, then the time, or the
-        rows of ``quantities``, e.g. ``full_quantities()``), a column per method that holds values
-        (:meth:`methods`) and, with a paper column, the verdict of each scored metric; every number by
-        :func:`format_number`."""
+        """The paper's shape: a block of rows per case (the scored metrics and the time, or ``quantities``), a column
+        per method that holds one of them and the verdict of each scored metric; numbers by :func:`format_number`."""
         return self._markdown(quantities or self.metrics + ["time"], met="paper" in self.methods())
 
     def verdict(self) -> str:
@@ -379,9 +379,8 @@ class Comparison:
                             "min_jacobian", "n_flipped", "work_n", "alpha", "time", "network_time"] if q in present]
 
     def full_markdown(self) -> str:
-        """Every quantity measured (``full_quantities()``), in the shape of :meth:`to_markdown`: one block of rows
-        per case, one row per quantity and a column per method, so that the table keeps the width of the text
-        column however many quantities there are."""
+        """Every quantity measured (``full_quantities()``) in the shape of :meth:`to_markdown`, without verdicts:
+        as narrow as the text column however many quantities there are."""
         return self._markdown(self.full_quantities(), met=False)
 
     def to_csv(self) -> str:
