@@ -184,8 +184,9 @@ def grid_measure_coefficients(ref: Tensor, disp: Tensor, n: int) -> list[tuple[t
 
     Returns
     -------
-    list of ``(S, c_S)`` over the subsets :math:`S` in binary order (``S`` a sorted tuple of axes, ``c_S`` of shape
-    (m,), elements in the order of :func:`grid_signed_measures`).
+    list of (S, c_S)
+        One pair per subset :math:`S`, in binary order: ``S`` a sorted tuple of axes, ``c_S`` a tensor of shape
+        (m,) over the elements, in the order of :func:`grid_signed_measures`.
     """
     P, d = disp.shape
     if P != n**d or ref.shape != disp.shape:

@@ -30,14 +30,19 @@ class MapMetrics:
 
     Attributes
     ----------
-    std_rho_orig, std_rho_map : float
-        :math:`\\mathrm{Std}(\\tilde\\rho)` on the reference and on the mapped mesh.
+    std_rho_orig : float
+        :math:`\\mathrm{Std}(\\tilde\\rho)` on the reference mesh: how far the input is from uniform.
+    std_rho_map : float
+        :math:`\\mathrm{Std}(\\tilde\\rho)` on the mapped mesh: the spread the map leaves (0 for a perfect
+        density-equalizing map).
     min_jacobian : float
         Smallest element Jacobian determinant.
     n_flipped : int
         Elements with determinant :math:`\\le 0`.
-    max_mu, mean_mu : float
-        Max and mean of :math:`|\\mu|` over triangles (2D only).
+    max_mu : float
+        Largest :math:`|\\mu|` over the triangles (2D only).
+    mean_mu : float
+        Mean of :math:`|\\mu|` over the triangles (2D only).
     mean_dd : float
         Mean vertex distance to a reference map.
     mean_dmu : float

@@ -46,11 +46,18 @@ class RandomDensityConfig:
     contrast : (float, float)
         Log-uniform range of the raw field's peak-to-peak value before the shift (the shifted field then spans
         ``[0.1, 0.1 + contrast]``; the test fields span about 2).
-    p_step, p_patch, p_noise : float
-        Probabilities of adding a step (box indicator), a compact high-frequency patch, and vertex noise.
-    p_peak, p_ramp : float
-        Probabilities of adding a narrow Gaussian peak (width 0.02–0.08) and a steep tanh ramp across a random
-        direction (width 0.01–0.05); both are 0 by default (the distribution of the first shipped models).
+    p_step : float
+        Probability of adding a step (a box indicator).
+    p_patch : float
+        Probability of adding a compact high-frequency patch.
+    p_noise : float
+        Probability of adding vertex noise.
+    p_peak : float
+        Probability of adding a narrow Gaussian peak (width 0.02–0.08); 0 by default (the distribution of the first
+        shipped models).
+    p_ramp : float
+        Probability of adding a steep tanh ramp across a random direction (width 0.01–0.05); 0 by default, like
+        ``p_peak``.
     ramp_width : (float, float)
         Uniform range of a ramp's width.
     ramp_scale : float

@@ -104,8 +104,9 @@ def transform_grid(grids: np.ndarray, s: Symmetry) -> np.ndarray:
 
     Returns
     -------
-    array, shape (B, N, ..., N), contiguous: the fields reflected along ``s.flips``, then with axes ``s.perm``
-    (and, for a Beltrami coefficient, its values transformed as above)
+    array, shape (B, N, ..., N), contiguous
+        The fields reflected along ``s.flips``, then with axes ``s.perm`` (and, for a Beltrami coefficient, its
+        values transformed as above).
     """
     g = np.asarray(grids)
     for ax in s.flips:
@@ -129,8 +130,9 @@ def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
 
     Returns
     -------
-    Tensor, shape (B, d, N, ..., N): axes and components put back in order, then every reflected axis flipped back
-    and its component negated
+    Tensor, shape (B, d, N, ..., N)
+        The displacement with its axes and components put back in order, then every reflected axis flipped back
+        and its component negated.
     """
     d = psi.shape[1]
     inv = [int(i) for i in np.argsort(s.perm)]

@@ -45,8 +45,10 @@ class BS32Options:
         norm).
     first_step : float
         The first step.
-    t0, t_end : float
-        The time span; by default from 0 until the flow has ``settled``.
+    t0 : float
+        The start time (0 by default).
+    t_end : float
+        The end time; by default none (infinity): the flow runs until it has ``settled``.
     max_steps : int
         Most (accepted + rejected) steps; ``RuntimeError`` beyond.
     fold_stop : int, optional

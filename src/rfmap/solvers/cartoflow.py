@@ -75,8 +75,10 @@ class GridFlow:
 
     Attributes
     ----------
-    ref_points, mapped_points : ndarray, shape (N*N, 2)
-        Vertex ``i*N + j`` at :math:`(i, j)/(N-1)` and its image.
+    ref_points : ndarray, shape (N*N, 2)
+        The grid's vertices, vertex ``i*N + j`` at :math:`(i, j)/(N-1)`.
+    mapped_points : ndarray, shape (N*N, 2)
+        Their images by the flow.
     time : float
         Seconds.
     info : dict

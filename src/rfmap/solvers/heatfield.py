@@ -98,8 +98,10 @@ class HeatField:
 
     Attributes
     ----------
-    dim, m : int
-        The dimension :math:`d` and the raster's side :math:`M`.
+    dim : int
+        The dimension :math:`d`.
+    m : int
+        The raster's side :math:`M`.
     divide : str
         Where :meth:`velocity_at` divides.
     coef : ndarray, shape (M,)*d

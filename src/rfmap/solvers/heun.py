@@ -77,8 +77,10 @@ class HeunOptions:
     ----------
     tol : float
         Largest predictor--corrector difference of an accepted step (``rtol`` grid spacings, in box units).
-    t0, t_end : float
-        The time span (the flow-based map's unit interval by default).
+    t0 : float
+        The start time (0 by default, the start of the flow-based map's unit interval).
+    t_end : float
+        The end time (1 by default).
     first_step : float
         The first step.
     max_steps : int

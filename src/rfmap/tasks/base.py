@@ -439,10 +439,13 @@ def draw_samples(spec: TaskSpec, *, seed: int, step: int, indices, n: int, optio
     Returns
     -------
     points : ndarray, shape (B, N**d, d), float64
-    params : ndarray, shape (B, N**d, ...), e.g. the unit-mass density (float64) or the Beltrami coefficient
-        (complex128)
-    targets : ndarray, shape (B, N**d, d), float64 — only with an active ``teacher``: the teacher's map at the
-        sample's vertices, NaN for samples without a target (beyond the share, or the solver failed)
+        The vertices of each sample's grid.
+    params : ndarray, shape (B, N**d, ...)
+        The field of each sample at its vertices, e.g. the unit-mass density (float64) or the Beltrami coefficient
+        (complex128).
+    targets : ndarray, shape (B, N**d, d), float64
+        Only with an active ``teacher``: the teacher's map at the sample's vertices, NaN for samples without a
+        target (beyond the share, or the solver failed).
     """
     task = spec.task
     options = replace(options or SampleOptions(), **kw)

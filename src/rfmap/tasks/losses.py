@@ -26,9 +26,11 @@ class Measures:
 
     Attributes
     ----------
-    ref, mapped : Tensor, shape (B, m), optional
-        Signed element measures before and after the map (e.g. by :func:`rfmap.core.geometry.grid_signed_measures` on a
-        grid mesh).
+    ref : Tensor, shape (B, m), optional
+        Signed element measures before the map (e.g. by :func:`rfmap.core.geometry.grid_signed_measures` on a grid
+        mesh).
+    mapped : Tensor, shape (B, m), optional
+        Signed element measures after the map.
     density : Tensor, shape (B, m), optional
         The mean vertex density of every element.
     """
