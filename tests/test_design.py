@@ -11,7 +11,8 @@ from pathlib import Path
 import pytest
 
 from rfmap.paper.design import (DESIGN_PATH, current_value, display_name, finding, kept_text, load_decisions,
-                                plain_numbers, readable_value, record, remeasure_command, stale_values, to_markdown)
+                                plain_numbers, readable_value, record, remeasure_command, stale_values, to_markdown,
+                                _sentence)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -153,11 +154,12 @@ def test_every_decision_says_in_plain_words_what_it_is_for_and_why_it_stays():
     glance = page[page.index("## At a glance"):page.index("## The decisions one by one")]
     assert glance.count("\n- [") == len(load_decisions())
     assert f"This page records {len(load_decisions())} such decisions." in page
-    # a section gives its criterion and outcome outside the collapsed block, not the overview's one-liner again
+    # a section gives its criterion outside the collapsed block, not the overview's purpose or outcome again
     for d in load_decisions():
         section = page[page.index(f"### {display_name(d)}\n"):]
         head = section[:section.index("::::{dropdown}")]
-        assert f"**Criterion:** {d['criterion']}." in head and "**Outcome:**" in head, d["constant"]
+        assert f"**Criterion:** {d['criterion']}." in head and "**Outcome:**" not in head, d["constant"]
+        assert page.count(_sentence(d["outcome"])) == 1, d["constant"]
         assert d["purpose"] not in head, d["constant"]
         if d.get("alternatives_per_case"):
             assert "**Tried per case:** see the table." in section[:section.index("\n::::\n")]

@@ -307,10 +307,11 @@ def _status(d: dict[str, Any]) -> list[str]:
 
 
 def _details(d: dict[str, Any]) -> list[str]:
-    """One decision's section: its name and value, its criterion and what the measurement showed (what it controls
-    is said in the overview), then the numbers in a collapsed block (rows quoted by a finding not repeated)."""
+    """One decision's section: its name and value and its criterion (what it controls and what the measurement
+    showed are said in the overview), then the numbers in a collapsed block (rows quoted by a finding not
+    repeated)."""
     lines = [f"({_label(d)})=", f"### {display_name(d)}", "", f"**Value:** {readable_value(d)}" + _where(d), "",
-             f"**Criterion:** {d['criterion']}.", "", f"**Outcome:** {_sentence(d.get('outcome'))}", ""]
+             f"**Criterion:** {d['criterion']}.", ""]  # the outcome is the overview's, said once
     lines += finding(d)
     lines += ["::::{dropdown} The measurement", ""]
     if d.get("alternatives_per_case"):
@@ -380,8 +381,7 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
              f"criterion; for {counted(len(uncompared), 'decision')} no alternative was tried, and the overview says "
              "so (*Tried instead: None recorded*). The overview below gives, for each, what it controls, what was "
              "tried instead, what the measurement showed and why the value stays. Below the overview, each decision "
-             "has a short section with its criterion and outcome; its numbers sit in a collapsed block (click to "
-             "open it).", "",
+             "has a short section with its criterion; its numbers sit in a collapsed block (click to open it).", "",
              f"The numbers are of two kinds. For {counted(len(scripted), 'decision')} a script "
              "(`benchmarks/design.py`) measures the choice again and prints the same numbers; the others are "
              "records written down when the value was chosen, and the code has changed since, so they explain the "
