@@ -1,5 +1,6 @@
 """The reference page of the command line lists every sub-command's options, read from the parsers."""
 import importlib.util
+import re
 from pathlib import Path
 
 from rfmap.cli.reference import options_markdown, subcommand_parsers
@@ -31,3 +32,16 @@ def test_the_cli_page_is_up_to_date_and_rebuilt_by_make_pages():
     spec.loader.exec_module(module)
     assert module.main(["--check"]) == 0, "book/api/cli.md is stale: run python scripts/make_cli_md.py"
     assert "$(BIN)/python scripts/make_cli_md.py" in (ROOT / "Makefile").read_text(encoding="utf-8")
+
+
+def test_every_table_row_has_two_cells_and_options_render_as_typed():
+    """A ``|`` in a metavar (``--init MODEL|FILE``) is escaped, so it does not split its cell, and an option named in
+    a help text is in code, where the book's typographer does not turn ``--`` into a dash."""
+    text = options_markdown()
+    rows = [line for line in text.splitlines() if line.startswith("| ")]
+    assert rows and all(len(re.split(r"(?<!\\)\|", row)) == 4 for row in rows), \
+        [row for row in rows if len(re.split(r"(?<!\\)\|", row)) != 4]
+    assert "| `--init MODEL\\|FILE` |" in text and "| `--n-range LO HI` |" in text
+    prose = re.sub(r"```text\n.*?```|\|---\|---\|", "", text, flags=re.S)
+    assert "--" not in re.sub(r"`[^`]*`", "", prose)
+    assert all(not row.endswith("| — |") for row in rows), [row for row in rows if row.endswith("| — |")]

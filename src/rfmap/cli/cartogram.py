@@ -265,7 +265,9 @@ def add_cartogram_parser(sub) -> None:
 
     default = CartogramOptions()  # every default of the command is the API's
 
-    s = sub.add_parser("cartogram", help="resize GeoJSON regions by a value (diffusion or flow-based cartogram)",
+    s = sub.add_parser("cartogram",
+                       help="resize GeoJSON regions by a value (a flow-based cartogram by default; diffusion, "
+                            "surrogate or hybrid)",
                        description="Resize GeoJSON regions by a value. Longitude/latitude are projected to an "
                                    "equal-area plane first (Lambert azimuthal equal-area centred on the map; Equal "
                                    "Earth for a map wider than 180 degrees of longitude). Exit status 0: within "
@@ -277,7 +279,8 @@ def add_cartogram_parser(sub) -> None:
                    help="the feature property holding each region's value (with --data: the CSV column)")
     s.add_argument("--series", nargs="+", default=None, metavar="VALUE",
                    help="instead of --value: a cartogram per value in turn (e.g. one per year), each computed from "
-                        "the previous one in the projection's plane; --out writes the last, --gif the animation")
+                        "the previous one in the projection's plane, by a classical method only (flow or "
+                        "diffusion); --out writes the last, --gif the animation")
     s.add_argument("--gif", default=None, help="with --series: write the frames as an animation (.gif, or .mp4)")
     d = s.add_argument_group("values from a CSV table")
     d.add_argument("--data", default=None, metavar="FILE.csv",

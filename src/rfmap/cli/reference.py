@@ -1,8 +1,13 @@
 """The options of every ``rfmap`` sub-command as Markdown, read from the parsers themselves, so that the reference
-page of the command line lists what ``rfmap <sub-command> --help`` prints and cannot fall behind it."""
+page of the command line lists what ``rfmap <sub-command> --help`` prints and cannot fall behind it.
+
+The Markdown is written to render as the terminal prints it: a ``|`` is escaped so that it stays inside its table
+cell, and an option named in a help text (``--resume``) is set in code, where MyST's typographer does not turn its
+two hyphens into a dash."""
 from __future__ import annotations
 
 import argparse
+import re
 
 __all__ = ["subcommand_parsers", "options_markdown"]
 
@@ -21,6 +26,8 @@ def subcommand_parsers() -> dict[str, argparse.ArgumentParser]:
 
 
 def _names(action: argparse.Action) -> str:
+    """The first cell of an argument's row: its name, or each option string with its value as ``--help`` writes
+    it (``--n-range LO HI``, ``--init MODEL|FILE``), in code, a ``|`` escaped so that it does not end the cell."""
     if not action.option_strings:
         return f"`{action.metavar or action.dest}`"
     if action.nargs == 0:
@@ -28,18 +35,25 @@ def _names(action: argparse.Action) -> str:
     else:
         metavar = action.metavar or (action.dest.upper() if not action.choices else
                                      "{" + ",".join(map(str, action.choices)) + "}")
+        if isinstance(metavar, tuple):
+            metavar = " ".join(metavar)
         value = f" {metavar}" if action.nargs is None else f" {metavar} ..." if action.nargs in ("+", "*") else \
             f" [{metavar}]" if action.nargs == "?" else f" {metavar}"
-    return ", ".join(f"`{o}{value}`" for o in action.option_strings)
+    return ", ".join(f"`{o}{value}`".replace("|", "\\|") for o in action.option_strings)
 
 
 #: characters of a help text that Markdown (or MyST's dollar math) would read as markup
 _MARKUP = str.maketrans({c: "\\" + c for c in "\\`*_$<>[]|"})
 
 
+#: an option named in a help text (``--resume``, ``--device``), not part of a longer word
+_OPTION = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*(?![\w-])")
+
+
 def _cell(text: str) -> str:
-    """A help text as one Markdown table cell, its markup characters escaped so that it reads as written."""
-    return " ".join(text.split()).translate(_MARKUP)
+    """A help text as one Markdown table cell, its markup characters escaped so that it reads as written and the
+    options it names set in code."""
+    return _OPTION.sub(lambda m: f"`{m.group(0)}`", " ".join(text.split()).translate(_MARKUP))
 
 
 def _description(action: argparse.Action) -> str:

@@ -26,7 +26,10 @@ __all__ = ["build_parser", "run", "main"]
 def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.ArgumentParser:
     """The arguments of ``rfmap train`` (:doc:`/book/api/cli`), added to ``parser`` or to a new parser."""
     p = parser or argparse.ArgumentParser(prog="rfmap train", description="Train a surrogate from a named config.")
-    p.add_argument("--config", required=True, help=f"one of: {', '.join(config_names())}")
+    p.add_argument("--config", required=True,
+                   help=f"one of: {', '.join(config_names())} (rfmap models lists the shipped models; "
+                        "ablation-lambda-* are the Beltrami-weight ablations of chapter 08, unet-fno-budget the "
+                        "U-Net trained at the FNO's budget in chapter 12)")
     p.add_argument("--preset", choices=list(PRESETS), default=None,
                    help="ci (seconds), full (the shipped CPU runs) or paper (the paper's hyperparameters); "
                         "default: $RFMAP_SCALE or full")
@@ -52,7 +55,10 @@ def build_parser(parser: argparse.ArgumentParser | None = None) -> argparse.Argu
     p.add_argument("--threads", type=int, default=None,
                    help="torch CPU threads per process (also with --device cuda: validation runs on a CPU copy)")
     p.add_argument("--workers", type=int, default=None, help="batch-drawing worker processes (0: a thread)")
-    p.add_argument("--seed", type=int, default=None)
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of the initial weights (and of --grow's new channels) and of each step's grid side, "
+                        "fields and sample points; the held-out validation fields do not depend on it (default: "
+                        "the config's, 0)")
     p.add_argument("--teacher", default=None, metavar="flow|diffusion|none",
                    help="density configs: a classical solver's map of a share of each batch's fields as a supervised "
                         "target beside the data-free losses (rfmap.tasks.teacher; default: the config's, none)")
