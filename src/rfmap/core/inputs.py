@@ -87,8 +87,9 @@ def preprocess_density(values, *, floor: float = DENSITY_FLOOR, weights: np.ndar
 
     The paper (Sec. 5.2) shifts a density "to ensure strict positivity" and does not print the shift; 0.1 is
     inferred from its tables: with it, Std(ρ̃_orig) agrees with the printed value to all six digits for the test
-    densities the paper defines completely (the module docstring names them and the exceptions). For ``sin-cos`` the paper's constant 2 then does not matter (:math:`2 + \sin\cos` becomes
-    :math:`1.1 + \sin\cos` before the mass is normalised).
+    densities the paper defines completely (the module docstring names them and the exceptions). For ``sin-cos``
+    the paper's constant 2 then does not matter (:math:`2 + \sin\cos` becomes :math:`1.1 + \sin\cos` before the
+    mass is normalised).
 
     Parameters
     ----------

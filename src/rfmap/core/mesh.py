@@ -82,7 +82,8 @@ def check_n(n: int, minimum: int = 3) -> int:
 
 
 #: peak memory per grid vertex of the heaviest single-map pipelines (peak resident size above that of the imported
-#: package), with a margin over the measured peak (the book's Design decisions page gives the margin per pipeline)
+#: package), with a margin over the measured peak (the book's page :doc:`Design decisions </book/design>` gives the
+#: margin per pipeline)
 BYTES_PER_VERTEX = {2: 4096, 3: 4096}
 
 

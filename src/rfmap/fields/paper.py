@@ -300,7 +300,7 @@ def sample_mu(name: str, n: int | None = None, *, points=None, elements=None) ->
 
 def prism_peak_readings(n: int, heights=(0.5, 1.0, 1.5, 2.0)) -> dict:
     r"""Std(:math:`\tilde\rho_{\text{orig}}`) on the ``n``-grid (identity map, as every table's input column) of the
-    two readings of the prism of Eq. (peak-3d): ``"replace"``, the value 1 inside the box as printed (the field
+    two readings of the prism of paper Eq. (37): ``"replace"``, the value 1 inside the box as printed (the field
     ``prism-peak-3d``), and ``"add"``, the background plus a height :math:`h` inside the box, one value per height
     (a dict ``{h: std}``).  Each input is shifted and scaled as every density (:func:`preprocess_density`)."""
     mesh = grid_mesh(n, 3)

@@ -277,7 +277,7 @@ class RandomBeltramiConfig:
 
 
 class RandomBeltrami:
-    r"""A random Beltrami coefficient as in paper Eq. (train_beltrami).
+    r"""A random Beltrami coefficient as in paper Sec. 5.1, Eq. (22).
 
     :math:`\mu = \tau(x)\, s \sum_i A_i \sin(2\pi f_{x,i} x + \phi_{x,i}) \cos(2\pi f_{y,i} y + \phi_{y,i})` with
     complex amplitudes :math:`A_i = |A_i| e^{i\theta_i}`, :math:`|A_i| \le 1`, a boundary taper

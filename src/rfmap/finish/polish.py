@@ -61,9 +61,9 @@ __all__ = ["GUARD", "POOR", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOT
 #: Most time steps of a warm flow before it is abandoned for a cold start.
 WARM_STEPS = 500
 
-#: The polish's guard (``PolishOptions.guard``, on by default): after a warm flow, run the cold flow as well and
-#: keep the better map; the warm flow often loses, and nothing measured beforehand predicts when (book: Design
-#: decisions).
+#: The polish's guard (``PolishOptions.guard``, on by default): after a warm flow, run the cold flow as well and keep
+#: the better map; the warm flow often loses, and nothing measured beforehand predicts when
+#: (:doc:`Design decisions </book/design>`).
 GUARD = True
 
 #: A network map is *poor* when its Std(ρ̃_map) is above this fraction of the input's Std(ρ̃_orig).
@@ -71,17 +71,18 @@ POOR = 0.5
 
 
 #: Binomial-filter passes of :func:`smooth_displacement` before a polish, per (dimension, boundary), when the output
-#: grid is the working grid: the best polished / cold-flow Std(ρ̃_map) on validation fields (book: Design decisions).
+#: grid is the working grid: the best polished / cold-flow Std(ρ̃_map) on validation fields
+#: (:doc:`Design decisions </book/design>`).
 SMOOTH_PASSES = {(2, "square"): 2, (3, "square"): 8, (2, "free"): 2, (3, "free"): 2}
 #: Passes per boundary when the map is resampled onto a finer output grid (followed by :data:`OUTPUT_PASSES` on the
-#: output grid), chosen as :data:`SMOOTH_PASSES` (book: Design decisions).
+#: output grid), chosen as :data:`SMOOTH_PASSES` (:doc:`Design decisions </book/design>`).
 SMOOTH_PASSES_FINER = {"square": 8, "free": 4}
 #: Passes of the same filter on the output grid, after the smoothed displacement is resampled onto a finer one: the
 #: multilinear resampling puts a kink at every working-grid line, which the working-grid passes cannot remove
-#: (numbers: book, Design decisions).
+#: (numbers: :doc:`Design decisions </book/design>`).
 OUTPUT_PASSES = 2
 #: How :func:`smooth_displacement` continues the displacement past the grid's edges, per boundary: a free boundary
-#: moves with its edge values, which a replicated edge would flatten (book: Design decisions).
+#: moves with its edge values, which a replicated edge would flatten (:doc:`Design decisions </book/design>`).
 SMOOTH_EDGES = {"square": "replicate", "free": "linear"}
 
 

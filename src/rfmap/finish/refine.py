@@ -133,8 +133,8 @@ def refine_alpha(objective: Callable[[np.ndarray], float], dim: int, *, bounds: 
     return RefineResult(alpha=alpha, objective=best, objective_start=j0, evaluations=count, history=history)
 
 
-#: points of the coarse geometric scan of the isotropic stretch that guards the golden-section search (book: Design
-#: decisions)
+#: points of the coarse geometric scan of the isotropic stretch that guards the golden-section search
+#: (:doc:`Design decisions </book/design>`)
 SCAN_POINTS = 9
 
 

@@ -41,14 +41,14 @@ def fno_available() -> bool:
 class FNONet(nn.Module):
     r"""``neuraloperator``'s FNO as a displacement network :math:`\psi = \mathcal{N}_\theta(x, p)`.
 
-    Shapes: ``(B, d + m, *S) -> (B, d, *S)``, any uniform grid with every side >= :attr:`min_size`.
+    Shapes: ``(B, d + c, *S) -> (B, d, *S)``, any uniform grid with every side >= :attr:`min_size`.
 
     Parameters
     ----------
     dim : int
         Spatial dimension (2 or 3).
     n_params : int
-        Number of parameter channels :math:`m`.
+        Number of parameter channels :math:`c` (the paper's :math:`m`).
     modes : int
         Fourier modes kept per axis.
     width : int

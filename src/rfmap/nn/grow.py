@@ -144,7 +144,7 @@ def grow_unet(parent: MultiResUNet, base: int, seed: int = 0) -> MultiResUNet:
     -------
     MultiResUNet
         Same ``dim``, ``n_params``, ``depth`` and ``attention``; for every input ``x`` of shape
-        ``(B, d + m, *S)``, ``grown(x) == parent(x)`` up to float round-off.
+        ``(B, d + c, *S)``, ``grown(x) == parent(x)`` up to float round-off.
 
     Raises
     ------

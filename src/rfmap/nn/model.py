@@ -16,7 +16,7 @@ BOUNDARIES = ("fixed", "square", "free")
 
 def check_input(net: nn.Module, x: Tensor) -> None:
     """Raise a clear ``ValueError`` unless ``x`` fits the displacement network ``net`` (attributes ``dim``,
-    ``n_params``, ``in_channels``, ``min_size``): shape ``(B, d + m, *S)`` with d spatial sides >= ``min_size``."""
+    ``n_params``, ``in_channels``, ``min_size``): shape ``(B, d + c, *S)`` with d spatial sides >= ``min_size``."""
     if x.dim() != net.dim + 2:
         raise ValueError(f"a {net.dim}D model expects input of shape (B, C, {', '.join(['N'] * net.dim)}), "
                          f"got {tuple(x.shape)}")
@@ -30,24 +30,27 @@ def check_input(net: nn.Module, x: Tensor) -> None:
 class MultiResUNet(nn.Module):
     r"""Resolution-free encoder–decoder :math:`\mathcal{N}_\theta` producing a displacement field :math:`\psi`.
 
-    Input encoding (paper Sec. 4.1): channels :math:`[x_1, \dots, x_d, p_1, \dots, p_m]` on a grid of any size, the
+    Input encoding (paper Sec. 4.1): channels :math:`[x_1, \dots, x_d, p_1, \dots, p_c]` on a grid of any size, the
     field in its task's encoding (:math:`\log p` for a density, :mod:`rfmap.tasks.density`).
     Multi-resolution lifting, ``depth`` encoder stages of :class:`EnhancedDoubleConv` with 2x average pooling,
     transposed-convolution upsampling with interpolation wherever sizes do not match the skip connection, and a
     zero-initialised 1x1 head (so the untrained model is the identity map).
 
-    Shapes: ``(B, d + m, *S) -> (B, d, *S)``, any grid with every side >= :attr:`min_size` (``2 ** depth + 1``).
+    Shapes: ``(B, d + c, *S) -> (B, d, *S)``, any grid with every side >= :attr:`min_size` (``2 ** depth + 1``).
 
     Parameters
     ----------
     dim : int
         Spatial dimension (2 or 3).
     n_params : int
-        Number of parameter channels :math:`m`.
+        Number of parameter channels :math:`c` (the paper's :math:`m`).
     base : int
         Channels of the first stage (doubled at every stage).
     depth : int
         Number of poolings.
+    attention : bool
+        Whether every :class:`EnhancedDoubleConv` block applies its :class:`SpatialAttention` gate (without it, the
+        gate is the identity).
     """
 
     def __init__(self, dim: int = 2, n_params: int = 1, base: int = 16, depth: int = 3, attention: bool = True):

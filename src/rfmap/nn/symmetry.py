@@ -23,7 +23,7 @@ axes permutes the components and transposes the array).  The boundary factor :ma
 over a set :math:`S` of symmetries is exact wherever :math:`\psi` is, and averages out the part of the error that
 changes with :math:`g`; it costs :math:`|S|` network evaluations. Measured on the held-out validation fields (never
 the paper's test fields) the average of :data:`DEFAULT_SYMMETRY` lowers the mean Std(ρ̃_map) by about 5 % in 2D and
-18 % in 3D and folds the steep ramps less often (the book's page *Design decisions*); the chapter on
+18 % in 3D and folds the steep ramps less often (the book's page :doc:`Design decisions </book/design>`); the chapter on
 density-equalizing maps in 3D reports it on the paper's 3D tests.
 """
 from __future__ import annotations
@@ -42,7 +42,7 @@ __all__ = ["Symmetry", "SYMMETRY_GROUPS", "DEFAULT_SYMMETRY", "symmetries", "tra
 #: order of the axes, d!), ``cyclic`` (the d cyclic orders of the axes), ``full`` (all 2^d d! symmetries)
 SYMMETRY_GROUPS = ("flips", "permutations", "cyclic", "full")
 #: the set used by ``symmetrize=True``, per dimension, chosen on the held-out validation fields: all 8 symmetries in
-#: 2D, the 3 cyclic axis orders in 3D (book: Design decisions)
+#: 2D, the 3 cyclic axis orders in 3D (:doc:`Design decisions </book/design>`)
 DEFAULT_SYMMETRY = {2: "full", 3: "cyclic"}
 
 
@@ -145,9 +145,9 @@ def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
     return out.contiguous()
 
 
-#: grid points per network evaluation up to which the copies of :func:`symmetrized_displacement` are stacked into
-#: one batch (a single copy larger than this is evaluated alone): small grids gain, large ones do not (book: Design
-#: decisions)
+#: grid points per network evaluation up to which the copies of :func:`symmetrized_displacement` are stacked into one
+#: batch (a single copy larger than this is evaluated alone): small grids gain, large ones do not
+#: (:doc:`Design decisions </book/design>`)
 BATCH_POINTS = 2**15
 
 

@@ -2,9 +2,13 @@
 
 * :func:`solve_lbs` -- Linear Beltrami Solver (Lui et al. 2013): the quasi-conformal map of the unit square with a
   prescribed Beltrami coefficient.
-* :func:`solve_dem` -- density-equalizing map of the unit square or cube: the diffusion method (Gastner & Newman
-  2004, ``rfmap.solvers.diffusion``) or, with ``method="flow"``, the flow-based method (Gastner, Seguy & More
-  2018, :func:`solve_flow`).
+* :func:`solve_dem` -- density-equalizing map of the unit square or cube: it picks the method, the diffusion method
+  (Gastner & Newman 2004, :func:`solve_diffusion`) or, with ``method="flow"``, the flow-based method (Gastner,
+  Seguy & More 2018, :func:`solve_flow`).
+
+:func:`solve_diffusion` is the function :func:`rfmap.solvers.diffusion.solve_dem` under a name of its own (so that it
+is not confused with :func:`solve_dem` above, which chooses between the methods); it is documented once, in
+:mod:`rfmap.solvers.diffusion`.
 
 All return a :class:`rfmap.core.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name: ``"lbs"``,
 ``"diffusion"`` and ``"flow"`` (``"dem"`` is accepted as another name of ``"diffusion"``, :data:`ALIASES`).
@@ -35,8 +39,8 @@ def solve_dem(density, *, method: str = "diffusion", **kwargs) -> MapResult:
     ----------
     density : ndarray, shape (N, N) or (N, N, N)
     method : {"diffusion", "flow"}
-        ``"diffusion"`` (also ``"dem"``): ``rfmap.solvers.diffusion.solve_dem`` (Gastner & Newman 2004); ``"flow"``:
-        ``rfmap.solvers.flow.solve_flow`` (Gastner, Seguy & More 2018), usually several times faster.
+        ``"diffusion"`` (also ``"dem"``): :func:`solve_diffusion` (Gastner & Newman 2004); ``"flow"``:
+        :func:`solve_flow` (Gastner, Seguy & More 2018), usually several times faster.
     **kwargs
         Options of the chosen solver (``boundary``, ``progress``, ...).
 

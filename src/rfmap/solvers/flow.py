@@ -49,15 +49,16 @@ Numerical method:
    maps.  Passes stop when :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is below ``tol`` or stops improving (by
    less than ``stall``).
 
-Boundary conditions follow ``rfmap.solvers.diffusion.solve_dem``: ``"square"`` keeps the walls (boundary vertices slide,
-corners stay); ``"free"`` embeds the square in :math:`[-L, 1+L]^d` filled with a sea whose level is balanced so that the
-domain keeps its measure (``rfmap.solvers.raster.balanced_sea``), and later passes fill the sea with the domain's mean
-residual density.  The flow's velocity :math:`-\nabla\phi/\rho_t` carries the density's jumps into the map, and a steep
-jump from a dense coast to the sea can squeeze a coastal element to zero measure: on held-out fields with a steep ramp
-against the coast (``rfmap.training.validation``) the pass stalls, its blurred retries (below) leave much of the density
-unequalized, and the flow ends 9-24 times above the diffusion solver's Std(ρ̃_map) at 2D N = 256 and 4-5 times at 3D
-N = 48.  A stalled first pass of a free boundary is therefore first redone with a sea that starts at the coast's own
-density and blends to its level (``stall_blend``); ``sea_blend`` asks for that sea from the start (see ``solve_flow``).
+Boundary conditions follow :func:`rfmap.solvers.diffusion.solve_dem`: ``"square"`` keeps the walls (boundary
+vertices slide, corners stay); ``"free"`` embeds the square in :math:`[-L, 1+L]^d` filled with a sea whose level is
+balanced so that the domain keeps its measure (``rfmap.solvers.raster.balanced_sea``), and later passes fill the
+sea with the domain's mean residual density.  The flow's velocity :math:`-\nabla\phi/\rho_t` carries the density's
+jumps into the map, and a steep jump from a dense coast to the sea can squeeze a coastal element to zero measure: on
+held-out fields with a steep ramp against the coast (``rfmap.training.validation``) the pass stalls, its blurred
+retries (below) leave much of the density unequalized, and the flow ends 9-24 times above the diffusion solver's
+Std(ρ̃_map) at 2D N = 256 and 4-5 times at 3D N = 48.  A stalled first pass of a free boundary is therefore first
+redone with a sea that starts at the coast's own density and blends to its level (``stall_blend``); ``sea_blend``
+asks for that sea from the start (see ``solve_flow``).
 
 The same passes finish any fold-free starting map (``start``): the first pass then flows the residual density of
 the starting map.  :mod:`rfmap.finish.polish` uses this to polish a neural surrogate's map.
@@ -107,18 +108,20 @@ def _turned_over(x: np.ndarray, n: int) -> bool:
 
 
 #: default step tolerance per dimension (grid spacings): 3D steps cost about ten times 2D ones, so 3D takes a coarser
-#: tolerance for nearly the same Std(ρ̃_map) (book: Design decisions)
+#: tolerance for nearly the same Std(ρ̃_map) (:doc:`Design decisions </book/design>`)
 RTOL = {2: 0.2, 3: 0.4}
 
 
-#: default sea width L of the free boundary per dimension (the box is [-L, 1 + L]^d): the diffusion solver's 0.5 in
-#: 2D; in 3D the sea box's transforms dominate the time, and a narrower sea gives the same Std (book: Design decisions)
+#: default sea width L of the free boundary per dimension (the box is [-L, 1 + L]^d): the diffusion solver's 0.5 in 2D;
+#: in 3D the sea box's transforms dominate the time, and a narrower sea gives the same Std
+#: (:doc:`Design decisions </book/design>`)
 MARGIN = {2: 0.5, 3: 0.25}
 
 
 #: Sea blend (``solve_flow(stall_blend=...)``) of the first remedy for a stalled first pass of a free boundary's cold
 #: start, tried before the blurred retries (``STALL_BLURS``): the width with the lowest mean Std(ρ̃_map) on the
-#: validation stream (book: Design decisions).  A pass that does not stall keeps the diffusion solver's sea.
+#: validation stream (:doc:`Design decisions </book/design>`).  A pass that does not stall keeps the diffusion solver's
+#: sea.
 STALL_BLEND = 0.25
 
 
@@ -186,7 +189,7 @@ class FlowOptions:
     Attributes
     ----------
     boundary : {"square", "free"}
-        As in ``rfmap.solvers.diffusion.solve_dem``: fixed walls of the unit square/cube, or a sea of the mean
+        As in :func:`rfmap.solvers.diffusion.solve_dem`: fixed walls of the unit square/cube, or a sea of the mean
         density around it in :math:`[-L, 1+L]^d`.
     tol : float
         Stop after the pass whose :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is at most ``tol`` (no pass at all
@@ -231,7 +234,7 @@ class FlowOptions:
         stall a ``RuntimeError`` at once (the hybrid then starts cold rather than blur a warm start).
     num_threads : int, optional
         Torch threads for the interpolation and the element measures (restored afterwards); as in
-        ``rfmap.solvers.diffusion.solve_dem``, default 1 in 2D and torch's setting in 3D.
+        :func:`rfmap.solvers.diffusion.solve_dem`, default 1 in 2D and torch's setting in 3D.
     keep_best : bool
         Return the map with the lowest :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` among the start and the passes
         (default), or ``False``: the map of the last pass, even where it is worse (to study what a pass does).
@@ -435,7 +438,7 @@ def solve_flow(density, options: FlowOptions | None = None, *, start=None, progr
     Raises
     ------
     ValueError
-        For a bad density (as ``rfmap.solvers.diffusion.solve_dem``), an unknown ``boundary``, non-positive
+        For a bad density (as :func:`rfmap.solvers.diffusion.solve_dem`), an unknown ``boundary``, non-positive
         ``tol``/``rtol``/``margin``/``refine``/``max_passes``, ``stall`` outside (0, 1], or a ``start`` of the wrong
         shape, with non-finite values, outside the box, or folded.
     TypeError

@@ -54,7 +54,7 @@ def lumped_residual(elements: np.ndarray, population: np.ndarray, measure: np.nd
 
 
 #: conjugate-gradient iterations of :func:`vertex_residual` (from the lumped residual): enough for a flow started at
-#: the identity to end where the cold flow does (book: Design decisions)
+#: the identity to end where the cold flow does (:doc:`Design decisions </book/design>`)
 RESIDUAL_ITERATIONS = 10
 
 

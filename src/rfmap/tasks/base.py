@@ -8,7 +8,8 @@ metric names, its classical reference solver and the checks of its input.  Every
 (``spec.task``), so a new kind of map is one new module.
 
 The input encoding (paper Sec. 4.1) stacks the vertex coordinates and the task's parameter channels,
-:math:`\mathcal{U} = [x_1, \dots, x_d, p_1, \dots, p_m]`, as a ``(B, d+m, *S)`` tensor in grid order.
+:math:`\mathcal{U} = [x_1, \dots, x_d, p_1, \dots, p_c]`, as a ``(B, d+c, *S)`` tensor in grid order (``c`` parameter
+channels, the paper's :math:`m`; here ``m`` counts a mesh's elements).
 """
 from __future__ import annotations
 
@@ -148,7 +149,7 @@ class Batch:
 
     Attributes
     ----------
-    inputs : Tensor, shape ``(B, d+m, *S)``
+    inputs : Tensor, shape ``(B, d+c, *S)``
     ref : Tensor, shape (B, n, d)
     elements : LongTensor, shape (m, d+1)
     density : Tensor, shape (B, n) — density tasks
@@ -271,11 +272,11 @@ class Task:
 
     # ------------------------------------------------------------------ encoding and input
     def n_params(self, dim: int) -> int:
-        """Number of parameter channels ``m`` of the encoding in ``dim`` dimensions."""
+        """Number of parameter channels ``c`` of the encoding in ``dim`` dimensions."""
         raise NotImplementedError
 
     def channels(self, params: Tensor) -> Tensor:
-        """The parameter channels of the encoding, shape (B, P, m), from the parameters at the P vertices."""
+        """The parameter channels of the encoding, shape (B, P, c), from the parameters at the P vertices."""
         raise NotImplementedError
 
     def check_field(self, grid: np.ndarray, preprocess: bool = True) -> np.ndarray:
@@ -412,13 +413,13 @@ def encode(points: Tensor, params: Tensor, spec: TaskSpec, n: int) -> Tensor:
 
     Returns
     -------
-    Tensor, shape (B, d + m, N, ..., N)
+    Tensor, shape (B, d + c, N, ..., N)
     """
     B, P, d = points.shape
     if P != n**d:
         raise ValueError(f"{P} points do not form an N={n} grid in {d}D")
     ch = spec.task.channels(params)
-    x = torch.cat([points, ch.to(points.dtype)], -1)  # (B, P, d+m)
+    x = torch.cat([points, ch.to(points.dtype)], -1)  # (B, P, d+c)
     return x.transpose(1, 2).reshape(B, d + spec.n_params, *([n] * d)).contiguous()
 
 

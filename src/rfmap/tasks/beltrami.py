@@ -61,6 +61,7 @@ class BeltramiTask(Task):
         return check_mu(grid, name="Beltrami coefficient")
 
     def sample_named(self, field):
+        """The coefficient function ``field.mu`` of a named test map (:class:`rfmap.fields.paper.BeltramiMap`)."""
         return field.mu
 
     def field_on_mesh(self, grid: np.ndarray, fn, ref: np.ndarray, elements: np.ndarray,
@@ -133,6 +134,7 @@ class BeltramiTask(Task):
         return "random boundary-fixing maps" + (f", low-frequency {100 * low:.0f} %" if low else "")
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
+        """The paper's test maps T1-T4 in 2D (reported after training, never used to select a model)."""
         return TEST_FIELDS[self.kind, dim]
 
     def test_record(self, result, name: str) -> dict:

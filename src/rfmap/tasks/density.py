@@ -67,6 +67,7 @@ class DensityTask(Task):
         return preprocess_density(grid) if preprocess else unit_mass(check_density(grid))
 
     def resampled(self, grid: np.ndarray) -> np.ndarray:
+        """A checked density after interpolation to another grid, scaled to unit mass again."""
         return unit_mass(check_density(grid))
 
     def field_on_mesh(self, grid: np.ndarray, fn, ref: np.ndarray, elements: np.ndarray,
@@ -163,6 +164,7 @@ class DensityTask(Task):
         return "modes, steps" + ("".join(f", {e}" for e in extra))
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
+        """The paper's test densities in ``dim`` dimensions (reported after training, never used to select a model)."""
         return TEST_FIELDS[self.kind, dim]
 
     def test_record(self, result, name: str) -> dict:

@@ -92,20 +92,22 @@ def _measures_at(coeffs, alpha) -> torch.Tensor:
 
 
 class MeasurePolynomial:
-    r"""The element measures :math:`|T(\alpha)| = \sum_S c_S \prod_{a \in S} \alpha_a` of
-    ``_measure_coefficients``, evaluated along the lines that :func:`~rfmap.finish.refine.refine_alpha` searches.
+    r"""The element measures :math:`|T(\alpha)| = \sum_S c_S \prod_{a \in S} \alpha_a` (the polynomial of
+    :func:`rfmap.core.geometry.grid_measure_coefficients`), evaluated along the lines that
+    :func:`~rfmap.finish.refine.refine_alpha` searches.
 
     Along a line the polynomial collapses: with every component but :math:`\alpha_i` fixed it is affine,
     :math:`A + \alpha_i B`, and on the diagonal :math:`\alpha = t \mathbf{1}` it is the cubic (in 3D)
     :math:`\sum_k t^k \sum_{|S| = k} c_S`.  A call whose ``alpha`` differs from the previous one in a single
     component (or lies on the diagonal) reuses the collapsed coefficients, so a golden-section step costs one
     multiply-add over the elements (or :math:`d`) instead of :math:`2^d - 1`; any other ``alpha`` is evaluated in
-    full.  Values equal ``_measures_at`` up to rounding.
+    full.  Values equal those of the full evaluation up to rounding.
 
     Parameters
     ----------
     coeffs : list of (tuple, Tensor)
-        ``[(S, c_S)]`` of ``_measure_coefficients``, ``c_S`` of shape (m,).
+        ``[(S, c_S)]`` over the subsets ``S`` of the axes, as
+        :func:`rfmap.core.geometry.grid_measure_coefficients` returns them, ``c_S`` of shape (m,).
     """
 
     def __init__(self, coeffs):
