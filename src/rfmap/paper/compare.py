@@ -26,7 +26,8 @@ from .generalization import generalization_table
 from .comparison import format_time
 from .tables import Table, format_sig
 
-__all__ = ["parameter_count", "model_table", "learning_summary", "paper_fields_table", "resolution_table",
+__all__ = ["parameter_count", "model_table", "validated_states", "learning_summary", "kept_state", "kept_rules",
+           "folded_states_text", "learning_verdict", "paper_fields_table", "resolution_table",
            "points_table", "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins",
            "folded_cell", "side_by_side", "MarkdownText"]
 
@@ -78,14 +79,44 @@ def model_table(surs: dict) -> Table:
     return t
 
 
+def validated_states(meta: dict) -> list[dict]:
+    """The distinct validated states of a model's training record, in order.
+
+    The record ends with the kept state evaluated again at the last step.  Where the last state's own validation
+    was logged too, the step repeats and the first entry is kept; in older records, which did not log it, the last
+    entry repeats the kept step's numbers exactly and is left out (it is not a measurement of the last state).
+
+    Parameters
+    ----------
+    meta : dict
+        A surrogate's metadata (``history["validation"]``, one summary per validation, and ``selected_step``).
+
+    Returns
+    -------
+    list of dict
+        One validation summary per validated step.
+    """
+    seen, hist = set(), []
+    for v in (meta.get("history") or {}).get("validation", []):
+        if v["step"] not in seen:
+            seen.add(v["step"])
+            hist.append(v)
+    kept = meta.get("selected_step")
+    if len(hist) > 1 and kept is not None and hist[-1]["step"] != kept:
+        twin = next((v for v in hist if v["step"] == kept), None)
+        same = ("std_rho_map", "min_jacobian")
+        if twin is not None and all(twin.get(k) == hist[-1].get(k) for k in same):
+            hist.pop()
+    return hist
+
+
 def learning_summary(meta: dict, last: int = 3) -> dict:
     """What a model's validation record says about its learning curve.
 
     Parameters
     ----------
     meta : dict
-        A surrogate's metadata (``history["validation"]``: one summary per validation, in order; a repeated last step,
-        the kept state evaluated again, is counted once).
+        A surrogate's metadata; its validated states are those of :func:`validated_states`.
     last : int
         How many of the last validations are set against the earlier ones.
 
@@ -93,23 +124,64 @@ def learning_summary(meta: dict, last: int = 3) -> dict:
     -------
     dict
         ``states`` (distinct validated steps), ``folded`` (of them, those whose map folded on some field),
-        ``best`` and ``best_step`` (the lowest plain held-out mean Std(ρ̃_map) and its step), ``last_best`` (the
-        lowest over the last ``last`` validations), ``earlier_best`` (over the others), ``improving`` (whether
-        ``last_best`` is below ``earlier_best``), ``last_range`` ((min, max) over the last ``last``) and ``kept_step``.
+        ``fold_free_steps`` (the steps of the others), ``best`` and ``best_step`` (the lowest plain held-out mean
+        Std(ρ̃_map) and its step), ``last_best`` (the lowest over the last ``last``), ``earlier_best`` (over the
+        others), ``improving`` (whether ``last_best`` is below ``earlier_best``), ``last_range`` ((min, max) over
+        the last ``last``), ``last_steps`` (their steps) and ``kept_step``.
     """
-    seen, hist = set(), []
-    for v in (meta.get("history") or {}).get("validation", []):
-        if v["step"] not in seen:
-            seen.add(v["step"])
-            hist.append(v)
+    hist = validated_states(meta)
     means = np.array([float(v["std_rho_map"]) for v in hist])
-    folded = sum((v.get("folded_fields", v.get("n_flipped")) or 0) > 0 for v in hist)
+    folds = [(v.get("folded_fields", v.get("n_flipped")) or 0) > 0 for v in hist]
     i = int(np.argmin(means))
     tail, head = means[-last:], means[:-last]
     earlier = float(head.min()) if len(head) else float("inf")
-    return {"states": len(hist), "folded": int(folded), "best": float(means[i]), "best_step": int(hist[i]["step"]),
+    return {"states": len(hist), "folded": int(sum(folds)),
+            "fold_free_steps": [int(v["step"]) for v, f in zip(hist, folds) if not f],
+            "best": float(means[i]), "best_step": int(hist[i]["step"]),
             "last_best": float(tail.min()), "earlier_best": earlier, "improving": bool(tail.min() < earlier),
-            "last_range": (float(tail.min()), float(tail.max())), "kept_step": meta.get("selected_step")}
+            "last_range": (float(tail.min()), float(tail.max())),
+            "last_steps": [int(v["step"]) for v in hist[-last:]], "kept_step": meta.get("selected_step")}
+
+
+def kept_state(meta: dict) -> dict:
+    """How a model's kept weights were chosen, how they do on the held-out fields, and what the other rule keeps.
+
+    Two rules choose the kept state among the validated ones (:func:`validated_states`): the *checkpoint score*
+    (:func:`rfmap.training.validation.score`, where the record has it), and, in records older than that score, the
+    lowest plain held-out mean Std(ρ̃_map) among the states whose maps fold on no held-out field.
+
+    Parameters
+    ----------
+    meta : dict
+        A surrogate's metadata: ``history``, ``selected_step`` and ``final_metrics`` (the kept state's validation,
+        field by field, keys such as ``"ramp-3@128"``).
+
+    Returns
+    -------
+    dict
+        ``step`` (the kept step), ``rule`` (``"checkpoint score"`` or ``"fold-free mean"``), ``mean`` (the kept
+        state's plain held-out mean), ``folds`` (a list of ``(field, N, flipped triangles)``, one per held-out
+        field on which the kept map folds), ``fold_free_step`` and ``fold_free_mean`` (the state the fold-free
+        mean rule keeps, ``None`` if every state folds) and ``fold_free_score`` (its checkpoint score, or
+        ``None``), ``score`` (the kept state's checkpoint score, or ``None``).
+    """
+    final = meta.get("final_metrics") or {}
+    mean = final.get("mean") or {}
+    folds = []
+    for key, m in final.items():
+        if "@" in key and (m.get("n_flipped") or 0) > 0:
+            field, n = key.rsplit("@", 1)
+            folds.append((field, int(n), int(m["n_flipped"])))
+    free = [v for v in validated_states(meta) if not (v.get("folded_fields", v.get("n_flipped")) or 0)]
+    best = min(free, key=lambda v: float(v["std_rho_map"])) if free else None
+    return {"step": meta.get("selected_step"),
+            "rule": "checkpoint score" if "family_score" in mean else "fold-free mean",
+            "mean": None if "std_rho_map" not in mean else float(mean["std_rho_map"]),
+            "folds": sorted(folds),
+            "fold_free_step": None if best is None else int(best["step"]),
+            "fold_free_mean": None if best is None else float(best["std_rho_map"]),
+            "fold_free_score": None if best is None or "family_score" not in best else float(best["family_score"]),
+            "score": None if "family_score" not in mean else float(mean["family_score"])}
 
 
 def _row(res, raw) -> dict:
@@ -308,3 +380,126 @@ def side_by_side(table: Table, columns: dict, case_title: str) -> MarkdownText:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     lines += ["| " + " | ".join([c] + [cell(c, m, col) for m, col in columns.values()]) + " |" for c in cases]
     return MarkdownText("\n".join(lines))
+
+
+def _steps(steps) -> str:
+    steps = [f"{s:,}" for s in steps]
+    return steps[0] if len(steps) == 1 else ", ".join(steps[:-1]) + " and " + steps[-1]
+
+
+def kept_rules(kept: dict) -> str:
+    """Sentences saying how each model's kept step was chosen, where its kept map folds, and what the fold-free
+    rule keeps instead (the text of chapter 12's model section).
+
+    Parameters
+    ----------
+    kept : dict
+        Display name -> :func:`kept_state` of that model.
+
+    Returns
+    -------
+    str
+        For a model chosen by the checkpoint score: its kept step, the held-out fields on which that state's map
+        folds, its plain mean, and the step the fold-free mean rule would have kept (with both states' plain means
+        and checkpoint scores) where it differs; for a model chosen by the fold-free mean: its kept step and mean.
+    """
+    out, cross = [], []
+    for name, k in kept.items():
+        if k["rule"] == "fold-free mean":
+            out.append(f"The {name}'s training record predates the checkpoint score (a dash in the table), so its"
+                       " weights were chosen by the lowest plain held-out mean among the states whose"
+                       f" maps fold on no held-out field: step {k['step']:,} ({k['mean']:#.3g}).")
+            continue
+        folds = k["folds"]
+        if folds:
+            where = "; ".join(f"{f} at N = {n}, {t:,} flipped triangle{'s' * (t != 1)}" for f, n, t in folds)
+            many = "one held-out field" if len(folds) == 1 else f"{len(folds)} held-out fields"
+            state = f"whose map folds on {many} ({where})"
+        else:
+            state = "whose maps fold on no held-out field"
+        out.append(f"The {name}'s weights were chosen by the checkpoint score: step {k['step']:,}, {state}; its"
+                   f" plain held-out mean is {k['mean']:#.3g}.")
+        if k["fold_free_step"] is None:
+            cross.append(f"Every validated state of the {name} folds on some held-out field.")
+        elif k["fold_free_step"] != k["step"]:
+            other = [n for n, v in kept.items() if v["rule"] == "fold-free mean"]
+            rule = f"The {other[0]}'s rule" if other else "Keeping the fold-free state with the lowest plain mean"
+            lower = "lower" if k["fold_free_mean"] < k["mean"] else "higher"
+            worse = ("worse" if k["fold_free_score"] > k["score"] else "better")
+            cross.append(f"{rule} would have kept the {name}'s step {k['fold_free_step']:,} instead, which folds on"
+                       f" no held-out field and has the {lower} plain mean {k['fold_free_mean']:#.3g} but a {worse}"
+                       f" checkpoint score ({k['fold_free_score']:#.3g} against {k['score']:#.3g}).")
+    rules = {k["rule"] for k in kept.values()}
+    head = ("The kept steps were chosen by different rules." if len(rules) > 1 else
+            "Every kept step was chosen by the checkpoint score." if rules == {"checkpoint score"} else
+            "Every kept step was chosen by the fold-free mean.")
+    return " ".join([head] + out + cross)
+
+
+def folded_states_text(learn: dict) -> str:
+    """One sentence on which validated states folded, naming the fold-free steps of each model.
+
+    Parameters
+    ----------
+    learn : dict
+        Display name -> :func:`learning_summary` of that model.
+
+    Returns
+    -------
+    str
+        The sentence, e.g. "The U-Net's maps folded on no held-out field only at steps 2,000, 3,000 and 4,000; ...".
+    """
+    if not any(v["folded"] for v in learn.values()):
+        return "No validated state of either network folded on a held-out field."
+    parts = []
+    for name, v in learn.items():
+        free = v["fold_free_steps"]
+        if not v["folded"]:
+            parts.append(f"the {name}'s maps never folded")
+        elif free:
+            parts.append(f"the {name}'s maps folded on no held-out field only at step{'s' * (len(free) > 1)}"
+                         f" {_steps(free)}")
+        else:
+            parts.append(f"every validated state of the {name} folded on some held-out field")
+    text = "; ".join(parts)
+    return text[0].upper() + text[1:] + "."
+
+
+def learning_verdict(learn: dict, surs: dict) -> str:
+    """Whether each model was still improving when its budget ran out, from its validation curve.
+
+    Parameters
+    ----------
+    learn : dict
+        Display name -> :func:`learning_summary` of that model (``last=3``).
+    surs : dict
+        Display name -> the :class:`rfmap.Surrogate`, for its number of training steps.
+
+    Returns
+    -------
+    str
+        Per model, its lowest plain mean and step against the range of its last three validations, a note where
+        the record holds no validation of the last step, and one verdict: improving (the lowest mean came in the
+        last three) or noisy without a trend.
+    """
+    parts, notes = [], []
+    for name, v in learn.items():
+        lo, hi = v["last_range"]
+        parts.append(f"the {name}'s lowest plain mean is {v['best']:#.3g}, at step {v['best_step']:,}, and its"
+                     f" last three validations (steps {_steps(v['last_steps'])}) range from {lo:#.3g} to {hi:#.3g}")
+        total = int(surs[name].meta.get("cumulative_steps", surs[name].meta.get("steps", 0)))
+        if v["last_steps"] and v["last_steps"][-1] < total:
+            notes.append(f"The {name}'s record holds no validation of its last step, {total:,}: it ends with the"
+                         " kept state evaluated again, which the curve leaves out.")
+    still = [n for n, v in learn.items() if v["improving"]]
+    text = "; ".join(parts) + "."
+    text = text[0].upper() + text[1:]
+    if not still:
+        text += (" Neither curve was still going down when the budget ran out: each network's best state came"
+                 " before its last three validations. Both are still noisy at the end, so a longer run may or"
+                 " may not find a better state.")
+    else:
+        text += (" " + " and ".join("the " + n for n in still)).rstrip() + (" was" if len(still) == 1 else " were")
+        text = text.replace(". the ", ". The ")
+        text += " still improving: the lowest mean came in the last three validations."
+    return " ".join([text] + notes)

@@ -1,0 +1,68 @@
+"""The validation-record readers of rfmap.paper.compare, on small hand-made records."""
+from rfmap.paper.compare import kept_state, learning_summary, validated_states
+
+
+def _v(step, mean, folded=0, score=None, jac=0.1):
+    v = {"step": step, "std_rho_map": mean, "folded_fields": folded, "n_flipped": 5 * folded, "min_jacobian": jac,
+         "elapsed": float(step)}
+    if score is not None:
+        v["family_score"] = score
+    return v
+
+
+def _meta(hist, kept, final):
+    return {"history": {"validation": hist}, "selected_step": kept, "final_metrics": final}
+
+
+def test_the_repeated_last_step_counts_once():
+    kept = _v(2, 0.3, folded=1, score=0.4)
+    meta = _meta([_v(1, 0.2, score=0.5), kept, _v(3, 0.5, folded=2, score=0.45), {**kept, "step": 3}], 2,
+                 {"mean": kept, "ramp-3@128": {"n_flipped": 7}, "smooth-0@51": {"n_flipped": 0}})
+    assert [v["step"] for v in validated_states(meta)] == [1, 2, 3]
+    k = kept_state(meta)
+    assert k["rule"] == "checkpoint score" and k["step"] == 2 and k["folds"] == [("ramp-3", 128, 7)]
+    assert (k["fold_free_step"], k["fold_free_mean"], k["fold_free_score"]) == (1, 0.2, 0.5)
+
+
+def test_an_old_record_s_closing_re_evaluation_is_not_a_state():
+    kept = _v(2, 0.3)
+    meta = _meta([_v(1, 0.6, folded=1), kept, _v(3, 0.2, folded=1), {**kept, "step": 4}], 2, {"mean": kept})
+    assert [v["step"] for v in validated_states(meta)] == [1, 2, 3]
+    s = learning_summary(meta, last=2)
+    assert s["states"] == 3 and s["folded"] == 2 and s["fold_free_steps"] == [2]
+    assert s["last_steps"] == [2, 3] and s["best_step"] == 3
+    k = kept_state(meta)
+    assert k["rule"] == "fold-free mean" and k["folds"] == [] and k["fold_free_step"] == 2
+    assert k["score"] is None and k["fold_free_score"] is None
+
+
+def test_the_rules_text_says_what_the_fold_free_rule_keeps():
+    from rfmap.paper.compare import kept_rules
+
+    scored = {"step": 5000, "rule": "checkpoint score", "mean": 0.251, "folds": [("ramp-3", 128, 208)],
+              "fold_free_step": 4000, "fold_free_mean": 0.224, "fold_free_score": 0.348, "score": 0.337}
+    old = {"step": 2500, "rule": "fold-free mean", "mean": 0.308, "folds": [], "fold_free_step": 2500,
+           "fold_free_mean": 0.308, "fold_free_score": None, "score": None}
+    text = kept_rules({"U-Net": scored, "FNO": old})
+    assert text.startswith("The kept steps were chosen by different rules.")
+    assert "ramp-3 at N = 128, 208 flipped triangles" in text
+    assert "The FNO's rule would have kept the U-Net's step 4,000" in text and "0.348 against 0.337" in text
+    same = kept_rules({"U-Net": {**scored, "folds": [], "fold_free_step": 5000}})
+    assert same.startswith("Every kept step was chosen by the checkpoint score.") and "would have" not in same
+
+
+def test_learning_texts_name_steps_not_counts():
+    from types import SimpleNamespace
+
+    from rfmap.paper.compare import folded_states_text, learning_verdict
+
+    kept = _v(2, 0.3)
+    meta = _meta([_v(1, 0.6, folded=1), kept, _v(3, 0.4, folded=1), _v(4, 0.5), {**kept, "step": 4}], 2,
+                 {"mean": kept})
+    learn = {"A": learning_summary(meta, last=3)}
+    assert folded_states_text(learn) == "The A's maps folded on no held-out field only at steps 2 and 4."
+    text = learning_verdict(learn, {"A": SimpleNamespace(meta={**meta, "steps": 4})})
+    assert "lowest plain mean is 0.300, at step 2" in text and "Neither curve" not in text
+    assert "was still improving" in text and "holds no validation" not in text
+    text = learning_verdict(learn, {"A": SimpleNamespace(meta={**meta, "steps": 5})})
+    assert "The A's record holds no validation of its last step, 5" in text
