@@ -278,9 +278,8 @@ def add_cartogram_parser(sub) -> None:
     s.add_argument("--value", default=None,
                    help="the feature property holding each region's value (with --data: the CSV column)")
     s.add_argument("--series", nargs="+", default=None, metavar="VALUE",
-                   help="instead of --value: a cartogram per value in turn (e.g. one per year), each computed from "
-                        "the previous one in the projection's plane, by a classical method only (flow or "
-                        "diffusion); --out writes the last, --gif the animation")
+                   help="instead of --value: a cartogram per value in turn (e.g. one per year), each from the previous "
+                        "one, by flow or diffusion only; --out writes the last, --gif the animation")
     s.add_argument("--gif", default=None, help="with --series: write the frames as an animation (.gif, or .mp4)")
     d = s.add_argument_group("values from a CSV table")
     d.add_argument("--data", default=None, metavar="FILE.csv",
