@@ -81,9 +81,9 @@ def check_n(n: int, minimum: int = 3) -> int:
     return int(n)
 
 
-#: peak memory per grid vertex of the heaviest single-map pipelines (peak resident size above that of the imported
+#: Peak memory per grid vertex of the heaviest single-map pipelines (peak resident size above that of the imported
 #: package), with a margin over the measured peak (the book's page :doc:`Design decisions </book/design>` gives the
-#: margin per pipeline)
+#: margin per pipeline).
 BYTES_PER_VERTEX = {2: 4096, 3: 4096}
 
 

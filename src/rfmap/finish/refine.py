@@ -3,8 +3,11 @@ r"""Weight refinement (paper Sec. 4.3): a stretching vector :math:`\alpha \in \m
 The refined map is :math:`u_\alpha = x + \mathcal{B}(x) \odot (\alpha \odot \psi(x))`, which keeps the boundary
 condition for every :math:`\alpha`.  :math:`\alpha^* = \arg\min_\alpha \mathcal{J}(u_\alpha)` with
 :math:`\mathcal{J} = \mathcal{L}_{\text{geom}} + \lambda \mathcal{P}` is found by derivative-free alternating
-golden-section searches over the components; the result never has a larger :math:`\mathcal{J}` than
-:math:`\alpha = (1, \dots, 1)`.  Each task builds its :math:`\mathcal{J}` (``Task.refine_objective``, from
+golden-section searches, first of a common (isotropic) stretch, then over the components; the result never has a
+larger :math:`\mathcal{J}` than :math:`\alpha = (1, \dots, 1)`.  Folded maps can make :math:`\mathcal{J}` jagged, so
+the isotropic search is checked by a coarse geometric scan of :data:`SCAN_POINTS` stretches: where a scanned point
+beats the search's result, the search is repeated around it (and the per-component searches are then checked the same
+way).  Each task builds its :math:`\mathcal{J}` (``Task.refine_objective``, from
 :mod:`rfmap.tasks.objectives`); :class:`RefineConfig` holds the search interval, :math:`\lambda` and the
 tolerance used by :meth:`rfmap.Surrogate.map`.
 """
@@ -133,8 +136,8 @@ def refine_alpha(objective: Callable[[np.ndarray], float], dim: int, *, bounds: 
     return RefineResult(alpha=alpha, objective=best, objective_start=j0, evaluations=count, history=history)
 
 
-#: points of the coarse geometric scan of the isotropic stretch that guards the golden-section search
-#: (:doc:`Design decisions </book/design>`)
+#: Points of the coarse geometric scan of the isotropic stretch that guards the golden-section search
+#: (:doc:`Design decisions </book/design>`).
 SCAN_POINTS = 9
 
 

@@ -9,8 +9,8 @@ from .blocks import EnhancedDoubleConv, MultiResolutionLift, conv_cls, conv_tran
 
 __all__ = ["MultiResUNet", "boundary_mask", "apply_displacement", "check_input", "BOUNDARIES"]
 
-#: boundary conditions: ``fixed`` (identity on the boundary), ``square`` (vertices slide along their wall,
-#: the cube in 3D), ``free`` (no constraint)
+#: Boundary conditions: ``fixed`` (identity on the boundary), ``square`` (vertices slide along their wall,
+#: the cube in 3D), ``free`` (no constraint).
 BOUNDARIES = ("fixed", "square", "free")
 
 

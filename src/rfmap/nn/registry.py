@@ -27,10 +27,10 @@ def _fno(kw: dict) -> nn.Module:
                   float(kw.get("padding", 0.25)))
 
 
-#: the constructor of every architecture a model description may name, from its stored ``kwargs()``
+#: The constructor of every architecture a model description may name, from its stored ``kwargs()``.
 NETWORKS: dict[str, Callable[[dict], nn.Module]] = {"unet": _unet, "fno": _fno}
 
-#: architectures a model description may name
+#: Architectures a model description may name.
 ARCHS = tuple(NETWORKS)
 
 

@@ -38,11 +38,11 @@ import torch
 __all__ = ["Symmetry", "SYMMETRY_GROUPS", "DEFAULT_SYMMETRY", "symmetries", "transform_grid", "restore_displacement",
            "symmetrized_displacement", "resolve_symmetry", "BATCH_POINTS"]
 
-#: the sets of symmetries offered: ``flips`` (every combination of axis reflections, 2^d), ``permutations`` (every
-#: order of the axes, d!), ``cyclic`` (the d cyclic orders of the axes), ``full`` (all 2^d d! symmetries)
+#: The sets of symmetries offered: ``flips`` (every combination of axis reflections, 2^d), ``permutations`` (every
+#: order of the axes, d!), ``cyclic`` (the d cyclic orders of the axes), ``full`` (all 2^d d! symmetries).
 SYMMETRY_GROUPS = ("flips", "permutations", "cyclic", "full")
-#: the set used by ``symmetrize=True``, per dimension, chosen on the held-out validation fields: all 8 symmetries in
-#: 2D, the 3 cyclic axis orders in 3D (:doc:`Design decisions </book/design>`)
+#: The set used by ``symmetrize=True``, per dimension, chosen on the held-out validation fields: all 8 symmetries in
+#: 2D, the 3 cyclic axis orders in 3D (:doc:`Design decisions </book/design>`).
 DEFAULT_SYMMETRY = {2: "full", 3: "cyclic"}
 
 
@@ -145,9 +145,9 @@ def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
     return out.contiguous()
 
 
-#: grid points per network evaluation up to which the copies of :func:`symmetrized_displacement` are stacked into one
+#: Grid points per network evaluation up to which the copies of :func:`symmetrized_displacement` are stacked into one
 #: batch (a single copy larger than this is evaluated alone): small grids gain, large ones do not
-#: (:doc:`Design decisions </book/design>`)
+#: (:doc:`Design decisions </book/design>`).
 BATCH_POINTS = 2**15
 
 

@@ -36,9 +36,9 @@ __all__ = ["CosineTransforms", "ScipyTransforms", "fft_workers"]
 
 
 #: Rows transformed at a time by :class:`CosineTransforms`, as a count of numbers in its extension buffer: a table of
-#: a 2049-vertex side then runs through buffers of 8 MB (256 rows) instead of two of 67 MB, for the same FFTs
+#: a 2049-vertex side then runs through buffers of 8 MB (256 rows) instead of two of 67 MB, for the same FFTs.
 BLOCK_NUMBERS = 1 << 20
-#: Tables of at least this side are transformed by ``scipy.fft`` (imported on the first of them)
+#: Tables of at least this side are transformed by ``scipy.fft`` (imported on the first of them).
 SCIPY_SIDE = 1025
 
 

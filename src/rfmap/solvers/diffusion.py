@@ -91,11 +91,11 @@ __all__ = [
 ]
 
 
-#: fold rejections after which the diffusion flow is stopped at its last fold-free state
+#: Fold rejections after which the diffusion flow is stopped at its last fold-free state.
 FOLD_STOP = 60
 
 
-#: blur widths (vertex spacings) of the retries of a flow that keeps folding (``solve_dem(fold_guard=True)``)
+#: Blur widths (vertex spacings) of the retries of a flow that keeps folding (``solve_dem(fold_guard=True)``).
 FOLD_BLURS = (1.0, 2.0, 4.0)
 
 

@@ -93,10 +93,10 @@ __all__ = ["STALL_BLEND", "STALL_DT", "STALL_BLURS", "FlowOptions", "solve_flow"
            "residual_density", "lumped_residual", "vertex_residual"]
 
 
-#: the fold check of a step (:func:`rfmap.core.geometry.grid_min_measure`, with the same threshold) and
+#: The fold check of a step (:func:`rfmap.core.geometry.grid_min_measure`, with the same threshold) and
 #: ``rfmap.surrogate.density_quality`` decide on float32 measures unless the smallest is below this fraction of the
 #: reference element measure; float64 then decides (the float32 rounding error of a grid element's measure is about
-#: 1e-6 / h of the mean, so this leaves a margin of about 20 at N = 1000)
+#: 1e-6 / h of the mean, so this leaves a margin of about 20 at N = 1000).
 F32_MARGIN = 1e-3
 
 
@@ -107,14 +107,14 @@ def _turned_over(x: np.ndarray, n: int) -> bool:
     return grid_min_measure(x, n) <= 0.0
 
 
-#: default step tolerance per dimension (grid spacings): 3D steps cost about ten times 2D ones, so 3D takes a coarser
-#: tolerance for nearly the same Std(ρ̃_map) (:doc:`Design decisions </book/design>`)
+#: Default step tolerance per dimension (grid spacings): 3D steps cost about ten times 2D ones, so 3D takes a coarser
+#: tolerance for nearly the same Std(ρ̃_map) (:doc:`Design decisions </book/design>`).
 RTOL = {2: 0.2, 3: 0.4}
 
 
-#: default sea width L of the free boundary per dimension (the box is [-L, 1 + L]^d): the diffusion solver's 0.5 in 2D;
+#: Default sea width L of the free boundary per dimension (the box is [-L, 1 + L]^d): the diffusion solver's 0.5 in 2D;
 #: in 3D the sea box's transforms dominate the time, and a narrower sea gives the same Std
-#: (:doc:`Design decisions </book/design>`)
+#: (:doc:`Design decisions </book/design>`).
 MARGIN = {2: 0.5, 3: 0.25}
 
 

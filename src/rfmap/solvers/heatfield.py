@@ -71,12 +71,12 @@ from .spectral import damp, half_coefficients, heat_factor
 
 __all__ = ["HeatField", "DIVISIONS", "DROPPED_RATE", "blas_threads"]
 
-#: where :class:`HeatField` divides :math:`-\nabla\rho` by :math:`\rho`: on the raster's nodes before interpolating
-#: (the maps), or at the points after interpolating both (the cartograms)
+#: Where :class:`HeatField` divides :math:`-\nabla\rho` by :math:`\rho`: on the raster's nodes before interpolating
+#: (the maps), or at the points after interpolating both (the cartograms).
 DIVISIONS = ("grid", "points")
 #: :math:`L`: modes whose per-axis decay exponent :math:`\pi^2 k^2 t` exceeds it are skipped
 #: (:meth:`HeatField.n_modes`); :math:`e^{-L}` is below :math:`10^{-17}` (:math:`-\ln 10^{-17} = 39.14`), under
-#: double precision's round-off
+#: double precision's round-off.
 DROPPED_RATE = 39.2
 
 

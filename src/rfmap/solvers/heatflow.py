@@ -41,9 +41,9 @@ from .heun import HeunOptions, heun_flow
 
 __all__ = ["SLOWEST_RATE", "INTEGRATORS", "Settling", "blur_start", "diffuse"]
 
-#: the decay rate :math:`\pi^2` of the slowest cosine mode of the unit box
+#: The decay rate :math:`\pi^2` of the slowest cosine mode of the unit box.
 SLOWEST_RATE = math.pi ** 2
-#: the time integrators of :func:`diffuse`, by the type of their options
+#: The time integrators of :func:`diffuse`, by the type of their options.
 INTEGRATORS = {BS32Options: bs32_flow, HeunOptions: heun_flow}
 
 

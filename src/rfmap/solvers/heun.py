@@ -24,10 +24,10 @@ import numpy as np
 
 __all__ = ["HeunOptions", "heun_flow", "heun_step", "step_factor", "Stalled", "STALL_DT", "STALL_BLURS"]
 
-#: a pass stalls when the step falls below this (in units of the unit time interval)
+#: A pass stalls when the step falls below this (in units of the unit time interval).
 STALL_DT = 1e-9
-#: blur widths (vertex spacings) with which the flow solvers (:mod:`rfmap.solvers.flow`,
-#: :mod:`rfmap.solvers.cartoflow`) redo a stalled pass
+#: Blur widths (vertex spacings) with which the flow solvers (:mod:`rfmap.solvers.flow`,
+#: :mod:`rfmap.solvers.cartoflow`) redo a stalled pass.
 STALL_BLURS = (1.0, 2.0, 4.0)
 
 

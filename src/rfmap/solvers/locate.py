@@ -112,7 +112,7 @@ def _kuhn_lookup() -> np.ndarray:
 _KUHN = _kuhn_lookup()
 
 
-#: Newton steps of the grid walk of :func:`rasterize_elements` before a node is handed to the element scan
+#: Newton steps of the grid walk of :func:`rasterize_elements` before a node is handed to the element scan.
 WALK_STEPS = 6
 
 
@@ -120,13 +120,13 @@ WALK_STEPS = 6
 WALK_COARSE = 4
 
 
-#: ... when that grid has at least this many nodes per side
+#: ... when that grid has at least this many nodes per side.
 WALK_COARSE_MIN = 9
 
 
 #: :func:`rasterize_elements` walks when the mesh's measure is at least this fraction of its bounding box's (the
 #: nodes the walk gives up on go to the element scan, so the result is the same either way): a free boundary's
-#: mapped cube fills most of its box, where walking is faster than scanning (:doc:`Design decisions </book/design>`)
+#: mapped cube fills most of its box, where walking is faster than scanning (:doc:`Design decisions </book/design>`).
 WALK_FILL = 0.5
 
 

@@ -53,8 +53,8 @@ def lumped_residual(elements: np.ndarray, population: np.ndarray, measure: np.nd
     return mass / vol
 
 
-#: conjugate-gradient iterations of :func:`vertex_residual` (from the lumped residual): enough for a flow started at
-#: the identity to end where the cold flow does (:doc:`Design decisions </book/design>`)
+#: Conjugate-gradient iterations of :func:`vertex_residual` (from the lumped residual): enough for a flow started at
+#: the identity to end where the cold flow does (:doc:`Design decisions </book/design>`).
 RESIDUAL_ITERATIONS = 10
 
 

@@ -31,7 +31,7 @@ from .objectives import FLIP_WEIGHT, beltrami_objective
 
 __all__ = ["BeltramiTask", "beltrami_validation_field"]
 
-#: side of the grid on which the jitter's density of a random map is probed
+#: Side of the grid on which the jitter's density of a random map is probed.
 PROBE_N = 33
 
 

@@ -35,7 +35,7 @@ from .teacher import teacher_map, teacher_targets
 
 __all__ = ["DensityTask", "DENSITY_KINDS", "density_validation_field"]
 
-#: the families of held-out densities, taken in turn
+#: The families of held-out densities, taken in turn.
 DENSITY_KINDS = ("smooth", "steps", "peak", "ramp")
 
 

@@ -13,11 +13,11 @@ import numpy as np
 
 __all__ = ["VALIDATION_SEED", "STREAMS", "ValidationField", "held_out_rng"]
 
-#: first word of every validation seed (training seeds have three words, so the streams never coincide)
+#: First word of every validation seed (training seeds have three words, so the streams never coincide).
 VALIDATION_SEED = 20_250_917
 
-#: the streams of held-out fields: 0 validates (and chooses checkpoints) during training, 1 is the report set of the
-#: book's generalization tables, used for nothing else
+#: The streams of held-out fields: 0 validates (and chooses checkpoints) during training, 1 is the report set of the
+#: book's generalization tables, used for nothing else.
 STREAMS = {"validation": 0, "report": 1}
 
 

@@ -18,7 +18,7 @@ from ..nn.model import boundary_mask
 
 __all__ = ["FLIP_WEIGHT", "density_objective", "beltrami_objective", "MeasurePolynomial"]
 
-#: :math:`\lambda`, the weight of the flipped-element fraction in :math:`\mathcal{J}`
+#: :math:`\lambda`, the weight of the flipped-element fraction in :math:`\mathcal{J}`.
 FLIP_WEIGHT = 10.0
 
 
