@@ -7,11 +7,11 @@ Each module is named by what it shows:
 - :mod:`~rfmap.paper.verdicts`: the verdict word of a paper table or figure, and whether a test input is the
   paper's;
 - :mod:`~rfmap.paper.comparison`: each paper table as a four-way comparison (the paper, the paper's method run
-  natively, the delivered map and the fastest classical solver) with one criterion; the chapters' tables and the
+  natively, the delivered map and the flow solver) with one criterion; the chapters' tables and the
   scoreboard;
 - :mod:`~rfmap.paper.ablations`: weight refinement against :math:`\alpha = 1`;
 - :mod:`~rfmap.paper.reproduce`: the per-map values, and the tables of ``rfmap reproduce``: the paper's published
-  rows beside the network's and the classical solver's, without the book's four-way comparison;
+  rows beside the network's and the diffusion DEM's, without the book's four-way comparison;
 - :mod:`~rfmap.paper.generalization`: unseen random fields, distortion, displacement demand;
 - :mod:`~rfmap.paper.recipes`: how the models were trained;
 - :mod:`~rfmap.paper.benchmarks`: classical, neural and hybrid maps side by side;

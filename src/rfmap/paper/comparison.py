@@ -160,8 +160,10 @@ class Comparison:
 
     Attributes
     ----------
-    label, title : str
-        The paper's table (``tab:...``) and the table's title.
+    label : str
+        The label of the paper's table (``tab:...``) that the comparison reproduces.
+    title : str
+        The title printed above the comparison's table.
     metrics : list of str
         The scored metrics (lower is better), keys of :data:`METRIC_TITLES`.
     cases : list of Case
@@ -478,8 +480,7 @@ def compare_beltrami(sur, cases: list[Case], label: str, title: str, *, case_pre
 def compare_models(models: dict, field, n: int, label: str, title: str, *, raw: bool = False) -> Comparison:
     """One density mapped by several density surrogates with one boundary, the cases named by the keys of
     ``models`` (the paper's Fig. 10: the DEM and the DEQ model), each by the paper's method and delivered, beside
-    the flow solver's map of the same density (the same in every case).  Scored: Std(ρ̃_map) and mean ``|μ|``; there
-    is no paper row.
+    the flow solver's map of the same density (the same in every case). Scored: Std(ρ̃_map), mean ``|μ|``; no paper row.
 
     Parameters
     ----------

@@ -134,8 +134,10 @@ def nc_clause(nc_worse: list[bool]) -> str:
 
     Examples
     --------
-    >>> nc_clause([False]), nc_clause([True, False])
-    ('the n/c case is not worse by Std ratio', '1 of the 2 n/c cases are worse by Std ratio')
+    >>> nc_clause([False])
+    'the n/c case is not worse by Std ratio'
+    >>> nc_clause([True, False])
+    '1 of the 2 n/c cases are worse by Std ratio'
     """
     if not nc_worse:
         return ""
@@ -208,8 +210,10 @@ def classical_lead(counts, noun: str = "case") -> str:
 
     Examples
     --------
-    >>> classical_lead([(4, 4), (4, 4)], "density"), classical_lead([(3, 4), (4, 4)])
-    ('every density', '7 of 8 cases')
+    >>> classical_lead([(4, 4), (4, 4)], "density")
+    'every density'
+    >>> classical_lead([(3, 4), (4, 4)])
+    '7 of 8 cases'
     """
     counts = list(counts)
     return every_or_count(sum(k for k, _ in counts), sum(m for _, m in counts), noun)
