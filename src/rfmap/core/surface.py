@@ -46,6 +46,10 @@ __all__ = ["boundary_faces", "surface_intersections", "grid_boundary_faces", "gr
 def boundary_faces(elements: np.ndarray, points: np.ndarray | None = None) -> np.ndarray:
     """Faces of a tetrahedral mesh that belong to one tetrahedron only, shape (f, 3).
 
+    The face opposite vertex ``i`` of a positive tetrahedron ``(v0, v1, v2, v3)`` is listed in the order that makes
+    its normal point out of the tetrahedron: ``(v1, v2, v3)``, ``(v0, v3, v2)``, ``(v0, v1, v3)``, ``(v0, v2, v1)`` for
+    ``i`` = 0, 1, 2, 3.
+
     Parameters
     ----------
     elements : int ndarray, shape (m, 4)
@@ -53,9 +57,6 @@ def boundary_faces(elements: np.ndarray, points: np.ndarray | None = None) -> np
     points : ndarray, shape (n, 3), optional
         Not needed for the faces; when given, each face is oriented with its normal pointing out of its tetrahedron
         (checked on these points).
-
-    The face opposite vertex ``i`` of a positive tetrahedron ``(v0, v1, v2, v3)`` is oriented outwards when listed
-    as the even permutation used here.
     """
     el = np.asarray(elements)
     if el.ndim != 2 or el.shape[1] != 4:

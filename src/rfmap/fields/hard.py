@@ -3,8 +3,10 @@ r"""Random fields built to be hard for a surrogate: the stress tests of the bije
 Densities are positive fields sampled on an ``N``-grid and meant to be mapped with ``preprocess=False`` (so that
 near-zero regions survive):
 
-.. math:: p = p_{\min} + (p_{\max} - p_{\min})\,\frac{g - \min g}{\max g - \min g},
-          \qquad g = \sum_k a_k\,\mathrm{bump}_k(x) + \text{steps} + \text{ramps},
+.. math::
+
+   p &= p_{\min} + (p_{\max} - p_{\min})\,\frac{g - \min g}{\max g - \min g}, \\
+   g &= \sum_k a_k\,\mathrm{bump}_k(x) + \text{steps} + \text{ramps},
 
 with sharp Gaussian peaks (widths 0.01–0.06), box steps, linear ramps, and a contrast :math:`p_{\min}/p_{\max}`
 drawn log-uniformly in :math:`[10^{-3}, 0.3]`.
@@ -12,9 +14,10 @@ drawn log-uniformly in :math:`[10^{-3}, 0.3]`.
 Beltrami coefficients have a smooth random part plus one to three localized bulges (Gaussian, width 0.03–0.12),
 are tapered to 0 at the boundary, and are scaled so that :math:`\|\mu\|_\infty` is drawn in :math:`[0.5, 0.95]`.
 
-Each task draws its hard fields (``Task.hard_field``); :func:`rfmap.paper.folding.first_folding` finds among them
-one on which a given surrogate's raw map folds (the bijectivity chapter's examples).  :func:`self_crossing_map` is a
-3D map that no element check can catch: every tetrahedron positive, the boundary surface passing through itself.
+Each task draws its hard fields (:meth:`rfmap.tasks.base.Task.hard_field`); :func:`rfmap.paper.folding.first_folding`
+finds among them one on which a given surrogate's raw map folds (the bijectivity chapter's examples).
+:func:`self_crossing_map` is a 3D map that no element check can catch: every tetrahedron positive, the boundary
+surface passing through itself.
 """
 from __future__ import annotations
 
@@ -80,8 +83,12 @@ def self_crossing_map(n: int, turns: float = 1.3) -> tuple[np.ndarray, np.ndarra
 
     Returns
     -------
-    (ref, mapped, elements)
-        Grid vertices (N^3, 3), their images (N^3, 3) and the tetrahedra of :func:`rfmap.core.mesh.grid_mesh`.
+    ref : ndarray, shape (N**3, 3)
+        The grid vertices.
+    mapped : ndarray, shape (N**3, 3)
+        Their images.
+    elements : int ndarray, shape (6 (N-1)**3, 4)
+        The tetrahedra of :func:`rfmap.core.mesh.grid_mesh`.
     """
     m = grid_mesh(n, 3)
     x, y, z = m.points.T

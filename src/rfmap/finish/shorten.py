@@ -33,10 +33,15 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
     :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) = \mathrm{Std}(\tilde\rho_{\text{orig}})`.  Along the segment
     from the identity to the map, the objective
 
-    .. math:: J(s) = \mathrm{Std}(\tilde\rho(u_s)) \text{ if } u_s \text{ is fold-free (and, on a free boundary,
-       embedded)}, \quad +\infty \text{ otherwise},
+    .. math::
 
-    (fold-free and embedded as :func:`~rfmap.core.folds.fold_free` checks) is sampled at ``samples + 1`` equally spaced
+       J(s) = \begin{cases}
+          \mathrm{Std}(\tilde\rho(u_s)) & \text{if } u_s \text{ is fold-free,} \\
+          +\infty & \text{otherwise,}
+       \end{cases}
+
+    (fold-free as :func:`~rfmap.core.folds.fold_free` checks it: no element folded and, on a free boundary, the
+    boundary embedded) is sampled at ``samples + 1`` equally spaced
     scales (both ends included) and refined by ``rounds`` golden-section steps between the neighbours of the best
     sample.  The returned map is never less equal than either end: it is at
     least as good as the input map when that is fold-free, and as the identity in any case.  Every :math:`u_s`
@@ -61,8 +66,10 @@ def shorten_map(ref: np.ndarray, mapped: np.ndarray, density: np.ndarray, n: int
 
     Returns
     -------
-    (points, report)
-        ``report``: ``scale`` (the chosen :math:`s`), ``std_before`` (of the input map; ``inf`` if folded),
+    points : ndarray, shape (P, d)
+        The map :math:`u_s` at the chosen scale.
+    report : dict
+        ``scale`` (the chosen :math:`s`), ``std_before`` (of the input map; ``inf`` if folded),
         ``std_identity``, ``std_after``, ``evaluations``, ``time`` (s) and ``curve``, the evaluated
         ``[s, J(s)]`` pairs in increasing ``s``.
     """

@@ -63,12 +63,14 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
 
     Returns
     -------
-    (points, report)
-        ``points`` is ``mapped`` itself (the same object) when nothing was folded.  ``report`` holds ``needed``,
-        ``method``, ``n_flipped_before``, ``n_flipped_after``, ``affected`` (triangles with truncated :math:`\mu`
-        for the LBS, vertices with a shortened displacement for the scaling), ``time`` (s), ``metrics_before`` and
-        ``metrics_after``; for a 3D free boundary also ``surface_crossings_before``/``_after`` (intersecting pairs
-        of boundary triangles) and, when :func:`~rfmap.finish.repair.embedding.surface_repair` ran, ``surface_scale``.
+    points : ndarray, shape (n, d)
+        The fold-free map; ``mapped`` itself (the same object) when nothing was folded.
+    report : dict
+        ``needed``, ``method``, ``n_flipped_before``, ``n_flipped_after``, ``affected`` (triangles with truncated
+        :math:`\mu` for the LBS, vertices with a shortened displacement for the scaling), ``time`` (s),
+        ``metrics_before`` and ``metrics_after``; for a 3D free boundary also ``surface_crossings_before``/``_after``
+        (intersecting pairs of boundary triangles) and, when :func:`~rfmap.finish.repair.embedding.surface_repair` ran,
+        ``surface_scale``.
     """
     t0 = time.perf_counter()
     if method not in REPAIR_METHODS:

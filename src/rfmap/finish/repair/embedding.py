@@ -24,7 +24,10 @@ def surface_repair(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *,
 
     Returns
     -------
-    (points, s)
+    points : ndarray, shape (n, 3)
+        The map :math:`u_s`.
+    s : float
+        The scale kept: below 1 (the first scale tried is 1/2), and 0, the identity, when no halving passes.
     """
     ref = np.asarray(ref, np.float64)
     disp = np.asarray(mapped, np.float64) - ref

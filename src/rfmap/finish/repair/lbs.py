@@ -49,7 +49,10 @@ def cap_mu(mu: np.ndarray, delta: float = DELTA) -> tuple[np.ndarray, np.ndarray
 
     Returns
     -------
-    (capped, mask) : complex ndarray (m,) and the boolean mask of the changed entries.
+    capped : complex ndarray, shape (m,)
+        The truncated coefficient.
+    mask : bool ndarray, shape (m,)
+        The entries that changed.
     """
     mu = np.asarray(mu, dtype=np.complex128)
     bad = ~np.isfinite(mu)
@@ -111,7 +114,10 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
 
     Returns
     -------
-    (points, capped) : the rebuilt map (N**2, 2) and the mask of the triangles whose :math:`\mu` was truncated.
+    points : ndarray, shape (N**2, 2)
+        The rebuilt map.
+    capped : bool ndarray, shape (m,)
+        The triangles whose :math:`\mu` was truncated.
     """
     mesh = grid_mesh(n, 2)
     ref_t, el_t = torch.as_tensor(mesh.points), torch.as_tensor(mesh.elements)

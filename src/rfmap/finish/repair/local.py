@@ -1,10 +1,11 @@
 r"""Repair of 2D grid maps by the Linear Beltrami Solver on a patch around the folds, tried before the global rebuild.
 
-The rebuild of :mod:`rfmap.finish.repair.lbs` is first tried on a patch (:func:`local_lbs_repair`): the truncated triangles
-grown by 2, 4, 8, then 16 vertex rings, the patch's rim and the domain boundary held where the map put them.  Folds of a
-network map are usually a few small clusters, so a patch solve costs a fraction of the global one and leaves the rest of
-the map exactly as the network made it.  Widespread folds (over 1 % of the triangles), a free boundary that crosses
-itself, or a patch that stays folded go to the global rebuild.
+The rebuild of :mod:`rfmap.finish.repair.lbs` is first tried on a patch (:func:`local_lbs_repair`): the truncated
+triangles grown by 2, 4, 8, then 16 vertex rings, the patch's rim and the domain boundary held where the map put them.
+Folds of a network map are usually a few small clusters, so a patch solve costs a fraction of the global one and
+leaves the rest of the map exactly as the network made it.  Widespread folds (more than 100 truncated triangles and
+more than the share :data:`LOCAL_MAX_CAPPED` of all), a free boundary that crosses itself, or a patch that stays
+folded go to the global rebuild.
 """
 from __future__ import annotations
 
@@ -22,18 +23,20 @@ from ...core.surface import boundary_crossings, boundary_loop
 from ...solvers.lbs import assemble_stiffness, beltrami_matrices
 from .lbs import DELTA, cap_mu
 
-__all__ = ["LOCAL_RINGS", "local_lbs_repair"]
+__all__ = ["LOCAL_RINGS", "LOCAL_MAX_FRACTION", "LOCAL_MIN_GIVE_UP", "LOCAL_MAX_CAPPED", "local_lbs_repair"]
 
 
 #: ring counts of the successive patches of :func:`local_lbs_repair`
 LOCAL_RINGS = (2, 4, 8, 16)
 
 
-#: a patch larger than this fraction of the vertices (and than ``LOCAL_MIN_GIVE_UP`` vertices) is given up for the
-#: global :func:`~rfmap.finish.repair.lbs.lbs_repair`
+#: a patch larger than this fraction of the vertices (and than :data:`LOCAL_MIN_GIVE_UP` vertices) is given up for
+#: the global :func:`~rfmap.finish.repair.lbs.lbs_repair`
 LOCAL_MAX_FRACTION = 0.25
 
 
+#: the number of vertices a patch may always grow to before it is given up, whatever :data:`LOCAL_MAX_FRACTION` of
+#: a small grid's vertices comes to
 LOCAL_MIN_GIVE_UP = 2000
 
 
@@ -58,10 +61,12 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
 
     Returns
     -------
-    (points, capped) as :func:`.lbs_repair`, or ``None`` when more than ``LOCAL_MAX_CAPPED`` of the triangles (and more
-    than 100) are truncated, when no patch of at most ``rings[-1]`` rings and ``max_fraction`` of the vertices (or
-    ``LOCAL_MIN_GIVE_UP`` vertices on small grids) ends fold-free, or when a free boundary crosses itself (boundary
-    vertices keep their positions in a local solve, so only :func:`.lbs_repair` can untangle it).
+    result : tuple of (ndarray, ndarray), or None
+        ``(points, capped)`` as :func:`.lbs_repair` returns them.  ``None`` when no triangle is truncated; when more
+        than 100 triangles and more than the share :data:`LOCAL_MAX_CAPPED` of all are truncated; when no patch of at
+        most ``rings[-1]`` rings and at most ``max_fraction`` of the vertices (or :data:`LOCAL_MIN_GIVE_UP` vertices on
+        small grids) ends fold-free; or when a free boundary crosses itself (boundary vertices keep their positions in
+        a local solve, so only :func:`.lbs_repair` can untangle it).
     """
     mesh = grid_mesh(n, 2)
     el = mesh.elements

@@ -1,25 +1,26 @@
 r"""Fold-free displacement scaling: the repair of 3D maps, and of any mesh the Beltrami rebuild does not apply to.
 
-Write the map as
-:math:`u = x + d(x)` with the displacement :math:`d` (for a surrogate :math:`d = \mathcal{B} \odot \psi`).  The
-identity (:math:`s = 0` in :math:`u_s = x + s\,d`) has every element positive, and every :math:`u_s` satisfies the
-same boundary condition as :math:`u`.  For one element, :math:`\det E(s) = \det(E_x + s E_d)` is a polynomial of
-degree :math:`d` in :math:`s` with :math:`\det E(0) > 0`, so its first root :math:`s_T` in :math:`(0, 1]` is computed
-exactly (closed form in 2D, companion-matrix eigenvalues in 3D) for the elements that a cheap test cannot clear: a
-polynomial is a convex combination of its Bernstein coefficients on :math:`[0, 1]`, so when they are all positive it
-has no root there.  The largest fold-free uniform scale is
-:math:`s^\* = \min_T s_T`, and the map :math:`u_{s^\*}` is fold-free.  Then the per-vertex scale :math:`s_v` is raised
-locally towards 1 by bisection: a proposed raise is kept unless an element touching the vertex would drop below its
-threshold, in which case the vertices of every such element go back to their accepted values (repeating until no
-element fails, which ends because the accepted state passes).  On grid meshes the raises of a round go class by
-class (:func:`vertex_classes`: the :math:`2^d` parities of the grid coordinates, no two of one class in an element),
-Gauss–Seidel fashion, so an element that fails has a single raised vertex and only that one goes back; raising all
-vertices at once would also send back the element's other vertices, whose raises were fine.  Each round first tries
-the raise of all active vertices at once and keeps it when no element fails (a fold-free target is then recovered
-in one step, where a class-by-class sweep could stall in a failing intermediate state).
+Write the map as :math:`u = x + d(x)` with the displacement :math:`d` (for a surrogate
+:math:`d = \mathcal{B} \odot \psi`).  The identity (:math:`s = 0` in :math:`u_s = x + s\,d`) has every element
+positive, and every :math:`u_s` satisfies the same boundary condition as :math:`u`.  For one element, with
+:math:`E_x` and :math:`E_d` the matrices of its edge vectors under :math:`x` and under :math:`d`,
+:math:`\det E(s) = \det(E_x + s E_d)` is a polynomial in :math:`s` of degree at most the dimension (2 or 3) with
+:math:`\det E(0) > 0`, so its first root :math:`s_T` in :math:`(0, 1]` is computed exactly (closed form in 2D,
+companion-matrix eigenvalues in 3D) for the elements that a cheap test cannot clear: on :math:`[0, 1]` a polynomial's
+values are convex combinations of its Bernstein coefficients, so when they are all positive it has no root there.
+The largest fold-free uniform scale is :math:`s^{*} = \min_T s_T`, and the map :math:`u_{s^{*}}` is fold-free.
+Then the per-vertex scale :math:`s_v` is raised locally towards 1 by bisection: a proposed raise is kept unless an
+element touching the vertex would drop below its threshold, in which case the vertices of every such element go back to
+their accepted values (repeating until no element fails, which ends because the accepted state passes).  On grid meshes
+the raises of a round go class by class (:func:`vertex_classes`: the parities of the grid coordinates, 4 classes in 2D
+and 8 in 3D, no two vertices of one class in an element), Gauss–Seidel fashion, so an element that fails has a single
+raised vertex and only that one goes back; raising all vertices at once would also send back the element's other
+vertices, whose raises were fine.  Each round first tries the raise of all active vertices at once and keeps it when no
+element fails (a fold-free target is then recovered in one step, where a class-by-class sweep could stall in a failing
+intermediate state).
 Vertices far from the folds thus recover the input map
 exactly and only a neighbourhood of the folds keeps a shortened displacement.  When the folds are local, the start
-itself is local: :math:`s^\*` on the elements whose polynomial has a root in :math:`(0, 1)`, rising linearly to
+itself is local: :math:`s^{*}` on the elements whose polynomial has a root in :math:`(0, 1)`, rising linearly to
 :math:`s = 1` over 6, 12 or 24 vertex rings around them (grown only as far as the start being tried needs), if one of
 these states verifies (else the uniform start), so the rounds touch only that region.  Only the elements touching a
 vertex with :math:`s_v < 1` are evaluated to verify a local start: every other element keeps the target, which the
@@ -27,7 +28,7 @@ root test cleared.  The cost thus follows the size of the folded region, not of 
 all elements for the polynomial coefficients.
 
 Why the result is fold-free: every accepted state is *verified* by direct evaluation of all element measures that
-changed, the starting state :math:`u_{s^\*}` is verified the same way (halving :math:`s` until it passes, the identity
+changed, the starting state :math:`u_{s^{*}}` is verified the same way (halving :math:`s` until it passes, the identity
 being the last resort), and a rejected proposal restores an accepted state.  So the returned map has every element
 measure above a positive threshold :math:`\tau_T` (a fraction :math:`\eta = 0.05` of the reference measure for
 elements that were folded, :math:`\min(\eta |T|, \tfrac12 |u(T)|)` for the others) whatever the root-finding accuracy.
@@ -293,11 +294,11 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
                  eta: float = ETA, rounds: int = 16) -> tuple[np.ndarray, dict]:
     r"""Fold-free map closest to ``target`` among :math:`u_v = x_v + s_v (t_v - x_v)`, :math:`s_v \in [0, 1]`.
 
-    See the module docstring: a verified fold-free uniform scale :math:`s^\*` (first root of the per-element determinant
-    polynomials; applied only on the unsafe elements and rising linearly to 1 over 6, 12 or 24 vertex rings around them
-    (``LOCAL_START_RINGS``), when such a start verifies), then ``rounds`` rounds of per-vertex bisection of :math:`s_v`
-    towards 1 that keep every element above its threshold.  Works on any simplicial mesh in 2D or 3D and keeps the
-    boundary condition of ``target`` (the displacement is only shortened).
+    See the module docstring.  The start is the fold-free scale :math:`s^{*}` (the first root of the per-element
+    determinant polynomials), applied on the elements with a root and rising linearly to 1 over 6, 12 or 24 vertex rings
+    around them (:data:`LOCAL_START_RINGS`) when such a local start verifies, else on every vertex; then ``rounds``
+    rounds of per-vertex bisection of :math:`s_v` towards 1 that keep every element above its threshold. Works on any
+    simplicial mesh in 2D or 3D and keeps the boundary condition of ``target`` (the displacement is only shortened).
 
     Parameters
     ----------
@@ -308,9 +309,13 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
 
     Returns
     -------
-    (points, info) : the repaired map (n, d) and ``{"s_uniform", "start", "affected", "classes"}``: the scale
-    :math:`s^\*`, ``"local (R rings)"`` or ``"uniform"``, the vertices left with :math:`s_v < 1`, and the number of
-    vertex classes raised in turn (:func:`vertex_classes`; 1 on meshes that are not grids).
+    points : ndarray, shape (n, d)
+        The repaired map.
+    info : dict
+        ``s_uniform``: the start's fold-free scale, just below :math:`s^{*}` (halved until it verified where the
+        uniform start needed that); ``start``: ``"local (R rings)"`` or ``"uniform"``; ``affected``: the number of
+        vertices left with :math:`s_v < 1`; ``classes``: the number of vertex classes raised in turn
+        (:func:`vertex_classes`; 1 on meshes that are not grids).
     """
     ref = np.asarray(ref, np.float64)
     target = np.asarray(target, np.float64)
