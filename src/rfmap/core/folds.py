@@ -28,7 +28,10 @@ def map_measures(points: np.ndarray, elements: np.ndarray, grid_n: int | None) -
 
 def fold_free(points: np.ndarray, elements: np.ndarray, *, grid_n: int | None = None,
               boundary: str = "fixed") -> bool:
-    """True when every element has positive measure (and, for a free 2D grid boundary, the boundary is simple).
+    """True when every element has positive measure and, on a free boundary, the boundary is embedded.
+
+    Embedded means a simple boundary polygon for a 2D grid mesh (other 2D meshes are not checked for it) and a
+    boundary surface without self-intersection in 3D.
 
     ``grid_n``: the mesh is :func:`grid_mesh(N, d) <rfmap.core.mesh.grid_mesh>` and the strided measures are used
     (fast path).

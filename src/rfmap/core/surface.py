@@ -312,7 +312,8 @@ def boundary_crossings(poly: np.ndarray, edges: np.ndarray | None = None) -> np.
 
     Returns
     -------
-    ndarray of int, shape (c, 2): edge index pairs ``(i, j)`` with ``i < j``.
+    pairs : int ndarray, shape (c, 2)
+        The crossing edges as index pairs ``(i, j)`` with ``i < j``.
     """
     P = np.asarray(poly, dtype=np.float64)
     k = P.shape[0]
