@@ -26,10 +26,14 @@ from .generalization import generalization_table
 from .comparison import format_time
 from .tables import Table, format_sig
 
-__all__ = ["parameter_count", "model_table", "validated_states", "learning_summary", "kept_state", "kept_rules",
-           "folded_states_text", "learning_verdict", "paper_fields_table", "resolution_table",
+__all__ = ["NETWORK_NAMES", "parameter_count", "model_table", "validated_states", "learning_summary", "kept_state",
+           "kept_rules", "folded_states_text", "learning_verdict", "paper_fields_table", "resolution_table",
            "points_table", "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins",
            "folded_cell", "side_by_side", "MarkdownText"]
+
+
+#: The printed name of each network architecture (``arch`` of a model's settings) in :func:`model_table`.
+NETWORK_NAMES = {"unet": "U-Net", "fno": "FNO"}
 
 
 def parameter_count(model) -> int:
@@ -50,8 +54,9 @@ def _check(surs: dict) -> tuple:
 
 
 def model_table(surs: dict) -> Table:
-    """Architecture, parameters, training steps, the step whose weights were kept and wall time (cumulative over
-    ``--init`` chains), and two held-out validation numbers of each model's kept weights, from its metadata.
+    """Architecture (:data:`NETWORK_NAMES`), parameters, training steps, the step whose weights were kept and wall
+    time (cumulative over ``--init`` chains), and two held-out validation numbers of each model's kept weights, from
+    its metadata.
 
     ``validation`` is the mean Std(ρ̃_map) over the held-out fields with a folded map counted as the identity (the
     ``penalized`` entry where recorded, else the plain mean); ``checkpoint score`` is the score that chose the kept
@@ -69,7 +74,8 @@ def model_table(surs: dict) -> Table:
         # meaningless
         val = mean.get("penalized", mean.get("std_rho_map"))
         kept = meta.get("selected_step")
-        t.add(name, s.model.kwargs().get("arch", "unet"),
+        arch = s.model.kwargs().get("arch", "unet")
+        t.add(name, NETWORK_NAMES.get(arch, arch),
               {"parameters": parameter_count(s.model),
                "steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
                "kept step": None if kept is None else int(kept),
