@@ -147,6 +147,10 @@ def _prism_peak_3d(x):
     return np.where(inside, 1.0, _multi_freq_3d(x))
 
 
+#: The paper's test densities by name (:class:`DensityField`): in 2D ``sin-cos``, ``exp-log``, ``rect-peak`` and
+#: ``ring`` (the tables of paper Sec. 5.2) and ``multi-freq`` (its resolution tests); in 3D ``sin-cos-3d``,
+#: ``shell-3d``, ``octant-3d`` and ``prism-peak-3d`` (the 3D tables) and ``multi-freq-3d`` (the 3D resolution tests).
+#: Each entry's ``description`` gives its formula.
 DENSITIES: dict[str, DensityField] = {
     f.name: f
     for f in [
@@ -247,6 +251,8 @@ def _t4(x, a=0.55, sigma=0.10):
     return torch.stack([X + w * (X - 0.5), Y + w * (Y - 0.5)], -1)
 
 
+#: The paper's analytic Beltrami test maps by name (:class:`BeltramiMap`): ``T1`` to ``T4`` (paper Sec. 5.1,
+#: Eqs. T1–T4) and ``T1-res``, the map T1 of the paper's resolution tests.
 BELTRAMI_MAPS: dict[str, BeltramiMap] = {
     m.name: m
     for m in [

@@ -109,6 +109,10 @@ class RandomDensity:
     [\sin(2\pi f_{k,3} x_3 + \varphi_{k,3})]` with :math:`A_k \in [-1,1]`; the non-smooth part holds optional box
     steps and Gaussian-windowed high-frequency patches; the scale :math:`s` sets a random peak-to-peak contrast.
     Call it on points of shape (P, d) to get raw values (P,); :func:`preprocess_density` does shift and mass.
+
+    Differs from the paper: its training densities are the sum of sine modes alone; the contrast scale :math:`s`
+    (peak-to-peak range log-uniform in ``RandomDensityConfig.contrast``), the steps, patches and vertex noise, and
+    the optional peaks, ramps and hard fields are this package's additions.
     """
 
     def __init__(self, rng: np.random.Generator, cfg: RandomDensityConfig = RandomDensityConfig()):
@@ -283,6 +287,11 @@ class RandomBeltrami:
     complex amplitudes :math:`A_i = |A_i| e^{i\theta_i}`, :math:`|A_i| \le 1`, a boundary taper
     :math:`\tau = \min(1, \mathrm{dist}(x, \partial\Omega)/0.1)` so that :math:`\mu = 0` on the boundary, and
     a scale :math:`s` making :math:`\|\mu\|_\infty` a random level :math:`\le k`.
+
+    Differs from the paper: Eq. (22) has real amplitudes :math:`A_i \in [-1, 1]` (so a real :math:`\mu`) and sets
+    :math:`\mu` to zero on :math:`\partial\Omega` without saying how; here the amplitudes are complex, so that
+    :math:`\mu` takes every direction, and the zero boundary value comes from the linear taper :math:`\tau`.
+    The Beltrami task's default training fields are those of :class:`RandomMap`, not these.
     """
 
     def __init__(self, rng: np.random.Generator, cfg: RandomBeltramiConfig = RandomBeltramiConfig()):

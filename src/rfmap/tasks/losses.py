@@ -100,11 +100,15 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
 
 def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor, beta: float = 1.0, *,
                  pre: Measures = NONE, tangent: bool = False) -> Tensor:
-    r"""Density-equalizing loss :math:`\int_\Omega L(p_i/A_i - P/A)` with smooth-L1 :math:`L` (paper Sec. 5.2).
+    r"""Density-equalizing loss :math:`\int_\Omega L(\tilde\rho_i - 1)` with smooth-L1 :math:`L`, where
+    :math:`\tilde\rho_i = (p_i/A_i)/(P/A)` is the density of element :math:`i` after the map (population
+    :math:`p_i`, mapped measure :math:`A_i`) relative to the mean density :math:`P/A` (total population over total
+    mapped measure).
 
-    The difference is taken relative to the mean density :math:`P/A`, i.e. :math:`L(\tilde\rho_i - 1)`; this
-    makes the loss invariant to a uniform rescaling of the mapped domain, so a free-boundary model cannot lower
-    it by inflating the domain.
+    Differs from the paper: its Sec. 5.2 writes :math:`L(p_i/A_i - P/A)`, the absolute difference.  The two are
+    equal when :math:`P/A = 1`, that is for fixed walls (the mapped domain keeps measure 1) and a density of unit
+    mass; they differ for a free boundary, where :math:`A` changes.  The relative form makes the loss invariant to a
+    uniform rescaling of the mapped domain, so a free-boundary model cannot lower it by inflating the domain.
 
     Parameters
     ----------
