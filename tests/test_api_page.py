@@ -12,7 +12,7 @@ ROOT = Path(__file__).resolve().parent.parent
 INDEX = ROOT / "book" / "api.md"
 PAGES = sorted((ROOT / "book" / "api").glob("*.md"))
 #: an autodoc directive, or a hand-written ``py:`` description of a name that has no docstring of its own
-DIRECTIVE = re.compile(r"^\.\. (auto\w+|py:\w+):: (\S+)\n((?:[ \t]+:[^\n]*\n)*)", re.M)
+DIRECTIVE = re.compile(r"^\.\. (auto\w+|py:\w+):: (\S+?)(?:\([^\n]*\))?\n((?:[ \t]+:[^\n]*\n)*)", re.M)
 
 
 def _public_modules() -> list[str]:

@@ -30,7 +30,7 @@ classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flo
    less than half of the input's density variation (:data:`POOR`), the flow starts cold from the identity instead,
    and the report says so.  ``Surrogate.map(polish=...)`` then skips its bijectivity repair of a folded map, which
    the cold start would throw away (on a 3D map with hundreds of folded tetrahedra the repair can cost more than the
-   whole flow).  So it does when the warm flow stalls (more than ``WARM_STEPS`` steps, or a step
+   whole flow).  The flow also starts cold when the warm flow stalls (more than ``WARM_STEPS`` steps, or a step
    below ``rfmap.solvers.flow.STALL_DT``: a near-degenerate element of :math:`u_0` keeps cutting the fold-free
    step; the warm flow is not retried with a blurred density).
 5. Even a good network map does not guarantee a better finish: on held-out fields the warm flow often ends above

@@ -6,9 +6,8 @@ no-flux walls.  Along one axis,
 
 .. math::
 
-    \mathrm{DCT\text{-}I}(x)_k = x_0 + (-1)^k x_{M-1} + 2\sum_{j=1}^{M-2} x_j \cos\frac{\pi jk}{M-1},
-    \qquad
-    \mathrm{DST\text{-}I}(x)_j = 2\sum_{k=0}^{K-1} x_k \sin\frac{\pi (j+1)(k+1)}{K+1},
+    \mathrm{DCT\text{-}I}(x)_k &= x_0 + (-1)^k x_{M-1} + 2\sum_{j=1}^{M-2} x_j \cos\frac{\pi jk}{M-1}, \\
+    \mathrm{DST\text{-}I}(x)_j &= 2\sum_{k=0}^{K-1} x_k \sin\frac{\pi (j+1)(k+1)}{K+1},
 
 (``scipy.fft.dct(x, type=1)`` and ``scipy.fft.dst(x, type=1)``, unnormalised).  Two objects compute them with one
 interface (``dct(x, axis, out=None)``, ``dst(x, axis, out=None)``, ``dctn(x)``):

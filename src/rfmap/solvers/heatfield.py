@@ -10,9 +10,8 @@ the box solve the equation exactly: from grid values :math:`p_j` at the nodes :m
 
 .. math::
 
-    \rho(x, t) = \sum_{k \in \{0..M-1\}^d} a_k \prod_{i=1}^d \cos(\pi k_i x_i)\, e^{-\pi^2 k_i^2 t},
-    \qquad
-    \partial_j \rho(x, t) = \sum_k a_k\, (-\pi k_j) \sin(\pi k_j x_j)
+    \rho(x, t) &= \sum_{k \in \{0..M-1\}^d} a_k \prod_{i=1}^d \cos(\pi k_i x_i)\, e^{-\pi^2 k_i^2 t}, \\
+    \partial_j \rho(x, t) &= \sum_k a_k\, (-\pi k_j) \sin(\pi k_j x_j)
     \prod_{i \ne j} \cos(\pi k_i x_i) \prod_{i=1}^d e^{-\pi^2 k_i^2 t},
 
 with :math:`a_k = b_k \prod_i e_{k_i}` (:math:`e = 1` at both ends of an axis, 2 inside) from the half coefficients

@@ -6,9 +6,9 @@ Writing the Beltrami equation in real form gives (Lui et al. 2013)
 
 .. math::
 
-    \begin{pmatrix} v_y \\ -v_x \end{pmatrix} = A \begin{pmatrix} u_x \\ u_y \end{pmatrix}, \qquad
-    \begin{pmatrix} -u_y \\ u_x \end{pmatrix} = A \begin{pmatrix} v_x \\ v_y \end{pmatrix}, \qquad
-    A = \frac{1}{1-|\mu|^2}
+    & \begin{pmatrix} v_y \\ -v_x \end{pmatrix} = A \begin{pmatrix} u_x \\ u_y \end{pmatrix}, \qquad
+    \begin{pmatrix} -u_y \\ u_x \end{pmatrix} = A \begin{pmatrix} v_x \\ v_y \end{pmatrix}, \\
+    & A = \frac{1}{1-|\mu|^2}
     \begin{pmatrix} (\rho-1)^2+\tau^2 & -2\tau \\ -2\tau & (\rho+1)^2+\tau^2 \end{pmatrix},
 
 and taking the divergence eliminates the other component: :math:`\nabla\cdot(A\nabla u) = 0` and
