@@ -229,6 +229,14 @@ def test_verdict_words_follow_the_stated_rule():
     assert [verdict(f) for f in ([True] * 3, [True, False, None], [False, None], [None, None])] == list(VERDICTS)
 
 
+def test_the_nc_clause_agrees_in_number():
+    from rfmap.paper.verdicts import nc_clause
+
+    assert nc_clause([]) == ""
+    assert nc_clause([True, False]) == "1 of the 2 n/c cases is worse by Std ratio"
+    assert nc_clause([True, True, False]) == "2 of the 3 n/c cases are worse by Std ratio"
+
+
 def test_full_table_sets_the_methods_as_columns():
     """Every quantity measured, a row per quantity in each case's block and a column per method: as narrow as the
     paper-shaped table however many quantities there are."""

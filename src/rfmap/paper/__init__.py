@@ -2,8 +2,8 @@ r"""The code of the book's chapters and tables, one module per kind of study, bu
 
 Each module is named by what it shows:
 
-- :mod:`~rfmap.paper.tables`: the table formatter, the paper's published tables and the glue of numbers into the
-  text;
+- :mod:`~rfmap.paper.tables`: the table formatter, the paper's published tables and the numbers of the book's text
+  as words;
 - :mod:`~rfmap.paper.verdicts`: the verdict word of a paper table or figure, and whether a test input is the
   paper's;
 - :mod:`~rfmap.paper.comparison`: each paper table as a four-way comparison (the paper, the paper's method run
@@ -16,12 +16,10 @@ Each module is named by what it shows:
 - :mod:`~rfmap.paper.recipes`: how the models were trained;
 - :mod:`~rfmap.paper.benchmarks`: classical, neural and hybrid maps side by side;
 - :mod:`~rfmap.paper.flow_studies`: studies of the flow-based solver;
-- :mod:`~rfmap.paper.design`: the design decisions page;
+- :mod:`~rfmap.paper.design`: the design decisions page (documented on the page of the book's internals);
 - :mod:`~rfmap.paper.cartograms`: the cartogram chapter's tables;
 - :mod:`~rfmap.paper.compare`: two surrogates of one task side by side (the U-Net against the Fourier neural
   operator);
 - :mod:`~rfmap.paper.folding`: the first hard field that folds a surrogate's raw map, documented with the repair
   functions that it serves.
-
-Nothing in the library imports this layer.
 """

@@ -25,8 +25,8 @@ __all__ = ["METHODS", "ROWS", "WARM_MODELS", "STD_TOL", "FLOW_TIME", "HYBRID_TIM
 
 #: The methods compared by :func:`compare_methods`.
 METHODS = ("diffusion", "flow", "surrogate", "surrogate+refine", "hybrid")
-#: The rows of :func:`compare_methods`, in order: the hybrid's run also gives the row of its warm flow alone
-#: (:data:`rfmap.finish.polish.UNGUARDED`; where the flow started cold, the hybrid's own row).
+#: The rows of :func:`compare_methods`, in order: the hybrid's run also gives the row of its warm flow alone,
+#: without the guard (:data:`rfmap.finish.polish.UNGUARDED`, ``"hybrid (no guard)"``; where the flow started cold, the hybrid's own row).
 ROWS = METHODS[:-1] + (UNGUARDED, "hybrid")
 
 #: "As accurate": a final Std(ρ̃_map) at most this factor above the reference solver's.
@@ -57,7 +57,9 @@ def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "squ
         One row per method: ``method``, ``std_rho_map``, ``n_flipped``, ``time`` (s, the result's own ``time``); for
         the surrogate's two rows ``coarser`` (the network's map folded, and a fold-free map from a coarser working
         grid was taken, :func:`rfmap.finish.stages.regrid`); for the hybrid, ``start`` (warm or cold) and ``kept`` (the map the guard kept); the hybrid's run adds the
-        row :data:`rfmap.finish.polish.UNGUARDED` before its own: its warm flow's map, timed without the guard's cold flow.
+        row ``"hybrid (no guard)"`` (:data:`rfmap.finish.polish.UNGUARDED`) before its own: its warm flow's map
+        alone, as the hybrid would return it without the guard (the cold flow from the identity that it also runs,
+        keeping the better map), timed without that cold flow.
     """
     rows = []
     for method in methods:
@@ -95,7 +97,8 @@ WARM_MODELS = {(2, "square"): "dem2d-square", (2, "free"): "deq2d-free", (3, "sq
 
 def benchmark_fields(dim: int, n: int, *, paper: bool = True, random: int = 0) -> list[tuple[str, np.ndarray]]:
     """Labelled densities on the ``N``-grid: the paper's test fields and a number ``random`` of unseen random fields
-    (the ``report`` stream of :func:`rfmap.training.validation.validation_fields`), preprocessed as the paper does."""
+    (the report stream of :func:`rfmap.training.validation.validation_fields`: fields drawn from a seed of their
+    own, never drawn in training or used to choose a model), preprocessed as the paper does."""
     out = [(name, sample_density(name, n)) for name in TEST_FIELDS[("density", dim)]] if paper else []
     if random:
         pts = grid_points(n, dim)

@@ -5,7 +5,7 @@ lower is better.  For each case this module puts four values side by side:
 
 ``paper``
     the published value (``data/paper_tables.json``);
-``native`` -- the paper's method
+``native`` (the paper's method)
     the network run on the requested grid itself, then the paper's weight refinement (Sec. 4.3), nothing else:
     ``Surrogate.map(field, n, native=True, refine=True, repair=False)``;
 ``delivered``
@@ -140,7 +140,7 @@ def timed(run: Callable[[], MapResult], warm: Callable[[], object] | None = None
 @dataclass(frozen=True)
 class Case:
     """One row of a paper table: ``name`` as the paper labels it (a field, or a grid side as text), the ``field`` to
-    map and the grid side ``n`` actually run (smaller than the paper's at ``ci`` scale)."""
+    map and the grid side ``n`` actually run (smaller than the paper's in the book's quick test runs)."""
 
     name: str
     field: str

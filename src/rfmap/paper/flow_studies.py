@@ -1,5 +1,8 @@
 r"""Studies of the flow-based solver: its free boundary's sea, where the classical solvers' residual comes from,
 whether its gap to the diffusion solver is a convergence error, and where a flow started from a network's map ends.
+
+With a free boundary the domain floats in a larger box filled with a *sea* of (nearly) mean density; the domain's
+outline, where the density jumps from the domain's to the sea's, is the *coast*.
 """
 from __future__ import annotations
 
@@ -28,7 +31,7 @@ SEA_TOL = 1.05
 def sea_blend_study(dim: int = 2, n: int = 256, *, count: int = 8, blend: float = 0.25) -> list[dict[str, Any]]:
     r"""The free boundary's flow with the diffusion solver's sea and with a blended one, beside the diffusion solver.
 
-    On ``count`` unseen random fields of the ``report`` stream (:func:`rfmap.training.validation.validation_fields`: smooth,
+    On ``count`` unseen random fields (the report stream of :func:`rfmap.training.validation.validation_fields`: smooth,
     steps, peak and ramp in turn, preprocessed) the diffusion solver and the flow-based solver run with
     ``boundary="free"``; the flow three times (``rfmap.solvers.flow.solve_flow``): with the sea that jumps to its
     level at the coast (the diffusion solver's) and only blurred retries after a stall (``stall_blend=0``); as by
@@ -144,8 +147,9 @@ def warm_start_residuals(sur, density_name: str = "sin-cos", ns=(51, 128, 256)) 
     r"""Why a flow started from a given map ends where it does: five maps of the test density per grid side.
 
     * ``"cold flow"``: ``solve_flow`` from the identity, the density sampled as its P1 interpolant;
-    * ``"flow from the identity, warm-start route"``: the same start, but through the warm-start route, which
-      rasterizes the residual density of the starting map (here the input density's element means;
+    * ``"flow from the identity, warm-start route"``: the same start, but through the *warm-start route*, the
+      path of a flow started from a given map (the hybrid's), which rasterizes the residual density of the starting
+      map (here the input density's element means;
       ``rfmap.solvers.residual.vertex_residual``);
     * ``"network"``: the surrogate's map ``sur.map(density_name, N)``;
     * ``"flow from the network"``: one flow pass from the network's map, ``NaN`` where it stalls;

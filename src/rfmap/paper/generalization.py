@@ -1,5 +1,9 @@
-r"""Beyond the paper's test fields: the surrogates on unseen random fields (the ``report`` stream of
-:mod:`rfmap.training.validation`), their angular distortion, and how far the fields ask a map to move its points.
+r"""Beyond the paper's test fields: the surrogates on unseen random fields, their angular distortion, and how far
+the fields ask a map to move its points.
+
+The unseen fields come from the *report stream* of :mod:`rfmap.training.validation`: random fields of the training
+families drawn from a seed of their own, kept for reporting results and never drawn in training or used to choose a
+model.
 """
 from __future__ import annotations
 
@@ -25,7 +29,7 @@ def generalization_table(sur, count: int = 50, n: int | None = None, refine: boo
                          classical: bool = True, low_frequency: bool = False,
                          symmetrize: bool | str = False, inputs: bool = False) -> Table:
     """Surrogate against the classical solver on ``count`` seeded random fields that training never drew (the
-    ``report`` stream of :mod:`rfmap.training.validation`, used for nothing else), on the same ``N``-grid.
+    report stream, see the module's description), on the same ``N``-grid.
 
     Density models: Std(ρ̃_map) of the raw network map, of the map with weight refinement (and what
     ``Surrogate.map`` does by default about folds: coarser working grids in 3D, then the repair), and of the
@@ -154,9 +158,9 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
     For each model and each kind of field (and ``all``): the mean, median and worst Std(ρ̃_map), the mean over fields
     of the mean :math:`|\mu|` over triangles, the largest :math:`|\mu|`, the smallest Jacobian and the flipped
     triangles; the last column is each field's mean :math:`|\mu|` divided by that of the first model on the same
-    field, averaged over the fields.  A DEQ loss (density + :math:`\lambda\int|\mu|^2`, paper Eq.
-    (3)) should lower the mean :math:`|\mu|` against a pure DEM loss at about the same
-    Std(ρ̃_map).
+    field, averaged over the fields.  A DEQ loss (the density loss plus :math:`\lambda` times the Beltrami energy
+    :math:`\int|\mu|^2`, paper Eq. (3)) should lower the mean :math:`|\mu|` against a pure DEM loss at about the
+    same Std(ρ̃_map).
 
     Parameters
     ----------

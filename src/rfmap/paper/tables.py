@@ -1,6 +1,6 @@
 """The book's tables: the :class:`Table` of rows ``(case, method, {column: value})`` with Markdown and CSV output,
-the formatter of its cells, the paper's published tables (``data/paper_tables.json``) and the glue of numbers into
-the book's text.
+the formatter of its cells, the paper's published tables (``data/paper_tables.json``) and the helpers that write
+numbers into the book's text (each number a chapter's text quotes is computed when the chapter runs).
 """
 from __future__ import annotations
 
@@ -332,7 +332,8 @@ def _power_text(text):
 
 
 def glue_all(values: dict, prefix: str) -> None:
-    """Glue every entry of ``values`` for the book's text as ``{prefix}_{key}`` (``myst_nb.glue``, not displayed)."""
+    """Store every entry of ``values`` under the name ``{prefix}_{key}``, for the chapter's text to quote
+    (``myst_nb.glue``, not displayed)."""
     from myst_nb import glue
 
     for key, value in values.items():

@@ -137,13 +137,16 @@ def nc_clause(nc_worse: list[bool]) -> str:
     >>> nc_clause([False])
     'the n/c case is not worse by Std ratio'
     >>> nc_clause([True, False])
-    '1 of the 2 n/c cases are worse by Std ratio'
+    '1 of the 2 n/c cases is worse by Std ratio'
+    >>> nc_clause([True, True, False])
+    '2 of the 3 n/c cases are worse by Std ratio'
     """
     if not nc_worse:
         return ""
     if len(nc_worse) == 1:
         return f"the n/c case is {'worse' if nc_worse[0] else 'not worse'} by Std ratio"
-    return f"{sum(nc_worse)} of the {len(nc_worse)} n/c cases are worse by Std ratio"
+    k = sum(nc_worse)
+    return f"{k} of the {len(nc_worse)} n/c cases {'is' if k == 1 else 'are'} worse by Std ratio"
 
 
 def ratio_text(r: float | None) -> str:
