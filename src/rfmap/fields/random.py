@@ -110,9 +110,10 @@ class RandomDensity:
     steps and Gaussian-windowed high-frequency patches; the scale :math:`s` sets a random peak-to-peak contrast.
     Call it on points of shape (P, d) to get raw values (P,); :func:`preprocess_density` does shift and mass.
 
-    Differs from the paper: its training densities are the sum of sine modes alone; the contrast scale :math:`s`
-    (peak-to-peak range log-uniform in ``RandomDensityConfig.contrast``), the steps, patches and vertex noise, and
-    the optional peaks, ramps and hard fields are this package's additions.
+    Differs from the paper: its Sec. 4.1 allows additive noise, step regions and high-frequency patches, which this
+    class draws, while its experiments (Sec. 5.2) list sums of sine modes alone; the contrast scale :math:`s`
+    (peak-to-peak range log-uniform in ``RandomDensityConfig.contrast``) and the optional peaks, ramps and hard
+    fields are this package's additions.
     """
 
     def __init__(self, rng: np.random.Generator, cfg: RandomDensityConfig = RandomDensityConfig()):
