@@ -22,6 +22,7 @@ from ..fields import sample_density
 from ..fields.paper import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
 from ..solvers import solve_dem
+from ..training.validation import has_folds
 from .generalization import generalization_table
 from .comparison import format_time
 from .tables import Table, format_sig
@@ -137,7 +138,7 @@ def learning_summary(meta: dict, last: int = 3) -> dict:
     """
     hist = validated_states(meta)
     means = np.array([float(v["std_rho_map"]) for v in hist])
-    folds = [(v.get("folded_fields", v.get("n_flipped")) or 0) > 0 for v in hist]
+    folds = [has_folds(v) for v in hist]
     i = int(np.argmin(means))
     tail, head = means[-last:], means[:-last]
     earlier = float(head.min()) if len(head) else float("inf")
@@ -178,7 +179,7 @@ def kept_state(meta: dict) -> dict:
         if "@" in key and (m.get("n_flipped") or 0) > 0:
             field, n = key.rsplit("@", 1)
             folds.append((field, int(n), int(m["n_flipped"])))
-    free = [v for v in validated_states(meta) if not (v.get("folded_fields", v.get("n_flipped")) or 0)]
+    free = [v for v in validated_states(meta) if not has_folds(v)]
     best = min(free, key=lambda v: float(v["std_rho_map"])) if free else None
     return {"step": meta.get("selected_step"),
             "rule": "checkpoint score" if "family_score" in mean else "fold-free mean",
