@@ -494,7 +494,7 @@ def world_countries() -> dict:
     scale.
 
     Natural Earth's 1:110m Admin 0 countries (public domain, https://www.naturalearthdata.com), from the
-    ``naturalearth_lowres`` data set that geopandas 0.14.4 shipped; ``scripts/make_world_geojson.py`` converted it to
+    ``naturalearth_lowres`` data set that geopandas 0.14.4 shipped, converted (by a script of the source repository) to
     the package's ``data/naturalearth_lowres.geojson`` (coordinates rounded to 4 decimals).  Longitude/latitude on
     WGS84; the countries that cross the antimeridian (Russia, Fiji) are split there.
     """

@@ -1,8 +1,9 @@
 r"""Training records: the budget behind a shipped model, and studies of runs of one configuration that differ in one
 option, trained side by side for the same wall time, and their validation curves.
 
-``benchmarks/train_study.py`` starts the runs at once (one thread each, so that they share the machine alike),
-and writes their validation histories (:func:`collect`) to ``src/rfmap/data/studies/NAME.json``; the book reads
+A study's runs start at once (one thread each, so that they share the machine alike; the source repository's
+``benchmarks/train_study.py``), and their validation histories (:func:`collect`) ship in the package's
+``data/studies/NAME.json``; the book reads
 them with :func:`load_study` and draws them with :func:`plot_study`.  The score is the validation stream's
 (:func:`rfmap.training.validation.score`: per field family, :math:`\mathrm{Std}(\tilde\rho_{\text{map}})`
 relative to :math:`\mathrm{Std}(\tilde\rho_{\text{orig}})`, averaged over the families), never the paper's test
