@@ -81,9 +81,10 @@ def check_n(n: int, minimum: int = 3) -> int:
     return int(n)
 
 
-#: Peak memory per grid vertex of the heaviest single-map pipelines (peak resident size above that of the imported
-#: package), with a margin over the measured peak (the book's page :doc:`Design decisions </book/design>` gives the
-#: margin per pipeline).
+#: Bytes of memory per grid vertex that a map needs, by dimension: 4096 bytes in both 2D and 3D (kept per dimension
+#: so that the two can differ).  It is the peak memory of the heaviest single-map pipelines (peak resident size above
+#: that of the imported package), with a margin over the measured peak (the book's page
+#: :doc:`Design decisions </book/design>` gives the margin per pipeline).
 BYTES_PER_VERTEX = {2: 4096, 3: 4096}
 
 
@@ -338,8 +339,8 @@ def multilinear(planes: np.ndarray, u: np.ndarray) -> np.ndarray:
     .. math:: \sum_{b \in \{0, 1\}^d} p_c[i + b] \prod_{j=1}^d \bigl(b_j f_j + (1 - b_j)(1 - f_j)\bigr),
 
     the corners summed in C order (last axis fastest).  Coordinates are clamped to the grid; a point on the upper
-    wall of an axis is interpolated in the last cell.  The classical solvers' interpolation of their tables (the
-    diffusion's heat field, :class:`rfmap.solvers.heatfield.HeatField`, and the cartogram flow,
+    wall of an axis is interpolated in the last cell.  It is the interpolation that the classical solvers use for
+    their tables (the diffusion's heat field, :class:`rfmap.solvers.heatfield.HeatField`, and the cartogram flow,
     :func:`rfmap.solvers.cartoflow.bilinear`); :func:`interpolate` is its torch form for batches of fields.
 
     Parameters

@@ -1,8 +1,12 @@
-"""The input fields of :mod:`rfmap`: one concept per module, the public names importable from the package.
+"""The input fields of :mod:`rfmap` in one namespace: every name below can be imported from ``rfmap.fields``, and
+each is documented with the module that defines it.
 
 * :mod:`rfmap.fields.paper` -- the paper's test densities and Beltrami test maps (``DENSITIES``, ``BELTRAMI_MAPS``,
-  ``TEST_FIELDS``, ``PAPER_N``, ``sample_density``, ``sample_mu``, ...);
-* :mod:`rfmap.fields.random` -- random training fields (``RandomDensity``, ``RandomBeltrami``, ``RandomMap``, ...);
+  ``TEST_FIELDS``, ``PAPER_N``, ``RECT_PEAK_BOX``, ``DensityField``, ``BeltramiMap``, ``field_names``,
+  ``get_field``, ``sample_density``, ``sample_mu``);
+* :mod:`rfmap.fields.random` -- random training fields (``RandomDensity``, ``RandomDensityConfig``,
+  ``random_density``, ``RandomMap``, ``random_boundary_map``, ``RandomBeltrami``, ``RandomBeltramiConfig``,
+  ``random_beltrami``);
 * :mod:`rfmap.fields.hard` -- hard fields that make a network's raw map fold (sharp peaks, near-zero regions,
   steep ramps; each task draws its own, ``Task.hard_field``);
 * :mod:`rfmap.core.inputs` -- checking and normalising input fields (``check_density``, ``check_mu``, ``unit_mass``,

@@ -108,7 +108,8 @@ class RandomDensity:
     The smooth part is :math:`\sum_k A_k \sin(2\pi f_{k,1}x_1+\varphi_{k,1})\cos(2\pi f_{k,2}x_2+\varphi_{k,2})
     [\sin(2\pi f_{k,3} x_3 + \varphi_{k,3})]` with :math:`A_k \in [-1,1]`; the non-smooth part holds optional box
     steps and Gaussian-windowed high-frequency patches; the scale :math:`s` sets a random peak-to-peak contrast.
-    Call it on points of shape (P, d) to get raw values (P,); :func:`preprocess_density` does shift and mass.
+    Call it on points of shape (P, d) to get raw values (P,); :func:`~rfmap.core.inputs.preprocess_density` does
+    shift and mass.
 
     Differs from the paper: its Sec. 4.1 allows additive noise, step regions and high-frequency patches, which this
     class draws, while its experiments (Sec. 5.2) list sums of sine modes alone; the contrast scale :math:`s`
@@ -252,10 +253,10 @@ class RandomBeltramiConfig:
         Range of the drawn sup-norm level (uniform), capped by ``k``.
     low : float
         Share of low-frequency fields, whose number of modes and frequencies are drawn from ``low_modes`` and
-        ``low_freq`` instead (0 draws no extra random number, so the streams of older configurations are kept).
-        At equal :math:`\\|\\mu\\|_\\infty` a map with a few slow modes moves the mesh much further than one with
-        many fast modes, and a model trained on the default ranges reconstructs such maps with about three times
-        the vertex error (measured on held-out random maps).
+        ``low_freq`` instead.  At equal :math:`\\|\\mu\\|_\\infty` a map with a few slow modes (like the test
+        maps T1–T4) moves the mesh much further than one with many fast modes, so a model trained on the default
+        ranges alone reconstructs such maps less well.  Appendix C of the book compares a model's vertex error on
+        the two families (:func:`rfmap.paper.generalization.generalization_table` with ``low_frequency=True``).
     low_modes : (int, int)
         Number of modes of a low-frequency field, uniform.
     low_freq : (float, float)
@@ -276,6 +277,7 @@ class RandomBeltramiConfig:
 
     def draw_ranges(self, rng: np.random.Generator) -> tuple[tuple[int, int], tuple[float, float]]:
         """The mode-count and frequency ranges of one field: the low-frequency ones with probability ``low``."""
+        # low = 0 draws no extra random number, so configurations without the share keep their random streams
         if self.low > 0 and rng.random() < self.low:
             return self.low_modes, self.low_freq
         return self.modes, self.freq

@@ -12,8 +12,8 @@ The set mixes kinds, sharp ones included, so that folds show up during training:
   ``ramp`` (a steep tanh ramp of height 1–4 across a random direction); after the density preprocessing (minimum
   shifted to 0.1, an inference from the paper's Std(ρ̃_orig), see :mod:`rfmap.core.inputs`) their
   largest-to-smallest density ratios lie within those of the training fields (up to ~80);
-* Beltrami tasks: random boundary-fixing maps (:class:`rfmap.fields.RandomMap`) with their exact image, at sup-norm
-  levels of :math:`|\mu|` spread over [0.1, 0.85]; the metric is the mean vertex distance to the exact map.  A
+* Beltrami tasks: random boundary-fixing maps (:class:`rfmap.fields.random.RandomMap`) with their exact image, at
+  sup-norm levels of :math:`|\mu|` spread over [0.1, 0.85]; the metric is the mean vertex distance to the exact map.  A
   second set of low-frequency maps (1-4 slow modes) serves reports only.
 
 The score of a density model is the mean over field families of each family's mean Std(ρ̃_map) relative to
