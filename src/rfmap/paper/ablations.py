@@ -37,7 +37,9 @@ def refinement_study(sur, fields, n: int, title: str = "") -> Table:
     Returns
     -------
     Table
-        Rows ``(field, "α = 1")`` and ``(field, "refined")`` with columns ``metric``, ``objective`` and ``alpha``.
+        Rows ``(field, "α = 1")`` and ``(field, "refined")`` with columns ``metric``, ``objective`` and ``alpha``;
+        a column of which some cell prints as a power of ten prints every cell so (``9.931 × 10⁻⁴`` beside
+        ``1.946 × 10⁻³``, not ``0.001946``).
     """
     task = sur.spec.task
     metric = task.score_metric
@@ -51,6 +53,9 @@ def refinement_study(sur, fields, n: int, title: str = "") -> Table:
             objective = ref.info["refine_objective_start" if label == "α = 1" else "refine_objective"]
             t.add(f, label, {"metric": values[metric], "objective": float(objective),
                              "alpha": list(res.info["alpha"])})
+    for col in ("metric", "objective"):  # one notation a column: all powers of ten where any cell is one
+        if any("×" in t.cell(v[col], col) for _, _, v in t.rows):
+            t.formats[col] = lambda v: power_of_ten(float(v), DIGITS)
     return t
 
 

@@ -19,7 +19,7 @@ from ..core.result import MapResult
 from ..fields.paper import BELTRAMI_MAPS, DENSITIES, PAPER_N, TEST_FIELDS, sample_mu
 from ..finish import quiet_quality
 from ..surrogate import Surrogate, models
-from .tables import COLUMN_TITLES, Headline, Table, format_sig, format_value, headline, paper_table
+from .tables import COLUMN_TITLES, Headline, Table, format_sig, format_value, headline, one_notation, paper_table
 
 __all__ = ["beltrami_table", "beltrami_resolution_table", "population_table", "resolution_table", "reproduce",
            "exact_beltrami_result", "population_summary", "population_headline", "beltrami_headline",
@@ -381,16 +381,21 @@ def _cell(v, column: str) -> str:
 def cases_markdown(table: Table, case_title: str = "") -> str:
     """A whole :class:`~rfmap.paper.tables.Table` as Markdown narrow enough for the book's text column: one table
     per case, with a row per column of ``table`` and a column per method (short names of :data:`METHOD_TITLES`),
-    numbers to three significant digits (:func:`~rfmap.core.wording.format_sig`), times with their unit."""
+    numbers to three significant digits (:func:`~rfmap.core.wording.format_sig`), a method's column in one notation
+    (:func:`~rfmap.paper.tables.one_notation`), times with their unit."""
     parts = []
     for case in dict.fromkeys(c for c, _, _ in table.rows):
         rows = [(m, v) for c, m, v in table.rows if c == case]
         head = [f"{case_title} {case}".strip()] + [METHOD_TITLES.get(m, m) for m, _ in rows]
         lines = ["| " + " | ".join(h.replace("|", "\\|") for h in head) + " |", "|" + "---|" * len(head)]
-        for col in table.columns:
-            if all(v.get(col) is None for _, v in rows):
-                continue
-            cells = [COLUMN_TITLES.get(col, col).replace("|", "\\|")] + [_cell(v.get(col), col) for _, v in rows]
-            lines.append("| " + " | ".join(cells) + " |")
+        cols = [col for col in table.columns if any(v.get(col) is not None for _, v in rows)]
+        body = [[COLUMN_TITLES.get(col, col).replace("|", "\\|")] + [_cell(v.get(col), col) for _, v in rows]
+                for col in cols]
+        plain = [i for i, col in enumerate(cols) if col not in ("time", "speedup")]
+        for j in range(1, len(head)):  # a method's column in one notation (powers of ten where any cell is one)
+            column = one_notation({f"c_{i}": body[i][j] for i in plain}, ["c"])
+            for i in plain:
+                body[i][j] = column[f"c_{i}"]
+        lines += ["| " + " | ".join(cells) + " |" for cells in body]
         parts.append("\n".join(lines))
     return f"**{table.title}**\n\n" + "\n\n".join(parts)

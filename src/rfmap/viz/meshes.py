@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..core.wording import format_sig
+from ..core.wording import format_sig, power_of_ten
 from .figures import ColorScale, color_scale, frameless, save_figure, style
 from .figures import colorbar as add_colorbar
 
@@ -152,7 +152,7 @@ def plot_beltrami_row(axes, exact, lbs, ours, *, n: int, label: str = "", bins: 
 def vertex_error_panels(results: dict, exact, *, n: int, title: str = ""):
     r"""One panel per 2D map of ``results`` (``{name: MapResult}`` on the ``n``-grid): the vertex error
     :math:`|u(x) - u_{\text{exact}}(x)|` as an image over the unit square, on a shared colour scale, with its mean
-    in the panel title.
+    in the panel title (all titles in one notation).
 
     Parameters
     ----------
@@ -173,10 +173,13 @@ def vertex_error_panels(results: dict, exact, *, n: int, title: str = ""):
             raise ValueError(f"vertex_error_panels needs 2D maps of the {n}-grid, got {r.ref_points.shape}")
         errs[name] = np.linalg.norm(r.mapped_points - exact.mapped_points, axis=1).reshape(n, n)
     hi = max(float(e.max()) for e in errs.values()) or 1.0
+    means = {name: format_sig(float(e.mean()), 3) for name, e in errs.items()}
+    if any("×" in t for t in means.values()):  # the titles in one notation
+        means = {name: power_of_ten(float(e.mean()), 3) for name, e in errs.items()}
     fig, axes = plt.subplots(1, len(errs), figsize=(3.3 * len(errs), 3.0), squeeze=False)
     for ax, (name, e) in zip(axes[0], errs.items()):
         im = ax.imshow(e.T, origin="lower", extent=(0, 1, 0, 1), vmin=0, vmax=hi, cmap="magma")
-        ax.set_title(f"{title} {name}: mean {format_sig(float(e.mean()), 3)}".strip())
+        ax.set_title(f"{title} {name}: mean {means[name]}".strip())
         ax.set_aspect("equal")
         ax.set_xticks([0, 0.5, 1], labels=["0", "0.5", "1"])
         ax.set_yticks([0, 0.5, 1], labels=["0", "0.5", "1"])

@@ -39,13 +39,18 @@ def _plain(v: float, _pos=None) -> str:
 
 def _round_log_values(lo: float, hi: float) -> list[float]:
     """Up to three round values (1, 1.5, 2, 3, 4, 5, 6 or 8 times a power of ten) inside ``[lo, hi]``, each the
-    one nearest on the log scale to a quarter, half and three quarters of the interval; the values rounded to two
-    digits where fewer than two round ones fall inside."""
+    one nearest on the log scale to a quarter, half and three quarters of the interval; where fewer than two such
+    values fall inside, evenly spaced round steps (``0.08, 0.09``; ``0.2, 0.22, 0.24``) as a linear axis has them."""
     e0, e1 = int(np.floor(np.log10(lo))), int(np.ceil(np.log10(hi)))
     nice = np.array(sorted(m * 10.0**e for e in range(e0, e1 + 1) for m in (1, 1.5, 2, 3, 4, 5, 6, 8)))
     nice = nice[(nice >= lo) & (nice <= hi)]
     targets = np.geomspace(lo, hi, 5)[1:-1]
-    if len(nice) < 2:
+    if len(nice) < 2:  # a narrow range: evenly spaced round steps (0.08, 0.09), as a linear axis labels them
+        from matplotlib.ticker import MaxNLocator
+
+        inside = [v for v in MaxNLocator(nbins=3, steps=[1, 2, 2.5, 5, 10]).tick_values(lo, hi) if lo <= v <= hi]
+        if len(inside) >= 2:
+            return [float(f"{v:.3g}") for v in (inside[::2] if len(inside) > 3 else inside)]
         return sorted({float(f"{t:.2g}") for t in targets})
     picked = {float(nice[np.argmin(abs(np.log(nice) - np.log(t)))]) for t in targets}
     return sorted(float(f"{v:.3g}") for v in picked)
@@ -105,8 +110,10 @@ def displacement_demand_figure(records: list[dict], *, title: str | None = None)
     """Left: the network map's largest displacement (reach) against the classical map's (demand), one marker per
     field, with the line reach = demand; right: the fraction of the non-uniformity each map leaves,
     Std(rho~_map) / Std(rho~_orig), against the demand.  The band marks the demand of 90 % of the training draws
-    (records of :func:`rfmap.paper.generalization.displacement_demand`); the legend is below the panels."""
+    (records of :func:`rfmap.paper.generalization.displacement_demand`); the legend is below the panels and names
+    the right panel's markers: o for the network map, x for the classical map."""
     import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
 
     groups = list(dict.fromkeys(r["group"] for r in records))
     fig, (a, b) = plt.subplots(1, 2, figsize=(7.2, 3.8), layout="constrained")
@@ -129,14 +136,16 @@ def displacement_demand_figure(records: list[dict], *, title: str | None = None)
     a.set_ylim(0, top)
     a.set_xlabel("demand: classical map's\nlargest displacement")
     a.set_ylabel("reach: network map's\nlargest displacement")
-    # below the panels, where it covers no marker
+    # below the panels, where it covers no marker; the two marker shapes of the right panel named too
     handles, labels = a.get_legend_handles_labels()
+    handles += [Line2D([], [], ls="none", marker=m, color="0.3", ms=6) for m in "ox"]
+    labels += ["o: network map (ours)", "x: classical map"]
     fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), frameon=False)
     b.set_xlim(0, top)
     b.set_yscale("log")
     plain_log_ticks(b.yaxis)
     b.set_xlabel("demand: classical map's\nlargest displacement")
-    b.set_ylabel(r"Std($\tilde\rho_{map}$) / Std($\tilde\rho_{orig}$)" + "\n(o: ours, x: classical)")
+    b.set_ylabel(r"Std($\tilde\rho_{map}$) / Std($\tilde\rho_{orig}$)" + "\n(fraction left)")
     if title:
         fig.suptitle(title)
     return fig
