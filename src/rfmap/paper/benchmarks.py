@@ -1,5 +1,5 @@
-r"""Classical, neural and hybrid maps side by side: the benchmark fields, time to accuracy and its summary (shared by
-``benchmarks/hybrid.py`` and the book's chapters).
+r"""Classical, neural and hybrid maps side by side: the benchmark fields, time to accuracy and its summary, as
+chapter 11 of the book runs them (the source repository's script ``benchmarks/hybrid.py`` runs the same functions).
 """
 from __future__ import annotations
 

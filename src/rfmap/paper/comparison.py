@@ -4,7 +4,7 @@ Every row of a paper table is a *case* (a test field, or a grid side) and every 
 lower is better.  For each case this module puts four values side by side:
 
 ``paper``
-    the published value (``data/paper_tables.json``);
+    the published value, from the paper's tables shipped inside the package (:func:`rfmap.paper.tables.paper_table`);
 ``native`` (the paper's method)
     the network run on the requested grid itself, then the paper's weight refinement (Sec. 4.3), nothing else:
     ``Surrogate.map(field, n, native=True, refine=True, repair=False)``;
@@ -53,7 +53,9 @@ PAPER_METHOD = {"native": True, "refine": True, "repair": False}
 #: Keywords of :meth:`rfmap.Surrogate.map` for the delivered map.
 DELIVERED = {"refine": True, "symmetrize": True}
 
-#: How a metric or a quantity of the tables is named in the book.
+#: How a metric or a quantity of the tables is named in the book.  ``mean |Δμ| vs PL`` is the mean |Δμ| measured
+#: against the Beltrami coefficient of the exact map's piecewise-linear interpolant on the same mesh, rather than
+#: against the exact map's own coefficient (the book's glossary has both).
 METRIC_TITLES = {"std_rho_map": "Std(ρ̃_map)", "std_rho_orig": "Std(ρ̃_orig)", "mean_mu": "mean |μ|",
                  "max_mu": "max |μ|", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
                  "mean_dmu_pl": "mean |Δμ| vs PL", "min_jacobian": "min det J", "n_flipped": "flips",
@@ -140,7 +142,8 @@ def timed(run: Callable[[], MapResult], warm: Callable[[], object] | None = None
 @dataclass(frozen=True)
 class Case:
     """One row of a paper table: ``name`` as the paper labels it (a field, or a grid side as text), the ``field`` to
-    map and the grid side ``n`` actually run (smaller than the paper's in the book's quick test runs)."""
+    map and the grid side ``n`` actually run, which can differ from the paper's (the book's fast build runs smaller
+    grids); :meth:`title` then says so."""
 
     name: str
     field: str

@@ -1,6 +1,7 @@
 """The book's tables: the :class:`Table` of rows ``(case, method, {column: value})`` with Markdown and CSV output,
-the formatter of its cells, the paper's published tables (``data/paper_tables.json``) and the helpers that write
-numbers into the book's text (each number a chapter's text quotes is computed when the chapter runs).
+the formatter of its cells, the paper's published tables (a data file shipped inside the package, read by
+:func:`paper_table`) and the helpers that write numbers into the book's text (each number a chapter's text quotes
+is computed when the chapter runs).
 """
 from __future__ import annotations
 
@@ -40,15 +41,16 @@ COLUMN_TITLES = {
 }
 
 
-#: significant digits of the numbers in a :class:`Table`'s Markdown and CSV (times: one fewer, with their unit),
-#: trailing zeros dropped (``0.13``); the comparison tables of :mod:`rfmap.paper.comparison` print as many digits
-#: with trailing zeros kept (``0.1300``), and the short summary tables of
+#: Significant digits of the numbers in a :class:`Table`'s Markdown and CSV (times: one fewer, with their unit),
+#: trailing zeros dropped (``0.13``).  The comparison tables of :mod:`rfmap.paper.comparison` print as many digits
+#: with trailing zeros kept (``0.1300``); the short summary tables of
 #: :func:`~rfmap.paper.generalization.pivot_markdown`, :func:`~rfmap.paper.generalization.columns_markdown` and
-#: :class:`Headline` print three (:func:`~rfmap.core.wording.format_sig`), trailing zeros dropped
+#: :class:`Headline` print three (:func:`~rfmap.core.wording.format_sig`), trailing zeros dropped.
 DIGITS = 4
 
 
-#: data columns per Markdown table; wider tables continue in a second table below, so they fit the page
+#: Data columns per Markdown table.  A wider table continues in a second table below it, so that each fits the
+#: page.
 MAX_COLUMNS = 6
 
 
@@ -100,8 +102,9 @@ class Table:
     title: str
     columns: list[str]
     rows: list[tuple[str, str, dict]] = field(default_factory=list)
-    #: Markdown cells of a column in one notation throughout, ``{column: function of the value}`` (a missing value
-    #: is an em dash); the other columns by :func:`format_value`, and the CSV always so
+    #: How the Markdown cells of a column are written, one notation throughout the column: ``{column: function of
+    #: the value}`` (a missing value is an em dash).  The other columns are written by :func:`format_value`, and so
+    #: is every column of the CSV.
     formats: dict = field(default_factory=dict)
     #: the Markdown heads of the ``case`` and ``method`` columns
     heads: tuple[str, str] = ("case", "method")
@@ -192,7 +195,9 @@ def decimal_text(v, digits: int = 3) -> str:
 class Headline:
     """One experiment at a glance: per case the delivered result, the paper's value, the classical solver's and
     whether the paper's value is met (``ours <= paper`` for a metric where lower is better).  ``paper_label``
-    names that column where the value to meet is a target rather than the paper's.
+    names that column where the value to meet is a target rather than the paper's; ``classical_label`` names the
+    classical solver of its column (the headlines of :mod:`rfmap.paper.reproduce` name the diffusion DEM or the
+    LBS).
 
     Build it with :func:`headline`; show it with ``display(Markdown(h.to_markdown()))`` or as the cell's value.
     """
