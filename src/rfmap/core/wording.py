@@ -134,8 +134,8 @@ _SUPERSCRIPT = str.maketrans("-0123456789", "⁻⁰¹²³⁴⁵⁶⁷⁸⁹")
 
 def power_of_ten(v: float, digits: int = 3) -> str:
     """``v`` to ``digits`` significant digits as a power of ten in Unicode (no e-notation, safe in HTML and
-    inside a sentence of the book): ``power_of_ten(2.5716e-05, 2)`` is ``"2.6 × 10⁻⁵"``, ``power_of_ten(6e-06, 1)``
-    ``"6 × 10⁻⁶"``."""
+    inside a sentence of the book): ``power_of_ten(2.5716e-05, 2)`` is ``"2.6 × 10⁻⁵"`` and ``power_of_ten(6e-06,
+    1)`` is ``"6 × 10⁻⁶"``."""
     mantissa, exponent = f"{float(v):.{max(digits, 1) - 1}e}".split("e")
     return f"{mantissa} × 10{str(int(exponent)).translate(_SUPERSCRIPT)}"
 

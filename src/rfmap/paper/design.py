@@ -1,30 +1,41 @@
 """Design decisions: the tuned constants of the package, with the measurements that chose them.
 
-The record is ``src/rfmap/data/design.json``: one entry per decision with the ``constant``, its ``module``, the
-chosen ``value`` (as ``repr`` prints it), where to read it (``attribute``: a dotted path in the module, a dict key
-as a path component, ``null`` for a choice that is not a constant), what it sets (``what``), the ``alternatives``
-tried, the ``criterion``, the ``data`` it was measured on, the ``results`` (rows ``case``, ``chosen``,
-``alternative``), ``notes`` and the ``benchmark`` that measures it.  Two keys are optional: ``value_keys`` names
-what the keys of a dict value (or the items of a tuple) are, ``"dimension"``, ``"boundary"`` or ``"option"``, so
-that the page can show the value readably (:func:`readable_value`); ``finding`` records where the numbers do not
-support the chosen value: its ``text``, the ``rows`` (by ``case``) that show it and, optionally, ``next``, what is to
-be done before the constant is changed; ``columns`` gives the heads of the decision's table (three, for the rows'
-``case``, ``chosen`` and ``alternative``) where the default heads do not fit its rows; ``alternatives_per_case``
-(true) says that not every alternative was tried in every case, so that the section points at its table instead of
-listing them; ``where`` names, in public terms (a training config key), where a constant named by its ``title`` is
-set.  The page shows a finding in the decision's section (:func:`finding`).  Every decision also
-says in plain words what it controls (``purpose``), what the measurement showed (``outcome``) and, unless it has a
-finding, why the value is kept (``kept``): the page's one table of decisions (:func:`kept_text`).
+The record is the file ``design.json`` in the package's data folder (:data:`DESIGN_PATH`): one entry per decision.
+Every entry has these keys:
 
-A decision is either *re-measurable* or a *historical record*.  A re-measurable one names its case of
-``benchmarks/design.py`` (``remeasure``); that script prints the table again and, with ``--record``, stores the rows
-with :func:`record`, together with ``measured`` (date, code version, machine, seconds).  A historical record keeps
-the numbers written down when the value was chosen, with ``recorded``: the commit that set the value
-(``value_set``, where it could be traced) and the commit that entered the numbers in this record (``entered``).
+* ``constant``, ``module`` and ``attribute``: the constant, its module and where to read it (a dotted path in the
+  module, a dict key as a path component; ``null`` or absent for a choice that is not a constant);
+* ``value``: the chosen value, as ``repr`` prints it; ``what``: what it sets;
+* ``alternatives``, ``criterion`` and ``data``: the values tried, the criterion, and the data they were measured on;
+* ``results``: the rows of the decision's table (``case``, ``chosen``, ``alternative``); ``notes``; ``benchmark``:
+  what measures it;
+* ``purpose``, ``outcome`` and ``kept``: in plain words, what it controls, what the measurement showed and, unless
+  the decision has a ``finding``, why the value is kept (the page's one table of decisions, :func:`kept_text`).
 
-The book's page *Design decisions* (``book/design.md``) is generated from the record by
-``scripts/make_design_md.py`` (:func:`to_markdown`).  :func:`stale_values` lists the entries whose value is no
-longer the one in the code.
+Some entries also have these:
+
+* ``value_keys``: what the keys of a dict value (or the items of a tuple) are, ``"dimension"``, ``"boundary"`` or
+  ``"option"``, so that the page can show the value readably (:func:`readable_value`);
+* ``finding``: where the numbers do not support the chosen value: its ``text``, the ``rows`` (by ``case``) that
+  show it and, optionally, ``next``, what is to be done before the constant is changed; the page shows it in the
+  decision's section (:func:`finding`);
+* ``columns``: the three heads of the decision's table, where the default heads do not fit its rows;
+* ``alternatives_per_case``: true where not every alternative was tried in every case, so that the section points
+  at its table instead of listing them;
+* ``title`` and ``where``: a name for a constant that has no public one, and where it is set in public terms (a
+  training config key, say);
+* ``remeasure`` and ``measured``, or ``recorded``: how the numbers can be obtained again (below).
+
+A decision is either *re-measurable* or a *historical record*.  A re-measurable one names in ``remeasure`` its case
+of the benchmark script ``benchmarks/design.py`` (in the source repository); that script prints the table again
+and, with ``--record``, stores the rows with :func:`record`, together with ``measured`` (date, code version,
+machine, seconds).  A historical record keeps the numbers written down when the value was chosen, with
+``recorded``: the commit that set the value (``value_set``, where it could be traced) and the commit that entered
+the numbers in this record (``entered``).
+
+The book's page *Design decisions* is the output of :func:`to_markdown` on the record (written to the page by the
+script ``scripts/make_design_md.py`` of the source repository).  :func:`stale_values` lists the entries whose value
+is no longer the one in the code.
 """
 from __future__ import annotations
 
@@ -79,7 +90,8 @@ def stale_values(decisions: list[dict[str, Any]] | None = None) -> list[tuple[st
 def record(constant: str, *, path: Path = DESIGN_PATH, **fields: Any) -> dict[str, Any]:
     """Store new measurements of one decision (named by its ``constant`` or its ``remeasure`` key; e.g.
     ``results=[...]``, ``data=...``, ``measured={...}``) in ``design.json``, for a benchmark that measures it again;
-    returns the updated entry.  Regenerate the page with ``python scripts/make_design_md.py`` afterwards."""
+    returns the updated entry.  The page is then written again from the record (the source repository's script
+    ``scripts/make_design_md.py`` does it)."""
     data = json.loads(Path(path).read_text(encoding="utf-8"))
     for d in data["decisions"]:
         if constant in (d["constant"], d.get("remeasure")):
@@ -89,7 +101,8 @@ def record(constant: str, *, path: Path = DESIGN_PATH, **fields: Any) -> dict[st
     raise KeyError(f"no decision {constant!r} in {path}")
 
 
-#: The page's groups: a module prefix and the heading of its decisions, in the page's order.
+#: The page's groups: a module prefix and the heading of its decisions, in the page's order.  ``rfmap.surrogate``
+#: and ``rfmap.nn`` share one group, *Network inference*.
 #:
 #: :meta hide-value:
 AREAS = (("rfmap.solvers", "Classical solvers"), ("rfmap.finish", "Finishing a network's map"),

@@ -174,16 +174,16 @@ def printed_digits(v: float) -> int:
 
 def rate_text(v) -> str:
     """A learning rate or a weight decay as papers print it, always as a power of ten with the digits it was given
-    with (:func:`printed_digits`): ``5e-4`` is ``"5 × 10⁻⁴"``, ``0.001`` ``"1 × 10⁻³"``, so that a column or a
-    sentence of rates never mixes ``0.0005`` with ``1e-05``; zero is ``"0"``."""
+    with (:func:`printed_digits`): ``5e-4`` → ``"5 × 10⁻⁴"``, ``0.001`` → ``"1 × 10⁻³"``, so that a column or a
+    sentence of rates never mixes ``0.0005`` with ``1e-05``; zero → ``"0"``."""
     v = float(v)
     return "0" if v == 0 else power_of_ten(v, printed_digits(v))
 
 
 def decimal_text(v, digits: int = 3) -> str:
     """A number with ``digits`` significant digits in positional notation, never in powers of ten
-    (``0.0006288`` is ``"0.000629"``, ``0.07308`` ``"0.0731"``, ``761.3`` ``"761"``): one notation for a column whose
-    values span several orders of magnitude below 1000."""
+    (``0.0006288`` → ``"0.000629"``, ``0.07308`` → ``"0.0731"``, ``761.3`` → ``"761"``): one notation for a column
+    whose values span several orders of magnitude below 1000."""
     v = float(v)
     if v == 0 or not np.isfinite(v):
         return format_sig(v, digits)
