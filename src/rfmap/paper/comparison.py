@@ -53,9 +53,9 @@ PAPER_METHOD = {"native": True, "refine": True, "repair": False}
 #: Keywords of :meth:`rfmap.Surrogate.map` for the delivered map.
 DELIVERED = {"refine": True, "symmetrize": True}
 
-#: How a metric or a quantity of the tables is named in the book.  ``mean |Δμ| vs PL`` is the mean |Δμ| measured
-#: against the Beltrami coefficient of the exact map's piecewise-linear interpolant on the same mesh, rather than
-#: against the exact map's own coefficient (the book's glossary has both).
+#: How a metric or a quantity of the tables is named in the book.  ``mean |Δμ| vs PL`` is the mean error in μ
+#: measured against the Beltrami coefficient of the exact map's piecewise-linear interpolant on the same mesh, rather
+#: than against the exact map's own coefficient (the book's glossary has both).
 METRIC_TITLES = {"std_rho_map": "Std(ρ̃_map)", "std_rho_orig": "Std(ρ̃_orig)", "mean_mu": "mean |μ|",
                  "max_mu": "max |μ|", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
                  "mean_dmu_pl": "mean |Δμ| vs PL", "min_jacobian": "min det J", "n_flipped": "flips",
