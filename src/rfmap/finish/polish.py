@@ -1,9 +1,9 @@
 r"""Neural warm starts: a surrogate's density-equalizing map finished by the flow-based solver.
 
 The network gives a map :math:`u_0` of the ``N``-grid in milliseconds, but leaves a residual density
-:math:`\tilde\rho_e = \text{population}_e / |u_0(e)|` whose variation (typically 0.05–0.25) is well above what the
-classical solvers reach.  :func:`polish_map` removes it with ``rfmap.solvers.flow.solve_flow`` started from
-:math:`u_0`:
+:math:`\tilde\rho_e = \text{population}_e / |u_0(e)|` whose variation is well above what the classical solvers
+reach (chapter 11 of the book, *Fast classical maps and neural warm starts*, measures both).  :func:`polish_map`
+removes it with :func:`rfmap.solvers.solve_flow` started from :math:`u_0`:
 
 1. The residual density is evaluated *exactly* on the flow's raster: it is turned into the P1 vertex field whose
    element means are :math:`\tilde\rho_e` (``rfmap.solvers.residual.vertex_residual``), and every raster node is
@@ -237,8 +237,8 @@ def polish_map(result, *, n: int, boundary: str, options: PolishOptions = Polish
         Seconds already spent computing :math:`u_0` (recorded in the report).
     start : ndarray, shape (N**d, d), optional
         The map the warm flow starts from instead of ``mapped`` when it is fold-free and stays in the box (a
-        smoothed :math:`u_0`, see the module docstring); whether and why ``mapped`` is good enough to start warm is
-        still judged on ``mapped``.
+        smoothed :math:`u_0`, see :mod:`rfmap.finish.polish`); whether and why ``mapped`` is good enough to start
+        warm is still judged on ``mapped``.
 
     Returns
     -------

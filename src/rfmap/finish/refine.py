@@ -1,7 +1,10 @@
 r"""Weight refinement (paper Sec. 4.3): a stretching vector :math:`\alpha \in \mathbb{R}^d` applied to the output.
 
 The refined map is :math:`u_\alpha = x + \mathcal{B}(x) \odot (\alpha \odot \psi(x))`, which keeps the boundary
-condition for every :math:`\alpha`.  :math:`\alpha^* = \arg\min_\alpha \mathcal{J}(u_\alpha)` with
+condition for every :math:`\alpha`.  Here :math:`\psi` is the network's displacement (the paper's :math:`\psi` of
+Sec. 4.2, which its Sec. 4.3 writes :math:`\phi`; this book keeps :math:`\phi` for the potential of the flow-based
+solver), :math:`\mathcal{B}` the boundary mask and :math:`\odot` the product component by component.
+:math:`\alpha^* = \arg\min_\alpha \mathcal{J}(u_\alpha)` with
 :math:`\mathcal{J} = \mathcal{L}_{\text{geom}} + \lambda \mathcal{P}` is found by derivative-free alternating
 golden-section searches, first of a common (isotropic) stretch, then over the components; the result never has a
 larger :math:`\mathcal{J}` than :math:`\alpha = (1, \dots, 1)`.  Folded maps can make :math:`\mathcal{J}` jagged, so

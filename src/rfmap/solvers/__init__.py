@@ -13,8 +13,8 @@ is not confused with :func:`solve_dem` above, which chooses between the methods)
 All return a :class:`rfmap.core.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name: ``"lbs"``,
 ``"diffusion"`` and ``"flow"`` (``"dem"`` is accepted as another name of ``"diffusion"``, :data:`ALIASES`).
 
-The solvers (which run on torch) are imported on first use (PEP 562), so that importing this package, e.g. for
-:data:`ALIASES` or the torch-free cartogram flow (:mod:`rfmap.solvers.cartoflow`), does not load PyTorch.
+The solvers (which run on torch) are imported the first time they are used, so that importing this package, e.g.
+for :data:`ALIASES` or the torch-free cartogram flow (:mod:`rfmap.solvers.cartoflow`), does not load PyTorch.
 """
 from __future__ import annotations
 
@@ -40,7 +40,8 @@ def solve_dem(density, *, method: str = "diffusion", **kwargs) -> MapResult:
     density : ndarray, shape (N, N) or (N, N, N)
     method : {"diffusion", "flow"}
         ``"diffusion"`` (also ``"dem"``): :func:`solve_diffusion` (Gastner & Newman 2004); ``"flow"``:
-        :func:`solve_flow` (Gastner, Seguy & More 2018), usually several times faster.
+        :func:`solve_flow` (Gastner, Seguy & More 2018), the faster of the two (chapter 11 of the book, *Fast
+        classical maps and neural warm starts*, times both).
     **kwargs
         Options of the chosen solver (``boundary``, ``progress``, ...).
 

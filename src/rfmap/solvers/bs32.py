@@ -1,7 +1,7 @@
 r"""The embedded Bogacki--Shampine 3(2) time integration of the diffusion map solver.
 
-:func:`bs32_flow` carries points by :math:`\dot y = v(t, y)` with the Bogacki--Shampine pair (FSAL: the last stage
-of a step is the first of the next, three velocity evaluations per step), the local error of a step estimated by
+:func:`bs32_flow` carries points by :math:`\dot y = v(t, y)` with the Bogacki--Shampine pair (the last stage
+of a step is the first of the next, so a step takes three velocity evaluations), the local error of a step estimated by
 the difference of its third- and second-order solutions.  It has the signature of
 :func:`rfmap.solvers.heun.heun_flow`, so that the diffusion flow (:func:`rfmap.solvers.heatflow.diffuse`) takes
 either as its integrator: this one for the maps of :mod:`rfmap.solvers.diffusion`, the Heun pairs for the

@@ -70,8 +70,9 @@ class CartoFlowOptions:
 
 @dataclass
 class GridFlow:
-    """The map of the ``N``-grid's vertices by one flow (duck-types the parts of :class:`rfmap.core.result.MapResult`
-    that a cartogram reads).
+    """The map of the ``N``-grid's vertices by one flow.  It has the attributes of a
+    :class:`rfmap.core.result.MapResult` that a cartogram reads, under the same names, and can stand in for one
+    there.
 
     Attributes
     ----------

@@ -14,9 +14,8 @@ Numerical method:
 1. **Initial density.**  The piecewise-linear (P1) interpolant of the vertex values on the simplicial mesh of
    :func:`rfmap.core.mesh.grid_mesh` -- the density whose element integrals :mod:`rfmap.core.metrics` uses -- is sampled on a
    grid ``refine`` times finer, with :math:`M = \text{refine}\,(N-1) + 1` points per side (:func:`.p1_upsample`).
-   Starting from the P1 rather than the cosine interpolant of the vertex values avoids Gibbs ringing at steep
-   features and lowers the final :math:`\mathrm{Std}(\tilde\rho)` markedly (e.g. 0.041 → 0.026 on rect-peak at
-   ``N = 51``).
+   Starting from the P1 rather than the cosine interpolant of the vertex values avoids the oscillations that a sum
+   of cosines makes beside a steep feature (Gibbs ringing), which would be carried into the map.
 2. **Exact diffusion.**  The diffusion equation is solved exactly in the cosine basis of the box,
 
    .. math::
@@ -32,9 +31,10 @@ Numerical method:
    :class:`rfmap.solvers.heatfield.HeatField` (numpy), which the cartogram diffusion evaluates too, on its own
    raster and dividing at the points.
 4. **Time integration.**  :math:`\dot x = v(x, t)` is integrated with the embedded Bogacki–Shampine 3(2) pair
-   (:func:`rfmap.solvers.bs32.bs32_flow`: FSAL, 3 evaluations per step) with the local error per step bounded by
-   ``rtol`` times the grid spacing, until the remaining displacement, estimated as :math:`\max|v| / \lambda_1` with
-   :math:`\lambda_1 = \pi^2` the decay rate of the slowest mode, falls below ``tol_end`` times the grid spacing.
+   (:func:`rfmap.solvers.bs32.bs32_flow`: 3 velocity evaluations per step, since the last of a step is the first
+   of the next), with the local error per step bounded by ``rtol`` times the grid spacing, until the remaining
+   displacement, estimated as :math:`\max|v| / \lambda_1` with :math:`\lambda_1 = \pi^2` the decay rate of the
+   slowest mode, falls below ``tol_end`` times the grid spacing.
    The flow's driver, this stopping rule and the blurred starts below are the cartogram diffusion's too
    (:mod:`rfmap.solvers.heatflow`); its integrator is this solver's own (the cartogram passes take Heun steps).
 5. **Fold guard.**  A step after which an element of the mesh would be turned over is rejected and retried with half
@@ -53,8 +53,8 @@ Boundary conditions:
 * ``"free"``: the unit square sits in a larger box :math:`[-L, 1+L]^d` (same grid spacing, ``margin`` :math:`= L`)
   filled with a "sea" of (nearly) the mean density; all mesh vertices move and the boundary deforms.  The sea level
   is chosen so that the exact flow conserves the domain's area (see ``rfmap.solvers.raster.balanced_sea``); the
-  measured area of the mapped mesh is then 1 up to a discretisation error of order :math:`h` with a small constant
-  (about :math:`3\cdot 10^{-4}` for ring at ``N = 51``).
+  measured area of the mapped mesh is then 1 up to a discretisation error of order :math:`h` with a small
+  constant.
 
 References
 ----------
@@ -172,9 +172,10 @@ class DiffusionOptions:
         Keep the mesh fold-free (default): a time step that would turn an element over is rejected and retried
         shorter.  The exact flow never folds, but its piecewise-linear image on the mesh can, where the density
         changes faster than the mesh resolves (near-zero regions beside sharp peaks); if the flow keeps folding
-        (``FOLD_STOP`` rejections) it is redone from a blurred start (``FOLD_BLURS``, see the module docstring), and
-        if it still folds with the widest blur the integration stops at its last fold-free state
-        (``info["fold_stop"]`` gives that time).  ``False`` integrates the vertex trajectories regardless.
+        (``FOLD_STOP`` rejections) it is redone from a blurred start (``FOLD_BLURS``, see
+        :mod:`rfmap.solvers.diffusion`), and if it still folds with the widest blur the integration stops at its
+        last fold-free state (``info["fold_stop"]`` gives that time).  ``False`` integrates the vertex trajectories
+        regardless.
     """
 
     boundary: str = "square"
@@ -205,7 +206,7 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
 
     Every vertex :math:`x` of the ``N``-grid follows :math:`\dot x = -\nabla\rho(x,t)/\rho(x,t)` where
     :math:`\rho` solves :math:`\partial_t\rho = \Delta\rho` with no-flux walls, started from the
-    piecewise-linear interpolant of the vertex densities (see the module docstring for the numerical method).
+    piecewise-linear interpolant of the vertex densities (:mod:`rfmap.solvers.diffusion` gives the numerical method).
 
     Parameters
     ----------
@@ -220,6 +221,7 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
         Show a ``tqdm`` progress bar over simulated time.
     **kwargs
         Fields of :class:`.DiffusionOptions` that replace those of ``options`` (``solve_dem(d, boundary="free")``).
+
     Returns
     -------
     MapResult

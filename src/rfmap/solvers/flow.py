@@ -28,8 +28,8 @@ Numerical method:
    component vanishes exactly on the walls (no-flux).
 3. **Velocity at a point.**  The flux and :math:`\rho_0` are interpolated multilinearly at the vertex and
    :math:`v = -\nabla\phi / ((1-t)\rho_0 + t\bar\rho)` is formed there.  The Poisson solve and this table are
-   single precision (a relative error of about 1e-7, far below a step's tolerance, at half the transform time and
-   a tenth of the interpolation time of double precision); the vertex positions are integrated in double.
+   single precision, whose rounding error is far below a step's tolerance (:doc:`Design decisions </book/design>`
+   compares it with double precision); the vertex positions are integrated in double.
 4. **Time steps.**  Predictor–corrector (Heun) steps (``rfmap.solvers.heun.heun_flow``, the cartogram
    passes' integrator), :math:`x^* = x + \Delta t\, v(x, t)`,
    :math:`x' = x + \tfrac{\Delta t}{2}\,(v(x, t) + v(x^*, t + \Delta t))`.  A step is accepted when the
@@ -38,9 +38,10 @@ Numerical method:
    measure is too close to zero for it, ``F32_MARGIN``); otherwise it is retried with a smaller
    :math:`\Delta t`.  The step then grows or shrinks with the usual rule for an embedded first/second-order pair.
    A density jump sharper than the mesh can make the sampled velocity squeeze one element to zero measure in finite
-   time, so that no step, however short, is accepted; when the step falls below ``STALL_DT`` the pass is redone
-   with the density blurred over 1, 2, then 4 vertex spacings (``STALL_BLURS``; recorded in ``info["stall_blurs"]``)
-   and later passes correct the residual the blur leaves.
+   time, so that no step, however short, is accepted.  When the step falls below
+   :data:`rfmap.solvers.heun.STALL_DT` (the pass has stalled), the pass is redone with the density blurred over 1,
+   2, then 4 vertex spacings (``STALL_BLURS``; recorded in ``info["stall_blurs"]``) and later passes correct the
+   residual the blur leaves.
 5. **Passes.**  Interpolation and time-stepping leave a residual.  After a pass the density that remains on the
    mapped mesh, :math:`\tilde\rho_e = \text{population}_e / |T(e)|` (population of the element over its mapped
    measure), is turned into the P1 vertex field whose element means match it (:func:`.vertex_residual`) and
@@ -54,11 +55,12 @@ vertices slide, corners stay); ``"free"`` embeds the square in :math:`[-L, 1+L]^
 balanced so that the domain keeps its measure (``rfmap.solvers.raster.balanced_sea``), and later passes fill the
 sea with the domain's mean residual density.  The flow's velocity :math:`-\nabla\phi/\rho_t` carries the density's
 jumps into the map, and a steep jump from a dense coast to the sea can squeeze a coastal element to zero measure: on
-held-out fields with a steep ramp against the coast (``rfmap.training.validation``) the pass stalls, its blurred
-retries (below) leave much of the density unequalized, and the flow ends 9-24 times above the diffusion solver's
-Std(ρ̃_map) at 2D N = 256 and 4-5 times at 3D N = 48.  A stalled first pass of a free boundary is therefore first
+held-out fields with a steep ramp against the coast (``rfmap.training.validation``) the pass stalls, and its blurred
+retries leave much of the density unequalized, far above the diffusion solver's Std(ρ̃_map) (appendix B of the book,
+*The flow solver and the hybrid in detail*, measures it with
+:func:`rfmap.paper.flow_studies.sea_blend_study`).  A stalled first pass of a free boundary is therefore first
 redone with a sea that starts at the coast's own density and blends to its level (``stall_blend``); ``sea_blend``
-asks for that sea from the start (see ``solve_flow``).
+asks for that sea from the start (see :func:`rfmap.solvers.solve_flow`).
 
 The same passes finish any fold-free starting map (``start``): the first pass then flows the residual density of
 the starting map.  :mod:`rfmap.finish.polish` uses this to polish a neural surrogate's map.
@@ -230,7 +232,7 @@ class FlowOptions:
         Most (accepted + rejected) steps of one pass; ``RuntimeError`` if exceeded, or if a pass still stalls
         with the density blurred over the last of ``stall_blurs``.
     stall_blurs : tuple of float
-        Blur widths (vertex spacings) of the retries of a stalled pass (see the module docstring); ``()`` makes a
+        Blur widths (vertex spacings) of the retries of a stalled pass (see :mod:`rfmap.solvers.flow`); ``()`` makes a
         stall a ``RuntimeError`` at once (the hybrid then starts cold rather than blur a warm start).
     num_threads : int, optional
         Torch threads for the interpolation and the element measures (restored afterwards); as in
@@ -404,7 +406,7 @@ def solve_flow(density, options: FlowOptions | None = None, *, start=None, progr
 
     Every vertex follows :math:`\dot x = -\nabla\phi(x) / ((1-t)\rho_0(x) + t\bar\rho)` for :math:`0 \le t \le 1`,
     :math:`\Delta\phi = \bar\rho - \rho_0` with no-flux walls, in passes until the density left on the mapped mesh
-    is uniform to ``tol`` (see the module docstring for the numerical method).
+    is uniform to ``tol`` (:mod:`rfmap.solvers.flow` gives the numerical method).
 
     Parameters
     ----------

@@ -47,7 +47,7 @@ What the two solvers set differently:
 
 :func:`blas_threads` sets the threads of the products (the maps' ``num_threads``).
 
-numpy only.
+The module uses numpy only.
 
 References
 ----------

@@ -25,10 +25,10 @@ the flow has settled.  One implementation here and in :mod:`rfmap.solvers.heatfi
 What stays two is the integrator, chosen by the options a solver hands :func:`diffuse`: the maps take
 Bogacki--Shampine 3(2) steps (:func:`rfmap.solvers.bs32.bs32_flow`, error ``1e-2`` grid spacings, stopped after
 repeated folds), the cartogram passes Heun pairs (:func:`rfmap.solvers.heun.heun_flow`, ``0.2`` spacings, the
-cartogram flow's), with their own first steps; merging them would change results that are reproduced
-(``tests/test_reference_outputs.py`` and the numbers of the book).
+cartogram flow's), with their own first steps; merging them would change results that are reproduced (the
+reference outputs checked by the tests of the source repository, and the numbers of the book).
 
-numpy only.
+The module uses numpy only.
 """
 from __future__ import annotations
 

@@ -13,7 +13,7 @@ cartogram diffusion (:mod:`rfmap.solvers.cartodiffusion`, until its velocity has
 * A flow whose step falls below :data:`STALL_DT` has stalled (:class:`Stalled`: a collapsing element); the flow
   solvers then redo the pass with the density blurred over :data:`STALL_BLURS` vertex spacings.
 
-numpy only: the torch-free cartogram passes step with it.
+The module uses numpy only, so that the torch-free cartogram passes can step with it.
 """
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ from .spectral import contract, interval_weights
 __all__ = ["DEM_BOUNDARIES", "check_grid_density", "p1_upsample", "balanced_sea"]
 
 
-#: Boundary conditions understood by :func:`solve_dem`.
+#: Boundary conditions understood by the density solvers (:func:`rfmap.solvers.solve_dem`, either method).
 DEM_BOUNDARIES = ("square", "free")
 
 
