@@ -7,8 +7,8 @@
   Seguy & More 2018, :func:`solve_flow`).
 
 :func:`solve_diffusion` is the function :func:`rfmap.solvers.diffusion.solve_dem` under a name of its own (so that it
-is not confused with :func:`solve_dem` above, which chooses between the methods); it is documented once, in
-:mod:`rfmap.solvers.diffusion`.
+is not confused with :func:`solve_dem` above, which chooses between the methods); it is documented once, under
+that name.
 
 All return a :class:`rfmap.core.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name: ``"lbs"``,
 ``"diffusion"`` and ``"flow"`` (``"dem"`` is accepted as another name of ``"diffusion"``, :data:`ALIASES`).
