@@ -26,7 +26,8 @@ __all__ = ["METHODS", "ROWS", "WARM_MODELS", "STD_TOL", "FLOW_TIME", "HYBRID_TIM
 #: The methods compared by :func:`compare_methods`.
 METHODS = ("diffusion", "flow", "surrogate", "surrogate+refine", "hybrid")
 #: The rows of :func:`compare_methods`, in order: the hybrid's run also gives the row of its warm flow alone,
-#: without the guard (:data:`rfmap.finish.polish.UNGUARDED`, ``"hybrid (no guard)"``; where the flow started cold, the hybrid's own row).
+#: without the guard (:data:`rfmap.finish.polish.UNGUARDED`, ``"hybrid (no guard)"``; where the flow started cold,
+#: the hybrid's own row).
 ROWS = METHODS[:-1] + (UNGUARDED, "hybrid")
 
 #: "As accurate": a final Std(ρ̃_map) at most this factor above the reference solver's.

@@ -54,7 +54,7 @@ __all__ = ["DESIGN_PATH", "AREAS", "load_decisions", "current_value", "stale_val
            "load_range",
            "to_markdown"]
 
-#: the record of the design decisions
+#: The file of the record of the design decisions: ``design.json`` in the package's data folder.
 DESIGN_PATH = Path(__file__).resolve().parent.parent / "data" / "design.json"
 
 

@@ -58,8 +58,8 @@ def recipe_table(surs: dict) -> Table:
     return t
 
 
-#: the recipe table in three narrow parts (what a model learned from, how it was optimised, how it was validated):
-#: each part's columns with their headers
+#: The recipe table in three narrow parts (what a model learned from, how it was optimised, how it was validated):
+#: each part's columns with their headers.
 RECIPE_PARTS = {
     "Training fields and fold penalty": {"fields": "training fields", "fold": "fold penalty"},
     "Optimisation over the whole chain (learning rate and weight average of the last run)":
@@ -70,7 +70,7 @@ RECIPE_PARTS = {
 }
 
 
-#: what the columns of each part of :data:`RECIPE_PARTS` mean, printed under its table
+#: What the columns of each part of :data:`RECIPE_PARTS` mean, printed under its table.
 RECIPE_LEGENDS = {
     "Training fields and fold penalty":
         "*fold penalty*: its weight, then the det J below which it acts (1 from 0.02: weight 1 below det J = 0.02).",
@@ -117,9 +117,9 @@ def _selection(val: dict) -> tuple[float | None, str | None]:
                    "capped": f"mean {metric}, folds as no map", "mean": f"mean {metric}"}[what]
 
 
-#: settings of a stored training configuration that name or time a run rather than shape what it learns
+#: The settings of a stored training configuration that name or time a run rather than shape what it learns.
 RUN_SETTINGS = ("name", "description", "seed", "steps", "time_limit", "out", "init")
-#: how :func:`differences_text` names a setting
+#: How :func:`differences_text` names a setting.
 SETTING_NAMES = {"loss.beltrami": "Beltrami weight λ", "lr": "peak learning rate", "ema": "weight average decay",
                  "loss.fold": "fold penalty", "n_range": "training grid sides", "batch": "batch"}
 

@@ -68,7 +68,7 @@ def _lbs(name: str, n: int) -> MapResult:
     return min((solvers.solve_lbs(mu, n) for _ in range(3)), key=lambda r: r.time)
 
 
-#: row names of the symmetrized network (``symmetrize`` of the tables; :mod:`rfmap.nn.symmetry`)
+#: The row names of the symmetrized network (``symmetrize`` of the tables; :mod:`rfmap.nn.symmetry`).
 SYM, SYM_REF = "ours, symmetrized", "ours, symmetrized + refinement"
 #: the row of the paper's method: the network on the requested grid itself (native), refined, not repaired
 NATIVE_REF = "paper's method: native + refinement"

@@ -106,7 +106,7 @@ class Table:
     #: the value}`` (a missing value is an em dash).  The other columns are written by :func:`format_value`, and so
     #: is every column of the CSV.
     formats: dict = field(default_factory=dict)
-    #: the Markdown heads of the ``case`` and ``method`` columns
+    #: The Markdown heads of the ``case`` and ``method`` columns.
     heads: tuple[str, str] = ("case", "method")
 
     def cell(self, value, column: str) -> str:

@@ -33,12 +33,12 @@ __all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "inp
            "verdict", "qualified_verdict", "nc_clause", "ratio_text", "met_text", "median_ratio", "every_or_count",
            "classical_lead", "times_lower"]
 
-#: relative agreement of the input's Std(ρ̃_orig) with the paper's for a case to count as the paper's input (the
-#: paper prints six digits): the inputs rebuilt from formulas that the paper gives completely agree with its values
-#: to 3 × 10⁻⁴ or better; rect-peak and prism-peak-3d, which it describes too loosely to rebuild, miss them by 19 %
-#: and 7 % and are not comparable (:func:`is_comparable`)
+#: The relative agreement of the input's Std(ρ̃_orig) with the paper's for a case to count as the paper's input
+#: (the paper prints six digits).  The inputs rebuilt from formulas that the paper gives completely agree with its
+#: values to 3 × 10⁻⁴ or better; rect-peak and prism-peak-3d, which it describes too loosely to rebuild, miss them
+#: by 19 % and 7 % and are not comparable (:func:`is_comparable`).
 COMPARABLE_RTOL = 1e-3
-#: the verdict words, best first
+#: The verdict words, best first.
 VERDICTS = ("reproduced", "partly", "not reproduced", "not comparable")
 #: The rule of :func:`verdict`, as the scoreboards state it once.
 #:
