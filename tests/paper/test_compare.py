@@ -62,7 +62,29 @@ def test_learning_texts_name_steps_not_counts():
     learn = {"A": learning_summary(meta, last=3)}
     assert folded_states_text(learn) == "The A's maps folded on no held-out field only at steps 2 and 4."
     text = learning_verdict(learn, {"A": SimpleNamespace(meta={**meta, "steps": 4})})
-    assert "lowest plain mean is 0.300, at step 2" in text and "Neither curve" not in text
-    assert "was still improving" in text and "holds no validation" not in text
+    assert text == ("The A was still improving: its lowest plain mean, 0.300, came at step 2, among its last three"
+                    " validations.")
     text = learning_verdict(learn, {"A": SimpleNamespace(meta={**meta, "steps": 5})})
-    assert "The A's record holds no validation of its last step, 5" in text
+    assert text.endswith("The A's record holds no validation of its last step, 5, so its curve ends at step 4.")
+    flat = {**learn["A"], "improving": False}
+    surs = {k: SimpleNamespace(meta={**meta, "steps": 4}) for k in "AB"}
+    assert learning_verdict({"A": flat, "B": flat}, surs) == (
+        "Neither network was still improving when the budget ran out: the A's lowest plain mean, 0.300, came at step"
+        " 2 and the B's, 0.300, at step 2, each before its last three validations, which range from 0.300 to 0.500"
+        " and from 0.300 to 0.500.")
+
+
+def test_the_model_table_names_each_configuration_and_prints_as_the_prose():
+    from rfmap.nn import MultiResUNet
+    from rfmap.paper.compare import model_table
+    from rfmap.surrogate import Surrogate
+    from rfmap.tasks import TaskSpec
+
+    final = {"mean": {"std_rho_map": 0.2514, "penalized": 0.2201, "family_score": 0.3374}}
+    meta = {"name": "unet-x", "selected_step": 5000, "wall_time": 2687.0, "final_metrics": final}
+    sur = Surrogate(MultiResUNet(2, 1, 4, 2), TaskSpec("density", 2, "square"), meta)
+    md = model_table({"U-Net": sur, "long U-Net": sur}).to_markdown()
+    head, _, one, two = md.splitlines()
+    assert head.startswith("| model | configuration | parameters | kept step | training (min) | held-out mean |")
+    assert one.startswith("| U-Net | unet-x | ") and one.endswith("| 5,000 | 44.8 | 0.251 | 0.220 | 0.337 |")
+    assert two.startswith("| long U-Net | unet-x (U-Net) |")

@@ -31,3 +31,12 @@ def test_speed_table_gives_each_methods_time_with_its_unit():
     md = speed_table({"U-Net": {"time": 0.0123, "std_rho_map": 0.08},
                       "flow solver": {"time": 1.5, "std_rho_map": 0.01}})
     assert md.splitlines()[2:] == ["| U-Net | 12.3 ms | 0.08 |", "| flow solver | 1.50 s | 0.01 |"]
+
+
+def test_speed_table_gives_one_row_per_grid_side():
+    from rfmap.paper.compare import speed_table
+
+    one = {"U-Net": {"time": 0.0123, "std_rho_map": 0.08}, "flow solver": {"time": 1.5, "std_rho_map": 0.01}}
+    md = speed_table({51: one, 256: one})
+    assert md.splitlines()[0] == "| N | U-Net, time | U-Net, Std | flow solver, time | flow solver, Std |"
+    assert md.splitlines()[3] == "| 256 | 12.3 ms | 0.08 | 1.50 s | 0.01 |"

@@ -33,7 +33,8 @@ __all__ = ["NETWORK_NAMES", "parameter_count", "model_table", "validated_states"
            "folded_cell", "side_by_side", "MarkdownText"]
 
 
-#: The printed name of each network architecture (``arch`` of a model's settings) in :func:`model_table`.
+#: The printed name of each network architecture (``arch`` of a model's settings) in :func:`model_table`, where a
+#: model's own name does not already say it.
 NETWORK_NAMES = {"unet": "U-Net", "fno": "FNO"}
 
 
@@ -55,33 +56,41 @@ def _check(surs: dict) -> tuple:
 
 
 def model_table(surs: dict) -> Table:
-    """Architecture (:data:`NETWORK_NAMES`), parameters, training steps, the step whose weights were kept and wall
-    time (cumulative over ``--init`` chains), and two held-out validation numbers of each model's kept weights, from
+    """Each model's training configuration (its ``name``), parameters, the step whose weights were kept, wall time
+    in minutes (cumulative over ``--init`` chains), and three held-out validation numbers of its kept weights, from
     its metadata.
 
-    ``validation`` is the mean Std(ρ̃_map) over the held-out fields with a folded map counted as the identity (the
-    ``penalized`` entry where recorded, else the plain mean); ``checkpoint score`` is the score that chose the kept
-    weights (:func:`rfmap.training.validation.score`: the mean over field families of Std(ρ̃_map) / Std(ρ̃_orig)),
-    ``None`` where the record predates it and the weights were chosen by the held-out mean.
+    ``held-out mean`` is the plain mean Std(ρ̃_map) over the held-out fields (a folded map's own Std included);
+    ``held-out, folds as identity`` the same mean with a folded map counted as the identity (the ``penalized``
+    entry where recorded, else the plain mean); ``checkpoint score`` is the score that chose the kept weights
+    (:func:`rfmap.training.validation.score`: the mean over field families of Std(ρ̃_map) / Std(ρ̃_orig)), ``None``
+    where the record predates it and the weights were chosen by the held-out mean.  The Markdown prints parameters
+    and the kept step with thousands separators and the other numbers to three significant digits, as the chapter's
+    prose.  The configuration is followed by the network's name (:data:`NETWORK_NAMES`) where the model's own name
+    is not already that name.
     """
     _check(surs)
+    sig, whole = (lambda v: f"{v:#.3g}".rstrip(".")), (lambda v: f"{v:,}")  # 0.220 and 594, as the prose
+    plain, ident = "held-out mean", "held-out, folds as identity"
     t = Table("tab:models", "The models",
-              ["parameters", "steps", "kept step", "train_time", "validation", "checkpoint score"],
-              heads=("model", "network"))
+              ["parameters", "kept step", "training (min)", plain, ident, "checkpoint score"],
+              heads=("model", "configuration"),
+              formats={"parameters": whole, "kept step": whole, "training (min)": sig, plain: sig, ident: sig,
+                       "checkpoint score": sig})
     for name, s in surs.items():
         meta = s.meta
         mean = (meta.get("final_metrics") or {}).get("mean") or {}
-        # a folded map counted as the identity where recorded: a plain mean over fields with a folded map is
-        # meaningless
+        # a folded map counted as the identity where recorded, else the plain mean (then no held-out map folded)
         val = mean.get("penalized", mean.get("std_rho_map"))
         kept = meta.get("selected_step")
         arch = s.model.kwargs().get("arch", "unet")
-        t.add(name, NETWORK_NAMES.get(arch, arch),
+        net = NETWORK_NAMES.get(arch, arch)
+        t.add(name, str(meta.get("name", name)) + ("" if name == net else f" ({net})"),
               {"parameters": parameter_count(s.model),
-               "steps": int(meta.get("cumulative_steps", meta.get("steps", 0))),
                "kept step": None if kept is None else int(kept),
-               "train_time": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 60.0,
-               "validation": None if val is None else float(val),
+               "training (min)": float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0))) / 60.0,
+               plain: None if "std_rho_map" not in mean else float(mean["std_rho_map"]),
+               ident: None if val is None else float(val),
                "checkpoint score": None if "family_score" not in mean else float(mean["family_score"])})
     return t
 
@@ -318,9 +327,20 @@ def speed_against_flow(surs: dict, n: int = 51, field: str = "multi-freq", repea
 
 def speed_table(speed: dict) -> "MarkdownText":
     """The result of :func:`speed_against_flow` as a Markdown table (one row per model and the flow solver: the
-    median time with its unit and the Std(ρ̃_map) the map leaves), shown as a table when it is a cell's value."""
-    lines = ["| method | time of one map | Std ρ̃ map |", "|---|---|---|"]
-    lines += [f"| {name} | {format_time(v['time'])} | {format_sig(v['std_rho_map'])} |" for name, v in speed.items()]
+    median time with its unit and the Std(ρ̃_map) the map leaves), shown as a table when it is a cell's value.
+    Given ``{N: result}`` for several grid sides, one row per side instead, with a time and a Std column per
+    method."""
+    first = next(iter(speed.values()))
+    if "time" in first:
+        lines = ["| method | time of one map | Std ρ̃ map |", "|---|---|---|"]
+        lines += [f"| {name} | {format_time(v['time'])} | {format_sig(v['std_rho_map'])} |"
+                  for name, v in speed.items()]
+        return MarkdownText("\n".join(lines))
+    head = ["N"] + [f"{m}, {what}" for m in first for what in ("time", "Std")]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join([str(n)] + [cell for v in runs.values() for cell in
+                                            (format_time(v["time"]), format_sig(v["std_rho_map"]))]) + " |"
+              for n, runs in speed.items()]
     return MarkdownText("\n".join(lines))
 
 
@@ -485,28 +505,43 @@ def learning_verdict(learn: dict, surs: dict) -> str:
     Returns
     -------
     str
-        Per model, its lowest plain mean and step against the range of its last three validations, a note where
-        the record holds no validation of the last step, and one verdict: improving (the lowest mean came in the
-        last three) or noisy without a trend.
+        One sentence for the models that were not still improving (their lowest plain mean came before their last
+        three validations: that mean and its step, and the range of the last three), one for each model that was
+        (its lowest mean came among the last three), and a note where a record holds no validation of its last
+        step.
     """
-    parts, notes = [], []
+    notes = []
     for name, v in learn.items():
-        lo, hi = v["last_range"]
-        parts.append(f"the {name}'s lowest plain mean is {v['best']:#.3g}, at step {v['best_step']:,}, and its"
-                     f" last three validations (steps {_steps(v['last_steps'])}) range from {lo:#.3g} to {hi:#.3g}")
         total = int(surs[name].meta.get("cumulative_steps", surs[name].meta.get("steps", 0)))
         if v["last_steps"] and v["last_steps"][-1] < total:
-            notes.append(f"The {name}'s record holds no validation of its last step, {total:,}: it ends with the"
-                         " kept state evaluated again, which the curve leaves out.")
-    still = [n for n, v in learn.items() if v["improving"]]
-    text = "; ".join(parts) + "."
-    text = text[0].upper() + text[1:]
-    if not still:
-        text += (" Neither curve was still going down when the budget ran out: each network's best state came"
-                 " before its last three validations. Both are still noisy at the end, so a longer run may or"
-                 " may not find a better state.")
-    else:
-        text += (" " + " and ".join("the " + n for n in still)).rstrip() + (" was" if len(still) == 1 else " were")
-        text = text.replace(". the ", ". The ")
-        text += " still improving: the lowest mean came in the last three validations."
-    return " ".join([text] + notes)
+            notes.append(f"The {name}'s record holds no validation of its last step, {total:,}, so its curve ends at"
+                         f" step {v['last_steps'][-1]:,}.")
+    done = [n for n, v in learn.items() if not v["improving"]]
+    out = []
+    if done:
+        one = len(done) == 1
+        if len(done) == len(learn) > 1:
+            subject = "Neither network was still"
+        else:
+            subject = "The " + _steps_text(done, " and the ") + (" was" if one else " were") + " no longer"
+        best = []
+        for k, n in enumerate(done):
+            val, step = f"{learn[n]['best']:#.3g}", f"{learn[n]['best_step']:,}"
+            whose = "its" if one else f"the {n}'s"
+            best.append(f"{whose} lowest plain mean, {val}, came at step {step}" if k == 0
+                        else f"the {n}'s, {val}, at step {step}")
+        ranges = [f"{learn[n]['last_range'][0]:#.3g} to {learn[n]['last_range'][1]:#.3g}" for n in done]
+        out.append(f"{subject} improving when {'its' if one else 'the'} budget ran out: " + _steps_text(best)
+                   + (", before its" if one else ", each before its") + " last three validations, which range from "
+                   + _steps_text(ranges, " and from ") + ".")
+    for n in learn:
+        if n not in done:
+            v = learn[n]
+            out.append(f"The {n} was still improving: its lowest plain mean, {v['best']:#.3g}, came at step"
+                       f" {v['best_step']:,}, among its last three validations.")
+    return " ".join(out + notes)
+
+
+def _steps_text(items: list, last: str = " and ") -> str:
+    """Items joined as prose: ``a``, ``a and b``, ``a, b and c``."""
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + last + items[-1]
