@@ -71,7 +71,7 @@ class CartoDiffusionOptions:
 
 def diffusion_square(density: np.ndarray, options: CartoDiffusionOptions | None = None, *,
                      points: np.ndarray | None = None) -> GridFlow:
-    r"""One diffusion map of the unit square with fixed walls (see the module docstring).
+    r"""One diffusion map of the unit square with fixed walls (the module's description gives the method).
 
     Parameters
     ----------

@@ -170,7 +170,7 @@ def _grid_turned_over(n: int):
 
 def flow_square(density: np.ndarray, options: CartoFlowOptions | None = None, *,
                 points: np.ndarray | None = None) -> GridFlow:
-    r"""One flow-based map of the unit square with fixed walls (see the module docstring).
+    r"""One flow-based map of the unit square with fixed walls (the module's description gives the method).
 
     Parameters
     ----------

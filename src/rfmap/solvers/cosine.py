@@ -87,8 +87,8 @@ class ScipyTransforms:
 
 
 class CosineTransforms:
-    """DCT-I and DST-I along either axis of (M, M) float64 tables by ``numpy.fft`` (module docstring), sharing two
-    buffers.
+    """DCT-I and DST-I along either axis of (M, M) float64 tables by ``numpy.fft`` (the module's description gives
+    how), sharing two buffers.
 
     Parameters
     ----------

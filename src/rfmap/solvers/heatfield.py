@@ -73,15 +73,15 @@ __all__ = ["HeatField", "DIVISIONS", "DROPPED_RATE", "blas_threads"]
 #: Where :class:`HeatField` divides :math:`-\nabla\rho` by :math:`\rho`: on the raster's nodes before interpolating
 #: (the maps), or at the points after interpolating both (the cartograms).
 DIVISIONS = ("grid", "points")
-#: :math:`L`: modes whose per-axis decay exponent :math:`\pi^2 k^2 t` exceeds it are skipped
-#: (:meth:`HeatField.n_modes`); :math:`e^{-L}` is below :math:`10^{-17}` (:math:`-\ln 10^{-17} = 39.14`), under
-#: double precision's round-off.
+#: The largest decay exponent :math:`L` of a mode: modes whose per-axis exponent :math:`\pi^2 k^2 t` exceeds it
+#: are skipped (:meth:`HeatField.n_modes`); :math:`e^{-L}` is below :math:`10^{-17}`
+#: (:math:`-\ln 10^{-17} = 39.14`), under double precision's round-off.
 DROPPED_RATE = 39.2
 
 
 class HeatField:
     r"""The diffusing density :math:`\rho(x, t)` of a raster on :math:`[0,1]^d`, its gradient and the velocity
-    :math:`v = -\nabla\rho/\rho` (see the module docstring for the sums and their products).
+    :math:`v = -\nabla\rho/\rho` (the module's description gives the sums and their products).
 
     Parameters
     ----------

@@ -116,11 +116,12 @@ _KUHN = _kuhn_lookup()
 WALK_STEPS = 6
 
 
-#: The walk of an ``M``-grid starts from the inverse map found on a grid about this many times coarser ...
+#: The walk of an ``M``-grid starts from the inverse map found on a grid about this many times coarser, when that
+#: grid has at least :data:`WALK_COARSE_MIN` nodes per side.
 WALK_COARSE = 4
 
 
-#: ... when that grid has at least this many nodes per side.
+#: The fewest nodes per side of the coarser grid from which the walk starts (:data:`WALK_COARSE`).
 WALK_COARSE_MIN = 9
 
 
