@@ -308,8 +308,9 @@ _AGAINST_FLOW = (("surrogate", "sur"), ("surrogate+refine", "ref"), ("hybrid", "
 
 
 def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]:
-    """The numbers that the book's text quotes from a time-to-accuracy run (the chapter on fast classical maps and neural warm starts): counts, ratios and times,
-    each formatted as the text prints it (ratios to three significant digits, times with their unit).
+    """The numbers that the book's text quotes from a time-to-accuracy run (the chapter on fast classical maps and
+    neural warm starts): counts, ratios and times, each formatted as the text prints it (ratios to three significant
+    digits, times with their unit).
 
     Parameters
     ----------
@@ -321,25 +322,31 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
     Returns
     -------
     dict
-        ``n_methods`` and ``method_names`` (the methods run; the tables add the row
-        :data:`rfmap.finish.polish.UNGUARDED`), ``flow_hybrid_flips`` (folds of the flow and the hybrid), the
-        guard's counts ``guard_fields`` (hybrid runs), ``guard_warm`` (warm starts, after which the guard ran the
-        cold flow), ``guard_cold`` (runs that kept the cold flow's map) and ``guard_worse`` (runs that ended above
-        the flow alone), ``warm_vs_cold`` (the warm flow's final Std over the cold flow's, mean over the warm
-        starts), the field on which the flow ends furthest above the diffusion solver in the first quoted case
-        (``flow_rough_field``, ``flow_rough_ratio``), and per quoted dimension ``d``: ``n{d}``; ``flow_speed{d}``
-        and ``flow_std{d}`` (the diffusion solver's time over the flow's, the flow's Std over diffusion's);
-        ``flow_wall{d}`` (the flow's mean time, with its unit) and ``flow_abs{d}`` (its mean Std); for the
-        surrogate (``sur``), the surrogate with weight refinement (``ref``), the hybrid (``hyb``) and its warm flow
-        without the guard (``ng``): ``<tag>_vs_flow{d}`` (mean time over the flow's) and ``<tag>_abs{d}`` (mean
-        Std; absent for a method that was not run), ``sur_std_vs_flow{d}`` (the surrogate's Std over the flow's);
-        and the hybrid against the best classical solver, ``hyb_time{d}`` and ``hyb_std{d}``; ``ref_effect{d}`` (what
-        weight refinement does to the surrogate's Std, as a phrase) and ``ref_worse_cases`` (the cases, of those
-        run with refinement, in which refinement raised the Std: ``"2 of 8 cases"``); ``ref_worse_fields`` (the
-        fields on which it raised the Std, of those mapped both ways) and ``ref_worse_coarser`` (how many of those,
-        an int, had a default map taken from a coarser working grid, because the network's own map folded), with
-        ``ref_worse_text``, the sentence that says both, and ``flow_hybrid_flips_text``, the sentence on the folds
-        of the flow and the hybrid.
+        These entries:
+
+        * ``n_methods`` and ``method_names``: the methods run (the tables add the row
+          :data:`rfmap.finish.polish.UNGUARDED`);
+        * ``flow_hybrid_flips``: the folds of the flow and the hybrid, and ``flow_hybrid_flips_text``, the sentence
+          on them;
+        * the guard's counts: ``guard_fields`` (hybrid runs), ``guard_warm`` (warm starts, after which the guard ran
+          the cold flow), ``guard_cold`` (runs that kept the cold flow's map) and ``guard_worse`` (runs that ended
+          above the flow alone);
+        * ``warm_vs_cold``: the warm flow's final Std over the cold flow's, mean over the warm starts;
+        * ``flow_rough_field`` and ``flow_rough_ratio``: the field on which the flow ends furthest above the
+          diffusion solver in the first quoted case, and that ratio;
+        * per quoted dimension ``d``: ``n{d}``; ``flow_speed{d}`` and ``flow_std{d}`` (the diffusion solver's time
+          over the flow's, the flow's Std over diffusion's); ``flow_wall{d}`` (the flow's mean time, with its unit)
+          and ``flow_abs{d}`` (its mean Std);
+        * per quoted dimension ``d`` and method tag, for the surrogate (``sur``), the surrogate with weight
+          refinement (``ref``), the hybrid (``hyb``) and its warm flow without the guard (``ng``):
+          ``<tag>_vs_flow{d}`` (mean time over the flow's) and ``<tag>_abs{d}`` (mean Std; absent for a method that
+          was not run); also ``sur_std_vs_flow{d}`` (the surrogate's Std over the flow's);
+        * ``hyb_time{d}`` and ``hyb_std{d}``: the hybrid against the best classical solver;
+        * ``ref_effect{d}``: what weight refinement does to the surrogate's Std, as a phrase;
+        * ``ref_worse_cases``: the cases, of those run with refinement, in which refinement raised the Std
+          (``"2 of 8 cases"``); ``ref_worse_fields``: the fields on which it raised the Std, of those mapped both
+          ways; ``ref_worse_coarser``: how many of those (an int) had a default map taken from a coarser working
+          grid, because the network's own map folded; ``ref_worse_text``: the sentence that says both.
     """
     summary = summarize(rows)
     methods = [m for m in dict.fromkeys(r["method"] for r in rows) if m != UNGUARDED]

@@ -12,8 +12,8 @@ lower is better.  For each case this module puts four values side by side:
     ``Surrogate.map(field, n, refine=True, symmetrize=True)``: the network on its working grid, averaged over the
     symmetries of the square or cube, refined, and repaired where it folds;
 ``classical``
-    the fastest classical solver of the project on the same mesh: the flow-based density-equalizing map
-    (``solve_dem(..., method="flow")``) or the Linear Beltrami Solver.
+    the project's fastest classical solver on the same mesh: the flow solver (``solve_dem(..., method="flow")``) or
+    the Linear Beltrami Solver.
 
 A case *meets* the paper when the paper's method is at most the paper's value: :math:`v_{\text{native}} \le
 v_{\text{paper}}`.  Times are kept beside the accuracies (the fastest of a few runs after a warm-up); the paper
@@ -53,9 +53,8 @@ PAPER_METHOD = {"native": True, "refine": True, "repair": False}
 #: Keywords of :meth:`rfmap.Surrogate.map` for the delivered map.
 DELIVERED = {"refine": True, "symmetrize": True}
 
-#: How a metric or a quantity of the tables is named in the book.  ``mean |Δμ| vs PL`` is the mean error in μ
-#: measured against the Beltrami coefficient of the exact map's piecewise-linear interpolant on the same mesh, rather
-#: than against the exact map's own coefficient (the book's glossary has both).
+#: How a metric or a quantity of the tables is named in the book (``mean |Δμ| vs PL``: the error in μ against the
+#: coefficient of the exact map's piecewise-linear interpolant on the same mesh, see the book's glossary).
 METRIC_TITLES = {"std_rho_map": "Std(ρ̃_map)", "std_rho_orig": "Std(ρ̃_orig)", "mean_mu": "mean |μ|",
                  "max_mu": "max |μ|", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
                  "mean_dmu_pl": "mean |Δμ| vs PL", "min_jacobian": "min det J", "n_flipped": "flips",
@@ -142,8 +141,7 @@ def timed(run: Callable[[], MapResult], warm: Callable[[], object] | None = None
 @dataclass(frozen=True)
 class Case:
     """One row of a paper table: ``name`` as the paper labels it (a field, or a grid side as text), the ``field`` to
-    map and the grid side ``n`` actually run, which can differ from the paper's (the book's fast build runs smaller
-    grids); :meth:`title` then says so."""
+    map and the grid side ``n`` actually run (:meth:`title` says where it differs from the paper's)."""
 
     name: str
     field: str
@@ -217,9 +215,8 @@ class Comparison:
         return [(a, b) for a, b in ratios if a is not None and b is not None and "std_rho_map" in self.metrics]
 
     def verdict_word(self, short: bool = False) -> str:
-        """The verdict with its count and the n/c qualifier (:func:`rfmap.paper.verdicts.qualified_verdict`):
-        ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'``; with ``short``
-        the word and its count only."""
+        """The verdict, its count and (unless ``short``) the n/c qualifier, by :func:`.qualified_verdict`:
+        ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'``."""
         flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
         return qualified_verdict(flags, [a > b for a, b in self._nc_ratios()], short=short)
 
