@@ -54,13 +54,12 @@ def test_the_rules_text_says_what_the_fold_free_rule_keeps():
 def test_learning_texts_name_steps_not_counts():
     from types import SimpleNamespace
 
-    from rfmap.paper.compare import folded_states_text, learning_verdict
+    from rfmap.paper.compare import learning_verdict
 
     kept = _v(2, 0.3)
     meta = _meta([_v(1, 0.6, folded=1), kept, _v(3, 0.4, folded=1), _v(4, 0.5), {**kept, "step": 4}], 2,
                  {"mean": kept})
     learn = {"A": learning_summary(meta, last=3)}
-    assert folded_states_text(learn) == "The A's maps folded on no held-out field only at steps 2 and 4."
     text = learning_verdict(learn, {"A": SimpleNamespace(meta={**meta, "steps": 4})})
     assert text == ("The A was still improving: its lowest plain mean, 0.300, came at step 2, among its last three"
                     " validations.")

@@ -28,7 +28,7 @@ from .comparison import format_time
 from .tables import Table, format_sig
 
 __all__ = ["NETWORK_NAMES", "parameter_count", "model_table", "validated_states", "learning_summary", "kept_state",
-           "kept_rules", "folded_states_text", "learning_verdict", "paper_fields_table", "resolution_table",
+           "kept_rules", "learning_verdict", "paper_fields_table", "resolution_table",
            "points_table", "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins",
            "folded_cell", "side_by_side", "MarkdownText"]
 
@@ -461,35 +461,6 @@ def kept_rules(kept: dict) -> str:
             "Every kept step was chosen by the checkpoint score." if rules == {"checkpoint score"} else
             "Every kept step was chosen by the fold-free mean.")
     return " ".join([head] + out + cross)
-
-
-def folded_states_text(learn: dict) -> str:
-    """One sentence on which validated states folded, naming the fold-free steps of each model.
-
-    Parameters
-    ----------
-    learn : dict
-        Display name -> :func:`learning_summary` of that model.
-
-    Returns
-    -------
-    str
-        The sentence, e.g. "The U-Net's maps folded on no held-out field only at steps 2,000, 3,000 and 4,000; ...".
-    """
-    if not any(v["folded"] for v in learn.values()):
-        return "No validated state of either network folded on a held-out field."
-    parts = []
-    for name, v in learn.items():
-        free = v["fold_free_steps"]
-        if not v["folded"]:
-            parts.append(f"the {name}'s maps never folded")
-        elif free:
-            parts.append(f"the {name}'s maps folded on no held-out field only at step{'s' * (len(free) > 1)}"
-                         f" {_steps(free)}")
-        else:
-            parts.append(f"every validated state of the {name} folded on some held-out field")
-    text = "; ".join(parts)
-    return text[0].upper() + text[1:] + "."
 
 
 def learning_verdict(learn: dict, surs: dict) -> str:
