@@ -409,11 +409,6 @@ def side_by_side(table: Table, columns: dict, case_title: str) -> MarkdownText:
     return MarkdownText("\n".join(lines))
 
 
-def _steps(steps) -> str:
-    steps = [f"{s:,}" for s in steps]
-    return steps[0] if len(steps) == 1 else ", ".join(steps[:-1]) + " and " + steps[-1]
-
-
 def kept_rules(kept: dict) -> str:
     """Sentences saying how each model's kept step was chosen, where its kept map folds, and what the fold-free
     rule keeps instead (the text of chapter 12's model section).
