@@ -48,7 +48,7 @@ def _round_log_values(lo: float, hi: float) -> list[float]:
     if len(nice) < 2:  # a narrow range: evenly spaced round steps (0.08, 0.09), as a linear axis labels them
         from matplotlib.ticker import MaxNLocator
 
-        inside = [v for v in MaxNLocator(nbins=3, steps=[1, 2, 2.5, 5, 10]).tick_values(lo, hi) if lo <= v <= hi]
+        inside = [v for v in MaxNLocator(nbins=3, steps=[1, 2, 5, 10]).tick_values(lo, hi) if lo <= v <= hi]
         if len(inside) >= 2:
             return [float(f"{v:.3g}") for v in (inside[::2] if len(inside) > 3 else inside)]
         return sorted({float(f"{t:.2g}") for t in targets})
