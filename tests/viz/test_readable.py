@@ -61,6 +61,30 @@ def test_validation_against_time_spans_the_stored_run():
     plt.close(ax.figure)
 
 
+def test_the_wall_time_figure_gives_each_model_a_panel_and_one_legend_below():
+    """One titled panel per model, a group starting a new row (the empty cell switched off), and one legend below
+    every panel naming the filled and the open markers."""
+    from rfmap.viz.wall_time import validation_time_figure
+
+    def meta(folded):
+        return {"wall_time": 600.0, "cumulative_wall_time": 3000.0,
+                "history": {"validation": [{"elapsed": 60.0 * (i + 1), "std_rho_map": 0.3 / (1 + i),
+                                            "folded_fields": int(folded and i == 0)} for i in range(4)]}}
+
+    with style():
+        fig = validation_time_figure({"2D": {"a": meta(True), "b": meta(False), "c": meta(False)},
+                                      "3D": {"d": meta(True)}})
+        shown = [ax for ax in fig.axes if ax.axison]
+        assert [ax.get_title().split("\n")[0] for ax in shown] == ["2D: a", "2D: b", "2D: c", "3D: d"]
+        assert "after 40 min of earlier runs" in shown[0].get_title()
+        assert len(fig.axes) == 6 and len(fig.legends) == 1
+        fig.canvas.draw()
+        legend_box = fig.legends[0].get_window_extent()
+        assert all(legend_box.y1 <= ax.get_window_extent().y0 + 1 for ax in shown)
+        _readable(fig)
+    plt.close(fig)
+
+
 def test_a_term_that_vanishes_everywhere_is_said_in_words():
     spec = TaskSpec("density", 2, "square")
     batch = sample_batch(spec, seed=0, step=0, indices=range(1), n=9)

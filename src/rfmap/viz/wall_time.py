@@ -43,6 +43,6 @@ def validation_time_figure(groups: dict, *, width: float = 7.2, ncols: int = 2):
             ax.set_xlabel("wall time of the last run (min)")
     handles = [Line2D([], [], ls="-", marker="o", ms=3, color="0.3", label="validated state"),
                Line2D([], [], ls="none", marker="o", ms=5, mfc="white", mec="0.3", mew=1.2,
-                      label="its map folded on some held-out field")]
+                      label="validated state whose map folded on some held-out field")]
     fig.legend(handles=handles, loc="outside lower center", ncols=2, frameon=False)
     return fig
