@@ -176,13 +176,13 @@ def render_slices(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), window
     return img
 
 
-def volume_rows(results: dict, labels, fig_label: str | None, *, clim=(0.0, 2.5)):
+def volume_rows(results: dict, labels, fig_label: str | None = None, *, clim=(0.0, 2.5)):
     r"""The paper's 3D figures, one row per result (keyed by ``labels``): filled slices through the original mesh
     coloured by the input's :math:`\tilde\rho` and through the mapped mesh coloured by the :math:`\tilde\rho` the
     map leaves (:func:`render_slices`: one colour where the map equalizes), and the grid itself on the same three
     slices as the map moves it, coloured by the input's density carried along (:func:`render_lattice`,
     ``carried=True``); one camera (:data:`CAMERA_3D`) and one colour scale with its colour bar.  Saved under
-    ``fig_label`` (7.2 inches wide, readable in the book's text column; not saved when it is ``None``); returns
+    ``fig_label`` (7.2 inches wide, readable in the book's text column; not saved when it is ``None``, the default); returns
     the figure."""
     import matplotlib.pyplot as plt
     from matplotlib.cm import ScalarMappable
