@@ -182,8 +182,8 @@ def volume_rows(results: dict, labels, fig_label: str | None = None, *, clim=(0.
     map leaves (:func:`render_slices`: one colour where the map equalizes), and the grid itself on the same three
     slices as the map moves it, coloured by the input's density carried along (:func:`render_lattice`,
     ``carried=True``); one camera (:data:`CAMERA_3D`) and one colour scale with its colour bar.  Saved under
-    ``fig_label`` (7.2 inches wide, readable in the book's text column; not saved when it is ``None``, the default); returns
-    the figure."""
+    ``fig_label`` (7.2 inches wide, readable in the book's text column; not saved when it is ``None``, the
+    default); returns the figure."""
     import matplotlib.pyplot as plt
     from matplotlib.cm import ScalarMappable
     from matplotlib.colors import Normalize
