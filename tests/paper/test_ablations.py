@@ -32,6 +32,11 @@ def test_summary_names_the_field_whose_metric_rose_most():
     s = refinement_summary(t)
     assert (s["metric_lowered"], s["metric_raised"]) == (1, 2)
     assert s["worst"] == "b, from 0.2000 to 0.2300"
+    assert s["raised_unprinted"] == []
+    t.add("d", "α = 1", {"metric": 0.1000001, "objective": 1.0})  # a rise the table does not print
+    t.add("d", "refined", {"metric": 0.1000002, "objective": 0.9})
+    s = refinement_summary(t)
+    assert s["metric_raised"] == 2 and s["raised_unprinted"] == ["d"]
     assert refinement_summary(Table("tab:refinement", "t", ["metric"]))["worst"] == "none"
 
 
