@@ -22,6 +22,7 @@ from pathlib import Path
 
 from rfmap.training.lineage import (Run, chain, idle_runs, load_metadata, repeat_commands, shipped_ancestor,
                                     shipped_hashes, source_run)
+from rfmap.training.validation import score_parts
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET = Path("book/reproduce.md")
@@ -97,6 +98,23 @@ def _threads(meta: dict) -> str:
     return f"{threads} CPU thread{'s' if threads != 1 else ''}" if threads else "the CPU"
 
 
+def checkpoint_rule(meta: dict) -> str:
+    """Which rule chose a model's kept checkpoint, read from its record (the entry that
+    :func:`rfmap.training.validation.score_parts` ranks the kept state's validation summary by)."""
+    mean = (meta.get("final_metrics") or {}).get("mean") or {}
+    if not mean:
+        return "not recorded"
+    entry = score_parts(mean)[2]
+    quantity = "mean vertex distance" if "mean_dd" in mean else "mean Std(ρ̃_map)"
+    if entry == "family_score":
+        return "family score"
+    if entry == "penalized" or (entry == "mean" and "penalized" in mean):
+        return f"{quantity}, a folded map counted as the identity"
+    if entry == "capped":
+        return f"{quantity}, a folded field's value capped"
+    return f"{quantity} of the fold-free states (the first runs' rule)"
+
+
 def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], level: str = "###",
                    notes: str | None = None) -> list[str]:
     """A model's facts (its chain, what validation kept, its parent), the command that trains it from its parent
@@ -141,7 +159,12 @@ def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], 
                      "file.")
     if notes:
         lines.append(f"- **Notes:** `{notes}`.")
-    lines += ["", "```bash", wrap(repeat[-1][1]), "```", ""]
+    needs = []
+    if len(repeat) > 1:
+        k = len(repeat) - 1
+        needs = [f"# needs the weights that {'the first run' if k == 1 else f'the first {k} runs'} of the folded "
+                 "list below write"]
+    lines += ["", "```bash", *needs, wrap(repeat[-1][1]), "```", ""]
     if len(repeat) == 1:
         return lines
     lines += [f":::{{dropdown}} The {len(repeat)} runs to repeat, parents first", "", "```bash"]
@@ -225,7 +248,8 @@ def section(root: Path = ROOT) -> str:
     metas = parents_first(load_metadata(root / WEIGHTS), shipped)
     chains = {p.parent.name: json.loads(p.read_text(encoding="utf-8"))
               for p in sorted((root / CHAINS).glob("*/state.json"))}
-    lines = ["| Model | Runs in its chain | Steps | Wall time | To train it again |", "| --- | --- | --- | --- | --- |"]
+    lines = ["| Model | Runs in its chain | Steps | Wall time | To train it again | Checkpoint chosen by |",
+             "| --- | --- | --- | --- | --- | --- |"]
     for model, meta in metas.items():
         runs = chain(meta)
         steps, seconds = _totals(meta)
@@ -233,7 +257,7 @@ def section(root: Path = ROOT) -> str:
         todo = source_run(meta).index - (start[0] if start else 0)
         source = f"the shipped `{start[1]}`" if start else "scratch"
         lines.append(f"| [{model}](retrain-{model}) | {len(runs)} | {steps:,} | {_hours(seconds)} | "
-                     f"{todo} run{'s' if todo != 1 else ''} from {source} |")
+                     f"{todo} run{'s' if todo != 1 else ''} from {source} | {checkpoint_rule(meta)} |")
     lines += [""] + _repeat_cost(metas, shipped)
     lines += ["Under each model: its chain, what validation kept of the last run, the parent it starts from, the "
               "one command that trains it from that parent and, folded, every run a repeat needs. Each command "
