@@ -204,9 +204,11 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     assert c.comparable("sin-cos") and not c.comparable("rect-peak")
     assert c.met("rect-peak", "std_rho_map") is None and c.count("std_rho_map") == (1, 1)
     v = c.score_values()
-    # 0.12 / 0.6 against 0.09 / 0.48; the scoreboards give the word and its count, the n/c clause in a footnote
+    # 0.12 / 0.6 against 0.09 / 0.48; the scoreboards give the word, its count of comparable pairs and the n/c
+    # clause, the Std ratios in a footnote
     assert c.verdict_word() == "reproduced on the comparable cases (1 of 1); the n/c case is worse by Std ratio"
-    assert v["verdict"] == "reproduced (1 of 1)" and v["nc"] == "paper's method 0.2, paper 0.187 (worse)"
+    assert v["verdict"] == "reproduced (1 of 1 comparable); the n/c case is worse by Std ratio"
+    assert v["nc"] == "paper's method 0.2, paper 0.187 (worse)"
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.09
     assert c.verdict_word() == (
         "reproduced on the comparable cases (1 of 1); the n/c case is not worse by Std ratio")

@@ -8,7 +8,7 @@ import torch  # noqa: E402
 
 from rfmap.tasks.losses import loss_integrands  # noqa: E402
 from rfmap.tasks import TaskSpec, sample_batch  # noqa: E402
-from rfmap.viz import learning_curves, plot_batch, plot_loss_terms  # noqa: E402
+from rfmap.viz import learning_curves, loss_terms_figure, plot_batch, plot_loss_terms  # noqa: E402
 
 
 def test_learning_curves_mark_the_budget_and_tolerate_old_metadata():
@@ -89,6 +89,30 @@ def test_loss_term_panels_carry_the_batch_values():
     value = float((terms["density"][0] * terms["weight"][0]).sum() / terms["weight"][0].sum())
     assert axes[1][1].get_title().endswith(f"= {value:.3g}")
     assert "fold penalty" in axes[1][3].get_title()
+    plt.close(fig)
+
+
+def test_loss_terms_figure_puts_like_terms_in_one_row():
+    spec = TaskSpec("density", 2, "square")
+    batch = sample_batch(spec, seed=0, step=0, indices=range(1), n=9)
+    mapped = batch.ref + 0.01 * torch.randn_like(batch.ref)
+    terms = loss_integrands(batch.ref, mapped, batch.elements, density=batch.density)
+    terms["beltrami"] = terms["mu2"]  # a stand-in mu mismatch for a second column
+    fig = loss_terms_figure({"DEQ": (mapped, batch.elements, terms, ["density", "mu2", "fold"]),
+                             "Beltrami": (mapped, batch.elements, terms, ["beltrami", "fold"])}, n=9)
+    cells = {}  # (row, column) -> the titles and texts of that panel (colour bars have no grid cell)
+    for ax in fig.axes:
+        if ax.get_subplotspec() is not None:
+            spec = ax.get_subplotspec()
+            cells[spec.rowspan.start, spec.colspan.start] = [ax.get_title()] + [t.get_text() for t in ax.texts]
+    names = ["the map", "density mismatch", "Beltrami energy", "$\\mu$ mismatch", "fold penalty"]
+    for row, name in enumerate(names):  # each row holds one term: drawn in a column, or said absent there
+        for col in range(2):
+            assert any(name in t for t in cells[row, col]), (row, col, cells[row, col])
+    assert any(t.startswith("no Beltrami energy") for t in cells[2, 1])
+    assert any(t.startswith("no density mismatch") for t in cells[1, 1])
+    assert any(t.startswith("no $\\mu$ mismatch") for t in cells[3, 0])
+    assert not any(t.startswith("no ") for t in cells[4, 0] + cells[4, 1])  # both losses have a fold penalty
     plt.close(fig)
 
 

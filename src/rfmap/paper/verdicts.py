@@ -119,12 +119,14 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     >>> nc
     'the n/c case is worse by Std ratio'
     >>> qualified_verdict([True, True, True], [True], short=True)
-    'reproduced (3 of 3)'
+    'reproduced (3 of 3 comparable); the n/c case is worse by Std ratio'
     """
     flags = [m for m in met if m is not None]
     count = f" ({sum(flags)} of {len(flags)})" if flags else ""
-    if not nc_worse or short:
+    if not nc_worse:
         return verdict(flags) + count
+    if short:  # the scoreboards' cell: the count named as that of the comparable cases, the n/c cases beside it
+        return f"{verdict(flags)}{count[:-1] + ' comparable)' if flags else ''}; {nc_clause(nc_worse)}"
     scope = " on the comparable cases" if flags else ""
     return f"{verdict(flags)}{scope}{count}; {nc_clause(nc_worse)}"
 

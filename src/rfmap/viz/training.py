@@ -92,17 +92,27 @@ def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: 
 def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0):
     """Side by side, the loss terms of one sample of several models (:func:`plot_loss_terms`), one column each:
     ``columns`` maps a column title (``"DEQ model"``) to ``(mapped, elements, terms, keys)`` as
-    ``rfmap.tasks.batch_loss_terms`` returns them, with the terms to draw; the map on top, one term per row
-    below, 7.2 inches wide. Returns the figure."""
+    ``rfmap.tasks.batch_loss_terms`` returns them, with the terms to draw; the map on top, then one row per term
+    (in the order of :data:`LOSS_TERMS`), so that like terms sit in one row and a column whose loss lacks a row's
+    term leaves that cell empty, saying so. 7.2 inches wide. Returns the figure."""
     import matplotlib.pyplot as plt
 
-    rows = 1 + max(len(keys) for *_, keys in columns.values())
+    drawn = {title: [k for k in keys if k in terms and k != "area"]
+             for title, (_, _, terms, keys) in columns.items()}
+    order = [k for k in LOSS_TERMS if any(k in keys for keys in drawn.values())]
+    rows = 1 + len(order)
     fig, axes = plt.subplots(rows, len(columns), figsize=(7.2, 2.875 * rows), layout="constrained", squeeze=False)
-    for col, (title, (mapped, elements, terms, keys)) in zip(axes.T, columns.items()):
-        plot_loss_terms(col, mapped, elements, terms, sample=sample, n=n, keys=keys)
+    for col, (title, (mapped, elements, terms, _)) in zip(axes.T, columns.items()):
+        keys = drawn[title]
+        plot_loss_terms([col[0]] + [col[1 + order.index(k)] for k in keys], mapped, elements, terms,
+                        sample=sample, n=n, keys=keys)
         col[0].set_title(f"{title}: the map $u$")
-        for ax in col[1 + len(keys):]:
-            ax.set_axis_off()
+        for key, ax in zip(order, col[1:]):
+            if key not in keys:
+                ax.set_axis_off()
+                name = LOSS_TERMS[key].split(" relu")[0].split(" $")[0]  # the name without its formula
+                ax.text(0.5, 0.5, f"no {name}\nin this loss",
+                        transform=ax.transAxes, ha="center", va="center", color="0.4")
     return fig
 
 
