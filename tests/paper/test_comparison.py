@@ -222,7 +222,7 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses
     assert c.verdict_word() == (
         "not reproduced on the comparable cases (0 of 1); the n/c case is worse by Std ratio")
-    assert c.score_values()["verdict"] == "not reproduced (0 of 1)"
+    assert c.score_values()["verdict"] == "not reproduced (0 of 1 comparable); the n/c case is worse by Std ratio"
 
 
 def test_verdict_words_follow_the_stated_rule():

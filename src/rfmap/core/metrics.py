@@ -313,9 +313,7 @@ def rotational_share(ref, mapped) -> float:
     gradient :math:`\nabla\chi` of :math:`\chi = \sum_k \chi_k \prod_i \cos(\pi k_i x_i)` (no flux through the walls)
     has, mode by mode, coefficients parallel to :math:`k`; :math:`P` projects every mode's coefficient vector onto
     :math:`k`, which is the :math:`L^2` orthogonal (Helmholtz) projection of the interpolant onto such gradients.
-    The norms are the :math:`L^2` norms of the interpolants (Parseval).  The highest cosine
-    :math:`\cos(\pi (N-1) x)` has a derivative that vanishes at every node, so along an axis where a mode is that
-    high its wavenumber counts as 0: the nodal samples of every such gradient are kept whole.
+    The norms are the :math:`L^2` norms of the interpolants (Parseval).
 
     A density-equalizing map must have :math:`\det Du = \rho_0/\bar\rho`, which fixes the map only up to such
     rotational parts.  The diffusion flow's velocity :math:`-\nabla \log\rho_t` is a gradient at every instant;
@@ -333,6 +331,11 @@ def rotational_share(ref, mapped) -> float:
     -------
     float
         In [0, 1]: 0 for a gradient displacement (and for the identity), 1 for a divergence-free one.
+
+    Notes
+    -----
+    The highest cosine :math:`\cos(\pi (N-1) x)` has a derivative that vanishes at every node, so along an axis
+    where a mode is that high its wavenumber counts as 0: the nodal samples of every such gradient are kept whole.
     """
     ref = np.asarray(ref, dtype=np.float64)
     mapped = np.asarray(mapped, dtype=np.float64)

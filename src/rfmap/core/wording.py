@@ -2,7 +2,10 @@
 
 Reports, warnings and errors count things ("2 folded elements", "1 region without data"); :func:`counted` writes
 the number and the noun that agrees with it, so that no message reads "pass(es)".  :func:`of_count` writes a part of
-a whole as a sentence says it: ``all 4 densities``, ``none of the 4``, ``3 of 4``, never ``4 of 4`` or ``0 of 4``.
+a whole as a sentence says it: ``all 4 densities``, ``none of the 4``, ``3 of 4``; it never writes ``4 of 4`` or
+``0 of 4``.  A tally in parentheses after a word is a score, not a phrase, and is written ``k of n`` whatever ``k``
+is: the verdict of a paper table counts its met (case, metric) pairs so, as in ``reproduced (3 of 3)``
+(:func:`rfmap.paper.verdicts.qualified_verdict`).
 :func:`power_of_ten` and :func:`format_sig` write numbers without e-notation (``2.6 × 10⁻⁵``), for every layer of
 the package (:mod:`rfmap.paper.tables` offers them too).
 """

@@ -146,9 +146,8 @@ def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
 
 
 #: Grid points per network evaluation up to which the copies of :func:`symmetrized_displacement` are stacked into one
-#: batch (a single copy larger than this is evaluated alone).  The re-measurement does not support this bound:
-#: batching paid on small grids, but on larger grids the rule was slower than an alternative; it is kept until
-#: measured again on an idle machine (:doc:`Design decisions </book/design>`).
+#: batch (a single copy larger than this is evaluated alone); only the time of a map depends on it, not the map.
+#: :doc:`Design decisions </book/design>` gives its timings against the alternatives.
 BATCH_POINTS = 2**15
 
 

@@ -104,17 +104,22 @@ def verdict(met: list[bool | None]) -> str:
 
 
 def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None, *, short: bool = False) -> str:
-    """The verdict of :func:`verdict` with its count of (case, metric) pairs and, where the item has cases whose
-    input is not the paper's (n/c), the qualifier on the word itself: whether each n/c case's Std ratio
-    (:func:`std_ratio`) is worse than the paper's (``nc_worse``, one flag per n/c case); with ``short`` the word
-    and its count only (the scoreboards give the n/c clause, :func:`nc_clause`, in a footnote).
+    """The verdict of :func:`verdict` followed by its tally and, where the item has cases whose input is not the
+    paper's (n/c), a clause on those cases.
+
+    The tally ``(k of n)`` counts (case, metric) pairs, not cases: ``n`` is the number of comparable pairs that have a
+    paper value, ``k`` those where the paper's method is at most the paper's value; it is written so even where
+    ``k`` is ``0`` or ``n``.  With n/c cases the word is scoped to the comparable cases and followed by
+    :func:`nc_clause`: whether each n/c case's Std ratio (:func:`std_ratio`, the share of the input's spread the map
+    leaves) by the paper's method is above the paper's (``nc_worse``, one flag per n/c case, ``True`` where it is);
+    with ``short`` the word and its tally only (the scoreboards give the n/c clause in a footnote).
 
     Examples
     --------
     >>> qualified_verdict([True, False])
     'partly (1 of 2)'
     >>> word, nc = qualified_verdict([True, True, True], [True]).split("; ")
-    >>> word
+    >>> word  # three comparable (case, metric) pairs, all met
     'reproduced on the comparable cases (3 of 3)'
     >>> nc
     'the n/c case is worse by Std ratio'
@@ -132,7 +137,9 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
 
 
 def nc_clause(nc_worse: list[bool]) -> str:
-    """Whether the n/c cases' Std ratios are worse than the paper's, one flag per n/c case (``""`` for none).
+    """Whether the n/c cases' Std ratios are worse than the paper's, one flag per n/c case (``""`` for none): a case
+    is *worse by Std ratio* where the paper's method leaves a larger share of its input's spread,
+    Std(ρ̃_map) / Std(ρ̃_orig), than the paper's map leaves of the paper's input.
 
     Examples
     --------
