@@ -215,7 +215,12 @@ class Comparison:
         return [(a, b) for a, b in ratios if a is not None and b is not None and "std_rho_map" in self.metrics]
 
     def verdict_word(self, short: bool = False) -> str:
-        """The verdict, its count and (unless ``short``) the n/c qualifier, by :func:`.qualified_verdict`:
+        """The verdict, its tally and (unless ``short``) the clause on the n/c cases, by :func:`.qualified_verdict`.
+
+        The tally counts (case, metric) pairs, not cases.  For a table of four cases scored on one metric, whose three
+        cases with the paper's input all meet the paper's value, and whose fourth input is not the paper's (n/c) and
+        is left by the paper's method with a larger share of its spread, Std(ρ̃_map) / Std(ρ̃_orig), than the
+        paper's map leaves of the paper's input, it reads
         ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'``."""
         flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
         return qualified_verdict(flags, [a > b for a, b in self._nc_ratios()], short=short)
