@@ -3,9 +3,9 @@ r"""Repair of 2D grid maps by the Linear Beltrami Solver on a patch around the f
 The rebuild of :mod:`rfmap.finish.repair.lbs` is first tried on a patch (:func:`local_lbs_repair`): the truncated
 triangles grown by 2, 4, 8, then 16 vertex rings, the patch's rim and the domain boundary held where the map put them.
 Folds of a network map are usually a few small clusters, so a patch solve costs a fraction of the global one and
-leaves the rest of the map exactly as the network made it.  Widespread folds (more than 100 truncated triangles and
-more than the share :data:`LOCAL_MAX_CAPPED` of all), a free boundary that crosses itself, or a patch that stays
-folded go to the global rebuild.
+leaves the rest of the map exactly as the network made it.  Widespread folds (more than :data:`LOCAL_MIN_CAPPED`
+truncated triangles and more than the share :data:`LOCAL_MAX_CAPPED` of all), a free boundary that crosses itself,
+or a patch that stays folded go to the global rebuild.
 """
 from __future__ import annotations
 
@@ -23,7 +23,8 @@ from ...core.surface import boundary_crossings, boundary_loop
 from ...solvers.lbs import assemble_stiffness, beltrami_matrices
 from .lbs import DELTA, cap_mu
 
-__all__ = ["LOCAL_RINGS", "LOCAL_MAX_FRACTION", "LOCAL_MIN_GIVE_UP", "LOCAL_MAX_CAPPED", "local_lbs_repair"]
+__all__ = ["LOCAL_RINGS", "LOCAL_MAX_FRACTION", "LOCAL_MIN_GIVE_UP", "LOCAL_MAX_CAPPED", "LOCAL_MIN_CAPPED",
+           "local_lbs_repair"]
 
 
 #: ring counts of the successive patches of :func:`local_lbs_repair`
@@ -40,8 +41,13 @@ LOCAL_MAX_FRACTION = 0.25
 LOCAL_MIN_GIVE_UP = 2000
 
 
-#: more truncated triangles than this fraction of all (and than 100) go straight to the global :func:`.lbs_repair`
+#: more truncated triangles than this fraction of all (and than :data:`LOCAL_MIN_CAPPED`) go straight to the global
+#: :func:`.lbs_repair`
 LOCAL_MAX_CAPPED = 0.01
+
+#: the number of truncated triangles a patch may always start from, whatever :data:`LOCAL_MAX_CAPPED` of a small
+#: grid's triangles comes to
+LOCAL_MIN_CAPPED = 100
 
 
 def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA, *,
@@ -63,10 +69,10 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
     -------
     result : tuple of (ndarray, ndarray), or None
         ``(points, capped)`` as :func:`.lbs_repair` returns them.  ``None`` when no triangle is truncated; when more
-        than 100 triangles and more than the share :data:`LOCAL_MAX_CAPPED` of all are truncated; when no patch of at
-        most ``rings[-1]`` rings and at most ``max_fraction`` of the vertices (or :data:`LOCAL_MIN_GIVE_UP` vertices on
-        small grids) ends fold-free; or when a free boundary crosses itself (boundary vertices keep their positions in
-        a local solve, so only :func:`.lbs_repair` can untangle it).
+        than :data:`LOCAL_MIN_CAPPED` triangles and more than the share :data:`LOCAL_MAX_CAPPED` of all are
+        truncated; when no patch of at most ``rings[-1]`` rings and at most ``max_fraction`` of the vertices (or
+        :data:`LOCAL_MIN_GIVE_UP` vertices on small grids) ends fold-free; or when a free boundary crosses itself
+        (boundary vertices keep their positions in a local solve, so only :func:`.lbs_repair` can untangle it).
     """
     mesh = grid_mesh(n, 2)
     el = mesh.elements
@@ -78,7 +84,7 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
     mu = beltrami_coefficient(ref_t, torch.as_tensor(out), torch.as_tensor(el)).numpy()
     mu_c, capped = cap_mu(mu, delta)
     capped |= map_measures(out, el, None) <= 0
-    if not capped.any() or capped.sum() > max(LOCAL_MAX_CAPPED * len(el), 100):
+    if not capped.any() or capped.sum() > max(LOCAL_MAX_CAPPED * len(el), LOCAL_MIN_CAPPED):
         return None  # nothing to do, or folds so widespread that the global rebuild costs no more than a patch
     on_edge = mesh.boundary_mask()
     grown = np.zeros(n_pts, bool)
