@@ -282,7 +282,9 @@ RULES_SHORT = (
     "The rules in full, and every case with its values: {ref}`the scoreboard <" + RULES_TARGET + ">`."
 )
 #: below the introduction's scoreboard: where the values are
-MEANS_NOTE = ("{doc}`figures` gives every case: the paper's value, ours, and by how much a missed case misses.")
+MEANS_NOTE = ("{doc}`figures` gives every case of this table (the paper's value, ours, and by how much a missed "
+              "case misses) and lists every figure and table of the paper with the chapter that makes it and the "
+              "command that reruns it.")
 #: above the rules: the outcome in words, one bullet per group of tables, every count pasted from the chapters
 #: (a bullet is a list of (notebook stem, template) parts)
 SUMMARY = [
@@ -344,8 +346,7 @@ def scoreboard(root: Path = ROOT) -> str:
             lines.append("| " + " | ".join(cells) + " |")
     others = [numbers[it["label"]] for it in items if (it.get("score") or {}).get("kind") == "illustration"]
     others = sorted(others, key=lambda s: (s.startswith("Fig"), int(s.split()[-1])))
-    lines += ["", MEANS_NOTE, "", f"The paper's {', '.join(others)} illustrate the method and are not scored; {{doc}}`figures` "
-              "lists every item with the chapter that makes it, and the full scoreboard, case by case."]
+    lines += ["", f"The paper's {', '.join(others)} illustrate the method and are not scored. " + MEANS_NOTE]
     return "\n".join(lines + [""] + defs) + "\n"
 
 
