@@ -8,7 +8,7 @@ each is documented with the module that defines it.
   ``random_density``, ``RandomMap``, ``random_boundary_map``, ``RandomBeltrami``, ``RandomBeltramiConfig``,
   ``random_beltrami``);
 * :mod:`rfmap.fields.hard` -- hard fields that make a network's raw map fold (sharp peaks, near-zero regions,
-  steep ramps; each task draws its own, ``Task.hard_field``);
+  steep ramps; each task draws its own kind, :doc:`Repair and shortening </book/api/repair>`);
 * :mod:`rfmap.core.inputs` -- checking and normalising input fields (``check_density``, ``check_mu``, ``unit_mass``,
   ``preprocess_density``).
 """

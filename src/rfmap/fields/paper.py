@@ -86,10 +86,10 @@ class DensityField:
 
 #: The box of the rect-peak test (c), as ((x0, x1), (y0, y1), height): the paper leaves ``rect(x, y)`` unspecified,
 #: and this package adds ``+2`` on this box, a plausible choice rather than the paper's.  The published
-#: Std(ρ̃_orig) of the field does not identify a box: among the many axis-aligned boxes that were searched, those
-#: that reproduce it are no more than chance agreement of six digits would give.  With this box the input misses
-#: the published Std(ρ̃_orig) by the amount :data:`rfmap.paper.verdicts.COMPARABLE_RTOL` states, so rect-peak is
-#: not comparable with the paper.
+#: Std(ρ̃_orig) of the field cannot identify the box: of the many axis-aligned boxes searched, no more reproduce its
+#: six printed digits than would by chance.  With this box the input's Std(ρ̃_orig) misses the published one by
+#: more than :data:`rfmap.paper.verdicts.COMPARABLE_RTOL` allows (its description gives the miss), so rect-peak is
+#: not compared with the paper's value.
 RECT_PEAK_BOX = ((0.6, 0.8), (0.2, 0.4), 2.0)
 
 
@@ -151,10 +151,30 @@ def _prism_peak_3d(x):
     return np.where(inside, 1.0, _multi_freq_3d(x))
 
 
-#: The paper's test densities by name (:class:`DensityField`): in 2D ``sin-cos``, ``exp-log``, ``rect-peak`` and
-#: ``ring`` (the tables of paper Sec. 5.2) and ``multi-freq`` (its resolution tests); in 3D ``sin-cos-3d``,
-#: ``shell-3d``, ``octant-3d`` and ``prism-peak-3d`` (the 3D tables) and ``multi-freq-3d`` (the 3D resolution tests).
-#: Each entry's ``description`` gives its formula.
+#: The paper's test densities by name (:class:`DensityField`): the 2D ones of the tables of paper Sec. 5.2 and of
+#: its resolution tests, then the 3D ones.  Each is the raw density :math:`p` of :math:`(x, y)` or :math:`(x, y, z)`
+#: in :math:`[0, 1]^d`, given with the paper's equation number (the densities of the resolution tests are unnumbered
+#: displays in the paper); :func:`sample_density` then shifts it to minimum 0.1 and scales it to unit mass.
+#:
+#: * ``sin-cos``, Eq. (28): :math:`2 + \sin(2\pi x)\cos(2\pi y)`;
+#: * ``exp-log``, Eq. (29): :math:`2 + \sin(2\pi e^{x})\cos(\pi\log(2y + 0.1))`;
+#: * ``rect-peak``, Eq. (30): ``sin-cos`` plus 2 on the box :math:`[0.6, 0.8] \times [0.2, 0.4]`
+#:   (:data:`RECT_PEAK_BOX`).  The paper leaves its :math:`\mathrm{rect}(x, y)` unspecified: this input is not the
+#:   paper's;
+#: * ``ring``, Eq. (31): :math:`\exp(-(r - 1)^2 / (2 \cdot 0.5^2))` with :math:`r` the distance to
+#:   :math:`(0.5, 0.5)`;
+#: * ``multi-freq``, the 2D resolution tests: :math:`2 + \sin(4\pi x)\cos(4\pi y) + 0.3\sin(6\pi x)`;
+#: * ``sin-cos-3d``, Eq. (33): :math:`2 + \sin(2\pi x)\cos(2\pi y)\sin(2\pi z)`;
+#: * ``shell-3d``, Eq. (34): :math:`\max g - g(r)` with :math:`g(r) = \exp(-(r - 1)^2 / (2 \cdot 0.5^2))` and
+#:   :math:`r` the distance to :math:`(0.5, 0.5, 0.5)`; the paper writes :math:`\max(p)`, read here as the largest
+#:   value of the Gaussian term in the cube, at its corners (:math:`r = \sqrt{3}/2`);
+#: * ``octant-3d``, Eqs. (35) and (36): the levels 1 to 8 of the eight octants blended by
+#:   :math:`s(t) = 1 / (1 + e^{-(t - 0.5)/0.1})` along each axis, level :math:`1 + a + 2b + 4c` weighted by
+#:   :math:`s_x^a (1 - s_x)^{1-a}\, s_y^b (1 - s_y)^{1-b}\, s_z^c (1 - s_z)^{1-c}` for :math:`a, b, c \in \{0, 1\}`;
+#: * ``prism-peak-3d``, Eq. (37): 1 in the box :math:`(0.6, 1) \times (0, 0.4) \times (0.4, 0.8)`, elsewhere
+#:   :math:`2 + \sin(4\pi x)\cos(2\pi y)\cos(2\pi z)`, as printed.  Its Std(ρ̃_orig) misses the paper's by more
+#:   than :data:`rfmap.paper.verdicts.COMPARABLE_RTOL` allows: this input is not taken for the paper's either;
+#: * ``multi-freq-3d``, the 3D resolution tests: :math:`2 + \sin(4\pi x)\cos(2\pi y)\cos(2\pi z)`.
 DENSITIES: dict[str, DensityField] = {
     f.name: f
     for f in [
@@ -255,8 +275,21 @@ def _t4(x, a=0.55, sigma=0.10):
     return torch.stack([X + w * (X - 0.5), Y + w * (Y - 0.5)], -1)
 
 
-#: The paper's analytic Beltrami test maps by name (:class:`BeltramiMap`): ``T1`` to ``T4`` (paper Sec. 5.1,
-#: Eqs. T1–T4) and ``T1-res``, the map T1 of the paper's resolution tests.
+#: The paper's analytic Beltrami test maps by name (:class:`BeltramiMap`): ``T1`` to ``T4`` (paper Sec. 5.1) and
+#: ``T1-res``, the map T1 of the paper's resolution tests (Table 3).  Each maps :math:`(x, y)` of the unit square to
+#: :math:`(u, v)`; below :math:`s = \sin(\pi x)\sin(\pi y)` and :math:`r^2 = (x - \tfrac12)^2 + (y - \tfrac12)^2`.
+#:
+#: * ``T1``, Eq. (23): :math:`u = x + a\sin(\pi x)\sin(2\pi y)`, :math:`v = y + b\sin(2\pi x)\sin(\pi y)`, with
+#:   :math:`a = b = 0.08`;
+#: * ``T2``, Eq. (24): :math:`u = x + a\sin(2\pi y)\sin(\pi x) + b\sin(4\pi y)\sin(2\pi x)`,
+#:   :math:`v = y + a\sin(2\pi x)\sin(\pi y) + b\sin(4\pi x)\sin(2\pi y)`, with :math:`a = 0.03`, :math:`b = 0.02`;
+#: * ``T3``, Eq. (25): :math:`u = x + s\,[-0.60\,(y - \tfrac12)\,e^{-r^2/0.045} + 0.70\,(y - \tfrac12)\,e^{-r^2/0.045}
+#:   + 0.06\sin(2\pi y)]`, :math:`v = y + s\,[0.60\,(x - \tfrac12)\,e^{-r^2/0.045} - 0.70\,(x - \tfrac12)\,
+#:   e^{-r^2/0.045} - 0.06\sin(2\pi x)]`, as printed (the two Gaussian terms combine into one of coefficient 0.10 in
+#:   :math:`u` and -0.10 in :math:`v`);
+#: * ``T4``, Eq. (26): :math:`u = x + a\,s\,e^{-r^2/\sigma}(x - \tfrac12)`,
+#:   :math:`v = y + a\,s\,e^{-r^2/\sigma}(y - \tfrac12)`, with :math:`a = 0.55`, :math:`\sigma = 0.10`;
+#: * ``T1-res``, Eq. (23) with :math:`a = 0.06`, :math:`b = 0.04`.
 BELTRAMI_MAPS: dict[str, BeltramiMap] = {
     m.name: m
     for m in [

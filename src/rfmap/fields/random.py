@@ -53,8 +53,7 @@ class RandomDensityConfig:
     p_noise : float
         Probability of adding vertex noise.
     p_peak : float
-        Probability of adding a narrow Gaussian peak (width 0.02–0.08); 0 by default (the distribution of the first
-        shipped models).
+        Probability of adding a narrow Gaussian peak (width 0.02–0.08); 0 by default (no peaks).
     p_ramp : float
         Probability of adding a steep tanh ramp across a random direction (width 0.01–0.05); 0 by default, like
         ``p_peak``.
@@ -97,6 +96,8 @@ class RandomDensityConfig:
 
     @classmethod
     def for_dim(cls, dim: int, **kw) -> "RandomDensityConfig":
+        """The default distribution in dimension ``dim``, with the paper's ranges: in 3D ``modes=(4, 40)`` and
+        ``freq=(0.1, 5.0)`` (paper Eq. (32)), in 2D the defaults above; ``kw`` overrides any field."""
         if check_dim(dim) == 3:
             kw = {"modes": (4, 40), "freq": (0.1, 5.0), **kw}
         return cls(dim=dim, **kw)
@@ -342,6 +343,10 @@ class RandomMap:
     so that :math:`\|\mu\|_\infty` equals a random level :math:`\le k` with :math:`\det J > 0`.  Its exact
     :math:`\mu` (closed-form derivatives) is a Beltrami training input whose solution is known to be a
     homeomorphism fixing the boundary, unlike a tapered random :math:`\mu`.
+
+    Differs from the paper: the paper draws :math:`\mu` itself by its Eq. (22) (here :class:`RandomBeltrami`) and
+    trains on ground-truth maps computed from it by a numerical solver; the Beltrami task's default draws a map and
+    takes its exact :math:`\mu`, so that no solver is needed to know the map.
     """
 
     dim = 2
