@@ -18,7 +18,7 @@ from ..tasks import draw_samples
 from ..training.config import get_config
 from ..training.validation import validation_fields
 from .reproduce import METHOD_TITLES, SYM, SYM_REF
-from .tables import COLUMN_TITLES, Table, format_sig
+from .tables import COLUMN_TITLES, Table, format_sig, power_of_ten
 
 __all__ = ["generalization_table", "generalization_summary", "pivot_markdown", "columns_markdown",
            "distortion_table", "displacement_demand"]
@@ -103,14 +103,23 @@ def generalization_summary(table: Table, column: str = "mean") -> str:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for kind in dict.fromkeys(c for c, _, _ in table.rows):
         vals = {m: v.get(column) for c, m, v in table.rows if c == kind}
-        cells = [kind] + [format_sig(vals.get(m)) for m in ours]
+        cells = [kind] + _one_notation([vals.get(m) for m in ours + ([classical] if classical else [])])
         if classical:
             best, ref = min(vals[m] for m in ours if vals.get(m) is not None), vals.get(classical)
-            cells += [format_sig(ref), f"{best / ref:.3g}×" if ref else "—"]
+            cells += [f"{best / ref:.3g}×" if ref else "—"]
         lines.append("| " + " | ".join(cells) + " |")
     kinds = list(dict.fromkeys(c for c, _, _ in table.rows))
     over = "over all its fields" if kinds == ["all"] else "per kind of field"
     return f"**{table.title}**: {column} {over}, lower is better\n\n" + "\n".join(lines)
+
+
+def _one_notation(values) -> list[str]:
+    """Numbers by :func:`format_sig`, all as powers of ten when any of them is one, so that a row reads in one
+    notation (``1.12 × 10⁻³`` beside ``6.46 × 10⁻⁵``, not ``0.00112``)."""
+    texts = [format_sig(v) for v in values]
+    if any("×" in t for t in texts):
+        texts = [power_of_ten(float(v), 3) if t != "—" and float(v) != 0 else t for v, t in zip(values, texts)]
+    return texts
 
 
 def pivot_markdown(columns: dict, column: str = "mean", title: str = "") -> str:
