@@ -52,7 +52,8 @@ def test_generalization_summary_compares_the_best_surrogate_with_the_solver():
     assert lines[4] == "| smooth | 0.04 | 0.03 | 0.02 | 0.01 | 2× |"
     t.add("tiny", "ours", {"mean": 0.00112})  # one power of ten in a row: the whole row in that notation
     t.add("tiny", "classical (diffusion DEM)", {"mean": 6.46e-5})
-    assert generalization_summary(t).splitlines()[-1] == "| tiny | 1.12 × 10⁻³ | — | — | 6.46 × 10⁻⁵ | 17.3× |"
+    row = generalization_summary(t).splitlines()[-1]
+    assert row == "| tiny | 1.12 × 10⁻³ | — | — | 6.46 × 10⁻⁵ | 17.3× |"
 
 
 def test_population_headline_of_a_table_without_refinement_or_paper_rows():
