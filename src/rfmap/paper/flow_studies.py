@@ -207,7 +207,7 @@ def floor_table(rows: list[dict[str, Any]]) -> CaseTable:
     part, the element-scale share of its variance, the time and the folded elements (small numbers as powers of
     ten)."""
     return _table("Where the last residual sits",
-                  ["N", "method", "Std(ρ̃_map)", "smooth part", "element-scale share", "time", "folded"],
+                  ["N", "method", "Std ρ̃ map", "smooth part", "element-scale share", "time", "folded"],
                   [[str(r["n"]), r["method"], format_sig(r["std"], 4), format_sig(r["smooth"], 3),
                     f"{100 * r['element_fraction']:.1f} %", format_value(r["time"], "time"), str(r["n_flipped"])]
                    for r in rows])
@@ -257,6 +257,6 @@ def warm_table(rows: list[dict[str, Any]]) -> CaseTable:
     """The rows of :func:`warm_start_residuals` as a table: per grid side and map the final Std(ρ̃_map), its
     smooth part, the element-scale share of its variance and the time."""
     return _table("Why the warm start stops short",
-                  ["N", "map", "Std(ρ̃_map)", "smooth part", "element-scale share", "time"],
+                  ["N", "map", "Std ρ̃ map", "smooth part", "element-scale share", "time"],
                   [[str(r["n"]), r["method"], format_sig(r["std"], 4), format_sig(r["smooth"], 3),
                     f"{100 * r['element_fraction']:.1f} %", format_value(r["time"], "time")] for r in rows])
