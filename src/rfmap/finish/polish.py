@@ -20,12 +20,15 @@ removes it with :func:`rfmap.solvers.solve_flow` started from :math:`u_0`:
    non-uniform target :math:`J_{u_0}`, which the density-equalizing flow does not solve.
 3. No flow removes a residual that alternates from element to element (``rfmap.core.metrics.residual_scales``), and the
    network's map has such a part: its displacement carries pixel-scale ripples of the working grid, which the
-   bilinear resampling onto a finer output grid turns into kinks.  ``Surrogate.map(polish=...)`` therefore starts
-   the flow from the map of the displacement smoothed on the working grid (:func:`smooth_displacement`, with
-   :func:`smooth_passes` passes of the binomial filter, edges continued as :data:`SMOOTH_EDGES` says; above the
-   working grid, :data:`OUTPUT_PASSES` more on the output grid, :func:`smooth_grid_displacement`, where the
-   resampling's kinks sit), when that map is fold-free; the report's ``"surrogate"`` stage is still the network's
-   own map.
+   bilinear resampling onto a finer output grid turns into kinks.  ``Surrogate.map(polish=...)`` therefore smooths
+   the displacement before the flow:
+
+   a. on the working grid, by :func:`smooth_passes` passes of the binomial filter (:func:`smooth_displacement`,
+      edges continued as :data:`SMOOTH_EDGES` says);
+   b. where the output grid is not the working grid, after the resampling, by :data:`OUTPUT_PASSES` more passes on
+      the output grid, where the resampling's kinks sit (:func:`smooth_grid_displacement`);
+   c. the flow starts from the smoothed map when that map is fold-free, from the network's map otherwise; the
+      report's ``"surrogate"`` stage is still the network's own map.
 4. A poor network map is not worth finishing: when :math:`u_0` has folded elements, leaves the sea box, or removes
    less than half of the input's density variation (:data:`POOR`), the flow starts cold from the identity instead,
    and the report says so.  ``Surrogate.map(polish=...)`` then skips its bijectivity repair of a folded map, which

@@ -21,7 +21,7 @@ equation, evaluated by separable products); what is the cartogram's own is how i
   estimated as :math:`\max|v| / \pi^2` (:class:`rfmap.solvers.heatflow.Settling`), is below ``tol_end`` grid
   spacings, or at ``t_max``.
 
-The map solver's integrator (Bogacki--Shampine 3(2)) is not used here: each path keeps its results (see
+The map solver's integrator (Bogacki--Shampine 3(2)) is not used here: a cartogram's pass takes Heun steps (see
 :mod:`rfmap.solvers.heatflow`).
 
 PyTorch is never imported here (nor ``scipy.fft``): the classical cartogram methods run without either.

@@ -141,7 +141,8 @@ def _flow(field: HeatField, y: np.ndarray, project, stepping: BS32Options, tol: 
 
 @dataclass(frozen=True)
 class DiffusionOptions:
-    r"""The options of :func:`solve_dem` with their defaults: a call names only those that differ.
+    r"""The options of the diffusion solver (:func:`solve_dem` of this module, ``rfmap.solvers.solve_diffusion``)
+    with their defaults: a call names only those that differ.
 
     Attributes
     ----------
@@ -220,7 +221,8 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
     progress : bool
         Show a ``tqdm`` progress bar over simulated time.
     **kwargs
-        Fields of :class:`.DiffusionOptions` that replace those of ``options`` (``solve_dem(d, boundary="free")``).
+        Fields of :class:`.DiffusionOptions` that replace those of ``options``
+        (``solve_diffusion(d, boundary="free")``).
 
     Returns
     -------

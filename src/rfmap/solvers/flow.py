@@ -207,9 +207,11 @@ class FlowOptions:
         Sea width :math:`L` for ``boundary="free"``, rounded to whole grid cells (at least one); default
         ``MARGIN`` of the dimension (0.5 in 2D, 0.25 in 3D).
     sea_blend : float
-        For ``boundary="free"``: the width (domain length units) over which the sea blends from the coast's density
-        to its balanced level (``rfmap.solvers.raster.balanced_sea``); 0 (the default) starts the sea at the coast,
-        as the diffusion solver does, so that both solve the same free-boundary problem.  A blend is a different
+        For ``boundary="free"`` only: smooths the jump in density between the domain's edge (the coast) and the
+        padding around it (the :term:`sea`).  The width (domain length units) over which the sea blends from the
+        coast's density to its balanced level (``rfmap.solvers.raster.balanced_sea``); 0 (the default) starts the
+        sea at its level right at the coast, as the diffusion solver does, so that both solve the same free-boundary
+        problem.  A blend is a different
         sea, hence a different coastline, and not a uniform gain: it helps steep ramps against the coast and can
         hurt raw densities of high contrast (``rfmap.paper.flow_studies.sea_blend_study`` measures it).  The width
         is halved while the blended sea would not be positive (down to an eighth of the request, then 0); the width

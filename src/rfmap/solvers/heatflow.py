@@ -22,11 +22,10 @@ the flow has settled.  One implementation here and in :mod:`rfmap.solvers.heatfi
   :math:`\sigma` vertex spacings, at :math:`t_0 = (\sigma h)^2/2` (the map's retries of a folding flow, the
   cartogram's ``blur``).
 
-What stays two is the integrator, chosen by the options a solver hands :func:`diffuse`: the maps take
-Bogacki--Shampine 3(2) steps (:func:`rfmap.solvers.bs32.bs32_flow`, error ``1e-2`` grid spacings, stopped after
-repeated folds), the cartogram passes Heun pairs (:func:`rfmap.solvers.heun.heun_flow`, ``0.2`` spacings, the
-cartogram flow's), with their own first steps; merging them would change results that are reproduced (the
-reference outputs checked by the tests of the source repository, and the numbers of the book).
+The two solvers differ in their time integrator, chosen by the options a solver hands :func:`diffuse`: the maps
+take Bogacki--Shampine 3(2) steps (:func:`rfmap.solvers.bs32.bs32_flow`, error ``1e-2`` grid spacings, stopped
+after repeated folds), the cartogram passes Heun pairs (:func:`rfmap.solvers.heun.heun_flow`, ``0.2`` spacings, the
+cartogram flow's), each with its own first step.
 
 The module uses numpy only.
 """
