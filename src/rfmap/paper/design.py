@@ -362,20 +362,25 @@ def _glance(decisions: list[dict[str, Any]]) -> list[str]:
     for heading, group in _groups(decisions):
         lines += [f"**{heading}**", ""]
         for d in group:
-            alternatives = "; ".join(d.get("alternatives") or []) or "none recorded"
+            alternatives = "; ".join(d.get("alternatives") or [])
+            tried = f"*Tried instead:* {_sentence(alternatives)} " if alternatives else ""  # no empty field
             lines.append(f"- [{display_name(d)}]({_label(d)}): {readable_value(d)}. "
-                         f"{_sentence(d.get('purpose') or d['what'])} *Tried instead:* {_sentence(alternatives)} "
+                         f"{_sentence(d.get('purpose') or d['what'])} {tried}"
                          f"*Outcome:* {_sentence(d.get('outcome'))} *Kept because:* {_sentence(kept_text(d))}")
         lines.append("")
     return lines
 
 
 def _sentence(text: Any) -> str:
-    """``text`` as a sentence: a capital first letter and a full stop; an em dash where there is none."""
+    """``text`` as a sentence: a capital first letter and a full stop; an em dash where there is none.  A first word
+    that names code (with an underscore, a digit or a bracket, such as ``float64`` or ``grid_sample``) keeps its
+    case."""
     text = str(text or "").strip()
     if not text:
         return "—."
-    return text[0].upper() + text[1:] + ("" if text.endswith((".", "!", "?")) else ".")
+    first = text.split()[0]
+    code = any(c in first for c in "_()`") or any(c.isdigit() for c in first)
+    return (text if code else text[0].upper() + text[1:]) + ("" if text.endswith((".", "!", "?")) else ".")
 
 
 def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "src/rfmap/data/design.json") -> str:
@@ -391,8 +396,8 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
              "step the flow solver takes, how much a network's map is smoothed before the solver finishes it, how "
              f"the checkpoint of a training run is chosen. This page records {len(decisions)} such decisions. Most "
              "were set by comparing a few values on a stated "
-             f"criterion; for {counted(len(uncompared), 'decision')} no alternative was tried, and the overview says "
-             "so (*Tried instead: None recorded*). The overview below gives, for each, what it controls, what was "
+             f"criterion; for {counted(len(uncompared), 'decision')} no alternative was tried, and the overview gives "
+             "them no *Tried instead*. The overview below gives, for each, what it controls, what was "
              "tried instead, what the measurement showed and why the value stays. Below the overview, each decision "
              "has a short section with its criterion; its numbers sit in a collapsed block (click to open it).", "",
              f"The numbers are of two kinds. For {counted(len(scripted), 'decision')} a script "
