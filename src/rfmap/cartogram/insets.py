@@ -108,7 +108,10 @@ class InsetCartogram:
     placement : dict
         ``{side: (scale, centre, offset)}``: a point :math:`p` of that inset is placed at :math:`s (p - c) + o`;
         the main inset (``C``, else the first) stays where it is.
-    tol, min_share : float
+    tol : float
+        The tolerance on the largest relative area error (the options' ``tol``).
+    min_share : float
+        The share of the total value from which a region is judged (the main inset's ``min_share``).
     """
 
     input_features: list

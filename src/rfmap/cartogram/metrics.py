@@ -55,7 +55,31 @@ BOOST_CAP = 0.4
 
 @dataclass
 class CartogramMetrics:
-    """Area errors and topology of a cartogram (see :func:`cartogram_metrics`)."""
+    r"""Area errors and topology of a cartogram (see :func:`cartogram_metrics`).
+
+    The area error of region :math:`i` is its relative error :math:`|A_i / T_i - 1|` against its target area
+    :math:`T_i`; the mean and largest errors are taken over the judged regions (at least the judged share of the
+    total value, :data:`MIN_SHARE`).
+
+    Attributes
+    ----------
+    mean_error : float
+        The mean area error of the judged regions.
+    max_error : float
+        The largest area error of the judged regions.
+    n_invalid : int
+        Regions whose polygon is invalid (self-intersecting, a hole outside its shell, ...).
+    max_overlap : float
+        The largest area shared by two regions, as a share of the total area (0 when none overlap).
+    n_overlapping : int
+        Pairs of regions that overlap by more than ``overlap_tol``.
+    overlap_tol : float
+        The share of the total area above which two regions count as overlapping.
+    n_minor : int
+        Regions under the judged share, left out of ``mean_error`` and ``max_error``.
+    max_error_minor : float
+        The largest area error of those regions (0 when there are none).
+    """
 
     mean_error: float
     max_error: float
@@ -63,8 +87,6 @@ class CartogramMetrics:
     max_overlap: float
     n_overlapping: int
     overlap_tol: float
-    #: regions below the judged share of the total value (:data:`MIN_SHARE`), left out of ``mean_error`` and
-    #: ``max_error`` and reported here
     n_minor: int = 0
     max_error_minor: float = 0.0
 

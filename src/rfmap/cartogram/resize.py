@@ -174,6 +174,9 @@ class Cartogram:
         The coordinates of ``features`` (:mod:`rfmap.cartogram.output`).
     tol : float
         The tolerance on the largest relative area error that :meth:`problems` checks.
+    min_share : float
+        The share of the total value from which a region is judged: smaller regions do not count in the area errors
+        (:func:`rfmap.cartogram.metrics.judged`).
     """
 
     input_features: list

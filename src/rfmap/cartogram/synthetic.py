@@ -43,12 +43,15 @@ class TessellationOptions:
     spread : float
         Cluster width (standard deviation) as a share of the outline's smaller side, drawn log-uniformly between
         ``spread / 30`` and ``spread``.
-    sigma, gamma : float
-        Log-normal spread of the densities and the growth of the density as the area shrinks.
+    sigma : float
+        Spread of the densities: the standard deviation :math:`\sigma` of their log-normal noise.
+    gamma : float
+        The exponent :math:`\gamma` by which the density grows as a region's area shrinks (small regions are the
+        dense ones, as in cities).
     decimals : int
         Coordinates rounded to this many decimals (degrees).
     wiggle : float
-        Borders bent by a smooth displacement of this amplitude (degrees, at a fifteenth of it wavelength; 0: the
+        Borders bent by a smooth displacement of this amplitude (degrees, with waves 15 times as long; 0: the
         Voronoi cells' straight edges), the same on both sides of every border.
     simplify : float
         Each region simplified on its own to this tolerance (degrees; 0: not at all), as files simplified feature by

@@ -79,8 +79,10 @@ class WorkingGridMap:
     ----------
     n : int
         The working grid's side ``W``.
-    points, mapped : ndarray, shape (W**d, d)
-        The grid's vertices and their repaired images.
+    points : ndarray, shape (W**d, d)
+        The working grid's vertices, in :func:`rfmap.core.mesh.grid_points` order.
+    mapped : ndarray, shape (W**d, d)
+        The images of ``points`` under the repaired, fold-free map.
     report : dict
         The report of :func:`rfmap.finish.repair.dispatch.repair_map`.
     """

@@ -65,9 +65,10 @@ class RefineReport:
 
     Attributes
     ----------
-    objective_start, objective : float
-        :math:`\mathcal{J}` at :math:`\alpha = 1` and at the chosen :math:`\alpha` (``info["refine_objective_start"]``,
-        ``info["refine_objective"]``).
+    objective_start : float
+        :math:`\mathcal{J}` at :math:`\alpha = 1`, the network's unrefined map (``info["refine_objective_start"]``).
+    objective : float
+        :math:`\mathcal{J}` at the chosen :math:`\alpha` (``info["refine_objective"]``).
     evaluations : int
         Evaluations of :math:`\mathcal{J}` (``info["refine_evaluations"]``).
     """
