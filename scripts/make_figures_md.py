@@ -335,13 +335,15 @@ def scoreboard(root: Path = ROOT) -> str:
         figs = [numbers[f] for f in shown_with.get(it["label"], [])]
         name = numbers[it["label"]] + (f" ({', '.join(figs)})" if figs else "")
         item = f"{_item_link(it, root, in_toc, name)}: {_cell(it['short'])}{refs[it['label']]}"
-        rows = [(m, t) for m, t in score["metrics"].items()]
-        rows += [(m, f"{t} (not scored)") for m, t in score.get("shown", {}).items()]
-        for i, (metric, title) in enumerate(rows):
+        rows = [(m, t, False) for m, t in score["metrics"].items()]
+        rows += [(m, f"{t} (not scored)", True) for m, t in score.get("shown", {}).items()]
+        for i, (metric, title, shown) in enumerate(rows):
             k = f"{score['key']}_{metric}"
-            cells = [item if i == 0 else "", paste(f"**{{{score['key']}_verdict}}**", nb) if i == 0 else "",
-                     _nobreak(title) if score.get("cases") else _nobreak(title.split(" (")[0]) + ", in the footnote",
-                     paste(f"{{{k}_met}}", nb) if score.get("cases") else "—"]
+            name = _nobreak(title) if score.get("cases") else _nobreak(title.split(" (")[0]) + ", in the footnote"
+            if shown:  # not scored: how many cases are at most the paper's goes with the name, not under *Cases met*
+                name += paste(f"; at most the paper's in {{{k}_met}}", nb)
+            cells = [item if i == 0 else "", paste(f"**{{{score['key']}_verdict}}**", nb) if i == 0 else "", name,
+                     paste(f"{{{k}_met}}", nb) if score.get("cases") and not shown else "—"]
             cells += [paste(f"{{{k}_{r}}}", nb) if score.get("cases") else "—" for r, _ in RATIOS]
             lines.append("| " + " | ".join(cells) + " |")
     others = [numbers[it["label"]] for it in items if (it.get("score") or {}).get("kind") == "illustration"]
@@ -375,7 +377,7 @@ def full_scoreboard(root: Path = ROOT) -> str:
                 first = False
         for metric, title in score.get("shown", {}).items():
             k = f"{score['key']}_{metric}"
-            cells = ["", _cell(f"mean over the cases, {title} (shown, not scored)")]
+            cells = ["", _cell(f"mean over the comparable cases, {title} (shown, not scored)")]
             cells += [paste(f"{{{k}_{c}}}", nb) for c, _ in COLUMNS] + [paste(f"at most the paper's in {{{k}_met}}", nb)]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines + [""] + defs) + "\n"
@@ -408,8 +410,11 @@ def reproduction(root: Path = ROOT) -> str:
         info = times.get(scale) or {}
         if info.get("seconds"):
             where = ", beside the test suite" if scale == "ci" else ""
+            listed = [v for stem, v in info["seconds"].items() if stem in chapters]
             lines.append(f"* `{scale}`: {_cell(info.get('machine', '?'))}, {info.get('date', '?')}{where}; "
-                         f"all chapters together {_duration(sum(info['seconds'].values()))}.")
+                         f"all {len(info['seconds'])} chapters of the book together "
+                         f"{_duration(sum(info['seconds'].values()))} (the {len(listed)} listed here: "
+                         f"{_duration(sum(listed))}).")
         else:
             lines.append(f"* `{scale}`: not measured yet (`python scripts/chapter_times.py collect --scale {scale} "
                          f"...`).")
