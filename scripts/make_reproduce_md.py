@@ -6,8 +6,8 @@ Usage: python scripts/make_reproduce_md.py [--check]
 For every weight file of src/rfmap/weights/ (NAME.safetensors with NAME.json) the section gives the one command that
 trains it again from its parent and, folded, every run of its chain that a repeat needs (rfmap.training.lineage: the
 recorded commands, each started from the file the run before it wrote; a last run that kept its parent's weights is
-named, not repeated); then the same for every chain of runs that is not shipped yet
-(src/rfmap/data/chains/NAME/state.json).  The section is written between the BEGIN and END lines of the page; the rest
+named, not repeated), and names the chains of runs that are not shipped yet (src/rfmap/data/chains/NAME/state.json)
+without their commands.  The section is written between the BEGIN and END lines of the page; the rest
 of the page is prose.  With --check nothing is written; the exit status is 1 when the page differs from what would be
 written.
 """
@@ -266,15 +266,12 @@ def section(root: Path = ROOT) -> str:
               "its states) changed nothing, so where a chain ends with one, the repeat stops before it.", ""]
     for model, meta in metas.items():
         lines += _model_section(f"retrain-{model}", model, meta, shipped)
-    if chains:
-        lines += ["### Chains in progress", "",
-                  "A chain whose weights are not shipped yet keeps its state in `src/rfmap/data/chains/NAME/`: the "
-                  "weights its last run kept, their metadata and the runs' logs, with `NOTES.md` saying how each run "
-                  "went and how to continue it.", ""]
-        for name, meta in chains.items():
-            notes = CHAINS / name / "NOTES.md"
-            lines += _model_section(f"retrain-chain-{name}", name, meta, shipped, "####",
-                                    notes.as_posix() if (root / notes).exists() else None)
+    if chains:  # unfinished work ships nothing: a pointer for maintainers, not its commands
+        names = ", ".join(f"`{name}`" for name in chains)
+        lines += ["Chains of runs whose weights are not shipped yet (" + names + ") keep their state in "
+                  "`src/rfmap/data/chains/NAME/`: the weights the last run kept, their metadata, the runs' logs and "
+                  "a `NOTES.md` saying how each run went and how to continue the chain. Nothing in the book uses "
+                  "them.", ""]
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
