@@ -13,7 +13,7 @@ transform is periodic, so the grid is zero-padded by ``padding`` (a fraction of 
 layers and cropped after them, which keeps the two sides of the unit square from talking to each other.
 
 :class:`FNONet` takes and returns the same tensors as :class:`rfmap.nn.MultiResUNet` — input channels
-:math:`[x_1, \dots, x_d, p_1, \dots, p_m]`, output the displacement :math:`\psi` — so the boundary mask, the
+:math:`[x_1, \dots, x_d, p_1, \dots, p_c]`, output the displacement :math:`\psi` — so the boundary mask, the
 losses, training, refinement, repair and :class:`rfmap.Surrogate` apply unchanged.  Its last projection is
 zero-initialised, so the untrained model is the identity map, like the U-Net.
 

@@ -1,8 +1,8 @@
 """Building a displacement network from its stored constructor arguments, and its tensors for a weight file.
 
 Two architectures share one interface (input ``(B, d + c, *S)``, output ``(B, d, *S)``, ``kwargs()``,
-``min_size``): the multi-resolution U-Net of the paper (``arch='unet'``, the default, also for metadata written
-before the choice existed) and ``neuraloperator``'s FNO (``arch='fno'``), each a constructor in ``NETWORKS``.
+``min_size``): the multi-resolution U-Net of the paper (``arch='unet'``, the default, and the one assumed where a
+model's metadata names none) and ``neuraloperator``'s FNO (``arch='fno'``), each a constructor in ``NETWORKS``.
 """
 from __future__ import annotations
 

@@ -129,7 +129,7 @@ class SampleOptions:
     beltrami_source : str
         ``'map'`` (the exact coefficient of a random map) or ``'mu'`` (a random coefficient).
     teacher : TeacherConfig, optional
-        A classical teacher's maps as targets (tasks with ``Task.teacher``).
+        A classical solver's maps as targets, for the tasks whose ``teacher`` attribute is true (:class:`Task`).
     """
 
     jitter: float = 0.2
@@ -198,7 +198,7 @@ class LossWeights:
     density_tangent : bool
         Below the 1 % floor of an element's mapped measure, continue its density along the tangent instead of
         clamping it (:func:`rfmap.tasks.losses.element_density`), so that collapsed and flipped elements keep a
-        restoring gradient from the density term. ``False`` (the clamp) is what the shipped models used.
+        restoring gradient from the density term. The default, ``False``, clamps; every shipped model was trained so.
     """
 
     beltrami: float = 0.0

@@ -16,8 +16,9 @@ __all__ = ["VALIDATION_SEED", "STREAMS", "ValidationField", "held_out_rng"]
 #: First word of every validation seed (training seeds have three words, so the streams never coincide).
 VALIDATION_SEED = 20_250_917
 
-#: The streams of held-out fields: 0 validates (and chooses checkpoints) during training, 1 is the report set of the
-#: book's generalization tables, used for nothing else.
+#: The streams of held-out fields: 0 validates during training (and chooses the weights that are kept), 1 draws the
+#: unseen random fields on which the book reports its results (the studies of :mod:`rfmap.paper`), used for nothing
+#: else (the glossary's *report stream*).
 STREAMS = {"validation": 0, "report": 1}
 
 
