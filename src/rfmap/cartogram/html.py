@@ -164,7 +164,9 @@ def _play(frame_ms: int) -> dict:
                         {"label": "pause", "method": "animate", "args": [[None], pause]}]}
 
 
-#: the width in pixels of a book page's text column, for which :func:`figure_html` sizes a figure's height
+#: the width, in CSS pixels, from which :func:`fitted_height` computes an interactive figure's height; the figure
+#: then fills the width of the page it is on, so this width only sets its proportions (it is not the readability
+#: check's :data:`rfmap.viz.figures.TEXT_COLUMN_PX`, which concerns saved images)
 PAGE_WIDTH_PX = 660
 
 

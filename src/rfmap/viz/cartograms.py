@@ -76,9 +76,9 @@ def plot_regions(ax, geoms, values=None, *, title: str | None = None, colorbar: 
     return coll
 
 
-#: Width (inches) up to which a figure's text keeps at least its own size when shown in the book's text column (the
-#: column's CSS pixels at 96 to the inch, :data:`rfmap.viz.figures.TEXT_COLUMN_PX`); a wider figure is shrunk, so its
-#: text is set larger (:func:`column_style`) to stay at least 9 pt when shown.
+#: Width (inches) up to which a figure's text keeps at least its own size when shown (the readability check's
+#: assumed display width, :data:`rfmap.viz.figures.TEXT_COLUMN_PX`, at 96 CSS pixels to the inch); a wider figure
+#: is shrunk, so its text is set larger (:func:`column_style`) to stay at least 9 pt when shown.
 TEXT_COLUMN_IN = 720 / 96
 #: The qualitative palette of regions coloured so that neighbours differ (matplotlib's Set2, then Pastel1).
 QUALITATIVE = ("#66c2a5", "#fc8d62", "#8da0cb", "#e78ac3", "#a6d854", "#ffd92f", "#e5c494", "#b3b3b3",

@@ -22,7 +22,9 @@ STYLE = {
 }
 
 
-#: width of the book's text column in CSS pixels; a wider image is shown scaled down to it
+#: the display width, in CSS pixels, that the readability check of saved figures assumes
+#: (:func:`display_font_sizes`): an image wider than this is taken to be shown scaled down to it.  An assumed width,
+#: not a measured one: the book's text column narrows and widens with the browser window
 TEXT_COLUMN_PX = 720
 
 #: the smallest text a reader should have to read, in points, as the figure is shown in the text column
@@ -128,11 +130,12 @@ def figures_dir() -> Path:
 
 
 def display_font_sizes(fig, dpi: float | None = None) -> tuple[float, list[tuple[str, float]], int]:
-    r"""How large the text of ``fig`` appears in the book's text column.
+    r"""How large the text of ``fig`` appears when its saved image is shown at most :data:`TEXT_COLUMN_PX` wide.
 
-    A saved image ``w`` pixels wide is shown at ``min(w, TEXT_COLUMN_PX)`` CSS pixels, so text of ``s`` points at
-    ``dpi`` appears at :math:`s\,\frac{\mathrm{dpi}}{96}\,\min\bigl(1, \frac{C}{w}\bigr)` points (96 CSS pixels to
-    the inch, 72 points to the inch).
+    A saved image ``w`` pixels wide is taken to be shown at :math:`\min(w, C)` CSS pixels, :math:`C` =
+    ``TEXT_COLUMN_PX``, so text of ``s`` points at ``dpi`` appears at
+    :math:`s\,\frac{\mathrm{dpi}}{96}\,\min\bigl(1, \frac{C}{w}\bigr)` points (96 CSS pixels to the inch, 72 points to
+    the inch).
 
     Returns
     -------
