@@ -411,9 +411,15 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
                       "was running, so a small difference in time between two settings can come from that load "
                       "rather than from the setting.")
     if flagged:
+        timed = [d for d in flagged if d["criterion"].startswith("time")]  # judged by time: results do not change
+        why = ("changing it would change every result of the book" if not timed else
+               f"changing one of the {len(flagged) - len(timed)} judged by their results would change results of the "
+               f"book, while the {counted(len(timed), 'decision')} judged by time ("
+               + ", ".join(display_name(d) for d in timed) + ") change only how long a computation takes, and wait "
+               "for a measurement on an idle machine")
         lines += [f"For {counted(len(flagged), 'decision')} the numbers do not support the value chosen. The "
-                  "overview says so under *Kept because*, and the constant stays as it is until it has been measured "
-                  "again: changing it would change every result of the book.", ""]
+                  f"overview says so under *Kept because*, and the constant stays as it is until it has been measured "
+                  f"again: {why}.", ""]
     lines += ["## At a glance", ""] + _glance(decisions)
     lines += ["## The decisions one by one", "",
               "To measure the re-measurable decisions again and regenerate this page:", "",
