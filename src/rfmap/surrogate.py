@@ -81,7 +81,8 @@ class PredictOptions:
         folded map is first tried on coarser working grids).  Given explicitly, it is used as given.
     native : bool
         Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried), as the paper
-        does; with ``refine=True`` (and ``repair=False``) this is the paper's method.  Excludes ``work_n``.
+        does; with ``refine=True`` and ``repair=False`` (every other option at its default) this is the paper's
+        method.  Excludes ``work_n``.
     alpha : sequence of d floats, optional
         A fixed stretching vector of a network's map (ignored with ``refine``).
     preprocess : bool
@@ -416,8 +417,8 @@ class Surrogate:
             given.
         native : bool
             Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried), as the
-            paper evaluates the one network on whatever grid the field comes on; with ``refine=True`` (and
-            ``repair=False``) this is the paper's method.  Excludes ``work_n``.
+            paper does; with ``refine=True`` and ``repair=False`` (every other option at its default) this is the
+            paper's method.  Excludes ``work_n``.
         alpha : sequence of d floats, optional
             A fixed stretching vector (ignored when ``refine``).
         preprocess : bool

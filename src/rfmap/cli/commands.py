@@ -338,8 +338,9 @@ def _add_map(sub) -> None:
     s.add_argument("--points", default=None, help=".npy array (P, d) of query points")
     s.add_argument("--refine", action="store_true", help="apply weight refinement")
     s.add_argument("--native", action="store_true",
-                   help="run the network on the requested grid itself (the paper's method), not on a working grid "
-                        "inside its training range")
+                   help="run the network on the requested grid itself, as the paper does, not on a working grid "
+                        "inside its training range; with --refine and --no-repair (and no other option) this is "
+                        "the paper's method")
     s.add_argument("--no-repair", action="store_true",
                    help="return the raw network map, without removing folded elements or shortening a map that "
                         "leaves the density less equal than it was")
