@@ -16,17 +16,25 @@ def training_fields_text(config: dict) -> str:
 
 
 def recipe_table(surs: dict) -> Table:
-    r"""How each model was trained, from its metadata: the training fields (:func:`training_fields_text`), the fold
-    penalty (weight, from :math:`\det J < \tau`), the peak learning rate of the last run, the decay of its weight
-    average (``ema``; ``None`` when it shipped the weights as trained), the cumulative steps and minutes over its
-    ``--init`` chain, and the held-out validation of the shipped weights as recorded at the end of training (grid sides;
-    the score that chose the kept weights, as :func:`rfmap.training.validation.score` ranks the validation summary's
-    scores, and what that score is: the family score of Std ratios, or the mean metric with every folded map counted as
-    the identity map, else the capped or the plain mean; which maps were scored: ``raw`` network output or the
-    ``default`` maps, as a plain ``Surrogate.map`` returns them, a folded map regridded or repaired
-    (``TrainConfig.val_repair``); how many held-out maps the network itself folded;
-    :func:`rfmap.training.validation.evaluate`).  Older weights were validated on fewer sides, so their numbers are not
-    comparable with those of later runs.
+    r"""How each model was trained, from its metadata, one row per model and one column per item:
+
+    * ``fields``: the training fields (:func:`training_fields_text`);
+    * ``fold``: the fold penalty, its weight and the threshold :math:`\tau` of :math:`\det J < \tau` below which it
+      acts;
+    * ``lr``: the peak learning rate of the last run;
+    * ``ema``: the decay of its weight average (``None`` where the weights shipped as trained);
+    * ``steps`` and ``train_time``: the steps and minutes summed over the model's chain of runs (``--init``);
+    * ``val_n``: the grid sides of the held-out validation of the shipped weights, as recorded at the end of training
+      (:func:`rfmap.training.validation.evaluate`);
+    * ``held_out``: the score that chose the kept weights, as :func:`rfmap.training.validation.score` ranks the
+      validation's scores;
+    * ``score_kind``: what that score is, one of the family score of Std ratios, the mean metric with every folded
+      map counted as the identity map, the capped mean and the plain mean;
+    * ``scored``: which maps were scored: the ``raw`` network output, or the ``default`` maps as a plain
+      ``Surrogate.map`` returns them, a folded map regridded or repaired (``TrainConfig.val_repair``);
+    * ``folded_maps``: how many held-out maps the network itself folded.
+
+    Older weights were validated on fewer sides, so their numbers are not comparable with those of later runs.
 
     Each column of the Markdown table is in one notation: rates as powers of ten
     (:func:`~rfmap.paper.tables.rate_text`), steps with thousands separators, minutes whole, the held-out scores with
