@@ -10,7 +10,7 @@ tests) so that pyproj is not imported; PROJ through pyproj serves a Lambert proj
 * the **Lambert azimuthal equal-area** projection centred on the map, for a regional map: centre longitude
   :math:`\lambda_0` the midpoint of the smallest arc of longitudes that holds every vertex, centre latitude
   :math:`\varphi_0` the midpoint of the latitudes;
-* the **Equal Earth** projection (Šavrič, Patterson & Jenny 2018) centred on Greenwich, for a world map: one whose
+* the **Equal Earth** projection (Šavrič, Patterson & Jenny 2019) centred on Greenwich, for a world map: one whose
   smallest arc of longitudes is wider than :data:`WORLD_SPAN` (180°).
 
 The smallest arc is the circle of longitudes less its largest empty gap, so a map that crosses the antimeridian
@@ -26,9 +26,10 @@ degrees (areas right to :math:`O(\Delta\varphi^2)` across a city) and ``"none"``
 
 References
 ----------
-B. Šavrič, T. Patterson, B. Jenny, "The Equal Earth map projection", Int. J. Geogr. Inf. Sci. 33(3), 454–465 (2019).
+Bojan Šavrič, Tom Patterson, Bernhard Jenny, "The Equal Earth map projection", Int. J. Geogr. Inf. Sci. 33(3),
+454–465 (2019).
 
-J. P. Snyder, "Map Projections: A Working Manual", U.S. Geological Survey Professional Paper 1395 (1987), §24
+John P. Snyder, "Map Projections: A Working Manual", U.S. Geological Survey Professional Paper 1395 (1987), §24
 (Lambert azimuthal equal-area).
 """
 from __future__ import annotations

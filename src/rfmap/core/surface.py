@@ -28,7 +28,8 @@ Cost: linear in the number of triangles for a surface without wild differences i
 
 References
 ----------
-T. Möller, "A fast triangle-triangle intersection test", J. Graphics Tools 2(2), 25–30 (1997).
+Tomas Möller, "A fast triangle-triangle intersection test", J. Graphics Tools 2(2), 25–30
+(1997).
 """
 from __future__ import annotations
 
