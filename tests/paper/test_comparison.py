@@ -217,8 +217,11 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     assert (v["std_rho_map_native"], v["std_rho_map_paper"]) == ("0.07000", "0.08000")
     assert c.mean("native", "std_rho_map") == pytest.approx(0.095)
     assert v["std_rho_map_rect-peak_met"] == "n/c"
-    assert c.to_markdown().splitlines()[4].endswith(
-        "| n/c; Std ratio: paper's method 0.2, paper 0.187 |")
+    # the met cell stays short; the Std ratios go in the note under the table
+    assert c.to_markdown().splitlines()[4].endswith("| n/c |")
+    assert c.to_markdown().endswith(
+        "lower is better: rect-peak, paper's method 0.2 and paper 0.187.")
+    assert c.nc_note().startswith("*n/c*: not comparable")
     c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses
     assert c.verdict_word() == (
         "not reproduced on the comparable cases (0 of 1); the n/c case is worse by Std ratio")

@@ -208,11 +208,11 @@ class Comparison:
         n = int(c.name) if c.name.isdigit() else PAPER_N[get_field(c.field).dim]
         return is_comparable(c.field, n, paper_std)
 
-    def _nc_ratios(self) -> list[tuple[float, float]]:
-        """Per case whose input is not the paper's: its Std ratio by the paper's method and the paper's."""
-        ratios = [[std_ratio(self.value(c.name, m, "std_rho_map"), self.value(c.name, m, "std_rho_orig"))
-                   for m in ("native", "paper")] for c in self.cases if not self.comparable(c.name)]
-        return [(a, b) for a, b in ratios if a is not None and b is not None and "std_rho_map" in self.metrics]
+    def _nc_ratios(self) -> list[tuple[str, float, float]]:
+        """Per case whose input is not the paper's: its name, its Std ratio by the paper's method and the paper's."""
+        ratios = [[c.name] + [std_ratio(self.value(c.name, m, "std_rho_map"), self.value(c.name, m, "std_rho_orig"))
+                              for m in ("native", "paper")] for c in self.cases if not self.comparable(c.name)]
+        return [(c, a, b) for c, a, b in ratios if a is not None and b is not None and "std_rho_map" in self.metrics]
 
     def verdict_word(self, short: bool = False) -> str:
         """The verdict, its tally and (unless ``short``) the clause on the n/c cases, by :func:`.qualified_verdict`.
@@ -223,21 +223,20 @@ class Comparison:
         paper's map leaves of the paper's input, it reads
         ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'``."""
         flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
-        return qualified_verdict(flags, [a > b for a, b in self._nc_ratios()], short=short)
+        return qualified_verdict(flags, [a > b for _, a, b in self._nc_ratios()], short=short)
 
     def _case_met(self, case: str, metric: str) -> str:
-        """A met cell of a chapter's table: ``yes``/``no``/``—``, or ``n/c; Std ratio: paper's method R, paper P``
-        for an input not the paper's."""
-        if self.comparable(case):
-            met = self.met(case, metric)
-            return "—" if met is None else ("yes" if met else "no")
-        if metric != "std_rho_map":
+        """A met cell of a chapter's table: ``yes``/``no``/``—``, or ``n/c`` for an input not the paper's."""
+        if not self.comparable(case):
             return "n/c"
-        ours, paper = (std_ratio(self.value(case, m, "std_rho_map"), self.value(case, m, "std_rho_orig"))
-                       for m in ("native", "paper"))
-        if ours is None or paper is None:
-            return "n/c"
-        return f"n/c; Std ratio: paper's method {ours:.3g}, paper {paper:.3g}"
+        return {None: "—", True: "yes", False: "no"}[self.met(case, metric)]
+
+    def nc_note(self) -> str:
+        """The note under a table with inputs not the paper's (``""`` if none): *n/c* and each one's Std ratios."""
+        parts = "; ".join(f"{c}, paper's method {a:.3g} and paper {b:.3g}" for c, a, b in self._nc_ratios())
+        ratio = f"; compared instead by the Std ratio, Std(ρ̃_map) / Std(ρ̃_orig), lower is better: {parts}"
+        nc = not all(self.comparable(c.name) for c in self.cases)
+        return f"*n/c*: not comparable, the input is not the paper's{ratio if parts else ''}." if nc else ""
 
     def count(self, metric: str, test: Callable[[str], bool | None] | None = None) -> tuple[int, int]:
         """``(k, m)``: the cases where ``test(case)`` holds (default: :meth:`met`) among the ``m`` it decides."""
@@ -316,7 +315,7 @@ class Comparison:
                 texts[f"{metric}_{c.name}_met"] = met_text(ours, paper) if c.name in comparable else "n/c"
         texts["verdict"] = self.verdict_word(short=True)
         texts["nc"] = "; ".join(f"paper's method {a:.3g}, paper {b:.3g} ({'worse' if a > b else 'not worse'})"
-                                for a, b in self._nc_ratios()) or "—"
+                                for _, a, b in self._nc_ratios()) or "—"
         out = one_notation(out, self.metrics + self.shown()) | texts
         return {k: v.replace(" × ", "\u00a0×\u00a0") for k, v in out.items()}  # 9.4 × 10⁻³ never split
 
@@ -365,19 +364,15 @@ class Comparison:
     def to_markdown(self, quantities: list[str] | None = None) -> str:
         """The paper's shape: a block of rows per case (the scored metrics and the time, or ``quantities``), a column
         per method that holds one of them and the verdict of each scored metric; numbers by :func:`format_number`."""
-        return self._markdown(quantities or self.metrics + ["time"], met="paper" in self.methods())
+        table = self._markdown(quantities or self.metrics + ["time"], met="paper" in self.methods())
+        return f"{table}\n\n{self.nc_note()}" if "paper" in self.methods() and self.nc_note() else table
 
     def verdict(self) -> str:
         """One sentence per metric: how many cases meet the paper (criterion named), and how many the classical
         solver maps more accurately than the paper's method."""
-        parts = []
-        for metric in self.metrics:
-            k, m = self.count(metric)
-            kc, mc = self.classical_better(metric)
-            parts.append(f"{METRIC_TITLES[metric]}: the paper's method is at most the paper's value on "
-                         f"{of_count(k, m, 'case')}; the {self.classical} does better than the paper's method on "
-                         f"{of_count(kc, mc)}.")
-        return " ".join(parts)
+        return " ".join(f"{METRIC_TITLES[q]}: the paper's method is at most the paper's value on "
+                        f"{of_count(*self.count(q), 'case')}; the {self.classical} does better than the paper's "
+                        f"method on {of_count(*self.classical_better(q))}." for q in self.metrics)
 
     def full_quantities(self, leave_out=()) -> list[str]:
         """Every quantity measured, in the tables' order, but those of ``leave_out``."""
