@@ -116,7 +116,7 @@ def _met(native, paper) -> bool | None:
 
 
 def score_row(paper, native, delivered, classical, *, published: bool = True) -> dict[str, str]:
-    """The four values of one scoreboard cell and its verdict, as the book pastes them: each number by
+    """The four values of one cell of the introduction's scoreboard and its verdict, as formatted text: each number by
     :func:`format_number` (``paper`` with no more digits than it was printed with, unless it is not a
     ``published`` value but, say, a mean of them), ``met`` ``yes`` / ``no`` (``—`` without a paper value)."""
     met = _met(native, paper)
@@ -290,9 +290,10 @@ class Comparison:
                 "runs it on the working grid and interpolates.")
 
     def score_values(self) -> dict[str, str]:
-        """The numbers the scoreboard pastes, as formatted text: for every metric ``{metric}_{col}`` (the mean over
-        the comparable cases of each column of :data:`METHODS`), ``{metric}_{col}_ratio`` (the median over them of
-        the ratio to the paper, :func:`rfmap.paper.verdicts.median_ratio`), ``{metric}_met`` and
+        """This table's numbers in the introduction's scoreboard, as formatted text: for every metric
+        ``{metric}_{col}`` (the mean over the comparable cases of each column of :data:`METHODS`),
+        ``{metric}_{col}_ratio`` (the median over them of the ratio to the paper,
+        :func:`rfmap.paper.verdicts.median_ratio`), ``{metric}_met`` and
         ``{metric}_classical_better`` (``"3 of 4"``, ``"all 4"``: :func:`rfmap.core.wording.of_count`), per case
         ``{metric}_{case}_{col}`` and ``{metric}_{case}_met`` (:func:`rfmap.paper.verdicts.met_text`, ``n/c`` for
         an input not the paper's); ``verdict`` (short) and ``nc``, the n/c cases' Std ratios (``—`` for none)."""
