@@ -415,7 +415,7 @@ def refinement_fields(rows: list[dict[str, Any]]) -> CaseTable:
     one); the title counts them among the fields mapped both ways, as ``ref_worse_text`` of
     :func:`hybrid_findings` does."""
     both, worse = _refine_pairs(rows)
-    title = (f"Weight refinement, field by field: it raised Std(ρ̃_map) on {of_count(len(worse), len(both), 'field')}"
+    title = (f"Weight refinement, field by field: it raised the map's Std on {of_count(len(worse), len(both), 'field')}"
              " mapped both ways")
     lines = ["| case | field | default map | with refinement | default map from a coarser grid |",
              "|---|---|---|---|---|"]
