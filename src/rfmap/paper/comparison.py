@@ -583,7 +583,7 @@ def native_side_by_side(tables: dict[str, Comparison], metric: str = "std_rho_ma
         if [c.name for c in t.cases] != [c.name for c in first.cases] or \
                 any(t.value(c.name, "native", metric) is None for c in t.cases):
             raise ValueError(f"comparison {name!r} differs from the first in its cases or lacks {metric!r}")
-    title = METRIC_TITLES[metric].replace("|", "\\|")
+    title = METRIC_TITLES[metric].replace("|", "\\|\u2060")  # a word joiner: never "paper mean |" / "μ|"
     head = [first.case_prefix.strip(" =") or "case", f"paper {title}"]
     head += [f"{name}, paper's method" for name in tables] + [first.classical]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
