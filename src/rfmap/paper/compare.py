@@ -64,9 +64,9 @@ def model_table(surs: dict) -> Table:
     ``held-out, folds as identity`` the same mean with a folded map counted as the identity (the ``penalized``
     entry where recorded, else the plain mean); ``checkpoint score`` is the score that chose the kept weights
     (:func:`rfmap.training.validation.score`: the mean over field families of Std(ρ̃_map) / Std(ρ̃_orig)), ``None``
-    where the record predates it and the weights were chosen by the held-out mean.  The Markdown prints parameters
-    and the kept step with thousands separators and the other numbers to three significant digits, as the chapter's
-    prose.  The configuration is followed by the network's name (:data:`NETWORK_NAMES`) where the model's own name
+    where the model's training record has none and the weights were chosen by the held-out mean.  The Markdown
+    prints parameters and the kept step with thousands separators and the other numbers to three significant digits,
+    as the chapter's prose.  The configuration is followed by the network's name (:data:`NETWORK_NAMES`) where the model's own name
     is not already that name.
     """
     _check(surs)
