@@ -66,8 +66,8 @@ def model_table(surs: dict) -> Table:
     (:func:`rfmap.training.validation.score`: the mean over field families of Std(ρ̃_map) / Std(ρ̃_orig)), ``None``
     where the model's training record has none and the weights were chosen by the held-out mean.  The Markdown
     prints parameters and the kept step with thousands separators and the other numbers to three significant digits,
-    as the chapter's prose.  The configuration is followed by the network's name (:data:`NETWORK_NAMES`) where the model's own name
-    is not already that name.
+    as the chapter's prose.  The configuration is followed by the network's name (:data:`NETWORK_NAMES`) where the
+    model's own name is not already that name.
     """
     _check(surs)
     sig, whole = (lambda v: f"{v:#.3g}".rstrip(".")), (lambda v: f"{v:,}")  # 0.220 and 594, as the prose
