@@ -319,6 +319,17 @@ def _status(d: dict[str, Any]) -> list[str]:
     return [f"{RECORD_TAG.format(date=date)}", ""]
 
 
+def _evidence(d: dict[str, Any]) -> str:
+    """Of what date the overview's outcome is: ``re-measured 2026-12-06`` for a decision a script measures again (its
+    last run), ``record of 2026-11-27, not re-measured`` for the others (``record, not re-measured`` without a
+    date)."""
+    if remeasure_command(d):
+        date = (d.get("measured") or {}).get("date")
+        return f"re-measured {date}" if date else "re-measurable, not measured yet"
+    date = ((d.get("recorded") or {}).get("entered") or {}).get("date")
+    return f"record of {date}, not re-measured" if date else "record, not re-measured"
+
+
 def _details(d: dict[str, Any]) -> list[str]:
     """One decision's section: its name and value and its criterion (what it controls and what the measurement
     showed are said in the overview), then the numbers in a collapsed block (rows quoted by a finding not
@@ -366,7 +377,8 @@ def _glance(decisions: list[dict[str, Any]]) -> list[str]:
             tried = f"*Tried instead:* {_sentence(alternatives)} " if alternatives else ""  # no empty field
             lines.append(f"- [{display_name(d)}]({_label(d)}): {readable_value(d)}. "
                          f"{_sentence(d.get('purpose') or d['what'])} {tried}"
-                         f"*Outcome:* {_sentence(d.get('outcome'))} *Kept because:* {_sentence(kept_text(d))}")
+                         f"*Outcome, {_evidence(d)}:* {_sentence(d.get('outcome'))} "
+                         f"*Kept because:* {_sentence(kept_text(d))}")
         lines.append("")
     return lines
 
