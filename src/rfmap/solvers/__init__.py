@@ -6,9 +6,8 @@
   (Gastner & Newman 2004, :func:`solve_diffusion`) or, with ``method="flow"``, the flow-based method (Gastner,
   Seguy & More 2018, :func:`solve_flow`).
 
-:func:`solve_diffusion` is the function :func:`rfmap.solvers.diffusion.solve_dem` under a name of its own (so that it
-is not confused with :func:`solve_dem` above, which chooses between the methods); it is documented once, under
-that name.
+:func:`solve_diffusion` is :func:`rfmap.solvers.diffusion.solve_dem`, the diffusion solver itself, under a name that
+keeps it apart from :func:`solve_dem` above, which chooses between the methods.
 
 All return a :class:`rfmap.core.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name: ``"lbs"``,
 ``"diffusion"`` and ``"flow"`` (``"dem"`` is accepted as another name of ``"diffusion"``, :data:`ALIASES`).
