@@ -394,8 +394,16 @@ class Surrogate:
         return self._forward(x).float().cpu()
 
     def map(self, field, n: int | None = None, points=None, options: MapOptions | None = None, **kw) -> MapResult:
-        """Map one field, as ``options`` say (:class:`.MapOptions`, the options of every way to map a field), its
-        fields also given as keywords (``sur.map(field, n, refine=True)``).
+        """Map one field: the network's map of the requested grid (or query points), by default made fold-free.
+
+        The options that matter most (keywords, or fields of ``options``):
+
+        * ``refine=True``: choose the stretching vector :math:`\\alpha` after inference (the paper's Sec. 4.3);
+        * ``repair=False``: return the network's map as it is, even folded (the default repairs folds and never
+          returns a density map less equal than its input);
+        * ``native=True``: run the network on the requested grid itself, as the paper does.  With ``refine=True`` and
+          ``repair=False`` (every other option at its default) this is :term:`the paper's method`;
+        * ``polish=True``: finish a density map with the flow-based solver, for accuracy beyond the network's.
 
         Parameters
         ----------
@@ -408,7 +416,7 @@ class Surrogate:
             Evaluate the map at these arbitrary query points instead of the output grid; the result's elements
             are a Delaunay triangulation of them.
         options : MapOptions, optional
-            The options below (default ``MapOptions()``); ``**kw`` replaces its fields:
+            The options below (default ``MapOptions()``, see :class:`.MapOptions`); ``**kw`` replaces its fields:
         refine : bool
             Apply weight refinement (paper Sec. 4.3) before returning.
         work_n : int, optional
@@ -428,47 +436,48 @@ class Surrogate:
         refine_bounds : (float, float), optional
             Search interval of every component of :math:`\\alpha` (default :data:`rfmap.finish.refine.REFINE`).
         repair : bool
-            Make the returned map fold-free (:func:`rfmap.finish.repair.dispatch.repair_map`, after any refinement); with query
-            ``points`` the map of the working grid is repaired first and then interpolated.  A density map of the
-            output grid (without ``polish``) that is then still no more equal than the input is shortened to the
-            most equal fold-free map between the identity and itself (:func:`rfmap.finish.shorten.shorten_map`;
-            ``info["shorten"]``), so the returned map never leaves the density less equal than it was.  A density
-            map of query ``points`` is shortened by the scale its working grid's map would be shortened by (the
-            judgement is made there; :func:`rfmap.finish.query.shorten_query`), so that grid and points deliver one
-            map.  ``False`` skips the repair and the shortening: with the other options at their defaults it
-            returns the raw network map (with ``refine`` a refined one).
+            Make the returned map fold-free (after any refinement; :func:`rfmap.finish.repair.dispatch.repair_map`),
+            and shorten a density map that is still no more equal than its input towards the identity, to the most
+            equal fold-free map between the two (:func:`rfmap.finish.shorten.shorten_map`, ``info["shorten"]``).
+            With query ``points``, the map of the working grid is repaired and judged, and the points follow it, so
+            that grid and points deliver one map.  ``False`` skips both: with the other options at their defaults
+            it returns the raw network map (with ``refine``, a refined one).
         polish : bool or float
-            Density maps on the output grid: finish the (refined, repaired) network map with the flow-based solver
-            (:func:`rfmap.finish.stages.polish`, :func:`rfmap.finish.polish.polish_map`), started from the map of the network's
-            displacement smoothed on the working grid (``rfmap.finish.polish.smooth_displacement``,
-            ``rfmap.finish.polish.smooth_passes`` passes, edges per ``rfmap.finish.polish.SMOOTH_EDGES``, and on a finer output
-            grid ``rfmap.finish.polish.OUTPUT_PASSES`` more passes there; all recorded in ``info["polish"]``) where that is
-            fold-free; a number is the tolerance on Std(ρ̃_map).  ``time`` then covers both stages.  A folded
-            network map is not repaired first (``info["repair"]["skipped"]``): the polish then starts cold from the
-            identity, and the repair would be thrown away.
+            Density maps on the output grid: finish the (refined) network map with the flow-based solver, started
+            from the network's map smoothed (the warm start) where that is fold-free, else from the identity (the
+            cold start); a number is the tolerance on Std(ρ̃_map).  A folded network map is not repaired first.
+            ``time`` then covers both stages; ``info["polish"]`` records them (details:
+            :func:`rfmap.finish.polish.polish_map`).
         guard : bool
-            With ``polish``: after a warm flow also run the cold flow and keep the better map
-            (``rfmap.finish.polish.GUARD``), so that the result is never worse than the flow-based solver alone.
+            With ``polish``: after a warm start also run the cold one and keep the better map, so that the result
+            is never worse than the flow-based solver alone.
         symmetrize : bool or str
-            Average the network's displacement over symmetries of the square or cube
-            (:mod:`rfmap.nn.symmetry`: ``True`` for :data:`rfmap.nn.symmetry.DEFAULT_SYMMETRY`, 8 evaluations in 2D and 3
-            in 3D, or a group name), before everything else; ``info["symmetrize"]`` records the group.
+            Average the network's displacement over symmetries of the square or cube, before everything else
+            (:mod:`rfmap.nn.symmetry`: ``True`` for :data:`rfmap.nn.symmetry.DEFAULT_SYMMETRY`, 8 evaluations in 2D
+            and 3 in 3D, or a group name); ``info["symmetrize"]`` records the group.
 
         Returns
         -------
         MapResult
-            ``info`` is a read-only view (:class:`rfmap.finish.report.InfoView`) of the typed report of the stages
-            (:class:`rfmap.finish.report.MapReport`, ``info.report``).  It holds ``alpha``, ``work_n`` (the working grid
-            of the returned map), ``network_time``, ``symmetrize``, with refinement the objective before/after, when
-            coarser working grids were tried ``info["regrid"]`` (``from``, ``tried``, ``work_n``: the grid taken or
-            ``None``, ``time``), with ``repair`` the report ``info["repair"]`` (see :func:`rfmap.finish.repair.dispatch.repair_map`),
-            and with ``polish`` the report ``info["polish"]`` (warm or cold start and both stages' times and
-            metrics).  A density map of the output grid without ``polish`` also carries ``info["quality"]``
-            (:func:`.density_quality`), and when it leaves the density less equal than it was (a field unlike the
-            training fields), or had to be shortened not to, a :class:`.PoorMapWarning` names the numbers and the
-            remedies (``refine``, ``polish``; :func:`.quiet_quality` silences it).  A uniform density (a constant,
-            e.g. all zeros, after preprocessing: :func:`rfmap.core.inputs.is_uniform`) is equal already: its map is
-            the identity, exactly, computed by no stage, and ``info`` holds only ``uniform = True``.
+            The map; its ``info`` reports what each stage did (a read-only view of the typed report
+            :class:`rfmap.finish.report.MapReport`, ``info.report``).  It holds ``alpha``, ``work_n`` (the working
+            grid of the returned map), ``network_time`` and ``symmetrize``; with refinement the objective before and
+            after; when coarser working grids were tried, ``info["regrid"]``; with ``repair``, ``info["repair"]``
+            (:func:`rfmap.finish.repair.dispatch.repair_map`); with ``polish``, ``info["polish"]``.  A density map of
+            the output grid without ``polish`` also carries ``info["quality"]`` (:func:`.density_quality`).
+
+        Warns
+        -----
+        PoorMapWarning
+            When a density map leaves the density less equal than it was (a field unlike the training fields), or
+            had to be shortened not to; it names the numbers and the remedies (``refine``, ``polish``;
+            :func:`.quiet_quality` silences it).
+
+        Notes
+        -----
+        A uniform density (a constant, e.g. all zeros, after preprocessing: :func:`rfmap.core.inputs.is_uniform`)
+        is equal already: its map is the identity, exactly, computed by no stage, and ``info`` holds only
+        ``uniform = True``.
         """
         opts = replace(options or MapOptions(), **kw)
         group = self._symmetry(opts.symmetrize)

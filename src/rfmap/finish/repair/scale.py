@@ -1,6 +1,11 @@
 r"""Fold-free displacement scaling: the repair of 3D maps, and of any mesh the Beltrami rebuild does not apply to.
 
-Write the map as :math:`u = x + d(x)` with the displacement :math:`d` (for a surrogate
+:func:`scale_repair` shortens a folded map's displacement vertex by vertex, as little as it can: every element ends
+with a positive measure, the vertices far from the folds keep their mapped positions exactly, and only a
+neighbourhood of the folds is pulled back towards the identity.  The map keeps its boundary condition.  A formerly
+folded element ends with at least :data:`ETA` of its reference measure.
+
+**Method.** Write the map as :math:`u = x + d(x)` with the displacement :math:`d` (for a surrogate
 :math:`d = \mathcal{B} \odot \psi`).  The identity (:math:`s = 0` in :math:`u_s = x + s\,d`) has every element
 positive, and every :math:`u_s` satisfies the same boundary condition as :math:`u`.  For one element, with
 :math:`E_x` and :math:`E_d` the matrices of its edge vectors under :math:`x` and under :math:`d`,
@@ -9,29 +14,30 @@ positive, and every :math:`u_s` satisfies the same boundary condition as :math:`
 companion-matrix eigenvalues in 3D) for the elements that a cheap test cannot clear: on :math:`[0, 1]` a polynomial's
 values are convex combinations of its Bernstein coefficients, so when they are all positive it has no root there.
 The largest fold-free uniform scale is :math:`s^{*} = \min_T s_T`, and the map :math:`u_{s^{*}}` is fold-free.
-Then the per-vertex scale :math:`s_v` is raised locally towards 1 by bisection: a proposed raise is kept unless an
-element touching the vertex would drop below its threshold, in which case the vertices of every such element go back to
-their accepted values (repeating until no element fails, which ends because the accepted state passes).  On grid meshes
-the raises of a round go class by class (:func:`vertex_classes`: the parities of the grid coordinates, 4 classes in 2D
-and 8 in 3D, no two vertices of one class in an element), Gauss–Seidel fashion, so an element that fails has a single
-raised vertex and only that one goes back; raising all vertices at once would also send back the element's other
-vertices, whose raises were fine.  Each round first tries the raise of all active vertices at once and keeps it when no
-element fails (a fold-free target is then recovered in one step, where a class-by-class sweep could stall in a failing
-intermediate state).
-Vertices far from the folds thus recover the input map
-exactly and only a neighbourhood of the folds keeps a shortened displacement.  When the folds are local, the start
-itself is local: :math:`s^{*}` on the elements whose polynomial has a root in :math:`(0, 1)`, rising linearly to
-:math:`s = 1` over 6, 12 or 24 vertex rings around them (grown only as far as the start being tried needs), if one of
-these states verifies (else the uniform start), so the rounds touch only that region.  Only the elements touching a
-vertex with :math:`s_v < 1` are evaluated to verify a local start: every other element keeps the target, which the
-root test cleared.  The cost thus follows the size of the folded region, not of the mesh, apart from one pass over
-all elements for the polynomial coefficients.
 
-Why the result is fold-free: every accepted state is *verified* by direct evaluation of all element measures that
+Then the per-vertex scale :math:`s_v` is raised locally towards 1 by bisection: a proposed raise is kept unless an
+element touching the vertex would drop below its threshold, in which case the vertices of every such element go back
+to their accepted values (repeating until no element fails, which ends because the accepted state passes).  On grid
+meshes the raises of a round go class by class (:func:`vertex_classes`: the parities of the grid coordinates, 4
+classes in 2D and 8 in 3D, no two vertices of one class in an element), Gauss–Seidel fashion, so an element that
+fails has a single raised vertex and only that one goes back.  Each round first tries the raise of all active
+vertices at once and keeps it when no element fails (a fold-free target is then recovered in one step).  Vertices far
+from the folds thus recover the input map exactly.
+
+**Local start.** When the folds are local, the start itself is local: :math:`s^{*}` on the elements whose polynomial
+has a root in :math:`(0, 1)`, rising linearly to :math:`s = 1` over 6, 12 or 24 vertex rings around them
+(:data:`LOCAL_START_RINGS`), if one of these states verifies (else the uniform start), so the rounds touch only that
+region.
+
+**Why the result is fold-free.** Every accepted state is *verified* by direct evaluation of all element measures that
 changed, the starting state :math:`u_{s^{*}}` is verified the same way (halving :math:`s` until it passes, the identity
 being the last resort), and a rejected proposal restores an accepted state.  So the returned map has every element
-measure above a positive threshold :math:`\tau_T` (a fraction :math:`\eta = 0.05` of the reference measure for
+measure above a positive threshold :math:`\tau_T` (a fraction :math:`\eta` = :data:`ETA` of the reference measure for
 elements that were folded, :math:`\min(\eta |T|, \tfrac12 |u(T)|)` for the others) whatever the root-finding accuracy.
+
+**Cost.** It follows the size of the folded region, not of the mesh, apart from one pass over all elements for the
+polynomial coefficients: to verify a local start only the elements touching a vertex with :math:`s_v < 1` are
+evaluated, since every other element keeps the target, which the root test cleared.
 """
 from __future__ import annotations
 
