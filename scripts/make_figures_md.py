@@ -253,10 +253,8 @@ def _preamble() -> list[str]:
     scoreboard of book/figures.md (the target the introduction and the glossary link to)."""
     rule, metrics = _verdicts()
     return [f"({RULES_TARGET})=", CRITERION, "", rule, "", metrics + (
-        " The rows *max |μ| (shown, not scored)* give its means and the number of cases in which the paper's "
-        "method is at most the paper's value. min det J is not shown here: what matters in it is its sign, and the "
-        "chapters count the folded elements (det J ≤ 0) of every map; each chapter's full table (collapsed) gives "
-        "it."), "", "**Met.** *yes* where the paper's method is at most the paper's value; *no* with the paper's "
+        " The rows *max |μ| (shown, not scored)* give its mean over the comparable cases and in how many of them the "
+        "paper's method is at most the paper's value; min det J is in each chapter's full table."), "", "**Met.** *yes* where the paper's method is at most the paper's value; *no* with the paper's "
         "method's value divided by the paper's beside it, so that a near miss reads as one; *n/c* where the input "
         "is not the paper's, whose Std ratio the table's footnote sets beside the paper's.", ""]
 
