@@ -154,7 +154,7 @@ class Surrogate:
     model : MultiResUNet or FNONet
     spec : TaskSpec
     meta : dict, optional
-        Metadata (see module docstring); ``n_range`` gives the training resolutions.
+        Metadata (see :mod:`rfmap.surrogate`); ``n_range`` gives the training resolutions.
     """
 
     def __init__(self, model: torch.nn.Module, spec: TaskSpec, meta: dict | None = None, *, device=None):
