@@ -14,6 +14,10 @@ __all__ = ["CartogramOptions"]
 class CartogramOptions:
     r"""How :func:`rfmap.cartogram.resize.cartogram` resizes regions; a call names only the fields that differ.
 
+    Most calls need at most four: ``method`` (the classical flow by default), ``n`` (the raster's resolution),
+    ``projection`` and ``output`` (the plane of the computation and the coordinates of the result).  The others
+    tune the stopping rule, the raster and the outlines.
+
     Attributes
     ----------
     method : {"diffusion", "flow", "surrogate", "hybrid"}
@@ -58,25 +62,26 @@ class CartogramOptions:
         Fields of :class:`rfmap.solvers.cartoflow.CartoFlowOptions` (``"flow"``) or
         :class:`rfmap.solvers.cartodiffusion.CartoDiffusionOptions` (``"diffusion"``).
     min_share : float
-        The passes' stopping rule, :meth:`~rfmap.cartogram.resize.Cartogram.metrics` and the tolerance count only the
-        regions holding at least this share of the total value (default :data:`~rfmap.cartogram.metrics.MIN_SHARE`,
-        0.01 %: islands of a few people on a world map are left to ``max_iterations``); ``info["max_error"]`` is over
-        those, and the others' errors are reported apart (``CartogramMetrics.max_error_minor``).  The passes raise
-        those others towards this share, so that none (an uninhabited Antarctica) collapses into a sliver that folds.
+        The smallest share of the total value whose regions are judged (default
+        :data:`~rfmap.cartogram.metrics.MIN_SHARE`, 0.01 %).  The stopping rule, the tolerance and
+        :meth:`~rfmap.cartogram.resize.Cartogram.metrics` count only the judged regions, so islands of a few people
+        on a world map do not hold the passes back; ``info["max_error"]`` is over the judged regions, and the others'
+        largest error is reported apart (``CartogramMetrics.max_error_minor``).  The passes raise the others' values
+        towards this share, so that none (an uninhabited Antarctica) collapses into a sliver that folds.
     max_n : int, optional
-        A pass that lowers the largest error but leaves more than :data:`~rfmap.cartogram.resize.SLOW_PASS` of it
-        (regions down to a few cells: slivers, small islands) doubles the raster's resolution, :math:`N \to 2N`, up to
-        ``max_n`` (default the larger of ``n`` and :data:`~rfmap.cartogram.methods.base.MAX_N`, for the flow
-        :data:`~rfmap.cartogram.methods.flow.FLOW_MAX_N`; ``n`` turns it off); ``info["grids"]`` lists each pass's
-        ``N``.
+        The finest raster side that the passes may refine to; set ``max_n = n`` to keep the raster fixed.  A pass
+        that lowers the largest error but leaves more than :data:`~rfmap.cartogram.resize.SLOW_PASS` of it (regions
+        down to a few cells: slivers, small islands) doubles the raster's side, :math:`N \to 2N`, up to ``max_n``.
+        Default: the larger of ``n`` and :data:`~rfmap.cartogram.methods.base.MAX_N` (for the flow,
+        :data:`~rfmap.cartogram.methods.flow.FLOW_MAX_N`); ``info["grids"]`` lists each pass's ``N``.
     points : int, optional
-        A budget of polygon vertices: the outlines (already split to edges of at most a grid cell) are simplified,
-        shared borders kept (:func:`rfmap.cartogram.regions.fit_outlines`), or densified to about that many.
-        Simplifying removes detail finer than the grid (and speeds up maps drawn with far more vertices than the grid
-        resolves); it changes the input's areas slightly.  The budget sets the outlines' detail, not the count of points
-        the flow carries: as for any input, the outlines are then split to edges of at most a grid cell, and edges the
-        classical methods stretch beyond :data:`~rfmap.cartogram.resize.SPLIT_EDGE` cells are split again between
-        passes, so that straight edges between distant vertices do not cross.
+        About how many vertices the outlines keep: they are simplified (shared borders kept,
+        :func:`rfmap.cartogram.regions.fit_outlines`) or densified to about that many.  Simplifying removes detail
+        finer than the grid and speeds up maps drawn with far more vertices than the grid resolves; it changes the
+        input's areas slightly.  The budget sets the outlines' detail, not the count of points the flow carries: as
+        for any input, the outlines are then split to edges of at most a grid cell, and edges that the classical
+        methods stretch beyond :data:`~rfmap.cartogram.resize.SPLIT_EDGE` cells are split again between passes, so
+        that straight edges between distant vertices do not cross.
     timeout : float, optional
         Seconds (counted from the parsed input) after which no further pass starts; the best pass so far is
         returned, with ``info["timed_out"]`` set and, when it is not within ``tol``, a problem that says so
