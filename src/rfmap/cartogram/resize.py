@@ -130,8 +130,8 @@ _NO_POINTS = np.empty((0, 2))
 
 
 def available_methods(surrogate=None) -> tuple[str, ...]:
-    """The methods of :func:`cartogram` (every :class:`rfmap.Surrogate` supports them all: :data:`CARTOGRAM_METHODS`;
-    the argument is kept for callers that pass their surrogate)."""
+    """The methods of :func:`cartogram`, :data:`CARTOGRAM_METHODS` (every :class:`rfmap.Surrogate` supports them
+    all; ``surrogate`` is not used, compatibility)."""
     return CARTOGRAM_METHODS
 
 

@@ -1,9 +1,10 @@
 """The options of every ``rfmap`` sub-command as Markdown, read from the parsers themselves, so that the reference
 page of the command line lists what ``rfmap <sub-command> --help`` prints and cannot fall behind it.
 
-The Markdown is written to render as the terminal prints it: a ``|`` is escaped so that it stays inside its table
-cell, and an option named in a help text (``--resume``) is set in code, where MyST's typographer does not turn its
-two hyphens into a dash."""
+The Markdown renders as the terminal prints the help: the options that a help text names are set in code, and
+characters that Markdown would read as markup are escaped."""
+# an option named in a help text (--resume) is set in code, where MyST's typographer does not turn its two hyphens
+# into a dash; a | is escaped so that it stays inside its table cell
 from __future__ import annotations
 
 import argparse

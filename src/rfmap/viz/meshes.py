@@ -257,7 +257,7 @@ def map_rows_figure(results: dict, *, rho_range=(0.0, 2.5), width: float = TEXT_
 def population_figure(maps: dict, fields, label: str, *, n: int | None = None, method: str = "ours+refine"):
     """The paper's 2D population figure: one row of :func:`map_rows_figure` per field of the maps of
     :func:`rfmap.paper.reproduce.population_table`, saved under the paper's ``label``; returns the figure.
-    (``n`` is read from the maps; the argument is kept for older callers.)"""
+    ``n`` is not used (compatibility): the grid is read from the maps."""
     with style():
         fig = map_rows_figure({f: maps[f][method] for f in fields})
         save_figure(fig, label)
