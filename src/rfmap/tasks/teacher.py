@@ -119,6 +119,8 @@ def teacher_targets(points: np.ndarray, n: int, mapped_grid: np.ndarray) -> np.n
     ----------
     points : ndarray, shape (N**d, d)
         The sample's vertices (regular or jittered) in :math:`[0, 1]^d`.
+    n : int
+        The grid side ``N`` of ``mapped_grid``.
     mapped_grid : ndarray, shape (N**d, d)
         :func:`teacher_map` of the sample's field.
 
@@ -139,7 +141,11 @@ def teacher_loss(mapped: Tensor, target: Tensor, ref: Tensor, mask: Tensor, n: i
     Parameters
     ----------
     mapped, target, ref : Tensor, shape (B, P, d)
+        The network's map, the teacher's targets and the reference vertices of each sample.
     mask : BoolTensor, shape (B,)
+        The samples that have a teacher map.
+    n : int
+        The grid side ``N``; it sets the loss's floor, :math:`P/(N-1)^2` for ``P`` vertices.
     """
     err = ((mapped - target) ** 2).sum((-1, -2))
     scale = ((target - ref) ** 2).sum((-1, -2))

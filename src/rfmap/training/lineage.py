@@ -16,7 +16,7 @@ A repeat trains with the recorded options and seed.  A run with a ``--time-limit
 learning-rate schedule follows the elapsed time, so on another machine it trains as long, not for the same steps;
 the weights are those of the same recipe, not the same bits.
 
-Torch-free: this reads metadata only (``src/rfmap/weights/*.json``, a chain's ``state.json``).
+Nothing here imports PyTorch: it reads the weights' metadata only (the ``.json`` file beside each weight file).
 """
 from __future__ import annotations
 
