@@ -15,7 +15,7 @@ and the report of what was done to it) to the next, finishes it:
 
 :func:`~rfmap.finish.pipeline.finish` composes them as :meth:`rfmap.Surrogate.map` does, with :class:`.FinishOptions`;
 :func:`.finish_map` applies them to a classical map.  The report is typed (:class:`.MapReport`) and the returned map's
-``info`` is its read-only view (:class:`.InfoView`), with the keys that ``info`` has always had.  Maps of query points
+``info`` is its read-only view as a dictionary (:class:`.InfoView`).  Maps of query points
 go back to their working grid (:mod:`~rfmap.finish.query`).
 
 The stages are functions of :mod:`~rfmap.finish.stages`; each calls the module that does its work:

@@ -1,7 +1,8 @@
 r"""The stages that finish a computed map, each a function from a :class:`~rfmap.finish.draft.Draft` to the next.
 
-* :func:`regrid` -- a folded network map: try the network on other working grids;
 * :func:`refine` -- weight refinement of the stretching vector :math:`\alpha` (paper Sec. 4.3);
+* :func:`regrid` -- a folded network map: try the network on other working grids, each map refined too when
+  refinement is on;
 * :func:`repair` -- make the map fold-free (:func:`rfmap.finish.repair.dispatch.repair_map`);
 * :func:`polish` -- finish a density map with the flow-based solver (:func:`rfmap.finish.polish.polish_map`);
 * :func:`judge` -- is a density map of a grid more equal than its input (:func:`rfmap.finish.quality.density_quality`);
