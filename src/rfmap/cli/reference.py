@@ -47,14 +47,22 @@ def _names(action: argparse.Action) -> str:
 _MARKUP = str.maketrans({c: "\\" + c for c in "\\`*_$<>[]|"})
 
 
-#: an option named in a help text (``--resume``, ``--device``), not part of a longer word
-_OPTION = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*(?![\w-])")
+#: an option named in a help text (``--resume``, ``--device``), not part of a longer word, or a dotted Python name
+#: (``rfmap.tasks.kinds``, ``Surrogate.map(native=True)``; every part at least two characters, so not "e.g.", and
+#: not part of a path)
+_OPTION = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*(?![\w-])"
+                     r"|(?<![\w./-])[A-Za-z_]\w+(?:\.[A-Za-z_]\w+)+(?:\([^()\s]*\))?(?![\w/-])")
 
 
 def _cell(text: str) -> str:
     """A help text as one Markdown table cell, its markup characters escaped so that it reads as written and the
-    options it names set in code."""
-    return _OPTION.sub(lambda m: f"`{m.group(0)}`", " ".join(text.split()).translate(_MARKUP))
+    options and dotted names it names set in code."""
+    parts = _OPTION.split(" ".join(text.split()))
+    names = _OPTION.findall(" ".join(text.split()))
+    out = parts[0].translate(_MARKUP)
+    for name, rest in zip(names, parts[1:]):
+        out += f"`{name}`" + rest.translate(_MARKUP)
+    return out
 
 
 def _description(action: argparse.Action) -> str:
