@@ -168,20 +168,20 @@ def teacher_of(meta: dict) -> str:
 
 
 def budget_table(metas: dict, paper_steps: dict, paper_batch: dict):
-    """One row per model (a :class:`pandas.DataFrame`): runs, steps, samples seen and wall time (hours) over the
-    whole chain, the paper's epochs and the samples of the ``paper`` preset (an epoch read as one step on a freshly
+    """One row per model (a :class:`pandas.DataFrame`): runs, steps, fields seen and wall time (hours) over the
+    whole chain, the paper's epochs and the fields of the ``paper`` preset (an epoch read as one step on a freshly
     drawn batch of the preset's size, since the paper gives no batch size), the ratios of steps to epochs
-    (``× paper's epochs``) and of samples (``× paper preset's samples``), and the teacher of the last run."""
+    (``× paper's epochs``) and of fields (``× paper preset's fields``), and the teacher of the last run."""
     import pandas as pd
 
     rows = []
     for name, meta in metas.items():
         b = training_budget(meta, int((meta.get("config") or {}).get("batch", 1)))
-        rows.append({"model": name, "runs": b["runs"], "steps": b["steps"], "samples seen": b["samples"],
+        rows.append({"model": name, "runs": b["runs"], "steps": b["steps"], "fields seen": b["samples"],
                      "hours": b["hours"], "paper's epochs": paper_steps[name],
-                     "paper preset's samples": paper_steps[name] * paper_batch[name],
+                     "paper preset's fields": paper_steps[name] * paper_batch[name],
                      "× paper's epochs": b["steps"] / paper_steps[name],
-                     "× paper preset's samples": b["samples"] / (paper_steps[name] * paper_batch[name]),
+                     "× paper preset's fields": b["samples"] / (paper_steps[name] * paper_batch[name]),
                      "teacher": teacher_of(meta)})
     return pd.DataFrame(rows).set_index("model")
 
