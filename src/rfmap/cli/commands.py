@@ -347,8 +347,8 @@ def _add_map(sub) -> None:
     s.add_argument("--polish", nargs="?", const="default", default=None, type=_polish_arg, metavar="TOL",
                    help="finish the density map with the flow-based solver (optionally to Std(ρ̃_map) <= TOL)")
     s.add_argument("--no-guard", action="store_true",
-                   help="with --polish: return the warm flow's map without also running the cold flow and keeping "
-                        "the better one")
+                   help="with --polish: return the map of the flow started from the network's map (warm) without "
+                        "also running the flow from the identity (cold) and keeping the better one")
     s.add_argument("--symmetrize", nargs="?", const=True, default=False, type=_symmetry_arg, metavar="GROUP",
                    help="average the network over symmetries of the square or cube (default set, or "
                         "one of flips, permutations, cyclic, full); one network evaluation per symmetry")
