@@ -101,7 +101,7 @@ RATIOS = [("native_ratio", "Paper's method"), ("delivered_ratio", "Delivered"), 
 
 def score_keys(item: dict) -> tuple[list[str], list[str]]:
     """The glue keys of a scored item (``"kind": "score"``): its verdict (``{key}_verdict``) and the Std ratios of
-    its n/c cases (``{key}_nc``), the summary keys of each metric (``{key}_{metric}_{col}`` for every column, the
+    its n/c cases (``{key}_nc``), its near or shared misses (``{key}_close``), the summary keys of each metric (``{key}_{metric}_{col}`` for every column, the
     median ratios ``_native_ratio``, ``_delivered_ratio``, ``_classical_ratio``, ``_met`` and
     ``_classical_better``) and the per-case keys (``{key}_{metric}_{case}_{col}``, ``_met``); for a metric the paper
     prints but the verdict does not score (``"shown"``) the summary keys only (no ``_classical_better``), ``_met``
@@ -114,7 +114,7 @@ def score_keys(item: dict) -> tuple[list[str], list[str]]:
         return [f"{score['key']}_verdict"] + [f"{score['key']}_{m}_{c}" for m in score["metrics"]
                                               for c in cols + ["met", "classical_better"]], []
     cols = [c for c, _ in COLUMNS] + [r for r, _ in RATIOS]
-    summary, per_case = [f"{score['key']}_verdict", f"{score['key']}_nc"], []
+    summary, per_case = [f"{score['key']}_verdict", f"{score['key']}_nc", f"{score['key']}_close"], []
     for metric in score["metrics"]:
         summary += [f"{score['key']}_{metric}_{c}" for c in cols + ["met", "classical_better"]]
         per_case += [f"{score['key']}_{metric}_{case}_{c}" for case in score.get("cases", [])

@@ -92,6 +92,7 @@ def test_score_values_print_a_metric_in_one_notation():
     assert v["std_rho_map_a_paper"] == "8 × 10⁻²"  # the paper's value with the digits it was printed with
     assert c.score_values()["std_rho_map_a_native"] == "2.822\u00a0×\u00a010⁻⁴"  # never split over two lines
     assert v["std_rho_map_met"] == "1 of 2" and v["verdict"] == c.verdict_word(short=True)
+    assert v["close"]  # near or shared misses as a sentence, "—" for none (rfmap.paper.verdicts.close_calls)
 
 
 def test_table_is_shaped_like_the_paper_one_block_per_case():

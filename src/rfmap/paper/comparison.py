@@ -38,7 +38,7 @@ from ..core.result import MapResult
 from .reproduce import beltrami_values, density_values, exact_beltrami_result
 from ..core.wording import of_count
 from .tables import _csv_cell, one_notation, paper_table, power_of_ten, printed_digits
-from .verdicts import is_comparable, median_ratio, met_text, qualified_verdict, ratio_text, std_ratio
+from .verdicts import close_calls, is_comparable, median_ratio, met_text, qualified_verdict, ratio_text, std_ratio
 
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
            "timed", "compare_density", "compare_beltrami", "compare_models", "population_comparison",
@@ -290,13 +290,10 @@ class Comparison:
                 "runs it on the working grid and interpolates.")
 
     def score_values(self) -> dict[str, str]:
-        """This table's numbers in the introduction's scoreboard, as formatted text: for every metric
-        ``{metric}_{col}`` (the mean over the comparable cases of each column of :data:`METHODS`),
-        ``{metric}_{col}_ratio`` (the median over them of the ratio to the paper,
-        :func:`rfmap.paper.verdicts.median_ratio`), ``{metric}_met`` and
-        ``{metric}_classical_better`` (``"3 of 4"``, ``"all 4"``: :func:`rfmap.core.wording.of_count`), per case
-        ``{metric}_{case}_{col}`` and ``{metric}_{case}_met`` (:func:`rfmap.paper.verdicts.met_text`, ``n/c`` for
-        an input not the paper's); ``verdict`` (short) and ``nc``, the n/c cases' Std ratios (``—`` for none)."""
+        """Scoreboard numbers as text: per metric ``{metric}_{col}`` (mean over the comparable cases, :data:`METHODS`),
+        ``{metric}_{col}_ratio`` (:func:`.median_ratio` to the paper), ``{metric}_met``, ``{metric}_classical_better``
+        (``"3 of 4"``), per case ``{metric}_{case}_{col}`` and ``{metric}_{case}_met`` (:func:`.met_text`, ``n/c``:
+        input not the paper's); ``verdict`` (short), ``nc`` (n/c Std ratios), ``close`` (:func:`.close_calls`)."""
         out, texts = {}, {}  # numbers, put in one notation per metric; texts (ratios, met cells) as they are
         comparable = [c.name for c in self.cases if self.comparable(c.name)]
         for metric in self.metrics + self.shown():
@@ -314,7 +311,9 @@ class Comparison:
                 out.update({f"{metric}_{c.name}_{k}": v for k, v in row.items() if k != "met"})
                 ours, paper = (self.value(c.name, m, metric) for m in ("native", "paper"))
                 texts[f"{metric}_{c.name}_met"] = met_text(ours, paper) if c.name in comparable else "n/c"
-        texts["verdict"] = self.verdict_word(short=True)
+        texts["verdict"], texts["close"] = self.verdict_word(short=True), close_calls(
+            (f"N = {c}" if c.isdigit() else c, METRIC_TITLES[m], *(self.value(c, k, m) for k in ("native", "paper",
+             "classical"))) for c in comparable for m in self.metrics)
         texts["nc"] = "; ".join(f"paper's method {a:.3g}, paper {b:.3g} ({'worse' if a > b else 'not worse'})"
                                 for _, a, b in self._nc_ratios()) or "—"
         out = one_notation(out, self.metrics + self.shown()) | texts
