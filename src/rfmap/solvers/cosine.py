@@ -19,9 +19,8 @@ interface (``dct(x, axis, out=None)``, ``dst(x, axis, out=None)``, ``dctn(x)``):
   x_1)`, the second minus the imaginary part of that of the odd extension :math:`(0, x, 0, -\bar x)` (:math:`\bar x`
   reversed), both of length :math:`2(M-1)` when :math:`K = M - 2` (the interior of an axis).  Tables of a side of
   at least ``SCIPY_SIDE`` go to ``scipy.fft`` itself, whose type-I transforms skip the extension and are
-  faster on large tables; the smaller ones do not import it, since its import (a few tenths
-  of a second) costs more than the extension saves on the passes of a map of a country's subdivisions at
-  ``n = 256`` (whose finest tables have a side of 1025).  It keeps the extension and the spectrum of a block of rows in
+  faster on large tables; the smaller ones do not import it, since its import (a few tenths of a second) takes
+  longer than a small cartogram.  It keeps the extension and the spectrum of a block of rows in
   two buffers between calls: a table of a few hundred thousand numbers allocated afresh for every transform costs
   the operating system's page faults, about as much as the FFT itself, and a table of millions (a cartogram's
   finest raster) would need two more tables' worth of memory at once.
@@ -39,7 +38,7 @@ __all__ = ["CosineTransforms", "ScipyTransforms", "fft_workers"]
 #: a 2049-vertex side then runs through buffers of 8 MB (256 rows) instead of two of 67 MB, for the same FFTs.
 BLOCK_NUMBERS = 1 << 20
 #: Tables of at least this side are transformed by ``scipy.fft`` (imported on the first of them).
-SCIPY_SIDE = 2049
+SCIPY_SIDE = 1025
 
 
 def fft_workers() -> int:
