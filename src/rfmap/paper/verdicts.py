@@ -115,7 +115,8 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     ``k`` is ``0`` or ``n``.  With n/c cases the word is scoped to the comparable cases and followed by
     :func:`nc_clause`: whether each n/c case's Std ratio (:func:`std_ratio`, the share of the input's spread the map
     leaves) by the paper's method is above the paper's (``nc_worse``, one flag per n/c case, ``True`` where it is);
-    with ``short`` the word and its tally only (the scoreboards give the n/c clause in a footnote).
+    with ``short`` the word, its tally named as that of the comparable cases, and the n/c clause (the scoreboards'
+    cell).
 
     Examples
     --------
