@@ -182,7 +182,10 @@ def chapter_title(notebook: str, root: Path = ROOT) -> str:
         for cell in json.loads(path.read_text(encoding="utf-8"))["cells"]:
             for line in "".join(cell["source"]).splitlines():
                 if cell["cell_type"] == "markdown" and line.startswith("# "):
-                    return f"{number} {line[2:].strip()}"
+                    title = line[2:].strip()
+                    if title.startswith(f"{number} "):  # the heading carries it
+                        return title
+                    return f"{number} {title}"
     return path.stem
 
 
