@@ -223,6 +223,8 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     assert c.to_markdown().endswith(
         "lower is better: rect-peak, paper's method 0.2 and paper 0.187.")
     assert c.nc_note().startswith("*n/c*: not comparable")
+    # a table of unscored rows has no n/c mark, so no note under it either
+    assert "n/c" not in c.to_markdown(["time"])
     c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses
     assert c.verdict_word() == (
         "not reproduced on the comparable cases (0 of 1); the n/c case is worse by Std ratio")

@@ -363,9 +363,14 @@ class Comparison:
 
     def to_markdown(self, quantities: list[str] | None = None) -> str:
         """The paper's shape: a block of rows per case (the scored metrics and the time, or ``quantities``), a column
-        per method that holds one of them and the verdict of each scored metric; numbers by :func:`format_number`."""
-        table = self._markdown(quantities or self.metrics + ["time"], met="paper" in self.methods())
-        return f"{table}\n\n{self.nc_note()}" if "paper" in self.methods() and self.nc_note() else table
+        per method that holds one of them and the verdict of each scored metric; numbers by :func:`format_number`.
+        The note on cases that are not comparable (:meth:`nc_note`) follows only a table that shows a scored metric,
+        where the *n/c* marks stand."""
+        quantities = quantities or self.metrics + ["time"]
+        table = self._markdown(quantities, met="paper" in self.methods())
+        scored = bool(set(quantities) & set(self.metrics))
+        note = self.nc_note() if "paper" in self.methods() and scored else ""
+        return f"{table}\n\n{note}" if note else table
 
     def verdict(self) -> str:
         """One sentence per metric: how many cases meet the paper (criterion named), and how many the classical
