@@ -68,8 +68,11 @@ def _lbs(name: str, n: int) -> MapResult:
     return min((solvers.solve_lbs(mu, n) for _ in range(3)), key=lambda r: r.time)
 
 
-#: The row names of the symmetrized network (``symmetrize`` of the tables; :mod:`rfmap.nn.symmetry`).
-SYM, SYM_REF = "ours, symmetrized", "ours, symmetrized + refinement"
+#: The row name of the symmetrized network: its maps averaged over the symmetries of the domain (``symmetrize`` of
+#: the tables; :mod:`rfmap.nn.symmetry`), without weight refinement.
+SYM = "ours, symmetrized"
+#: The row name of the symmetrized network after weight refinement (``symmetrize`` with ``refine``).
+SYM_REF = "ours, symmetrized + refinement"
 #: the row of the paper's method: the network on the requested grid itself (native), refined, not repaired
 NATIVE_REF = "paper's method: native + refinement"
 
