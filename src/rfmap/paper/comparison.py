@@ -217,10 +217,9 @@ class Comparison:
     def verdict_word(self, short: bool = False) -> str:
         """The verdict, its tally and (unless ``short``) the clause on the n/c cases, by :func:`.qualified_verdict`.
 
-        The tally counts (case, metric) pairs, not cases.  For a table of four cases scored on one metric, whose three
-        cases with the paper's input all meet the paper's value, and whose fourth input is not the paper's (n/c) and
-        is left by the paper's method with a larger share of its spread, Std(ρ̃_map) / Std(ρ̃_orig), than the
-        paper's map leaves of the paper's input, it reads
+        The tally counts (case, metric) pairs, not cases; *n/c* and *worse by Std ratio* are defined in
+        :mod:`rfmap.paper.verdicts`.  For a table of four cases scored on one metric, three of them comparable and
+        meeting the paper's value, the fourth n/c and worse by Std ratio, it reads
         ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'``."""
         flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
         return qualified_verdict(flags, [a > b for _, a, b in self._nc_ratios()], short=short)

@@ -2,9 +2,12 @@ r"""One verdict word per paper table or figure, and whether a test input is the 
 
 A case of a density table is *comparable* with the paper when its input is the paper's: the test density on the
 paper's grid has the paper's :math:`\mathrm{Std}(\tilde\rho_{\text{orig}})` to within :data:`COMPARABLE_RTOL`
-(relative).  A case whose input differs (a field the paper describes too loosely to rebuild exactly) is not scored
-against the paper's value; :func:`std_ratio` compares it by the share of the input's spread the map leaves,
-:math:`\mathrm{Std}(\tilde\rho_{\text{map}}) / \mathrm{Std}(\tilde\rho_{\text{orig}})`.
+(relative).  A case whose input differs (a field the paper describes too loosely to rebuild exactly) is marked
+*n/c* (not comparable) and is not scored against the paper's value; it is compared instead by its *Std ratio*
+(:func:`std_ratio`), the share of the input's spread the map leaves,
+:math:`\mathrm{Std}(\tilde\rho_{\text{map}}) / \mathrm{Std}(\tilde\rho_{\text{orig}})`, and it is *worse by Std
+ratio* where the paper's method leaves a larger share of its input's spread than the paper's map leaves of the
+paper's input.
 
 The verdict of an item (:func:`verdict`) counts, over its comparable cases and its scored metrics, the pairs where
 the paper's method is at most the paper's value:
@@ -141,9 +144,8 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
 
 
 def nc_clause(nc_worse: list[bool]) -> str:
-    """Whether the n/c cases' Std ratios are worse than the paper's, one flag per n/c case (``""`` for none): a case
-    is *worse by Std ratio* where the paper's method leaves a larger share of its input's spread,
-    Std(ρ̃_map) / Std(ρ̃_orig), than the paper's map leaves of the paper's input.
+    """How many of the n/c cases are *worse by Std ratio* (both defined in :mod:`rfmap.paper.verdicts`), from one
+    flag per n/c case (``""`` for none).
 
     Examples
     --------
