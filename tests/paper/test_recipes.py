@@ -36,3 +36,12 @@ def test_a_network_section_shows_only_the_settings_of_its_architecture():
     assert diff["model.base"] == (16, None) and "model.depth" in diff
     same = {"model": {"arch": "unet", "base": 16, "depth": 3, "attention": True, "modes": 12}}
     assert recipe_differences(same, {"model": {**same["model"], "modes": 99}}) == []  # unused field ignored
+
+
+def test_folded_maps_are_counted_from_the_fields_where_the_summary_lacks_them():
+    from rfmap.paper.recipes import _folded_maps
+
+    assert _folded_maps({"mean": {"raw_folded_fields": 3, "folded_fields": 1}}) == 3
+    record = {"mean": {"n_flipped": 2}, "a@51": {"n_flipped": 0}, "b@51": {"n_flipped": 2}}
+    assert _folded_maps(record) == 1
+    assert _folded_maps({"mean": {"std_rho_map": 0.1}}) is None and _folded_maps({}) is None

@@ -61,9 +61,19 @@ def recipe_table(surs: dict) -> Table:
             "held_out": None if metric is None else float(metric),
             "score_kind": kind,
             "scored": ("default" if val.get("path") == "repaired" else "raw") if val else None,
-            "folded_maps": (int(val["raw_folded_fields"]) if "raw_folded_fields" in val else
-                            int(val["folded_fields"]) if "folded_fields" in val else None)})
+            "folded_maps": _folded_maps(meta.get("final_metrics") or {})})
     return t
+
+
+def _folded_maps(metrics: dict) -> int | None:
+    """How many held-out maps the network folded, from a validation record (``final_metrics``): the count its summary
+    records, else the fields whose own entries record flipped elements, else ``None``."""
+    val = metrics.get("mean") or {}
+    for key in ("raw_folded_fields", "folded_fields"):
+        if key in val:
+            return int(val[key])
+    fields = [v for k, v in metrics.items() if k != "mean" and isinstance(v, dict) and "n_flipped" in v]
+    return sum(int(v["n_flipped"]) > 0 for v in fields) if fields else None
 
 
 #: The recipe table in three narrow parts (what a model learned from, how it was optimised, how it was validated):
@@ -127,7 +137,9 @@ def _selection(val: dict) -> tuple[float | None, str | None]:
 
 #: The settings of a stored training configuration that name or time a run rather than shape what it learns.
 RUN_SETTINGS = ("name", "description", "seed", "steps", "time_limit", "out", "init")
-#: How :func:`differences_text` names a setting.
+#: How :func:`differences_text` names a setting: a dotted key of the stored configuration (``"loss.beltrami"``,
+#: ``"lr"``, ``"ema"``, ``"loss.fold"``, ``"n_range"``, ``"batch"``) -> its name in the text (``"Beltrami weight λ"``,
+#: ``"peak learning rate"``, ...); a setting not listed is named by its key.
 SETTING_NAMES = {"loss.beltrami": "Beltrami weight λ", "lr": "peak learning rate", "ema": "weight average decay",
                  "loss.fold": "fold penalty", "n_range": "training grid sides", "batch": "batch"}
 
@@ -197,9 +209,10 @@ def differences_table(metas: dict) -> str:
 
 
 def training_settings(meta: dict) -> dict[str, str]:
-    """The settings of a model's training that chapter 08 compares, in words, from its metadata
-    (``Surrogate.meta``): the Beltrami weight λ, the decay of the weight average, the peak learning rate and the seed
-    of the last run, and the steps over its ``--init`` chain (``cumulative_steps``; its earlier runs are ``lineage``).
+    """The settings of a model's training that the book's chapter "08 DEM against DEQ on an extreme density"
+    compares, in words, from its metadata (``Surrogate.meta``): the Beltrami weight λ, the decay of the weight
+    average, the peak learning rate and the seed of the last run, and the steps over its ``--init`` chain
+    (``cumulative_steps``; its earlier runs are ``lineage``).
 
     Examples
     --------
