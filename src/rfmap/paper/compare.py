@@ -411,7 +411,8 @@ def side_by_side(table: Table, columns: dict, case_title: str) -> MarkdownText:
 
 def kept_rules(kept: dict) -> str:
     """Sentences saying how each model's kept step was chosen, where its kept map folds, and what the fold-free
-    rule keeps instead (the text of chapter 12's model section).
+    rule keeps instead (the text of the section on the models in the book's chapter "12 U-Net or Fourier neural
+    operator?").
 
     Parameters
     ----------

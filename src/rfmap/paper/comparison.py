@@ -53,8 +53,11 @@ PAPER_METHOD = {"native": True, "refine": True, "repair": False}
 #: Keywords of :meth:`rfmap.Surrogate.map` for the delivered map.
 DELIVERED = {"refine": True, "symmetrize": True}
 
-#: How a metric or a quantity of the tables is named in the book (``mean |Δμ| vs PL``: the error in μ against the
-#: coefficient of the exact map's piecewise-linear interpolant on the same mesh, see the book's glossary).
+#: How a metric or a quantity of the tables is named in the book: its key (a field of
+#: :class:`rfmap.core.metrics.MapMetrics` such as ``"std_rho_map"``, or ``"network_time"``,
+#: ``"work_n"``, ``"alpha"``, ``"mu_ratio"``) -> its title (``"Std(ρ̃_map)"``, ``"network time"``, ...).  The title
+#: ``mean |Δμ| vs PL`` is the error in μ against the coefficient of the exact map's piecewise-linear interpolant on
+#: the same mesh (see the book's glossary).
 METRIC_TITLES = {"std_rho_map": "Std(ρ̃_map)", "std_rho_orig": "Std(ρ̃_orig)", "mean_mu": "mean |μ|",
                  "max_mu": "max |μ|", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
                  "mean_dmu_pl": "mean |Δμ| vs PL", "min_jacobian": "min det J", "n_flipped": "flips",

@@ -100,6 +100,8 @@ def residual_floor(density_name: str = "sin-cos", ns=(64, 128, 256), boundary: s
 #: The flow settings that :func:`flow_convergence` compares: the default, the step tolerance ``rtol`` set to 0.02
 #: and to 0.005 (the defaults, ``rfmap.solvers.flow.RTOL``, are 0.2 in 2D and 0.4 in 3D), and the density raster
 #: twice as fine (``refine=4``).
+#:
+#: :meta hide-value:
 CONVERGENCE_SETTINGS = ({}, {"rtol": 0.02}, {"rtol": 0.005}, {"refine": 4})
 
 
