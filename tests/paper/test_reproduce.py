@@ -256,7 +256,9 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     assert again.value("new", "unet", "scored") == "default" and again.value("new", "unet", "folded_maps") == 3
     assert "| new | unet | modes, steps" in t.to_markdown()
     bel = get_config("beltrami2d", "full")
-    for low, text in ((0.0, "random boundary-fixing maps"), (0.3, "random boundary-fixing maps, low-frequency 30 %")):
+    for low, text in ((0.0, "coefficients of random maps that fix the boundary"),
+                      (0.3, "coefficients of random maps that fix the boundary; 30 % of them low-frequency "
+                            "(a few slow modes)")):
         cfg = bel.with_overrides(beltrami_field=replace(bel.beltrami_field, low=low))
         assert training_fields_text(cfg.to_dict()) == text
     for name in ("dem3d-free", "dem3d-cube"):

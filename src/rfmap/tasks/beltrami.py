@@ -129,9 +129,11 @@ class BeltramiTask(Task):
         return solvers.solve_lbs(field, n)
 
     def training_fields_text(self, config: dict) -> str:
-        """Random boundary-fixing maps, with the share of low-frequency maps where drawn."""
+        """The coefficients of random boundary-fixing maps, with the share of low-frequency maps (a few slow modes)
+        where drawn."""
         low = (config.get("beltrami_field") or {}).get("low", 0.0)
-        return "random boundary-fixing maps" + (f", low-frequency {100 * low:.0f} %" if low else "")
+        return "coefficients of random maps that fix the boundary" + (
+            f"; {100 * low:.0f} % of them low-frequency (a few slow modes)" if low else "")
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
         """The paper's test maps T1-T4 in 2D (reported after training, never used to select a model)."""
