@@ -1,5 +1,6 @@
 r"""Classical, neural and hybrid maps side by side: the benchmark fields, time to accuracy and its summary, as
-chapter 11 of the book runs them (the source repository's script ``benchmarks/hybrid.py`` runs the same functions).
+the book's chapter "11 Fast classical maps and neural warm starts" runs them (the source repository's script
+``benchmarks/hybrid.py`` runs the same functions).
 """
 from __future__ import annotations
 
@@ -412,8 +413,9 @@ def refinement_fields(rows: list[dict[str, Any]]) -> CaseTable:
     """The fields on which weight refinement raised the surrogate's Std(ρ̃_map), from the rows of
     :func:`time_to_accuracy`: one row per such field with its case, the default map's Std and the refined map's,
     and whether the default map came from a coarser working grid (the network's own map folded on the requested
-    one); the title counts them among the fields mapped both ways, as ``ref_worse_text`` of
-    :func:`hybrid_findings` does."""
+    one).  The title says on how many of the fields mapped both ways, default and refined, refinement raised the
+    Std ("it raised the map's Std on *k* of *m* fields mapped both ways"); without such a field the table is the line
+    "No field."."""
     both, worse = _refine_pairs(rows)
     title = (f"Weight refinement, field by field: it raised the map's Std on {of_count(len(worse), len(both), 'field')}"
              " mapped both ways")
