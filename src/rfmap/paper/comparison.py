@@ -53,16 +53,12 @@ PAPER_METHOD = {"native": True, "refine": True, "repair": False}
 #: Keywords of :meth:`rfmap.Surrogate.map` for the delivered map.
 DELIVERED = {"refine": True, "symmetrize": True}
 
-#: How a metric or a quantity of the tables is named in the book: its key (a field of
-#: :class:`rfmap.core.metrics.MapMetrics` such as ``"std_rho_map"``, or ``"network_time"``,
-#: ``"work_n"``, ``"alpha"``, ``"mu_ratio"``) -> its title (``"Std(ρ̃_map)"``, ``"network time"``, ...).  The title
-#: ``mean |Δμ| vs PL`` is the error in μ against the coefficient of the exact map's piecewise-linear interpolant on
-#: the same mesh (see the book's glossary).
+#: How a metric or quantity of the tables is named in the book, key (``"std_rho_map"``) -> title (``"Std(ρ̃_map)"``);
+#: ``mean |Δμ| vs PL`` is the error in μ against the μ of the exact map's piecewise-linear interpolant.
 METRIC_TITLES = {"std_rho_map": "Std(ρ̃_map)", "std_rho_orig": "Std(ρ̃_orig)", "mean_mu": "mean |μ|",
-                 "max_mu": "max |μ|", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|",
-                 "mean_dmu_pl": "mean |Δμ| vs PL", "min_jacobian": "min det J", "n_flipped": "flips",
-                 "time": "time", "network_time": "network time", "work_n": "network grid", "alpha": "α",
-                 "mu_ratio": "mean |μ|, DEQ / DEM"}
+                 "max_mu": "max |μ|", "mean_dd": "mean |Δd|", "mean_dmu": "mean |Δμ|", "mean_dmu_pl": "mean |Δμ| vs PL",
+                 "min_jacobian": "min det J", "n_flipped": "flips", "time": "time", "network_time": "network time",
+                 "work_n": "network grid", "alpha": "α", "mu_ratio": "mean |μ|, DEQ / DEM"}
 
 #: Quantities the paper prints, lower being better, that the verdict does not score (shown beside the scored ones).
 SHOWN = ("max_mu",)
@@ -130,9 +126,8 @@ def score_row(paper, native, delivered, classical, *, published: bool = True) ->
 
 def timed(run: Callable[[], MapResult], warm: Callable[[], object] | None = None, repeats: int = 3,
           slow: float = 1.0) -> MapResult:
-    """The fastest of ``repeats`` runs of ``run`` (by the result's own ``time``) after one untimed ``warm`` call
-    (default: ``run`` itself); a single run when the first took more than ``slow`` seconds (the spread of repeated
-    timings is then far below the digits quoted)."""
+    """The fastest of ``repeats`` runs of ``run`` (by the result's ``time``) after one untimed ``warm`` call
+    (default: ``run``); one run where the first took over ``slow`` seconds (repeats would change no quoted digit)."""
     (warm or run)()
     t0 = time.perf_counter()
     first = run()
@@ -218,12 +213,10 @@ class Comparison:
         return [(c, a, b) for c, a, b in ratios if a is not None and b is not None and "std_rho_map" in self.metrics]
 
     def verdict_word(self, short: bool = False) -> str:
-        """The verdict, its tally and (unless ``short``) the clause on the n/c cases, by :func:`.qualified_verdict`.
-
-        The tally counts (case, metric) pairs, not cases; *n/c* and *worse by Std ratio* are defined in
-        :mod:`rfmap.paper.verdicts`.  For a table of four cases scored on one metric, three of them comparable and
-        meeting the paper's value, the fourth n/c and worse by Std ratio, it reads
-        ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std ratio'``."""
+        """The verdict, its tally of (case, metric) pairs and (unless ``short``) the clause on the n/c cases (see
+        :mod:`rfmap.paper.verdicts`), by :func:`.qualified_verdict`: three comparable cases that meet the paper and one
+        n/c case worse by Std ratio read ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std
+        ratio'``."""
         flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
         return qualified_verdict(flags, [a > b for _, a, b in self._nc_ratios()], short=short)
 
