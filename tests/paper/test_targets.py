@@ -65,7 +65,26 @@ def test_targets_table_is_one_row_per_case_with_the_hybrid_against_the_flow():
     lines = [line for line in md.splitlines() if line.startswith("| ")]
     assert len(lines) == 1 + len(CASES)
     assert "hybrid time / flow" in lines[0] and f"(≤ {FLOW_TIME:g})" in lines[0]
-    assert lines[1] == "| 2D, N = 33, square | 0.1 (met) | 1 (met) | 0.4 (met) | 1 (met) | 4 |"
+    # ratios keep three significant digits, trailing zeros included
+    assert lines[1] == "| 2D, N = 33, square | 0.100 (met) | 1.00 (met) | 0.400 (met) | 1.00 (met) | 4.00 |"
+
+
+def test_cases_keep_the_order_they_were_run_in():
+    rows = _rows(0.1, 1.0, 0.4, 1.0)
+    free = [dict(r, boundary="free") for r in rows if r["dim"] == 2]
+    summary = summarize(rows[:5] + free + rows[5:])
+    cases = list(dict.fromkeys((r["dim"], r["n"], r["boundary"]) for r in summary))
+    assert cases == [(2, 33, "square"), (2, 33, "free"), (3, 16, "square")]
+
+
+def test_findings_state_the_hybrids_cost_against_the_flow_once():
+    found = hybrid_findings(_rows(0.1, 1.0, 0.4, 1.0), dict(zip((2, 3), CASES)))
+    assert (found["hyb_flow_range"], found["hyb_slower_cases"], found["hyb_verdict"]) == ("4.00", "both cases",
+                                                                                         "does not pay")
+    assert found["hyb_cost_text"] == ("it took longer than the flow alone in every case of the time table, 4.00 times"
+                                      " the flow's time")
+    quick = hybrid_findings(_rows(0.5, 1.0, 0.4, 1.0), dict(zip((2, 3), CASES)))
+    assert quick["hyb_verdict"] == "pays" and quick["hyb_flow_range"] == "0.800"
 
 
 def test_method_tables_pivot_methods_into_columns():

@@ -133,8 +133,9 @@ def time_to_accuracy(dim: int, n: int, boundary: str = "square", *, paper: bool 
 
 def summarize(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
     """Per (dim, n, boundary, method): mean Std(ρ̃_map), mean time, total folds, and the ratios to the best
-    classical solver of the same case (the one with the lower mean Std; time ratio < 1 means faster)."""
-    keys = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
+    classical solver of the same case (the one with the lower mean Std; time ratio < 1 means faster).  The cases
+    keep the order in which ``rows`` first give them (the order they were run in)."""
+    keys = list(dict.fromkeys((r["dim"], r["n"], r["boundary"]) for r in rows))
     out = []
     for key in keys:
         case = [r for r in rows if (r["dim"], r["n"], r["boundary"]) == key]
@@ -238,8 +239,9 @@ def _refine_worse_text(worse: int, fields: int, coarser: int) -> str:
 
 
 def targets_table(checks: list[dict[str, Any]]) -> CaseTable:
-    """The targets of :func:`target_checks` in one row per case: each measured ratio with whether it meets its
-    target (the target in the column's head), and the hybrid's time over the flow solver's, which has no target."""
+    """The targets of :func:`target_checks` in one row per case: each measured ratio (three significant digits,
+    trailing zeros kept) with whether it meets its target (the target in the column's head), and the hybrid's time
+    over the flow solver's, which has no target."""
     cols = (("flow_time", f"flow time / diffusion (≤ {FLOW_TIME:g})", FLOW_TIME),
             ("flow_std", f"flow Std / diffusion (≤ {STD_TOL:g})", STD_TOL),
             ("hybrid_time", f"hybrid time / best classical (≤ {HYBRID_TIME:g})", HYBRID_TIME),
@@ -249,7 +251,7 @@ def targets_table(checks: list[dict[str, Any]]) -> CaseTable:
     for c in checks:
         cells = []
         for key, _, limit in cols:
-            text = f"{c[key]:.3g}"
+            text = _ratio_text(c[key])
             if limit is not None:
                 text += " (met)" if c[key] <= limit else " (missed)"
             cells.append(text)
@@ -347,7 +349,11 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
         * ``ref_worse_cases``: the cases, of those run with refinement, in which refinement raised the Std
           (``"2 of 8 cases"``); ``ref_worse_fields``: the fields on which it raised the Std, of those mapped both
           ways; ``ref_worse_coarser``: how many of those (an int) had a default map taken from a coarser working
-          grid, because the network's own map folded; ``ref_worse_text``: the sentence that says both.
+          grid, because the network's own map folded; ``ref_worse_text``: the sentence that says both;
+        * the hybrid's mean time over the flow's in every case of the time table (not only the quoted ones):
+          ``hyb_flow_range`` (``"from 3.32 to 3.88"``), ``hyb_slower_cases`` (the cases where the hybrid took longer,
+          ``"all 8 cases"``), ``hyb_cost_text`` (the clause that says both) and ``hyb_verdict`` (``"does not pay"``
+          where the hybrid took longer in every case, ``"pays"`` where in none, else ``"pays only in some cases"``).
     """
     summary = summarize(rows)
     methods = [m for m in dict.fromkeys(r["method"] for r in rows) if m != UNGUARDED]
@@ -397,7 +403,33 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
         if sur is not None and ref is not None:
             out[f"ref_effect{d}"] = _refine_effect(sur["std_rho_map"], ref["std_rho_map"])
     out.update(_roughest_field(by, rows, tuple(targets[min(targets)])))
+    out.update(_hybrid_cost(summary))
     return out
+
+
+def _hybrid_cost(summary: list[dict[str, Any]]) -> dict[str, str]:
+    """The hybrid's mean time over the flow's in every case of :func:`summarize` that ran both: the range, how
+    many cases were slower, the clause that says both and the verdict on the warm start that follows."""
+    cases = list(dict.fromkeys((r["dim"], r["n"], r["boundary"]) for r in summary))
+    times = {(r["dim"], r["n"], r["boundary"], r["method"]): r["time"] for r in summary}
+    ratios = [times[(*c, "hybrid")] / times[(*c, "flow")] for c in cases
+              if (*c, "hybrid") in times and (*c, "flow") in times]
+    if not ratios:
+        return {}
+    lo, hi = _ratio_text(min(ratios)), _ratio_text(max(ratios))
+    span = lo if lo == hi else f"from {lo} to {hi}"
+    slower = sum(v > 1 for v in ratios)
+    where = "every case" if len(ratios) > 1 else "the one case"
+    if slower == len(ratios):
+        text, verdict = f"it took longer than the flow alone in {where} of the time table, {span} times", "does not pay"
+    elif slower == 0:
+        text, verdict = f"it took less time than the flow alone in {where} of the time table, {span} times", "pays"
+    else:
+        text, verdict = (f"it took longer than the flow alone in {of_count(slower, len(ratios), 'case')} of the"
+                         f" time table; its time ranged {span} times"), "pays only in some cases"
+    text += " the flow's time"
+    return {"hyb_flow_range": span, "hyb_slower_cases": of_count(slower, len(ratios), "case"),
+            "hyb_cost_text": text, "hyb_verdict": verdict}
 
 
 def _refine_pairs(rows: list[dict[str, Any]]) -> tuple[list[tuple[dict, dict]], list[tuple[dict, dict]]]:
