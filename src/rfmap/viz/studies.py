@@ -68,24 +68,24 @@ def decade_ticks(axis) -> None:
 
 def time_accuracy_figure(rows: list[dict], *, title: str | None = None, ncols: int = 2):
     """Std(rho~_map) against wall time (rows of :func:`rfmap.paper.benchmarks.time_to_accuracy`), log-log axes: one
-    panel per (dimension, N, boundary) in a grid of ``ncols`` columns (3.6 inches each), one marker per field and
-    method, and one legend of the methods, in an empty panel or else below the panels."""
+    panel per (dimension, N, boundary), in the order the rows give them, in a grid of ``ncols`` columns (3.6 inches
+    each); one marker per field and method, its colour the method's and its shape the field's (rows without a
+    ``field`` share one shape), so that a single field can be followed across methods and panels; and one legend of
+    the methods (colours) and one of the fields (shapes), in an empty panel or else below the panels."""
     import matplotlib.pyplot as plt
-    from matplotlib.lines import Line2D
 
-    cases = sorted({(r["dim"], r["n"], r["boundary"]) for r in rows})
+    cases = list(dict.fromkeys((r["dim"], r["n"], r["boundary"]) for r in rows))
     methods = list(dict.fromkeys(r["method"] for r in rows))
-    markers = dict(zip(methods, "osD^v*<>ph"))
+    fields = list(dict.fromkeys(r.get("field", "") for r in rows))
+    shapes = dict(zip(fields, "osD^v<>ph*P"))
     ncols = max(1, min(ncols, len(cases)))
     nrows = -(-len(cases) // ncols)
     fig, axes = plt.subplots(nrows, ncols, figsize=(3.6 * ncols, 3.3 * nrows + 0.4), layout="constrained",
                              squeeze=False)
     for ax, case in zip(axes.flat, cases):
-        for k, method in enumerate(methods):
-            rs = [r for r in rows if (r["dim"], r["n"], r["boundary"]) == case and r["method"] == method]
-            if rs:
-                ax.loglog([r["time"] for r in rs], [r["std_rho_map"] for r in rs], markers[method], color=f"C{k}",
-                          alpha=0.8, mfc="none")
+        for r in (r for r in rows if (r["dim"], r["n"], r["boundary"]) == case):
+            ax.loglog(r["time"], r["std_rho_map"], shapes[r.get("field", "")],
+                      color=f"C{methods.index(r['method'])}", alpha=0.8, mfc="none")
         ax.set_title(f"{case[0]}D, N = {case[1]}, {case[2]}", fontsize="medium", pad=8)
         plain_log_ticks(ax.xaxis)
         plain_log_ticks(ax.yaxis)
@@ -95,15 +95,26 @@ def time_accuracy_figure(rows: list[dict], *, title: str | None = None, ncols: i
         ax.set_axis_off()
     # room between a panel's axis label and the title of the panel below it
     fig.get_layout_engine().set(h_pad=0.2)
-    handles = [Line2D([], [], ls="none", marker=markers[m], color=f"C{k}", mfc="none", label=m)
-               for k, m in enumerate(methods)]
-    if len(cases) < axes.size:  # the legend in the first empty panel
-        list(axes.flat)[len(cases)].legend(handles=handles, loc="center", title="method")
-    else:
-        fig.legend(handles=handles, loc="outside lower center", ncols=min(3, len(methods)))
+    _time_accuracy_legends(fig, axes, len(cases), methods, fields if len(fields) > 1 else [], shapes)
     if title:
         fig.suptitle(title)
     return fig
+
+
+def _time_accuracy_legends(fig, axes, used: int, methods: list, fields: list, shapes: dict) -> None:
+    """The legend of the methods (colour) and of the fields (shape) of :func:`time_accuracy_figure`: one above the
+    other, in two columns each, in the first empty panel, or else below the panels."""
+    from matplotlib.lines import Line2D
+
+    by_method = [Line2D([], [], ls="none", marker="s", color=f"C{k}", label=m) for k, m in enumerate(methods)]
+    by_field = [Line2D([], [], ls="none", marker=shapes[f], color="0.3", mfc="none", label=f) for f in fields]
+    if used < axes.size:  # the legends in the first empty panel
+        ax = list(axes.flat)[used]
+        if by_field:
+            ax.add_artist(ax.legend(handles=by_field, loc="lower center", title="field", ncols=2))
+        ax.legend(handles=by_method, loc="upper center" if by_field else "center", title="method", ncols=2)
+    else:
+        fig.legend(handles=by_method + by_field, loc="outside lower center", ncols=min(4, len(methods) + len(fields)))
 
 
 def displacement_demand_figure(records: list[dict], *, title: str | None = None):
