@@ -45,3 +45,24 @@ def test_folded_maps_are_counted_from_the_fields_where_the_summary_lacks_them():
     record = {"mean": {"n_flipped": 2}, "a@51": {"n_flipped": 0}, "b@51": {"n_flipped": 2}}
     assert _folded_maps(record) == 1
     assert _folded_maps({"mean": {"std_rho_map": 0.1}}) is None and _folded_maps({}) is None
+
+
+def test_recipe_markdown_writes_none_for_no_weight_average_and_explains_a_dash_only_where_one_is_shown():
+    from types import SimpleNamespace
+
+    from rfmap.paper.recipes import recipe_markdown, recipe_table
+
+    class Model:
+        def kwargs(self):
+            return {"arch": "unet"}
+
+    from rfmap.training.config import get_config
+
+    config = {**get_config("deq2d-square", "ci").to_dict(), "lr": 2e-4, "ema": None, "val_sizes": [51]}
+    meta = {"config": config, "steps": 10, "wall_time": 60.0,
+            "final_metrics": {"mean": {"std_rho_map": 0.1, "raw_folded_fields": 0}}}
+    md = recipe_markdown(recipe_table({"m": SimpleNamespace(meta=meta, model=Model())}))
+    assert "| m | 2 × 10⁻⁴ | none | 10 | 1 |" in md
+    assert "—" not in md and "not recorded" not in md
+    bare = recipe_markdown(recipe_table({"m": SimpleNamespace(meta={"steps": 1}, model=Model())}))
+    assert all("not recorded" in part for part in bare.split("\n\n**"))  # every part shows a dash

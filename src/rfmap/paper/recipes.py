@@ -100,21 +100,30 @@ RECIPE_LEGENDS = {
         "*N*: the held-out grid sides; *score*: the validation score of the kept weights, lower is better; "
         "*maps scored*: the raw network maps, or the default maps a plain Surrogate.map returns; *folded maps*: "
         "held-out maps the network itself folded at the kept weights (the default maps repair them; the chapter "
-        "on bijectivity shows how). —: not recorded in the model's metadata.",
+        "on bijectivity shows how).",
 }
+
+#: The note added under a part of :func:`recipe_markdown` whose table shows a dash.
+_MISSING_NOTE = "—: not recorded in the model's metadata."
 
 
 def recipe_markdown(table: Table) -> str:
     """A :func:`recipe_table` as three Markdown tables of a few columns each (:data:`RECIPE_PARTS`), one row per
     model, so that each fits the width of a book page, each followed by the legend of its columns
-    (:data:`RECIPE_LEGENDS`)."""
+    (:data:`RECIPE_LEGENDS`). A weight average that is absent reads "none" (the weights as trained); any other
+    absent value reads "—", and the legend of a part explains the dash only where its table shows one
+    ("—: not recorded in the model's metadata")."""
     out = []
     for title, cols in RECIPE_PARTS.items():
         lines = [f"**{title}**", "", "| model | " + " | ".join(cols.values()) + " |", "|" + "---|" * (len(cols) + 1)]
+        dashed = False
         for case, _, values in table.rows:
-            cells = [table.cell(values.get(c), c).replace("|", "\\|") for c in cols]
+            cells = ["none" if c == "ema" and values.get(c) is None
+                     else table.cell(values.get(c), c).replace("|", "\\|") for c in cols]
+            dashed = dashed or "—" in cells
             lines.append(f"| {case} | " + " | ".join(cells) + " |")
-        lines += ["", RECIPE_LEGENDS[title]]
+        legend = RECIPE_LEGENDS[title] + (" " + _MISSING_NOTE if dashed else "")
+        lines += ["", legend]
         out.append("\n".join(lines))
     return "\n\n".join(out)
 
