@@ -283,10 +283,14 @@ def _t4(x, a=0.55, sigma=0.10):
 #:   :math:`a = b = 0.08`;
 #: * ``T2``, Eq. (24): :math:`u = x + a\sin(2\pi y)\sin(\pi x) + b\sin(4\pi y)\sin(2\pi x)`,
 #:   :math:`v = y + a\sin(2\pi x)\sin(\pi y) + b\sin(4\pi x)\sin(2\pi y)`, with :math:`a = 0.03`, :math:`b = 0.02`;
-#: * ``T3``, Eq. (25): :math:`u = x + s\,[-0.60\,(y - \tfrac12)\,e^{-r^2/0.045} + 0.70\,(y - \tfrac12)\,e^{-r^2/0.045}
-#:   + 0.06\sin(2\pi y)]`, :math:`v = y + s\,[0.60\,(x - \tfrac12)\,e^{-r^2/0.045} - 0.70\,(x - \tfrac12)\,
-#:   e^{-r^2/0.045} - 0.06\sin(2\pi x)]`, as printed (the two Gaussian terms combine into one of coefficient 0.10 in
-#:   :math:`u` and -0.10 in :math:`v`);
+#: * ``T3``, Eq. (25), as printed, with :math:`g = e^{-r^2/0.045}`:
+#:
+#:   .. math::
+#:
+#:      u &= x + s\,[-0.60\,(y - \tfrac12)\,g + 0.70\,(y - \tfrac12)\,g + 0.06\sin(2\pi y)],\\
+#:      v &= y + s\,[0.60\,(x - \tfrac12)\,g - 0.70\,(x - \tfrac12)\,g - 0.06\sin(2\pi x)]
+#:
+#:   (the two Gaussian terms combine into one of coefficient 0.10 in :math:`u` and -0.10 in :math:`v`);
 #: * ``T4``, Eq. (26): :math:`u = x + a\,s\,e^{-r^2/\sigma}(x - \tfrac12)`,
 #:   :math:`v = y + a\,s\,e^{-r^2/\sigma}(y - \tfrac12)`, with :math:`a = 0.55`, :math:`\sigma = 0.10`;
 #: * ``T1-res``, Eq. (23) with :math:`a = 0.06`, :math:`b = 0.04`.
