@@ -19,6 +19,17 @@ def test_a_comment_with_a_colon_is_not_cut_into_a_type():
     assert out == [GUARD, *comment] and not any(line.startswith(":type:") for line in out)
 
 
+def test_the_guard_is_taken_out_after_napoleon():
+    from rfmap.paper._apidocs import drop_guard
+
+    lines = _rendered("data", ["cells per side: the raster's side at which", "the flow is run."])
+    drop_guard(None, "data", "X", None, None, lines)
+    assert lines == ["cells per side: the raster's side at which", "the flow is run."]
+    joined = [GUARD + "text", "more"]
+    drop_guard(None, "data", "X", None, None, joined)
+    assert joined == ["text", "more"]
+
+
 def test_functions_and_comments_without_a_colon_are_left_alone():
     assert _rendered("data", ["the largest side"]) == ["the largest side"]
     lines = ["Do this: then that."]
@@ -47,6 +58,7 @@ def test_the_extension_loads_before_autodoc_in_a_sphinx_build(tmp_path):
         sys.modules.pop("mod_x", None)
     text = (tmp_path / "_build" / "index.txt").read_text(encoding="utf-8")
     assert "cells per side: the raster's side" in text and "Type:" not in text
+    assert GUARD not in text  # taken out again after napoleon
 
 
 def test_an_entry_naming_several_attributes_becomes_one_entry_each():

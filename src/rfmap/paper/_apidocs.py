@@ -4,7 +4,7 @@ A constant is documented by a ``#:`` comment, and ``sphinx.ext.napoleon`` reads 
 ``type: description``: a comment whose first line holds a colon ("cells per side: the raster's ...") comes out cut at
 that colon, its start shown as the constant's type (a property's docstring too).  The constants' comments are prose,
 never types, so this extension puts an invisible first line (a zero-width space) before napoleon reads them, which
-leaves the text whole.
+leaves the text whole, and takes that line out again once napoleon is done, so that the page does not carry it.
 
 A constant whose comment hides its value (``:meta hide-value:``, for a long text or table that reads badly as a quoted
 value) is shown with its value as text instead: a string as a paragraph, its ``*emphasis*`` kept, a dict as a list.
@@ -26,6 +26,8 @@ import re
 
 #: napoleon handles ``autodoc-process-docstring`` at Sphinx's default priority, 500; lower runs first
 PRIORITY = 400
+#: the priority of the handler that removes the guard again, after napoleon's
+AFTER_NAPOLEON = 600
 #: the invisible line napoleon takes for the (empty) type and description
 GUARD = "\u200b"
 #: an entry of a numpy-style section that names several attributes: indentation, the names, the type (if any)
@@ -37,6 +39,16 @@ def keep_whole(app, what: str, name: str, obj, options, lines: list[str]) -> Non
     place."""
     if what in ("data", "attribute", "property") and any(":" in line for line in lines[:1]):
         lines.insert(0, GUARD)
+
+
+def drop_guard(app, what: str, name: str, obj, options, lines: list[str]) -> None:
+    """After napoleon: the :data:`GUARD` that :func:`keep_whole` put first is taken out again, in place."""
+    if lines and lines[0].startswith(GUARD):
+        rest = lines[0][len(GUARD):]
+        if rest.strip():
+            lines[0] = rest
+        else:
+            del lines[0]
 
 
 def _escaped(text: str) -> str:
@@ -111,5 +123,6 @@ def setup(app):
     app.connect("autodoc-process-docstring", keep_whole, priority=PRIORITY)
     app.connect("autodoc-process-docstring", split_attributes, priority=PRIORITY)
     app.connect("autodoc-process-docstring", show_text, priority=PRIORITY)
+    app.connect("autodoc-process-docstring", drop_guard, priority=AFTER_NAPOLEON)
     app.connect("autodoc-process-signature", factory_defaults)
     return {"parallel_read_safe": True, "parallel_write_safe": True}
