@@ -352,7 +352,9 @@ def test_a_range_or_a_change_whose_ends_print_alike_is_said_as_one_value():
 
     assert span_text(0.4123, 0.5712) == "0.412 to 0.571" and span_text(0.19234, 0.19231) == "0.192"
     assert span_text(5.04, 5.1, ".2g") == "5 to 5.1" and span_text(5.14, 5.1, ".2g") == "5.1"
-    assert change_text(1.08313, 0.11620) == "goes from 1.0831 to 0.1162"
+    assert change_text(1.08313, 0.11620) == "goes from 1.083 to 0.1162"
+    assert change_text(0.00012, 0.00003) == "goes from 1.200 × 10⁻⁴ to 3.000 × 10⁻⁵"  # never "to 0.0000"
+    assert change_text(1.08313, 0.11620, ".4f") == "goes from 1.0831 to 0.1162"
     assert change_text(0.192344, 0.192305) == "stays at 0.1923 (to the digits shown)"
 
 

@@ -278,10 +278,23 @@ def span_text(lo: float, hi: float, fmt: str = ".3g") -> str:
     return a if a == b else f"{a} to {b}"
 
 
-def change_text(before: float, after: float, fmt: str = ".4f") -> str:
-    """A change for the book's text: ``"goes from 1.0831 to 0.1162"``, or ``"stays at 0.1923 (to the digits
-    shown)"`` where both values print the same.  ``fmt``: the format of each value."""
-    a, b = format(float(before), fmt), format(float(after), fmt)
+def change_text(before: float, after: float, fmt: str | None = None, digits: int = 4) -> str:
+    """A change for the book's text: ``"goes from 1.083 to 0.1162"``, or ``"stays at 0.1923 (to the digits
+    shown)"`` where both values print the same.  Each value has ``digits`` significant digits
+    (:func:`~rfmap.core.wording.format_sig`: below 10⁻³ as a power of ten), so a small value is never rounded to a
+    zero it did not reach; ``fmt``, where given, is a format of each value instead (``".4f"``).
+
+    Examples
+    --------
+    >>> change_text(1.08314, 0.11617)
+    'goes from 1.083 to 0.1162'
+    >>> change_text(0.01234, 0.0004567)
+    'goes from 0.01234 to 4.567 × 10⁻⁴'
+    """
+    def show(v: float) -> str:
+        return format_sig(float(v), digits) if fmt is None else format(float(v), fmt)
+
+    a, b = show(before), show(after)
     return f"goes from {a} to {b}" if a != b else f"stays at {a} (to the digits shown)"
 
 
