@@ -31,7 +31,8 @@ class MultiResUNet(nn.Module):
     r"""Resolution-free encoder–decoder :math:`\mathcal{N}_\theta` producing a displacement field :math:`\psi`.
 
     Input encoding (paper Sec. 4.1): channels :math:`[x_1, \dots, x_d, p_1, \dots, p_c]` on a grid of any size, the
-    field in its task's encoding (:math:`\log p` for a density, :mod:`rfmap.tasks.density`).
+    field in its task's encoding (:math:`\log p` for a density where the paper feeds :math:`p`, a departure that
+    :mod:`rfmap.tasks.density` explains).
     Multi-resolution lifting, ``depth`` encoder stages of :class:`EnhancedDoubleConv` with 2x average pooling,
     transposed-convolution upsampling with interpolation wherever sizes do not match the skip connection, and a
     zero-initialised 1x1 head (so the untrained model is the identity map).

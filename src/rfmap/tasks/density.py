@@ -1,7 +1,10 @@
 r"""The density task: a density-equalizing map (DEM, DEQ) of the unit square or cube (paper Sec. 5.2).
 
 * encoding (m = 1): the channel is :math:`\log p` of the unit-mass density, a discretisation-consistent
-  normalisation (mass :math:`\int p = 1` on every grid);
+  normalisation (mass :math:`\int p = 1` on every grid).  This differs from the paper, whose Sec. 4.1 stacks the
+  field itself, :math:`[x, p(x)]`: a density-equalizing map depends on :math:`p` only through its ratios, which
+  :math:`\log p` turns into differences, and :math:`\log p` keeps a density that spans orders of magnitude (a
+  narrow peak over a low floor) in a range of order one;
 * training fields: random densities (:class:`rfmap.fields.random.RandomDensity`) at Sobol-jittered vertices, with a
   classical teacher's map as an optional target (:mod:`rfmap.tasks.teacher`);
 * loss: the density mismatch :math:`L(\tilde\rho - 1)`, with :math:`\lambda \int |\mu|^2` for DEQ in 2D and the
