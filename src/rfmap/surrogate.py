@@ -581,6 +581,6 @@ class Surrogate:
 
     def _field_on(self, inp: _Input, ref: np.ndarray, elements: np.ndarray, grid_n: int | None = None) -> np.ndarray:
         r"""The input field on the output mesh (:meth:`rfmap.tasks.base.Task.field_on_mesh`: unit-mass vertex densities
-        (n,), or :math:`\mu` per element (m,) at the centroids, ...); from the exact evaluator when there is one,
+        (P,), or :math:`\mu` per element (m,) at the centroids, ...); from the exact evaluator when there is one,
         else interpolated from the input grid.  ``grid_n``: the output mesh is the ``N``-grid."""
         return self.spec.task.field_on_mesh(inp.grid, inp.fn, ref, elements, grid_n)

@@ -65,8 +65,8 @@ def unit_mass(values: np.ndarray, weights: np.ndarray | None = None) -> np.ndarr
 
     Parameters
     ----------
-    values : ndarray, shape (N,)*d (a grid field) or (n,) with ``weights``
-    weights : array, shape (n,), optional
+    values : ndarray, shape (N,)*d (a grid field) or (P,) with ``weights``
+    weights : array, shape (P,), optional
         Vertex quadrature weights (:func:`rfmap.core.mesh.vertex_weights`); defaults to the ``N``-grid's.
 
     Returns
@@ -93,10 +93,10 @@ def preprocess_density(values, *, floor: float = DENSITY_FLOOR, weights: np.ndar
 
     Parameters
     ----------
-    values : array, shape (N,)*d (a grid field) or (n,) with ``weights``
+    values : array, shape (N,)*d (a grid field) or (P,) with ``weights``
     floor : float
         Minimum after the shift.
-    weights : array, shape (n,), optional
+    weights : array, shape (P,), optional
         Vertex quadrature weights (:func:`rfmap.core.mesh.vertex_weights`); defaults to the ``N``-grid's.
 
     Returns

@@ -311,7 +311,7 @@ def vertex_weights(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (n,)
+    ndarray, shape (P,)
     """
     pts = np.asarray(points, dtype=np.float64)
     el = np.asarray(elements)

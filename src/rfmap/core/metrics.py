@@ -167,11 +167,11 @@ def compute_metrics(
 
     Parameters
     ----------
-    ref, mapped : array, shape (n, d)
+    ref, mapped : array, shape (P, d)
     elements : int array, shape (m, d+1)
-    density : array, shape (n,), optional
+    density : array, shape (P,), optional
         Vertex densities (preprocessed); enables the two ``std_rho`` metrics.
-    exact_points : array, shape (n, d), optional
+    exact_points : array, shape (P, d), optional
         A reference image of the vertices; enables ``mean_dd``.
     mu : complex array, shape (m,), optional
         Beltrami coefficient of the map (computed from the mesh when omitted in 2D).
@@ -220,16 +220,16 @@ def residual_parts(ref, mapped, elements, density) -> tuple[np.ndarray, np.ndarr
 
     Parameters
     ----------
-    ref, mapped : array, shape (n, d)
+    ref, mapped : array, shape (P, d)
     elements : array of int, shape (m, d+1)
-    density : array, shape (n,)
+    density : array, shape (P,)
         Vertex densities (any positive scale).
 
     Returns
     -------
     r : ndarray, shape (m,)
         :math:`r_e = \tilde\rho_e - 1` per element, :math:`\tilde\rho` on the mapped mesh.
-    smooth : ndarray, shape (n,)
+    smooth : ndarray, shape (P,)
         :math:`\bar r_v = \sum_{e \ni v} |e|\, r_e / \sum_{e \ni v} |e|` per vertex, :math:`|e|` the reference
         measure.
 

@@ -95,11 +95,11 @@ class MapResult:
 
     Attributes
     ----------
-    ref_points : ndarray, shape (n, d)
-    mapped_points : ndarray, shape (n, d)
+    ref_points : ndarray, shape (P, d)
+    mapped_points : ndarray, shape (P, d)
     elements : ndarray, shape (m, d+1)
     field : ndarray
-        The input field: vertex densities, shape (n,), or per-triangle Beltrami coefficients, shape (m,) complex.
+        The input field: vertex densities, shape (P,), or per-triangle Beltrami coefficients, shape (m,) complex.
     kind : str
         ``'density'`` or ``'beltrami'``.
     time : float

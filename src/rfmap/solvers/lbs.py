@@ -87,7 +87,7 @@ def p1_gradients(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray,
 
     Parameters
     ----------
-    points : ndarray, shape (n, 2)
+    points : ndarray, shape (P, 2)
     triangles : int ndarray, shape (m, 3)
 
     Returns
@@ -112,14 +112,14 @@ def assemble_stiffness(points: np.ndarray, triangles: np.ndarray, A: np.ndarray)
 
     Parameters
     ----------
-    points : ndarray, shape (n, 2)
+    points : ndarray, shape (P, 2)
     triangles : int ndarray, shape (m, 3)
     A : ndarray, shape (m, 2, 2)
         Per-triangle coefficient matrices.
 
     Returns
     -------
-    scipy.sparse.csr_matrix, shape (n, n)
+    scipy.sparse.csr_matrix, shape (P, P)
         Symmetric; its rows sum to zero (constants are in the kernel).
     """
     grads, area = p1_gradients(points, triangles)
@@ -140,15 +140,15 @@ def grid_dissection_order(ij: np.ndarray, leaf: int = 32) -> np.ndarray:
 
     Parameters
     ----------
-    ij : int ndarray, shape (n, 2)
+    ij : int ndarray, shape (P, 2)
         Grid indices of the vertices (any subset of a grid, e.g. the free vertices of a Dirichlet problem).
     leaf : int
         Boxes with at most this many vertices are not split further.
 
     Returns
     -------
-    int ndarray, shape (n,)
-        A permutation of ``range(n)``.
+    int ndarray, shape (P,)
+        A permutation of ``range(P)``.
     """
     ij = np.asarray(ij)
     out: list[np.ndarray] = []

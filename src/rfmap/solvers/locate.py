@@ -73,7 +73,7 @@ def _locate(points: np.ndarray, elements: np.ndarray, m: int, chunk: int, subset
 
 def _barycentric(coords: list[np.ndarray], vid: np.ndarray, y: list[np.ndarray]) -> list[np.ndarray]:
     r""":math:`\lambda_1..\lambda_d` (d arrays, (k,) each) of the points ``y`` in the simplices of vertices ``vid``
-    (k, d+1), by Cramer's rule.  ``coords``: the d vertex coordinate arrays (each contiguous, (n,)); ``y``: the d
+    (k, d+1), by Cramer's rule.  ``coords``: the d vertex coordinate arrays (each contiguous, (P,)); ``y``: the d
     point coordinate arrays (each (k,)).  Gathering one coordinate at a time keeps every operand contiguous (about
     4x faster than gathering (k, d+1, d) vertex blocks)."""
     d = len(coords)
@@ -286,10 +286,10 @@ def rasterize_elements(points: np.ndarray, elements: np.ndarray, values: np.ndar
 
     Parameters
     ----------
-    points : ndarray, shape (n, d)
+    points : ndarray, shape (P, d)
         Vertex positions in :math:`[0,1]^d` (a fold-free mesh).
     elements : ndarray, shape (e, d+1)
-    values : ndarray, shape (e,) or (n,)
+    values : ndarray, shape (e,) or (P,)
         One value per element or per vertex (``at``).
     m : int
         Grid nodes per side.

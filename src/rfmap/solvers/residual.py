@@ -32,7 +32,7 @@ def residual_density(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, 
 
 def lumped_residual(elements: np.ndarray, population: np.ndarray, measure: np.ndarray, n: int) -> np.ndarray:
     r"""The residual density lumped onto the vertices: :math:`\sum_{e \ni v} \text{population}_e \,/\,
-    \sum_{e \ni v} |T(e)|`, shape (n,): the measure-weighted mean of the element residuals
+    \sum_{e \ni v} |T(e)|`, shape (P,): the measure-weighted mean of the element residuals
     :math:`\tilde\rho_e = \text{population}_e/|T(e)|` around each vertex.
 
     Parameters
@@ -43,7 +43,7 @@ def lumped_residual(elements: np.ndarray, population: np.ndarray, measure: np.nd
     measure : ndarray, shape (e,)
         Measure of each mapped element :math:`|T(e)|` (positive; any common scale as ``population``'s).
     n : int
-        Number of vertices.
+        Number of vertices, :math:`P` (the length of the result).
     """
     mass = np.zeros(n)
     vol = np.zeros(n)
@@ -86,7 +86,7 @@ def vertex_residual(elements: np.ndarray, population: np.ndarray, measure: np.nd
 
     Returns
     -------
-    ndarray, shape (n,)
+    ndarray, shape (P,)
     """
     import scipy.sparse as sp
 

@@ -150,9 +150,9 @@ class Batch:
     Attributes
     ----------
     inputs : Tensor, shape ``(B, d+c, *S)``
-    ref : Tensor, shape (B, n, d)
+    ref : Tensor, shape (B, P, d)
     elements : LongTensor, shape (m, d+1)
-    density : Tensor, shape (B, n) — density tasks
+    density : Tensor, shape (B, P) — density tasks
     mu_target : complex Tensor, shape (B, m) — Beltrami tasks: target per triangle
     extra : dict
         What else a task's loss needs (tensors move with the batch), e.g. a teacher's ``target``.
@@ -215,7 +215,7 @@ class MappedBatch:
     Attributes
     ----------
     batch : Batch
-    mapped : Tensor, shape (B, n, d)
+    mapped : Tensor, shape (B, P, d)
         The mapped vertices :math:`u = x + \\mathcal{B}(x) \\odot \\psi(x)`.
     measures : rfmap.tasks.losses.Measures
         The signed element measures before and after, shape (B, m) (strided on a grid).
@@ -532,7 +532,7 @@ def batch_loss_terms(model, spec: TaskSpec, batch: Batch, weights: LossWeights) 
         :func:`task_loss` of the network's maps.
     parts : dict
         Its terms (batch means).
-    mapped : Tensor, shape (B, n, d)
+    mapped : Tensor, shape (B, P, d)
         The mapped vertices :math:`u = x + \mathcal{B}(x) \odot \psi(x)`.
     terms : dict
         :func:`rfmap.tasks.losses.loss_integrands` of the maps (fold threshold of ``weights``).

@@ -75,7 +75,7 @@ class DensityTask(Task):
 
     def field_on_mesh(self, grid: np.ndarray, fn, ref: np.ndarray, elements: np.ndarray,
                       grid_n: int | None) -> np.ndarray:
-        """Unit-mass vertex densities (n,) on the output mesh: from the exact evaluator ``fn`` when there is one,
+        """Unit-mass vertex densities (P,) on the output mesh: from the exact evaluator ``fn`` when there is one,
         else interpolated from the input ``grid`` (``grid_n``: the output mesh is the ``N``-grid)."""
         w = grid_vertex_weights(grid_n, ref.shape[1]) if grid_n else vertex_weights(ref, elements)
         if fn is not None:

@@ -3,7 +3,7 @@ r"""Data-free training losses (paper Sec. 5), integrated over element measures.
 Every loss is an average over elements weighted by the reference element measure, i.e. a quadrature of an
 integral over :math:`\Omega`, so its value does not depend on the grid resolution.
 
-Shapes: ``ref`` and ``mapped`` are (B, n, d) vertex positions, ``elements`` is (m, d+1).
+Shapes: ``ref`` and ``mapped`` are (B, P, d) vertex positions, ``elements`` is (m, d+1).
 """
 from __future__ import annotations
 
@@ -112,7 +112,7 @@ def density_loss(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tensor,
 
     Parameters
     ----------
-    density : Tensor, shape (B, n)
+    density : Tensor, shape (B, P)
         Vertex densities.
     pre : Measures
         Precomputed measures and element densities.

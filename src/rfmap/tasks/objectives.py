@@ -29,10 +29,10 @@ def density_objective(ref, psi, elements, density, boundary, flip_weight: float 
 
     Parameters
     ----------
-    ref, psi : Tensor, float64, shape (n, d)
+    ref, psi : Tensor, float64, shape (P, d)
         Reference vertices and the network's displacement at them.
     elements : LongTensor, shape (m, d+1)
-    density : array, shape (n,)
+    density : array, shape (P,)
         Vertex densities (unit mass).
     boundary : str
         The boundary condition of :func:`rfmap.nn.apply_displacement`.
