@@ -308,7 +308,8 @@ def add_cartogram_parser(sub) -> None:
                    help="classical flow-based method (default, the fastest), classical diffusion (also 'dem'), "
                         "neural surrogate, or the surrogate polished by the flow")
     s.add_argument("--n", type=int, default=default.n,
-                   help=f"cells per side N of the density raster, as cartogram-cpp's -n (default {default.n})")
+                   help=f"cells per side N of the density raster, as cartogram-cpp's -n (default {default.n}); the "
+                        "maps run on N + 1 points per side, the count that rfmap solve and rfmap map --n take")
     s.add_argument("--tol", type=float, default=default.tol,
                    help=f"repeat passes until the largest relative area error is at most this (default {default.tol})")
     s.add_argument("--max-passes", type=int, default=default.max_iterations,

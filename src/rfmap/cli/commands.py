@@ -312,7 +312,8 @@ def _add_classical(sub) -> None:
     g.add_argument("--field", help="a built-in field name")
     g.add_argument("--field-file", help=".npy array sampled on an N^d grid: a density (preprocessed as by rfmap map) "
                                         "or, for lbs, a complex Beltrami coefficient (N, N) at the vertices")
-    s.add_argument("--n", type=int, default=None, help="grid side N (with --field-file: the array's side)")
+    s.add_argument("--n", type=int, default=None,
+                   help="grid side N, in points per side (with --field-file: the array's side)")
     s.add_argument("--boundary", choices=["square", "free", "fixed"], default=None,
                    help="diffusion and flow: square (default) or free; lbs: fixed (default) or square")
     s.add_argument("--out", required=True, help="output .npz")
@@ -334,7 +335,7 @@ def _add_map(sub) -> None:
     g = s.add_mutually_exclusive_group(required=True)
     g.add_argument("--field", help="a built-in field name")
     g.add_argument("--field-file", help=".npy array sampled on an N^d grid")
-    s.add_argument("--n", type=int, default=None, help="output grid side N")
+    s.add_argument("--n", type=int, default=None, help="output grid side N, in points per side")
     s.add_argument("--points", default=None, help=".npy array (P, d) of query points")
     s.add_argument("--refine", action="store_true", help="apply weight refinement")
     s.add_argument("--native", action="store_true",
