@@ -46,8 +46,9 @@ class CartogramMethod:
         self.calls = 0
 
     def prepare(self) -> None:
-        """Load what the method needs before the first pass (a surrogate); checks the options.  Nothing by
-        default."""
+        """Called once before the first pass, to load what the method needs and check the options.  Here, and
+        for the classical methods, it does nothing; the neural methods load their surrogate
+        (:meth:`rfmap.cartogram.methods.neural.SurrogateMethod.prepare`)."""
 
     def grid_map(self, density: np.ndarray, points: np.ndarray):
         """The map of the unit square for one pass of the density raster ``density`` (N+1, N+1), at the distinct

@@ -26,6 +26,9 @@ class SurrogateMethod(CartogramMethod):
     carries_vertices = False
 
     def prepare(self) -> None:
+        """Loads the surrogate, ``options.surrogate`` or else the shipped ``options.model`` (default
+        ``deq2d-square``), and checks that it maps 2D densities with the square's walls fixed (``ValueError``
+        otherwise); the hybrid method loads it the same way."""
         self.surrogate = square_surrogate(self.options.surrogate, self.options.model)
 
     def _map(self, density: np.ndarray, points: np.ndarray, solver_kw: dict):
