@@ -207,9 +207,11 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     v = c.score_values()
     # 0.12 / 0.6 against 0.09 / 0.48; the scoreboards give the word, its count of comparable pairs and the n/c
     # clause, the Std ratios in a footnote
-    assert c.verdict_word() == "reproduced on the comparable cases (1 of 1); the n/c case is worse by Std ratio"
-    assert v["verdict"] == "reproduced (1 of 1 comparable); the n/c case is worse by Std ratio"
-    assert v["nc"] == "paper's method 0.2, paper 0.187 (worse)"
+    # the clause gives the size of the gap: 0.2 / 0.1875 = 1.07
+    assert c.verdict_word() == ("reproduced on the comparable cases (1 of 1); the n/c case's Std ratio is 1.1 times "
+                                "the paper's")
+    assert v["verdict"] == "reproduced (1 of 1 comparable); the n/c case's Std ratio is 1.1 times the paper's"
+    assert v["nc"] == "a Std ratio of 0.2 against the paper's 0.187, 1.1 times the paper's"
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.09
     assert c.verdict_word() == (
         "reproduced on the comparable cases (1 of 1); the n/c case is not worse by Std ratio")
@@ -227,8 +229,9 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     assert "n/c" not in c.to_markdown(["time"])
     c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses
     assert c.verdict_word() == (
-        "not reproduced on the comparable cases (0 of 1); the n/c case is worse by Std ratio")
-    assert c.score_values()["verdict"] == "not reproduced (0 of 1 comparable); the n/c case is worse by Std ratio"
+        "not reproduced on the comparable cases (0 of 1); the n/c case's Std ratio is 1.1 times the paper's")
+    assert c.score_values()["verdict"] == ("not reproduced (0 of 1 comparable); the n/c case's Std ratio is 1.1 "
+                                           "times the paper's")
 
 
 def test_verdict_words_follow_the_stated_rule():

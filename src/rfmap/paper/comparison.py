@@ -38,7 +38,8 @@ from ..core.result import MapResult
 from .reproduce import beltrami_values, density_values, exact_beltrami_result
 from ..core.wording import of_count
 from .tables import _csv_cell, one_notation, paper_table, power_of_ten, printed_digits
-from .verdicts import close_calls, is_comparable, median_ratio, met_text, qualified_verdict, ratio_text, std_ratio
+from .verdicts import (close_calls, is_comparable, median_ratio, met_text, nc_phrase, qualified_verdict, ratio_text,
+                       std_ratio)
 
 __all__ = ["Case", "Comparison", "METHODS", "METRIC_TITLES", "format_number", "format_time", "score_row",
            "timed", "compare_density", "compare_beltrami", "compare_models", "population_comparison",
@@ -213,12 +214,11 @@ class Comparison:
         return [(c, a, b) for c, a, b in ratios if a is not None and b is not None and "std_rho_map" in self.metrics]
 
     def verdict_word(self, short: bool = False) -> str:
-        """The verdict, its tally of (case, metric) pairs and (unless ``short``) the clause on the n/c cases (see
-        :mod:`rfmap.paper.verdicts`), by :func:`.qualified_verdict`: three comparable cases that meet the paper and one
-        n/c case worse by Std ratio read ``'reproduced on the comparable cases (3 of 3); the n/c case is worse by Std
-        ratio'``."""
-        flags = [self.met(c.name, m) for c in self.cases for m in self.metrics]
-        return qualified_verdict(flags, [a > b for _, a, b in self._nc_ratios()], short=short)
+        """The verdict, its tally of (case, metric) pairs and the clause on the n/c cases with the size of the gap
+        (:func:`.qualified_verdict`): ``'reproduced (3 of 3 comparable); the n/c case's Std ratio is 1.6 times the
+        paper's'`` with ``short``."""
+        flags, nc = [self.met(c.name, m) for c in self.cases for m in self.metrics], self._nc_ratios()
+        return qualified_verdict(flags, [a > b for _, a, b in nc], short=short, factors=[a / b for _, a, b in nc])
 
     def _case_met(self, case: str, metric: str) -> str:
         """A met cell of a chapter's table: ``yes``/``no``/``—``, or ``n/c`` for an input not the paper's."""
@@ -309,8 +309,8 @@ class Comparison:
         texts["verdict"], texts["close"] = self.verdict_word(short=True), close_calls(
             (f"N = {c}" if c.isdigit() else c, METRIC_TITLES[m], *(self.value(c, k, m) for k in ("native", "paper",
              "classical"))) for c in comparable for m in self.metrics)
-        texts["nc"] = "; ".join(f"paper's method {a:.3g}, paper {b:.3g} ({'worse' if a > b else 'not worse'})"
-                                for _, a, b in self._nc_ratios()) or "—"
+        nc = self._nc_ratios()
+        texts["nc"] = "; ".join((f"{c}: " if len(nc) > 1 else "") + nc_phrase(a, b) for c, a, b in nc) or "—"
         out = one_notation(out, self.metrics + self.shown()) | texts
         return {k: v.replace(" × ", "\u00a0×\u00a0") for k, v in out.items()}  # 9.4 × 10⁻³ never split
 

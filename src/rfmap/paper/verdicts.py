@@ -33,7 +33,7 @@ from ..core.wording import of_count
 from ..fields.paper import get_field, sample_density
 
 __all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "input_std", "is_comparable", "std_ratio",
-           "verdict", "qualified_verdict", "nc_clause", "ratio_text", "met_text", "median_ratio", "every_or_count",
+           "verdict", "qualified_verdict", "nc_clause", "nc_phrase", "ratio_text", "met_text", "median_ratio", "every_or_count",
            "classical_lead", "times_lower", "NEAR_MISS", "close_calls"]
 
 #: The relative agreement of the input's Std(ρ̃_orig) with the paper's for a case to count as the paper's input
@@ -109,7 +109,8 @@ def verdict(met: list[bool | None]) -> str:
     return "reproduced" if k == len(flags) else ("partly" if k else "not reproduced")
 
 
-def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None, *, short: bool = False) -> str:
+def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None, *, short: bool = False,
+                      factors: list[float] | None = None) -> str:
     """The verdict of :func:`verdict` followed by its tally and, where the item has cases whose input is not the
     paper's (n/c), a clause on those cases.
 
@@ -119,7 +120,8 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     :func:`nc_clause`: whether each n/c case's Std ratio (:func:`std_ratio`, the share of the input's spread the map
     leaves) by the paper's method is above the paper's (``nc_worse``, one flag per n/c case, ``True`` where it is);
     with ``short`` the word, its tally named as that of the comparable cases, and the n/c clause (the scoreboards'
-    cell).
+    cell).  ``factors``, one per n/c case, are the paper's method's Std ratio over the paper's: the clause then
+    says by how much a worse case misses.
 
     Examples
     --------
@@ -132,20 +134,23 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     'the n/c case is worse by Std ratio'
     >>> qualified_verdict([True, True, True], [True], short=True)
     'reproduced (3 of 3 comparable); the n/c case is worse by Std ratio'
+    >>> qualified_verdict([True, True, True], [True], short=True, factors=[1.61])
+    "reproduced (3 of 3 comparable); the n/c case's Std ratio is 1.6 times the paper's"
     """
     flags = [m for m in met if m is not None]
     count = f" ({sum(flags)} of {len(flags)})" if flags else ""
     if not nc_worse:
         return verdict(flags) + count
     if short:  # the scoreboards' cell: the count named as that of the comparable cases, the n/c cases beside it
-        return f"{verdict(flags)}{count[:-1] + ' comparable)' if flags else ''}; {nc_clause(nc_worse)}"
+        return f"{verdict(flags)}{count[:-1] + ' comparable)' if flags else ''}; {nc_clause(nc_worse, factors)}"
     scope = " on the comparable cases" if flags else ""
-    return f"{verdict(flags)}{scope}{count}; {nc_clause(nc_worse)}"
+    return f"{verdict(flags)}{scope}{count}; {nc_clause(nc_worse, factors)}"
 
 
-def nc_clause(nc_worse: list[bool]) -> str:
+def nc_clause(nc_worse: list[bool], factors: list[float] | None = None) -> str:
     """How many of the n/c cases are *worse by Std ratio* (both defined in :mod:`rfmap.paper.verdicts`), from one
-    flag per n/c case (``""`` for none).
+    flag per n/c case (``""`` for none); with ``factors`` (per n/c case, the paper's method's Std ratio over the
+    paper's), by how much, to two digits.
 
     Examples
     --------
@@ -155,13 +160,37 @@ def nc_clause(nc_worse: list[bool]) -> str:
     '1 of the 2 n/c cases is worse by Std ratio'
     >>> nc_clause([True, True, False])
     '2 of the 3 n/c cases are worse by Std ratio'
+    >>> nc_clause([True], [1.93]), nc_clause([True, False], [1.61, 0.9])
+    ("the n/c case's Std ratio is 1.9 times the paper's", "1 of the 2 n/c cases is worse by Std ratio, 1.6 times \
+the paper's")
     """
     if not nc_worse:
         return ""
+    worst = max((f for f, w in zip(factors or [], nc_worse) if w), default=None)
+    size = f"{float(f'{worst:.2g}'):g} times the paper's" if worst is not None else ""
     if len(nc_worse) == 1:
+        if size:
+            return f"the n/c case's Std ratio is {size}"
         return f"the n/c case is {'worse' if nc_worse[0] else 'not worse'} by Std ratio"
     k = sum(nc_worse)
-    return f"{k} of the {len(nc_worse)} n/c cases {'is' if k == 1 else 'are'} worse by Std ratio"
+    up_to = ("up to " if k > 1 else "") + size
+    return (f"{k} of the {len(nc_worse)} n/c cases {'is' if k == 1 else 'are'} worse by Std ratio"
+            + (f", {up_to}" if size else ""))
+
+
+def nc_phrase(ours: float, paper: float) -> str:
+    """One n/c case's Std ratio by the paper's method beside the paper's, as a phrase for running text, with the
+    size of the gap where it is worse.
+
+    Examples
+    --------
+    >>> nc_phrase(0.125, 0.194)
+    "a Std ratio of 0.125 against the paper's 0.194, so no worse"
+    >>> nc_phrase(0.442, 0.274)
+    "a Std ratio of 0.442 against the paper's 0.274, 1.6 times the paper's"
+    """
+    gap = "so no worse" if ours <= paper else f"{float(f'{ours / paper:.2g}'):g} times the paper's"
+    return f"a Std ratio of {ours:.3g} against the paper's {paper:.3g}, {gap}"
 
 
 def ratio_text(r: float | None) -> str:
@@ -253,10 +282,15 @@ def times_lower(ratios) -> str:
     return f"{float(f'{min(ratios):.2g}'):g} to {float(f'{max(ratios):.2g}'):g} times lower than"
 
 
+def _pair(case: str, title: str) -> str:
+    """A (case, metric) pair as a noun phrase: ``the mean |Δμ| of T2``, ``the Std at N = 128``."""
+    return f"the {title} {'at' if case.startswith('N = ') else 'of'} {case}"
+
+
 def close_calls(rows) -> str:
-    """The misses that say less than they seem, as a sentence: those within :data:`NEAR_MISS` of the paper's value, and
-    those where even the classical solver is above the paper's value (a value the discretisation on this mesh does
-    not reach); ``—`` where there are none.  The verdict is unchanged: a miss is a miss.
+    """The misses that say less than they seem, in sentences: those within :data:`NEAR_MISS` of the paper's value,
+    and those where even the classical solver is above the paper's value (a value the discretisation on this mesh
+    does not reach); a sentence saying there are none otherwise.  The verdict is unchanged: a miss is a miss.
 
     Parameters
     ----------
@@ -266,19 +300,31 @@ def close_calls(rows) -> str:
     Examples
     --------
     >>> close_calls([("N = 128", "Std", 0.07902, 0.07892, 0.0094), ("T2", "mean |Δμ|", 0.00877, 0.00629, 0.00635)])
-    "Within 0.5 % of the paper's value: N = 128, Std. Above the paper's value for the classical solver too: T2, \
-mean |Δμ|."
+    "The miss on the Std at N = 128 is within 0.5 % of the paper's value. On the mean |Δμ| of T2 the classical \
+solver is above the paper's value too."
     >>> close_calls([("T1", "mean |Δμ|", 0.009, 0.017, 0.005)])
-    '—'
+    "No miss is within 0.5 % of the paper's value, and none is shared by the classical solver."
     """
     near, shared = [], []
     for case, title, ours, paper, classical in rows:
         if ours is None or paper is None or ours <= paper:
             continue
         if ours <= paper * (1 + NEAR_MISS):
-            near.append(f"{case}, {title}")
+            near.append(_pair(case, title))
         if classical is not None and classical > paper:
-            shared.append(f"{case}, {title}")
-    parts = ([f"Within {NEAR_MISS * 100:g} % of the paper's value: {'; '.join(near)}."] if near else []) + (
-        [f"Above the paper's value for the classical solver too: {'; '.join(shared)}."] if shared else [])
-    return " ".join(parts) or "—"
+            shared.append(_pair(case, title))
+    within = f"within {NEAR_MISS * 100:g} % of the paper's value"
+    if not near and not shared:
+        return f"No miss is {within}, and none is shared by the classical solver."
+    parts = []
+    if near:
+        parts.append(f"The miss{'es' * (len(near) > 1)} on {_and_join(near)} {'are' if len(near) > 1 else 'is'} "
+                     f"{within.replace('value', 'values') if len(near) > 1 else within}.")
+    if shared:
+        parts.append(f"On {_and_join(shared)} the classical solver is above the paper's value too.")
+    return " ".join(parts)
+
+
+def _and_join(items: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
