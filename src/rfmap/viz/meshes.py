@@ -522,21 +522,25 @@ def query_points_figure(cloud, grid, *, width: float = TEXT_WIDTH_IN, bins: int 
 
 
 def random_fields_figure(mesh, densities: dict, mu_panels: dict, maps: dict, *, n: int, width: float = TEXT_WIDTH_IN,
-                         max_lines: int = 16):
+                         max_lines: int = 16, density_label: str = "density (unit mass)"):
     r"""Random training fields on one grid mesh, four panels a row: the densities (a title and the values at the
-    mesh's vertices per panel, four a row), then a row of Beltrami fields, :math:`|\mu|` per vertex
-    (``mu_panels``) followed by mapped grids (``maps``: title to mapped points of the ``n``-grid, drawn with at
-    most ``max_lines`` grid lines per direction so that a fine grid stays readable).  Returns the figure."""
+    mesh's vertices per panel, four a row, each colour bar labelled ``density_label``), then a row of Beltrami
+    fields, :math:`|\mu|` per vertex (``mu_panels``, colour bars labelled :math:`|\mu|`) followed by mapped grids
+    (``maps``: title to mapped points of the ``n``-grid, drawn with at most ``max_lines`` grid lines per direction
+    so that a fine grid stays readable).  Returns the figure."""
     import matplotlib.pyplot as plt
 
     dens = list(densities.items())
     rows = -(-len(dens) // 4) + 1
     fig, axes = plt.subplots(rows, 4, figsize=(width, 2.0 * rows), layout="constrained", squeeze=False)
     for ax, (title, values) in zip(axes[:-1].ravel(), dens):
-        plot_density(ax, mesh.points, mesh.elements, values, title=title)
+        im = plot_density(ax, mesh.points, mesh.elements, values, title=title, colorbar=False)
+        add_colorbar(im, ax=ax, fraction=0.046, pad=0.03, label=density_label)
     last = list(axes[-1])
     for title, values in mu_panels.items():
-        plot_density(last.pop(0), mesh.points, mesh.elements, values, cmap="magma", vmin=0, title=title)
+        ax = last.pop(0)
+        im = plot_density(ax, mesh.points, mesh.elements, values, cmap="magma", vmin=0, title=title, colorbar=False)
+        add_colorbar(im, ax=ax, fraction=0.046, pad=0.03, label=r"$|\mu|$")
     for title, points in maps.items():
         plot_mesh(last.pop(0), points, n=n, max_lines=max_lines, title=title)
     for ax in last + list(axes[:-1].ravel()[len(dens):]):
@@ -545,17 +549,18 @@ def random_fields_figure(mesh, densities: dict, mu_panels: dict, maps: dict, *, 
 
 
 def jitter_figure(mesh, jittered, h: float, window=(0.45, 0.75, 0.1, 0.4), *, width: float = TEXT_WIDTH_IN):
-    """Sobol-jittered sampling of a grid mesh: the offset of every vertex in grid spacings ``h`` (left), and a zoom
+    """Sobol-jittered sampling of a grid mesh: the larger of the two coordinate offsets of every vertex, in grid
+    spacings ``h`` (left; the quantity the jitter caps), and a zoom
     on ``window`` = (x0, x1, y0, y1) with the regular mesh in wide light grey lines under the jittered one in thin
     black lines (right).
     Returns the figure."""
     import matplotlib.pyplot as plt
 
     jittered = np.asarray(jittered)
-    offset = np.linalg.norm(jittered - mesh.points, axis=1) / h
+    offset = np.abs(jittered - mesh.points).max(axis=1) / h
     fig, axes = plt.subplots(1, 2, figsize=(width, width / 2), layout="constrained")
     plot_density(axes[0], mesh.points, mesh.elements, offset, cmap="magma", vmin=0,
-                 title="offset $|x_{jit} - x| / h$")
+                 title="largest offset per coordinate,\nin grid spacings $h$")
     # the regular mesh wide and light under the jittered one thin and dark, so that both stay visible
     axes[1].triplot(mesh.points[:, 0], mesh.points[:, 1], mesh.elements, color="0.7", lw=2.2)
     axes[1].triplot(jittered[:, 0], jittered[:, 1], mesh.elements, color="k", lw=0.6)
