@@ -63,14 +63,16 @@ def fold_repair_figure(raw, repaired, n: int, *, margin: float = 0.03):
 def surface_crossing_figure(bent, repaired, n: int, turns: float, scale: float):
     """The middle slice of a bent cube whose boundary surface crosses itself (``bent``, mapped points of the
     ``n``-grid, bent through ``turns`` turns) beside its repair (``repaired``, the displacement kept at ``scale``),
-    in the book's style (the chapter on repairing folded maps), both panels on the same axes' limits.  Returns the
-    figure."""
+    in the book's style (the chapter on repairing folded maps), both panels on the same axes' limits, each with the
+    undeformed slice (the unit square) faintly dashed.  Returns the figure."""
     import matplotlib.pyplot as plt
 
     with style():
         fig, axes = plt.subplots(1, 2, figsize=(7.0, 3.9), layout="constrained")
         plot_slice_outline(axes[0], bent, n, title=f"(a) raw: bent through {turns:g} turns,\nthe ends overlap")
         plot_slice_outline(axes[1], repaired, n, title=f"(b) repaired: displacement\n× {scale:.3f}")
+        for a in axes:  # the slice before the map, the unit square, faintly dashed in both panels
+            a.plot([0, 1, 1, 0, 0], [0, 0, 1, 1, 0], ls="--", lw=0.8, color="0.6", zorder=0)
         # one scale for both panels, so that the repaired bar is seen as nearly straight beside the bent one
         x0, x1 = min(a.get_xlim()[0] for a in axes), max(a.get_xlim()[1] for a in axes)
         y0, y1 = min(a.get_ylim()[0] for a in axes), max(a.get_ylim()[1] for a in axes)
