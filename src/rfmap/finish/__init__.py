@@ -9,8 +9,8 @@ and the report of what was done to it) to the next, finishes it:
   refined too when refinement is on;
 * :func:`~rfmap.finish.stages.repair` -- the map made fold-free;
 * :func:`~rfmap.finish.stages.polish` -- a density map finished by the flow-based solver;
-* :func:`~rfmap.finish.stages.judge` -- whether a density map is more equal than its input
-  (:mod:`~rfmap.finish.quality`);
+* :func:`~rfmap.finish.stages.judge` -- whether a density map is more equal than its input, i.e. lowers
+  Std(ρ̃) (:mod:`~rfmap.finish.quality`);
 * :func:`~rfmap.finish.stages.shorten` -- if not, shortened towards the identity until it is.
 
 :func:`~rfmap.finish.pipeline.finish` composes them as :meth:`rfmap.Surrogate.map` does, with :class:`.FinishOptions`;

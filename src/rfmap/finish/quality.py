@@ -1,10 +1,12 @@
-r"""Judging a density map: is the density more equal after it than before, and a warning when it is not.
+r"""Judging a density map: does it make the density more equal, and a warning when it does not.
 
-A density map that leaves :math:`\mathrm{Std}(\tilde\rho)` above the input's undid more than it did, and one that
-does not lower it by at least the fraction :data:`GAIN_RTOL` brought no gain (:func:`density_quality`);
-:class:`PoorMapWarning` says so with the numbers and the remedies
-(:func:`quality_message`, :func:`poor_map_message`), and :func:`quiet_quality` silences it where the metrics are
-reported anyway.
+A density map makes the density *more equal* when it lowers :math:`\mathrm{Std}(\tilde\rho)`, the spread of the
+normalised element densities: :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` on the mapped mesh below
+:math:`\mathrm{Std}(\tilde\rho_{\text{orig}})` on the reference mesh (the :term:`judge`); it leaves the density
+*less equal* when it raises it.  A map that raises it by more than the fraction :data:`QUALITY_MARGIN` is worse than
+no map, and one that does not lower it by at least the fraction :data:`GAIN_RTOL` brought no gain
+(:func:`density_quality`); :class:`PoorMapWarning` says so with the numbers and the remedies (:func:`quality_message`,
+:func:`poor_map_message`), and :func:`quiet_quality` silences it where the metrics are reported anyway.
 """
 from __future__ import annotations
 
