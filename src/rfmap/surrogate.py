@@ -81,8 +81,8 @@ class PredictOptions:
         folded map is first tried on coarser working grids).  Given explicitly, it is used as given.
     native : bool
         Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried), as the paper
-        does; with ``refine=True`` and ``repair=False`` (every other option at its default) this is the paper's
-        method.  Excludes ``work_n``.
+        does (with refinement and without repair, :term:`the paper's method`, see :class:`MapOptions`).  Excludes
+        ``work_n``.
     alpha : sequence of d floats, optional
         A fixed stretching vector of a network's map (ignored with ``refine``).
     preprocess : bool
@@ -119,10 +119,13 @@ class PredictOptions:
 @dataclass(frozen=True)
 class MapOptions(FinishOptions, PredictOptions):
     """How a field is mapped by a network, listed once: the keywords of :meth:`~rfmap.Surrogate.map` (and ``map_batch``)
-    and the options of ``rfmap map``.  The prediction's options (:class:`PredictOptions`: the grid rule, the input,
-    the stretching, the symmetry) and the finishing stages' (:class:`rfmap.finish.pipeline.FinishOptions`:
-    ``refine``, ``refine_bounds``, ``repair``, ``polish``, ``guard``), which the stages receive alone
-    (:attr:`finishing`)."""
+    and the options of ``rfmap map``.  It combines the prediction's options (:class:`PredictOptions`: the grid rule,
+    the input, the stretching, the symmetry) and the finishing stages' (:class:`rfmap.finish.pipeline.FinishOptions`:
+    ``refine``, ``refine_bounds``, ``repair``, ``polish``, ``guard``); :attr:`finishing` returns the latter, which are
+    all that the stages receive.
+
+    With ``native=True``, ``refine=True`` and ``repair=False`` (every other option at its default) a map is computed
+    by :term:`the paper's method`."""
 
     @property
     def finishing(self) -> FinishOptions:
@@ -400,7 +403,7 @@ class Surrogate:
 
         * ``refine=True``: choose the stretching vector :math:`\\alpha` after inference (the paper's Sec. 4.3);
         * ``repair=False``: return the network's map as it is, even folded (the default repairs folds and never
-          returns a density map less equal than its input);
+          returns a density map with a higher Std(ρ̃) than its input, see :mod:`rfmap.finish.quality`);
         * ``native=True``: run the network on the requested grid itself, as the paper does.  With ``refine=True`` and
           ``repair=False`` (every other option at its default) this is :term:`the paper's method`;
         * ``polish=True``: finish a density map with the flow-based solver, for accuracy beyond the network's.
@@ -425,8 +428,7 @@ class Surrogate:
             given.
         native : bool
             Run the network on the requested grid itself (``work_n = n``, no coarser working grid tried), as the
-            paper does; with ``refine=True`` and ``repair=False`` (every other option at its default) this is the
-            paper's method.  Excludes ``work_n``.
+            paper does.  Excludes ``work_n``.
         alpha : sequence of d floats, optional
             A fixed stretching vector (ignored when ``refine``).
         preprocess : bool
@@ -437,8 +439,8 @@ class Surrogate:
             Search interval of every component of :math:`\\alpha` (default :data:`rfmap.finish.refine.REFINE`).
         repair : bool
             Make the returned map fold-free (after any refinement; :func:`rfmap.finish.repair.dispatch.repair_map`),
-            and shorten a density map that is still no more equal than its input towards the identity, to the most
-            equal fold-free map between the two (:func:`rfmap.finish.shorten.shorten_map`, ``info["shorten"]``).
+            and shorten a density map that still does not lower Std(ρ̃) below the input's towards the identity, to
+            the fold-free map of lowest Std(ρ̃) between the two (:func:`rfmap.finish.shorten.shorten_map`, ``info["shorten"]``).
             With query ``points``, the map of the working grid is repaired and judged, and the points follow it, so
             that grid and points deliver one map.  ``False`` skips both: with the other options at their defaults
             it returns the raw network map (with ``refine``, a refined one).
@@ -469,8 +471,8 @@ class Surrogate:
         Warns
         -----
         PoorMapWarning
-            When a density map leaves the density less equal than it was (a field unlike the training fields), or
-            had to be shortened not to; it names the numbers and the remedies (``refine``, ``polish``;
+            When a density map does not lower Std(ρ̃) by the fraction :data:`.GAIN_RTOL` (a field unlike the
+            training fields), or was shortened so as not to raise it; it names the numbers and the remedies (``refine``, ``polish``;
             :func:`.quiet_quality` silences it).
 
         Notes
