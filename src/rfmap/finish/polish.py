@@ -33,8 +33,8 @@ removes it with :func:`rfmap.solvers.solve_flow` started from :math:`u_0`:
    less than half of the input's density variation (:data:`POOR`), the flow starts cold from the identity instead,
    and the report says so.  ``Surrogate.map(polish=...)`` then skips its bijectivity repair of a folded map, which
    the cold start would throw away (on a 3D map with hundreds of folded tetrahedra the repair can cost more than the
-   whole flow).  The flow also starts cold when the warm flow stalls (more than ``WARM_STEPS`` steps, or a step
-   below ``rfmap.solvers.flow.STALL_DT``: a near-degenerate element of :math:`u_0` keeps cutting the fold-free
+   whole flow).  The flow also starts cold when the warm flow stalls (more than :data:`WARM_STEPS` steps, or a step
+   below :data:`rfmap.solvers.heun.STALL_DT`: a near-degenerate element of :math:`u_0` keeps cutting the fold-free
    step; the warm flow is not retried with a blurred density).
 5. Even a good network map does not guarantee a better finish: on held-out fields the warm flow often ends above
    the cold flow, and nothing measured before the cold flow predicts which (:data:`GUARD`; the numbers are on the
@@ -58,7 +58,7 @@ from ..core.wording import counted
 from ..solvers import flow
 from ..solvers.flow import MARGIN
 
-__all__ = ["GUARD", "POOR", "UNGUARDED", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER", "OUTPUT_PASSES",
+__all__ = ["GUARD", "POOR", "UNGUARDED", "WARM_STEPS", "SMOOTH_EDGES", "SMOOTH_PASSES", "SMOOTH_PASSES_FINER", "OUTPUT_PASSES",
            "PolishOptions", "polish_map", "polish_tolerance", "smooth_displacement", "smooth_grid_displacement", "smooth_passes"]
 
 #: Most time steps of a warm flow before it is abandoned for a cold start.

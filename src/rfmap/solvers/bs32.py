@@ -16,7 +16,7 @@ numpy only.
 
 References
 ----------
-P. Bogacki, L. F. Shampine, "A 3(2) pair of Runge--Kutta formulas", Appl. Math. Lett. 2(4), 321--325 (1989).
+P\. Bogacki, L. F. Shampine, "A 3(2) pair of Runge--Kutta formulas", Appl. Math. Lett. 2(4), 321--325 (1989).
 """
 from __future__ import annotations
 

@@ -1,6 +1,6 @@
 r"""Linear Beltrami Solver (LBS): the quasi-conformal map of the unit square with a prescribed Beltrami coefficient.
 
-Given :math:`\mu = \rho + i\tau` with :math:`\|\mu\|_\infty < 1`, we look for :math:`f = u + iv` with
+Given :math:`\mu = \mu_1 + i\mu_2` with :math:`\|\mu\|_\infty < 1`, we look for :math:`f = u + iv` with
 :math:`f_{\bar z} = \mu f_z`, where :math:`f_z = \tfrac12(f_x - i f_y)` and :math:`f_{\bar z} = \tfrac12(f_x + i f_y)`.
 Writing the Beltrami equation in real form gives (Lui et al. 2013)
 
@@ -9,7 +9,7 @@ Writing the Beltrami equation in real form gives (Lui et al. 2013)
     & \begin{pmatrix} v_y \\ -v_x \end{pmatrix} = A \begin{pmatrix} u_x \\ u_y \end{pmatrix}, \qquad
     \begin{pmatrix} -u_y \\ u_x \end{pmatrix} = A \begin{pmatrix} v_x \\ v_y \end{pmatrix}, \\
     & A = \frac{1}{1-|\mu|^2}
-    \begin{pmatrix} (\rho-1)^2+\tau^2 & -2\tau \\ -2\tau & (\rho+1)^2+\tau^2 \end{pmatrix},
+    \begin{pmatrix} (\mu_1-1)^2+\mu_2^2 & -2\mu_2 \\ -2\mu_2 & (\mu_1+1)^2+\mu_2^2 \end{pmatrix},
 
 and taking the divergence eliminates the other component: :math:`\nabla\cdot(A\nabla u) = 0` and
 :math:`\nabla\cdot(A\nabla v) = 0`.  :math:`A` is symmetric positive definite with :math:`\det A = 1`, so both are
@@ -56,8 +56,8 @@ def beltrami_matrices(mu: np.ndarray) -> np.ndarray:
 
     .. math::
         A = \frac{1}{1-|\mu|^2}
-        \begin{pmatrix} (\rho-1)^2+\tau^2 & -2\tau \\ -2\tau & (\rho+1)^2+\tau^2 \end{pmatrix},
-        \qquad \mu = \rho + i\tau .
+        \begin{pmatrix} (\mu_1-1)^2+\mu_2^2 & -2\mu_2 \\ -2\mu_2 & (\mu_1+1)^2+\mu_2^2 \end{pmatrix},
+        \qquad \mu = \mu_1 + i\mu_2 .
 
     Parameters
     ----------
