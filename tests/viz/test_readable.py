@@ -38,7 +38,7 @@ def test_learning_curves_count_the_whole_chain():
         lo, hi = loss.get_xlim()
         assert 3600 < lo < 3710 and 4000 < hi < 4100 and "3,700" in loss.get_xlabel()
         assert val.lines[0].get_xdata()[0] == 4000 and "Std" in val.get_ylabel()
-        assert "1.2 % of the paper's" in fig.axes[2].get_title()
+        assert "1.25 % of the paper's" in fig.axes[2].get_title()
         assert all(len(ax.get_shared_x_axes().get_siblings(ax)) == 1 for ax in fig.axes)  # no twins
         _readable(fig)
     plt.close(fig)

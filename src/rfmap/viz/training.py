@@ -55,7 +55,7 @@ def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: 
     present), titled with the term's value (its weighted mean, as in training)."""
     import torch
 
-    keys = [k for k in (keys or LOSS_TERMS) if k in terms and k != "area"]
+    keys = [k for k in (LOSS_TERMS if keys is None else keys) if k in terms and k != "area"]
     pts = np.asarray(mapped[sample])
     el = np.asarray(elements)
     plot_mesh(axes[0], pts, el, n=n, title="the map $u$")
@@ -89,30 +89,39 @@ def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: 
         ax.set_yticks([])
 
 
-def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0):
-    """Side by side, the loss terms of one sample of several models (:func:`plot_loss_terms`), one column each:
-    ``columns`` maps a column title (``"DEQ model"``) to ``(mapped, elements, terms, keys)`` as
-    ``rfmap.tasks.batch_loss_terms`` returns them, with the terms to draw; the map on top, then one row per term
-    (in the order of :data:`LOSS_TERMS`), so that like terms sit in one row and a column whose loss lacks a row's
-    term leaves that cell empty, saying so. 7.2 inches wide. Returns the figure."""
+def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0, ncols: int = 2):
+    """The loss terms of one sample of several models (:func:`plot_loss_terms`): ``columns`` maps a model's title
+    (``"DEQ model"``) to ``(mapped, elements, terms, keys)`` as ``rfmap.tasks.batch_loss_terms`` returns them, with
+    the terms of its loss to draw. Each model starts a new row of ``ncols`` panels: its map, then each of its terms
+    that is not zero on every element of the sample. The terms that are zero everywhere are named in a line under
+    the panels instead of drawn, so that no panel is empty. 7.2 inches wide. Returns the figure."""
     import matplotlib.pyplot as plt
+    import torch
 
-    drawn = {title: [k for k in keys if k in terms and k != "area"]
-             for title, (_, _, terms, keys) in columns.items()}
-    order = [k for k in LOSS_TERMS if any(k in keys for keys in drawn.values())]
-    rows = 1 + len(order)
-    fig, axes = plt.subplots(rows, len(columns), figsize=(7.2, 2.875 * rows), layout="constrained", squeeze=False)
-    for col, (title, (mapped, elements, terms, _)) in zip(axes.T, columns.items()):
+    def zero(terms, key):
+        v = terms[key][sample]
+        return float(v.max() if isinstance(v, torch.Tensor) else np.max(v)) <= 0
+
+    drawn, zeros = {}, []
+    for title, (_, _, terms, keys) in columns.items():
+        keys = [k for k in keys if k in terms and k != "area"]
+        drawn[title] = [k for k in keys if not zero(terms, k)]
+        zeros += [f"{LOSS_TERMS[k].split(' $')[0].split(' relu')[0]} ({title})" for k in keys if zero(terms, k)]
+    rows = {title: -(-(1 + len(keys)) // ncols) for title, keys in drawn.items()}
+    nrows = sum(rows.values())
+    fig, axes = plt.subplots(nrows, ncols, figsize=(7.2, 3.1 * nrows + (0.3 if zeros else 0)),
+                             layout="constrained", squeeze=False)
+    row = 0
+    for title, (mapped, elements, terms, _) in columns.items():
+        panels = list(axes[row:row + rows[title]].ravel())
         keys = drawn[title]
-        plot_loss_terms([col[0]] + [col[1 + order.index(k)] for k in keys], mapped, elements, terms,
-                        sample=sample, n=n, keys=keys)
-        col[0].set_title(f"{title}: the map $u$")
-        for key, ax in zip(order, col[1:]):
-            if key not in keys:
-                ax.set_axis_off()
-                name = LOSS_TERMS[key].split(" relu")[0].split(" $")[0]  # the name without its formula
-                ax.text(0.5, 0.5, f"no {name}\nin this loss",
-                        transform=ax.transAxes, ha="center", va="center", color="0.4")
+        plot_loss_terms(panels[:1 + len(keys)], mapped, elements, terms, sample=sample, n=n, keys=keys)
+        panels[0].set_title(f"{title}: the map $u$")
+        for ax in panels[1 + len(keys):]:
+            ax.set_axis_off()
+        row += rows[title]
+    if zeros:
+        fig.supxlabel("zero on every element of this sample, not drawn: " + "; ".join(zeros), fontsize="small")
     return fig
 
 
@@ -173,10 +182,11 @@ VAL_NAMES = {"std_rho_map": r"Std($\tilde\rho_{map}$)", "mean_dd": r"mean $|\Del
 
 
 def _times(ratio: float) -> str:
-    """A multiple for a title, ``22×`` or ``1.5×`` from 1 on, a share in per cent below (``57 % of``)."""
+    """A multiple for a title to three significant digits, as the budget table prints it: ``25.5×`` or ``1.5×``
+    from 1 on, a share in per cent below (``57.3 % of``)."""
     if ratio >= 1:
-        return f"{ratio:.0f}×" if ratio >= 10 else f"{ratio:.2g}×"
-    return f"{100 * ratio:.2g} % of"
+        return f"{ratio:.3g}×"
+    return f"{100 * ratio:.3g} % of"
 
 
 def _chain_axis(ax, xs, offset: int, budget: int):
@@ -202,7 +212,7 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
     against the step counted over its whole ``--init`` chain. The step axis spans the stored steps: the
     ``cumulative_steps - steps`` steps of the earlier runs, whose curves are not stored, are named in its label,
     and the paper's budget of steps (``budgets[name]``) is dashed where it falls inside. The loss panel's title
-    gives the chain's steps as a multiple of the paper's (``22× the paper's epochs``), or a share below it, as the
+    gives the chain's steps as a multiple of the paper's (``22.3× the paper's epochs``), or a share below it, as the
     training chapter's budget table counts them.
     ``ncols`` models per row (two panels each), 7.2 inches wide in all; ``mark_folded`` draws open markers on the
     validated states whose maps folded on some held-out field. With ``score`` the validation panel draws the score
