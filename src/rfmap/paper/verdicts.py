@@ -299,11 +299,15 @@ def close_calls(rows) -> str:
 
     Examples
     --------
-    >>> close_calls([("N = 128", "Std", 0.07902, 0.07892, 0.0094), ("T2", "mean |Δμ|", 0.00877, 0.00629, 0.00635)])
-    "The miss on the Std at N = 128 is within 0.5 % of the paper's value. On the mean |Δμ| of T2 the classical \
-solver is above the paper's value too."
-    >>> close_calls([("T1", "mean |Δμ|", 0.009, 0.017, 0.005)])
-    "No miss is within 0.5 % of the paper's value, and none is shared by the classical solver."
+    >>> rows = [("N = 128", "Std", 0.07902, 0.07892, 0.0094),
+    ...         ("T2", "mean |Δμ|", 0.00877, 0.00629, 0.00635)]
+    >>> print(close_calls(rows))  # doctest: +NORMALIZE_WHITESPACE
+    The miss on the Std at N = 128 is within 0.5 % of the paper's value.
+    On the mean |Δμ| of T2 the classical solver is above the paper's value
+    too.
+    >>> print(close_calls([("T1", "mean |Δμ|", 0.009, 0.017, 0.005)]))  # doctest: +NORMALIZE_WHITESPACE
+    No miss is within 0.5 % of the paper's value, and none is shared by the
+    classical solver.
     """
     near, shared = [], []
     for case, title, ours, paper, classical in rows:
