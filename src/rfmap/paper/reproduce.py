@@ -2,9 +2,10 @@ r"""The paper's tables as functions: each runs our surrogate and the classical s
 row beside them, returning a :class:`~rfmap.paper.tables.Table` and the computed maps for plotting; :func:`reproduce`
 writes one experiment's tables (``rfmap reproduce``).
 
-Times are wall-clock seconds on the machine that runs them.  The paper names an NVIDIA RTX A6000 GPU for its
-training runs but does not say on what hardware the times in its tables were measured, so only ratios measured in
-one run (``speedup`` = classical time / surrogate time) are comparable.
+Times are wall-clock seconds on the machine that runs them.  The experimental settings of each of the paper's
+experiments name a single NVIDIA RTX A6000 GPU, and this project reads the times in the paper's tables as the
+network's inference on that GPU; ours come from whatever machine runs them, so only ratios measured in one run
+(``speedup`` = classical time / surrogate time) are comparable.
 """
 from __future__ import annotations
 
