@@ -145,7 +145,8 @@ def teacher_loss(mapped: Tensor, target: Tensor, ref: Tensor, mask: Tensor, n: i
     mask : BoolTensor, shape (B,)
         The samples that have a teacher map.
     n : int
-        The grid side ``N``; it sets the loss's floor, :math:`P/(N-1)^2` for ``P`` vertices.
+        The grid side ``N``; it sets the loss's floor, :math:`P h^2 = P/(N-1)^2` for ``P`` vertices (grid
+        spacing :math:`h = 1/(N-1)`).
     """
     err = ((mapped - target) ** 2).sum((-1, -2))
     scale = ((target - ref) ** 2).sum((-1, -2))

@@ -1,4 +1,6 @@
-r"""The training loop (paper Sec. 5): steps on fresh random batches, validation and the choice of the shipped weights.
+r"""The training loop: steps on fresh random batches, validation and the choice of the shipped weights.  The
+steps follow the paper's training settings (Sec. 5.1 and 5.2: epochs, optimiser, learning-rate schedule, gradient
+clipping); the validation, the weight average and the choice of the kept weights are this project's own.
 
 Validation and the choice of the shipped checkpoint use the held-out random fields of :mod:`rfmap.training.validation` (seeds
 training never draws); the paper's test fields are evaluated once at the end as a report
