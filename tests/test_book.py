@@ -218,11 +218,14 @@ def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
         left = re.sub(r"\{glue:text\}`[^`]*`", "", text)
         left = re.sub(r"\{(doc|term|ref)\}`[^`]*`", "", left)
         assert not mod.PLACEHOLDER.search(left), mod.PLACEHOLDER.search(left)
-    refs, defs = mod._footnotes([it for it in _items() if it["score"]["kind"] == "score"])
+    scored = [it for it in _items() if it["score"]["kind"] == "score"]
+    refs, defs = mod._footnotes(scored)
     assert len({d.split("]:")[0] for d in defs}) == len(defs)  # a caveat two items share is defined once
-    for d in defs:  # every caveat is defined once and referenced
-        name = d.split("]:")[0] + "]"
-        for text in (board, full):
+    brief = mod._footnotes(scored, intro=True)[1]
+    assert set(brief) < set(defs)  # the intro keeps the notes that change a row's reading, figures.md has all
+    for text, notes in ((board, brief), (full, defs)):  # every caveat is defined once and referenced
+        for d in notes:
+            name = d.split("]:")[0] + "]"
             assert text.count("\n" + name + ":") == 1 and text.count(name) >= 2, name
     for it in _items():
         notes = it["score"].get("footnotes", [])
