@@ -429,7 +429,7 @@ def kept_rules(kept: dict) -> str:
     out, cross = [], []
     for name, k in kept.items():
         if k["rule"] == "fold-free mean":
-            out.append(f"The {name}'s training record predates the checkpoint score (a dash in the table), so its"
+            out.append(f"The {name}'s training record has no checkpoint score (a dash in the table), so its"
                        " weights were chosen by the lowest plain held-out mean among the states whose"
                        f" maps fold on no held-out field: step {k['step']:,} ({k['mean']:#.3g}).")
             continue

@@ -222,9 +222,27 @@ def resolution_panels(table, *, title: str | None = None):
     for ax in axes:
         ax.get_legend().remove()
     fig.legend(handles, labels, loc="outside lower center", ncols=min(len(labels), 4), frameon=False)
+    _label_lowest(axes[0].yaxis)
     if title:
         fig.suptitle(title)
     return fig
+
+
+def _label_lowest(axis) -> None:
+    """On a log ``axis`` labelled by :func:`plain_log_ticks` over less than a factor of five, add a labelled tick
+    at the lowest round value in view (``0.07`` on an axis from 0.069) and unlabelled minor ticks at every step of
+    that size, so that values below the lowest round label can be read off."""
+    from matplotlib.ticker import FixedLocator, MultipleLocator
+
+    lo, hi = sorted(axis.get_view_interval())
+    if not (lo > 0 and hi / lo < 5):
+        return
+    step = 10.0 ** np.floor(np.log10(lo))
+    first = float(f"{np.ceil(lo / step - 1e-9) * step:.6g}")
+    ticks = sorted(t for t in axis.get_majorticklocs() if lo <= t <= hi)
+    if ticks and first < ticks[0] and np.log10(ticks[0] / first) > 0.04:
+        axis.set_major_locator(FixedLocator([first, *ticks]))
+    axis.set_minor_locator(MultipleLocator(step))
 
 
 def shorten_curve(report: dict, ax=None, *, title: str | None = None):
