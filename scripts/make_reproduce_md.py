@@ -6,15 +6,14 @@ Usage: python scripts/make_reproduce_md.py [--check]
 For every weight file of src/rfmap/weights/ (NAME.safetensors with NAME.json) the section gives the one command that
 trains it again from its parent and, folded, every run of its chain that a repeat needs (rfmap.training.lineage: the
 recorded commands, each started from the file the run before it wrote; a last run that kept its parent's weights is
-named, not repeated), and names the chains of runs that are not shipped yet (src/rfmap/data/chains/NAME/state.json)
-without their commands.  The section is written between the BEGIN and END lines of the page; the rest
+named, not repeated).  Chains of runs not shipped yet (src/rfmap/data/chains/NAME/) are left out: nothing in the
+book uses them, and their NOTES.md says how to continue them.  The section is written between the BEGIN and END lines of the page; the rest
 of the page is prose.  With --check nothing is written; the exit status is 1 when the page differs from what would be
 written.
 """
 from __future__ import annotations
 
 import argparse
-import json
 import shlex
 import sys
 import textwrap
@@ -27,7 +26,6 @@ from rfmap.training.validation import score_parts
 ROOT = Path(__file__).resolve().parent.parent
 TARGET = Path("book/reproduce.md")
 WEIGHTS = Path("src/rfmap/weights")
-CHAINS = Path("src/rfmap/data/chains")
 #: the longest line of a command block: the page's code boxes show about this many characters without scrolling
 CODE_WIDTH = 76
 #: the lines of book/reproduce.md between which the section is written
@@ -246,8 +244,6 @@ def section(root: Path = ROOT) -> str:
     """The generated part of book/reproduce.md."""
     shipped = shipped_hashes(root / WEIGHTS)
     metas = parents_first(load_metadata(root / WEIGHTS), shipped)
-    chains = {p.parent.name: json.loads(p.read_text(encoding="utf-8"))
-              for p in sorted((root / CHAINS).glob("*/state.json"))}
     lines = ["| Model | Runs in its chain | Steps | Wall time | To train it again | Checkpoint chosen by |",
              "| --- | --- | --- | --- | --- | --- |"]
     for model, meta in metas.items():
@@ -266,12 +262,6 @@ def section(root: Path = ROOT) -> str:
               "its states) changed nothing, so where a chain ends with one, the repeat stops before it.", ""]
     for model, meta in metas.items():
         lines += _model_section(f"retrain-{model}", model, meta, shipped)
-    if chains:  # unfinished work ships nothing: a pointer for maintainers, not its commands
-        names = ", ".join(f"`{name}`" for name in chains)
-        lines += ["Chains of runs whose weights are not shipped yet (" + names + ") keep their state in "
-                  "`src/rfmap/data/chains/NAME/`: the weights the last run kept, their metadata, the runs' logs and "
-                  "a `NOTES.md` saying how each run went and how to continue the chain. Nothing in the book uses "
-                  "them.", ""]
     return "\n".join(lines).rstrip("\n") + "\n"
 
 
