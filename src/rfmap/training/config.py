@@ -1,13 +1,14 @@
 r"""Typed training configurations with named ``ci`` and ``full`` presets.
 
-``RFMAP_SCALE`` (``ci`` or ``full``, default ``full``) chooses the preset wherever none is named.  ``ci`` presets
+``RFMAP_SCALE`` (``ci`` or ``full``, default ``full``; never ``paper``) chooses the preset wherever none is
+named.  ``ci`` presets
 train tiny models for a few steps (seconds on a laptop CPU, used by the tests and by the notebooks under CI);
 ``full`` presets are the ones that produced the shipped weights; ``paper`` presets are the paper's hyperparameters
 as printed (for a GPU: ``rfmap train --config NAME --preset paper --device cuda``), with the paper's "epoch" read as
 one optimisation step on a freshly drawn batch (the paper draws a new training grid every epoch).  A configuration
 for which the paper has no model (the FNO and its U-Net partner, the variants trained across grid sides) keeps its
 own learning rate or grid sides in its ``paper`` preset; the preset's description gives the paper's recipe and then
-what the preset runs instead.  ``RFMAP_SCALE`` only switches between ``ci`` and ``full``.
+what the preset runs instead.
 """
 from __future__ import annotations
 
@@ -99,6 +100,56 @@ class TrainConfig:
     ``precision``: ``'fp32'`` or ``'bf16'`` (:data:`rfmap.core.device.PRECISIONS`): with ``'bf16'`` the network's
     forward and backward pass run under bfloat16 autocast (CUDA, or a CPU with AVX512-BF16/AMX); the losses, the
     Jacobians, the fold penalty, the optimiser's state and validation stay in float32.
+
+    Attributes
+    ----------
+    name, task, preset, description : str, TaskSpec, str, str
+        The configuration's name, what it maps (:class:`rfmap.tasks.base.TaskSpec`), its preset (``ci``, ``full`` or
+        ``paper``) and the description recorded with the shipped file.
+    model : ModelConfig
+        The network: a U-Net or an FNO, and its size.
+    steps, batch : int
+        Optimiser steps, and fields per step (per process in a data-parallel run); see ``batch_points``.
+    n_range, n_sampling, batch_points, jitter : tuple of int, str, int, float
+        The training grid sides (lowest and highest ``N``), how they are drawn, the batch size by grid points, and
+        the vertices' jitter in grid spacings (above).
+    grow : bool
+        With ``init``: widen the parent network first (above).
+    lr, weight_decay, betas, clip : float, float, tuple of float, float
+        AdamW's peak learning rate, weight decay and moment decays, and the gradient-norm clipping threshold.
+    schedule, warmup, lr_min, step_size, gamma, T0, T_mult : str, int, float, int, float, int, int
+        The learning-rate schedule (above): ``warmup`` steps of linear warm-up and the floor ``lr_min`` for
+        ``'cosine'`` (``lr_min`` also for ``'restarts'``); ``step_size`` and ``gamma`` for ``'step'``; ``T0`` and
+        ``T_mult`` for ``'restarts'``.
+    ema : float
+        Decay of the weight average (0: none; above).
+    loss : LossWeights
+        The weights of the loss terms (:class:`rfmap.tasks.base.LossWeights`).
+    density_field, beltrami_field, beltrami_source : RandomDensityConfig, RandomBeltramiConfig, str
+        The random training fields (``None``: the task's defaults), and for the Beltrami task whether a sample is
+        the exact coefficient of a random map (``'map'``) or a random coefficient (``'mu'``).
+    teacher : TeacherConfig
+        A classical solver's maps as targets (above).
+    seed : int
+        Seeds the network's initial weights and every step's fields, so a run without a time limit repeats.
+    val_every, val_n, val_sizes, val_count, val_repair, val_native : int, int, tuple of int, int, bool, bool
+        Validation on held-out random fields: every ``val_every`` steps (0: none during training; ``rfmap
+        validate`` scores the snapshots instead), at the grid sides ``val_sizes`` (else ``val_n``, which is also
+        the side of the final report on the paper's test fields), on ``val_count`` fields, of the maps chosen by
+        ``val_repair`` and ``val_native`` (above).
+    select_best : bool
+        Ship the best validated state (:func:`rfmap.training.validation.score`) instead of the last one.
+    snapshot_every, ckpt_every : int
+        Steps between weight snapshots (above; 0: none) and between the checkpoints ``rfmap train --resume``
+        continues from.
+    workers, threads : int
+        Processes that draw the batches (0: drawn in the training process) and PyTorch's CPU threads (0: its
+        default).
+    time_limit : float
+        Wall-time budget in seconds (0: none): training stops when it is spent, and the cosine schedule then
+        follows the elapsed time where that is further along than the step count.
+    precision : str
+        ``'fp32'`` or ``'bf16'`` (above).
     """
 
     name: str
