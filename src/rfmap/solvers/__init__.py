@@ -6,8 +6,8 @@
   (Gastner & Newman 2004, :func:`solve_diffusion`) or, with ``method="flow"``, the flow-based method (Gastner,
   Seguy & More 2018, :func:`solve_flow`).
 
-:func:`solve_diffusion` is :func:`rfmap.solvers.diffusion.solve_dem`, the diffusion solver itself, under a name that
-keeps it apart from :func:`solve_dem` above, which chooses between the methods.
+:func:`solve_diffusion` is :func:`rfmap.solvers.diffusion.solve_diffusion`, the diffusion solver itself, which
+:func:`solve_dem` calls for ``method="diffusion"``.
 
 All return a :class:`rfmap.core.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name: ``"lbs"``,
 ``"diffusion"`` and ``"flow"`` (``"dem"`` is accepted as another name of ``"diffusion"``, :data:`ALIASES`).
@@ -60,7 +60,7 @@ def __getattr__(name: str):
     if name == "solve_lbs":
         from .lbs import solve_lbs as value
     elif name == "solve_diffusion":
-        from .diffusion import solve_dem as value
+        from .diffusion import solve_diffusion as value
     elif name == "DiffusionOptions":
         from .diffusion import DiffusionOptions as value
     elif name in ("solve_flow", "FlowOptions"):

@@ -83,7 +83,7 @@ from .raster import DEM_BOUNDARIES, balanced_sea, check_grid_density, p1_upsampl
 from .spectral import cosine_coefficients
 
 __all__ = [
-    "solve_dem",
+    "solve_diffusion",
     "DiffusionOptions",
     "cosine_coefficients",
     "p1_upsample",
@@ -95,7 +95,7 @@ __all__ = [
 FOLD_STOP = 60
 
 
-#: Blur widths (vertex spacings) of the retries of a flow that keeps folding (``solve_dem(fold_guard=True)``).
+#: Blur widths (vertex spacings) of the retries of a flow that keeps folding (``solve_diffusion(fold_guard=True)``).
 FOLD_BLURS = (1.0, 2.0, 4.0)
 
 
@@ -127,7 +127,7 @@ def _flow(field: HeatField, y: np.ndarray, project, stepping: BS32Options, tol: 
           label: str | None) -> tuple[np.ndarray, dict]:
     r"""The vertices ``y`` carried by the diffusion flow (:func:`rfmap.solvers.heatflow.diffuse`, Bogacki--Shampine
     steps) until the remaining displacement is at most ``tol`` (box units), with a progress bar when ``label`` is
-    given; the info of :func:`solve_dem` (``iterations``, ..., ``fold_stop``)."""
+    given; the info of :func:`solve_diffusion` (``iterations``, ..., ``fold_stop``)."""
     settling = Settling(tol)
     bar = _Progress(label, settling) if label is not None else None
     try:
@@ -141,7 +141,7 @@ def _flow(field: HeatField, y: np.ndarray, project, stepping: BS32Options, tol: 
 
 @dataclass(frozen=True)
 class DiffusionOptions:
-    r"""The options of the diffusion solver (:func:`solve_dem` of this module, ``rfmap.solvers.solve_diffusion``)
+    r"""The options of the diffusion solver (:func:`solve_diffusion`)
     with their defaults: a call names only those that differ.
 
     Attributes
@@ -202,7 +202,8 @@ class DiffusionOptions:
             raise ValueError(f"refine must be a positive integer, got {r!r}")
 
 
-def solve_dem(density, options: DiffusionOptions | None = None, *, progress: bool = False, **kwargs) -> MapResult:
+def solve_diffusion(density, options: DiffusionOptions | None = None, *, progress: bool = False,
+                    **kwargs) -> MapResult:
     r"""Diffusion density-equalizing map (Gastner & Newman 2004) of the unit square or cube.
 
     Every vertex :math:`x` of the ``N``-grid follows :math:`\dot x = -\nabla\rho(x,t)/\rho(x,t)` where
@@ -312,3 +313,8 @@ def solve_dem(density, options: DiffusionOptions | None = None, *, progress: boo
         info["sea_density"] = sea
     return MapResult(ref_points=ref, mapped_points=mapped, elements=mesh.elements, field=dens.reshape(-1),
                      kind="density", time=elapsed, info=info)
+
+
+# the former name of solve_diffusion, kept for code that imports it from here (rfmap.solvers.solve_dem is the function
+# that chooses between the methods)
+solve_dem = solve_diffusion

@@ -50,7 +50,7 @@ Numerical method:
    maps.  Passes stop when :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is below ``tol`` or stops improving (by
    less than ``stall``).
 
-Boundary conditions follow :func:`rfmap.solvers.diffusion.solve_dem`: ``"square"`` keeps the walls (boundary
+Boundary conditions follow :func:`rfmap.solvers.diffusion.solve_diffusion`: ``"square"`` keeps the walls (boundary
 vertices slide, corners stay); ``"free"`` embeds the square in :math:`[-L, 1+L]^d` filled with a sea whose level is
 balanced so that the domain keeps its measure (``rfmap.solvers.raster.balanced_sea``), and later passes fill the
 sea with the domain's mean residual density.  The flow's velocity :math:`-\nabla\phi/\rho_t` carries the density's
@@ -191,7 +191,7 @@ class FlowOptions:
     Attributes
     ----------
     boundary : {"square", "free"}
-        As in :func:`rfmap.solvers.diffusion.solve_dem`: fixed walls of the unit square/cube, or a sea of the mean
+        As in :func:`rfmap.solvers.diffusion.solve_diffusion`: fixed walls of the unit square/cube, or a sea of the mean
         density around it in :math:`[-L, 1+L]^d`.
     tol : float
         Stop after the pass whose :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is at most ``tol`` (no pass at all
@@ -238,7 +238,7 @@ class FlowOptions:
         stall a ``RuntimeError`` at once (the hybrid then starts cold rather than blur a warm start).
     num_threads : int, optional
         Torch threads for the interpolation and the element measures (restored afterwards); as in
-        :func:`rfmap.solvers.diffusion.solve_dem`, default 1 in 2D and torch's setting in 3D.
+        :func:`rfmap.solvers.diffusion.solve_diffusion`, default 1 in 2D and torch's setting in 3D.
     keep_best : bool
         Return the map with the lowest :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` among the start and the passes
         (default), or ``False``: the map of the last pass, even where it is worse (to study what a pass does).
@@ -442,7 +442,7 @@ def solve_flow(density, options: FlowOptions | None = None, *, start=None, progr
     Raises
     ------
     ValueError
-        For a bad density (as :func:`rfmap.solvers.diffusion.solve_dem`), an unknown ``boundary``, non-positive
+        For a bad density (as :func:`rfmap.solvers.diffusion.solve_diffusion`), an unknown ``boundary``, non-positive
         ``tol``/``rtol``/``margin``/``refine``/``max_passes``, ``stall`` outside (0, 1], or a ``start`` of the wrong
         shape, with non-finite values, outside the box, or folded.
     TypeError

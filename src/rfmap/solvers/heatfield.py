@@ -32,7 +32,7 @@ window of nodes around the points asked for is evaluated.
 
 What the two solvers set differently:
 
-* **The raster.**  The maps (:func:`rfmap.solvers.diffusion.solve_dem`) diffuse the piecewise-linear interpolant
+* **The raster.**  The maps (:func:`rfmap.solvers.diffusion.solve_diffusion`) diffuse the piecewise-linear interpolant
   of the vertex densities sampled ``refine`` times finer (:func:`rfmap.solvers.raster.p1_upsample`, or the sea of
   the free boundary, :func:`rfmap.solvers.raster.balanced_sea`); the cartograms
   (:func:`rfmap.solvers.cartodiffusion.diffusion_square`) their raster of cell means itself.  The field takes the

@@ -7,7 +7,7 @@ cosine basis solves exactly,
 
 with the coefficients :math:`a_k` of the initial density; points follow :math:`\dot x = v = -\nabla\rho/\rho` until
 the flow has settled.  One implementation here and in :mod:`rfmap.solvers.heatfield`, for
-:func:`rfmap.solvers.diffusion.solve_dem` (maps of the square and cube) and
+:func:`rfmap.solvers.diffusion.solve_diffusion` (maps of the square and cube) and
 :func:`rfmap.solvers.cartodiffusion.diffusion_square` (a cartogram's pass):
 
 * the heat field, :class:`rfmap.solvers.heatfield.HeatField`: :math:`\rho`, :math:`\nabla\rho` and :math:`v`
