@@ -110,7 +110,9 @@ def generalization_summary(table: Table, column: str = "mean") -> str:
         lines.append("| " + " | ".join(cells) + " |")
     kinds = list(dict.fromkeys(c for c, _, _ in table.rows))
     over = "over all its fields" if kinds == ["all"] else "per kind of field"
-    return f"**{table.title}**: {column} {over}, lower is better\n\n" + "\n".join(lines)
+    best = ("; *best ours / classical* is the lowest of the network's columns over the classical solver's"
+            if classical else "")
+    return f"**{table.title}**: the {column} of each method {over}, lower is better{best}\n\n" + "\n".join(lines)
 
 
 def _one_notation(values) -> list[str]:
