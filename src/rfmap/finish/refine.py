@@ -11,8 +11,9 @@ larger :math:`\mathcal{J}` than :math:`\alpha = (1, \dots, 1)`.  Folded maps can
 the isotropic search is checked by a coarse geometric scan of :data:`SCAN_POINTS` stretches: where a scanned point
 beats the search's result, the search is repeated around it (and the per-component searches are then checked the same
 way).  Each task builds its :math:`\mathcal{J}` (``Task.refine_objective``, from
-:mod:`rfmap.tasks.objectives`); :class:`RefineConfig` holds the search interval, :math:`\lambda` and the
-tolerance used by :meth:`rfmap.Surrogate.map`.
+:mod:`rfmap.tasks.objectives`, whose :data:`~rfmap.tasks.objectives.FLIP_WEIGHT` is :math:`\lambda`);
+:class:`RefineConfig` holds the search interval and the tolerance, :data:`REFINE` those that :meth:`rfmap.Surrogate.map`
+uses and :func:`refine_alpha`'s defaults.
 """
 from __future__ import annotations
 
@@ -21,8 +22,6 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
-
-from ..tasks.objectives import FLIP_WEIGHT
 
 __all__ = ["golden_section", "refine_alpha", "RefineResult", "RefineConfig", "REFINE", "SCAN_POINTS"]
 
@@ -35,18 +34,15 @@ class RefineConfig:
     ----------
     bounds : (float, float)
         Search interval of every component of :math:`\alpha`.
-    flip_weight : float
-        :math:`\lambda`, the weight of the flipped-element fraction :math:`\mathcal{P}` in :math:`\mathcal{J}`.
     tol : float
         Interval length at which each golden-section search stops.
     """
 
     bounds: tuple[float, float] = (0.1, 3.0)
-    flip_weight: float = FLIP_WEIGHT
     tol: float = 1e-2
 
 
-#: The refinement settings of :meth:`rfmap.Surrogate.map`.
+#: The refinement settings of :meth:`rfmap.Surrogate.map`, and the defaults of :func:`refine_alpha`.
 REFINE = RefineConfig()
 
 _INV_PHI = (math.sqrt(5) - 1) / 2
@@ -90,7 +86,7 @@ class RefineResult:
 
 
 def refine_alpha(objective: Callable[[np.ndarray], float], dim: int, *, bounds: tuple[float, float] = REFINE.bounds,
-                 sweeps: int = 2, tol: float = 1e-3) -> RefineResult:
+                 sweeps: int = 2, tol: float = REFINE.tol) -> RefineResult:
     r"""Alternating golden-section search for :math:`\alpha^* = \arg\min \mathcal{J}(\alpha)` over
     :math:`\alpha \in [\text{lo}, \text{hi}]^d`.
 
@@ -100,9 +96,11 @@ def refine_alpha(objective: Callable[[np.ndarray], float], dim: int, *, bounds: 
         :math:`\mathcal{J}(\alpha)` for ``alpha`` of shape (d,); may return ``inf`` for inadmissible maps.
     dim : int
     bounds : (float, float)
-        Search interval of every component.
+        Search interval of every component (default ``REFINE.bounds``).
     sweeps : int
         Passes over the components.
+    tol : float
+        Interval length at which each golden-section search stops (default ``REFINE.tol``).
     """
     count = 0
 
