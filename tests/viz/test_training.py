@@ -109,7 +109,7 @@ def test_loss_terms_figure_draws_each_models_own_terms_and_names_the_zero_ones()
     assert cells[0, 0].startswith("DEQ: the map") and "density mismatch" in cells[0, 1]
     assert "Beltrami energy" in cells[1, 0] and (1, 1) not in cells  # the zero fold penalty is not drawn
     assert cells[2, 0].startswith("Beltrami: the map") and "mismatch" in cells[2, 1]
-    note = fig.get_supxlabel()
+    note = fig.get_supxlabel().replace("\n", " ")
     assert "fold penalty (DEQ)" in note and "fold penalty (Beltrami)" in note
     plt.close(fig)
 

@@ -121,7 +121,9 @@ def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0, n
             ax.set_axis_off()
         row += rows[title]
     if zeros:
-        fig.supxlabel("zero on every element of this sample, not drawn: " + "; ".join(zeros), fontsize="small")
+        import textwrap
+
+        fig.supxlabel(textwrap.fill("zero on every element of this sample, not drawn: " + "; ".join(zeros), 80))
     return fig
 
 
