@@ -203,17 +203,18 @@ def kept_state(meta: dict) -> dict:
 def _row(res, raw) -> dict:
     m, mr = res.metrics(), raw.metrics()
     return {"std_rho_map": m.std_rho_map, "raw_std": mr.std_rho_map, "n_flipped": mr.n_flipped,
-            "flips_repaired": m.n_flipped, "time": res.time}
+            "flips_repaired": m.n_flipped, "time": res.time, "std_rho_orig": m.std_rho_orig}
 
 
 @quiet_quality()
 def paper_fields_table(surs: dict, n: int | None = None, fields=None, refine: bool = True) -> Table:
-    """The paper's four 2D population tests at ``N``: raw and refined Std, raw and repaired flips, per model."""
+    """The paper's four 2D population tests at ``N``: raw and refined Std, raw and repaired flips, per model, and
+    the input's Std (``std_rho_orig``)."""
     _check(surs)
     n = int(n or PAPER_N[2])
     fields = list(fields or TEST_FIELDS["density", 2])
     t = Table("tab:fno-paper-fields", f"The paper's 2D tests (N = {n})",
-              ["raw_std", "std_rho_map", "n_flipped", "flips_repaired", "time"])
+              ["raw_std", "std_rho_map", "n_flipped", "flips_repaired", "time", "std_rho_orig"])
     for f in fields:
         for name, s in surs.items():
             raw = s.map(f, n, repair=False)
