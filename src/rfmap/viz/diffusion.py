@@ -48,19 +48,20 @@ def dem_steps_figure(densities: dict, meshes: dict, rho0, elements, *, n: int, l
     hist = axes[1, -1]
     mapped = rho0 / _areas(meshes[stages[-1]], elements)  # the grid's triangles all have one area
     bins = np.linspace(0, 1.02 * top, 41)
-    hist.hist(rho0, bins=bins, alpha=0.6, label="original")
-    hist.hist(mapped / mapped.mean(), bins=bins, alpha=0.8, label="mapped")
+    counts = [hist.hist(rho0, bins=bins, alpha=0.6, label="original")[0],
+              hist.hist(mapped / mapped.mean(), bins=bins, alpha=0.8, label="mapped")[0]]
     hist.set_yscale("log")
     hist.set_xlabel(r"$\tilde\rho$")
     hist.set_ylabel("triangles")
-    # ticks and label on the right, outside the row of meshes, so that the columns stay even
+    # ticks, label and spine on the right, outside the row of meshes, so that the columns stay even
     hist.yaxis.tick_right()
     hist.yaxis.set_label_position("right")
+    hist.spines["right"].set_visible(True)
+    hist.spines["left"].set_visible(False)
     hist.set_title(r"$\tilde\rho$ per triangle")
     # head room above the tallest bar on the log axis, where the legend sits without hiding a bar
-    low, high = hist.get_ylim()
-    hist.set_ylim(low, high * 40)
-    hist.legend(loc="upper right", framealpha=0.9)
+    hist.set_ylim(0.7, 10 * float(max(c.max() for c in counts)))
+    hist.legend(loc="upper right", framealpha=0.9, handlelength=1)
     return fig
 
 
