@@ -356,6 +356,11 @@ def multilinear(planes: np.ndarray, u: np.ndarray) -> np.ndarray:
     ndarray, shape (P, C)
         In Fortran order (each channel contiguous), as :func:`interpolate` returns it: the reductions over the
         points that the solvers take of a velocity, and of the points it moves, run along contiguous columns.
+
+    Warnings
+    --------
+    ``u`` is modified in place (its callers in the solvers pass points computed for the call, so no copy is made);
+    pass ``u.copy()`` to keep the points.
     """
     shape = planes.shape[1:]
     d = len(shape)

@@ -39,8 +39,8 @@ def solve_dem(density, *, method: str = "diffusion", **kwargs) -> MapResult:
     density : ndarray, shape (N, N) or (N, N, N)
     method : {"diffusion", "flow"}
         ``"diffusion"`` (also ``"dem"``): :func:`solve_diffusion` (Gastner & Newman 2004); ``"flow"``:
-        :func:`solve_flow` (Gastner, Seguy & More 2018), the faster of the two (chapter 11 of the book, *Fast
-        classical maps and neural warm starts*, times both).
+        :func:`solve_flow` (Gastner, Seguy & More 2018), usually the faster of the two (chapter 11 of the book,
+        *Fast classical maps and neural warm starts*, times both on its fields and grids).
     **kwargs
         Options of the chosen solver (``boundary``, ``progress``, ...).
 
