@@ -250,6 +250,9 @@ def _cartogram_figures(args, carto) -> None:
             fig = cartogram_figure(carto, colors=colors, labels=labels, title=args.value, path=path)
             plt.close(fig)
 
+#: ``--n``'s help: cells, where ``rfmap solve`` and ``rfmap map`` count points
+N_HELP = ("cells per side N of the density raster, as cartogram-cpp's -n (default {n}); the maps run on N + 1 points "
+          "per side, the count that rfmap solve and rfmap map --n take")
 #: the help of ``--inset``, which names cartogram-cpp first on the command line's page
 INSET_HELP = ("the column (or, without --data, the property) naming each region's inset, as the 'Inset' column of "
               "cartogram-cpp (the C++ program of the flow-based method, Gastner, Seguy & More 2018, "
@@ -307,9 +310,7 @@ def add_cartogram_parser(sub) -> None:
     s.add_argument("--method", choices=tuple(METHODS), type=solver_name, default=default.method,
                    help="classical flow-based method (default, the fastest), classical diffusion (also 'dem'), "
                         "neural surrogate, or the surrogate polished by the flow")
-    s.add_argument("--n", type=int, default=default.n,
-                   help=f"cells per side N of the density raster, as cartogram-cpp's -n (default {default.n}); the "
-                        "maps run on N + 1 points per side, the count that rfmap solve and rfmap map --n take")
+    s.add_argument("--n", type=int, default=default.n, help=N_HELP.format(n=default.n))
     s.add_argument("--tol", type=float, default=default.tol,
                    help=f"repeat passes until the largest relative area error is at most this (default {default.tol})")
     s.add_argument("--max-passes", type=int, default=default.max_iterations,

@@ -16,10 +16,8 @@ lower is better.  For each case this module puts four values side by side:
     the Linear Beltrami Solver.
 
 A case *meets* the paper when the paper's method is at most the paper's value: :math:`v_{\text{native}} \le
-v_{\text{paper}}`.  Times are kept beside the accuracies (the fastest of a few runs after a warm-up).  The
-experimental settings of each of the paper's experiments name a single NVIDIA RTX A6000 GPU, and this project reads
-the paper's times as the network's inference on that GPU; ours are measured on whatever machine runs the
-comparison, so only ratios measured in one run compare.
+v_{\text{paper}}`.  Times are the fastest of a few runs after a warm-up; the paper's are, as this project reads
+its experimental settings, network inference on one NVIDIA RTX A6000 GPU, so only ratios measured in one run compare.
 """
 from __future__ import annotations
 
