@@ -21,8 +21,9 @@ class FinishOptions:
     ----------
     refine : bool
         Weight refinement of the map's displacement (paper Sec. 4.3; :func:`rfmap.finish.stages.refine`).  In
-        :meth:`rfmap.Surrogate.map` a network's map is refined as it is predicted (every working grid that
-        :func:`rfmap.finish.stages.regrid` tries is), not by :func:`finish`; :func:`finish_map` refines any map.
+        :meth:`rfmap.Surrogate.map` a network's map is refined as it is predicted (so is the map of every working
+        grid that :func:`rfmap.finish.stages.regrid` tries), not by :func:`finish`; :func:`finish_map` refines any
+        map.
     refine_bounds : (float, float), optional
         Search interval of every component of the stretching vector (default :data:`rfmap.finish.refine.REFINE`).
     repair : bool

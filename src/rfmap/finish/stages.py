@@ -1,13 +1,6 @@
-r"""The stages that finish a computed map, each a function from a :class:`~rfmap.finish.draft.Draft` to the next.
-
-* :func:`refine` -- weight refinement of the stretching vector :math:`\alpha` (paper Sec. 4.3);
-* :func:`regrid` -- a folded network map: try the network on other working grids, each map refined too when
-  refinement is on;
-* :func:`repair` -- make the map fold-free (:func:`rfmap.finish.repair.dispatch.repair_map`);
-* :func:`polish` -- finish a density map with the flow-based solver (:func:`rfmap.finish.polish.polish_map`);
-* :func:`judge` -- is a density map of a grid more equal than its input (:func:`rfmap.finish.quality.density_quality`);
-* :func:`shorten` -- if not, the most equal fold-free map between the identity and it
-  (:func:`rfmap.finish.shorten.shorten_map`).
+r"""The stages that finish a computed map, one function per stage in the order that :mod:`rfmap.finish` lists them
+(:func:`refine`, :func:`regrid`, :func:`repair`, :func:`polish`, :func:`judge`, :func:`shorten`), each from a
+:class:`~rfmap.finish.draft.Draft` to the next.
 
 Every stage adds its seconds to ``draft.result.time`` and its report to ``draft.report``.
 """
