@@ -20,7 +20,8 @@ the density :math:`\rho = v_i / a_i` (value over area) of the region under each 
    the first pass and half as much in each next one.  The classical diffusion DEM of the unit square
    (``"diffusion"``, :func:`rfmap.solvers.cartodiffusion.diffusion_square`, numpy only) carries the vertices too.
    The neural methods map the grid instead and interpolate its displacement bilinearly at the vertices: a neural
-   surrogate of the same task (``deq2d-square``) on its working grid, where its output is repaired to be
+   surrogate trained for 2D density equalization with the square's walls fixed (by default ``deq2d-square``, the
+   paper's DEQ model, whose loss adds a Beltrami term) on its working grid, where its output is repaired to be
    fold-free, or the hybrid, which resamples the network's map to the vertex grid and finishes it there with the
    flow (``Surrogate.map(polish=...)``, :data:`~rfmap.cartogram.methods.neural.HYBRID_POLISH`).
 4. **Passes.**  A map computed on a grid smears every coastline and border over a grid cell, so small dense regions come
