@@ -176,12 +176,14 @@ def render_slices(result, *, mapped: bool = True, slices=(0.2, 0.5, 0.8), window
     return img
 
 
-def volume_rows(results: dict, labels, fig_label: str | None = None, *, clim=(0.0, 2.5)):
+def volume_rows(results: dict, labels, fig_label: str | None = None, *, clim=(0.0, 2.5), mapped_clim=(0.5, 1.5)):
     r"""The paper's 3D figures, one row per result (keyed by ``labels``): filled slices through the original mesh
     coloured by the input's :math:`\tilde\rho` and through the mapped mesh coloured by the :math:`\tilde\rho` the
     map leaves (:func:`render_slices`: one colour where the map equalizes), and the grid itself on the same three
     slices as the map moves it, coloured by the input's density carried along (:func:`render_lattice`,
-    ``carried=True``); one camera (:data:`CAMERA_3D`) and one colour scale with its colour bar.  Saved under
+    ``carried=True``); one camera (:data:`CAMERA_3D`).  The input and the moved grid share the scale ``clim``; the
+    density the map leaves has a narrow scale of its own, ``mapped_clim`` (``None``: ``clim``), on which what is
+    left unequalized shows; each scale has its colour bar under its columns.  Saved under
     ``fig_label`` (7.2 inches wide, readable in the book's text column; not saved when it is ``None``, the
     default); returns the figure."""
     import matplotlib.pyplot as plt
@@ -189,13 +191,14 @@ def volume_rows(results: dict, labels, fig_label: str | None = None, *, clim=(0.
     from matplotlib.colors import Normalize
 
     labels = list(labels)
+    mapped_clim = clim if mapped_clim is None else mapped_clim
     titles = [r"input: $\tilde\rho$ on three slices", r"mapped: $\tilde\rho$ remaining", "the map: the grid moved"]
     with style():
         fig, axes = plt.subplots(len(labels), 3, figsize=(7.2, 2.25 * len(labels) + 0.9), layout="constrained",
                                  squeeze=False)
         for row, key in zip(axes, labels):
             r = results[key]
-            imgs = [render_slices(r, mapped=False, clim=clim), render_slices(r, mapped=True, clim=clim),
+            imgs = [render_slices(r, mapped=False, clim=clim), render_slices(r, mapped=True, clim=mapped_clim),
                     render_lattice(r, mapped=True, carried=True, clim=clim)]
             for ax, img in zip(row, imgs):
                 ax.imshow(img)
@@ -206,8 +209,10 @@ def volume_rows(results: dict, labels, fig_label: str | None = None, *, clim=(0.
             row[0].set_ylabel(str(key))
         for ax, t in zip(axes[0], titles):
             ax.set_title(t)
-        add_colorbar(ScalarMappable(Normalize(*clim), "viridis"), fig=fig, ax=axes, location="bottom", shrink=0.7,
-                     aspect=30, label=r"$\tilde\rho$ (grid lines: the input's, carried by the map)")
+        add_colorbar(ScalarMappable(Normalize(*clim), "viridis"), fig=fig, ax=axes[:, 0].tolist(), location="bottom",
+                     shrink=0.9, aspect=12, label=r"input $\tilde\rho$ (left and right)")
+        add_colorbar(ScalarMappable(Normalize(*mapped_clim), "viridis"), fig=fig, ax=axes[:, 1].tolist(),
+                     location="bottom", shrink=0.9, aspect=12, label=r"$\tilde\rho$ remaining (middle)")
         if fig_label is not None:
             save_figure(fig, fig_label)
     return fig
