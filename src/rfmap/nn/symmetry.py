@@ -147,7 +147,8 @@ def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
 
 #: Grid points per network evaluation up to which the copies of :func:`symmetrized_displacement` are stacked into one
 #: batch (a single copy larger than this is evaluated alone); only the time of a map depends on it, not the map.
-#: :doc:`Design decisions </book/design>` gives its timings against the alternatives.
+#: :doc:`Design decisions </book/design>` gives its timings against the alternatives and whether the last
+#: re-measurement supports the choice (it may not: the timings are taken on a loaded machine).
 BATCH_POINTS = 2**15
 
 

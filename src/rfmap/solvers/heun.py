@@ -1,4 +1,4 @@
-r"""The predictor--corrector (Heun) time integration shared by the flow-based and the diffusion solvers.
+r"""The predictor--corrector (Heun) time integration shared by the flow-based solvers and the cartogram diffusion.
 
 The classical density-equalizing solvers carry points by a velocity field, :math:`\dot y = v(t, y)`, and all of
 them but the diffusion map of :mod:`rfmap.solvers.diffusion` step it the same way (:func:`heun_flow`): the map
