@@ -236,9 +236,9 @@ class Join:
     ambiguous: list = field(default_factory=list)
 
     def report(self) -> list[str]:
-        """Two lines: the regions without a row (how many, what they were given, their ids; ``none`` when every
-        region has a row), and the rows without a region; then a line for the pairs joined with accents and case
-        ignored, and one for the ambiguous near-matches, where there are any."""
+        """Two lines, and up to two more: the regions without a row (how many, what they were given, their ids;
+        ``none`` when every region has a row), and the rows without a region; then, where there are any, a line
+        for the pairs joined with accents and case ignored, and one for the ambiguous near-matches."""
         todo = {"mean": "given the mean density", "drop": "left out", "error": "", "fallback": "given a fallback"}
         n_regions, n_rows = len(self.unmatched_regions), len(self.unmatched_rows)
         lines = [f"regions without data ({n_regions}, {todo[self.missing]}): {', '.join(self.unmatched_regions)}"
