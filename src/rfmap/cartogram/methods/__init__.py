@@ -1,6 +1,6 @@
-"""The methods of a cartogram pass, one strategy a file, looked up by name in :data:`METHODS`: each turns the density raster of a pass into a map of the unit square
-(:class:`~rfmap.cartogram.methods.base.CartogramMethod`).  Nothing here imports PyTorch; the neural methods load it
-when they prepare their surrogate."""
+"""The methods of a cartogram pass, one strategy a file, looked up by name in :data:`METHODS`: each turns the
+density raster of a pass into a map of the unit square (:class:`~rfmap.cartogram.methods.base.CartogramMethod`).
+Nothing here imports PyTorch; the neural methods load it when they prepare their surrogate."""
 from __future__ import annotations
 
 from .base import MAX_N, CartogramMethod
