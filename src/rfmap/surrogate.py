@@ -155,7 +155,9 @@ class Surrogate:
     Parameters
     ----------
     model : MultiResUNet or FNONet
+        The network that predicts the displacement.
     spec : TaskSpec
+        What the network computes: the task, the dimension and the boundary.
     meta : dict, optional
         Metadata (see :mod:`rfmap.surrogate`); ``n_range`` gives the training resolutions.
     """
@@ -252,7 +254,8 @@ class Surrogate:
     @classmethod
     def load(cls, path, *, device=None) -> "Surrogate":
         """Load weights ``path`` (``.safetensors``, metadata ``.json`` beside it) onto ``device`` (default the CPU).
-        Clear errors on bad files."""
+        Raises ``FileNotFoundError`` when the weights or their metadata are missing, and ``ValueError`` naming the
+        file when either is corrupt or the weights do not fit the model the metadata describe."""
         from safetensors import SafetensorError
         from safetensors.torch import load_file
 

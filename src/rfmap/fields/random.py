@@ -256,8 +256,8 @@ class RandomBeltramiConfig:
         Share of low-frequency fields, whose number of modes and frequencies are drawn from ``low_modes`` and
         ``low_freq`` instead.  At equal :math:`\\|\\mu\\|_\\infty` a map with a few slow modes (like the test
         maps T1–T4) moves the mesh much further than one with many fast modes, so a model trained on the default
-        ranges alone reconstructs such maps less well.  Appendix C of the book compares a model's vertex error on
-        the two families (:func:`rfmap.paper.generalization.generalization_table` with ``low_frequency=True``).
+        ranges alone reconstructs such maps less well.  :doc:`Appendix C </notebooks/16_appendix_budgets>` compares a
+        model's vertex error on the two families (:func:`rfmap.paper.generalization.generalization_table` with ``low_frequency=True``).
     low_modes : (int, int)
         Number of modes of a low-frequency field, uniform.
     low_freq : (float, float)
