@@ -29,11 +29,13 @@ class RegionStyle:
 
 def _error_title(carto, m) -> str:
     """The cartogram panel's title: its largest area error, and where regions under the judged share of the total
-    are left out of it, over which regions it is taken and how far the smaller ones are off."""
+    are left out of it, over which regions it is taken and how many smaller ones it leaves out (too small for the
+    raster to size: the page that draws them says how far off they are)."""
     head = f"cartogram: max area error {format_sig(m.max_error, 2)}"
     if m.n_minor:
+        some = "one region" if m.n_minor == 1 else f"{m.n_minor} regions"
         head += (f"\nover the regions holding at least {100 * carto.min_share:.2g} % of the total"
-                 f" (the smaller ones: up to {format_sig(m.max_error_minor, 4)})")
+                 f" ({some} too small for the raster left out)")
     return head
 
 
