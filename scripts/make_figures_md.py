@@ -361,25 +361,25 @@ def full_scoreboard(root: Path = ROOT) -> str:
     numbers, in_toc = paper_numbers(items), toc_documents(root)
     scored, _ = _scored(items)
     refs, defs = _footnotes(scored)
-    head = ["Paper item", "Case, metric", "Paper", "Paper's method", "Delivered", "Classical", "Met"]
+    head = ["Paper item", "Verdict", "Case, metric", "Paper", "Paper's method", "Delivered", "Classical", "Met"]
     lines = _preamble() + ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for it in scored:
         score, nb = it["score"], it["notebook"]
-        item = (f"{_item_link(it, root, in_toc, numbers[it['label']])}{refs[it['label']]}: "
-                + paste(f"**{{{score['key']}_verdict}}**", nb))
+        item = f"{_item_link(it, root, in_toc, numbers[it['label']])}{refs[it['label']]}"
+        word = paste(f"**{{{score['key']}_verdict}}**", nb)
         cases = score.get("cases") or [None]
         first = True
         for case in cases:
             for metric, title in score["metrics"].items():
                 k = f"{score['key']}_{metric}" + (f"_{case}" if case else "")
                 label = "" if case is None else (f"N = {case}, " if case.isdigit() else f"{case}, ")
-                cells = [item if first else "", _nobreak(label + title)]
+                cells = [item if first else "", word if first else "", _nobreak(label + title)]
                 cells += [paste(f"{{{k}_{c}}}", nb) for c, _ in COLUMNS] + [paste(f"{{{k}_met}}", nb)]
                 lines.append("| " + " | ".join(cells) + " |")
                 first = False
         for metric, title in score.get("shown", {}).items():
             k = f"{score['key']}_{metric}"
-            cells = ["", _cell(f"mean over the comparable cases, {title} (shown, not scored)")]
+            cells = ["", "", _cell(f"mean over the comparable cases, {title} (shown, not scored)")]
             cells += [paste(f"{{{k}_{c}}}", nb) for c, _ in COLUMNS] + [paste(f"at most the paper's in {{{k}_met}}", nb)]
             lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines + [""] + defs) + "\n"
