@@ -1,5 +1,5 @@
 """The validation-record readers of rfmap.paper.compare, on small hand-made records."""
-from rfmap.paper.compare import kept_state, learning_summary, validated_states
+from rfmap.paper.compare import kept_state, learning_summary, shipped_raw_folds, validated_states
 
 
 def _v(step, mean, folded=0, score=None, jac=0.1):
@@ -87,3 +87,12 @@ def test_the_model_table_names_each_configuration_and_prints_as_the_prose():
     assert head.startswith("| model | configuration | parameters | kept step | training (min) | held-out mean |")
     assert one.startswith("| U-Net | unet-x | ") and one.endswith("| 5,000 | 44.8 | 0.251 | 0.220 | 0.337 |")
     assert two.startswith("| long U-Net | unet-x (U-Net) |")
+
+
+def test_shipped_raw_folds_reads_the_raw_flag_where_the_repaired_map_was_validated():
+    repaired = {"final_metrics": {"mean": {}, "a": {"n_flipped": 0, "raw_folded": True},
+                                  "b": {"n_flipped": 0, "raw_folded": False}}}
+    raw = {"final_metrics": {"mean": {}, "a": {"n_flipped": 12}, "b": {"n_flipped": 0}, "c": {"n_flipped": 1}}}
+    assert shipped_raw_folds(repaired) == (1, 2)
+    assert shipped_raw_folds(raw) == (2, 3)
+    assert shipped_raw_folds({}) == (0, 0)

@@ -45,7 +45,7 @@ def test_learning_curves_can_draw_the_selection_score():
     line, star = ax_val.lines[:2]
     assert list(line.get_ydata()) == [0.3, 0.2, 0.35] and list(line.get_xdata()) == [1000, 1100, 1200]
     assert list(star.get_xdata()) == [1100] and list(star.get_ydata()) == [0.2] and star.get_marker() == "*"
-    assert "folds as no map" in ax_val.get_ylabel()
+    assert "folded map = identity" in ax_val.get_ylabel()
     assert len(ax_val.lines) == 2  # no open circles on the penalized score unless asked for
     ax_marked = learning_curves({"m": meta}, {"m": 100}, score=True, mark_folded=True).axes[1]
     opened = [ln for ln in ax_marked.lines if ln.get_markerfacecolor() == "white"]
@@ -106,11 +106,31 @@ def test_loss_terms_figure_draws_each_models_own_terms_and_names_the_zero_ones()
         if ax.get_subplotspec() is not None and ax.axison:
             spec = ax.get_subplotspec()
             cells[spec.rowspan.start, spec.colspan.start] = ax.get_title()
-    assert cells[0, 0].startswith("DEQ: the map") and "density mismatch" in cells[0, 1]
-    assert "Beltrami energy" in cells[1, 0] and (1, 1) not in cells  # the zero fold penalty is not drawn
-    assert cells[2, 0].startswith("Beltrami: the map") and "mismatch" in cells[2, 1]
+    # 12 grid columns: the DEQ model's three panels fill one row (4 columns each), the Beltrami model's two the next
+    assert cells[0, 0].startswith("DEQ: the map") and "density mismatch" in cells[0, 4]
+    assert "Beltrami energy" in cells[0, 8] and len(cells) == 5  # the zero fold penalty is not drawn
+    assert cells[1, 0].startswith("Beltrami: the map") and "mismatch" in cells[1, 6]
+    assert all(ax.axison for ax in fig.axes if ax.get_subplotspec() is not None)  # no empty panel
     note = fig.get_supxlabel().replace("\n", " ")
     assert "fold penalty (DEQ)" in note and "fold penalty (Beltrami)" in note
+    plt.close(fig)
+
+
+def test_loss_terms_figure_fills_four_panels_two_by_two_and_centres_a_short_last_row():
+    spec = TaskSpec("density", 2, "square")
+    batch = sample_batch(spec, seed=0, step=0, indices=range(1), n=9)
+    mapped = batch.ref + 0.2 * torch.randn_like(batch.ref)  # large enough to fold: every term drawn
+    terms = loss_integrands(batch.ref, mapped, batch.elements, density=batch.density)
+    terms["beltrami"] = terms["mu2"]
+    fig = loss_terms_figure({"DEQ": (mapped, batch.elements, terms, ["density", "mu2", "fold"]),
+                             "four terms": (mapped, batch.elements, terms, ["density", "mu2", "beltrami", "fold"])},
+                            n=9)
+    spans = sorted((ax.get_subplotspec().rowspan.start, ax.get_subplotspec().colspan.start,
+                    ax.get_subplotspec().colspan.stop) for ax in fig.axes if ax.get_subplotspec() is not None)
+    # 5 panels (map and four terms) in rows of 3 and 2, so 12 grid columns of 4 per panel; the 4 of the DEQ model
+    # two by two, 6 columns each; the short row of two is centred at the same width as the row above
+    assert spans == [(0, 0, 6), (0, 6, 12), (1, 0, 6), (1, 6, 12),
+                     (2, 0, 4), (2, 4, 8), (2, 8, 12), (3, 2, 6), (3, 6, 10)]
     plt.close(fig)
 
 

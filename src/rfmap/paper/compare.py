@@ -28,7 +28,7 @@ from .comparison import format_time
 from .tables import Table, format_sig
 
 __all__ = ["NETWORK_NAMES", "parameter_count", "model_table", "validated_states", "learning_summary", "kept_state",
-           "kept_rules", "learning_verdict", "paper_fields_table", "resolution_table",
+           "shipped_raw_folds", "kept_rules", "learning_verdict", "paper_fields_table", "resolution_table",
            "points_table", "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins",
            "folded_cell", "side_by_side", "MarkdownText"]
 
@@ -124,6 +124,31 @@ def validated_states(meta: dict) -> list[dict]:
         if twin is not None and all(twin.get(k) == hist[-1].get(k) for k in same):
             hist.pop()
     return hist
+
+
+def shipped_raw_folds(meta: dict) -> tuple[int, int]:
+    """On how many held-out validation fields the raw map of a model's shipped weights folds.
+
+    Reads the validation of the shipped state that the metadata keeps (``final_metrics``), one entry per held-out
+    field (each field at each of its grid sides).  A field counts where the network's raw map, before refinement or
+    repair, has a flipped element: its ``raw_folded`` flag where the run validated the repaired map, else its own
+    ``n_flipped`` (the run validated the raw map).
+
+    Parameters
+    ----------
+    meta : dict
+        A surrogate's metadata.
+
+    Returns
+    -------
+    tuple of int
+        ``(folded, fields)``: the fields whose raw map folds and the held-out fields validated; ``(0, 0)`` where
+        the metadata keeps no final validation.
+    """
+    final = meta.get("final_metrics") or {}
+    fields = [v for k, v in final.items() if k != "mean"]
+    folded = sum(bool(v["raw_folded"]) if "raw_folded" in v else (v.get("n_flipped") or 0) > 0 for v in fields)
+    return folded, len(fields)
 
 
 def learning_summary(meta: dict, last: int = 3) -> dict:

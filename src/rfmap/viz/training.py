@@ -89,12 +89,22 @@ def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: 
         ax.set_yticks([])
 
 
-def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0, ncols: int = 2):
+def _panel_rows(count: int, ncols: int) -> list[int]:
+    """How many panels each row of one model's block holds: as few rows of at most ``ncols`` as hold ``count``
+    panels, filled evenly (4 panels in rows of 2 and 2, 3 in one row, 5 in rows of 3 and 2)."""
+    nrows = -(-count // ncols)
+    per_row = -(-count // nrows)
+    return [min(per_row, count - i * per_row) for i in range(nrows)]
+
+
+def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0, ncols: int = 3):
     """The loss terms of one sample of several models (:func:`plot_loss_terms`): ``columns`` maps a model's title
     (``"DEQ model"``) to ``(mapped, elements, terms, keys)`` as ``rfmap.tasks.batch_loss_terms`` returns them, with
-    the terms of its loss to draw. Each model starts a new row of ``ncols`` panels: its map, then each of its terms
-    that is not zero on every element of the sample. The terms that are zero everywhere are named in a line under
-    the panels instead of drawn, so that no panel is empty. 7.2 inches wide. Returns the figure."""
+    the terms of its loss to draw. Each model's panels (its map, then each of its terms that is not zero on every
+    element of the sample) form a block of rows below the previous model's, as few rows of at most ``ncols``
+    panels as hold them, filled evenly; a shorter last row is centred, so that no cell of the figure is left
+    empty. The terms that are zero everywhere are named in a line under the panels instead of drawn. 7.2 inches
+    wide. Returns the figure."""
     import matplotlib.pyplot as plt
     import torch
 
@@ -107,19 +117,22 @@ def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0, n
         keys = [k for k in keys if k in terms and k != "area"]
         drawn[title] = [k for k in keys if not zero(terms, k)]
         zeros += [f"{LOSS_TERMS[k].split(' $')[0].split(' relu')[0]} ({title})" for k in keys if zero(terms, k)]
-    rows = {title: -(-(1 + len(keys)) // ncols) for title, keys in drawn.items()}
-    nrows = sum(rows.values())
-    fig, axes = plt.subplots(nrows, ncols, figsize=(7.2, 3.1 * nrows + (0.3 if zeros else 0)),
-                             layout="constrained", squeeze=False)
+    rows = {title: _panel_rows(1 + len(keys), ncols) for title, keys in drawn.items()}
+    widest = max(max(r) for r in rows.values())
+    grid = int(np.lcm.reduce(np.arange(1, widest + 1))) * 2  # grid columns: every row width divides it, centred
+    heights = [0.86 * 7.2 / r[0] for r in rows.values() for _ in r]  # a panel about as tall as wide, with its title
+    fig = plt.figure(figsize=(7.2, sum(heights) + (0.3 if zeros else 0)), layout="constrained")
+    gs = fig.add_gridspec(len(heights), grid, height_ratios=heights)
     row = 0
     for title, (mapped, elements, terms, _) in columns.items():
-        panels = list(axes[row:row + rows[title]].ravel())
-        keys = drawn[title]
-        plot_loss_terms(panels[:1 + len(keys)], mapped, elements, terms, sample=sample, n=n, keys=keys)
+        panels = []
+        span = grid // rows[title][0]  # one panel width for the whole block
+        for k in rows[title]:
+            start = (grid - k * span) // 2
+            panels += [fig.add_subplot(gs[row, start + j * span:start + (j + 1) * span]) for j in range(k)]
+            row += 1
+        plot_loss_terms(panels, mapped, elements, terms, sample=sample, n=n, keys=drawn[title])
         panels[0].set_title(f"{title}: the map $u$")
-        for ax in panels[1 + len(keys):]:
-            ax.set_axis_off()
-        row += rows[title]
     if zeros:
         import textwrap
 
@@ -282,13 +295,13 @@ def _kept_marker(ax, meta: dict, val: list[dict], key: str, offset: int) -> int:
 def _selection_value(record: dict, key: str) -> tuple[float, str]:
     """The score that chose among a run's validated weights, from one validation record of a history, and what it
     is: the family score (``"family score (Std ratio)"``) where recorded, else the mean metric with every folded
-    map counted as no map (``penalized``), else the capped or the plain mean, as
+    map counted as the identity (``penalized``), else the capped or the plain mean, as
     :func:`rfmap.training.validation.score` ranks them."""
     if "family_score" in record:
         return float(record["family_score"]), "family score (Std ratio)"
     for k in ("penalized", "capped"):
         if k in record:
-            return float(record[k]), f"{VAL_NAMES[key]}, folds as no map"
+            return float(record[k]), f"{VAL_NAMES[key]}, folded map = identity"
     return float(record[key]), VAL_NAMES[key]
 
 
