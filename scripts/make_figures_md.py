@@ -276,7 +276,8 @@ RULES_SHORT = (
     "* *n/c*, *not comparable*: the case's input is not the paper's. It is left out of the counts, and its footnote "
     "sets its Std ratio, Std(ρ̃_map) / Std(ρ̃_orig), beside the paper's.\n"
     "* *Verdict*: *reproduced* when every comparable (case, metric) pair is met, *partly* when some are, *not "
-    "reproduced* when none is. *Cases met* counts the comparable cases met, metric by metric.\n"
+    "reproduced* when none is; *not comparable* when no case has the paper's input, *not scored* when the paper "
+    "prints no number for the item. *Cases met* counts the comparable cases met, metric by metric.\n"
     "* *Ratio columns*: over the comparable cases, the median of each map's value divided by the paper's (0.5× is "
     "half the paper's value), for the paper's method, the {term}`delivered map` and the fastest *classical* solver "
     "on the same mesh.\n\n"
@@ -445,9 +446,13 @@ def render(root: Path = ROOT) -> str:
         "",
         "# Figures and tables of the paper",
         "",
-        "Every figure and table of the paper, numbered as in the paper, with the chapter of this book that "
-        "regenerates it. The chapter writes it to `book/figures/` when the book is built, named after the paper's "
-        "LaTeX label (`fig-population-test.png` for Fig. 7, `tab-population-test.md` and `.csv` for Table 4).",
+        "Every figure and table of the paper, numbered as in the paper, with the chapter of this book that makes "
+        "its counterpart. Each chapter writes its figures and tables to `book/figures/` when the book is built, "
+        "named after the paper's LaTeX label (`fig-population-test.png` for Fig. 7, `tab-population-test.md` and "
+        "`.csv` for Table 4). Table 1, the paper's comparison of operator-learning frameworks, holds no computed "
+        "result and is restated in the introduction as text; Fig. 10 is drawn for a density of this book's own, "
+        "since the paper gives neither its density nor a number; a case whose input the paper describes too "
+        "loosely to rebuild is marked *n/c* in the scoreboard below.",
         "",
         "## The scoreboard, case by case",
         "",

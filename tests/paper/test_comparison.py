@@ -237,7 +237,18 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
 def test_verdict_words_follow_the_stated_rule():
     from rfmap.paper.verdicts import VERDICTS, verdict
 
-    assert [verdict(f) for f in ([True] * 3, [True, False, None], [False, None], [None, None])] == list(VERDICTS)
+    assert [verdict(f) for f in ([True] * 3, [True, False, None], [False, None], [None, None], [])] == list(VERDICTS)
+
+
+def test_an_item_with_no_scored_pair_is_not_scored_not_not_comparable():
+    """No (case, metric) pair at all (the paper prints no number, Fig. 10) is *not scored*; cases whose inputs are
+    none of them the paper's are *not comparable*, with or without the clause on the n/c cases."""
+    from rfmap.paper.verdicts import VERDICT_RULE, qualified_verdict, verdict
+
+    assert verdict([]) == qualified_verdict([]) == "not scored"
+    assert verdict([None, None]) == qualified_verdict([None]) == "not comparable"
+    assert qualified_verdict([None], [True]).startswith("not comparable; ")
+    assert "*not scored*: the paper prints no number" in VERDICT_RULE
 
 
 def test_the_nc_clause_agrees_in_number():
@@ -272,6 +283,17 @@ def test_a_raw_column_and_no_empty_paper_column():
     lines = c.to_markdown().splitlines()
     assert lines[0] == "| case | quantity | raw network | paper's method | delivered | flow solver |"
     assert lines[2] == "| a | Std(ρ̃_map) | 0.5000 | 0.05000 | 0.04000 | 0.01000 |"
+
+
+def test_a_folded_raw_map_reads_folded_not_a_std():
+    """A raw map that folds has no meaningful Std(ρ̃_map) (negative areas): its cell says how many elements fold, as
+    the headline tables' ``folded_cell`` does; a refined map's Std stays a number."""
+    c = _comparison()
+    c.values[("a", "raw")] = {"std_rho_map": 17.8, "n_flipped": 537, "time": None}
+    c.values[("a", "native")]["n_flipped"] = 2
+    lines = c.to_markdown(["std_rho_map", "n_flipped"]).splitlines()
+    assert lines[2] == "| a | Std(ρ̃_map) | 0.08 | folded (537 flips) | 0.05000 | 0.04000 | 0.01000 | yes |"
+    assert lines[3] == "|  | flips | — | 537 | 2 | — | — |  |"
 
 
 def test_side_by_side_of_a_quantity_that_is_shown_not_scored():

@@ -148,10 +148,8 @@ class Case:
 
     def title(self, prefix: str = "") -> str:
         """The row's label; a case run on another grid than the paper's says so."""
-        text = f"{prefix}{self.name}"
-        if self.name.isdigit() and int(self.name) != self.n:
-            text += f" (run at {self.n})"
-        return text
+        run_at = f" (run at {self.n})" if self.name.isdigit() and int(self.name) != self.n else ""
+        return f"{prefix}{self.name}{run_at}"
 
 
 @dataclass
@@ -333,7 +331,9 @@ class Comparison:
         return [names.get(m, self.classical) for m in self.methods()]
 
     def _cell(self, case: str, method: str, q: str) -> str:
-        v = self.value(case, method, q)
+        v, flips = self.value(case, method, q), self.value(case, method, "n_flipped")
+        if q == "std_rho_map" and method == "raw" and flips:  # a folded map's Std is no spread (compare.folded_cell)
+            return f"folded ({int(flips):,} flips)"
         if q in ("time", "network_time"):
             return format_time(v)
         if isinstance(v, (list, tuple)):
@@ -360,7 +360,7 @@ class Comparison:
         """The paper's shape: a block of rows per case (the scored metrics and the time, or ``quantities``), a column
         per method that holds one of them and the verdict of each scored metric; numbers by :func:`format_number`.
         The note on cases that are not comparable (:meth:`nc_note`) follows only a table that shows a scored metric,
-        where the *n/c* marks stand."""
+        where the *n/c* marks stand; a raw map that folds reads ``folded (n flips)`` as its Std(ρ̃_map)."""
         quantities = quantities or self.metrics + ["time"]
         table = self._markdown(quantities, met="paper" in self.methods())
         scored = bool(set(quantities) & set(self.metrics))

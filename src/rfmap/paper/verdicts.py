@@ -19,7 +19,9 @@ the paper's method is at most the paper's value:
 ``not reproduced``
     none;
 ``not comparable``
-    no comparable case (or no paper value to compare with).
+    cases, but none whose input is the paper's;
+``not scored``
+    nothing to score: the paper prints no number for the item (Fig. 10).
 """
 from __future__ import annotations
 
@@ -45,14 +47,14 @@ COMPARABLE_RTOL = 1e-3
 #: counts it as a miss.
 NEAR_MISS = 5e-3
 #: The verdict words, best first.
-VERDICTS = ("reproduced", "partly", "not reproduced", "not comparable")
+VERDICTS = ("reproduced", "partly", "not reproduced", "not comparable", "not scored")
 #: The rule of :func:`verdict`, as the scoreboards state it once.
 #:
 #: :meta hide-value:
 VERDICT_RULE = (
     "*reproduced*: the paper's method meets the paper in every scored metric of every case whose input is the "
     "paper's; *partly*: in some of them; *not reproduced*: in none; *not comparable*: no case has the paper's "
-    "input, or the paper gives none. "
+    "input; *not scored*: the paper prints no number for the item, so nothing is scored. "
     "A case's input is the paper's when its Std(ρ̃_orig) on the paper's grid agrees with the paper's to "
     f"within {COMPARABLE_RTOL * 100:g} %; a case whose input differs is marked *not comparable* (*n/c*) and "
     "compared instead by Std(ρ̃_map) / Std(ρ̃_orig), the share of the input's spread the map leaves.")
@@ -92,19 +94,20 @@ def std_ratio(std_map: float | None, std_orig: float | None) -> float | None:
 
 
 def verdict(met: list[bool | None]) -> str:
-    """The verdict word of an item from the met flags of its comparable (case, metric) pairs, each ``True``,
-    ``False`` or ``None`` (no paper value); see :mod:`rfmap.paper.verdicts`.
+    """The verdict word of an item from the met flags of its (case, metric) pairs, each ``True``, ``False`` or
+    ``None`` (a case whose input is not the paper's); see :mod:`rfmap.paper.verdicts`.  No pair at all (the paper
+    prints no number for the item) is *not scored*; pairs that are all ``None`` are *not comparable*.
 
     Examples
     --------
     >>> verdict([True, True]), verdict([True, False]), verdict([False])
     ('reproduced', 'partly', 'not reproduced')
     >>> verdict([None]), verdict([])
-    ('not comparable', 'not comparable')
+    ('not comparable', 'not scored')
     """
     flags = [m for m in met if m is not None]
     if not flags:
-        return "not comparable"
+        return "not comparable" if met else "not scored"
     k = sum(flags)
     return "reproduced" if k == len(flags) else ("partly" if k else "not reproduced")
 
@@ -140,11 +143,11 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     flags = [m for m in met if m is not None]
     count = f" ({sum(flags)} of {len(flags)})" if flags else ""
     if not nc_worse:
-        return verdict(flags) + count
+        return verdict(met) + count
     if short:  # the scoreboards' cell: the count named as that of the comparable cases, the n/c cases beside it
-        return f"{verdict(flags)}{count[:-1] + ' comparable)' if flags else ''}; {nc_clause(nc_worse, factors)}"
+        return f"{verdict(met)}{count[:-1] + ' comparable)' if flags else ''}; {nc_clause(nc_worse, factors)}"
     scope = " on the comparable cases" if flags else ""
-    return f"{verdict(flags)}{scope}{count}; {nc_clause(nc_worse, factors)}"
+    return f"{verdict(met)}{scope}{count}; {nc_clause(nc_worse, factors)}"
 
 
 def nc_clause(nc_worse: list[bool], factors: list[float] | None = None) -> str:
