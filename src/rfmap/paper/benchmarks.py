@@ -58,7 +58,8 @@ def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "squ
     list of dict
         One row per method: ``method``, ``std_rho_map``, ``n_flipped``, ``time`` (s, the result's own ``time``); for
         the surrogate's two rows ``coarser`` (the network's map folded, and a fold-free map from a coarser working
-        grid was taken, :func:`rfmap.finish.stages.regrid`); for the hybrid, ``start`` (warm or cold) and ``kept`` (the map the guard kept); the hybrid's run adds the
+        grid was taken, :func:`rfmap.finish.stages.regrid`) and ``work_n`` (the side of the grid the returned map's
+        network ran on); for the hybrid, ``start`` (warm or cold) and ``kept`` (the map the guard kept); the hybrid's run adds the
         row ``"hybrid (no guard)"`` (:data:`rfmap.finish.polish.UNGUARDED`) before its own: its warm flow's map
         alone, as the hybrid would return it without the guard (the cold flow from the identity that it also runs,
         keeping the better map), timed without that cold flow.
@@ -79,6 +80,7 @@ def compare_methods(density: np.ndarray, surrogate=None, *, boundary: str = "squ
         row = {"method": method, "std_rho_map": m.std_rho_map, "n_flipped": m.n_flipped, "time": res.time}
         if method in ("surrogate", "surrogate+refine"):  # the network's map folded; one from a coarser grid taken
             row["coarser"] = (res.info.get("regrid") or {}).get("work_n") is not None
+            row["work_n"] = int(res.info["work_n"])
         if method == "hybrid":
             p = res.info["polish"]
             row.update(start=p["start"], kept=p["kept"])
