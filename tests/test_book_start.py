@@ -90,6 +90,30 @@ def test_code_blocks_of_the_pages_fit_88_columns():
     assert not long, "code lines longer than 88 characters:\n" + "\n".join(long)
 
 
+def test_docstring_examples_on_the_api_pages_fit_88_columns():
+    """The examples of a docstring that an API page renders (``autofunction`` and the like) sit in a code box as
+    well: each of their lines, prompts and printed output alike, fits 88 characters."""
+    import importlib
+    import inspect
+
+    long = []
+    for page in sorted((ROOT / "book" / "api").glob("*.md")):
+        for name in re.findall(r"^\.\. auto(?:function|class|method)::\s+([\w.]+)", page.read_text(encoding="utf-8"),
+                               re.M):
+            module, _, attr = name.rpartition(".")
+            try:
+                obj = getattr(importlib.import_module(module), attr)
+            except (ImportError, AttributeError):  # a method (Class.method): its class's module
+                owner, _, cls = module.rpartition(".")
+                obj = getattr(getattr(importlib.import_module(owner), cls), attr)
+            example = False
+            for ln in (inspect.getdoc(obj) or "").splitlines():
+                example = ln.startswith((">>>", "...")) or (example and bool(ln.strip()))
+                if example and len(ln) > 88:
+                    long.append(f"{page.name}: {name}: {ln[:60]!r}... ({len(ln)})")
+    assert not long, "docstring example lines longer than 88 characters:\n" + "\n".join(long)
+
+
 @pytest.mark.parametrize("nb", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_chapter_ends_with_try_it(nb):
     """The last cell is a Markdown cell '## Try it' with one to three exercises (a numbered list)."""

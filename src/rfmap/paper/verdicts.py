@@ -135,10 +135,10 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     'reproduced on the comparable cases (3 of 3)'
     >>> nc
     'the n/c case is worse by Std ratio'
-    >>> qualified_verdict([True, True, True], [True], short=True)
-    'reproduced (3 of 3 comparable); the n/c case is worse by Std ratio'
-    >>> qualified_verdict([True, True, True], [True], short=True, factors=[1.61])
-    "reproduced (3 of 3 comparable); the n/c case's Std ratio is 1.6 times the paper's"
+    >>> print(qualified_verdict([True] * 3, [True], short=True))
+    reproduced (3 of 3 comparable); the n/c case is worse by Std ratio
+    >>> print(qualified_verdict([True] * 3, [True], short=True, factors=[1.61]))
+    reproduced (3 of 3 comparable); the n/c case's Std ratio is 1.6 times the paper's
     """
     flags = [m for m in met if m is not None]
     count = f" ({sum(flags)} of {len(flags)})" if flags else ""
@@ -163,9 +163,10 @@ def nc_clause(nc_worse: list[bool], factors: list[float] | None = None) -> str:
     '1 of the 2 n/c cases is worse by Std ratio'
     >>> nc_clause([True, True, False])
     '2 of the 3 n/c cases are worse by Std ratio'
-    >>> nc_clause([True], [1.93]), nc_clause([True, False], [1.61, 0.9])
-    ("the n/c case's Std ratio is 1.9 times the paper's", "1 of the 2 n/c cases is worse by Std ratio, 1.6 times \
-the paper's")
+    >>> print(nc_clause([True], [1.93]))
+    the n/c case's Std ratio is 1.9 times the paper's
+    >>> print(nc_clause([True, False], [1.61, 0.9]))
+    1 of the 2 n/c cases is worse by Std ratio, 1.6 times the paper's
     """
     if not nc_worse:
         return ""
