@@ -315,24 +315,31 @@ def lookup_engine(n, repeat, threads):
 
 def batch_per_thread(n, repeat, threads):
     """One velocity evaluation of the 3D flow on ``threads`` threads, the points split into one grid_sample batch
-    entry per thread over the same table or left in one entry."""
+    entry per thread over the same table or left in one entry; and on one thread, where the rule gives one entry
+    (the two settings coincide), to show what the extra threads cost or gain on the machine at hand."""
     n = n or 48
     table, q, m = _velocity_setup(n, np.float32)
     old = torch.get_num_threads()
-    torch.set_num_threads(threads)
     try:
+        torch.set_num_threads(threads)
         t_split, _ = best_time(lambda: _sample(table, q, threads), max(5, repeat))
         t_one, _ = best_time(lambda: _sample(table, q, 1), max(5, repeat))
+        torch.set_num_threads(1)
+        t_single, _ = best_time(lambda: _sample(table, q, 1), max(5, repeat))
     finally:
         torch.set_num_threads(old)
     return [_row(f"3D N = {n}, M = {m}, {threads} threads: one evaluation at {len(q):,} points",
-                 f"{threads} batch entries: {_ms(t_split)}", f"one batch entry: {_ms(t_one)}")]
+                 f"{threads} batch entries: {_ms(t_split)}", f"one batch entry: {_ms(t_one)}"),
+            _row(f"3D N = {n}, M = {m}, 1 thread: one evaluation at {len(q):,} points",
+                 f"1 batch entry: {_ms(t_single)}", "the same single entry")]
 
 
 # ------------------------------------------------------------------------------------------------ symmetrization
 def batch_points(n, repeat, threads):
     """The 8 symmetric copies of deq2d-square's input evaluated stacked into batches of at most BATCH_POINTS grid
-    points or one after another, one thread."""
+    points or one after another, one thread.  The settings are timed in turn, round after round, and each one's
+    median counts: on a loaded machine a best-of-n taken one setting after another lets the load of the moment
+    pick the winner."""
     from rfmap import Surrogate
     from rfmap.nn.symmetry import BATCH_POINTS, symmetrized_displacement
 
@@ -341,20 +348,23 @@ def batch_points(n, repeat, threads):
     for side in ([n] if n else [51, 64, 96, 128, 256]):
         grids = sample_density("sin-cos", side)[None].astype(np.float32)
         grids = grids / grids.mean()
-
-        def copies(points):
-            return symmetrized_displacement(sur.displacement, grids, "full", batch_points=points)
-
-        copies(BATCH_POINTS)  # the first call of a shape pays for tracing
         stacked = max(1, min(8, BATCH_POINTS // side**2))
-        t_batch, _ = best_time(lambda: copies(BATCH_POINTS), repeat)
-        others = []
+        settings = {"chosen": BATCH_POINTS}
         if stacked > 1:  # one copy per batch is the chosen rule itself
-            others.append(f"one after another {_ms(best_time(lambda: copies(1), repeat)[0])}")
+            settings["one after another"] = 1
         if stacked < 8:
-            others.append(f"all 8 in one batch {_ms(best_time(lambda: copies(8 * side**2), repeat)[0])}")
+            settings["all 8 in one batch"] = 8 * side**2
+        for points in settings.values():  # the first call of a shape pays for tracing
+            symmetrized_displacement(sur.displacement, grids, "full", batch_points=points)
+        times = {k: [] for k in settings}
+        for _ in range(max(5, repeat)):
+            for k, points in settings.items():
+                t0 = time.perf_counter()
+                symmetrized_displacement(sur.displacement, grids, "full", batch_points=points)
+                times[k].append(time.perf_counter() - t0)
+        med = {k: float(np.median(v)) for k, v in times.items()}
         rows.append(_row(f"2D N = {side} ({stacked} cop{'y' if stacked == 1 else 'ies'} per batch)",
-                         _ms(t_batch), "; ".join(others)))
+                         _ms(med["chosen"]), "; ".join(f"{k} {_ms(med[k])}" for k in settings if k != "chosen")))
     return rows
 
 
@@ -503,13 +513,14 @@ CASES: dict[str, Case] = {
                                      f"{max(3, r)}"),
     "velocity-table-float32": Case(velocity_table, "3D N = 48", lambda n, r, t: f"the flow's first velocity table of "
                                    f"sin-cos-3d at N = {n or 48} (M = {2 * (n or 48) - 1}), best of {max(3, r)}"),
-    "flow-lookup-engine": Case(lookup_engine, "3D N = 48", lambda n, r, t: f"as velocity-table-float32, one "
-                               f"thread, best of {max(3, r)}"),
-    "grid-sample-per-thread": Case(batch_per_thread, "3D N = 48", lambda n, r, t: f"as velocity-table-float32, "
-                                   f"{t} threads, best of {max(5, r)}"),
+    "flow-lookup-engine": Case(lookup_engine, "3D N = 48", lambda n, r, t: "the table and points of the "
+                               f"section on the velocity table's precision, one thread, best of {max(3, r)}"),
+    "grid-sample-per-thread": Case(batch_per_thread, "3D N = 48", lambda n, r, t: "the table and points of "
+                                   f"the section on the velocity table's precision, {t} threads and one thread, "
+                                   f"best of {max(5, r)}"),
     "BATCH_POINTS": Case(batch_points, "2D N = 51 to 256", lambda n, r, t: "deq2d-square, the 8 symmetries of "
                          f"sin-cos at {'N = 51, 64, 96, 128 and 256' if n is None else f'N = {n}'}, one thread, "
-                         f"best of {r}"),
+                         f"median of {max(5, r)} rounds, the settings timed in turn"),
     "DEFAULT_SYMMETRY": Case(default_symmetry, "2D N = 51, 3D N = 32", lambda n, r, t: "the 16 held-out validation "
                              f"fields: deq2d-square at N = {n or 51}, dem3d-cube at N = {n or 32}; raw maps"),
     "BYTES_PER_VERTEX": Case(bytes_per_vertex, "2D N = 512, 3D N = 48 and 64", lambda n, r, t: "the paper's first "

@@ -12,7 +12,7 @@ import pytest
 
 from rfmap.paper.design import (DESIGN_PATH, current_value, display_name, finding, kept_text, load_decisions,
                                 plain_numbers, readable_value, record, remeasure_command, stale_values, to_markdown,
-                                _sentence)
+                                _label, _sentence)
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -111,20 +111,27 @@ def test_headings_and_the_table_of_decisions_show_no_python_reprs():
     assert display_name(by["_HARD2 (p_hard)"]) == "Share of hard fields in 2D training"
     assert "**Value:** 0.3 (training config key `density_field.p_hard` of " in page
     assert "._HARD" not in page and "._FOLD" not in page, "a private name on the page"
-    assert display_name(by["RTOL"]) == "`RTOL`"
-    assert not [h for h in headings if h.startswith("### `_")], "a private name as a heading"
-    assert display_name(by["validation score"]) == "validation score"
+    assert display_name(by["RTOL"]) == "Step size of the flow solver (`RTOL`)"
+    assert not [h for h in headings if h.startswith("### `")], "a heading that is only a code name"
+    assert not [h for h in headings if "`_" in h], "a private name as a heading"
+    assert display_name(by["validation score"]) == "Choosing a training run's checkpoint"
+    # every decision has a plain title; a public constant follows it in backticks, as the reader would type it
+    for d in load_decisions():
+        assert d.get("title") and display_name(d).startswith(d["title"]), d["constant"]
+        if d.get("attribute") and not d["constant"].startswith("_"):
+            assert display_name(d).endswith(f"(`{d['attribute']}`)"), d["constant"]
 
 
 #: decisions whose recorded numbers contradict the chosen value
-CONTRADICTED = ["one grid_sample batch entry per thread", "BATCH_POINTS", "SCAN_POINTS", "_FOLD_HARD3 (fold weight)",
+CONTRADICTED = ["one grid_sample batch entry per thread", "SCAN_POINTS", "_FOLD_HARD3 (fold weight)",
                 "_HARD2 (p_hard)", "_HARD3 (p_hard)", "_FOLD_HARD (fold weight)"]
 
 
 def test_findings_say_where_the_numbers_do_not_support_the_value():
-    """A finding is shown in its section with the rows it rests on and that the constant waits for a new
-    measurement, and the table of decisions says plainly that the numbers do not support the value; the page says
-    once that timings taken under load can mislead, without load averages or commits in its text."""
+    """A finding is shown in its section with the rows it rests on and its own account of what is known and what
+    was not measured (no stock reason shared between decisions), and the overview says plainly that the numbers do
+    not support the value; the page says once that timings taken under load can mislead, without load averages or
+    commits in its text."""
     page = to_markdown()
     assert page.count("can come from that load rather than from the setting") == 1
     assert "load average" not in page and "commit" not in page
@@ -140,11 +147,16 @@ def test_findings_say_where_the_numbers_do_not_support_the_value():
             assert case in text and all(plain_numbers(str(row[k])) in text for k in ("chosen", "alternative")
                                         if row.get(k))
         assert kept_text(d) in page and kept_text(d).startswith("**Not supported by the")
-        if d.get("remeasure") and not d["finding"].get("why_kept"):  # a timing: only an idle machine settles it
-            assert "idle machine" in text and "idle machine" in kept_text(d)
-    broken = {**by["BATCH_POINTS"], "finding": {"text": "x", "rows": ["no such case"]}}
+        assert d["finding"]["why_kept"].rstrip(".") in text and d["kept"] in kept_text(d)
+    reasons = [by[name]["finding"]["why_kept"] for name in CONTRADICTED] + [by[name]["kept"] for name in CONTRADICTED]
+    assert len(set(reasons)) == len(reasons), "two decisions share a reason"
+    for stock in ("does not settle the choice", "idle machine can", "The value is kept because"):
+        assert stock not in page, stock
+    broken = {**by["BATCH_POINTS"], "finding": {"text": "x", "rows": ["no such case"], "why_kept": "y"}}
     with pytest.raises(KeyError):
         finding(broken)
+    with pytest.raises(KeyError):  # a finding without its own reason is refused, not given a stock one
+        finding({**by["BATCH_POINTS"], "finding": {"text": "x", "rows": []}})
 
 
 def test_every_decision_says_in_plain_words_what_it_is_for_and_why_it_stays():
@@ -153,8 +165,9 @@ def test_every_decision_says_in_plain_words_what_it_is_for_and_why_it_stays():
     page = to_markdown()
     glance = page[page.index("## At a glance"):page.index("## The decisions one by one")]
     assert glance.count("\n- [") == len(load_decisions())
-    n, m = len(load_decisions()), sum(1 for d in load_decisions() if d.get("remeasure"))
-    assert f"| All | {m} | {n - m} | {n} |" in page  # the opening table counts every decision
+    for d in load_decisions():  # each overview entry links to its section by the section's label
+        assert f"- [{display_name(d)}]({_label(d)}): {readable_value(d)}." in glance, d["constant"]
+        assert f"({_label(d)})=\n### {display_name(d)}\n" in page, d["constant"]
     # a section gives its criterion outside the collapsed block, not the overview's purpose or outcome again
     for d in load_decisions():
         section = page[page.index(f"### {display_name(d)}\n"):]
@@ -165,7 +178,7 @@ def test_every_decision_says_in_plain_words_what_it_is_for_and_why_it_stays():
         if d.get("alternatives_per_case"):
             assert "**Tried per case:** see the table." in section[:section.index("\n::::\n")]
     for d in load_decisions():
-        assert d.get("purpose") and d.get("outcome") and (d.get("kept") or d.get("finding")), d["constant"]
+        assert d.get("purpose") and d.get("outcome") and d.get("kept"), d["constant"]
         words = re.sub(r"\b[23]D\b|chapter \d+|counted as 1", "", d["purpose"] + d["outcome"] + d.get("kept", ""))
         assert not re.search(r"\d", words), (d["constant"], words)  # measured numbers come from the record
     assert not re.search(r"\d\.?\d*e-\d", page)

@@ -9,21 +9,22 @@ Every entry has these keys:
 * ``alternatives``, ``criterion`` and ``data``: the values tried, the criterion, and the data they were measured on;
 * ``results``: the rows of the decision's table (``case``, ``chosen``, ``alternative``); ``notes``; ``benchmark``:
   what measures it;
-* ``purpose``, ``outcome`` and ``kept``: in plain words, what it controls, what the measurement showed and, unless
-  the decision has a ``finding``, why the value is kept (the page's one table of decisions, :func:`kept_text`).
+* ``purpose``, ``outcome`` and ``kept``: in plain words, what it controls, what the measurement showed and why the
+  value is kept (the page's overview, :func:`kept_text`);
+* ``title``: the decision's name in plain words, the page's heading (followed by the constant where it is a public
+  one, :func:`display_name`).
 
 Some entries also have these:
 
 * ``value_keys``: what the keys of a dict value (or the items of a tuple) are, ``"dimension"``, ``"boundary"`` or
   ``"option"``, so that the page can show the value readably (:func:`readable_value`);
 * ``finding``: where the numbers do not support the chosen value: its ``text``, the ``rows`` (by ``case``) that
-  show it and, optionally, ``why_kept``, why the value stays all the same; the page shows it in the decision's
-  section (:func:`finding`);
+  show it and ``why_kept``, the decision's own account of what is known, what was not measured and why the value
+  stays all the same; the page shows it in the decision's section (:func:`finding`);
 * ``columns``: the three heads of the decision's table, where the default heads do not fit its rows;
 * ``alternatives_per_case``: true where not every alternative was tried in every case, so that the section points
   at its table instead of listing them;
-* ``title`` and ``where``: a name for a constant that has no public one, and where it is set in public terms (a
-  training config key, say);
+* ``where``: where a constant that has no public name is set, in public terms (a training config key, say);
 * ``remeasure`` and ``measured``, or ``recorded``: how the numbers can be obtained again (below).
 
 A decision is either *re-measurable* or a *historical record*.  A re-measurable one names in ``remeasure`` its case
@@ -109,6 +110,12 @@ AREAS = (("rfmap.solvers", "Classical solvers"), ("rfmap.finish", "Finishing a n
          ("rfmap.core", "Memory and input checks"), ("rfmap.cartogram", "Cartograms"),
          ("rfmap.training", "Training"))
 
+#: A paragraph under a group's heading in the sections, where something holds for every decision of the group.
+_GROUP_NOTES = {"Training": "The shares of hard fields and the fold penalties below are those the shipped models "
+               "were trained with. A different value takes effect only in a model trained again, so where the "
+               "record does not support one of them, its section says what is known and what a new training run "
+               "would have to measure."}
+
 #: the script that re-measures a decision with a ``remeasure`` key
 REMEASURE = "python benchmarks/design.py --only"
 
@@ -149,15 +156,24 @@ def _code_words(text: str) -> str:
     return re.sub(r"([A-Za-z_][\w.]*\([\w=, ]*\)|\b[A-Za-z]\w*_\w*\b)", r"`\1`", text)
 
 
-def display_name(d: dict[str, Any]) -> str:
-    """The decision's name for headings and the table of decisions: its ``title`` where it has one (a private
-    constant such as ``_HARD2.p_hard`` is named in words), else the constant as inline code (``RTOL``) where it is
-    one, else its words; never its value."""
-    if d.get("title"):
-        return d["title"]
+def _code_name(d: dict[str, Any]) -> str | None:
+    """The public name of the decision's constant as a reader would type it (``RTOL``), or ``None`` for a choice
+    that is not a public constant (a private one such as ``_HARD2.p_hard`` is set through a training config key)."""
     m = re.fullmatch(r"([A-Za-z_]\w*)(?: \((.*)\))?", d["constant"])
-    if m and (d.get("attribute") or "_" in m.group(1) or m.group(1).isupper()):
-        return f"`{m.group(1)}`" + (f" ({m.group(2)})" if m.group(2) else "")
+    if not m or m.group(1).startswith("_") or not (d.get("attribute") or m.group(1).isupper()):
+        return None
+    return m.group(1)
+
+
+def display_name(d: dict[str, Any]) -> str:
+    """The decision's name for headings and the overview: its ``title`` in plain words, followed by the constant
+    as inline code where it is a public one (``Step size of the flow solver (`RTOL`)``); without a title, the
+    constant as inline code, else its words; never its value."""
+    name = _code_name(d)
+    if d.get("title"):
+        return d["title"] + (f" (`{name}`)" if name else "")
+    if name:
+        return f"`{name}`"
     return _code_words(d["constant"])
 
 
@@ -248,21 +264,19 @@ def _kind(d: dict[str, Any]) -> str:
 
 
 def _why_kept(d: dict[str, Any]) -> str:
-    """Why a constant whose numbers do not support it stays: the finding's ``why_kept``, else that the record does
-    not settle it (timings taken under load, for a timing that can be re-measured: only an idle machine can)."""
-    f = d.get("finding") or {}
-    if f.get("why_kept"):
-        return f["why_kept"]
-    if d.get("remeasure"):
-        return "timings taken under load do not settle the choice; only a measurement on an idle machine can"
-    return "one record does not settle the choice"
+    """What is known and what was not measured, for a value its numbers do not support: the finding's own
+    ``why_kept``, specific to the decision (a finding without one is an error: the page has no stock reason)."""
+    why = (d.get("finding") or {}).get("why_kept")
+    if not why:
+        raise KeyError(f"{d['constant']}: a finding needs its own why_kept")
+    return why
 
 
 def kept_text(d: dict[str, Any]) -> str:
-    """The table's *kept because* cell: the decision's ``kept``, or, where the numbers do not support the value
-    (a ``finding``), that plainly, with what the constant waits for."""
+    """The overview's last field: the decision's ``kept``, why the value was chosen; where the numbers do not
+    support the value (a ``finding``), that first, plainly, then the decision's own ``kept``."""
     if d.get("finding"):
-        return f"**Not supported by the {_kind(d)}**; kept because {_why_kept(d)}"
+        return f"**Not supported by the {_kind(d)}.** {_sentence(d.get('kept'))}"
     return d.get("kept", "")
 
 
@@ -277,11 +291,9 @@ def finding(d: dict[str, Any]) -> list[str]:
     missing = [c for c in f.get("rows", []) if c not in rows]
     if missing:
         raise KeyError(f"{d['constant']}: the finding names rows that the record does not hold: {missing}")
-    text = f"**The {_kind(d)} does not support the choice.** {f['text'][0].upper()}{f['text'][1:]}."
+    text = f"**The {_kind(d)} does not support the choice.** {_sentence(f['text'])}"
     shown = [rows[c] for c in f.get("rows", [])]
-    if shown:
-        text += " " + ("The row that shows it:" if len(shown) == 1 else "The rows that show it:")
-    end = f"The value is kept because {_why_kept(d)}."
+    end = _sentence(_why_kept(d))
     return [":::{warning}", text, ""] + (_rows_table(shown, d.get("columns")) + [""] if shown else []) + [end, ":::", ""]
 
 
@@ -290,11 +302,11 @@ def _cell(text: Any) -> str:
 
 
 def _where(d: dict[str, Any]) -> str:
-    """Where a decision named by its title is set, in public terms: its ``where`` (a training config key, say), else
-    its module and attribute."""
+    """Where a decision is set, in public terms, where its heading does not say it: its ``where`` (a training config
+    key, say)."""
     if d.get("where"):
         return f" ({d['where']})"
-    return f" (`{d['module']}.{d['attribute']}`)" if d.get("title") and d.get("attribute") else ""
+    return ""  # a public constant is named in the heading, its module under "In the code"
 
 
 def _label(d: dict[str, Any]) -> str:
@@ -380,8 +392,8 @@ def _glance(decisions: list[dict[str, Any]]) -> list[str]:
             tried = f"*Tried instead:* {_sentence(alternatives)} " if alternatives else ""  # no empty field
             lines.append(f"- [{display_name(d)}]({_label(d)}): {readable_value(d)}. "
                          f"{_sentence(d.get('purpose') or d['what'])} {tried}"
-                         f"*Outcome, {_evidence(d)}:* {_sentence(d.get('outcome'))} "
-                         f"*Kept because:* {_sentence(kept_text(d))}")
+                         f"*Outcome ({_evidence(d)}):* {_sentence(d.get('outcome'))} "
+                         f"*Why this value:* {_sentence(kept_text(d))}")
         lines.append("")
     return lines
 
@@ -398,51 +410,32 @@ def _sentence(text: Any) -> str:
     return (text if code else text[0].upper() + text[1:]) + ("" if text.endswith((".", "!", "?")) else ".")
 
 
-def _summary_table(decisions: list[dict[str, Any]]) -> list[str]:
-    """The page's opening table: how many decisions were re-measured or are records only, by whether their numbers
-    support the value and whether an alternative was tried."""
-    def kind(d):
-        if not d.get("alternatives"):
-            return "No alternative tried"
-        return "The numbers do not support the value" if d.get("finding") else "The numbers support the value"
-    rows = ["The numbers support the value", "The numbers do not support the value", "No alternative tried"]
-    count = {(r, c): 0 for r in rows for c in (True, False)}
-    for d in decisions:
-        count[kind(d), bool(d.get("remeasure"))] += 1
-    lines = ["| Decisions | Re-measured | Records, not re-measured | All |", "| --- | --- | --- | --- |"]
-    for r in rows + ["All"]:
-        a, b = ((sum(count[x, c] for x in rows) for c in (True, False)) if r == "All" else
-                (count[r, True], count[r, False]))
-        lines.append(f"| {r} | {a} | {b} | {a + b} |")
-    return lines + [""]
-
-
 def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "src/rfmap/data/design.json") -> str:
     """The page *Design decisions*: how to read it, one table of every decision, then one short section per
     decision with its numbers folded."""
     decisions = load_decisions() if decisions is None else decisions
     lines = [f"<!-- Generated by scripts/make_design_md.py from {source}: edit the JSON, then rerun. -->", "",
              "# Design decisions", "",
-             "Besides the paper's method, the package has settings that nobody prescribes: how large a "
-             "step the flow solver takes, how much a network's map is smoothed before the solver finishes it, how "
-             "the checkpoint of a training run is chosen. This page records, for each such decision, what it "
-             "controls, what was tried instead, what the measurement showed and why the value stays:", ""]
-    lines += _summary_table(decisions) + [
-        "A script (`benchmarks/design.py`) measures a re-measured decision again and prints the same numbers. A "
-        "record was written down when the value was chosen, and the code has changed since, so it explains the "
-        "choice without showing that it still holds; its section is marked *Record of* its date, *not "
-        "re-measured*.", ""]
+             "The paper specifies its method, but an implementation needs settings that the paper does not fix: "
+             "how large a step the flow solver takes, how much a network's map is smoothed before the solver "
+             "finishes it, how the checkpoint of a training run is chosen. This page gives, for each such setting, "
+             "its value, the criterion it was chosen by, what else was tried and what the measurements showed, "
+             "including where they do not support the value.", "",
+             "The overview below has one entry per setting, grouped by the part of the package it belongs to. The "
+             "sections after it repeat the value and give the criterion; the numbers sit in a collapsed block "
+             "(click *The measurement* to open it). Where the numbers do not support the value, a warning box at "
+             "the top of the section says so, shows the rows that show it, and says what is known and what was "
+             "not measured.", "",
+             "The numbers are of two kinds. A *re-measured* decision is measured again by the script "
+             "`benchmarks/design.py`, which prints the same table; its section gives the command and the date of "
+             "the run. A *record* holds the numbers written down when the value was chosen; the code has changed "
+             "since, so a record explains the choice without showing that it still holds, and its section is "
+             "marked *Record of* its date, *not re-measured*.", ""]
     loads = load_range(decisions)
     if loads:
-        lines[-2] += (f" The re-measured timings were taken on a shared machine with {loads[2]} while other work "
-                      "was running, so a small difference in time between two settings can come from that load "
-                      "rather than from the setting.")
-    if any(d.get("finding") for d in decisions):
-        lines += ["Where the numbers do not support the value, the overview says so under *Kept because*, with the "
-                  "reason the value stays: changing a value judged by its results would change results of the "
-                  "book, while one judged by time changes only how long a computation takes.", ""]
-    lines += ["Below the overview, each decision has a short section with its criterion; its numbers sit in a "
-              "collapsed block (click to open it).", ""]
+        lines[-2] += (f" The timings were taken on a shared machine with {loads[2]} while other work was running, "
+                      "so a small difference in time between two settings can come from that load rather than "
+                      "from the setting.")
     lines += ["## At a glance", ""] + _glance(decisions)
     lines += ["## The decisions one by one", "",
               "To measure the re-measurable decisions again and regenerate this page:", "",
@@ -451,7 +444,7 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
               "make pages                            # regenerate this page from the record",
               "```", ""]
     for heading, group in _groups(decisions):
-        lines += [f"## {heading}", ""]
+        lines += [f"## {heading}", ""] + ([_GROUP_NOTES[heading], ""] if heading in _GROUP_NOTES else [])
         for d in group:
             lines += _details(d)
     return "\n".join(lines).rstrip("\n") + "\n"
