@@ -163,7 +163,7 @@ def test_every_decision_says_in_plain_words_what_it_is_for_and_why_it_stays():
     """The table of decisions: what each controls, what the measurement showed and why the value is kept (or that
     the numbers do not support it), in words; numbers of the record written as powers of ten, not e-notation."""
     page = to_markdown()
-    glance = page[page.index("## At a glance"):page.index("## The decisions one by one")]
+    glance = page[page.index("## At a glance"):page.index("## Measuring again")]
     assert glance.count("\n- [") == len(load_decisions())
     for d in load_decisions():  # each overview entry links to its section by the section's label
         assert f"- [{display_name(d)}]({_label(d)}): {readable_value(d)}." in glance, d["constant"]

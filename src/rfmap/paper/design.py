@@ -437,8 +437,9 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
                       "so a small difference in time between two settings can come from that load rather than "
                       "from the setting.")
     lines += ["## At a glance", ""] + _glance(decisions)
-    lines += ["## The decisions one by one", "",
-              "To measure the re-measurable decisions again and regenerate this page:", "",
+    lines += ["## Measuring again", "",
+              "The re-measured decisions are measured again, and this page is written again from the new numbers, "
+              "by:", "",
               "```bash",
               "python benchmarks/design.py --record  # every case; or --only NAME [NAME ...]",
               "make pages                            # regenerate this page from the record",
