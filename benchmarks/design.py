@@ -458,7 +458,7 @@ def bytes_per_vertex(n, repeat, threads):
                              capture_output=True, text=True, check=True)
         per_vertex = max(1, int(out.stdout.split()[-1])) / side**d
         rows.append(_row(f"{label}, N = {side}", f"{per_vertex / 1024:.2f} KiB per vertex",
-                         f"BYTES_PER_VERTEX[{d}] = {BYTES_PER_VERTEX[d] / 1024:g} KiB: "
+                         f"{BYTES_PER_VERTEX[d] / 1024:g} KiB assumed in {d}D: "
                          f"{BYTES_PER_VERTEX[d] / per_vertex:.1f} times the peak"))
     return rows
 
