@@ -542,3 +542,25 @@ def test_map_and_cartogram_passes_share_one_velocity():
     np.testing.assert_allclose(cart(1.0, nodes), np.moveaxis(flux, 0, -1).reshape(-1, 2) / spectral.box_mean(dens),
                                rtol=1e-12, atol=1e-14)
     assert cart.evaluations == 4 and mapped.evaluations == 3
+
+
+def test_large_table_transforms_skip_the_scipy_fft_import_and_give_its_numbers():
+    """A table transformed by scipy's pocketfft (a side of ``SCIPY_SIDE`` or more) does so without importing
+    ``scipy.fft`` (:func:`rfmap.solvers.cosine.type1_transforms`: half a second of a cartogram command), and
+    its
+    DCT-I and DST-I along both axes equal ``scipy.fft``'s bit for bit."""
+    code = """
+import sys
+import numpy as np
+from rfmap.solvers.cosine import CosineTransforms
+ct = CosineTransforms(17, use_scipy=True)
+x = np.random.default_rng(3).normal(size=(17, 17))
+got = [ct.dct(x, 0), ct.dct(x, 1), ct.dst(x[1:-1], 0), ct.dst(x[:, 1:-1], 1)]
+assert 'scipy.fft' not in sys.modules, 'scipy.fft'
+import scipy.fft
+want = [scipy.fft.dct(x, type=1, axis=0), scipy.fft.dct(x, type=1, axis=1),
+        scipy.fft.dst(x[1:-1], type=1, axis=0), scipy.fft.dst(x[:, 1:-1], type=1, axis=1)]
+assert all(np.array_equal(g, w) for g, w in zip(got, want)), 'numbers'
+"""
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr

@@ -18,26 +18,29 @@ interface (``dct(x, axis, out=None)``, ``dst(x, axis, out=None)``, ``dctn(x)``):
   transform is the real part of the real FFT of the even extension :math:`(x_0, \dots, x_{M-1}, x_{M-2}, \dots,
   x_1)`, the second minus the imaginary part of that of the odd extension :math:`(0, x, 0, -\bar x)` (:math:`\bar x`
   reversed), both of length :math:`2(M-1)` when :math:`K = M - 2` (the interior of an axis).  Tables of a side of
-  at least ``SCIPY_SIDE`` go to ``scipy.fft`` itself, whose type-I transforms skip the extension and are
-  faster on large tables; the smaller ones do not import it, since its import (a few tenths of a second) takes
-  longer than a small cartogram.  It keeps the extension and the spectrum of a block of rows in
-  two buffers between calls: a table of a few hundred thousand numbers allocated afresh for every transform costs
+  at least ``SCIPY_SIDE`` go to scipy's pocketfft, whose type-I transforms skip the extension and are faster on
+  large tables, called as ``scipy.fft`` calls it but without importing ``scipy.fft``
+  (:func:`type1_transforms`); the smaller ones do not load it at all, since importing ``scipy.fft`` (a few
+  tenths of a second) takes longer than a small cartogram.  It keeps the extension and the spectrum of a block of
+  rows in two buffers between calls: a table of a few hundred thousand numbers allocated afresh for every transform costs
   the operating system's page faults, about as much as the FFT itself, and a table of millions (a cartogram's
   finest raster) would need two more tables' worth of memory at once.
 """
 from __future__ import annotations
 
+import functools
 import sys
 
 import numpy as np
 
-__all__ = ["CosineTransforms", "ScipyTransforms", "fft_workers"]
+__all__ = ["CosineTransforms", "ScipyTransforms", "fft_workers", "type1_transforms"]
 
 
 #: Rows transformed at a time by :class:`CosineTransforms`, as a count of numbers in its extension buffer: a table of
 #: a 2049-vertex side then runs through buffers of 8 MB (256 rows) instead of two of 67 MB, for the same FFTs.
 BLOCK_NUMBERS = 1 << 20
-#: Tables of at least this side are transformed by ``scipy.fft`` (imported on the first of them).
+#: Tables of at least this side are transformed by scipy's pocketfft (:func:`type1_transforms`, loaded on the
+#: first of them).
 SCIPY_SIDE = 1025
 
 
@@ -50,6 +53,56 @@ def fft_workers() -> int:
 
         return get_workers()
     return max(1, torch.get_num_threads())
+
+
+class _Type1:
+    """``dct`` and ``dst`` (``type=1``, along ``axis``, unnormalised, one thread) by scipy's pocketfft extension
+    module itself, as ``scipy.fft.dct`` and ``scipy.fft.dst`` call it for a float64 table (the same numbers)."""
+
+    def __init__(self, module):
+        self._pfft = module
+
+    def dct(self, x: np.ndarray, type: int, axis: int) -> np.ndarray:  # noqa: A002 (scipy.fft's keyword)
+        return self._pfft.dct(np.asarray(x, dtype=np.float64), type, (axis,), 0, None, 1, None)
+
+    def dst(self, x: np.ndarray, type: int, axis: int) -> np.ndarray:  # noqa: A002
+        return self._pfft.dst(np.asarray(x, dtype=np.float64), type, (axis,), 0, None, 1, None)
+
+
+@functools.lru_cache(maxsize=None)
+def type1_transforms():
+    """The type-I transforms of :class:`CosineTransforms`'s large tables: an object with ``dct(x, type, axis)``
+    and ``dst(x, type, axis)`` for float64 tables.  Unless ``scipy.fft`` is loaded already, scipy's pocketfft
+    extension module (``scipy.fft._pocketfft.pypocketfft``, which ``scipy.fft`` calls for them) is loaded from its
+    file alone: importing ``scipy.fft`` loads ``scipy.special`` and scipy's array-API layer too, half a second,
+    a fifth of the whole command on a map of a country's subdivisions.  Where that fails (another scipy layout),
+    ``scipy.fft`` itself."""
+    if "scipy.fft" not in sys.modules:
+        try:
+            return _Type1(_load_pocketfft())
+        except Exception:  # noqa: BLE001 (any failure: the public module instead)
+            pass
+    import scipy.fft
+
+    return scipy.fft
+
+
+def _load_pocketfft():
+    """scipy's pocketfft extension module, loaded from its file without importing ``scipy.fft``."""
+    import glob
+    import importlib.machinery
+    import importlib.util
+    import os
+
+    spec = importlib.util.find_spec("scipy")
+    folder = os.path.join(spec.submodule_search_locations[0], "fft", "_pocketfft")
+    files = [f for suffix in importlib.machinery.EXTENSION_SUFFIXES
+             for f in glob.glob(os.path.join(folder, "pypocketfft" + suffix))]
+    loader = importlib.machinery.ExtensionFileLoader("pypocketfft", files[0])
+    module = importlib.util.module_from_spec(importlib.util.spec_from_file_location("pypocketfft", files[0],
+                                                                                    loader=loader))
+    loader.exec_module(module)
+    return module
 
 
 class ScipyTransforms:
@@ -111,9 +164,7 @@ class CosineTransforms:
         self.m = m
         self._scipy = None
         if use_scipy if use_scipy is not None else m >= SCIPY_SIDE:
-            import scipy.fft
-
-            self._scipy = scipy.fft
+            self._scipy = type1_transforms()
         self.block = int(block) if block is not None else max(1, BLOCK_NUMBERS // (2 * (m - 1)))
         if self.block < 1:
             raise ValueError(f"block must be a positive number of rows, got {block!r}")
