@@ -438,8 +438,7 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
                       "from the setting.")
     lines += ["## At a glance", ""] + _glance(decisions)
     lines += ["## Measuring again", "",
-              "The re-measured decisions are measured again, and this page is written again from the new numbers, "
-              "by:", "",
+              "To measure the re-measured decisions again and write this page from the new numbers:", "",
               "```bash",
               "python benchmarks/design.py --record  # every case; or --only NAME [NAME ...]",
               "make pages                            # regenerate this page from the record",
