@@ -146,9 +146,8 @@ def restore_displacement(psi: torch.Tensor, s: Symmetry) -> torch.Tensor:
 
 
 #: Grid points per network evaluation up to which the copies of :func:`symmetrized_displacement` are stacked into one
-#: batch (a single copy larger than this is evaluated alone); only the time of a map depends on it, not the map.
-#: :doc:`Design decisions </book/design>` gives its timings against the alternatives and whether the last
-#: re-measurement supports the choice (it may not: the timings are taken on a loaded machine).
+#: batch (a single copy larger than this is evaluated alone); the time of a map depends on it, the map only through
+#: float32 rounding. :doc:`Design decisions </book/design>` gives its timings against the alternatives.
 BATCH_POINTS = 2**15
 
 
