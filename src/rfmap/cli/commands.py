@@ -321,8 +321,9 @@ def _add_classical(sub) -> None:
     s.set_defaults(func=cmd_solve)
 
     s = sub.add_parser("metrics", help="print the metrics of a result file as JSON")
-    s.add_argument("file", help="a result file (.npz) written by rfmap solve, map or Surrogate.save")
-    s.add_argument("--exact", default=None, help="Beltrami test map to measure |Δd| and |Δμ| against")
+    s.add_argument("file", help="a result file (.npz) written by rfmap solve, map or MapResult.save")
+    s.add_argument("--exact", default=None, help="Beltrami test map to measure the mean vertex distance |Δd| and "
+                   "the Beltrami coefficient error |Δμ| against")
     s.set_defaults(func=cmd_metrics)
 
 
