@@ -18,7 +18,7 @@ and the report of what was done to it) to the next, finishes it:
 ``info`` is its read-only view as a dictionary (:class:`.InfoView`).  Maps of query points
 go back to their working grid (:mod:`~rfmap.finish.query`).
 
-The stages are functions of :mod:`~rfmap.finish.stages`; each calls the module that does its work:
+The stages are the functions of the module :mod:`rfmap.finish.stages`; each calls the module that does its work:
 :mod:`~rfmap.finish.refine` (the search for :math:`\alpha`), :mod:`~rfmap.finish.repair` (one strategy per module),
 :mod:`~rfmap.finish.polish` (the flow-based solver from the network's map) and :mod:`~rfmap.finish.shorten`.
 Modules: :mod:`~rfmap.finish.report`, :mod:`~rfmap.finish.draft`, :mod:`~rfmap.finish.stages`,
