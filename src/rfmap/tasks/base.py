@@ -198,7 +198,9 @@ class LossWeights:
     density_tangent : bool
         Below the 1 % floor of an element's mapped measure, continue its density along the tangent instead of
         clamping it (:func:`rfmap.tasks.losses.element_density`), so that collapsed and flipped elements keep a
-        restoring gradient from the density term. The default, ``False``, clamps; every shipped model was trained so.
+        restoring gradient from the density term. The default, ``False``, clamps; the
+        ``full`` presets of the U-Net density models set it, and those shipped models were trained with it (the
+        FNO of ``fno-deq2d-square`` clamps; each model's metadata records its setting).
     """
 
     beltrami: float = 0.0

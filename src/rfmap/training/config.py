@@ -3,7 +3,11 @@ r"""Typed training configurations with named ``ci`` and ``full`` presets.
 ``RFMAP_SCALE`` (``ci`` or ``full``, default ``full``; never ``paper``) chooses the preset wherever none is
 named.  ``ci`` presets
 train tiny models for a few steps (seconds on a laptop CPU, used by the tests and by the notebooks under CI);
-``full`` presets are the ones that produced the shipped weights; ``paper`` presets are the paper's hyperparameters
+``full`` presets are the ones the shipped weights were trained at, over a chain of runs: the first run of a chain
+is the preset as it stands, and each later run continues from the weights before it (``--init``) with the preset's
+steps, time limit and peak learning rate (at times its seed and weight average) overridden on the command line, so
+``rfmap train --preset full`` alone repeats only the first run; every run's command is in the model's metadata
+(``rfmap models --lineage``), and the book's page on reproducing the results lists them; ``paper`` presets are the paper's hyperparameters
 as printed (for a GPU: ``rfmap train --config NAME --preset paper --device cuda``), with the paper's "epoch" read as
 one optimisation step on a freshly drawn batch (the paper draws a new training grid every epoch).  A configuration
 for which the paper has no model (the FNO and its U-Net partner, the variants trained across grid sides) keeps its
@@ -232,7 +236,8 @@ class Presets:
     ci : TrainConfig
         The tiny preset of the tests.
     full : TrainConfig
-        The preset of the shipped weights.
+        The preset of the shipped weights: the first run of each shipped chain, which later runs override on the
+        command line.
     paper : TrainConfig
         The paper's recipe.
     paper_note : str
