@@ -3,11 +3,8 @@
 * :func:`solve_lbs` -- Linear Beltrami Solver (Lui et al. 2013): the quasi-conformal map of the unit square with a
   prescribed Beltrami coefficient.
 * :func:`solve_dem` -- density-equalizing map of the unit square or cube: it picks the method, the diffusion method
-  (Gastner & Newman 2004, :func:`solve_diffusion`) or, with ``method="flow"``, the flow-based method (Gastner,
-  Seguy & More 2018, :func:`solve_flow`).
-
-:func:`solve_diffusion` is :func:`rfmap.solvers.diffusion.solve_diffusion`, the diffusion solver itself, which
-:func:`solve_dem` calls for ``method="diffusion"``.
+  (Gastner & Newman 2004, :func:`~rfmap.solvers.diffusion.solve_diffusion`, which this package also exports) or,
+  with ``method="flow"``, the flow-based method (Gastner, Seguy & More 2018, :func:`solve_flow`).
 
 All return a :class:`rfmap.core.result.MapResult`; :data:`SOLVERS` / :func:`get_solver` look them up by name: ``"lbs"``,
 ``"diffusion"`` and ``"flow"`` (``"dem"`` is accepted as another name of ``"diffusion"``, :data:`ALIASES`).
@@ -38,9 +35,10 @@ def solve_dem(density, *, method: str = "diffusion", **kwargs) -> MapResult:
     ----------
     density : ndarray, shape (N, N) or (N, N, N)
     method : {"diffusion", "flow"}
-        ``"diffusion"`` (also ``"dem"``): :func:`solve_diffusion` (Gastner & Newman 2004); ``"flow"``:
-        :func:`solve_flow` (Gastner, Seguy & More 2018), usually the faster of the two (chapter 11 of the book,
-        *Fast classical maps and neural warm starts*, times both on its fields and grids).
+        ``"diffusion"`` (also ``"dem"``): :func:`~rfmap.solvers.diffusion.solve_diffusion` (Gastner & Newman
+        2004); ``"flow"``: :func:`solve_flow` (Gastner, Seguy & More 2018), usually the faster of the two
+        (chapter 11 of the book, *Fast classical maps and neural warm starts*, times both on its fields and
+        grids).
     **kwargs
         Options of the chosen solver (``boundary``, ``progress``, ...).
 
