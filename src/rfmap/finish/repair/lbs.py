@@ -1,18 +1,20 @@
 r"""Repair of 2D grid maps by μ-truncation and the Linear Beltrami Solver on the whole grid.
 
 The Beltrami coefficient of the current map is computed per triangle (paper Eq. (1)); a flipped triangle has
-:math:`|\mu| > 1`.  Every coefficient is radially
-truncated,
+:math:`|\mu| > 1`.  Every coefficient is truncated (:func:`cap_mu`): radially where the triangle keeps its
+orientation, to zero where it is flipped or the coefficient is not finite,
 
-.. math:: \mu \leftarrow \mu \, \min\Bigl(1, \frac{1 - \delta}{|\mu|}\Bigr), \qquad \delta = 0.1,
+.. math::
+
+   \mu \leftarrow \begin{cases} \mu \, \min\Bigl(1, \dfrac{1 - \delta}{|\mu|}\Bigr), & |\mu| < 1, \\
+   0, & |\mu| \ge 1 \text{ or } \mu \text{ not finite}, \end{cases} \qquad \delta = 0.1,
 
 and the map is rebuilt from the truncated :math:`\mu` by :func:`rfmap.solvers.solve_lbs` with the model's boundary
 condition: the identity on the boundary (``fixed``), vertices sliding on their walls (``square``), or the boundary
 vertices where the network put them (``free``), after moving crossing boundary vertices back towards the square until
 the boundary polygon is simple (:func:`untangle_boundary`).  Where the map was not folded and
-:math:`|\mu| \le 1 - \delta` the coefficient is unchanged (flipped triangles get :math:`\mu = 0`, see
-:func:`cap_mu`), and the LBS reproduces a piecewise-linear map from its own coefficient, so the rebuilt map stays
-close to the input.  The discrete LBS has no bijectivity theorem (its stiffness weights may be negative), so its
+:math:`|\mu| \le 1 - \delta` the coefficient is unchanged, and the LBS reproduces a piecewise-linear map from its
+own coefficient, so the rebuilt map stays close to the input.  The discrete LBS has no bijectivity theorem (its stiffness weights may be negative), so its
 output is checked and, if still folded, handed to the displacement scaling (:mod:`rfmap.finish.repair.scale`).
 
 References
