@@ -210,7 +210,8 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     # the clause gives the size of the gap: 0.2 / 0.1875 = 1.07
     assert c.verdict_word() == ("reproduced on the comparable cases (1 of 1); the n/c case's Std ratio is 1.1 times "
                                 "the paper's")
-    assert v["verdict"] == "reproduced (1 of 1 comparable); the n/c case's Std ratio is 1.1 times the paper's"
+    assert v["verdict"] == ("reproduced (1 of 1 comparable); outside this verdict, the n/c case's Std ratio is 1.1 "
+                            "times the paper's")
     assert v["nc"] == "a Std ratio of 0.2 against the paper's 0.187, 1.1 times the paper's"
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.09
     assert c.verdict_word() == (
@@ -230,8 +231,8 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses
     assert c.verdict_word() == (
         "not reproduced on the comparable cases (0 of 1); the n/c case's Std ratio is 1.1 times the paper's")
-    assert c.score_values()["verdict"] == ("not reproduced (0 of 1 comparable); the n/c case's Std ratio is 1.1 "
-                                           "times the paper's")
+    assert c.score_values()["verdict"] == ("not reproduced (0 of 1 comparable); outside this verdict, the n/c case's "
+                                           "Std ratio is 1.1 times the paper's")
 
 
 def test_verdict_words_follow_the_stated_rule():

@@ -122,9 +122,9 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     ``k`` is ``0`` or ``n``.  With n/c cases the word is scoped to the comparable cases and followed by
     :func:`nc_clause`: whether each n/c case's Std ratio (:func:`std_ratio`, the share of the input's spread the map
     leaves) by the paper's method is above the paper's (``nc_worse``, one flag per n/c case, ``True`` where it is);
-    with ``short`` the word, its tally named as that of the comparable cases, and the n/c clause (the scoreboards'
-    cell).  ``factors``, one per n/c case, are the paper's method's Std ratio over the paper's: the clause then
-    says by how much a worse case misses.
+    with ``short`` the word, its tally named as that of the comparable cases, and the n/c clause marked as outside
+    the verdict (the scoreboards' cell).  ``factors``, one per n/c case, are the paper's method's Std ratio over
+    the paper's: the clause then says by how much a worse case misses.
 
     Examples
     --------
@@ -136,16 +136,17 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     >>> nc
     'the n/c case is worse by Std ratio'
     >>> print(qualified_verdict([True] * 3, [True], short=True))
-    reproduced (3 of 3 comparable); the n/c case is worse by Std ratio
+    reproduced (3 of 3 comparable); outside this verdict, the n/c case is worse by Std ratio
     >>> print(qualified_verdict([True] * 3, [True], short=True, factors=[1.61]))
-    reproduced (3 of 3 comparable); the n/c case's Std ratio is 1.6 times the paper's
+    reproduced (3 of 3 comparable); outside this verdict, the n/c case's Std ratio is 1.6 times the paper's
     """
     flags = [m for m in met if m is not None]
     count = f" ({sum(flags)} of {len(flags)})" if flags else ""
     if not nc_worse:
         return verdict(met) + count
     if short:  # the scoreboards' cell: the count named as that of the comparable cases, the n/c cases beside it
-        return f"{verdict(met)}{count[:-1] + ' comparable)' if flags else ''}; {nc_clause(nc_worse, factors)}"
+        return (f"{verdict(met)}{count[:-1] + ' comparable)' if flags else ''}; "
+                f"{'outside this verdict, ' if flags else ''}{nc_clause(nc_worse, factors)}")
     scope = " on the comparable cases" if flags else ""
     return f"{verdict(met)}{scope}{count}; {nc_clause(nc_worse, factors)}"
 
@@ -183,18 +184,18 @@ def nc_clause(nc_worse: list[bool], factors: list[float] | None = None) -> str:
 
 
 def nc_phrase(ours: float, paper: float) -> str:
-    """One n/c case's Std ratio by the paper's method beside the paper's, as a phrase for running text, with the
-    size of the gap where it is worse.
+    """One n/c case's Std ratio by the paper's method beside the paper's, as a phrase for running text, with their
+    quotient to two digits in the same form whichever is lower (lower is better).
 
     Examples
     --------
     >>> nc_phrase(0.125, 0.194)
-    "a Std ratio of 0.125 against the paper's 0.194, so no worse"
+    "a Std ratio of 0.125 against the paper's 0.194, 0.64 times the paper's"
     >>> nc_phrase(0.442, 0.274)
     "a Std ratio of 0.442 against the paper's 0.274, 1.6 times the paper's"
     """
-    gap = "so no worse" if ours <= paper else f"{float(f'{ours / paper:.2g}'):g} times the paper's"
-    return f"a Std ratio of {ours:.3g} against the paper's {paper:.3g}, {gap}"
+    return (f"a Std ratio of {ours:.3g} against the paper's {paper:.3g}, "
+            f"{float(f'{ours / paper:.2g}'):g} times the paper's")
 
 
 def ratio_text(r: float | None) -> str:
