@@ -103,11 +103,15 @@ def checkpoint_rule(meta: dict) -> str:
     if not mean:
         return "not recorded"
     entry = score_parts(mean)[2]
-    quantity = "mean vertex distance" if "mean_dd" in mean else "mean Std(ρ̃_map)"
+    beltrami = "mean_dd" in mean
+    quantity = "mean vertex distance" if beltrami else "mean Std(ρ̃_map)"
     if entry == "family_score":
-        return "family score"
+        return "checkpoint score (Std ratio by family)"
+    if beltrami and entry == "penalized":
+        # a Beltrami model's checkpoint score is this mean (rfmap.training.validation.score)
+        return "checkpoint score (mean vertex distance)"
     if entry == "penalized" or (entry == "mean" and "penalized" in mean):
-        return f"{quantity}, a folded map counted as the identity"
+        return f"{quantity}, a folded map counted as the identity (the earlier rule)"
     if entry == "capped":
         return f"{quantity}, a folded field's value capped"
     return f"{quantity} of the fold-free states (the first runs' rule)"
