@@ -47,7 +47,7 @@ def edge_matrices(points: Tensor, elements) -> Tensor:
 
     Parameters
     ----------
-    points : Tensor, shape (..., n, d)
+    points : Tensor, shape (..., P, d)
     elements : LongTensor, shape (m, d+1)
 
     Returns
@@ -67,7 +67,7 @@ def signed_measures(points: Tensor, elements) -> Tensor:
 
     Parameters
     ----------
-    points : Tensor, shape (..., n, d)
+    points : Tensor, shape (..., P, d)
     elements : LongTensor, shape (m, d+1)
 
     Returns
@@ -275,9 +275,9 @@ def element_jacobians(ref: Tensor, mapped: Tensor, elements) -> Tensor:
 
     Parameters
     ----------
-    ref : Tensor, shape (..., n, d)
+    ref : Tensor, shape (..., P, d)
         Reference vertex positions (broadcast against ``mapped``).
-    mapped : Tensor, shape (..., n, d)
+    mapped : Tensor, shape (..., P, d)
     elements : LongTensor, shape (m, d+1)
 
     Returns
@@ -344,7 +344,7 @@ def beltrami_coefficient(ref: Tensor, mapped: Tensor, elements) -> Tensor:
 
     Parameters
     ----------
-    ref, mapped : Tensor, shape (..., n, 2)
+    ref, mapped : Tensor, shape (..., P, 2)
     elements : LongTensor, shape (m, 3)
 
     Returns

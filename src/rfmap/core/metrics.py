@@ -180,7 +180,7 @@ def compute_metrics(
     """
     ref_t, map_t = _t(ref), _t(mapped)
     if ref_t.shape != map_t.shape or ref_t.dim() != 2:
-        raise ValueError(f"ref and mapped points must both have shape (n, d); got {tuple(ref_t.shape)} and "
+        raise ValueError(f"ref and mapped points must both have shape (P, d); got {tuple(ref_t.shape)} and "
                          f"{tuple(map_t.shape)}")
     el = torch.as_tensor(np.asarray(elements)).long()
     d = ref_t.shape[1]

@@ -55,7 +55,7 @@ def boundary_faces(elements: np.ndarray, points: np.ndarray | None = None) -> np
     ----------
     elements : int ndarray, shape (m, 4)
         Tetrahedra, positively oriented.
-    points : ndarray, shape (n, 3), optional
+    points : ndarray, shape (P, 3), optional
         Not needed for the faces; when given, each face is oriented with its normal pointing out of its tetrahedron
         (checked on these points).
     """
@@ -250,7 +250,7 @@ def surface_intersections(points: np.ndarray, faces: np.ndarray, *, tol: float =
 
     Parameters
     ----------
-    points : ndarray, shape (n, 3)
+    points : ndarray, shape (P, 3)
         Vertex positions (e.g. a mapped mesh).
     faces : int ndarray, shape (f, 3)
         Triangles, e.g. :func:`boundary_faces` of the mesh.
@@ -263,7 +263,7 @@ def surface_intersections(points: np.ndarray, faces: np.ndarray, *, tol: float =
     p = np.asarray(points, np.float64)
     fc = np.asarray(faces, np.int64)
     if p.ndim != 2 or p.shape[1] != 3 or fc.ndim != 2 or fc.shape[1] != 3:
-        raise ValueError(f"surface_intersections needs points (n, 3) and faces (f, 3), got {p.shape}, {fc.shape}")
+        raise ValueError(f"surface_intersections needs points (P, 3) and faces (f, 3), got {p.shape}, {fc.shape}")
     if not np.isfinite(p).all():
         raise ValueError("surface_intersections: the points contain NaN or infinity")
     if len(fc) < 2:

@@ -54,8 +54,8 @@ def grid_lines_drawn(n: int, max_lines: int = 40) -> str:
 
 def plot_mesh(ax, points, elements=None, *, n: int | None = None, max_lines: int = 40, title: str | None = None,
               color="0.2", lw=0.5):
-    """Draw a (mapped) 2D grid mesh: grid lines when ``n`` is given (at most ``max_lines`` per direction), else
-    the triangle edges."""
+    """Draw a (mapped) 2D grid mesh: grid lines when the grid side ``n`` is given (at most ``max_lines`` per
+    direction), else the triangle edges."""
     points = np.asarray(points)
     if n is not None and n * n == points.shape[0]:
         _grid_lines(ax, points, n, grid_line_step(n, max_lines), color=color, lw=lw)
@@ -85,7 +85,7 @@ def plot_slice_outline(ax, points, n: int, k: int | None = None, *, title: str |
 
 
 def plot_density(ax, points, elements, values, *, title=None, colorbar=True, scale: ColorScale | None = None, **kw):
-    """Per-element (length m) or per-vertex (length n) values on a 2D mesh, coloured by ``scale``
+    """Per-element (length m) or per-vertex (length P) values on a 2D mesh, coloured by ``scale``
     (:class:`rfmap.viz.figures.ColorScale`; its fields ``vmin``, ``vmax``, ``cmap`` may be given as keywords).
 
     The triangles are drawn unsnapped (``snap=False``): snapped to the pixel grid, the row of triangles along a
@@ -157,7 +157,7 @@ def vertex_error_panels(results: dict, exact, *, n: int, title: str = ""):
     Parameters
     ----------
     results : dict of str to MapResult
-        Maps of the same ``n``-grid (``ref_points`` of shape (n^2, 2)).
+        Maps of the same grid of side N (``ref_points`` of shape (N², 2)).
     exact : MapResult
         The exact map on the same grid.
 
@@ -434,7 +434,8 @@ def _folded(points: np.ndarray, elements: np.ndarray) -> np.ndarray:
 def repair_figure(before, after, elements, *, n: int | None = None, titles=("folded map", "repaired map"),
                   width: float = TEXT_WIDTH_IN, zoom: float | None = 3.0):
     """Two 2D maps of one mesh side by side, a folded one and its repair, each with its folded triangles filled in
-    red and counted in its title (appendix A's example).  ``before``, ``after``: mapped points, shape (n, 2).
+    red and counted in its title (appendix A's example).  ``before``, ``after``: mapped points, shape (P, 2);
+    ``n``: the grid side N of a grid mesh (:math:`P = N^2`), whose grid lines are then drawn instead of its triangles.
 
     ``zoom``: a second row draws both maps around the folds of ``before`` (a square ``zoom`` times as wide as
     their bounding box, marked on the first row), where a few folded triangles are large enough to see; ``None``

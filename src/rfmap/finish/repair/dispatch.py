@@ -43,14 +43,14 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
 
     Parameters
     ----------
-    ref, mapped : ndarray, shape (n, d)
+    ref, mapped : ndarray, shape (P, d)
     elements : int ndarray, shape (m, d+1), positively oriented on ``ref``
     boundary : {"fixed", "square", "free"}
         The boundary condition the repaired map must keep.
     grid_n : int, optional
         Set when the mesh is :func:`rfmap.core.mesh.grid_mesh` ``(N, d)``: enables the fast strided check and, in 2D,
         the LBS repair.
-    density : ndarray (n,), optional
+    density : ndarray (P,), optional
         Vertex densities, for the density metrics in the report.
     mu : complex ndarray (m,), optional
         Target Beltrami coefficient, for ``mean_dmu`` in the report.
@@ -63,7 +63,7 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
 
     Returns
     -------
-    points : ndarray, shape (n, d)
+    points : ndarray, shape (P, d)
         The fold-free map; ``mapped`` itself (the same object) when nothing was folded.
     report : dict
         ``needed``, ``method``, ``n_flipped_before``, ``n_flipped_after``, ``affected`` (triangles with truncated

@@ -24,7 +24,7 @@ def surface_repair(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *,
 
     Returns
     -------
-    points : ndarray, shape (n, 3)
+    points : ndarray, shape (P, 3)
         The map :math:`u_s`.
     s : float
         The scale kept: below 1 (the first scale tried is 1/2), and 0, the identity, when no halving passes.

@@ -14,8 +14,9 @@ condition: the identity on the boundary (``fixed``), vertices sliding on their w
 vertices where the network put them (``free``), after moving crossing boundary vertices back towards the square until
 the boundary polygon is simple (:func:`untangle_boundary`).  Where the map was not folded and
 :math:`|\mu| \le 1 - \delta` the coefficient is unchanged, and the LBS reproduces a piecewise-linear map from its
-own coefficient, so the rebuilt map stays close to the input.  The discrete LBS has no bijectivity theorem (its stiffness weights may be negative), so its
-output is checked and, if still folded, handed to the displacement scaling (:mod:`rfmap.finish.repair.scale`).
+own coefficient, so the rebuilt map stays close to the input.  The discrete LBS has no bijectivity theorem (its
+stiffness weights may be negative), so its output is checked and, if still folded, handed to the displacement
+scaling (:mod:`rfmap.finish.repair.scale`).
 
 References
 ----------

@@ -155,7 +155,7 @@ class _Verifier:
 
     Parameters
     ----------
-    ref : ndarray, shape (n, d)
+    ref : ndarray, shape (P, d)
     el : int ndarray, shape (m, d+1)
     cols : list of d + 1 int ndarrays, shape (m,)
         The columns of ``el``, contiguous.
@@ -308,14 +308,14 @@ def scale_repair(ref: np.ndarray, target: np.ndarray, elements: np.ndarray, *, b
 
     Parameters
     ----------
-    ref, target : ndarray, shape (n, d)
+    ref, target : ndarray, shape (P, d)
     elements : int ndarray, shape (m, d+1), positively oriented on ``ref``
     boundary : str
         With ``"free"`` in 2D the boundary polygon of a grid mesh must also stay simple.
 
     Returns
     -------
-    points : ndarray, shape (n, d)
+    points : ndarray, shape (P, d)
         The repaired map.
     info : dict
         ``s_uniform``: the start's fold-free scale, just below :math:`s^{*}` (halved until it verified where the
@@ -362,7 +362,7 @@ def vertex_classes(ref: np.ndarray, elements: np.ndarray) -> np.ndarray | None:
     vertex positions (an ``N^d`` grid spanning their bounding box) and checked on every element; ``None`` when
     the mesh is not of that kind.
 
-    Shapes: ref (n, d), elements (m, d+1) -> (n,) ints in ``[0, 2^d)``.
+    Shapes: ref (P, d), elements (m, d+1) -> (P,) ints in ``[0, 2^d)``.
     """
     n_pts, d = ref.shape
     lo = ref.min(0)
