@@ -36,6 +36,18 @@ def test_an_old_record_s_closing_re_evaluation_is_not_a_state():
     assert k["score"] is None and k["fold_free_score"] is None
 
 
+def test_a_record_with_the_mean_counting_folds_as_identity_names_the_earlier_rule():
+    kept = {**_v(2, 0.3, folded=1), "penalized": 0.35}
+    meta = _meta([_v(1, 0.4), kept], 2, {"mean": kept})
+    k = kept_state(meta)
+    assert k["rule"] == "earlier rule" and k["score"] is None and k["fold_free_step"] == 1
+    from rfmap.paper.compare import kept_rules
+
+    text = kept_rules({"U-Net": k})
+    assert text.startswith("Every kept step was chosen by the earlier rule.")
+    assert "a folded map counted as the identity: step 2, plain held-out mean 0.300" in text
+
+
 def test_the_rules_text_says_what_the_fold_free_rule_keeps():
     from rfmap.paper.compare import kept_rules
 

@@ -22,7 +22,7 @@ from ..fields import sample_density
 from ..fields.paper import PAPER_N, TEST_FIELDS
 from ..finish import quiet_quality
 from ..solvers import solve_dem
-from ..training.validation import has_folds
+from ..training.validation import has_folds, score_parts
 from .generalization import generalization_table
 from .comparison import format_time
 from .tables import Table, format_sig
@@ -185,11 +185,14 @@ def learning_summary(meta: dict, last: int = 3) -> dict:
 
 
 def kept_state(meta: dict) -> dict:
-    """How a model's kept weights were chosen, how they do on the held-out fields, and what the other rule keeps.
+    """How a model's kept weights were chosen, how they do on the held-out fields, and what the fold-free rule keeps.
 
-    Two rules choose the kept state among the validated ones (:func:`validated_states`): the *checkpoint score*
-    (:func:`rfmap.training.validation.score`, where the record has it), and, in records older than that score, the
-    lowest plain held-out mean Std(ρ̃_map) among the states whose maps fold on no held-out field.
+    Three rules have chosen the kept state among the validated ones (:func:`validated_states`), read from the
+    kept state's validation summary as :func:`rfmap.training.validation.score_parts` ranks it: the *checkpoint
+    score* (:func:`rfmap.training.validation.score`, where the record has it); in older records, the *earlier
+    rule*, the held-out mean Std(ρ̃_map) with a folded map counted as the identity (where the record has that
+    mean); and in the oldest, the *fold-free mean*, the lowest plain held-out mean Std(ρ̃_map) among the states
+    whose maps fold on no held-out field.
 
     Parameters
     ----------
@@ -200,7 +203,8 @@ def kept_state(meta: dict) -> dict:
     Returns
     -------
     dict
-        ``step`` (the kept step), ``rule`` (``"checkpoint score"`` or ``"fold-free mean"``), ``mean`` (the kept
+        ``step`` (the kept step), ``rule`` (``"checkpoint score"``, ``"earlier rule"`` or ``"fold-free mean"``),
+        ``mean`` (the kept
         state's plain held-out mean), ``folds`` (a list of ``(field, N, flipped triangles)``, one per held-out
         field on which the kept map folds), ``fold_free_step`` and ``fold_free_mean`` (the state the fold-free
         mean rule keeps, ``None`` if every state folds) and ``fold_free_score`` (its checkpoint score, or
@@ -215,8 +219,10 @@ def kept_state(meta: dict) -> dict:
             folds.append((field, int(n), int(m["n_flipped"])))
     free = [v for v in validated_states(meta) if not has_folds(v)]
     best = min(free, key=lambda v: float(v["std_rho_map"])) if free else None
-    return {"step": meta.get("selected_step"),
-            "rule": "checkpoint score" if "family_score" in mean else "fold-free mean",
+    entry = score_parts(mean)[2] if mean else "mean"
+    rule = ("checkpoint score" if entry == "family_score" else
+            "earlier rule" if entry == "penalized" or "penalized" in mean else "fold-free mean")
+    return {"step": meta.get("selected_step"), "rule": rule,
             "mean": None if "std_rho_map" not in mean else float(mean["std_rho_map"]),
             "folds": sorted(folds),
             "fold_free_step": None if best is None else int(best["step"]),
@@ -450,7 +456,8 @@ def kept_rules(kept: dict) -> str:
     str
         For a model chosen by the checkpoint score: its kept step, the held-out fields on which that state's map
         folds, its plain mean, and the step the fold-free mean rule would have kept (with both states' plain means
-        and checkpoint scores) where it differs; for a model chosen by the fold-free mean: its kept step and mean.
+        and checkpoint scores) where it differs; for a model chosen by the earlier rule or the fold-free mean: its
+        kept step and plain mean.
     """
     out, cross = [], []
     for name, k in kept.items():
@@ -458,6 +465,11 @@ def kept_rules(kept: dict) -> str:
             out.append(f"The {name}'s training record has no checkpoint score (a dash in the table), so its"
                        " weights were chosen by the lowest plain held-out mean among the states whose"
                        f" maps fold on no held-out field: step {k['step']:,} ({k['mean']:#.3g}).")
+            continue
+        if k["rule"] == "earlier rule":
+            out.append(f"The {name}'s training record has no checkpoint score (a dash in the table), so its"
+                       " weights were chosen by the held-out mean with a folded map counted as the identity:"
+                       f" step {k['step']:,}, plain held-out mean {k['mean']:#.3g}.")
             continue
         folds = k["folds"]
         if folds:
@@ -480,8 +492,7 @@ def kept_rules(kept: dict) -> str:
                        f" checkpoint score ({k['fold_free_score']:#.3g} against {k['score']:#.3g}).")
     rules = {k["rule"] for k in kept.values()}
     head = ("The kept steps were chosen by different rules." if len(rules) > 1 else
-            "Every kept step was chosen by the checkpoint score." if rules == {"checkpoint score"} else
-            "Every kept step was chosen by the fold-free mean.")
+            f"Every kept step was chosen by the {next(iter(rules), 'fold-free mean')}.")
     return " ".join([head] + out + cross)
 
 
