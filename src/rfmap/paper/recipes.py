@@ -28,8 +28,8 @@ def recipe_table(surs: dict) -> Table:
       (:func:`rfmap.training.validation.evaluate`);
     * ``held_out``: the score that chose the kept weights, as :func:`rfmap.training.validation.score` ranks the
       validation's scores;
-    * ``score_kind``: what that score is, one of the checkpoint score (Std ratio by family), the mean metric with every folded
-      map counted as the identity map, the capped mean and the plain mean;
+    * ``score_kind``: what that score is, one of the checkpoint score (Std ratio by family), the mean metric with
+      every folded map counted as the identity map, the capped mean and the plain mean;
     * ``scored``: which maps were scored: the ``raw`` network output, or the ``default`` maps as a plain
       ``Surrogate.map`` returns them, a folded map regridded or repaired (``TrainConfig.val_repair``);
     * ``folded_maps``: how many held-out maps the network itself folded.
@@ -130,8 +130,8 @@ def recipe_markdown(table: Table) -> str:
 
 def _selection(val: dict) -> tuple[float | None, str | None]:
     """The score that chose the kept weights, from a validation summary, and what it is, as
-    :func:`rfmap.training.validation.score_parts` ranks them: the checkpoint score (each field's Std(ρ̃_map) relative to
-    its Std(ρ̃_orig), averaged by family) where recorded, else the mean metric with every folded map counted as no
+    :func:`rfmap.training.validation.score_parts` ranks them: the checkpoint score (each field's Std(ρ̃_map)
+    relative to its Std(ρ̃_orig), averaged by family) where recorded, else the mean metric with every folded map counted as no
     map, else the plain mean."""
     if not val:
         return None, None
