@@ -131,8 +131,8 @@ def recipe_markdown(table: Table) -> str:
 def _selection(val: dict) -> tuple[float | None, str | None]:
     """The score that chose the kept weights, from a validation summary, and what it is, as
     :func:`rfmap.training.validation.score_parts` ranks them: the checkpoint score (each field's Std(ρ̃_map)
-    relative to its Std(ρ̃_orig), averaged by family) where recorded, else the mean metric with every folded map counted as no
-    map, else the plain mean."""
+    relative to its Std(ρ̃_orig), averaged by family) where recorded, else the mean metric with every folded map
+    counted as no map, else the plain mean."""
     if not val:
         return None, None
     metric = "|Δd|" if "mean_dd" in val else "Std"
