@@ -183,7 +183,8 @@ def volume_rows(results: dict, labels, fig_label: str | None = None, *, clim=(0.
     slices as the map moves it, coloured by the input's density carried along (:func:`render_lattice`,
     ``carried=True``); one camera (:data:`CAMERA_3D`).  The input and the moved grid share the scale ``clim``; the
     density the map leaves has a narrow scale of its own, ``mapped_clim`` (``None``: ``clim``), on which what is
-    left unequalized shows; each scale has its colour bar under its columns.  Saved under
+    left unequalized shows; each scale has its colour bar under its columns, with arrows where values beyond it
+    saturate.  Saved under
     ``fig_label`` (7.2 inches wide, readable in the book's text column; not saved when it is ``None``, the
     default); returns the figure."""
     import matplotlib.pyplot as plt
@@ -210,9 +211,10 @@ def volume_rows(results: dict, labels, fig_label: str | None = None, *, clim=(0.
         for ax, t in zip(axes[0], titles):
             ax.set_title(t)
         add_colorbar(ScalarMappable(Normalize(*clim), "viridis"), fig=fig, ax=axes[:, 0].tolist(), location="bottom",
-                     shrink=0.9, aspect=12, label=r"input $\tilde\rho$ (left and right)")
+                     shrink=0.9, aspect=12, extend="max", label=r"input $\tilde\rho$ (left and right)")
         add_colorbar(ScalarMappable(Normalize(*mapped_clim), "viridis"), fig=fig, ax=axes[:, 1].tolist(),
-                     location="bottom", shrink=0.9, aspect=12, label=r"$\tilde\rho$ remaining (middle)")
+                     location="bottom", shrink=0.9, aspect=12, extend="both",
+                     label=r"$\tilde\rho$ remaining (middle)")
         if fig_label is not None:
             save_figure(fig, fig_label)
     return fig
