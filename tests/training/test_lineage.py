@@ -119,3 +119,16 @@ def test_every_shipped_model_has_a_command_that_rfmap_train_accepts():
             assert args.config == run.config and args.preset == "full"
             assert args.init is None or args.init in metas or args.init.startswith(f"runs/retrain/{name}/run-")
         assert steps[-1][0].config == name  # the last run trained the shipped configuration
+
+
+def test_run_settings_reads_each_run_s_overrides_and_falls_back_to_the_preset():
+    from rfmap.training.lineage import run_settings
+
+    meta = {"command": "rfmap train --config m --preset full --steps 900 --lr 0.0001 --init m", "steps": 800,
+            "wall_time": 600.0,
+            "lineage": [{"command": "rfmap train --config m --preset full", "steps": 100, "wall_time": 1200.0}]}
+    rows = run_settings(meta, {"steps": 500, "time_limit": 1800.0, "lr": 5e-4})
+    assert [r["run"] for r in rows] == [1, 2]
+    assert (rows[0]["step budget"], rows[0]["time limit (min)"], rows[0]["peak lr"]) == (500, 30.0, 5e-4)
+    assert (rows[1]["step budget"], rows[1]["time limit (min)"], rows[1]["peak lr"]) == (900, 30.0, 1e-4)
+    assert rows[0]["minutes"] == 20.0 and rows[1]["steps"] == 800

@@ -26,7 +26,7 @@ import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["Run", "chain", "source_run", "idle_runs", "repeat_command", "repeat_commands", "retrain_command",
+__all__ = ["Run", "chain", "run_settings", "source_run", "idle_runs", "repeat_command", "repeat_commands", "retrain_command",
            "shipped_ancestor", "shipped_hashes", "load_metadata", "REPEAT_ROOT"]
 
 #: where the repeated runs of a chain write their weights: ``runs/retrain/MODEL/run-K``
@@ -105,6 +105,35 @@ def chain(meta: dict) -> list[Run]:
     """The runs behind weights with metadata ``meta``, parents first; the last is the run that wrote them."""
     runs = [_run(k, r, r.get("sha256")) for k, r in enumerate(meta.get("lineage") or [], 1)]
     return runs + [_run(len(runs) + 1, meta, None)]
+
+
+def run_settings(meta: dict, preset: dict) -> list[dict]:
+    """The budget and peak learning rate of every run of a chain, as its command set them.
+
+    Parameters
+    ----------
+    meta : dict
+        The metadata of the last run's weights.
+    preset : dict
+        ``steps``, ``time_limit`` (seconds) and ``lr`` of the preset the runs started from, for the runs whose
+        command does not set them (``--steps``, ``--time-limit``, ``--lr``).
+
+    Returns
+    -------
+    list of dict
+        Per run, parents first: ``run`` (its index), ``steps`` (run), ``step budget``, ``minutes`` (run),
+        ``time limit (min)`` and ``peak lr``.
+    """
+    rows = []
+    for run in chain(meta):
+        words = shlex.split(run.command)
+        steps, limit, lr = (_option(words, flag) for flag in ("--steps", "--time-limit", "--lr"))
+        rows.append({"run": run.index, "steps": run.steps,
+                     "step budget": int(steps) if steps else int(preset["steps"]),
+                     "minutes": run.wall_time / 60.0,
+                     "time limit (min)": (float(limit) if limit else float(preset["time_limit"])) / 60.0,
+                     "peak lr": float(lr) if lr else float(preset["lr"])})
+    return rows
 
 
 def source_run(meta: dict) -> Run:
