@@ -190,7 +190,9 @@ class LossWeights:
     Attributes
     ----------
     beltrami : float
-        :math:`\\lambda` of the Beltrami energy :math:`\\int|\\mu|^2` in the DEQ loss (0 gives DEM).
+        :math:`\\lambda_{\\mathrm{hr}}`, the paper's Beltrami regularization weight, of the Beltrami energy
+        :math:`\\int|\\mu|^2` in the DEQ loss (0 gives DEM).  Not the :math:`\\lambda` of weight refinement
+        (:data:`rfmap.tasks.objectives.FLIP_WEIGHT`).
     fold : float
         Weight of the fold penalty; ``fold_threshold`` is its :math:`\\tau`.
     area : float

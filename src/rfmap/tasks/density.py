@@ -7,9 +7,10 @@ r"""The density task: a density-equalizing map (DEM, DEQ) of the unit square or 
   narrow peak over a low floor) in a range of order one;
 * training fields: random densities (:class:`rfmap.fields.random.RandomDensity`) at Sobol-jittered vertices, with a
   classical teacher's map as an optional target (:mod:`rfmap.tasks.teacher`);
-* loss: the density mismatch :math:`L(\tilde\rho - 1)`, with :math:`\lambda \int |\mu|^2` for DEQ in 2D and the
-  area constraint on a free boundary;
-* refinement objective: :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m`
+* loss: the density mismatch :math:`L(\tilde\rho - 1)`, with :math:`\lambda_{\mathrm{hr}} \int |\mu|^2` for DEQ
+  in 2D (the paper's Beltrami regularization weight) and the area constraint on a free boundary;
+* refinement objective: :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m`, with
+  :math:`\lambda` the weight of the flipped-element fraction
   (:func:`rfmap.tasks.objectives.density_objective`);
 * validation: Std(ρ̃_map) on four families of held-out densities, relative to the field's own Std(ρ̃_orig);
 * reference solver: the diffusion method (:func:`rfmap.solvers.solve_dem`).
