@@ -16,7 +16,10 @@ from torch.nn import functional as F
 from ..core.geometry import beltrami_coefficient, signed_measures
 
 __all__ = ["Measures", "weighted_mean", "beltrami_loss", "density_loss", "beltrami_energy", "fold_penalty", "area_penalty",
-           "element_density", "loss_integrands"]
+           "element_density", "loss_integrands", "DENSITY_FLOOR"]
+
+#: the floor of an element's mapped measure in :func:`element_density`, as a fraction of its reference measure
+DENSITY_FLOOR = 0.01
 
 
 @dataclass(frozen=True)
@@ -90,7 +93,7 @@ def element_density(ref: Tensor, mapped: Tensor, elements: Tensor, density: Tens
     pop = elem_density * ref_meas
     # guard: an element shrunk below 1% of its reference measure (or flipped) counts as 1% (the fold penalty
     # handles it); this keeps the density and its gradient bounded
-    floor = 0.01 * ref_meas
+    floor = DENSITY_FLOOR * ref_meas
     rho = pop / torch.maximum(meas, floor)
     if tangent:
         rho = torch.where(meas >= floor, rho, pop / floor * (2 - meas / floor))
