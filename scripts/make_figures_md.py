@@ -459,15 +459,16 @@ def render(root: Path = ROOT) -> str:
         "named after the paper's LaTeX label (`fig-population-test.png` for Fig. 7, `tab-population-test.md` and "
         "`.csv` for Table 4). Table 1, the paper's comparison of operator-learning frameworks, holds no computed "
         "result and is restated in the introduction as text; Fig. 10 is drawn for a density of this book's own, "
-        "since the paper gives neither its density nor a number; a case whose input the paper describes too "
-        "loosely to rebuild is marked *n/c* in the scoreboard below.",
+        "since the paper gives neither its density nor a number; a case whose input is not the paper's "
+        "(described too loosely to rebuild, or, for the prism peak, a printed formula that gives another input) is "
+        "marked *n/c* in the scoreboard below.",
         "",
         "## The scoreboard, case by case",
         "",
         "Every number of the scoreboard is pasted from the chapter that computes it, executed in the same build as "
-        "this page and at its scale (`RFMAP_SCALE`; the chapter times at the end of the page were measured apart, "
-        "on the dates they give): at `ci` scale tiny models run on small grids, the numbers only show that the "
-        "code runs, and a grid side the chapter runs in place of the paper's is named in the chapter's table. The "
+        "this page and at its scale (`RFMAP_SCALE`). At `ci` scale tiny models run on small grids and the numbers "
+        "only show that the code runs; a grid side the chapter runs in place of the paper's is named in the "
+        "chapter's table. The chapter times at the end of the page were measured apart, on the dates they give. The "
         "introduction shows the same scoreboard in short, as the median over the cases of each column's ratio to the "
         "paper's value.",
         "",
