@@ -1,9 +1,9 @@
 r"""The paper's test fields: densities (paper Sec. 5.2) and analytic Beltrami test maps (paper Sec. 5.1).
 
 Densities are functions :math:`p: [0,1]^d \to \mathbb{R}`; before use they are evaluated at the mesh vertices,
-shifted to minimum 0.1 and scaled to unit mass (:func:`rfmap.core.inputs.preprocess_density`).  Beltrami test maps
-(Eqs. T1–T4) are analytic maps of the unit square; their exact Beltrami coefficient :math:`\mu = f_{\bar z}/f_z` is
-computed by automatic differentiation in float64 (exact to round-off).
+shifted to minimum 0.1 and scaled to unit mass (:func:`rfmap.core.inputs.preprocess_density`).  The Beltrami test
+maps T1–T4 (paper Eqs. (23)–(26)) are analytic maps of the unit square; their exact Beltrami coefficient
+:math:`\mu = f_{\bar z}/f_z` is computed by automatic differentiation in float64 (exact to round-off).
 
 ``TEST_FIELDS`` lists the fields of the paper's tables per (kind, dimension) and ``PAPER_N`` the grid sizes
 of those tables.
