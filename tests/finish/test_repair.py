@@ -48,6 +48,10 @@ def test_2d_folded_grid_repaired(boundary, shift, method):
         assert rep["method"] in ("lbs", "lbs+scale")
     else:
         assert rep["method"] == ("local" if shift != (-0.06, 0.1) else "lbs+scale")
+    # the LBS counts triangles, the scaling vertices; affected is the larger count of the strategies that ran
+    assert rep["triangles_capped"] > 0
+    assert rep["vertices_scaled"] > 0 if rep["method"].endswith("+scale") else rep["vertices_scaled"] == 0
+    assert rep["affected"] == max(rep["triangles_capped"], rep["vertices_scaled"])
     bmask = mesh.boundary_mask()
     if boundary == "fixed":
         assert np.abs(out[bmask] - mesh.points[bmask]).max() < 1e-12
@@ -216,6 +220,8 @@ def test_3d_inverted_region_repaired(boundary):
     far = np.linalg.norm(x - 0.5, axis=1) > 0.4
     assert np.array_equal(out[far], p[far])  # away from the folds the input map is kept exactly
     assert 0 < rep["affected"] < len(x) // 4
+    # the scaling alone ran: its vertex count is the report's affected, and no triangle was capped
+    assert rep["vertices_scaled"] == rep["affected"] and rep["triangles_capped"] == 0
 
 
 def test_scale_repair_starts_locally_on_a_small_fold():

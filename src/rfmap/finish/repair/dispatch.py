@@ -67,7 +67,8 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         The fold-free map; ``mapped`` itself (the same object) when nothing was folded.
     report : dict
         ``needed``, ``method``, ``n_flipped_before``, ``n_flipped_after``, ``affected`` (triangles with truncated
-        :math:`\mu` for the LBS, vertices with a shortened displacement for the scaling), ``time`` (s),
+        :math:`\mu` for the LBS, vertices with a shortened displacement for the scaling, the larger of the two
+        counts when both ran), the two counts apart as ``triangles_capped`` and ``vertices_scaled``, ``time`` (s),
         ``metrics_before`` and ``metrics_after``; for a 3D free boundary also ``surface_crossings_before``/``_after``
         (intersecting pairs of boundary triangles) and, when :func:`~rfmap.finish.repair.embedding.surface_repair` ran,
         ``surface_scale``.
@@ -96,13 +97,14 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     if ok:
         cheap = {"n_flipped": 0, "min_jacobian": float(min_jac)}
         return mapped, {"needed": False, "method": "none", "n_flipped_before": 0, "n_flipped_after": 0,
-                        "affected": 0, "time": time.perf_counter() - t0, "metrics_before": cheap,
+                        "affected": 0, "triangles_capped": 0, "vertices_scaled": 0,
+                        "time": time.perf_counter() - t0, "metrics_before": cheap,
                         "metrics_after": dict(cheap)}
     mapped = np.asarray(mapped, np.float64)
     before = _metrics(ref, np.where(np.isfinite(mapped), mapped, ref), el, density, mu)
     if method == "auto":
         method = "local" if d == 2 and grid_n else "scale"
-    affected = 0
+    affected = capped_n = scaled_n = 0
     out = mapped
     used = method
     if method == "local":
@@ -111,17 +113,18 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         local = local_lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, DELTA)
         if local is not None:
             out, capped = local
-            affected = int(capped.sum())
+            affected = capped_n = int(capped.sum())
         else:  # no patch ended fold-free: the global rebuild
             method = used = "lbs"
     if method == "lbs":
         if not (d == 2 and grid_n):
             raise ValueError("the LBS repair needs a 2D grid mesh (grid_n)")
         out, capped = lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, DELTA)
-        affected = int(capped.sum())
+        affected = capped_n = int(capped.sum())
     if method == "scale" or not fold_free(out, el, grid_n=grid_n, boundary=boundary):
         out, info = scale_repair(ref, out, el, boundary=boundary)
-        affected = max(affected, info["affected"])
+        scaled_n = int(info["affected"])
+        affected = max(affected, scaled_n)
         used = "scale" if method == "scale" else method + "+scale"
     report: dict[str, Any] = {}
     if boundary == "free" and d == 3:
@@ -136,4 +139,5 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     after = _metrics(ref, out, el, density, mu)
     return out, {"needed": True, "method": used, "n_flipped_before": int(before["n_flipped"]),
                  "n_flipped_after": int(after["n_flipped"]), "affected": affected,
+                 "triangles_capped": capped_n, "vertices_scaled": scaled_n,
                  "time": time.perf_counter() - t0, "metrics_before": before, "metrics_after": after, **report}
