@@ -318,7 +318,7 @@ SUMMARY = [
       "solver maps a density in a median {t4_time_classical}, the paper's method in {t4_time_native};"),
      ("05_beltrami_reconstruction", "the paper's method takes {t2_time_ratio:.2g} times as long as the Linear "
       "Beltrami Solver per Beltrami map."),
-     ("11_fast_classical_and_hybrid", "On the larger grids of chapter 11 (the square at N = {n2}, the cube at "
+     ("11_fast_classical_and_hybrid", "On the grids that chapter 11 quotes (the square at N = {n2}, the cube at "
       "N = {n3}) the network's default map takes {sur_median2} and {sur_median3} times the flow solver's time on "
       "the median field, but leaves {sur_std_vs_flow2} and {sur_std_vs_flow3} times its Std(ρ̃_map). The "
       "paper's times are network inference on a GPU and do not compare with these.")],
