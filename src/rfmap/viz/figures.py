@@ -177,6 +177,9 @@ def _drawn(text, renderer) -> bool:
 def save_figure(fig, label: str) -> Path:
     """Save ``fig`` as ``<figures_dir>/<label>.png`` where ``label`` is the paper's label (``fig:x_y`` → ``fig-x-y``).
 
+    Meant for the book's own figures, whose layout rule it enforces; save a figure of your own with matplotlib's
+    ``fig.savefig(path)``, which checks nothing.
+
     Raises
     ------
     ValueError
