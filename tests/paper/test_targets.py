@@ -124,3 +124,15 @@ def test_findings_word_the_counts_as_sentences():
                                                  "came from a coarser grid.")
     found = hybrid_findings(_rows(0.1, 1.0, 0.4, 1.0), dict(zip((2, 3), CASES)))
     assert found["flow_hybrid_flips_text"] == "Neither the flow nor the hybrid folded an element in any case."
+
+
+def test_time_ratio_table_gives_each_field_and_the_median():
+    from rfmap.paper.benchmarks import time_ratio_table
+
+    rows = _rows(0.1, 1.0, 0.4, 1.0)
+    # a second field on the 2D case whose network map folded: 4 times the flow's time, from a coarser grid
+    rows += [dict(r, field="g", time=0.4 if r["method"] == "surrogate" else r["time"],
+                  coarser=r["method"] == "surrogate") for r in rows if r["dim"] == 2]
+    lines = time_ratio_table(rows, CASES[0]).text.splitlines()
+    assert lines[0] == "| field | surrogate / flow |"  # no refined rows: no column for them
+    assert lines[2:] == ["| f | 0.500 |", "| g (coarser grid) | 4.00 |", "| median | 2.25 |"]

@@ -22,7 +22,7 @@ from .tables import Table, format_value, headline
 
 __all__ = ["METHODS", "ROWS", "WARM_MODELS", "STD_TOL", "FLOW_TIME", "HYBRID_TIME", "compare_methods",
            "benchmark_fields", "time_to_accuracy", "summarize", "target_checks", "targets_headline", "summary_table",
-           "targets_table", "method_tables", "CaseTable", "hybrid_findings", "refinement_fields"]
+           "targets_table", "method_tables", "time_ratio_table", "CaseTable", "hybrid_findings", "refinement_fields"]
 
 #: The methods compared by :func:`compare_methods`.
 METHODS = ("diffusion", "flow", "surrogate", "surrogate+refine", "hybrid")
@@ -276,6 +276,24 @@ def method_tables(summary: list[dict[str, Any]]) -> tuple[CaseTable, CaseTable]:
             lines.append(f"| {_case_label(*case)} | " + " | ".join(cells) + " |")
         out.append(CaseTable(title, "\n".join(lines)))
     return out[0], out[1]
+
+
+def time_ratio_table(rows: list[dict[str, Any]], case: tuple, methods=("surrogate", "surrogate+refine")) -> CaseTable:
+    """Each field's time of ``methods`` over the flow solver's on one case ``(dim, n, boundary)`` of the rows of
+    :func:`time_to_accuracy`, one row per field, with the median over the fields in the last row and, where the
+    network's own map folded and the default map came from a coarser grid, a mark on the field."""
+    by = {(r["field"], r["method"]): r for r in rows if (r["dim"], r["n"], r["boundary"]) == tuple(case)}
+    fields = [f for f, m in by if m == "flow"]
+    methods = [m for m in methods if any((f, m) in by for f in fields)]
+    ratio = {(f, m): by[f, m]["time"] / by[f, "flow"]["time"] for f in fields for m in methods if (f, m) in by}
+    lines = ["| field | " + " | ".join(f"{m} / flow" for m in methods) + " |", "|---|" + "---|" * len(methods)]
+    for f in fields:
+        mark = " (coarser grid)" if any(by.get((f, m), {}).get("coarser") for m in methods) else ""
+        lines.append(f"| {f}{mark} | " + " | ".join(
+            _ratio_text(ratio[f, m]) if (f, m) in ratio else "—" for m in methods) + " |")
+    meds = [_ratio_text(float(np.median([v for (f, m2), v in ratio.items() if m2 == m]))) for m in methods]
+    lines.append("| median | " + " | ".join(meds) + " |")
+    return CaseTable(f"Time over the flow solver's, field by field, {_case_label(*case)}", "\n".join(lines))
 
 
 def summary_table(summary: list[dict[str, Any]]):
