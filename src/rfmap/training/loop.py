@@ -1,6 +1,9 @@
 r"""The training loop: steps on fresh random batches, validation and the choice of the shipped weights.  The
 steps follow the paper's training settings (Sec. 5.1 and 5.2: epochs, optimiser, learning-rate schedule, gradient
-clipping); the validation, the weight average and the choice of the kept weights are this project's own.
+clipping); the validation, the weight average and the choice of the kept weights are this project's own.  This loop
+runs one training run; the weights of each shipped model come from a chain of runs, each started from the weights of
+the one before (``rfmap train --init``), which ``rfmap models --lineage`` lists and the book's page *Reproducing the
+results* gives as commands.
 
 Validation and the choice of the shipped checkpoint use the held-out random fields of :mod:`rfmap.training.validation` (seeds
 training never draws); the paper's test fields are evaluated once at the end as a report
