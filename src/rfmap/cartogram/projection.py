@@ -3,9 +3,10 @@ square.
 
 A cartogram sizes regions by area, so it must be computed where areas are the Earth's.  For longitude/latitude input
 (every point within :math:`|\lambda| \le 180^\circ`, :math:`|\varphi| \le 90^\circ`) the default is an equal-area
-projection of the WGS84 ellipsoid fitted to the map, computed by numpy formulas (Snyder's for the Lambert
-projection, with the authalic latitude, and Šavrič et al.'s for Equal Earth, which agree with PROJ's to 1e-9 in the
-tests) so that pyproj is not imported; PROJ through pyproj serves a Lambert projection centred within 0.1° of a pole:
+projection of the WGS84 ellipsoid fitted to the map.  It is computed by numpy formulas, so that pyproj is not
+imported: Snyder's for the Lambert projection, with the authalic latitude, and Šavrič et al.'s for Equal Earth;
+both agree with PROJ's to 1e-9 in the tests.  Only a Lambert projection centred within 0.1° of a pole goes through
+PROJ (with pyproj).  The two projections:
 
 * the **Lambert azimuthal equal-area** projection centred on the map, for a regional map: centre longitude
   :math:`\lambda_0` the midpoint of the smallest arc of longitudes that holds every vertex, centre latitude
