@@ -28,17 +28,22 @@ the density :math:`\rho = v_i / a_i` (value over area) of the region under each 
    out a little small and sparse ones a little large.  The cartogram is therefore computed again from the mapped
    polygons, whose densities are now nearly equal, and the maps are composed, until the largest relative area error over
    the regions holding at least ``min_share`` of the total value (:data:`~rfmap.cartogram.metrics.MIN_SHARE`, 0.01 %) is
-   below ``tol`` (flow-based cartogram programs stop at 1 %, the default).  No pass asks a region to change its area
-   more than :data:`PASS_CONTRAST` times (its raster densities are clipped to that factor of the sea's): a city that
-   must grow a hundredfold grows over several passes, and its neighbours are never squeezed into bands thinner than a
-   cell, whose borders would cross.  The smaller regions are mapped as if they held that share and their errors are
-   reported apart.  A pass that gains little doubles the raster's resolution (:data:`SLOW_PASS`, up to ``max_n``): what
-   is left are regions a few cells wide.  Edges that the classical passes stretched beyond :data:`SPLIT_EDGE` cells (of
-   at most a :data:`SPLIT_MAX_N` raster) are split again before the next pass, and (flow) each region's weight is
-   boosted by the share of its error that the last pass left (a secant acceleration of the passes:
-   :func:`rfmap.cartogram.metrics.boost`).  A fold smaller than the overlap tolerance, where the input draws two edges
-   nearly touching, is repaired (:func:`rfmap.cartogram.metrics.repair_folds`), and so is a sliver where neighbours
-   under a cell apart in the input were pressed together (:func:`rfmap.cartogram.metrics.repair_overlaps`).
+   below ``tol`` (flow-based cartogram programs stop at 1 %, the default).  The smaller regions are mapped as if they
+   held that share and their errors are reported apart.  Within the passes:
+
+   * no pass asks a region to change its area more than :data:`PASS_CONTRAST` times (its raster densities are clipped
+     to that factor of the sea's): a city that must grow a hundredfold grows over several passes, and its neighbours
+     are never squeezed into bands thinner than a cell, whose borders would cross;
+   * a pass that gains little doubles the raster's resolution (:data:`SLOW_PASS`, up to ``max_n``): what is left are
+     regions a few cells wide;
+   * edges that the classical passes stretched beyond :data:`SPLIT_EDGE` cells (of at most a :data:`SPLIT_MAX_N`
+     raster) are split again before the next pass;
+   * (flow) each region's weight is boosted by the share of its error that the last pass left, a secant acceleration
+     of the passes (:func:`rfmap.cartogram.metrics.boost`);
+   * a fold smaller than the overlap tolerance, where the input draws two edges nearly touching, is repaired
+     (:func:`rfmap.cartogram.metrics.repair_folds`), and so is a sliver where neighbours under a cell apart in the
+     input were pressed together (:func:`rfmap.cartogram.metrics.repair_overlaps`).
+
 5. **Output.**  Edges longer than a grid cell are first split so that they bend with the map; every vertex is
    mapped once (shared borders stay shared); the polygons come back in the input's coordinates or the projection's
    plane (``output="projected"``) as GeoJSON with the input's properties, its ``"rfmap"`` member saying whether the
