@@ -231,7 +231,7 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
     training chapter's budget table counts them.
     ``ncols`` models per row (two panels each), 7.2 inches wide in all; ``mark_folded`` draws open markers on the
     validated states whose maps folded on some held-out field. With ``score`` the validation panel draws the score
-    that chose the kept weights (:func:`rfmap.training.validation.score`: the family score where recorded, else
+    that chose the kept weights (:func:`rfmap.training.validation.score`: the checkpoint score where recorded, else
     the mean with every folded map counted as no map) instead of the plain mean, which one folded map can inflate
     without bound, and a star marks the kept weights at their step, the value the recipe table records; where only
     the plain mean is stored, open circles mark the states with a folded map, which ranked behind every fold-free
@@ -294,7 +294,7 @@ def _kept_marker(ax, meta: dict, val: list[dict], key: str, offset: int) -> int:
 
 def _selection_value(record: dict, key: str) -> tuple[float, str]:
     """The score that chose among a run's validated weights, from one validation record of a history, and what it
-    is: the family score (``"family score (Std ratio)"``) where recorded, else the mean metric with every folded
+    is: the checkpoint score (``"family score (Std ratio)"``) where recorded, else the mean metric with every folded
     map counted as the identity (``penalized``), else the capped or the plain mean, as
     :func:`rfmap.training.validation.score` ranks them."""
     if "family_score" in record:
