@@ -82,25 +82,9 @@ from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _featu
 from .data import atomic_write
 
 __all__ = [
-    "CARTOGRAM_METHODS",
-    "Cartogram",
-    "CartogramMetrics",
-    "PlanarFrame",
-    "read_regions",
-    "density_grid",
-    "cartogram",
-    "cartogram_metrics",
-    "available_methods",
-    "compare_cartograms",
-    "montreal_election",
-    "world_countries",
-    "MONTREAL_CANDIDATES",
-    "HYBRID_POLISH",
-    "ZERO_FLOOR",
-    "OUTPUTS",
-    "MIN_SHARE",
-    "judged",
-    "CartogramOptions",
+    "CARTOGRAM_METHODS", "Cartogram", "CartogramMetrics", "PlanarFrame", "read_regions", "density_grid", "cartogram",
+    "cartogram_metrics", "available_methods", "compare_cartograms", "montreal_election", "world_countries",
+    "MONTREAL_CANDIDATES", "HYBRID_POLISH", "ZERO_FLOOR", "OUTPUTS", "MIN_SHARE", "judged", "CartogramOptions",
 ]
 
 #: Methods of :func:`cartogram`, the names of :data:`rfmap.cartogram.methods.METHODS` (``"dem"`` is accepted as another

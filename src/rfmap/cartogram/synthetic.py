@@ -30,7 +30,7 @@ __all__ = ["TessellationOptions", "tessellate", "synthetic_counties", "synthetic
 
 @dataclass(frozen=True)
 class TessellationOptions:
-    """How :func:`tessellate` cuts an outline (see :mod:`rfmap.cartogram.synthetic`).
+    r"""How :func:`tessellate` cuts an outline (see :mod:`rfmap.cartogram.synthetic`).
 
     Attributes
     ----------

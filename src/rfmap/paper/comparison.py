@@ -15,9 +15,8 @@ lower is better.  For each case this module puts four values side by side:
     the project's fastest classical solver on the same mesh: the flow solver (``solve_dem(..., method="flow")``) or
     the Linear Beltrami Solver.
 
-A case *meets* the paper when the paper's method is at most the paper's value: :math:`v_{\text{native}} \le
-v_{\text{paper}}`.  Times are the fastest of a few runs after a warm-up; the paper's are, as this project reads
-its experimental settings, network inference on one NVIDIA RTX A6000 GPU, so only ratios measured in one run compare.
+A case *meets* the paper when :math:`v_{\text{native}} \le v_{\text{paper}}`.  Times are the fastest of a few
+runs after a warm-up; the paper's are read as network inference on the one NVIDIA RTX A6000 GPU its settings list.
 """
 from __future__ import annotations
 

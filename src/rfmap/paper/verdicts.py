@@ -136,9 +136,13 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     >>> nc
     'the n/c case is worse by Std ratio'
     >>> print(qualified_verdict([True] * 3, [True], short=True))
-    reproduced (3 of 3 comparable); outside this verdict, the n/c case is worse by Std ratio
-    >>> print(qualified_verdict([True] * 3, [True], short=True, factors=[1.61]))
-    reproduced (3 of 3 comparable); outside this verdict, the n/c case's Std ratio is 1.6 times the paper's
+    ... # doctest: +NORMALIZE_WHITESPACE
+    reproduced (3 of 3 comparable); outside this verdict,
+    the n/c case is worse by Std ratio
+    >>> print(qualified_verdict([True] * 3, [True], short=True,
+    ...                         factors=[1.61]))  # doctest: +NORMALIZE_WHITESPACE
+    reproduced (3 of 3 comparable); outside this verdict,
+    the n/c case's Std ratio is 1.6 times the paper's
     """
     flags = [m for m in met if m is not None]
     count = f" ({sum(flags)} of {len(flags)})" if flags else ""
@@ -313,7 +317,9 @@ def close_calls(rows) -> str:
     On the mean |Δμ| of T2 even the classical solver is above the paper's value.
     >>> print(close_calls([("N = 128", "Std", 0.0790, 0.0789, 0.009),
     ...                    ("N = 128", "mean |μ|", 0.1981, 0.1974, None)]))
-    At N = 128 both misses, on the Std and the mean |μ|, are within 0.5 % of the paper's values.
+    ... # doctest: +NORMALIZE_WHITESPACE
+    At N = 128 both misses, on the Std and the mean |μ|,
+    are within 0.5 % of the paper's values.
     >>> print(close_calls([("T1", "mean |Δμ|", 0.009, 0.017, 0.005)]))
     —
     """
