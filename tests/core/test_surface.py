@@ -94,7 +94,7 @@ def test_bad_input():
         boundary_faces(np.zeros((3, 3), int))
     with pytest.raises(ValueError, match="NaN"):
         surface_intersections(np.full((3, 3), np.nan), np.array([[0, 1, 2]]))
-    with pytest.raises(ValueError, match=r"\(n, 3\)"):
+    with pytest.raises(ValueError, match=r"\(P, 3\)"):
         surface_intersections(np.zeros((3, 2)), np.array([[0, 1, 2]]))
 
 

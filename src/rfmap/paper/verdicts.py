@@ -35,8 +35,8 @@ from ..core.wording import of_count
 from ..fields.paper import get_field, sample_density
 
 __all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "input_std", "is_comparable", "std_ratio",
-           "verdict", "qualified_verdict", "nc_clause", "nc_phrase", "ratio_text", "met_text", "median_ratio", "every_or_count",
-           "classical_lead", "times_lower", "NEAR_MISS", "close_calls"]
+           "verdict", "qualified_verdict", "nc_clause", "nc_phrase", "ratio_text", "met_text", "median_ratio",
+           "every_or_count", "classical_lead", "times_lower", "NEAR_MISS", "close_calls"]
 
 #: The relative agreement of the input's Std(ρ̃_orig) with the paper's for a case to count as the paper's input
 #: (the paper prints six digits).  The inputs rebuilt from formulas that the paper gives completely agree with its
@@ -300,8 +300,8 @@ def close_calls(rows) -> str:
     """The misses that say less than they seem, in sentences: those within :data:`NEAR_MISS` of the paper's value,
     and those where even the classical solver is above the paper's value (a value the discretisation on this mesh
     does not reach; pass ``None`` as the classical value of a metric the classical solver does not aim at, such as
-    the flow solver's mean |μ|); ``—`` where there are none (the chapters test for it).  Misses of one case are
-    named together.  The verdict is unchanged: a miss is a miss.
+    the flow solver's mean :math:`|\\mu|`); ``—`` where there are none (the chapters test for it).  Misses of one
+    case are named together.  The verdict is unchanged: a miss is a miss.
 
     Parameters
     ----------
@@ -316,10 +316,8 @@ def close_calls(rows) -> str:
     The miss on the Std at N = 128 is within 0.5 % of the paper's value.
     On the mean |Δμ| of T2 even the classical solver is above the paper's value.
     >>> print(close_calls([("N = 128", "Std", 0.0790, 0.0789, 0.009),
-    ...                    ("N = 128", "mean |μ|", 0.1981, 0.1974, None)]))
-    ... # doctest: +NORMALIZE_WHITESPACE
-    At N = 128 both misses, on the Std and the mean |μ|,
-    are within 0.5 % of the paper's values.
+    ...                    ("N = 128", "|μ|", 0.1981, 0.1974, None)]))
+    At N = 128 both misses, on the Std and the |μ|, are within 0.5 % of the paper's values.
     >>> print(close_calls([("T1", "mean |Δμ|", 0.009, 0.017, 0.005)]))
     —
     """
