@@ -7,7 +7,8 @@ positive; the value 0.1 is our inference, supported by the test densities' Std(�
 it, Std(ρ̃_orig) agrees with all six digits the paper prints for the densities whose formulas the paper gives
 completely: sin-cos, exp-log and ring, the 2D multi-frequency field at every side of the resolution test, and the 3D
 sin-cos and shell fields. The 3D octant and multi-frequency fields agree to 3 × 10⁻⁴ or better; rect-peak and
-prism-peak-3d, which the paper describes too loosely to rebuild, do not agree and are *not comparable* (see the
+prism-peak-3d (the first's box is not defined by the paper, the second's printed formula gives another input) do
+not agree and are *not comparable* (see the
 book's :doc:`glossary </book/glossary>` and :data:`rfmap.paper.verdicts.COMPARABLE_RTOL`).
 """
 from __future__ import annotations

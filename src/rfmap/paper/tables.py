@@ -198,7 +198,8 @@ class Headline:
     whether the paper's value is met (``ours <= paper`` for a metric where lower is better).  ``paper_label``
     names that column where the value to meet is a target rather than the paper's; ``classical_label`` names the
     classical solver of its column (the headlines of :mod:`rfmap.paper.reproduce` name the diffusion DEM or the
-    LBS).
+    LBS).  Its ``met`` judges the delivered map, so its counts can differ from the scoreboard's, which judges the
+    paper's method (:mod:`rfmap.paper.comparison`).
 
     Build it with :func:`headline`; show it with ``display(Markdown(h.to_markdown()))`` or as the cell's value.
     """

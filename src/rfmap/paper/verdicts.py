@@ -2,7 +2,8 @@ r"""One verdict word per paper table or figure, and whether a test input is the 
 
 A case of a density table is *comparable* with the paper when its input is the paper's: the test density on the
 paper's grid has the paper's :math:`\mathrm{Std}(\tilde\rho_{\text{orig}})` to within :data:`COMPARABLE_RTOL`
-(relative).  A case whose input differs (a field the paper describes too loosely to rebuild exactly) is marked
+(relative).  A case whose input differs (rect-peak, whose box the paper does not define, or prism-peak-3d, whose
+printed formula gives another input) is marked
 *n/c* (not comparable) and is not scored against the paper's value; it is compared instead by its *Std ratio*
 (:func:`std_ratio`), the share of the input's spread the map leaves,
 :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) / \mathrm{Std}(\tilde\rho_{\text{orig}})`, and it is *worse by Std
@@ -40,8 +41,8 @@ __all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "inp
 
 #: The relative agreement of the input's Std(ρ̃_orig) with the paper's for a case to count as the paper's input
 #: (the paper prints six digits).  The inputs rebuilt from formulas that the paper gives completely agree with its
-#: values to 3 × 10⁻⁴ or better; rect-peak and prism-peak-3d, which it describes too loosely to rebuild, miss them
-#: by 19 % and 7 % and are not comparable (:func:`is_comparable`).
+#: values to 3 × 10⁻⁴ or better; rect-peak (whose box the paper does not define) and prism-peak-3d (whose printed
+#: formula gives another input) miss them by 19 % and 7 % and are not comparable (:func:`is_comparable`).
 COMPARABLE_RTOL = 1e-3
 #: A miss by at most this share of the paper's value is named as a near miss (:func:`close_calls`); the verdict still
 #: counts it as a miss.

@@ -107,48 +107,90 @@ class TrainConfig:
 
     Attributes
     ----------
-    name, task, preset, description : str, TaskSpec, str, str
-        The configuration's name, what it maps (:class:`rfmap.tasks.base.TaskSpec`), its preset (``ci``, ``full`` or
-        ``paper``) and the description recorded with the shipped file.
+    name : str
+        The configuration's name.
+    task : TaskSpec
+        What it maps (:class:`rfmap.tasks.base.TaskSpec`).
+    preset : str
+        ``ci``, ``full`` or ``paper``.
+    description : str
+        The description recorded with the shipped file.
     model : ModelConfig
         The network: a U-Net or an FNO, and its size.
-    steps, batch : int
-        Optimiser steps, and fields per step (per process in a data-parallel run); see ``batch_points``.
-    n_range, n_sampling, batch_points, jitter : tuple of int, str, int, float
-        The training grid sides (lowest and highest ``N``), how they are drawn, the batch size by grid points, and
-        the vertices' jitter in grid spacings (above).
+    steps : int
+        Optimiser steps.
+    batch : int
+        Fields per step (per process in a data-parallel run); see ``batch_points``.
+    n_range : tuple of int
+        The training grid sides, lowest and highest ``N``.
+    n_sampling : str
+        How the side of each step is drawn from ``n_range`` (above).
+    batch_points : int
+        The batch size by grid points (above; 0: always ``batch``).
+    jitter : float
+        The vertices' jitter in grid spacings (above).
     grow : bool
         With ``init``: widen the parent network first (above).
-    lr, weight_decay, betas, clip : float, float, tuple of float, float
-        AdamW's peak learning rate, weight decay and moment decays, and the gradient-norm clipping threshold.
-    schedule, warmup, lr_min, step_size, gamma, T0, T_mult : str, int, float, int, float, int, int
-        The learning-rate schedule (above): ``warmup`` steps of linear warm-up and the floor ``lr_min`` for
-        ``'cosine'`` (``lr_min`` also for ``'restarts'``); ``step_size`` and ``gamma`` for ``'step'``; ``T0`` and
-        ``T_mult`` for ``'restarts'``.
+    lr : float
+        AdamW's peak learning rate.
+    weight_decay : float
+        AdamW's weight decay.
+    betas : tuple of float
+        AdamW's moment decays.
+    clip : float
+        The gradient-norm clipping threshold.
+    schedule : str
+        The learning-rate schedule (above).
+    warmup : int
+        Steps of linear warm-up.
+    lr_min : float
+        The floor of ``'cosine'`` and ``'restarts'``.
+    step_size : int
+        For ``'step'``: steps between decays.
+    gamma : float
+        For ``'step'``: the factor of each decay.
+    T0 : int
+        For ``'restarts'``: the first cycle's length in steps.
+    T_mult : int
+        For ``'restarts'``: the factor by which each cycle is longer than the last.
     ema : float
         Decay of the weight average (0: none; above).
     loss : LossWeights
         The weights of the loss terms (:class:`rfmap.tasks.base.LossWeights`).
-    density_field, beltrami_field, beltrami_source : RandomDensityConfig, RandomBeltramiConfig, str
-        The random training fields (``None``: the task's defaults), and for the Beltrami task whether a sample is
-        the exact coefficient of a random map (``'map'``) or a random coefficient (``'mu'``).
+    density_field : RandomDensityConfig
+        The random training densities (``None``: the task's defaults).
+    beltrami_field : RandomBeltramiConfig
+        The random training coefficients (``None``: the task's defaults).
+    beltrami_source : str
+        For the Beltrami task: whether a sample is the exact coefficient of a random map (``'map'``) or a random
+        coefficient (``'mu'``).
     teacher : TeacherConfig
         A classical solver's maps as targets (above).
     seed : int
         Seeds the network's initial weights and every step's fields, so a run without a time limit repeats.
-    val_every, val_n, val_sizes, val_count, val_repair, val_native : int, int, tuple of int, int, bool, bool
-        Validation on held-out random fields: every ``val_every`` steps (0: none during training; ``rfmap
-        validate`` scores the snapshots instead), at the grid sides ``val_sizes`` (else ``val_n``, which is also
-        the side of the final report on the paper's test fields), on ``val_count`` fields, of the maps chosen by
-        ``val_repair`` and ``val_native`` (above).
+    val_every : int
+        Steps between validations on held-out random fields (0: none during training; ``rfmap validate`` scores
+        the snapshots instead).
+    val_n : int
+        The validation side when ``val_sizes`` is empty, and the side of the final report on the paper's test fields.
+    val_sizes : tuple of int
+        The validation grid sides.
+    val_count : int
+        Held-out fields per side.
+    val_repair : bool
+        Validate the default maps (recomputed on coarser grids and repaired) instead of the raw maps (above).
+    val_native : bool
+        Validate with the network on each validation grid itself (above).
     select_best : bool
         Ship the best validated state (:func:`rfmap.training.validation.score`) instead of the last one.
-    snapshot_every, ckpt_every : int
-        Steps between weight snapshots (above; 0: none) and between the checkpoints ``rfmap train --resume``
-        continues from.
-    workers, threads : int
-        Processes that draw the batches (0: drawn in the training process) and PyTorch's CPU threads (0: its
-        default).
+    snapshot_every : int
+        Steps between weight snapshots (above; 0: none).
+    ckpt_every : int
+        Steps between the checkpoints ``rfmap train --resume`` continues from.
+    workers : int
+        Processes that draw the batches (0: drawn in the training process).
+    threads : int
+        PyTorch's CPU threads (0: its default).
     time_limit : float
         Wall-time budget in seconds (0: none): training stops when it is spent, and the cosine schedule then
         follows the elapsed time where that is further along than the step count.
