@@ -553,7 +553,7 @@ def jitter_figure(mesh, jittered, h: float, window=(0.45, 0.75, 0.1, 0.4), *, wi
     """Sobol-jittered sampling of a grid mesh: the larger of the two coordinate offsets of every vertex, in grid
     spacings ``h`` (left; the quantity the jitter caps), and a zoom
     on ``window`` = (x0, x1, y0, y1) with the regular mesh in wide light grey lines under the jittered one in thin
-    black lines (right).
+    red lines (right).
     Returns the figure."""
     import matplotlib.pyplot as plt
 
@@ -562,11 +562,11 @@ def jitter_figure(mesh, jittered, h: float, window=(0.45, 0.75, 0.1, 0.4), *, wi
     fig, axes = plt.subplots(1, 2, figsize=(width, width / 2), layout="constrained")
     plot_density(axes[0], mesh.points, mesh.elements, offset, cmap="magma", vmin=0,
                  title="largest offset per coordinate,\nin grid spacings $h$")
-    # the regular mesh wide and light under the jittered one thin and dark, so that both stay visible
+    # the regular mesh wide and light under the jittered one thin and red, so that both stay visible
     axes[1].triplot(mesh.points[:, 0], mesh.points[:, 1], mesh.elements, color="0.7", lw=2.2)
-    axes[1].triplot(jittered[:, 0], jittered[:, 1], mesh.elements, color="k", lw=0.6)
+    axes[1].triplot(jittered[:, 0], jittered[:, 1], mesh.elements, color="tab:red", lw=0.7)
     axes[1].set_xlim(window[:2])
     axes[1].set_ylim(window[2:])
     axes[1].set_aspect("equal")
-    axes[1].set_title("zoom: regular (wide grey),\njittered (thin black)")
+    axes[1].set_title("zoom: regular (wide grey),\njittered (thin red)")
     return fig
