@@ -66,3 +66,30 @@ def test_recipe_markdown_writes_none_for_no_weight_average_and_explains_a_dash_o
     assert "—" not in md and "not recorded" not in md
     bare = recipe_markdown(recipe_table({"m": SimpleNamespace(meta={"steps": 1}, model=Model())}))
     assert all("not recorded" in part for part in bare.split("\n\n**"))  # every part shows a dash
+
+
+def test_preset_table_has_a_row_per_preset_with_its_schedule_and_time_limit():
+    from rfmap.paper.recipes import preset_markdown
+    from rfmap.paper.tables import rate_text
+    from rfmap.training.config import PRESETS, get_config
+
+    lines = preset_markdown("deq2d-square").splitlines()
+    assert lines[0].startswith("| preset | steps | batch | N | peak lr |")
+    assert [line.split(" | ")[0] for line in lines[2:]] == [f"| {p}" for p in PRESETS]
+    paper = get_config("deq2d-square", "paper")
+    row = lines[2 + PRESETS.index("paper")].split(" | ")
+    assert row[1] == f"{paper.steps:,}" and row[4] == rate_text(paper.lr) and row[6] == paper.schedule
+    assert row[7] == "none |"  # the paper's recipe has no time limit
+
+
+def test_chain_table_has_a_row_per_run_with_what_its_command_set_and_what_it_ran():
+    from rfmap.paper.recipes import chain_markdown
+
+    runs = [{"run": 1, "steps": 2658, "step budget": 6000, "minutes": 50.01, "time limit (min)": 50.0,
+             "peak lr": 5e-4},
+            {"run": 2, "steps": 17000, "step budget": 17000, "minutes": 41.3, "time limit (min)": 70.0,
+             "peak lr": 7e-5}]
+    lines = chain_markdown(runs).splitlines()
+    assert lines[0] == "| run | step budget | time limit | peak lr | steps run | minutes run |"
+    assert lines[2] == "| 1 | 6,000 | 50 min | 5 × 10⁻⁴ | 2,658 | 50 |"
+    assert lines[3] == "| 2 | 17,000 | 70 min | 7 × 10⁻⁵ | 17,000 | 41 |"

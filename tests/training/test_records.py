@@ -83,3 +83,15 @@ def test_stored_studies_load_and_unknown_ones_are_refused():
         assert study["runs"] and all(r["score"] for r in study["runs"].values())
     with pytest.raises(ValueError, match="unknown study"):
         S.load_study("no-such-study")
+
+
+def test_budget_markdown_marks_the_fields_of_a_shrinking_batch_as_an_upper_bound():
+    import pandas as pd
+
+    metas = {"a": {"config": {"batch": 4}}, "b": {"config": {"batch": 8, "batch_points": 20000}}}
+    assert S.shrinking_batches(metas) == ["b"]
+    budget = pd.DataFrame({"model": ["a", "b"], "steps": [100, 200], "× paper preset's fields": [0.5, 23.41]}
+                          ).set_index("model")
+    lines = S.budget_markdown(budget, metas, ["steps", "× paper preset's fields"]).splitlines()
+    assert lines[2] == "| a | 100 | 0.5 |"
+    assert lines[3] == "| b | 200 | ≤ 23.4 |"

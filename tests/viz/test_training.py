@@ -146,6 +146,19 @@ def test_learning_rates_are_drawn_on_a_log_axis_one_line_per_schedule():
     plt.close(fig)
 
 
+def test_a_schedule_stopped_by_its_time_limit_is_marked_where_it_stopped():
+    from rfmap.viz import plot_learning_rates
+
+    fig, ax = plt.subplots()
+    plot_learning_rates(ax, {"nominal": [1e-4, 1e-4, 5e-5, 1e-5], "as run": [1e-4, 3e-5, 1e-6]},
+                        stops=["as run"])
+    assert len(ax.lines) == 3  # two schedules and one cross
+    cross = ax.lines[2]
+    assert list(cross.get_xdata()) == [3] and list(cross.get_ydata()) == [1e-6]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["nominal", "as run", "time limit reached"]
+    plt.close(fig)
+
+
 def test_plot_batch_can_draw_the_jittered_meshes():
     import numpy as np
 

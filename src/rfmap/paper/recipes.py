@@ -2,11 +2,13 @@ r"""How the shipped models were trained, from their metadata: the training field
 from __future__ import annotations
 
 from ..tasks import get_task
+from ..training.config import PRESETS, get_config
 from ..training.validation import score_parts
+from .comparison import format_time
 from .tables import Table, decimal_text, rate_text
 
 __all__ = ["training_fields_text", "recipe_table", "recipe_markdown", "recipe_differences", "differences_text",
-           "differences_table", "training_settings", "settings_markdown"]
+           "differences_table", "training_settings", "settings_markdown", "preset_markdown", "chain_markdown"]
 
 
 def training_fields_text(config: dict) -> str:
@@ -246,3 +248,27 @@ def settings_markdown(metas: dict) -> str:
     lines = ["| setting | " + " | ".join(rows) + " |", "|---" * (len(rows) + 1) + "|"]
     lines += [f"| {k} | " + " | ".join(r[k] for r in rows.values()) + " |" for k in first]
     return "\n".join(lines)
+
+
+def _markdown(header: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|---" * len(header) + "|"]
+    return "\n".join(lines + ["| " + " | ".join(map(str, row)) + " |" for row in rows])
+
+
+def preset_markdown(name: str) -> str:
+    """The presets of training configuration ``name`` side by side (Markdown, one row per preset): steps, batch,
+    grid sides, peak learning rate, weight decay, schedule and time limit ("none" where it has none)."""
+    rows = []
+    for preset in PRESETS:
+        c = get_config(name, preset)
+        rows.append([preset, f"{c.steps:,}", c.batch, f"{c.n_range[0]}–{c.n_range[1]}", rate_text(c.lr),
+                     rate_text(c.weight_decay), c.schedule, format_time(c.time_limit) if c.time_limit else "none"])
+    return _markdown(["preset", "steps", "batch", "N", "peak lr", "weight decay", "schedule", "time limit"], rows)
+
+
+def chain_markdown(runs: list[dict]) -> str:
+    """The runs of a chain (:func:`rfmap.training.lineage.run_settings`) as Markdown, one row per run: its step
+    budget, time limit and peak learning rate as its command set them, and the steps and minutes it ran."""
+    rows = [[r["run"], f"{r['step budget']:,}", f"{r['time limit (min)']:.0f} min", rate_text(r["peak lr"]),
+             f"{r['steps']:,}", f"{r['minutes']:.0f}"] for r in runs]
+    return _markdown(["run", "step budget", "time limit", "peak lr", "steps run", "minutes run"], rows)

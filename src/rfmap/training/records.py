@@ -24,7 +24,8 @@ from ..tasks.teacher import teacher_map
 from .validation import validation_fields
 
 __all__ = ["STUDIES_DIR", "collect", "load_study", "study_names", "study_table", "plot_study", "study_values",
-           "training_budget", "budget_table", "teacher_of", "to_markdown", "example_field",
+           "training_budget", "budget_table", "shrinking_batches", "budget_markdown", "teacher_of", "to_markdown",
+           "example_field",
            "example_text", "map_gap"]
 
 STUDIES_DIR = Path(__file__).resolve().parent.parent / "data" / "studies"
@@ -184,6 +185,23 @@ def budget_table(metas: dict, paper_steps: dict, paper_batch: dict):
                      "× paper preset's fields": b["samples"] / (paper_steps[name] * paper_batch[name]),
                      "teacher": teacher_of(meta)})
     return pd.DataFrame(rows).set_index("model")
+
+
+def shrinking_batches(metas: dict) -> list[str]:
+    """The models whose batch shrinks on larger grids (``batch_points`` set in their configuration): the fields they
+    saw are counted at the largest batch, so :func:`budget_table` gives an upper bound for them."""
+    return [k for k, m in metas.items() if (m.get("config") or {}).get("batch_points", 0) > 0]
+
+
+def budget_markdown(budget, metas: dict, columns: list[str]) -> str:
+    """The ``columns`` of a :func:`budget_table` as Markdown (:func:`to_markdown`), with the fields-seen ratio of
+    each model of :func:`shrinking_batches` marked as the upper bound it is (``≤ 3.24``)."""
+    shown = budget[columns].astype(object)
+    col = "× paper preset's fields"
+    if col in columns:
+        for k in shrinking_batches(metas):
+            shown.at[k, col] = "≤ " + format_sig(float(budget.at[k, col]), 3)
+    return to_markdown(shown)
 
 
 def to_markdown(df) -> str:

@@ -26,9 +26,10 @@ from ..surrogate import Surrogate, WEIGHTS_DIR, models
 from ..tasks import TaskSpec
 from .averaging import WeightAverage
 from .config import TrainConfig
+from .lineage import run_settings
 from .validation import score
 
-__all__ = ["TrainState", "memory_format", "machine", "sha256", "load_init", "learning_rates"]
+__all__ = ["TrainState", "memory_format", "machine", "sha256", "load_init", "learning_rates", "run_learning_rates"]
 
 
 def memory_format(dim: int) -> torch.memory_format:
@@ -68,20 +69,53 @@ def _scheduler(opt, cfg: TrainConfig, clock: Callable[[], float] | None = None):
     raise ValueError(f"unknown schedule {cfg.schedule!r}; expected cosine, step or restarts")
 
 
-def learning_rates(cfg: TrainConfig, steps: int | None = None) -> list[float]:
+def learning_rates(cfg: TrainConfig, steps: int | None = None, *, stopped_at: int | None = None) -> list[float]:
     """The learning rate of each of the first ``steps`` optimiser steps (default ``cfg.steps``) of a run of ``cfg``
     (its ``schedule``) that is not stopped by a wall-time limit (``--time-limit``): the rates by the step count
     alone.  A time-limited run with the ``cosine`` schedule stretches the same cosine over the elapsed time, so it
     may reach ``lr_min`` in fewer steps; the ``step`` and ``restarts`` schedules follow the step count in every
-    run."""
+    run.
+
+    ``stopped_at``: the step at which such a run reached its time limit.  The rates are then those of its steps up
+    to that one (``steps`` is ignored), with its clock read as if every step took the same time (step ``k`` at
+    ``k / stopped_at`` of ``cfg.time_limit``), since a run's record keeps its total time, not each step's.
+
+    >>> from rfmap.training.config import get_config
+    >>> cfg = get_config("deq2d-square", "full")
+    >>> rates = learning_rates(cfg, stopped_at=cfg.steps // 2)
+    >>> len(rates), rates[-1] < learning_rates(cfg)[cfg.steps // 2]
+    (3000, True)
+    """
+    if stopped_at is not None and cfg.time_limit <= 0:
+        raise ValueError("stopped_at needs a run with a time limit (cfg.time_limit > 0)")
     opt = torch.optim.SGD([torch.nn.Parameter(torch.zeros(1))], lr=cfg.lr)
-    sched = _scheduler(opt, cfg)
+    done = [0]
+    clock = None if stopped_at is None else (lambda: done[0] / max(1, stopped_at) * cfg.time_limit)
+    sched = _scheduler(opt, cfg, clock)
     rates = []
-    for _ in range(cfg.steps if steps is None else steps):
+    for _ in range(stopped_at if stopped_at is not None else cfg.steps if steps is None else steps):
         rates.append(opt.param_groups[0]["lr"])
         opt.step()
+        done[0] += 1
         sched.step()
     return rates
+
+
+def run_learning_rates(meta: dict, preset: TrainConfig, run: int = 1) -> tuple[list[float], bool]:
+    """The learning rate of every step that run ``run`` of the chain behind a weight file took, and whether its
+    time limit stopped it before its step budget.
+
+    ``meta`` is the weights' metadata (``Surrogate.meta``), ``preset`` the configuration the chain started
+    from (its ``full`` preset); the run's step budget, time limit and peak rate are those its command set
+    (:func:`rfmap.training.lineage.run_settings`).  A run that its time limit stopped followed the clock: its rates
+    are :func:`learning_rates` with ``stopped_at``, which reads its steps as taking equal time."""
+    rec = run_settings(meta, vars(preset))[run - 1]
+    cfg = preset.with_overrides(steps=rec["step budget"], lr=rec["peak lr"],
+                                time_limit=60.0 * rec["time limit (min)"])
+    stopped = rec["steps"] < rec["step budget"] and cfg.time_limit > 0
+    if stopped:
+        return learning_rates(cfg, stopped_at=rec["steps"]), True
+    return learning_rates(cfg, rec["steps"]), False
 
 
 def machine(device: torch.device) -> dict:

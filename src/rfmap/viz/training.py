@@ -419,17 +419,22 @@ def validation_vs_time(metas: dict, ax=None, *, key: str | None = None, logx: bo
     return ax
 
 
-def plot_learning_rates(ax, rates: dict, *, title: str = ""):
+def plot_learning_rates(ax, rates: dict, *, title: str = "", stops=()):
     """Learning-rate schedules against the optimiser step on a log axis, one line per entry of ``rates`` (label ->
-    the rate of every step, :func:`rfmap.training.state.learning_rates`); a rate of zero is left out. Returns the
-    axes."""
+    the rate of every step, :func:`rfmap.training.state.learning_rates`); a rate of zero is left out.  ``stops``
+    names the entries whose run a time limit stopped: a cross marks the last step of each (one legend entry,
+    "time limit reached").  Returns the axes."""
+    marked = False
     for k, (label, r) in enumerate(rates.items()):
         r = np.asarray(r, dtype=float)
         steps = np.arange(1, len(r) + 1)
         keep = r > 0
         ax.semilogy(steps[keep], r[keep], color=f"C{k}", lw=1.4, label=label)
+        if label in stops and keep[-1]:
+            ax.plot(steps[-1], r[-1], "x", color="k", ms=7, mew=1.6,
+                    label=None if marked else "time limit reached")
+            marked = True
     ax.set(xlabel="optimiser step", ylabel="learning rate", title=title)
     ax.set_xlim(left=0)
     ax.legend()
     return ax
-
