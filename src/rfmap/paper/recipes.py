@@ -93,7 +93,9 @@ RECIPE_PARTS = {
 #: What the columns of each part of :data:`RECIPE_PARTS` mean, printed under its table.
 RECIPE_LEGENDS = {
     "Training fields and fold penalty":
-        "*fold penalty*: its weight, then the det J below which it acts (1 from 0.02: weight 1 below det J = 0.02).",
+        "*training fields*: the smooth modes that every field has, then the share of fields that add each other "
+        "feature (a box step is a jump of the density, not an optimiser step); *fold penalty*: its weight, then "
+        "the det J below which it acts (1 from 0.02: weight 1 below det J = 0.02).",
     "Optimisation over the whole chain (learning rate and weight average of the last run)":
         "*peak lr*: the top of the last run's learning-rate schedule; *weight average*: the decay of the "
         "exponential moving average of the weights it shipped (none: the weights as trained); *steps* and "

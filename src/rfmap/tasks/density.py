@@ -154,10 +154,12 @@ class DensityTask(Task):
         return solvers.solve_dem(dens, boundary="free" if boundary == "free" else "square")
 
     def training_fields_text(self, config: dict) -> str:
-        """The paper's smooth modes with steps and patches, plus the sharp features (narrow peaks, steep ramps)
-        where drawn."""
+        """The paper's smooth modes (in every field), then the share of fields that add each other feature: box
+        steps, patches and, where drawn, narrow peaks, steep ramps and single hard ramps or peaks."""
         dens = config.get("density_field") or {}
-        extra = []
+        default = RandomDensityConfig()
+        extra = [f"box steps {100 * dens.get('p_step', default.p_step):.0f} %",
+                 f"patches {100 * dens.get('p_patch', default.p_patch):.0f} %"]
         if dens.get("p_peak"):
             extra.append(f"peaks {100 * dens['p_peak']:.0f} %")
         if dens.get("p_ramp"):
@@ -165,7 +167,7 @@ class DensityTask(Task):
             extra.append(f"ramps {100 * dens['p_ramp']:.0f} %" + (f" (height ×{scale:g})" if scale != 1.0 else ""))
         if dens.get("p_hard"):
             extra.append(f"single hard ramps or peaks {100 * dens['p_hard']:.0f} %")
-        return "modes, steps" + ("".join(f", {e}" for e in extra))
+        return "modes (every field)" + "".join(f", {e}" for e in extra)
 
     def test_fields(self, dim: int) -> tuple[str, ...]:
         """The paper's test densities in ``dim`` dimensions (reported after training, never used to select a model)."""

@@ -149,7 +149,7 @@ def score(summary: dict) -> tuple[int, float]:
     times the others', cannot decide the choice alone.  Beltrami models: ``(0, penalized)``, the mean vertex
     distance with a folded map counted as the identity (see :func:`evaluate`).
 
-    A summary that lacks these entries ranks after every summary that has them (first entry 1 or 2)."""
+    Summaries of older weights, recorded before these entries existed, rank after every summary that has them."""
     # summaries written before these entries existed: (1, penalized), a fold-free one (1, mean), one with a folded
     # map, whose penalized mean is unknown, (2, capped mean)
     tier, value, _ = score_parts(summary)
