@@ -90,6 +90,31 @@ def test_local_repair_gives_way_to_the_global_one_for_a_crossing_free_boundary()
     assert rep["method"].startswith("lbs") and flipped(out, mesh) == 0
 
 
+def test_report_says_whether_a_local_patch_was_tried():
+    """``local_tried`` is True when a patch was solved, also when none ended fold-free and the global LBS ran (the
+    pulled grid of appendix A), and False when the folds went straight to the global LBS or to the scaling."""
+    n = 21
+    mesh = grid_mesh(n, 2)
+    x = mesh.points
+    c = x - 0.5
+    pull = 1.6 * np.exp(-(c**2).sum(1) / 0.02) * 16 * np.prod(x * (1 - x), axis=1)
+    folded = x - pull[:, None] * c
+    info = {}
+    assert local_lbs_repair(folded, n, "square", info=info) is None and info["tried"]
+    _, rep = repair_map(x, folded, mesh.elements, boundary="square", grid_n=n)
+    assert rep["method"].startswith("lbs") and rep["local_tried"] is True
+    mesh, p = pushed(17, 2, (0.12, 0.07))
+    _, rep = repair_map(mesh.points, p, mesh.elements, boundary="square", grid_n=17)
+    assert rep["method"] == "local" and rep["local_tried"] is True
+    for method in ("lbs", "scale"):
+        _, rep = repair_map(mesh.points, p, mesh.elements, boundary="square", grid_n=17, method=method)
+        assert rep["local_tried"] is False
+    _, rep = repair_map(mesh.points, mesh.points, mesh.elements, boundary="square", grid_n=17)
+    assert not rep["needed"] and rep["local_tried"] is False
+    info = {}
+    assert local_lbs_repair(mesh.points, 17, "square", info=info) is None and info["tried"] is False
+
+
 @pytest.mark.parametrize("passed", [False, True])
 def test_global_repair_on_the_square_keeps_or_slides_the_walls(passed):
     """``lbs_repair`` on the square keeps the map's own wall positions (one factorisation); when a wall vertex has

@@ -68,7 +68,9 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     report : dict
         ``needed``, ``method``, ``n_flipped_before``, ``n_flipped_after``, ``affected`` (triangles with truncated
         :math:`\mu` for the LBS, vertices with a shortened displacement for the scaling, the larger of the two
-        counts when both ran), the two counts apart as ``triangles_capped`` and ``vertices_scaled``, ``time`` (s),
+        counts when both ran), the two counts apart as ``triangles_capped`` and ``vertices_scaled``, ``local_tried``
+        (True when a local LBS patch was solved, even if none ended fold-free and the global LBS then ran, so that a
+        ``method`` of ``lbs`` tells whether a patch failed first or was never tried), ``time`` (s),
         ``metrics_before`` and ``metrics_after``; for a 3D free boundary also ``surface_crossings_before``/``_after``
         (intersecting pairs of boundary triangles) and, when :func:`~rfmap.finish.repair.embedding.surface_repair` ran,
         ``surface_scale``.
@@ -98,19 +100,21 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
         cheap = {"n_flipped": 0, "min_jacobian": float(min_jac)}
         return mapped, {"needed": False, "method": "none", "n_flipped_before": 0, "n_flipped_after": 0,
                         "affected": 0, "triangles_capped": 0, "vertices_scaled": 0,
-                        "time": time.perf_counter() - t0, "metrics_before": cheap,
+                        "local_tried": False, "time": time.perf_counter() - t0, "metrics_before": cheap,
                         "metrics_after": dict(cheap)}
     mapped = np.asarray(mapped, np.float64)
     before = _metrics(ref, np.where(np.isfinite(mapped), mapped, ref), el, density, mu)
     if method == "auto":
         method = "local" if d == 2 and grid_n else "scale"
     affected = capped_n = scaled_n = 0
+    local_info = {"tried": False}
     out = mapped
     used = method
     if method == "local":
         if not (d == 2 and grid_n):
             raise ValueError("the local LBS repair needs a 2D grid mesh (grid_n)")
-        local = local_lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, DELTA)
+        local = local_lbs_repair(np.where(np.isfinite(mapped), mapped, ref), grid_n, boundary, DELTA,
+                                 info=local_info)
         if local is not None:
             out, capped = local
             affected = capped_n = int(capped.sum())
@@ -140,4 +144,4 @@ def repair_map(ref: np.ndarray, mapped: np.ndarray, elements: np.ndarray, *, bou
     return out, {"needed": True, "method": used, "n_flipped_before": int(before["n_flipped"]),
                  "n_flipped_after": int(after["n_flipped"]), "affected": affected,
                  "triangles_capped": capped_n, "vertices_scaled": scaled_n,
-                 "time": time.perf_counter() - t0, "metrics_before": before, "metrics_after": after, **report}
+                 "local_tried": local_info["tried"], "time": time.perf_counter() - t0, "metrics_before": before, "metrics_after": after, **report}

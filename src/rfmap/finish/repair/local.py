@@ -52,7 +52,7 @@ LOCAL_MIN_CAPPED = 100
 
 def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA, *,
                      rings: Sequence[int] = LOCAL_RINGS, max_fraction: float = LOCAL_MAX_FRACTION,
-                     passes: int = 3) -> tuple[np.ndarray, np.ndarray] | None:
+                     passes: int = 3, info: dict | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     r"""Rebuild a 2D grid map from its truncated Beltrami coefficient on a patch around the folds only.
 
     The triangles whose :math:`\mu` :func:`.cap_mu` changes (flipped, :math:`|\mu| > 1 - \delta`, non-finite) are
@@ -65,6 +65,13 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
     of the patch's rim, which a larger patch would not undo).  Outside the patch the map is not touched, and the
     cost is that of sparse solves the size of the patch.
 
+    Parameters
+    ----------
+    info : dict, optional
+        When given, receives ``tried``: True when at least one patch was solved, whether or not it ended
+        fold-free; False when the function returned before any solve (nothing truncated, folds too widespread, a
+        free boundary that crosses itself, or a first patch already too large).
+
     Returns
     -------
     result : tuple of (ndarray, ndarray), or None
@@ -74,6 +81,8 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
         :data:`LOCAL_MIN_GIVE_UP` vertices on small grids) ends fold-free; or when a free boundary crosses itself
         (boundary vertices keep their positions in a local solve, so only :func:`.lbs_repair` can untangle it).
     """
+    if info is not None:
+        info["tried"] = False
     mesh = grid_mesh(n, 2)
     el = mesh.elements
     n_pts = mesh.points.shape[0]
@@ -103,6 +112,8 @@ def local_lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = D
         is_fixed = np.zeros(n_pts, bool)
         is_fixed[fixed] = True
         mu_p = mu_c[patch]
+        if info is not None:
+            info["tried"] = True
         for _ in range(passes):
             K = assemble_stiffness(mesh.points, el_p, beltrami_matrices(mu_p)).tocsc()
             rhs = -(K[free][:, fixed] @ out[fixed])
