@@ -212,11 +212,16 @@ def test_scoreboard_numbers_the_items_as_the_paper_and_fits_one_screen():
     full = mod.full_scoreboard(ROOT)
     assert full.count("**Criterion.**") == 1 and full.count("**Verdict.**") == 1
     assert full.count(f"({mod.RULES_TARGET})=") == 1
+    # the rule in two sentences, then the rules in full in a closed dropdown, then the table
+    target, fold, criterion, table = (full.index(t) for t in (f"({mod.RULES_TARGET})=", ":::{dropdown}",
+                                                                "**Criterion.**", "| Paper item"))
+    assert target < fold < criterion < table and full.index("\n:::\n", criterion) < table
     for key in ("t4_std_rho_map_rect-peak_native", "t9_std_rho_map_64_met", "t7_verdict", "f10_verdict"):
         assert f"::{key}:s`" in full, key  # pasted by a glue role, not left as text
     for text in (board, full):  # every placeholder became a glue role (a key with a hyphen too)
         left = re.sub(r"\{glue:text\}`[^`]*`", "", text)
         left = re.sub(r"\{(doc|term|ref)\}`[^`]*`", "", left)
+        left = re.sub(r"^:::\{dropdown\}", "", left, flags=re.M)  # a directive, not a placeholder
         assert not mod.PLACEHOLDER.search(left), mod.PLACEHOLDER.search(left)
     scored = [it for it in _items() if it["score"]["kind"] == "score"]
     refs, defs = mod._footnotes(scored)

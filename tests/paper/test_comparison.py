@@ -212,7 +212,8 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
                                 "the paper's")
     assert v["verdict"] == ("reproduced (1 of 1 comparable); outside this verdict, the n/c case's Std ratio is 1.1 "
                             "times the paper's")
-    assert v["nc"] == "a Std ratio of 0.2 against the paper's 0.187, 1.1 times the paper's"
+    nc = "20 % of its input's spread against the paper's 18.7 % (1.1 times as much)"
+    assert v["nc"] == nc.replace(" %", "\u00a0%")  # a per cent sign never wraps away from its number
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.09
     assert c.verdict_word() == (
         "reproduced on the comparable cases (1 of 1); the n/c case is not worse by Std ratio")

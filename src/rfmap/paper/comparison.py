@@ -310,7 +310,7 @@ class Comparison:
         nc = self._nc_ratios()
         texts["nc"] = "; ".join((f"{c}: " if len(nc) > 1 else "") + nc_phrase(a, b) for c, a, b in nc) or "—"
         out = one_notation(out, self.metrics + self.shown()) | texts
-        return {k: v.replace(" × ", "\u00a0×\u00a0") for k, v in out.items()}  # 9.4 × 10⁻³ never split
+        return {k: v.replace(" × ", "\u00a0×\u00a0").replace(" %", "\u00a0%") for k, v in out.items()}  # never split
 
     def shown(self) -> list[str]:
         """The quantities of :data:`SHOWN` that the paper's table prints: the scoreboard shows them beside the scored

@@ -189,18 +189,19 @@ def nc_clause(nc_worse: list[bool], factors: list[float] | None = None) -> str:
 
 
 def nc_phrase(ours: float, paper: float) -> str:
-    """One n/c case's Std ratio by the paper's method beside the paper's, as a phrase for running text, with their
+    """One n/c case's Std ratio by the paper's method beside the paper's, as a phrase for running text after
+    *leaves*: each as the share of the input's spread the map leaves, in per cent to three digits, and their
     quotient to two digits in the same form whichever is lower (lower is better).
 
     Examples
     --------
-    >>> nc_phrase(0.125, 0.194)
-    "a Std ratio of 0.125 against the paper's 0.194, 0.64 times the paper's"
-    >>> nc_phrase(0.442, 0.274)
-    "a Std ratio of 0.442 against the paper's 0.274, 1.6 times the paper's"
+    >>> print(nc_phrase(0.125, 0.194))
+    12.5 % of its input's spread against the paper's 19.4 % (0.64 times as much)
+    >>> print(nc_phrase(0.442, 0.274))
+    44.2 % of its input's spread against the paper's 27.4 % (1.6 times as much)
     """
-    return (f"a Std ratio of {ours:.3g} against the paper's {paper:.3g}, "
-            f"{float(f'{ours / paper:.2g}'):g} times the paper's")
+    return (f"{100 * ours:.3g} % of its input's spread against the paper's {100 * paper:.3g} % "
+            f"({float(f'{ours / paper:.2g}'):g} times as much)")
 
 
 def ratio_text(r: float | None) -> str:
