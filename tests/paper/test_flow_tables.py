@@ -21,3 +21,4 @@ def test_convergence_rotation_and_sea_tables_have_one_row_per_field():
     sea = [{"field": "ramp-3", "ratio_abrupt": 5.36, "ratio_default": 1.04, "ratio_blended": 1.04,
             "stalled": True, "time_default": 0.31, "shift": 10.4}]
     assert sea_table(sea).text.splitlines()[2] == "| ramp-3 | 5.36 | 1.04 | 1.04 | yes | 0.31 | 10.4 |"
+    assert "| abrupt sea stalled |" in sea_table(sea).text.splitlines()[0]  # whose first pass stalled

@@ -249,7 +249,7 @@ def sea_table(rows: list[dict[str, Any]]) -> CaseTable:
     diffusion solver's, whether the abrupt sea stalled, the default flow's time over the diffusion solver's (a stalled
     attempt included) and the shift of the blended flow's map in grid spacings."""
     return _table("A dense coast: the flows' Std over the diffusion solver's",
-                  ["field", "abrupt sea, blurred retries", "default", "blended sea", "stalled",
+                  ["field", "abrupt sea, blurred retries", "default", "blended sea", "abrupt sea stalled",
                    "default's time / diffusion's", "shift (spacings)"],
                   [[r["field"], f"{r['ratio_abrupt']:.3g}", f"{r['ratio_default']:.3g}", f"{r['ratio_blended']:.3g}",
                     "yes" if r["stalled"] else "no", f"{r['time_default']:.2g}", f"{r['shift']:.3g}"] for r in rows])
