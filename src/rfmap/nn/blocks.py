@@ -99,10 +99,12 @@ def _groups(c: int) -> int:
 class EdgeAwareConv(nn.Module):
     r"""Edge-aware convolution :math:`\mathcal{C}_{EA}(f) = w\,\mathcal{C}_{edge}(f) + (1-w)\,\mathcal{C}_{loc}(f)`.
 
-    :math:`\mathcal{C}_{loc}` is a 3-point-stencil convolution, :math:`\mathcal{C}_{edge}` a wider (dilation-2)
-    stencil, and :math:`w = \sigma(\mathcal{E}(f))` a per-point gate.  The edge detector is
-    :math:`\mathcal{E}(f) = P\,|\mathcal{C}_{edge}(f) - \mathcal{C}_{loc}(f)|` with a learned 1x1 projection
-    :math:`P`: the two stencils disagree where the features vary on the grid scale, i.e. at edges (paper Sec. 4.2).
+    :math:`w = \sigma(\mathcal{E}(f))` is a per-point gate (paper Sec. 4.2).  The paper names a local and a
+    wider-stencil convolution and leaves the edge detector :math:`\mathcal{E}` unspecified; the rest is this
+    package's choice: :math:`\mathcal{C}_{loc}` is a 3-point-stencil convolution, :math:`\mathcal{C}_{edge}` a
+    dilation-2 stencil, and :math:`\mathcal{E}(f) = P\,|\mathcal{C}_{edge}(f) - \mathcal{C}_{loc}(f)|` with a
+    learned 1x1 projection :math:`P`: the two stencils disagree where the features vary on the grid scale, i.e. at
+    edges.
 
     Shapes: ``(B, C_in, *S) -> (B, C_out, *S)`` for any spatial size S.
     """
@@ -126,6 +128,7 @@ class SpatialAttention(nn.Module):
 
     :math:`m = \mathrm{mean}_c f` and :math:`M = \max_c f` are channel statistics, :math:`\bar m, \bar M` their
     local means (average over ``kernel``-point blocks, interpolated back), and :math:`W` a learned 1x1 projection.
+    The paper names a spatial attention module but gives no formula; this one is the package's choice.
     Shapes: ``(B, C, *S) -> (B, C, *S)``.
     """
 
@@ -147,7 +150,8 @@ class SpatialAttention(nn.Module):
 
 class EnhancedDoubleConv(nn.Module):
     """Enhanced double convolution (EDC): an edge-aware convolution and a 3-point convolution, each followed by
-    GroupNorm (and SiLU), then spatial attention and a residual 1x1 projection.
+    GroupNorm (and SiLU), then spatial attention and a residual 1x1 projection.  The paper names the block and its
+    parts but states no normalisation, activation or residual projection: those are this package's choices.
     Shapes: ``(B, C_in, *S) -> (B, C_out, *S)``."""
 
     def __init__(self, cin: int, cout: int, dim: int, attention: bool = True):

@@ -2,7 +2,7 @@
 
 Two architectures share one interface (input ``(B, d + c, *S)``, output ``(B, d, *S)``, ``kwargs()``,
 ``min_size``): the multi-resolution U-Net of the paper (``arch='unet'``, the default, and the one assumed where a
-model's metadata names none) and ``neuraloperator``'s FNO (``arch='fno'``), each a constructor in ``NETWORKS``.
+model's metadata names none) and ``neuraloperator``'s FNO (``arch='fno'``).
 """
 from __future__ import annotations
 

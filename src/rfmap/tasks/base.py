@@ -194,9 +194,13 @@ class LossWeights:
         :math:`\\int|\\mu|^2` in the DEQ loss (0 gives DEM).  Not the :math:`\\lambda` of weight refinement
         (:data:`rfmap.tasks.objectives.FLIP_WEIGHT`).
     fold : float
-        Weight of the fold penalty; ``fold_threshold`` is its :math:`\\tau`.
+        Weight of the fold penalty (:func:`rfmap.tasks.losses.fold_penalty`, an addition of this package, not in
+        the paper); ``fold_threshold`` is its :math:`\\tau`.  The default here is not the weight every shipped
+        model was trained with: each model's is in its configuration (``get_config(name).loss``,
+        :mod:`rfmap.training.config`).
     area : float
-        Free boundary: weight of the area constraint.
+        Free boundary: weight of the area constraint (:func:`rfmap.tasks.losses.area_penalty`, also an addition of
+        this package).
     density_tangent : bool
         Below the 1 % floor of an element's mapped measure, continue its density along the tangent instead of
         clamping it (:func:`rfmap.tasks.losses.element_density`), so that collapsed and flipped elements keep a
@@ -527,8 +531,9 @@ def batch_loss_terms(model, spec: TaskSpec, batch: Batch, weights: LossWeights) 
 
     Parameters
     ----------
-    model : torch.nn.Module
+    model : torch.nn.Module or None
         The displacement network (``Surrogate.model``): ``batch.inputs`` to :math:`\psi` of shape ``(B, d, *S)``.
+        ``None``: the identity map (:math:`\psi = 0`), the reference a trained network's terms are read against.
 
     Returns
     -------
@@ -542,7 +547,11 @@ def batch_loss_terms(model, spec: TaskSpec, batch: Batch, weights: LossWeights) 
         :func:`rfmap.tasks.losses.loss_integrands` of the maps (fold threshold of ``weights``).
     """
     with torch.no_grad():
-        psi = model(batch.inputs)
+        if model is None:  # the identity map: zero displacement on the batch's grid
+            grid = batch.inputs.shape[2:]
+            psi = torch.zeros(batch.inputs.shape[0], len(grid), *grid, dtype=batch.ref.dtype)
+        else:
+            psi = model(batch.inputs)
         total, parts = task_loss(spec, batch, psi, weights)
         mapped = apply_displacement(batch.ref, psi.flatten(2).transpose(1, 2), spec.boundary)
         terms = L.loss_integrands(batch.ref, mapped, batch.elements, density=batch.density,

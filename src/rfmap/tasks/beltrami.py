@@ -1,10 +1,11 @@
 r"""The Beltrami task: the quasi-conformal map of the unit square with a prescribed Beltrami coefficient (paper
 Sec. 5.1).
 
-* encoding (m = 2): the channels are :math:`\mathrm{Re}\,\mu` and :math:`\mathrm{Im}\,\mu` at the vertices;
+* encoding (:math:`c = 2` parameter channels): the channels are :math:`\mathrm{Re}\,\mu` and :math:`\mathrm{Im}\,\mu` at the vertices;
 * training fields: the exact coefficient of a random boundary-fixing map (:class:`rfmap.fields.random.RandomMap`),
   or a random coefficient (:class:`rfmap.fields.random.RandomBeltrami`), at Sobol-jittered vertices;
-* loss: :math:`\int_\Omega |\mu(u) - \mu_{\text{in}}|^2` (:func:`rfmap.tasks.losses.beltrami_loss`);
+* loss: :math:`\int_\Omega |\mu(u) - \mu_{\text{in}}|^2` (:func:`rfmap.tasks.losses.beltrami_loss`), and the fold
+  penalty that :func:`rfmap.tasks.base.task_loss` adds to every task (this package's addition, not in the paper);
 * refinement objective: :math:`\mathrm{mean}|\mu(u_\alpha) - \mu_{\text{in}}| + \lambda\,\#\text{flipped}/m`
   (:func:`rfmap.tasks.objectives.beltrami_objective`);
 * validation: the mean vertex distance to the exact map of held-out random maps, at sup-norm levels of

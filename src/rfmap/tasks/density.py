@@ -1,6 +1,6 @@
 r"""The density task: a density-equalizing map (DEM, DEQ) of the unit square or cube (paper Sec. 5.2).
 
-* encoding (m = 1): the channel is :math:`\log p` of the unit-mass density, a discretisation-consistent
+* encoding (:math:`c = 1` parameter channel): the channel is :math:`\log p` of the unit-mass density, a discretisation-consistent
   normalisation (mass :math:`\int p = 1` on every grid).  This differs from the paper, whose Sec. 4.1 stacks the
   field itself, :math:`[x, p(x)]`: a density-equalizing map depends on :math:`p` only through its ratios, which
   :math:`\log p` turns into differences, and :math:`\log p` keeps a density that spans orders of magnitude (a
@@ -8,7 +8,10 @@ r"""The density task: a density-equalizing map (DEM, DEQ) of the unit square or 
 * training fields: random densities (:class:`rfmap.fields.random.RandomDensity`) at Sobol-jittered vertices, with a
   classical teacher's map as an optional target (:mod:`rfmap.tasks.teacher`);
 * loss: the density mismatch :math:`L(\tilde\rho - 1)`, with :math:`\lambda_{\mathrm{hr}} \int |\mu|^2` for DEQ
-  in 2D (the paper's Beltrami regularization weight) and the area constraint on a free boundary;
+  in 2D (the paper's Beltrami regularization weight); two further terms are this package's additions, not in the
+  paper: the fold penalty (:func:`rfmap.tasks.losses.fold_penalty`, added to every task's loss by
+  :func:`rfmap.tasks.base.task_loss`) and, on a free boundary, the area constraint
+  (:func:`rfmap.tasks.losses.area_penalty`);
 * refinement objective: :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) + \lambda\,\#\text{flipped}/m`, with
   :math:`\lambda` the weight of the flipped-element fraction
   (:func:`rfmap.tasks.objectives.density_objective`);

@@ -134,14 +134,24 @@ def beltrami_energy(ref: Tensor, mapped: Tensor, elements: Tensor) -> Tensor:
 
 def fold_penalty(ref: Tensor, mapped: Tensor, elements: Tensor, threshold: float = 0.02, *,
                  pre: Measures = NONE) -> Tensor:
-    r"""Fold penalty :math:`\int_\Omega \mathrm{relu}(\tau - \det J)` that keeps elements away from flipping."""
+    r"""Fold penalty :math:`\int_\Omega \mathrm{relu}(\tau - \det J)` that keeps elements away from flipping.
+
+    An addition of this package, not in the paper's losses.  Its weight and :math:`\tau` are
+    :class:`rfmap.tasks.base.LossWeights` ``fold`` and ``fold_threshold``; the weight a shipped model was trained
+    with is in its configuration, ``get_config(name).loss`` (:mod:`rfmap.training.config`), not necessarily the
+    default.
+    """
     ref_meas, meas = pre.measures(ref, mapped, elements)
     det = meas / ref_meas
     return weighted_mean(torch.relu(threshold - det), ref_meas)
 
 
 def area_penalty(ref: Tensor, mapped: Tensor, elements: Tensor, *, pre: Measures = NONE) -> Tensor:
-    r"""Free-boundary area constraint :math:`(|u(\Omega)| / |\Omega| - 1)^2`."""
+    r"""Free-boundary area constraint :math:`(|u(\Omega)| / |\Omega| - 1)^2`.
+
+    An addition of this package, not in the paper's losses: on a free boundary it keeps the mapped domain's
+    measure equal to the reference's.  Its weight is :class:`rfmap.tasks.base.LossWeights` ``area``.
+    """
     ref_meas, meas = pre.measures(ref, mapped, elements)
     ratio = meas.sum(-1) / ref_meas.sum(-1)
     return ((ratio - 1) ** 2).mean()
