@@ -281,8 +281,7 @@ def _preamble() -> list[str]:
 #: the rules in brief, above the introduction's scoreboard (in full: :func:`_preamble`, on book/figures.md)
 RULES_SHORT = (
     "**How to read it.**\n\n"
-    "* *Met*: the *paper's method* run here (the network on the requested grid, then the paper's weight "
-    "refinement) is at most the paper's value, with no tolerance. Scored are the mean measures the paper's losses "
+    "* *Met*: the *paper's method* run here is at most the paper's value, with no tolerance. Scored are the mean measures the paper's losses "
     "drive down (|Δd|, |Δμ|, Std(ρ̃_map), and mean |μ| for DEQ maps), not times.\n"
     "* *n/c*, *not comparable*: the case's input is not the paper's. It is left out of the counts, and its footnote "
     "sets its Std ratio, Std(ρ̃_map) / Std(ρ̃_orig), beside the paper's.\n"
