@@ -1,5 +1,5 @@
 """The validation-record readers of rfmap.paper.compare, on small hand-made records."""
-from rfmap.paper.compare import kept_state, learning_summary, shipped_raw_folds, validated_states
+from rfmap.paper.compare import budget_folds, kept_state, learning_summary, shipped_raw_folds, validated_states
 
 
 def _v(step, mean, folded=0, score=None, jac=0.1):
@@ -73,16 +73,18 @@ def test_learning_texts_name_steps_not_counts():
                  {"mean": kept})
     learn = {"A": learning_summary(meta, last=3)}
     text = learning_verdict(learn, {"A": SimpleNamespace(meta={**meta, "steps": 4})})
-    assert text == ("The A was still improving: its lowest plain mean, 0.300, came at step 2, among its last three"
-                    " validations.")
+    assert text == ("The A may still have been improving: its lowest plain mean, 0.300, came at step 2, among its"
+                    " last three validations.")
     text = learning_verdict(learn, {"A": SimpleNamespace(meta={**meta, "steps": 5})})
     assert text.endswith("The A's record holds no validation of its last step, 5, so its curve ends at step 4.")
     flat = {**learn["A"], "improving": False}
     surs = {k: SimpleNamespace(meta={**meta, "steps": 4}) for k in "AB"}
     assert learning_verdict({"A": flat, "B": flat}, surs) == (
-        "Neither network was still improving when the budget ran out: the A's lowest plain mean, 0.300, came at step"
-        " 2 and the B's, 0.300, at step 2, each before its last three validations, which range from 0.300 to 0.500"
+        "In this one run per network, neither reached a lower plain mean after its lowest: the A's lowest plain mean,"
+        " 0.300, came at step 2 and the B's, 0.300, at step 2, each before its last three validations, which range from 0.300 to 0.500"
         " and from 0.300 to 0.500.")
+    one = learning_verdict({"A": flat, "B": learn["A"]}, surs)
+    assert one.startswith("The A reached no lower plain mean after its lowest in its run: its lowest plain mean,")
 
 
 def test_the_model_table_names_each_configuration_and_prints_as_the_prose():
@@ -108,3 +110,22 @@ def test_shipped_raw_folds_reads_the_raw_flag_where_the_repaired_map_was_validat
     assert shipped_raw_folds(repaired) == (1, 2)
     assert shipped_raw_folds(raw) == (2, 3)
     assert shipped_raw_folds({}) == (0, 0)
+
+
+def test_budget_folds_counts_raw_folds_and_the_shipped_step_over_the_chain():
+    """A record that validated the repaired map counts its raw folds, not the repaired map's none; the shipped step
+    is counted over the whole chain; a step validated twice counts once."""
+    repaired = [dict(_v(0, 0.3), raw_folded_fields=2), dict(_v(50, 0.2), raw_folded_fields=0),
+                dict(_v(100, 0.25), raw_folded_fields=1), dict(_v(100, 0.25), raw_folded_fields=1)]
+    metas = {"cube": {"steps": 100, "cumulative_steps": 1100, "selected_step": 50,
+                      "history": {"validation": repaired},
+                      "final_metrics": {"mean": {}, "a": {"raw_folded": True}, "b": {"raw_folded": False}}},
+             "square": {"steps": 200, "selected_step": 200,
+                        "history": {"validation": [_v(100, 0.4, folded=1), _v(200, 0.3)]}}}
+    t = budget_folds(metas, {"cube": 500, "square": 1000})
+    assert t.loc["cube", "steps spent"] == 1100 and t.loc["cube", "shipped at step"] == 1050
+    assert t.loc["cube", "validated states whose raw map folds"] == "2 of 3"
+    assert t.loc["cube", "validation fields on which the shipped raw map folds"] == "1 of 2"
+    assert t.loc["square", "shipped at step"] == 200 and t.loc["square", "paper's epochs"] == 1000
+    assert t.loc["square", "validated states whose raw map folds"] == "1 of 2"
+    assert t.loc["square", "validation fields on which the shipped raw map folds"] == "0 of 0"

@@ -22,3 +22,15 @@ def test_score_parts_names_the_entry_that_ranks_a_summary(summary, expected, lab
 def test_a_summary_without_metrics_has_no_selection_score():
     assert _selection({}) == (None, None)
     assert _selection({"folded_fields": 0}) == (None, None)
+
+
+def test_has_folds_reads_the_raw_map_only_when_asked():
+    """A summary that scored the repaired map records no folds of its own but counts the raw map's apart."""
+    from rfmap.training.validation import has_folds
+
+    repaired = {"std_rho_map": 0.2, "folded_fields": 0, "raw_folded_fields": 3}
+    assert not has_folds(repaired) and has_folds(repaired, raw=True)
+    assert not has_folds({**repaired, "raw_folded_fields": 0}, raw=True)
+    raw = {"std_rho_map": 0.2, "folded_fields": 2}
+    assert has_folds(raw) and has_folds(raw, raw=True)
+    assert has_folds({"n_flipped": 4}, raw=True) and not has_folds({"n_flipped": 0}, raw=True)

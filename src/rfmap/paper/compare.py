@@ -28,7 +28,7 @@ from .comparison import format_time
 from .tables import Table, format_sig
 
 __all__ = ["NETWORK_NAMES", "parameter_count", "model_table", "validated_states", "learning_summary", "kept_state",
-           "shipped_raw_folds", "kept_rules", "learning_verdict", "paper_fields_table", "resolution_table",
+           "shipped_raw_folds", "budget_folds", "kept_rules", "learning_verdict", "paper_fields_table", "resolution_table",
            "points_table", "generalization_tables", "inference_table", "speed_against_flow", "speed_table", "wins",
            "folded_cell", "side_by_side", "MarkdownText"]
 
@@ -149,6 +149,41 @@ def shipped_raw_folds(meta: dict) -> tuple[int, int]:
     fields = [v for k, v in final.items() if k != "mean"]
     folded = sum(bool(v["raw_folded"]) if "raw_folded" in v else (v.get("n_flipped") or 0) > 0 for v in fields)
     return folded, len(fields)
+
+
+def budget_folds(metas: dict, paper_steps: dict):
+    """Each shipped model's steps against the paper's and the folds of its raw maps, from its training record.
+
+    Parameters
+    ----------
+    metas : dict
+        Model name to a surrogate's metadata (``Surrogate.meta``).
+    paper_steps : dict
+        Model name to the paper's epochs for its task.
+
+    Returns
+    -------
+    pandas.DataFrame
+        One row per model: the steps spent over its whole chain of runs, the step of the chain at which the shipped
+        state was validated, the paper's epochs, the validated states of the last run (:func:`validated_states`)
+        whose raw map folds on some validation field (``"3 of 32"``; a record that validated the repaired map counts
+        its ``raw_folded_fields``) and the fields on which the shipped raw map folds (:func:`shipped_raw_folds`).
+    """
+    import pandas as pd
+
+    rows = []
+    for name, meta in metas.items():
+        spent = int(meta.get("cumulative_steps", meta.get("steps", 0)))
+        last = int(meta.get("steps", spent))  # the steps of the chain's last run
+        states = validated_states(meta)
+        folded = sum(has_folds(v, raw=True) for v in states)
+        rows.append({"model": name, "steps spent": spent,
+                     "shipped at step": spent - last + int(meta.get("selected_step", last)),
+                     "paper's epochs": int(paper_steps[name]),
+                     "validated states whose raw map folds": f"{folded} of {len(states)}",
+                     "validation fields on which the shipped raw map folds": "{} of {}".format(
+                         *shipped_raw_folds(meta))})
+    return pd.DataFrame(rows).set_index("model")
 
 
 def learning_summary(meta: dict, last: int = 3) -> dict:
@@ -497,7 +532,7 @@ def kept_rules(kept: dict) -> str:
 
 
 def learning_verdict(learn: dict, surs: dict) -> str:
-    """Whether each model was still improving when its budget ran out, from its validation curve.
+    """Whether each model's validation curve still fell at the end of its run, from its validation record.
 
     Parameters
     ----------
@@ -509,10 +544,11 @@ def learning_verdict(learn: dict, surs: dict) -> str:
     Returns
     -------
     str
-        One sentence for the models that were not still improving (their lowest plain mean came before their last
-        three validations: that mean and its step, and the range of the last three), one for each model that was
-        (its lowest mean came among the last three), and a note where a record holds no validation of its last
-        step.
+        One sentence for the models that reached no lower plain mean later in their run (their lowest came before
+        their last three validations: that mean and its step, and the range of the last three), one for each model
+        whose lowest mean came among the last three (it may still have been improving), and a note where a record
+        holds no validation of its last step. The sentences speak of one run per model, whose curve is noisy: they
+        say where its lowest value came, not whether more steps would have lowered it.
     """
     notes = []
     for name, v in learn.items():
@@ -525,9 +561,10 @@ def learning_verdict(learn: dict, surs: dict) -> str:
     if done:
         one = len(done) == 1
         if len(done) == len(learn) > 1:
-            subject = "Neither network was still"
+            subject = "In this one run per network, neither reached a lower plain mean after its lowest"
         else:
-            subject = "The " + _steps_text(done, " and the ") + (" was" if one else " were") + " no longer"
+            subject = ("The " + _steps_text(done, " and the ") + " reached no lower plain mean after "
+                       + ("its" if one else "their") + " lowest in " + ("its run" if one else "their runs"))
         best = []
         for k, n in enumerate(done):
             val, step = f"{learn[n]['best']:#.3g}", f"{learn[n]['best_step']:,}"
@@ -535,14 +572,14 @@ def learning_verdict(learn: dict, surs: dict) -> str:
             best.append(f"{whose} lowest plain mean, {val}, came at step {step}" if k == 0
                         else f"the {n}'s, {val}, at step {step}")
         ranges = [f"{learn[n]['last_range'][0]:#.3g} to {learn[n]['last_range'][1]:#.3g}" for n in done]
-        out.append(f"{subject} improving when {'its' if one else 'the'} budget ran out: " + _steps_text(best)
+        out.append(f"{subject}: " + _steps_text(best)
                    + (", before its" if one else ", each before its") + " last three validations, which range from "
                    + _steps_text(ranges, " and from ") + ".")
     for n in learn:
         if n not in done:
             v = learn[n]
-            out.append(f"The {n} was still improving: its lowest plain mean, {v['best']:#.3g}, came at step"
-                       f" {v['best_step']:,}, among its last three validations.")
+            out.append(f"The {n} may still have been improving: its lowest plain mean, {v['best']:#.3g}, came at"
+                       f" step {v['best_step']:,}, among its last three validations.")
     return " ".join(out + notes)
 
 

@@ -156,9 +156,13 @@ def score(summary: dict) -> tuple[int, float]:
     return tier, value
 
 
-def has_folds(summary: dict) -> bool:
+def has_folds(summary: dict, raw: bool = False) -> bool:
     """Whether a validation summary's maps folded on some held-out field: its ``folded_fields`` count, or in older
-    summaries, which do not record it, its ``n_flipped`` count of flipped elements."""
+    summaries, which do not record it, its ``n_flipped`` count of flipped elements.  With ``raw``, whether the
+    network's raw map folded: the ``raw_folded_fields`` count where the summary scored the repaired map
+    (``evaluate(..., repair=True)``), else the same count."""
+    if raw and "raw_folded_fields" in summary:
+        return (summary["raw_folded_fields"] or 0) > 0
     return (summary.get("folded_fields", summary.get("n_flipped")) or 0) > 0
 
 
