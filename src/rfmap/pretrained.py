@@ -25,10 +25,11 @@ def study_models() -> list[str]:
 
 def load_or_train(name: str, preset: str | None = None, *, out_dir=None, progress: bool = False) -> Surrogate:
     """The model a chapter of the book uses: the shipped weights at ``full`` scale (a shipped model's, or else a
-    study's, :data:`~rfmap.pretrained.STUDY_WEIGHTS`); at ``ci`` scale a tiny model
-    trained on the spot with the named config's ``ci`` preset (seconds; cached in the temporary directory and
-    reused while the configuration is unchanged), so every notebook runs end to end on a laptop CPU.
-    ``preset`` defaults to :func:`rfmap.training.config.scale`."""
+    study's, :data:`~rfmap.pretrained.STUDY_WEIGHTS`); at ``ci`` scale a tiny model trained on the spot with the
+    named configuration's ``ci`` preset (seconds; cached in the temporary directory and reused while the
+    configuration is unchanged), so every notebook runs end to end on a laptop CPU.  The :term:`scale` is the
+    ``RFMAP_SCALE`` setting that :func:`rfmap.training.config.scale` reads, and ``preset`` defaults to it; a
+    preset is a configuration's settings at one scale (:mod:`rfmap.training.config`)."""
     preset = preset or scale()
     if preset == "full":
         if name in study_models():

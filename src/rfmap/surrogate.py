@@ -407,8 +407,9 @@ class Surrogate:
         * ``refine=True``: choose the stretching vector :math:`\\alpha` after inference (the paper's Sec. 4.3);
         * ``repair=False``: return the network's map as it is, even folded (the default repairs folds and never
           returns a density map with a higher Std(ρ̃) than its input, see :mod:`rfmap.finish.quality`);
-        * ``native=True``: run the network on the requested grid itself, as the paper does.  With ``refine=True`` and
-          ``repair=False`` (every other option at its default) this is :term:`the paper's method`;
+        * ``native=True``: run the network on the requested grid itself, as the paper does.  With ``native=True``,
+          ``refine=True`` and ``repair=False`` (every other option at its default) a map is
+          :term:`the paper's method`;
         * ``polish=True``: finish a density map with the flow-based solver, for accuracy beyond the network's.
 
         Parameters

@@ -60,10 +60,12 @@ class FinishOptions:
 
 
 def finish(draft: Draft, options: FinishOptions = FinishOptions()) -> Draft:
-    """The stages after the map is computed: refine, repair, then polish, or for a density map judge and shorten.
+    """The stages of :mod:`rfmap.finish` after the map is computed, but for regrid: refine, repair, then polish,
+    or for a density map judge and shorten.
 
-    :meth:`rfmap.Surrogate.map` calls it with ``refine`` off: a network's map arrives refined when refinement is asked
-    for (``FinishOptions.refine``).
+    The regrid stage, between refine and repair, is run by :meth:`rfmap.Surrogate.map`, which alone can evaluate the
+    network on another working grid.  That method calls :func:`finish` with ``refine`` off: a network's map arrives
+    refined when refinement is asked for (``FinishOptions.refine``).
 
     A density map of a grid without ``polish`` is judged (:func:`rfmap.finish.stages.judge`); with ``repair`` a density
     map of a grid or a network's map of query points is shortened when it is no more equal than its input.

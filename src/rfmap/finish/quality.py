@@ -77,7 +77,8 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     -------
     dict
         ``std_rho_orig``, ``std_rho_map``, ``min_jacobian``; ``worse``: whether Std(ρ̃_map) exceeds
-        Std(ρ̃_orig) by more than the fraction :data:`QUALITY_MARGIN` and 1e-5 (or the map is not finite), i.e.
+        ``(1 + QUALITY_MARGIN) * Std(ρ̃_orig) + 1e-5`` (:data:`QUALITY_MARGIN`; the absolute 1e-5 covers float32
+        round-off) or the map is not finite, i.e.
         the map undid more than it did; and ``no_gain``: whether Std(ρ̃_map) is not below
         ``(1 - GAIN_RTOL) * Std(ρ̃_orig)`` (:data:`GAIN_RTOL`; or the map is not finite), i.e. the map did not make
         the density measurably more equal.  A map that is worse brings no gain; the identity brings none either, on

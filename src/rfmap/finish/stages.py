@@ -24,7 +24,36 @@ from .quality import density_quality
 from .query import repair_query, shorten_query
 from .report import RefineReport, RegridReport
 
-__all__ = ["regrid", "refine", "repair", "polish", "judge", "shorten"]
+__all__ = ["refine", "regrid", "repair", "polish", "judge", "shorten"]
+
+
+def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
+    r"""Weight refinement (paper Sec. 4.3): the map :math:`x + \mathcal{B}(x) \odot (\alpha^* \odot \psi(x))` with
+    :math:`\alpha^* = \arg\min_\alpha \mathcal{J}` (:func:`rfmap.finish.refine.refine_alpha`, the objective of the task,
+    :meth:`rfmap.tasks.base.Task.refine_objective`, settings :data:`rfmap.finish.refine.REFINE`).  :math:`\psi` is the network's displacement, or a classical map's :math:`u - x`
+    (:meth:`rfmap.finish.draft.Draft.displacement`); a given stretching vector is replaced.
+
+    Parameters
+    ----------
+    draft : Draft
+    bounds : (float, float), optional
+        Search interval of every component of :math:`\alpha` (default ``REFINE.bounds``).
+
+    Returns
+    -------
+    Draft
+        With ``report.alpha`` and ``report.refine`` (:class:`rfmap.finish.report.RefineReport`).
+    """
+    t0 = time.perf_counter()
+    res = draft.result
+    ref64 = torch.as_tensor(res.ref_points, dtype=torch.float64)
+    psi64, mask = draft.displacement()
+    elements = torch.as_tensor(res.elements)
+    obj = draft.task.refine_objective(ref64, psi64, elements, res.field, mask, draft.grid_n)
+    rr = refine_alpha(obj, res.dim, bounds=bounds or REFINE.bounds, tol=REFINE.tol)
+    mapped = apply_displacement(ref64, psi64, mask, torch.as_tensor(rr.alpha)).numpy()
+    return draft.then(mapped, time.perf_counter() - t0, alpha=rr.alpha.tolist(),
+                      refine=RefineReport(rr.objective_start, rr.objective, rr.evaluations))
 
 
 def regrid(draft: Draft, remap: Callable[[int], Draft], sides: Sequence[int]) -> Draft:
@@ -72,35 +101,6 @@ def _improves(draft: Draft) -> bool:
         return True
     m = draft.result.metrics()
     return bool(m.std_rho_map < m.std_rho_orig)
-
-
-def refine(draft: Draft, bounds: tuple[float, float] | None = None) -> Draft:
-    r"""Weight refinement (paper Sec. 4.3): the map :math:`x + \mathcal{B}(x) \odot (\alpha^* \odot \psi(x))` with
-    :math:`\alpha^* = \arg\min_\alpha \mathcal{J}` (:func:`rfmap.finish.refine.refine_alpha`, the objective of the task,
-    :meth:`rfmap.tasks.base.Task.refine_objective`, settings :data:`rfmap.finish.refine.REFINE`).  :math:`\psi` is the network's displacement, or a classical map's :math:`u - x`
-    (:meth:`rfmap.finish.draft.Draft.displacement`); a given stretching vector is replaced.
-
-    Parameters
-    ----------
-    draft : Draft
-    bounds : (float, float), optional
-        Search interval of every component of :math:`\alpha` (default ``REFINE.bounds``).
-
-    Returns
-    -------
-    Draft
-        With ``report.alpha`` and ``report.refine`` (:class:`rfmap.finish.report.RefineReport`).
-    """
-    t0 = time.perf_counter()
-    res = draft.result
-    ref64 = torch.as_tensor(res.ref_points, dtype=torch.float64)
-    psi64, mask = draft.displacement()
-    elements = torch.as_tensor(res.elements)
-    obj = draft.task.refine_objective(ref64, psi64, elements, res.field, mask, draft.grid_n)
-    rr = refine_alpha(obj, res.dim, bounds=bounds or REFINE.bounds, tol=REFINE.tol)
-    mapped = apply_displacement(ref64, psi64, mask, torch.as_tensor(rr.alpha)).numpy()
-    return draft.then(mapped, time.perf_counter() - t0, alpha=rr.alpha.tolist(),
-                      refine=RefineReport(rr.objective_start, rr.objective, rr.evaluations))
 
 
 def repair(draft: Draft, *, cold_polish: bool = False) -> Draft:
