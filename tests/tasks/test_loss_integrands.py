@@ -65,3 +65,22 @@ def test_batch_loss_terms_of_an_untrained_network_are_those_of_the_identity():
     assert parts["fold"] == 0 and parts["mu2"] == pytest.approx(0, abs=1e-12)
     assert total == pytest.approx(parts["density"], rel=1e-6)
     assert float(L.weighted_mean(terms["density"], terms["weight"])) == pytest.approx(parts["density"], rel=1e-5)
+
+
+@pytest.mark.parametrize("spec", [TaskSpec("density", 2, "free"), TaskSpec("beltrami", 2, "fixed")])
+def test_batch_loss_terms_without_a_model_are_those_of_the_identity(spec):
+    """model=None gives the identity map's terms, those of an untrained (zero-head) network: a Beltrami batch keeps
+    its whole mu mismatch, |mu_in|^2, and nothing is folded."""
+    from rfmap.nn.model import MultiResUNet
+    from rfmap.tasks import batch_loss_terms
+
+    batch = sample_batch(spec, seed=2, step=0, indices=range(2), n=9)
+    weights = LossWeights(beltrami=0.1, fold=1.0, area=1.0)
+    total, parts, mapped, _ = batch_loss_terms(None, spec, batch, weights)
+    net = MultiResUNet(n_params=batch.inputs.shape[1] - 2, base=4, depth=2)
+    net_total, net_parts, _, _ = batch_loss_terms(net, spec, batch, weights)
+    assert torch.equal(mapped, batch.ref)
+    assert total == pytest.approx(net_total, rel=1e-6)
+    assert parts.keys() == net_parts.keys() and parts["fold"] == 0
+    if spec.kind == "beltrami":
+        assert parts["beltrami"] > 0

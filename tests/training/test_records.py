@@ -35,6 +35,9 @@ def test_collect_reads_curves_and_keeps_the_final_point_only_for_the_last_state(
     v = S.study_values(data)
     assert v["winner"] == "A" and v["margin"] == pytest.approx(0.6 / 0.4) and v["run1_steps"] == 12
     assert v["run0_best_at_end"] and v["run1_best_at_end"] and v["still_improving"]  # both best at the end
+    # per step: B stopped at step 12 (score 0.6); A's score there lies between its 0.5 at 10 and 0.4 at 20
+    assert v["short_label"] == "B" and v["short_step"] == 12 and v["short_score"] == 0.6
+    assert v["long_at_short"] == pytest.approx(0.48)
     data["runs"]["B"]["score"] = [0.6, 0.7]
     v = S.study_values(data)
     assert v["run0_best_at_end"] and not v["run1_best_at_end"] and not v["still_improving"]
@@ -90,8 +93,8 @@ def test_budget_markdown_marks_the_fields_of_a_shrinking_batch_as_an_upper_bound
 
     metas = {"a": {"config": {"batch": 4}}, "b": {"config": {"batch": 8, "batch_points": 20000}}}
     assert S.shrinking_batches(metas) == ["b"]
-    budget = pd.DataFrame({"model": ["a", "b"], "steps": [100, 200], "× paper preset's fields": [0.5, 23.41]}
+    budget = pd.DataFrame({"model": ["a", "b"], "steps": [100, 200], "× fields, assumed batch": [0.5, 23.41]}
                           ).set_index("model")
-    lines = S.budget_markdown(budget, metas, ["steps", "× paper preset's fields"]).splitlines()
+    lines = S.budget_markdown(budget, metas, ["steps", "× fields, assumed batch"]).splitlines()
     assert lines[2] == "| a | 100 | 0.5 |"
     assert lines[3] == "| b | 200 | ≤ 23.4 |"

@@ -106,17 +106,19 @@ def test_loss_terms_figure_draws_each_models_own_terms_and_names_the_zero_ones()
         if ax.get_subplotspec() is not None and ax.axison:
             spec = ax.get_subplotspec()
             cells[spec.rowspan.start, spec.colspan.start] = ax.get_title()
-    # 12 grid columns: the DEQ model's three panels fill one row (4 columns each), the Beltrami model's two the next
-    assert cells[0, 0].startswith("DEQ: the map") and "density mismatch" in cells[0, 4]
-    assert "Beltrami energy" in cells[0, 8] and len(cells) == 5  # the zero fold penalty is not drawn
-    assert cells[1, 0].startswith("Beltrami: the map") and "mismatch" in cells[1, 6]
-    assert all(ax.axison for ax in fig.axes if ax.get_subplotspec() is not None)  # no empty panel
+    # one grid of 3 equal columns: the DEQ model's three panels fill the first row, the Beltrami model's two the
+    # first two cells of the next, its map below the other map at the same size
+    assert cells[0, 0].startswith("DEQ: the map") and "density mismatch" in cells[0, 1]
+    assert "Beltrami energy" in cells[0, 2] and len(cells) == 5  # the zero fold penalty is not drawn
+    assert cells[1, 0].startswith("Beltrami: the map") and "mismatch" in cells[1, 1]
+    assert all(ax.get_subplotspec().colspan.stop - ax.get_subplotspec().colspan.start == 1
+               for ax in fig.axes if ax.get_subplotspec() is not None)  # every panel one cell wide
     note = fig.get_supxlabel().replace("\n", " ")
     assert "fold penalty (DEQ)" in note and "fold penalty (Beltrami)" in note
     plt.close(fig)
 
 
-def test_loss_terms_figure_fills_four_panels_two_by_two_and_centres_a_short_last_row():
+def test_loss_terms_figure_puts_every_row_on_one_grid_of_equal_cells():
     spec = TaskSpec("density", 2, "square")
     batch = sample_batch(spec, seed=0, step=0, indices=range(1), n=9)
     mapped = batch.ref + 0.2 * torch.randn_like(batch.ref)  # large enough to fold: every term drawn
@@ -127,10 +129,10 @@ def test_loss_terms_figure_fills_four_panels_two_by_two_and_centres_a_short_last
                             n=9)
     spans = sorted((ax.get_subplotspec().rowspan.start, ax.get_subplotspec().colspan.start,
                     ax.get_subplotspec().colspan.stop) for ax in fig.axes if ax.get_subplotspec() is not None)
-    # 5 panels (map and four terms) in rows of 3 and 2, so 12 grid columns of 4 per panel; the 4 of the DEQ model
-    # two by two, 6 columns each; the short row of two is centred at the same width as the row above
-    assert spans == [(0, 0, 6), (0, 6, 12), (1, 0, 6), (1, 6, 12),
-                     (2, 0, 4), (2, 4, 8), (2, 8, 12), (3, 2, 6), (3, 6, 10)]
+    # 5 panels (map and four terms) in rows of 3 and 2, so a grid of 3 columns; the 4 of the DEQ model two by two
+    # in the same cells, filled from the left; every short row leaves its last cell empty
+    assert spans == [(0, 0, 1), (0, 1, 2), (1, 0, 1), (1, 1, 2),
+                     (2, 0, 1), (2, 1, 2), (2, 2, 3), (3, 0, 1), (3, 1, 2)]
     plt.close(fig)
 
 

@@ -15,6 +15,8 @@ import json
 import shlex
 from pathlib import Path
 
+import numpy as np
+
 from ..core.inputs import preprocess_density
 from ..core.mesh import grid_points
 from ..core.result import MapResult
@@ -110,7 +112,10 @@ def study_values(study: dict) -> dict:
     ``run{i}_label``, ``run{i}_best_at_end`` (whether the run's best score is that of its last validation, i.e. it
     was still improving when it stopped); ``start`` (the score at step 0, where validated: the weights a continued
     run started from); ``winner`` (the label of the run with the lowest best score), ``loser``, ``margin`` (the
-    loser's best score over the winner's), ``still_improving`` (every run's best at its end) and ``minutes``."""
+    loser's best score over the winner's), ``still_improving`` (every run's best at its end) and ``minutes``. With
+    two runs, also the scores at equal steps: ``short_label`` (the run that took fewer steps), ``short_step`` and
+    ``short_score`` (its last validation) and ``long_at_short`` (the other run's score at that step, interpolated
+    linearly between its validations)."""
     out: dict = {}
     best = {}
     for i, (label, r) in enumerate(study["runs"].items()):
@@ -126,6 +131,11 @@ def study_values(study: dict) -> dict:
     out.update(winner=order[0], loser=order[-1], margin=best[order[-1]] / best[order[0]],
                minutes=max(r["total_time"] for r in study["runs"].values()) / 60.0,
                still_improving=all(out[f"run{i}_best_at_end"] for i in range(len(best))))
+    if len(study["runs"]) == 2:  # per step: the shorter run's last validation against the other at that step
+        short, long = sorted(study["runs"].items(), key=lambda kv: kv[1]["step"][-1])
+        step = short[1]["step"][-1]
+        out.update(short_label=short[0], short_step=step, short_score=short[1]["score"][-1],
+                   long_at_short=float(np.interp(step, long[1]["step"], long[1]["score"])))
     return out
 
 
@@ -172,7 +182,8 @@ def budget_table(metas: dict, paper_steps: dict, paper_batch: dict):
     """One row per model (a :class:`pandas.DataFrame`): runs, steps, fields seen and wall time (hours) over the
     whole chain, the paper's epochs and the fields of the ``paper`` preset (an epoch read as one step on a freshly
     drawn batch of the preset's size, since the paper gives no batch size), the ratios of steps to epochs
-    (``× paper's epochs``) and of fields (``× paper preset's fields``), and the teacher of the last run."""
+    (``× paper's epochs``) and of fields (``× fields, assumed batch``: the preset's batch is this project's
+    assumption), and the teacher of the last run."""
     import pandas as pd
 
     rows = []
@@ -182,7 +193,7 @@ def budget_table(metas: dict, paper_steps: dict, paper_batch: dict):
                      "hours": b["hours"], "paper's epochs": paper_steps[name],
                      "paper preset's fields": paper_steps[name] * paper_batch[name],
                      "× paper's epochs": b["steps"] / paper_steps[name],
-                     "× paper preset's fields": b["samples"] / (paper_steps[name] * paper_batch[name]),
+                     "× fields, assumed batch": b["samples"] / (paper_steps[name] * paper_batch[name]),
                      "teacher": teacher_of(meta)})
     return pd.DataFrame(rows).set_index("model")
 
@@ -193,15 +204,16 @@ def shrinking_batches(metas: dict) -> list[str]:
     return [k for k, m in metas.items() if (m.get("config") or {}).get("batch_points", 0) > 0]
 
 
-def budget_markdown(budget, metas: dict, columns: list[str]) -> str:
+def budget_markdown(budget, metas: dict, columns: list[str], headers: dict | None = None) -> str:
     """The ``columns`` of a :func:`budget_table` as Markdown (:func:`to_markdown`), with the fields-seen ratio of
-    each model of :func:`shrinking_batches` marked as the upper bound it is (``≤ 3.24``)."""
+    each model of :func:`shrinking_batches` marked as the upper bound it is (``≤ 3.24``); ``headers`` renames
+    columns for the reader (``{"× fields, assumed batch": "× fields at an assumed batch of 8"}``)."""
     shown = budget[columns].astype(object)
-    col = "× paper preset's fields"
+    col = "× fields, assumed batch"
     if col in columns:
         for k in shrinking_batches(metas):
             shown.at[k, col] = "≤ " + format_sig(float(budget.at[k, col]), 3)
-    return to_markdown(shown)
+    return to_markdown(shown.rename(columns=headers or {}))
 
 
 def to_markdown(df) -> str:

@@ -102,8 +102,9 @@ def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0, n
     (``"DEQ model"``) to ``(mapped, elements, terms, keys)`` as ``rfmap.tasks.batch_loss_terms`` returns them, with
     the terms of its loss to draw. Each model's panels (its map, then each of its terms that is not zero on every
     element of the sample) form a block of rows below the previous model's, as few rows of at most ``ncols``
-    panels as hold them, filled evenly; a shorter last row is centred, so that no cell of the figure is left
-    empty. The terms that are zero everywhere are named in a line under the panels instead of drawn. 7.2 inches
+    panels as hold them, filled evenly. Every row shares one grid of equal cells, as many as the widest row has
+    panels, filled from the left: the maps of all models sit in the first column at one size, and a shorter row
+    leaves its last cells empty. The terms that are zero everywhere are named in a line under the panels instead of drawn. 7.2 inches
     wide. Returns the figure."""
     import matplotlib.pyplot as plt
     import torch
@@ -118,18 +119,16 @@ def loss_terms_figure(columns: dict, *, n: int | None = None, sample: int = 0, n
         drawn[title] = [k for k in keys if not zero(terms, k)]
         zeros += [f"{LOSS_TERMS[k].split(' $')[0].split(' relu')[0]} ({title})" for k in keys if zero(terms, k)]
     rows = {title: _panel_rows(1 + len(keys), ncols) for title, keys in drawn.items()}
-    widest = max(max(r) for r in rows.values())
-    grid = int(np.lcm.reduce(np.arange(1, widest + 1))) * 2  # grid columns: every row width divides it, centred
-    heights = [0.86 * 7.2 / r[0] for r in rows.values() for _ in r]  # a panel about as tall as wide, with its title
-    fig = plt.figure(figsize=(7.2, sum(heights) + (0.3 if zeros else 0)), layout="constrained")
-    gs = fig.add_gridspec(len(heights), grid, height_ratios=heights)
+    widest = max(max(r) for r in rows.values())  # the columns of the one grid of every row
+    nrows = sum(len(r) for r in rows.values())
+    height = 0.86 * 7.2 / widest  # a panel about as tall as wide, with its title
+    fig = plt.figure(figsize=(7.2, nrows * height + (0.3 if zeros else 0)), layout="constrained")
+    gs = fig.add_gridspec(nrows, widest)
     row = 0
     for title, (mapped, elements, terms, _) in columns.items():
         panels = []
-        span = grid // rows[title][0]  # one panel width for the whole block
         for k in rows[title]:
-            start = (grid - k * span) // 2
-            panels += [fig.add_subplot(gs[row, start + j * span:start + (j + 1) * span]) for j in range(k)]
+            panels += [fig.add_subplot(gs[row, j]) for j in range(k)]
             row += 1
         plot_loss_terms(panels, mapped, elements, terms, sample=sample, n=n, keys=drawn[title])
         panels[0].set_title(f"{title}: the map $u$")
