@@ -217,7 +217,7 @@ def scan_points(n, repeat, threads):
                     J.append(r.info["refine_objective"])
                     evals += r.info["refine_evaluations"]
                 seconds = (time.perf_counter() - t0) / len(ramps)
-            out[label] = (f"{label}: {folded} folded, mean J {np.mean(J):.3g}, {evals / len(ramps):.0f} evaluations, "
+            out[label] = (f"{label}: {folded} folded, mean J {np.mean(J):#.3g}, {evals / len(ramps):.0f} evaluations, "
                           f"{seconds:.1f} s per map")
         key = f"{chosen} points"
         rows.append(_row(f"{model}, the {len(ramps)} held-out steep ramps, 3D N = {n}", out[key],
