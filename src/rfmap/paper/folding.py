@@ -34,8 +34,8 @@ def repaired_mu(raw, repaired) -> dict:
     r"""The Beltrami coefficient of a 2D map before and after its repair (two :class:`rfmap.core.result.MapResult`
     of one mesh): ``moved``, the triangles with a vertex the repair moved; ``same_outside``, whether :math:`\mu` is
     unchanged on every other triangle; ``max_mu``, the largest :math:`|\mu|` of the repaired map on the moved
-    triangles; ``over_cap``, how many of them end above the repair's cap :math:`1 - \delta`
-    (``rfmap.finish.repair.DELTA``), which the rebuilt map need not meet exactly."""
+    triangles; ``over_cap``, how many of them end above :math:`1 - \delta`
+    (``rfmap.finish.repair.DELTA``), the cap of the truncated coefficient, which the rebuilt map need not meet."""
     ref, el = torch.as_tensor(raw.ref_points), torch.as_tensor(raw.elements)
     mu = [np.abs(beltrami_coefficient(ref, torch.as_tensor(r.mapped_points), el).numpy()) for r in (raw, repaired)]
     moved = (np.abs(repaired.mapped_points - raw.mapped_points).max(1) > 0)[raw.elements].any(1)

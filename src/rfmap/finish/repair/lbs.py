@@ -37,7 +37,9 @@ from ...solvers.lbs import solve_lbs
 __all__ = ["DELTA", "cap_mu", "untangle_boundary", "lbs_repair"]
 
 
-#: Margin of the μ-truncation: :math:`|\mu| \le 1 - \delta` after repair.
+#: Margin of the μ-truncation: the *truncated coefficient* that the LBS is given satisfies
+#: :math:`|\mu| \le 1 - \delta`.  The map rebuilt from it is only checked to be fold-free
+#: (:math:`|\mu| < 1` on every triangle); its own :math:`|\mu|` may exceed :math:`1 - \delta`.
 DELTA = 0.1
 
 
@@ -112,8 +114,7 @@ def lbs_repair(mapped: np.ndarray, n: int, boundary: str, delta: float = DELTA,
         ``mapped`` keeps them there and the untangling only shortens displacements; if a vertex has passed its
         neighbour along a wall, the walls slide instead (:func:`rfmap.solvers.solve_lbs`, ``boundary="square"``).
         Keeping the map's own boundary needs one factorisation for both components, where sliding walls need one
-        per component: at N = 160 on folded ``deq2d-square`` outputs, half the time and a 2 % lower
-        Std(ρ̃_map) than sliding walls.
+        per component.
 
     Returns
     -------

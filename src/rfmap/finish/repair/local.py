@@ -31,22 +31,20 @@ __all__ = ["LOCAL_RINGS", "LOCAL_MAX_FRACTION", "LOCAL_MIN_GIVE_UP", "LOCAL_MAX_
 LOCAL_RINGS = (2, 4, 8, 16)
 
 
-#: a patch larger than this fraction of the vertices (and than :data:`LOCAL_MIN_GIVE_UP` vertices) is given up for
-#: the global :func:`~rfmap.finish.repair.lbs.lbs_repair`
+#: A patch is given up for the global :func:`~rfmap.finish.repair.lbs.lbs_repair` when it would solve for more
+#: than max(``LOCAL_MAX_FRACTION`` · P, :data:`LOCAL_MIN_GIVE_UP`) vertices, P the grid's vertex count.
 LOCAL_MAX_FRACTION = 0.25
 
 
-#: the number of vertices a patch may always grow to before it is given up, whatever :data:`LOCAL_MAX_FRACTION` of
-#: a small grid's vertices comes to
+#: The floor of the patch limit of :data:`LOCAL_MAX_FRACTION`, in vertices.
 LOCAL_MIN_GIVE_UP = 2000
 
 
-#: more truncated triangles than this fraction of all (and than :data:`LOCAL_MIN_CAPPED`) go straight to the global
-#: :func:`.lbs_repair`
+#: Folds go straight to the global :func:`.lbs_repair`, with no patch tried, when more than
+#: max(``LOCAL_MAX_CAPPED`` · T, :data:`LOCAL_MIN_CAPPED`) triangles are truncated, T the grid's triangle count.
 LOCAL_MAX_CAPPED = 0.01
 
-#: the number of truncated triangles a patch may always start from, whatever :data:`LOCAL_MAX_CAPPED` of a small
-#: grid's triangles comes to
+#: The floor of the limit of :data:`LOCAL_MAX_CAPPED`, in triangles.
 LOCAL_MIN_CAPPED = 100
 
 
