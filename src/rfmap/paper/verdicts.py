@@ -7,7 +7,7 @@ printed formula gives another input) is marked
 *n/c* (not comparable) and is not scored against the paper's value; it is compared instead by its *Std ratio*
 (:func:`std_ratio`), the share of the input's spread the map leaves,
 :math:`\mathrm{Std}(\tilde\rho_{\text{map}}) / \mathrm{Std}(\tilde\rho_{\text{orig}})`, and it is *worse by Std
-ratio* where the paper's method leaves a larger share of its input's spread than the paper's map leaves of the
+ratio* where :term:`the paper's method` leaves a larger share of its input's spread than the paper's map leaves of the
 paper's input.
 
 The verdict of an item (:func:`verdict`) counts, over its comparable cases and its scored metrics, the pairs where
@@ -119,7 +119,7 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     paper's (n/c), a clause on those cases.
 
     The tally ``(k of n)`` counts (case, metric) pairs, not cases: ``n`` is the number of comparable pairs that have a
-    paper value, ``k`` those where the paper's method is at most the paper's value; it is written so even where
+    paper value, ``k`` those where :term:`the paper's method` is at most the paper's value; it is written so even where
     ``k`` is ``0`` or ``n``.  With n/c cases the word is scoped to the comparable cases and followed by
     :func:`nc_clause`: whether each n/c case's Std ratio (:func:`std_ratio`, the share of the input's spread the map
     leaves) by the paper's method is above the paper's (``nc_worse``, one flag per n/c case, ``True`` where it is);
