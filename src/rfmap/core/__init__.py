@@ -5,6 +5,5 @@ meshes and surfaces, and where the network runs.
 :mod:`~rfmap.core.metrics` (the paper's measures of a map), :mod:`~rfmap.core.mesh` (grids and meshes),
 :mod:`~rfmap.core.inputs` (checking and normalising inputs), :mod:`~rfmap.core.result`
 (:class:`~rfmap.core.result.MapResult` and its exports), :mod:`~rfmap.core.folds` and :mod:`~rfmap.core.surface`
-(folded elements, crossing boundaries) and :mod:`~rfmap.core.device` (CPU or GPU, threads).  The package's own
-messages write their counts through :mod:`~rfmap.core.wording`, which no user needs.
+(folded elements, crossing boundaries) and :mod:`~rfmap.core.device` (CPU or GPU, threads).
 """

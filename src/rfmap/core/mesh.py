@@ -81,10 +81,9 @@ def check_n(n: int, minimum: int = 3) -> int:
     return int(n)
 
 
-#: Bytes of memory per grid vertex that a map needs, by dimension: 4096 bytes in both 2D and 3D (kept per dimension
-#: so that the two can differ).  It is the peak memory of the heaviest single-map pipelines (peak resident size above
-#: that of the imported package), with a margin over the measured peak (the book's page
-#: :doc:`Design decisions </book/design>` gives the margin per pipeline).
+#: Bytes of memory per grid vertex that a map needs, by dimension.  It is the peak memory of the heaviest
+#: single-map pipelines (peak resident size above that of the imported package), with a margin over the measured
+#: peak (the book's page :doc:`Design decisions </book/design>` gives the margin per pipeline).
 BYTES_PER_VERTEX = {2: 4096, 3: 4096}
 
 
@@ -354,13 +353,11 @@ def multilinear(planes: np.ndarray, u: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray, shape (P, C)
-        In Fortran order (each channel contiguous), as :func:`interpolate` returns it: the reductions over the
-        points that the solvers take of a velocity, and of the points it moves, run along contiguous columns.
+        In Fortran order (each channel contiguous), as :func:`interpolate` returns it.
 
     Warnings
     --------
-    ``u`` is modified in place (its callers in the solvers pass points computed for the call, so no copy is made);
-    pass ``u.copy()`` to keep the points.
+    ``u`` is modified in place; pass ``u.copy()`` to keep the points.
     """
     shape = planes.shape[1:]
     d = len(shape)
@@ -380,7 +377,10 @@ def multilinear(planes: np.ndarray, u: np.ndarray) -> np.ndarray:
         corners = [(off + b * strides[j], (f if b else g) if w is None else w * (f if b else g))
                    for off, w in corners for b in (0, 1)]
     idx = [k if off == 0 else k + off for off, _ in corners]
-    out = np.empty((len(flat), len(u)))  # channel by channel: returned transposed
+    # channel by channel, returned transposed (Fortran order): the solvers' reductions over the points of a velocity,
+    # and of the points it moves, then run along contiguous columns; the solvers pass points computed for the call,
+    # so u is overwritten rather than copied
+    out = np.empty((len(flat), len(u)))
     for plane, acc in zip(flat, out):
         np.take(plane, idx[0], out=acc)
         acc *= corners[0][1]

@@ -307,6 +307,10 @@ def _wall_coefficients(values: np.ndarray, axis: int) -> np.ndarray:
 def rotational_share(ref, mapped) -> float:
     r"""The share of a map's displacement that is not a gradient: :math:`\|\psi - P\psi\| / \|\psi\|`.
 
+    What it is for: two density-equalizing maps of the same density can differ by a rotational part of their
+    displacements, which this share measures (0 for a displacement that is a gradient); it tells the maps of
+    methods that move along gradients, such as the diffusion method, from those that do not.
+
     The displacement :math:`\psi = u - \mathrm{id}` of a map of the ``N``-grid of the unit square or cube whose
     boundary vertices stay on their walls (``boundary="square"``) is expanded, component :math:`i` in sines along
     axis :math:`i` and cosines along the others (the series that vanish on the walls normal to that axis).  A

@@ -34,7 +34,8 @@ def _log_uniform(rng: np.random.Generator, lo: float, hi: float, size) -> np.nda
 
 @dataclass(frozen=True)
 class RandomDensityConfig:
-    r"""Ranges of the random training densities (paper Sec. 5.2; 3D: modes [4, 40], frequencies [0.1, 5]).
+    r"""Ranges of the random training densities (paper Sec. 5.2; 3D: modes [4, 40], frequencies [0.1, 5]).  The
+    generator they feed, :class:`RandomDensity`, is the one of the paper's Sec. 4.1; Sec. 5.2 gives its ranges.
 
     Attributes
     ----------
