@@ -312,13 +312,12 @@ SUMMARY = [
      ("07_resolution_2d", "Run on the grid sides of Table 6, some of them outside the sides it was trained on, it "
       "meets the paper's Std(ρ̃_map) at {t6_std_rho_map_met}."),
      ("06_dem_deq_2d", "The rectangular peak, whose rectangle the paper does not define, is left out of these "
-      "counts; on our rectangle the network leaves {t4_nc} with the square boundary, and {t5_nc} with the free "
-      "one.")],
+      "counts; the footnotes of Tables 4 and 5 give its Std ratio on our rectangle beside the paper's.")],
     [("09_dem_3d", "*3D density maps (Tables 7 to 9).* In 3D the network's Std(ρ̃_map) is at most the "
       "paper's on {t7_std_rho_map_met} comparable densities with the cube boundary, on {t8_std_rho_map_met} with "
       "the free one, and at {t9_std_rho_map_met} grid sides of Table 9. The rectangular prism peak is left out: "
-      "its formula as the paper prints it does not give the paper's input, and on it the network leaves {t7_nc} "
-      "with the cube boundary and {t8_nc} with the free one.")],
+      "its formula as the paper prints it does not give the paper's input; the footnotes of Tables 7 and 8 give "
+      "its Std ratio beside the paper's.")],
     [("06_dem_deq_2d", "*Classical solvers.* On the same meshes the flow solver leaves a lower Std(ρ̃_map) than "
       "the network on {flow_std_lead} of Tables 4 and 5,"),
      ("07_resolution_2d", "at {flow_std_lead} of Table 6"),
@@ -331,7 +330,8 @@ SUMMARY = [
      ("05_beltrami_reconstruction", "the paper's method takes {t2_time_ratio:.2g} times as long as the Linear "
       "Beltrami Solver per Beltrami map."),
      ("11_fast_classical_and_hybrid", "On the grids that chapter 11 quotes (the square at N = {n2}, the cube at "
-      "N = {n3}) the network's default map takes {sur_median2} and {sur_median3} times the flow solver's time on "
+      "N = {n3}) the network's default map, which skips the paper's refinement and the symmetry average "
+      "and so is the fastest of the network's maps, takes {sur_median2} and {sur_median3} times the flow solver's time on "
       "the median field, but leaves {sur_std_vs_flow2} and {sur_std_vs_flow3} times its Std(ρ̃_map). The "
       "paper's times are network inference on a GPU and do not compare with these.")],
 ]
@@ -428,25 +428,19 @@ def reproduction(root: Path = ROOT) -> str:
     for it in items:
         if it["notebook"].startswith("notebooks/") and it.get("output"):
             chapters.setdefault(Path(it["notebook"]).stem, (it, []))[1].append(numbers[it["label"]])
-    lines = []
-    for scale in ("ci", "full"):
-        info = times.get(scale) or {}
-        if info.get("seconds"):
-            where = ", beside the test suite" if scale == "ci" else ""
-            listed = [v for stem, v in info["seconds"].items() if stem in chapters]
-            lines.append(f"* `{scale}`: {_cell(info.get('machine', '?'))}, {info.get('date', '?')}{where}; "
-                         f"all {len(info['seconds'])} chapters of the book together "
-                         f"{_duration(sum(info['seconds'].values()))} (the {len(listed)} listed here: "
-                         f"{_duration(sum(listed))}).")
-        else:
-            lines.append(f"* `{scale}`: not measured yet (`python scripts/chapter_times.py collect --scale {scale} "
-                         f"...`).")
-    lines += ["", "| Chapter | Paper items | `NB=` | Time at `full` | Time at `ci`, beside the test suite |",
-              "| --- | --- | --- | --- | --- |"]
+    info = times.get("full") or {}
+    if info.get("seconds"):
+        listed = [v for stem, v in info["seconds"].items() if stem in chapters]
+        lines = [f"Measured on {_cell(info.get('machine', '?'))}, {info.get('date', '?')}: the {len(listed)} "
+                 f"chapters listed here together {_duration(sum(listed))}, all {len(info['seconds'])} chapters of "
+                 f"the book {_duration(sum(info['seconds'].values()))}."]
+    else:
+        lines = ["Not measured yet (`python scripts/chapter_times.py collect --scale full ...`)."]
+    lines += ["", "| Chapter | Paper items | `NB=` | Time at `full` |", "| --- | --- | --- | --- |"]
     for stem, (it, labels) in sorted(chapters.items()):
-        t = [(times.get(scale) or {}).get("seconds", {}).get(stem) for scale in ("full", "ci")]
+        t = (times.get("full") or {}).get("seconds", {}).get(stem)
         lines.append(f"| {_chapter_link(it, root, in_toc, chapter_title(it['notebook'], root))} | "
-                     f"{', '.join(labels)} | `{stem}` | {_duration(t[0])} | {_duration(t[1])} |")
+                     f"{', '.join(labels)} | `{stem}` | {_duration(t)} |")
     return "\n".join(lines) + "\n"
 
 
@@ -479,8 +473,7 @@ def render(root: Path = ROOT) -> str:
         "",
         "Every number of the scoreboard is pasted from the chapter that computes it, executed in the same build as "
         "this page and at its scale (`RFMAP_SCALE`). At `ci` scale tiny models run on small grids and the numbers "
-        "only show that the code runs; a grid side the chapter runs in place of the paper's is named in the "
-        "chapter's table. The chapter times at the end of the page were measured apart, on the dates they give. The "
+        "only show that the code runs. The chapter times at the end of the page were measured apart, on the dates they give. The "
         "introduction shows the same scoreboard in short, as the median over the cases of each column's ratio to the "
         "paper's value.",
         "",
@@ -504,9 +497,8 @@ def render(root: Path = ROOT) -> str:
         "environment, `RFMAP_SCALE` as given: `full` is the default); the executed copy, with its outputs, goes to "
         "`_build/chapters/`, and the chapter writes its figures and tables to `book/figures/`: "
         "`make chapter NB=05_beltrami_reconstruction RFMAP_SCALE=full` reruns chapter 05, and the column `NB=` "
-        "gives the name of each. The times are wall times of the whole chapter; the `ci` times were measured while "
-        "the tests ran beside the chapters on the same cores, so they can exceed the `full` ones. "
-        "{doc}`reproduce` tells how they were measured.",
+        "gives the name of each. The times are wall times of the whole chapter at `full` scale; {doc}`reproduce` "
+        "tells how they were measured.",
         "",
         reproduction(root).rstrip("\n"),
     ]

@@ -171,11 +171,15 @@ def nc_clause(nc_worse: list[bool], factors: list[float] | None = None) -> str:
     '2 of the 3 n/c cases are worse by Std ratio'
     >>> print(nc_clause([True], [1.93]))
     the n/c case's Std ratio is 1.9 times the paper's
+    >>> print(nc_clause([False], [0.65]))
+    the n/c case's Std ratio is 0.65 times the paper's
     >>> print(nc_clause([True, False], [1.61, 0.9]))
     1 of the 2 n/c cases is worse by Std ratio, 1.6 times the paper's
     """
     if not nc_worse:
         return ""
+    if len(nc_worse) == 1 and factors:  # one n/c case: its ratio to the paper's, better or worse
+        return f"the n/c case's Std ratio is {float(f'{factors[0]:.2g}'):g} times the paper's"
     worst = max((f for f, w in zip(factors or [], nc_worse) if w), default=None)
     size = f"{float(f'{worst:.2g}'):g} times the paper's" if worst is not None else ""
     if len(nc_worse) == 1:
