@@ -165,7 +165,7 @@ def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], 
     if len(repeat) > 1:
         k = len(repeat) - 1
         needs = [f"# needs the weights that {'the first run' if k == 1 else f'the first {k} runs'} of the folded "
-                 "list below write"]
+                 f"list below {'writes' if k == 1 else 'write'}"]
     lines += ["", "```bash", *needs, wrap(repeat[-1][1]), "```", ""]
     if len(repeat) == 1:
         return lines
