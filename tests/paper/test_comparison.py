@@ -215,8 +215,9 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     nc = "20 % of its input's spread against the paper's 18.7 % (1.1 times as much)"
     assert v["nc"] == nc.replace(" %", "\u00a0%")  # a per cent sign never wraps away from its number
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.09
+    # a better n/c case is given by its ratio too: 0.15 / 0.1875 = 0.8
     assert c.verdict_word() == (
-        "reproduced on the comparable cases (1 of 1); the n/c case is not worse by Std ratio")
+        "reproduced on the comparable cases (1 of 1); the n/c case's Std ratio is 0.8 times the paper's")
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.12
     # the means beside the verdict are over the comparable case only
     assert (v["std_rho_map_native"], v["std_rho_map_paper"]) == ("0.07000", "0.08000")
