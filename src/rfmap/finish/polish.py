@@ -41,6 +41,13 @@ removes it with :func:`rfmap.solvers.solve_flow` started from :math:`u_0`:
    book's page *Design decisions*).  The guard therefore runs the cold flow after every warm one and keeps the map
    with the lower :math:`\mathrm{Std}(\tilde\rho_{\text{map}})`; the report says which (``kept``) and records both.
    The polished map is never worse than the flow-based solver's, at the price of that solver's time on top.
+
+The report of :func:`polish_map` holds ``start`` (``"warm"`` or ``"cold"``), ``reason`` (why cold, else ``None``),
+``smoothed`` (whether the warm flow started from the smoothed map), ``tol``, ``passes``, ``steps``, ``std_history``
+(of the flow whose map is returned), ``kept`` (``"warm"`` or ``"cold"``: the flow whose map is returned), ``time``
+(s, the polish only, both flows with the guard) and ``stages``: ``{"surrogate": ..., "polish": ...}``, each with
+its ``time``, ``std_rho_map``, ``n_flipped`` and ``min_jacobian``, and with the guard after a warm flow ``"warm"``
+and ``"cold"``, the two candidates (each with its own flow's ``time``).
 """
 from __future__ import annotations
 
@@ -246,13 +253,9 @@ def polish_map(result, *, n: int, boundary: str, options: PolishOptions = Polish
     Returns
     -------
     (points, report)
-        The polished positions (N**d, d) and ``report`` with ``start`` (``"warm"`` or ``"cold"``), ``reason`` (why
-        cold, else ``None``), ``smoothed`` (whether the warm flow started from ``start``), ``tol``, ``passes``,
-        ``steps``, ``std_history`` (of the flow whose map is returned), ``kept`` (``"warm"`` or ``"cold"``: the
-        flow whose map is returned), ``time`` (s, the polish only, both flows with the guard) and ``stages``:
-        ``{"surrogate": ..., "polish": ...}``, each with its ``time``, ``std_rho_map``, ``n_flipped`` and
-        ``min_jacobian``, and with the guard after a warm flow ``"warm"`` and ``"cold"``, the two candidates (each
-        with its own flow's ``time``).
+        The polished positions (N**d, d) and a ``report`` dict: which start the flow took and why, which flow's
+        map was kept, its passes, steps and time, and the metrics of the network's and the polished map
+        (``report["stages"]``).  The description of :mod:`rfmap.finish.polish` lists its keys.
     """
     t0 = time.perf_counter()
     ref, mapped, elements, density = result.ref_points, result.mapped_points, result.elements, result.field

@@ -10,10 +10,11 @@ golden-section searches, first of a common (isotropic) stretch, then over the co
 larger :math:`\mathcal{J}` than :math:`\alpha = (1, \dots, 1)`.  Folded maps can make :math:`\mathcal{J}` jagged, so
 the isotropic search is checked by a coarse geometric scan of :data:`SCAN_POINTS` stretches: where a scanned point
 beats the search's result, the search is repeated around it (and the per-component searches are then checked the same
-way).  Each task builds its :math:`\mathcal{J}` (``Task.refine_objective``, from
-:mod:`rfmap.tasks.objectives`, whose :data:`~rfmap.tasks.objectives.FLIP_WEIGHT` is :math:`\lambda`);
-:class:`RefineConfig` holds the search interval and the tolerance, :data:`REFINE` those that :meth:`rfmap.Surrogate.map`
-uses and :func:`refine_alpha`'s defaults.
+way).  The paper allows alternating one-dimensional or golden-section searches; the isotropic search first and the
+scan that checks it are this package's choices.  Each task builds its :math:`\mathcal{J}`
+(``Task.refine_objective``, from :mod:`rfmap.tasks.objectives`, whose :data:`~rfmap.tasks.objectives.FLIP_WEIGHT`
+is :math:`\lambda`); :class:`RefineConfig` holds the search interval and the tolerance, :data:`REFINE` those that
+:meth:`rfmap.Surrogate.map` uses and :func:`refine_alpha`'s defaults.
 """
 from __future__ import annotations
 

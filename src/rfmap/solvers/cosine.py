@@ -18,14 +18,14 @@ interface (``dct(x, axis, out=None)``, ``dst(x, axis, out=None)``, ``dctn(x)``):
   transform is the real part of the real FFT of the even extension :math:`(x_0, \dots, x_{M-1}, x_{M-2}, \dots,
   x_1)`, the second minus the imaginary part of that of the odd extension :math:`(0, x, 0, -\bar x)` (:math:`\bar x`
   reversed), both of length :math:`2(M-1)` when :math:`K = M - 2` (the interior of an axis).  Tables of a side of
-  at least ``SCIPY_SIDE`` go to scipy's pocketfft, whose type-I transforms skip the extension and are faster on
-  large tables, called as ``scipy.fft`` calls it but without importing ``scipy.fft``
-  (:func:`type1_transforms`); the smaller ones do not load it at all, since importing ``scipy.fft`` (a few
-  tenths of a second) takes longer than a small cartogram.  It keeps the extension and the spectrum of a block of
-  rows in two buffers between calls: a table of a few hundred thousand numbers allocated afresh for every transform costs
-  the operating system's page faults, about as much as the FFT itself, and a table of millions (a cartogram's
-  finest raster) would need two more tables' worth of memory at once.
+  at least ``SCIPY_SIDE`` go to scipy's type-I transforms, which skip the extension and are faster on large tables
+  (:func:`type1_transforms`).  The extension and the spectrum of a block of rows are kept in two buffers reused
+  between calls, which saves their allocation and bounds the memory on a cartogram's finest raster.
 """
+# Implementation notes.  The smaller tables do not load scipy at all, since importing scipy.fft (a few tenths of a
+# second) takes longer than a small cartogram.  A table of a few hundred thousand numbers allocated afresh for every
+# transform costs the operating system's page faults, about as much as the FFT itself, and a table of millions would
+# need two more tables' worth of memory at once: hence the two reused buffers.
 from __future__ import annotations
 
 import functools
@@ -72,11 +72,11 @@ class _Type1:
 @functools.lru_cache(maxsize=None)
 def type1_transforms():
     """The type-I transforms of :class:`CosineTransforms`'s large tables: an object with ``dct(x, type, axis)``
-    and ``dst(x, type, axis)`` for float64 tables.  Unless ``scipy.fft`` is loaded already, scipy's pocketfft
-    extension module (``scipy.fft._pocketfft.pypocketfft``, which ``scipy.fft`` calls for them) is loaded from its
-    file alone: importing ``scipy.fft`` loads ``scipy.special`` and scipy's array-API layer too, half a second,
-    a fifth of the whole command on a map of a country's subdivisions.  Where that fails (another scipy layout),
-    ``scipy.fft`` itself."""
+    and ``dst(x, type, axis)`` for float64 tables: the extension module that ``scipy.fft`` calls for them, loaded
+    without importing ``scipy.fft`` (which loads much more of scipy) unless that is loaded already, and
+    ``scipy.fft`` itself where loading the module alone fails."""
+    # importing scipy.fft loads scipy.special and scipy's array-API layer too: half a second, a fifth of the whole
+    # command on a map of a country's subdivisions
     if "scipy.fft" not in sys.modules:
         try:
             return _Type1(_load_pocketfft())

@@ -59,8 +59,12 @@ held-out fields with a steep ramp against the coast (``rfmap.training.validation
 retries leave much of the density unequalized, far above the diffusion solver's Std(ρ̃_map) (appendix B of the book,
 *The flow solver and the hybrid in detail*, measures it with
 :func:`rfmap.paper.flow_studies.sea_blend_study`).  A stalled first pass of a free boundary is therefore first
-redone with a sea that starts at the coast's own density and blends to its level (``stall_blend``); ``sea_blend``
-asks for that sea from the start (see :func:`rfmap.solvers.solve_flow`).
+redone with a sea that starts at the coast's own density and blends to its level (``stall_blend``; only if it
+stalls again is it redone with blurred densities); ``sea_blend`` asks for that sea from the start (see
+:class:`rfmap.solvers.FlowOptions`).  A blend is a different sea, hence a different coastline, and not a uniform
+gain: it helps steep ramps against the coast and can hurt raw densities of high contrast
+(:func:`rfmap.paper.flow_studies.sea_blend_study` measures it).  The width is halved while the blended sea would not
+be positive (down to an eighth of the request, then 0), and ``info["sea_blend"]`` records the width used.
 
 The same passes finish any fold-free starting map (``start``): the first pass then flows the residual density of
 the starting map.  :mod:`rfmap.finish.polish` uses this to polish a neural surrogate's map.
@@ -207,20 +211,13 @@ class FlowOptions:
         Sea width :math:`L` for ``boundary="free"``, rounded to whole grid cells (at least one); default
         ``MARGIN`` of the dimension (0.5 in 2D, 0.25 in 3D).
     sea_blend : float
-        For ``boundary="free"`` only: smooths the jump in density between the domain's edge (the coast) and the
-        padding around it (the :term:`sea`).  The width (domain length units) over which the sea blends from the
-        coast's density to its balanced level (``rfmap.solvers.raster.balanced_sea``); 0 (the default) starts the
-        sea at its level right at the coast, as the diffusion solver does, so that both solve the same free-boundary
-        problem.  A blend is a different
-        sea, hence a different coastline, and not a uniform gain: it helps steep ramps against the coast and can
-        hurt raw densities of high contrast (``rfmap.paper.flow_studies.sea_blend_study`` measures it).  The width
-        is halved while the blended sea would not be positive (down to an eighth of the request, then 0); the width
-        used is ``info["sea_blend"]``.
+        For ``boundary="free"`` only: the width (domain length units) over which the :term:`sea` around the domain
+        blends from the coast's density to its own level; 0 (the default) starts the sea at its level at the coast,
+        as the diffusion solver does.  The width used is ``info["sea_blend"]``; the module's description
+        (:mod:`rfmap.solvers.flow`) says what a blend changes.
     stall_blend : float
-        For the first pass of a free boundary's cold start with ``sea_blend=0``: when it stalls, it is first redone
-        once with the sea blended over this width (:data:`.STALL_BLEND`; ``info["sea_fallback"]``, and
-        ``info["sea_blend"]`` the width used), and only then, if it stalls again, with blurred densities; 0 skips
-        this remedy.
+        For a free boundary's cold start with ``sea_blend=0``: the sea blend of the one retry of a stalled first
+        pass, before any blurred retry (:data:`.STALL_BLEND`; 0 skips it; ``info["sea_fallback"]``).
     max_passes : int
         Most passes; the passes also stop when one lowers :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` by less than
         the factor ``stall`` (the map with the lowest value is returned).

@@ -1,11 +1,9 @@
 r"""The heat field of the diffusion method (Gastner & Newman 2004): one engine for the maps and the cartograms.
 
-The density diffuses with no-flux walls on the box :math:`[0,1]^d`,
-
-.. math:: \partial_t \rho = \Delta \rho, \qquad \partial_n \rho = 0 \text{ on the walls},
-
-and points follow :math:`v = -\nabla\rho/\rho` (:mod:`rfmap.solvers.heatflow` carries them).  The cosine modes of
-the box solve the equation exactly: from grid values :math:`p_j` at the nodes :math:`j/(M-1)` of a raster of
+The method (the heat equation with no-flux walls, points following :math:`v = -\nabla\rho/\rho`) is stated in
+:mod:`rfmap.solvers.diffusion`; this module evaluates the density and its velocity, and
+:mod:`rfmap.solvers.heatflow` carries the points.  The cosine modes of the box solve the equation exactly: from
+grid values :math:`p_j` at the nodes :math:`j/(M-1)` of a raster of
 :math:`M` points per side,
 
 .. math::
@@ -269,8 +267,7 @@ def _openblas_threads() -> tuple:
 def blas_threads(n: int | None):
     """Temporarily run numpy's matrix products on ``n`` threads (``None``: leave them alone).
 
-    Sets OpenBLAS's thread count where numpy's BLAS is an OpenBLAS found in the process (Linux); another BLAS keeps
-    its own setting.
+    Only an OpenBLAS (on Linux) is adjusted; another BLAS keeps its own setting.
     """
     libs = _openblas_threads() if n is not None else ()
     old = [get() for _, get in libs]

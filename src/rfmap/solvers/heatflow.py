@@ -1,12 +1,8 @@
 r"""The flow of the diffusion method (Gastner & Newman 2004), shared by the map and the cartogram solvers.
 
-The density diffuses with no-flux walls on the box :math:`[0,1]^d`, :math:`\partial_t\rho = \Delta\rho`, which the
-cosine basis solves exactly,
-
-.. math:: \rho(x, t) = \sum_k a_k \prod_i \cos(\pi k_i x_i)\, e^{-\pi^2 |k|^2 t},
-
-with the coefficients :math:`a_k` of the initial density; points follow :math:`\dot x = v = -\nabla\rho/\rho` until
-the flow has settled.  One implementation here and in :mod:`rfmap.solvers.heatfield`, for
+The method, points following :math:`\dot x = v = -\nabla\rho/\rho` of the diffusing density until the flow has
+settled, is stated in :mod:`rfmap.solvers.diffusion`.  One implementation here and in
+:mod:`rfmap.solvers.heatfield`, for
 :func:`rfmap.solvers.diffusion.solve_diffusion` (maps of the square and cube) and
 :func:`rfmap.solvers.cartodiffusion.diffusion_square` (a cartogram's pass):
 
