@@ -76,7 +76,7 @@ def test_wide_tables_wrap_into_narrow_ones():
 
 def test_beltrami_table_on_untrained_model():
     sur = Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, name="tiny")
-    table, maps = beltrami_table(sur, n=17, maps=("T1",), symmetrize=True)
+    table, maps = beltrami_table(sur, n=17, maps=("T1",), refine=False, symmetrize=True)
     # an untrained surrogate is the identity: its error is the exact map's mean displacement, and so is that of its
     # average over the square's symmetries
     exact = maps["T1"]["exact"]
@@ -111,7 +111,7 @@ def test_population_and_resolution_tables_on_untrained_model():
     assert ours == pytest.approx(table.value("sin-cos", "ours", "std_rho_orig"))  # identity map
     assert table.value("sin-cos", "diffusion DEM", "std_rho_map") < 0.5 * ours
     assert table.value("sin-cos", "ours + refinement", "std_rho_map") <= ours + 1e-12
-    rt, _ = resolution_table(sur, ns=(9, 17), classical=False)
+    rt, _ = resolution_table(sur, ns=(9, 17), refine=False, classical=False)
     assert [c for c, m, _ in rt.rows if m == "ours"] == ["9", "17"]
 
 
@@ -159,7 +159,7 @@ def test_reproduce_dem3d_writes_every_table(tmp_path, monkeypatch):
     pop, res = E.population_table, E.resolution_table
     monkeypatch.setattr(E, "population_table", lambda sur, refine=True, symmetrize=False: pop(
         sur, ["sin-cos-3d"], n=9, refine=refine, symmetrize=symmetrize))
-    monkeypatch.setattr(E, "resolution_table", lambda sur, refine=False, symmetrize=False: res(
+    monkeypatch.setattr(E, "resolution_table", lambda sur, refine=True, symmetrize=False: res(
         sur, ns=(9,), refine=refine, symmetrize=symmetrize))
     paths = E.reproduce("dem3d", tmp_path, refine=True, symmetrize="cyclic")
     assert sorted(p.name for p in paths) == sorted(
@@ -170,6 +170,34 @@ def test_reproduce_dem3d_writes_every_table(tmp_path, monkeypatch):
     assert "paper's method: native + refinement" in text  # the paper's method beside the delivered rows
     with pytest.raises(ValueError, match="unknown experiment"):
         E.reproduce("dem4d", tmp_path)
+
+
+def test_refine_defaults_agree_so_a_table_by_hand_matches_rfmap_reproduce(monkeypatch, tmp_path):
+    """Every table function refines by default, as ``reproduce`` (``rfmap reproduce``) does, and ``reproduce``
+    hands its ``refine`` to every table it writes, so ``beltrami_table(sur)`` gives the rows of the command."""
+    import inspect
+
+    import rfmap.paper.reproduce as E
+
+    for f in (E.beltrami_table, E.beltrami_resolution_table, E.population_table, E.resolution_table, E.reproduce):
+        assert inspect.signature(f).parameters["refine"].default is True, f.__name__
+    seen = []
+
+    class Probe:
+        def save(self, out):
+            return []
+
+    def record(name):
+        return lambda sur, refine=None, symmetrize=False: (seen.append((name, refine)) or Probe(), None)
+
+    for name in ("beltrami_table", "beltrami_resolution_table", "population_table", "resolution_table"):
+        monkeypatch.setattr(E, name, record(name))
+    monkeypatch.setattr(E, "Surrogate", type("S", (), {"pretrained": staticmethod(lambda name, device: name)}))
+    for experiment in ("beltrami", "dem2d", "dem3d"):
+        for refine in (True, False):
+            seen.clear()
+            E.reproduce(experiment, tmp_path, refine=refine)
+            assert seen and all(r is refine for _, r in seen), (experiment, seen)
 
 
 def test_generalization_table_compares_with_the_classical_solver_on_unseen_fields():

@@ -6,6 +6,10 @@ Times are wall-clock seconds on the machine that runs them.  The experimental se
 experiments name a single NVIDIA RTX A6000 GPU, and this project reads the times in the paper's tables as the
 network's inference on that GPU; ours come from whatever machine runs them, so only ratios measured in one run
 (``speedup`` = classical time / surrogate time) are comparable.
+
+Every table function here and :func:`reproduce` refine by default (``refine=True``; ``rfmap reproduce --no-refine``
+turns it off for all of an experiment's tables), so a table built by hand, such as ``beltrami_table(sur)``, has the
+rows that ``rfmap reproduce`` writes.
 """
 from __future__ import annotations
 
@@ -114,7 +118,7 @@ def _beltrami_rows(sur, table: Table, cases: list[tuple[str, str, int]], paper: 
 _BEL_COLS = ["time", "speedup", "mean_dd", "mean_dmu", "mean_dmu_pl", "n_flipped", "min_jacobian"]
 
 
-def beltrami_table(sur, n: int = PAPER_N[2], maps=TEST_FIELDS["beltrami", 2], refine: bool = False,
+def beltrami_table(sur, n: int = PAPER_N[2], maps=TEST_FIELDS["beltrami", 2], refine: bool = True,
                    symmetrize: bool | str = False):
     """The paper's Table 2 (``tab:reconstruction_results_mu``): our model, the Linear Beltrami Solver and the paper on
     T1–T4 at ``n``; ``refine`` adds the weight-refined map (row ``ours + refinement``, paper Sec. 4.3), ``symmetrize``
@@ -123,7 +127,7 @@ def beltrami_table(sur, n: int = PAPER_N[2], maps=TEST_FIELDS["beltrami", 2], re
     return _beltrami_rows(sur, t, [(m, m, n) for m in maps], paper_table(t.label), refine, symmetrize)
 
 
-def beltrami_resolution_table(sur, ns=(48, 64, 80, 96), name: str = "T1-res", refine: bool = False,
+def beltrami_resolution_table(sur, ns=(48, 64, 80, 96), name: str = "T1-res", refine: bool = True,
                               symmetrize: bool | str = False):
     """The paper's Table 3 (``tab:reconstruction_results_res``): the same model on ``name`` at several
     resolutions (``refine`` and ``symmetrize`` as in :func:`beltrami_table`)."""
@@ -217,7 +221,7 @@ def population_table(sur, fields=None, n: int | None = None, refine: bool = True
                          "free" if b == "free" else "square", classical, symmetrize)
 
 
-def resolution_table(sur, ns=None, refine: bool = False, classical: bool = True, work_n=None,
+def resolution_table(sur, ns=None, refine: bool = True, classical: bool = True, work_n=None,
                      symmetrize: bool | str = False):
     """The paper's Tables 6 and 9 (``tab:resolution_test``, ``tab:3d_resolution_test``): the multi-frequency field
     at several resolutions (``symmetrize`` as in :func:`population_table`)."""
@@ -252,7 +256,7 @@ def reproduce(experiment: str, out_dir, *, refine: bool = True, device="cpu",
     elif experiment == "dem2d":
         paths += population_table(need("deq2d-square"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
         paths += population_table(need("deq2d-free"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
-        paths += resolution_table(need("deq2d-square"), symmetrize=symmetrize)[0].save(out_dir)
+        paths += resolution_table(need("deq2d-square"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
     elif experiment == "dem3d":
         paths += population_table(need("dem3d-cube"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
         paths += resolution_table(need("dem3d-cube"), refine=refine, symmetrize=symmetrize)[0].save(out_dir)
