@@ -208,16 +208,16 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     # 0.12 / 0.6 against 0.09 / 0.48; the scoreboards give the word, its count of comparable pairs and the n/c
     # clause, the Std ratios in a footnote
     # the clause gives the size of the gap: 0.2 / 0.1875 = 1.07
-    assert c.verdict_word() == ("reproduced on the comparable cases (1 of 1); the n/c case's Std ratio is 1.1 times "
-                                "the paper's")
-    assert v["verdict"] == ("reproduced (1 of 1 comparable); outside this verdict, the n/c case's Std ratio is 1.1 "
-                            "times the paper's")
-    nc = "20 % of its input's spread against the paper's 18.7 % (1.1 times as much)"
+    assert c.verdict_word() == ("reproduced on the comparable cases (1 of 1); the n/c case’s Std ratio is 1.1 times "
+                                "the paper’s")
+    assert v["verdict"] == ("reproduced (1 of 1 comparable); outside this verdict, the n/c case’s Std ratio is 1.1 "
+                            "times the paper’s")
+    nc = "20 % of its input’s spread against the paper’s 18.7 % (1.1 times as much)"
     assert v["nc"] == nc.replace(" %", "\u00a0%")  # a per cent sign never wraps away from its number
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.09
     # a better n/c case is given by its ratio too: 0.15 / 0.1875 = 0.8
     assert c.verdict_word() == (
-        "reproduced on the comparable cases (1 of 1); the n/c case's Std ratio is 0.8 times the paper's")
+        "reproduced on the comparable cases (1 of 1); the n/c case’s Std ratio is 0.8 times the paper’s")
     c.values[("rect-peak", "native")]["std_rho_map"] = 0.12
     # the means beside the verdict are over the comparable case only
     assert (v["std_rho_map_native"], v["std_rho_map_paper"]) == ("0.07000", "0.08000")
@@ -232,9 +232,9 @@ def test_a_case_whose_input_is_not_the_papers_is_not_scored():
     assert "n/c" not in c.to_markdown(["time"])
     c.values[("sin-cos", "native")]["std_rho_map"] = 0.09  # now the one comparable case misses
     assert c.verdict_word() == (
-        "not reproduced on the comparable cases (0 of 1); the n/c case's Std ratio is 1.1 times the paper's")
-    assert c.score_values()["verdict"] == ("not reproduced (0 of 1 comparable); outside this verdict, the n/c case's "
-                                           "Std ratio is 1.1 times the paper's")
+        "not reproduced on the comparable cases (0 of 1); the n/c case’s Std ratio is 1.1 times the paper’s")
+    assert c.score_values()["verdict"] == ("not reproduced (0 of 1 comparable); outside this verdict, the n/c case’s "
+                                           "Std ratio is 1.1 times the paper’s")
 
 
 def test_verdict_words_follow_the_stated_rule():

@@ -143,7 +143,7 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     >>> print(qualified_verdict([True] * 3, [True], short=True,
     ...                         factors=[1.61]))  # doctest: +NORMALIZE_WHITESPACE
     reproduced (3 of 3 comparable); outside this verdict,
-    the n/c case's Std ratio is 1.6 times the paper's
+    the n/c case’s Std ratio is 1.6 times the paper’s
     """
     flags = [m for m in met if m is not None]
     count = f" ({sum(flags)} of {len(flags)})" if flags else ""
@@ -170,21 +170,21 @@ def nc_clause(nc_worse: list[bool], factors: list[float] | None = None) -> str:
     >>> nc_clause([True, True, False])
     '2 of the 3 n/c cases are worse by Std ratio'
     >>> print(nc_clause([True], [1.93]))
-    the n/c case's Std ratio is 1.9 times the paper's
+    the n/c case’s Std ratio is 1.9 times the paper’s
     >>> print(nc_clause([False], [0.65]))
-    the n/c case's Std ratio is 0.65 times the paper's
+    the n/c case’s Std ratio is 0.65 times the paper’s
     >>> print(nc_clause([True, False], [1.61, 0.9]))
-    1 of the 2 n/c cases is worse by Std ratio, 1.6 times the paper's
+    1 of the 2 n/c cases is worse by Std ratio, 1.6 times the paper’s
     """
     if not nc_worse:
         return ""
     if len(nc_worse) == 1 and factors:  # one n/c case: its ratio to the paper's, better or worse
-        return f"the n/c case's Std ratio is {float(f'{factors[0]:.2g}'):g} times the paper's"
+        return f"the n/c case’s Std ratio is {float(f'{factors[0]:.2g}'):g} times the paper’s"
     worst = max((f for f, w in zip(factors or [], nc_worse) if w), default=None)
-    size = f"{float(f'{worst:.2g}'):g} times the paper's" if worst is not None else ""
+    size = f"{float(f'{worst:.2g}'):g} times the paper’s" if worst is not None else ""
     if len(nc_worse) == 1:
         if size:
-            return f"the n/c case's Std ratio is {size}"
+            return f"the n/c case’s Std ratio is {size}"
         return f"the n/c case is {'worse' if nc_worse[0] else 'not worse'} by Std ratio"
     k = sum(nc_worse)
     up_to = ("up to " if k > 1 else "") + size
@@ -200,11 +200,11 @@ def nc_phrase(ours: float, paper: float) -> str:
     Examples
     --------
     >>> print(nc_phrase(0.125, 0.194))
-    12.5 % of its input's spread against the paper's 19.4 % (0.64 times as much)
+    12.5 % of its input’s spread against the paper’s 19.4 % (0.64 times as much)
     >>> print(nc_phrase(0.442, 0.274))
-    44.2 % of its input's spread against the paper's 27.4 % (1.6 times as much)
+    44.2 % of its input’s spread against the paper’s 27.4 % (1.6 times as much)
     """
-    return (f"{100 * ours:.3g} % of its input's spread against the paper's {100 * paper:.3g} % "
+    return (f"{100 * ours:.3g} % of its input’s spread against the paper’s {100 * paper:.3g} % "
             f"({float(f'{ours / paper:.2g}'):g} times as much)")
 
 
