@@ -25,14 +25,13 @@ __all__ = [
 class Conv3d(nn.Conv3d):
     """``nn.Conv3d`` (same parameters and state dict) with faster inference on CPU; in training exactly ``nn.Conv3d``.
 
-    Notes
-    -----
-    Inference on CPU always takes the oneDNN kernel.  PyTorch's CPU heuristic sends a float32 Conv3d with batch 1
-    and few channels (``B C D H`` at most 20,480, e.g. 8 channels on a 48^3 grid), and any 1x1x1 Conv3d on one
-    thread, to a slow native kernel; the oneDNN kernel gives the same result (to float32 round-off) about four times
-    faster for the surrogate's 3D networks at batch 1.  With gradients enabled (training) the layer is exactly
-    ``nn.Conv3d``, so training is unchanged and reproducible.
+    Without gradients on CPU it takes the oneDNN kernel, with the same results to float32 round-off; with gradients
+    enabled (training) the layer is exactly ``nn.Conv3d``, so training is unchanged and reproducible.
     """
+
+    # PyTorch's CPU heuristic sends a float32 Conv3d with batch 1 and few channels (B C D H at most 20,480, e.g. 8
+    # channels on a 48^3 grid), and any 1x1x1 Conv3d on one thread, to a slow native kernel; the oneDNN kernel was
+    # about four times faster for the surrogate's 3D networks at batch 1.
 
     def _conv_forward(self, input: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
         if (not torch.is_grad_enabled() and input.device.type == "cpu" and input.dtype == torch.float32
@@ -46,14 +45,14 @@ class Conv3d(nn.Conv3d):
 class Conv2d(nn.Conv2d):
     """``nn.Conv2d`` (same parameters and state dict) with faster inference on CPU; in training exactly ``nn.Conv2d``.
 
-    Notes
-    -----
     Without gradients, on CPU in float32: a 1x1 convolution of a contiguous input is one matrix product
     ``W (C_out, C_in) @ x (C_in, H W)`` per sample (so a sample's output is the same in any batch), and a dilated
-    convolution takes the oneDNN kernel; PyTorch sends both to slow native kernels at batch 1.  Same results to
-    float32 round-off (tested); at the 51-point grid the 2D surrogate's network takes about 10 % less time.  With
-    gradients enabled (training) the layer is exactly ``nn.Conv2d``.
+    convolution takes the oneDNN kernel, with the same results to float32 round-off (tested).  With gradients
+    enabled (training) the layer is exactly ``nn.Conv2d``.
     """
+
+    # PyTorch sends both to slow native kernels at batch 1; at the 51-point grid the 2D surrogate's network took
+    # about 10 % less time with these paths.
 
     def _conv_forward(self, input: Tensor, weight: Tensor, bias: Tensor | None) -> Tensor:
         if not torch.is_grad_enabled() and input.device.type == "cpu" and input.dtype == torch.float32 \

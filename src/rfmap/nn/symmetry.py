@@ -21,10 +21,10 @@ axes permutes the components and transposes the array).  The boundary factor :ma
     \bar\psi = \frac{1}{|S|} \sum_{g \in S} A_g\, \psi(\rho \circ g) \circ g^{-1}
 
 over a set :math:`S` of symmetries is exact wherever :math:`\psi` is, and averages out the part of the error that
-changes with :math:`g`; it costs :math:`|S|` network evaluations. Measured on the held-out validation fields (never
-the paper's test fields) the average of :data:`DEFAULT_SYMMETRY` lowers the mean Std(ρ̃_map) by about 5 % in 2D and
-18 % in 3D and folds the steep ramps less often (the book's page :doc:`Design decisions </book/design>`); the chapter on
-density-equalizing maps in 3D reports it on the paper's 3D tests.
+changes with :math:`g`; it costs :math:`|S|` network evaluations. On the held-out validation fields (never the
+paper's test fields) the average of :data:`DEFAULT_SYMMETRY` lowers the mean Std(ρ̃_map) in 2D and in 3D and folds
+the steep ramps less often (the book's page :doc:`Design decisions </book/design>` gives the measurements); the
+chapter on density-equalizing maps in 3D reports it on the paper's 3D tests.
 """
 from __future__ import annotations
 
