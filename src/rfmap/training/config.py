@@ -1,18 +1,20 @@
-r"""Typed training configurations with named ``ci`` and ``full`` presets.
+r"""Typed training configurations with named ``ci``, ``full`` and ``paper`` presets.
 
-``RFMAP_SCALE`` (``ci`` or ``full``, default ``full``; never ``paper``) chooses the preset wherever none is
-named.  ``ci`` presets
-train tiny models for a few steps (seconds on a laptop CPU, used by the tests and by the notebooks under CI);
-``full`` presets are the ones the shipped weights were trained at, over a chain of runs: the first run of a chain
-is the preset as it stands, and each later run continues from the weights before it (``--init``) with the preset's
-steps, time limit and peak learning rate (at times its seed and weight average) overridden on the command line, so
-``rfmap train --preset full`` alone repeats only the first run; every run's command is in the model's metadata
-(``rfmap models --lineage``), and the book's page on reproducing the results lists them; ``paper`` presets are the paper's hyperparameters
-as printed (for a GPU: ``rfmap train --config NAME --preset paper --device cuda``), with the paper's "epoch" read as
-one optimisation step on a freshly drawn batch (the paper draws a new training grid every epoch).  A configuration
-for which the paper has no model (the FNO and its U-Net partner, the variants trained across grid sides) keeps its
-own learning rate or grid sides in its ``paper`` preset; the preset's description gives the paper's recipe and then
-what the preset runs instead.
+Where no preset is named, the environment variable ``RFMAP_SCALE`` chooses it: ``ci`` or ``full`` (the default).
+``paper`` cannot be chosen through ``RFMAP_SCALE``; name it with ``--preset paper`` (in Python,
+``get_config(name, "paper")``).
+
+* ``ci`` presets train tiny models for a few steps, for the tests and for the notebooks under CI.
+* ``full`` presets are the ones the shipped weights were trained at, over a chain of runs.  The first run of a
+  chain is the preset as it stands; each later run continues from the weights before it (``--init``) with the
+  preset's steps, time limit and peak learning rate (at times its seed and weight average) overridden on the
+  command line.  ``rfmap train --preset full`` alone therefore repeats only the first run; every run's command is
+  in the model's metadata (``rfmap models --lineage``).
+* ``paper`` presets are the paper's hyperparameters as printed (for a GPU: ``rfmap train --config NAME --preset
+  paper --device cuda``), with the paper's "epoch" read as one optimisation step on a freshly drawn batch (the
+  paper draws a new training grid every epoch).  A configuration for which the paper has no model (the FNO and its
+  U-Net partner, the variants trained across grid sides) keeps its own learning rate or grid sides in its
+  ``paper`` preset; the preset's description gives the paper's recipe and then what the preset runs instead.
 """
 from __future__ import annotations
 

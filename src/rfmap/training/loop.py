@@ -74,7 +74,9 @@ class RunOptions:
     init : str, optional
         Start from a shipped model's weights or a ``.safetensors`` file (fresh optimiser and schedule).
     device : str or torch.device
-        ``'cpu'`` (default), ``'cuda'`` or ``'auto'``; the network's arithmetic is ``cfg.precision``.
+        ``'cpu'`` (default, as for ``rfmap train --device``: a run uses a GPU only when asked to, unlike
+        :func:`~rfmap.core.device.resolve_device`, whose default is ``'auto'``), ``'cuda'`` or ``'auto'``; the
+        network's arithmetic is ``cfg.precision``.
     command : str, optional
         The command line that started the run (recorded in the metadata).
     finish : bool
