@@ -376,6 +376,18 @@ def test_cli_cartogram_methods_match_the_library():
     assert tuple(method.choices) == CARTOGRAM_METHODS
 
 
+def test_available_methods_warns_on_its_deprecated_argument():
+    import warnings
+
+    from rfmap.cartogram.resize import CARTOGRAM_METHODS, available_methods
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert available_methods() == CARTOGRAM_METHODS
+    with pytest.warns(DeprecationWarning, match="ignored"):
+        assert available_methods(object()) == CARTOGRAM_METHODS
+
+
 def test_surrogate_cartogram():
     c = cartogram(grid_2x2([1, 1, 1, 5]), "pop", method="surrogate", n=64, iterations=2)
     assert c.info["iterations"] == 2

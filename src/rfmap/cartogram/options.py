@@ -28,9 +28,10 @@ class CartogramOptions:
         surrogate; ``"hybrid"``: the surrogate's map finished by the classical flow on the raster's vertex grid
         (``Surrogate.map(polish=HYBRID_POLISH)``).
     n : int
-        Cells per side ``N`` of the density raster (cartogram-cpp's ``-n``); the maps run on its
-        :math:`(N+1)^2` vertices (FFT lengths :math:`2N`: a power of two is fastest).  It counts cells, not
-        vertices: the ``n`` of :meth:`rfmap.Surrogate.map` and of ``rfmap map --n``, and that of
+        Cells per side ``N`` of the density raster, as the ``-n`` option of cartogram-cpp (the C++ program of the
+        flow-based method of Gastner, Seguy & More 2018, github.com/mgastner/cartogram-cpp) counts them; the maps
+        run on its :math:`(N+1)^2` vertices (FFT lengths :math:`2N`: a power of two is fastest).  It counts cells,
+        not vertices: the ``n`` of :meth:`rfmap.Surrogate.map` and of ``rfmap map --n``, and that of
         :func:`~rfmap.cartogram.regions.density_grid`, count vertices, so ``n = 64`` here is a side of 65 there.
     tol : float
         The stopping tolerance of the passes, see ``max_iterations``.

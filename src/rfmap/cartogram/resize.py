@@ -64,6 +64,7 @@ from __future__ import annotations
 import math
 import numbers
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -120,8 +121,12 @@ _NO_POINTS = np.empty((0, 2))
 
 
 def available_methods(surrogate=None) -> tuple[str, ...]:
-    """The methods of :func:`cartogram`, :data:`CARTOGRAM_METHODS` (every :class:`rfmap.Surrogate` supports them
-    all; ``surrogate`` is not used, compatibility)."""
+    """The methods of :func:`cartogram`, :data:`CARTOGRAM_METHODS`; every :class:`rfmap.Surrogate` supports them all.
+
+    ``surrogate`` is deprecated and ignored (passing it warns): call ``available_methods()``."""
+    if surrogate is not None:
+        warnings.warn("available_methods(surrogate): the argument is ignored and will be removed; call "
+                      "available_methods()", DeprecationWarning, stacklevel=2)
     return CARTOGRAM_METHODS
 
 
