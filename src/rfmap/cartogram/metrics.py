@@ -224,19 +224,37 @@ def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tupl
 
 
 def clean_input_overlaps(regions: np.ndarray, gap_width: float = 0.0) -> tuple[np.ndarray, int]:
-    r"""Regions (R,) that overlap in the input (borders drawn twice, a file simplified feature by feature) made a
-    coverage: ``shapely.coverage_clean`` gives every overlap to one of its regions (the one with the longest border
-    along it) and snaps nearby vertices so that neighbours share their border vertex for vertex.  Enclosed gaps
-    narrower than ``gap_width`` (the slivers of sea such a file opens between neighbours, which no raster resolves)
-    go to the neighbour with the longest border along them, so that the two then share that border; wider gaps
-    stay (sea).  The map of a coverage keeps its regions apart, where a map of overlapping regions carries every
-    overlap along, and the two sides of a sliver gap, drawn with different vertices, cross when the map closes it.
+    r"""Regions that overlap in the input made a coverage, so that neighbours share their borders.
+
+    Input regions can overlap (borders drawn twice, a file simplified feature by feature).  ``shapely.coverage_clean``
+    gives every overlap to one of its regions (the one with the longest border along it) and snaps nearby vertices,
+    so that neighbours share their border vertex for vertex.  Enclosed gaps narrower than ``gap_width`` (slivers of
+    sea that such a file opens between neighbours, which no raster resolves) go to the neighbour with the longest
+    border along them, so that the two then share that border; wider gaps stay (sea).  The map of a coverage keeps
+    its regions apart; a map of overlapping regions carries every overlap along, and the two sides of a sliver gap,
+    drawn with different vertices, cross when the map closes it.
+
     Only slivers are cleaned: every overlap holding more than :data:`REPAIR_AREA` of the total area (the metrics'
-    default tolerance; smaller ones are left to :func:`repair_overlaps`) must be thin, its isoperimetric quotient
-    :math:`4\pi A / P^2` under :data:`SLIVER_SHAPE`, or under :data:`SLIVER_SHARE` of the smaller region.  Regions
-    without such overlaps, or with one that is not a sliver (a region drawn over half of another: bad input that
-    :meth:`rfmap.cartogram.resize.Cartogram.problems` reports), are returned as they are, and so is a cleaning that leaves
-    a region empty or invalid (or a shapely before 2.2).  Returns the regions and the count of pairs cleaned."""
+    default tolerance; smaller ones are left to :func:`repair_overlaps`) must be
+
+    * thin: its isoperimetric quotient :math:`4\pi A / P^2` under :data:`SLIVER_SHAPE`, or
+    * small: under :data:`SLIVER_SHARE` of the smaller region's area.
+
+    The regions are returned as they are when no overlap holds more than :data:`REPAIR_AREA`; when one that does is
+    not a sliver (a region drawn over half of another: bad input that
+    :meth:`rfmap.cartogram.resize.Cartogram.problems` reports); and when the cleaning leaves a region empty or
+    invalid, or shapely is older than 2.2.
+
+    Parameters
+    ----------
+    regions : ndarray of shapely geometries, shape (R,)
+    gap_width : float
+
+    Returns
+    -------
+    (ndarray of shapely geometries, int)
+        The regions and the number of overlapping pairs cleaned (0 when they are returned as they are).
+    """
     shapely = _shapely()
     left, right, inter = overlaps(regions)
     area = shapely.area(regions)
@@ -257,16 +275,23 @@ def clean_input_overlaps(regions: np.ndarray, gap_width: float = 0.0) -> tuple[n
 
 def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float = REPAIR_OVERLAP,
                     min_share: float = MIN_SHARE) -> tuple[np.ndarray, list]:
-    r"""Sliver overlaps of valid mapped regions removed: each overlap of two regions holding at most ``max_change``
-    of the total area, or one holding at most :data:`REPAIR_SLIVER` of it that is thin (:data:`SLIVER_SHAPE`) or
-    touches a region under the judged share ``min_share`` (drawn at the size :func:`pass_weights` raised it to, not
-    at its value) (and over a thousandth of :data:`REPAIR_AREA`, below which it is rounding), is shared out
-    between the two (``shapely.difference``), so that the two then share a border: the first gives up the share
-    :math:`f \in` :data:`SPLITS` of it (the part on one side of a line across the overlap) and the second the rest,
-    with :math:`f` the share that keeps the larger of their relative area errors :math:`|A_i / T_i - 1|` (target
-    :math:`T_i = (v_i/\sum_j v_j)\sum_j A_j`) lowest; the whole overlap goes to one of them unless that costs more
-    than :data:`SPLIT_COST`.  So a cut never takes a small region off its target where its neighbour can spare the
-    sliver.  Larger overlaps stay, for :meth:`~rfmap.cartogram.resize.Cartogram.problems` to report.
+    r"""Sliver overlaps of valid mapped regions, each shared out between its two regions so that they share a border.
+
+    An overlap of two regions is removed when it holds more than a thousandth of :data:`REPAIR_AREA` of the total
+    area (below that it is rounding) and
+
+    * at most ``max_change`` of the total area, or
+    * at most :data:`REPAIR_SLIVER` of it, and it is thin (its isoperimetric quotient under :data:`SLIVER_SHAPE`) or
+      one of its regions holds less than the judged share ``min_share`` of the total value (such a region is drawn
+      at the size :func:`pass_weights` raised it to, not at its value).
+
+    Larger overlaps stay, for :meth:`~rfmap.cartogram.resize.Cartogram.problems` to report.
+
+    The overlap is cut along a line across it (``shapely.difference``): the first region gives up the share
+    :math:`f \in` :data:`SPLITS` of it and the second the rest.  :math:`f` is the share that keeps the larger of the
+    two relative area errors :math:`|A_i / T_i - 1|` (target :math:`T_i = (v_i/\sum_j v_j)\sum_j A_j`) lowest; the
+    whole overlap goes to one region instead unless that raises the larger error by more than :data:`SPLIT_COST`.
+    So a cut never takes a small region off its target where its neighbour can spare the sliver.
 
     Parameters
     ----------
