@@ -254,10 +254,10 @@ def map_rows_figure(results: dict, *, rho_range=(0.0, 2.5), width: float = TEXT_
     return fig
 
 
-def population_figure(maps: dict, fields, label: str, *, n: int | None = None, method: str = "ours+refine"):
+def population_figure(maps: dict, fields, label: str, *, method: str = "ours+refine"):
     """The paper's 2D population figure: one row of :func:`map_rows_figure` per field of the maps of
-    :func:`rfmap.paper.reproduce.population_table`, saved under the paper's ``label``; returns the figure.
-    ``n`` is not used (compatibility): the grid is read from the maps."""
+    :func:`rfmap.paper.reproduce.population_table` (the grid is read from the maps), saved under the paper's
+    ``label``; returns the figure."""
     with style():
         fig = map_rows_figure({f: maps[f][method] for f in fields})
         save_figure(fig, label)
@@ -361,7 +361,8 @@ def beltrami_case_figure(label: str, exact, lbs, ours, *, width: float = TEXT_WI
 
 
 def extreme_figure(original, maps: dict, *, width: float = TEXT_WIDTH_IN, max_lines: int = 20):
-    r"""The paper's Fig. 10: (a) :math:`\tilde\rho` of a density on the original grid, then each map of ``maps``
+    r"""The paper's Fig. 10: (a) the original domain, coloured by the density divided by its mean
+    (:math:`\tilde\rho` before the map; the paper's (a) shows the domain alone), then each map of ``maps``
     (``{label: MapResult}``, two of them: (b), (c)), with its folded triangles filled in red, and below, per map,
     histograms of :math:`\tilde\rho` on the mapped mesh (d, e) and of :math:`|\mu|` (f, g) on shared axes.  The
     histograms cover the triangles (the :math:`\tilde\rho` axis ends at the 99th percentile of either map, at
