@@ -254,7 +254,7 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     old = Surrogate.untrained(TaskSpec("beltrami", 2, "fixed"), base=4, depth=2, steps=5, wall_time=30.0)
     t = recipe_table({"new": sur, "old": old})
     assert t.value("new", "unet", "fields") == \
-        "modes (every field), box steps 30 %, patches 20 %, peaks 15 %, ramps 15 % (height ×2.5), single hard ramps or peaks 30 %"
+        "modes (every field), box steps 30 %, patches 20 %, noise 10 %, peaks 15 %, ramps 15 % (height ×2.5), single hard ramps or peaks 30 %"
     assert t.value("new", "unet", "fold") == "100 from 0.05"
     assert t.value("new", "unet", "lr") == 2e-4 and t.value("new", "unet", "ema") is None
     sur.meta["config"]["ema"] = 0.999
@@ -291,10 +291,10 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
         assert training_fields_text(cfg.to_dict()) == text
     for name in ("dem3d-free", "dem3d-cube"):
         assert training_fields_text(get_config(name, "full").to_dict()) == \
-            "modes (every field), box steps 30 %, patches 20 %, peaks 15 %, ramps 15 %, single hard ramps or peaks 15 %"
+            "modes (every field), box steps 30 %, patches 20 %, noise 10 %, peaks 15 %, ramps 15 %, single hard ramps or peaks 15 %"
     for name in ("deq2d-square", "deq2d-free", "dem2d-square"):
         assert training_fields_text(get_config(name, "full").to_dict()) == \
-            "modes (every field), box steps 30 %, patches 20 %, peaks 15 %, ramps 15 %, single hard ramps or peaks 30 %"
+            "modes (every field), box steps 30 %, patches 20 %, noise 10 %, peaks 15 %, ramps 15 %, single hard ramps or peaks 30 %"
 
 
 def test_distortion_table_puts_models_side_by_side_on_unseen_fields():

@@ -158,11 +158,13 @@ class DensityTask(Task):
 
     def training_fields_text(self, config: dict) -> str:
         """The paper's smooth modes (in every field), then the share of fields that add each other feature: box
-        steps, patches and, where drawn, narrow peaks, steep ramps and single hard ramps or peaks."""
+        steps, patches, vertex noise and, where drawn, narrow peaks, steep ramps and single hard ramps or peaks."""
         dens = config.get("density_field") or {}
         default = RandomDensityConfig()
         extra = [f"box steps {100 * dens.get('p_step', default.p_step):.0f} %",
                  f"patches {100 * dens.get('p_patch', default.p_patch):.0f} %"]
+        if dens.get("p_noise", default.p_noise):
+            extra.append(f"noise {100 * dens.get('p_noise', default.p_noise):.0f} %")
         if dens.get("p_peak"):
             extra.append(f"peaks {100 * dens['p_peak']:.0f} %")
         if dens.get("p_ramp"):
