@@ -256,6 +256,28 @@ def test_models(capsys):
         assert "no pretrained models" in stdout
 
 
+def test_models_line_gives_the_chain_totals_and_cube(capsys):
+    """A model's line gives its whole chain's steps and runs (as --lineage's first line), not its last run's, and
+    calls the 3D 'square' boundary 'cube'."""
+    import json
+
+    from rfmap.surrogate import WEIGHTS_DIR, models
+
+    rc, stdout, err = run_main(capsys, "models")
+    assert rc == 0 and err == ""
+    lines = {ln.split()[0]: ln for ln in stdout.splitlines() if ln.strip()}
+    for name in models():
+        meta = json.loads((WEIGHTS_DIR / f"{name}.json").read_text())
+        runs = meta.get("lineage", []) + [meta]
+        fields = lines[name].split()
+        assert f"{meta.get('cumulative_steps', meta['steps'])} steps, {counted(len(runs), 'run')}," in \
+            " ".join(fields)
+        assert "steps=" not in lines[name]
+        task = meta.get("task", {})
+        if task.get("dim") == 3 and task.get("boundary") == "square":
+            assert fields[3] == "cube"
+
+
 def test_models_lineage_lists_every_run(capsys):
     """--lineage prints each shipped model's runs, parents first, with the commands and step counts of the
     metadata, and cumulative steps that add up."""

@@ -567,8 +567,9 @@ def compare_cartograms(collection, values, runs: dict, *, n: int = 256, surrogat
     values : sequence of str
         Property names.
     runs : dict
-        ``{label: keyword arguments of cartogram}``, e.g. ``{"diffusion": {}, "surrogate, 1 pass": {"method":
-        "surrogate", "iterations": 1}}``.
+        ``{label: keyword arguments of cartogram}``, e.g. ``{"diffusion": {"method": "diffusion"},
+        "surrogate, 1 pass": {"method": "surrogate", "iterations": 1}}``.  A label is only a name: the method is the
+        ``method`` keyword, and a run without one uses :func:`cartogram`'s default, ``"flow"``.
     n : int
     surrogate : rfmap.Surrogate, optional
         Shared by the surrogate runs (loaded once).

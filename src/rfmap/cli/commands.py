@@ -113,24 +113,31 @@ def _description(name: str, meta: dict) -> str:
     return cfg.description if cfg is not None else meta.get("description", "")
 
 
+def _boundary_word(task: dict) -> str:
+    """A task's boundary as ``rfmap models`` prints it: ``cube`` for the walls of the 3D ``square`` condition."""
+    boundary = task.get("boundary", "?")
+    return "cube" if boundary == "square" and task.get("dim") == 3 else boundary
+
+
 def cmd_models(args) -> int:
     from ..surrogate import Surrogate, models
 
     names = models()
     if not names:
         print("no pretrained models are shipped")
+    width = max((len(name) for name in names), default=0)
     for name in names:
         meta, needs = _model_meta(Surrogate, name)
         t = meta.get("task", {})
-        if not args.lineage:
-            print(f"{name:16s} {t.get('kind', '?'):9s} {t.get('dim', '?')}D {t.get('boundary', '?'):7s} "
-                  f"steps={meta.get('steps')} wall={meta.get('wall_time')}s  " +
-                  (f"[needs rfmap[{needs}]: pip install 'rfmap[{needs}]'] " if needs else "") +
-                  f"{_description(name, meta)}")
-            continue
         runs = list(meta.get("lineage", [])) + [meta]
         total_steps = meta.get("cumulative_steps", meta.get("steps"))
         total_wall = float(meta.get("cumulative_wall_time", meta.get("wall_time", 0.0)))
+        if not args.lineage:  # the whole chain's steps and time, as --lineage's first line gives them
+            print(f"{name:{width}s}  {t.get('kind', '?'):9s} {t.get('dim', '?')}D {_boundary_word(t):7s} "
+                  f"{total_steps!s:>6} steps, {counted(len(runs), 'run'):>7s}, {total_wall / 60:4.0f} min  " +
+                  (f"[needs rfmap[{needs}]: pip install 'rfmap[{needs}]'] " if needs else "") +
+                  f"{_description(name, meta)}")
+            continue
         print(f"{name}: {counted(len(runs), 'run')}, {total_steps} steps, {total_wall / 60:.0f} min")
         for k, run in enumerate(runs, 1):
             sha = run.get("sha256")
