@@ -9,7 +9,8 @@ crossings:
 
 * :func:`boundary_faces`: the triangles that belong to exactly one tetrahedron, oriented outwards.
 * :func:`surface_intersections`: pairs of triangles of a triangulated surface that intersect, leaving out pairs
-  that share a vertex (they meet by construction).  A uniform-grid broad phase (cell side the median
+  that share a vertex (they meet there by construction): a crossing between two triangles that share a vertex is
+  therefore not detected.  A uniform-grid broad phase (cell side the median
   bounding-box extent) pairs triangles whose boxes overlap; the narrow phase is the interval test of Möller (1997):
   two non-coplanar triangles intersect when each straddles the other's plane and the two intervals they cut from
   the planes' common line overlap; (nearly) coplanar pairs are projected onto the plane and tested for properly
@@ -257,8 +258,9 @@ def surface_intersections(points: np.ndarray, faces: np.ndarray, *, tol: float =
     tol : float
         Relative tolerance: contacts shallower than ``tol`` times the surface's bounding-box diagonal do not count.
 
-    Pairs of triangles that share a vertex are not tested (they meet by construction).  Returns an empty (0, 2)
-    array for an embedded surface.
+    Pairs of triangles that share a vertex are not tested (they meet there by construction), so a crossing between
+    two such triangles elsewhere than at their shared vertex or edge is not detected.  Returns an empty (0, 2) array
+    when no other pair intersects.
     """
     p = np.asarray(points, np.float64)
     fc = np.asarray(faces, np.int64)

@@ -10,9 +10,11 @@ orientation, to zero where it is flipped or the coefficient is not finite,
    0, & |\mu| \ge 1 \text{ or } \mu \text{ not finite}, \end{cases} \qquad \delta = 0.1,
 
 and the map is rebuilt from the truncated :math:`\mu` by :func:`rfmap.solvers.solve_lbs` with the model's boundary
-condition: the identity on the boundary (``fixed``), vertices sliding on their walls (``square``), or the boundary
-vertices where the network put them (``free``), after moving crossing boundary vertices back towards the square until
-the boundary polygon is simple (:func:`untangle_boundary`).  Where the map was not folded and
+condition: the identity on the boundary (``fixed``), or the boundary vertices held where the network put them
+(``square``, whose map keeps them on their walls, and ``free``), after moving crossing boundary vertices back towards
+the square until the boundary polygon is simple (:func:`untangle_boundary`).  On the square the vertices slide along
+the walls only as a fallback: when a vertex has passed its neighbour along a wall, so that holding them would fold
+the boundary back on itself.  Where the map was not folded and
 :math:`|\mu| \le 1 - \delta` the coefficient is unchanged, and the LBS reproduces a piecewise-linear map from its
 own coefficient, so the rebuilt map stays close to the input.  The discrete LBS has no bijectivity theorem (its
 stiffness weights may be negative), so its output is checked and, if still folded, handed to the displacement
