@@ -51,14 +51,15 @@ def plot_batch(axes, batch, *, title: str = "sample", mesh: bool = False):
 def plot_loss_terms(axes, mapped, elements, terms: dict, *, sample: int = 0, n: int | None = None,
                     keys=None):
     """One sample's map and its loss terms element by element (:func:`rfmap.tasks.losses.loss_integrands`) on the
-    mapped mesh: ``axes[0]`` the mapped grid, then one panel per key of ``keys`` (default: every element-wise term
-    present), titled with the term's value (its weighted mean, as in training)."""
+    mapped mesh: ``axes[0]`` the mapped grid (at most 16 lines a direction), then one panel per key of ``keys``
+    (default: every element-wise term present), titled with the term's value (its weighted mean, as in training)."""
     import torch
 
     keys = [k for k in (LOSS_TERMS if keys is None else keys) if k in terms and k != "area"]
     pts = np.asarray(mapped[sample])
     el = np.asarray(elements)
-    plot_mesh(axes[0], pts, el, n=n, title="the map $u$")
+    # at most 16 grid lines a direction, so that a strongly squeezed region stays readable
+    plot_mesh(axes[0], pts, el, n=n, max_lines=16, title="the map $u$")
     for ax in axes:
         for side in ax.spines.values():
             side.set_visible(False)
