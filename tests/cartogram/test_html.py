@@ -120,11 +120,11 @@ PROBE = """<script>
     rail.dispatchEvent(new MouseEvent("mousedown", at));
     rail.dispatchEvent(new MouseEvent("mouseup", at));
     var tries = 0, last = null;
-    (function wait() {  // until the outlines changed and stayed so for one poll (the frame drawn), at most 30 s
+    (function wait() {  // until the outlines changed and stayed so for one poll (the frame drawn), at most 60 s
       out.active_after = gd._fullLayout.sliders[0].active;
       out.after = fills(gd);
       var now = out.after.join(), changed = now !== out.before.join();
-      if ((changed && now === last) || ++tries > 150) { report(out); } else { last = now; setTimeout(wait, 200); }
+      if ((changed && now === last) || ++tries > 300) { report(out); } else { last = now; setTimeout(wait, 200); }
     })();
   }
   window.addEventListener("load", function () { setTimeout(probe, 500); });
@@ -147,7 +147,7 @@ def _in_chromium(page, tmp_path) -> dict:
     probed.write_text(html[:end] + PROBE + html[end:])
     cmd = [_chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
            "--disable-component-update", "--disable-sync", "--no-first-run", f"--user-data-dir={tmp_path / 'profile'}",
-           "--virtual-time-budget=60000", "--dump-dom", probed.as_uri()]
+           "--virtual-time-budget=120000", "--dump-dom", probed.as_uri()]
     proc = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
     found = re.search(r'<pre id="probe">(.*?)</pre>', proc.stdout, re.S)
     assert found, proc.stderr[-2000:]
