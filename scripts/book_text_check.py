@@ -15,7 +15,11 @@ problem are reported, one line each, naming the page and what was found:
   dataclass repr of the package (``Surrogate(``, ``TaskSpec(``, ``MapResult(``, ``MapMetrics(``) or a printed
   ``dict`` of metric names.
 
-A third check reads the sources rather than the pages: every key a ``{glue:...}`` role of a chapter or of a page
+A chapter (a page under ``notebooks/``) also fails when it shows more than :data:`MAX_TABLES` tables: a table in a
+collapsed output (a cell tagged ``hide-output``, or inside a ``<details>`` block) does not count, since the reader
+opens it on demand.
+
+A fourth check reads the sources rather than the pages: every key a ``{glue:...}`` role of a chapter or of a page
 of ``book/`` refers to must be in the glue data the build recorded for its notebook
 (``_build/jupyter_execute/notebooks/NAME.glue.json``).  A key that is missing renders as nothing at all (a
 sentence ending in ": ."), so it is reported as ``missing glue key``, naming the notebook and the key.
@@ -30,6 +34,7 @@ import html
 import json
 import re
 import sys
+from html.parser import HTMLParser
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -54,6 +59,40 @@ REPRS = [
     (re.compile(r"\{'(?:std_rho_map|std_rho_orig|mean_mu|max_mu|mean_dd|mean_dmu|min_jacobian|n_flipped)'"),
      "a printed dict of metrics"),
 ]
+
+
+#: the most tables a chapter shows before its reader opens a collapsed output
+MAX_TABLES = 8
+#: HTML elements without an end tag
+VOID = {"area", "base", "br", "col", "embed", "hr", "img", "input", "link", "meta", "source", "track", "wbr"}
+
+
+class _ShownTables(HTMLParser):
+    """Counts the ``<table>`` elements that are not inside a collapsed output (``tag_hide-output`` or
+    ``<details>``)."""
+
+    def __init__(self):
+        super().__init__()
+        self.hidden: list[bool] = []
+        self.shown = 0
+
+    def handle_starttag(self, tag, attrs):
+        classes = (dict(attrs).get("class") or "").split()
+        hidden = (bool(self.hidden) and self.hidden[-1]) or tag == "details" or "tag_hide-output" in classes
+        self.shown += tag == "table" and not hidden
+        if tag not in VOID:
+            self.hidden.append(hidden)
+
+    def handle_endtag(self, tag):
+        if tag not in VOID and self.hidden:
+            self.hidden.pop()
+
+
+def shown_tables(body: str) -> int:
+    """The number of tables an article's HTML shows without opening a collapsed output."""
+    parser = _ShownTables()
+    parser.feed(body)
+    return parser.shown
 
 
 def article(text: str) -> str:
@@ -83,7 +122,10 @@ def repr_problems(body: str) -> list[str]:
 
 def page_problems(page: Path) -> list[str]:
     body = article(page.read_text(encoding="utf-8", errors="replace"))
-    return placeholder_problems(body) + repr_problems(body)
+    problems = placeholder_problems(body) + repr_problems(body)
+    if page.parent.name == "notebooks" and (n := shown_tables(body)) > MAX_TABLES:
+        problems.append(f"{n} tables shown (at most {MAX_TABLES}; collapse the others with hide-output)")
+    return problems
 
 
 #: a glue role and its target: {glue:text}`key:fmt`, {glue}`key`, {glue:text}`../notebooks/NB.ipynb::key:fmt`
@@ -163,8 +205,9 @@ def main(argv: list[str] | None = None) -> int:
     else:
         print(f"book_text_check: {len(missing)} missing glue key(s)" if missing
               else "book_text_check: every glue key the sources use was recorded")
-    print(f"book_text_check: {bad} of {len(pages)} page(s) with unresolved placeholders or raw reprs" if bad
-          else f"book_text_check: {len(pages)} pages, no unresolved placeholder and no raw repr")
+    print(f"book_text_check: {bad} of {len(pages)} page(s) with unresolved placeholders, raw reprs or too many "
+          "tables" if bad else f"book_text_check: {len(pages)} pages, no unresolved placeholder, no raw repr and no "
+          f"chapter with more than {MAX_TABLES} tables shown")
     return 1 if bad or bad_glue else 0
 
 

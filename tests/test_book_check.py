@@ -221,3 +221,26 @@ def test_the_capture_uses_the_laid_out_viewport(book_check):
     """The whole page is the viewport; the capture does not ask Chromium to render beyond it again."""
     source = (ROOT / "scripts" / "book_check.py").read_text(encoding="utf-8")
     assert "captureBeyondViewport=False" in source and "captureBeyondViewport=True" not in source
+
+
+def _tables(k: int) -> str:
+    return "".join(f"<table><tr><td>{i}</td></tr></table>" for i in range(k))
+
+
+def test_a_chapter_with_more_tables_than_the_limit_fails(text_check, tmp_path):
+    limit = text_check.MAX_TABLES
+    assert text_check.page_problems(_page(tmp_path, _tables(limit))) == []
+    problems = text_check.page_problems(_page(tmp_path, _tables(limit + 1)))
+    assert problems == [f"{limit + 1} tables shown (at most {limit}; collapse the others with hide-output)"]
+
+
+def test_collapsed_tables_and_pages_outside_the_chapters_do_not_count(text_check, tmp_path):
+    limit = text_check.MAX_TABLES
+    hidden = (f'<div class="cell tag_hide-output docutils container"><div>{_tables(3)}</div><br></div>'
+              f"<details><summary>more</summary>{_tables(3)}</details>")
+    assert text_check.shown_tables(_tables(limit) + hidden) == limit
+    assert text_check.page_problems(_page(tmp_path, _tables(limit) + hidden)) == []
+    other = tmp_path / "book" / "design.html"
+    other.parent.mkdir(parents=True)
+    other.write_text(f"<html><body><article>{_tables(limit + 5)}</article></body></html>", encoding="utf-8")
+    assert text_check.page_problems(other) == []
