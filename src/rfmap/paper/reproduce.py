@@ -221,7 +221,7 @@ def population_table(sur, fields=None, n: int | None = None, refine: bool = True
                          "free" if b == "free" else "square", classical, symmetrize)
 
 
-def resolution_table(sur, ns=None, refine: bool = True, classical: bool = True, work_n=None,
+def resolution_table(sur, ns=None, refine: bool = True, classical: bool = True,
                      symmetrize: bool | str = False):
     """The paper's Tables 6 and 9 (``tab:resolution_test``, ``tab:3d_resolution_test``): the multi-frequency field
     at several resolutions (``symmetrize`` as in :func:`population_table`)."""
