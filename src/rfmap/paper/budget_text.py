@@ -86,7 +86,12 @@ def raw_folds_text(raw_folds_of: dict) -> str:
         return "The raw map of no shipped model folds on its validation fields."
     return ("The raw map of the shipped weights folds on "
             + names_text([counts[0].replace(" for ", " validation fields for ", 1)] + counts[1:])
-            + (f", and on none for the other {WORDS.get(rest, rest)} models." if rest else "."))
+            + (f", and on none for the other {_models(rest)}." if rest else "."))
+
+
+def _models(k: int) -> str:
+    """``k`` models in words: "one model", "two models", …"""
+    return f"{WORDS.get(k, k)} model" + ("" if k == 1 else "s")
 
 
 def fold_states_text(metas: dict) -> str:
@@ -105,8 +110,8 @@ def fold_states_text(metas: dict) -> str:
     if never:
         parts.append(raw_of(never) + " folded at no validated state" + ("" if every else " of the last run"))
     if some:
-        parts.append("those of the other " + WORDS.get(len(some), str(len(some))) + " models at some states only"
-                     if parts else raw_of(some) + " folded at some validated states of the last run only")
+        parts.append(("that of the other model" if len(some) == 1 else f"those of the other {_models(len(some))}")
+                     + " at some states only" if parts else raw_of(some) + " folded at some validated states of the last run only")
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
 
