@@ -169,6 +169,25 @@ def test_overlaps_measures_only_pairs_whose_interiors_meet_and_finds_every_kind(
     split = shapely.Polygon([(1, 0), (1, 0.25), (1, 0.5), (1, 1), (2, 1), (2, 0)])  # tile 0's border, more vertices
     assert overlaps(np.array([tiles[0], corner, split], dtype=object))[0].size == 0
 
+
+@pytest.mark.parametrize("case", ["crossed part", "parts overlap", "parts share a border", "crossed into a part"])
+def test_valid_polygons_fixes_multipolygons_part_by_part_as_make_valid_does(case):
+    """``valid_polygons`` fixes a MultiPolygon's crossed part alone and unions only the parts that meet, and gives
+    the point set of ``make_valid(method="structure")`` of the whole; parts that touch at a corner stay apart."""
+    from rfmap.cartogram.metrics import valid_polygons
+
+    bowtie = shapely.Polygon([(0, 0), (1, 1), (1, 0), (0, 1)])
+    islands = [shapely.box(3 + 2 * k, 0, 4 + 2 * k, 1) for k in range(4)] + [shapely.box(4, 1, 5, 2)]  # corner
+    extra = {"crossed part": [bowtie], "parts overlap": [shapely.box(3.5, 0.5, 4.5, 1.5)],
+             "parts share a border": [shapely.box(4, 0, 5, 1)],
+             "crossed into a part": [shapely.Polygon([(2, 0), (3.5, 1), (3.5, 0), (2, 1)])]}[case]
+    g = shapely.MultiPolygon(extra + islands)
+    assert not shapely.is_valid(g)
+    fixed = valid_polygons(np.array([g], dtype=object))[0]
+    want = shapely.make_valid(g, method="structure", keep_collapsed=False)
+    assert shapely.is_valid(fixed) and shapely.get_type_id(fixed) == 6
+    assert shapely.equals(fixed, want) and fixed.area == pytest.approx(want.area, rel=1e-12)
+
 # ----------------------------------------------------------------------------------------------- equal-area plane
 def lonlat_box(lon0, lat0, lon1, lat1):
     """A longitude/latitude rectangle with a vertex every 0.1 degree (so that its edges mean the same as straight
