@@ -45,7 +45,7 @@ def test_fold_states_sort_models_into_every_no_and_some_states():
 
     text = fold_states_text({"a": meta(1, 1), "b": meta(0, 0), "c": meta(1, 0)})
     assert text == ("The raw map of a folded on some validation field at every validated state of the last run; "
-                    "the raw map of b folded at no validated state; those of the other one models at some states "
+                    "the raw map of b folded at no validated state; that of the other model at some states "
                     "only.")
 
 
