@@ -387,7 +387,7 @@ def _union_meeting(parts: np.ndarray):
     for k in range(len(parts)):  # every part points at its root (roots have the lowest index of their group)
         group[k] = group[group[k]]
     pieces = [shapely.union_all(parts[group == root]) if (group == root).sum() > 1 else parts[root]
-              for root in np.unique(group)]
+              for root in np.flatnonzero(group == np.arange(len(parts)))]
     return shapely.multipolygons(np.concatenate([shapely.get_parts(p) for p in pieces]))
 
 

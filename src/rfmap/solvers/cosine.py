@@ -89,15 +89,14 @@ def type1_transforms():
 
 def _load_pocketfft():
     """scipy's pocketfft extension module, loaded from its file without importing ``scipy.fft``."""
-    import glob
     import importlib.machinery
     import importlib.util
     import os
 
     spec = importlib.util.find_spec("scipy")
     folder = os.path.join(spec.submodule_search_locations[0], "fft", "_pocketfft")
-    files = [f for suffix in importlib.machinery.EXTENSION_SUFFIXES
-             for f in glob.glob(os.path.join(folder, "pypocketfft" + suffix))]
+    names = (os.path.join(folder, "pypocketfft" + suffix) for suffix in importlib.machinery.EXTENSION_SUFFIXES)
+    files = [f for f in names if os.path.isfile(f)]
     loader = importlib.machinery.ExtensionFileLoader("pypocketfft", files[0])
     module = importlib.util.module_from_spec(importlib.util.spec_from_file_location("pypocketfft", files[0],
                                                                                     loader=loader))

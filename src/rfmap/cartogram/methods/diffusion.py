@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...solvers import cartodiffusion
 from .base import CartogramMethod
 
 __all__ = ["DiffusionMethod"]
@@ -18,5 +17,7 @@ class DiffusionMethod(CartogramMethod):
     name = "diffusion"
 
     def _map(self, density: np.ndarray, points: np.ndarray, solver_kw: dict):
+        from ...solvers import cartodiffusion  # loaded by the method's first pass: a flow cartogram never needs it
+
         opts = cartodiffusion.CartoDiffusionOptions(**solver_kw)
         return cartodiffusion.diffusion_square(density, opts, points=points)
