@@ -57,24 +57,50 @@ def fft_workers() -> int:
 
 class _Type1:
     """``dct`` and ``dst`` (``type=1``, along ``axis``, unnormalised, one thread) by scipy's pocketfft extension
-    module itself, as ``scipy.fft.dct`` and ``scipy.fft.dst`` call it for a float64 table (the same numbers)."""
+    module itself, as ``scipy.fft.dct`` and ``scipy.fft.dst`` call it for a float64 table (the same numbers),
+    written into ``out`` where given (``x`` itself, or an array that does not overlap it)."""
 
     def __init__(self, module):
         self._pfft = module
 
-    def dct(self, x: np.ndarray, type: int, axis: int) -> np.ndarray:  # noqa: A002 (scipy.fft's keyword)
-        return self._pfft.dct(np.asarray(x, dtype=np.float64), type, (axis,), 0, None, 1, None)
+    def dct(self, x: np.ndarray, type: int, axis: int,  # noqa: A002 (scipy.fft's keyword)
+            out: np.ndarray | None = None) -> np.ndarray:
+        return self._pfft.dct(np.asarray(x, dtype=np.float64), type, (axis,), 0, out, 1, None)
 
-    def dst(self, x: np.ndarray, type: int, axis: int) -> np.ndarray:  # noqa: A002
-        return self._pfft.dst(np.asarray(x, dtype=np.float64), type, (axis,), 0, None, 1, None)
+    def dst(self, x: np.ndarray, type: int, axis: int,  # noqa: A002
+            out: np.ndarray | None = None) -> np.ndarray:
+        return self._pfft.dst(np.asarray(x, dtype=np.float64), type, (axis,), 0, out, 1, None)
+
+
+class _Public:
+    """:class:`_Type1`'s transforms by ``scipy.fft`` itself, the result copied into ``out`` where given."""
+
+    def __init__(self, fft):
+        self._fft = fft
+
+    def dct(self, x: np.ndarray, type: int, axis: int,  # noqa: A002
+            out: np.ndarray | None = None) -> np.ndarray:
+        return _into(out, self._fft.dct(x, type=type, axis=axis))
+
+    def dst(self, x: np.ndarray, type: int, axis: int,  # noqa: A002
+            out: np.ndarray | None = None) -> np.ndarray:
+        return _into(out, self._fft.dst(x, type=type, axis=axis))
+
+
+def _into(out: np.ndarray | None, y: np.ndarray) -> np.ndarray:
+    """``y``, or ``out`` with ``y`` copied into it."""
+    if out is None:
+        return y
+    out[...] = y
+    return out
 
 
 @functools.lru_cache(maxsize=None)
 def type1_transforms():
-    """The type-I transforms of :class:`CosineTransforms`'s large tables: an object with ``dct(x, type, axis)``
-    and ``dst(x, type, axis)`` for float64 tables: the extension module that ``scipy.fft`` calls for them, loaded
-    without importing ``scipy.fft`` (which loads much more of scipy) unless that is loaded already, and
-    ``scipy.fft`` itself where loading the module alone fails."""
+    """The type-I transforms of :class:`CosineTransforms`'s large tables: an object with ``dct(x, type, axis,
+    out=None)`` and ``dst(x, type, axis, out=None)`` for float64 tables: the extension module that ``scipy.fft``
+    calls for them, loaded without importing ``scipy.fft`` (which loads much more of scipy) unless that is loaded
+    already, and ``scipy.fft`` itself where loading the module alone fails."""
     # importing scipy.fft loads scipy.special and scipy's array-API layer too: half a second, a fifth of the whole
     # command on a map of a country's subdivisions
     if "scipy.fft" not in sys.modules:
@@ -84,7 +110,7 @@ def type1_transforms():
             pass
     import scipy.fft
 
-    return scipy.fft
+    return _Public(scipy.fft)
 
 
 def _load_pocketfft():
@@ -180,9 +206,10 @@ class CosineTransforms:
 
     def _by_scipy(self, transform, src: np.ndarray, rows: np.ndarray, result: np.ndarray) -> np.ndarray:
         """``rows`` (the result with the transformed axis last) filled by the type-I ``scipy.fft`` ``transform`` of
-        ``src``'s rows, a block at a time (no temporary table); returns ``result``."""
+        ``src``'s rows, a block at a time, each written straight into its rows (no temporary table, no block
+        allocated afresh); returns ``result``."""
         for a in range(0, src.shape[0], self.block):
-            rows[a:a + self.block] = transform(src[a:a + self.block], type=1, axis=-1)
+            transform(src[a:a + self.block], 1, -1, out=rows[a:a + self.block])
         return result
 
     def _spectra(self, src: np.ndarray, fill):
