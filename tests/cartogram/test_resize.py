@@ -336,6 +336,24 @@ BAD = [
 ]
 
 
+def test_geojson_geometries_are_read_as_shapely_reads_them():
+    """The regions' reader builds each geometry from float arrays, the same (Multi)Polygon as ``shape``: holes,
+    several parts, a third coordinate, no coordinates at all."""
+    from shapely.geometry import shape
+
+    from rfmap.cartogram.regions import _geometry
+
+    hole = [square(0, 0, 4)[0], [[1, 1], [2, 1], [2, 2], [1, 2], [1, 1]]]
+    cases = [{"type": "Polygon", "coordinates": hole},
+             {"type": "MultiPolygon", "coordinates": [hole, square(2000, 0)]},
+             {"type": "Polygon", "coordinates": [[[0, 0, 5], [1, 0, 5], [1, 1, 5], [0, 0, 5]]]},
+             {"type": "Polygon", "coordinates": []}, {"type": "MultiPolygon", "coordinates": []}]
+    for geom in cases:
+        got, want = _geometry(geom), shape(geom)
+        assert got.geom_type == want.geom_type and shapely.equals_exact(got, want, 0), geom
+        assert shapely.get_coordinate_dimension(got) == shapely.get_coordinate_dimension(want)
+
+
 @pytest.mark.parametrize("fc,match", BAD)
 def test_bad_input_is_one_clear_value_error(fc, match):
     with pytest.raises(ValueError, match=match) as e:

@@ -60,6 +60,23 @@ def _load_collection(collection) -> dict:
     raise ValueError(f"expected a GeoJSON FeatureCollection (dict, JSON text or path), got {type(collection).__name__}")
 
 
+def _geometry(geom: dict):
+    """The shapely (Multi)Polygon of a GeoJSON Polygon or MultiPolygon geometry, as ``shapely.geometry.shape`` makes
+    it, each ring read as one float array (shapely's constructors read a list of positions point by point, which on
+    a country's subdivisions takes longer than parsing the file)."""
+    shapely = _shapely()
+
+    def polygon(rings):
+        if not rings:
+            return shapely.Polygon()
+        shell, *holes = (np.asarray(ring, dtype=float) for ring in rings)
+        return shapely.Polygon(shell, holes)
+
+    if geom["type"] == "Polygon":
+        return polygon(geom["coordinates"])
+    return shapely.MultiPolygon([polygon(rings) for rings in geom["coordinates"]])
+
+
 def read_regions(collection, value: str, *, floor: float = ZERO_FLOOR):
     """The polygons of a GeoJSON FeatureCollection and their values, checked.
 
@@ -90,8 +107,6 @@ def read_regions(collection, value: str, *, floor: float = ZERO_FLOOR):
         or with zero area, a missing, non-numeric, negative, NaN or infinite value, or all values zero.
     """
     shapely = _shapely()
-    from shapely.geometry import shape
-
     fc = _load_collection(collection)
     if not isinstance(fc, dict) or fc.get("type") != "FeatureCollection" or not isinstance(fc.get("features"), list):
         raise ValueError("not a GeoJSON FeatureCollection (need {'type': 'FeatureCollection', 'features': [...]})")
@@ -106,7 +121,7 @@ def read_regions(collection, value: str, *, floor: float = ZERO_FLOOR):
             got = geom.get("type") if isinstance(geom, dict) else type(geom).__name__
             raise ValueError(f"feature {name}: geometry must be a Polygon or MultiPolygon, got {got}")
         try:
-            g = shape(geom)
+            g = _geometry(geom)
         except Exception as e:  # noqa: BLE001 - shapely raises several types for malformed coordinates
             raise ValueError(f"feature {name}: malformed {geom['type']} coordinates ({e})") from e
         if g.is_empty or not np.isfinite(shapely.get_coordinates(g)).all() or g.area <= 0:
