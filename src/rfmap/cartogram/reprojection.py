@@ -74,15 +74,18 @@ def _ring_area(ring: np.ndarray) -> float:
     return 0.5 * float(np.dot(x[:-1], y[1:]) - np.dot(x[1:], y[:-1]))
 
 
-def _strip_ring(ring: np.ndarray, angle: float, width: float) -> tuple[np.ndarray | None, int]:
+def _strip_ring(ring: np.ndarray, angle: float, width: float, tipped: bool = True) -> tuple[np.ndarray | None, int]:
     """A closed ring with its needle tips removed, round after round (the first tip of every run of neighbouring
     tips each round, so that every removal is judged with its true neighbours), and the count removed; ``None`` for
-    a ring that collapsed (fewer than three vertices left, or a mean width :math:`2|A|/P` under ``width``)."""
+    a ring that collapsed (fewer than three vertices left, or a mean width :math:`2|A|/P` under ``width``).  A ring
+    not ``tipped`` (found without a tip at this width or a wider one) is only checked for collapse."""
     removed = 0
     while True:
         p = ring[:-1]
         if len(p) < 3 or 2 * abs(_ring_area(ring)) < width * float(np.hypot(*np.diff(ring, axis=0).T).sum()):
             return None, removed
+        if not tipped:
+            return ring, removed
         tip = needles(ring, angle, width)
         if not tip.any():
             return ring, removed
@@ -94,21 +97,24 @@ def _strip_ring(ring: np.ndarray, angle: float, width: float) -> tuple[np.ndarra
         ring = np.vstack([p, p[:1]])
 
 
-def _strip_region(geom, angle: float, width: float):
+def _strip_region(geom, angle: float, width: float, tipped: np.ndarray):
     """A (Multi)Polygon with its needles removed and collapsed rings dropped (:func:`_strip_ring`), and the count of
     points removed (those of a dropped ring included); the region itself when nothing changed or nothing would be
-    left."""
+    left.  ``tipped`` flags the rings (in the order of ``shapely.get_rings`` of its parts) that hold a tip at this
+    width or a wider one (:func:`_candidates`)."""
     import shapely
 
-    polys, changed = [], False
+    polys, changed, flags = [], False, iter(tipped)
     for part in shapely.get_parts(geom):
-        shell, n = _strip_ring(np.asarray(part.exterior.coords), angle, width)
+        shell, n = _strip_ring(np.asarray(part.exterior.coords), angle, width, next(flags))
         changed |= shell is None or n > 0
         if shell is None:
+            for _ in part.interiors:
+                next(flags)
             continue
         holes = []
         for h in part.interiors:
-            hole, n = _strip_ring(np.asarray(h.coords), angle, width)
+            hole, n = _strip_ring(np.asarray(h.coords), angle, width, next(flags))
             changed |= hole is None or n > 0
             if hole is not None:
                 holes.append(hole)
@@ -120,8 +126,9 @@ def _strip_region(geom, angle: float, width: float):
     return out, int(shapely.get_num_coordinates(geom) - shapely.get_num_coordinates(out))
 
 
-def _candidates(geoms: np.ndarray, angle: float, width: float) -> np.ndarray:
-    """The regions (indices) with a needle tip or a collapsed ring: every ring screened at once."""
+def _candidates(geoms: np.ndarray, angle: float, width: float) -> dict[int, np.ndarray]:
+    """The regions (indices) with a needle tip or a collapsed ring, every ring screened at once, and which of each
+    one's rings (in the order of ``shapely.get_rings`` of its parts) hold a tip: ``{region: flags}``."""
     import shapely
 
     parts, owner = shapely.get_parts(geoms, return_index=True)
@@ -138,12 +145,13 @@ def _candidates(geoms: np.ndarray, angle: float, width: float) -> np.ndarray:
     lu, lv = np.hypot(u[:, 0], u[:, 1]), np.hypot(v[:, 0], v[:, 1])
     tip = (np.minimum(lu, lv) > 0) & (turn < angle) & (np.abs(cross) < width * np.maximum(lu, lv))
     tip[last] = False
-    hit = np.zeros(len(rings), dtype=bool)
-    np.logical_or.at(hit, of_ring, tip)
-    hit |= 2 * np.abs(shapely.area(shapely.polygons(rings))) < width * shapely.length(rings)
+    tipped = np.zeros(len(rings), dtype=bool)
+    np.logical_or.at(tipped, of_ring, tip)
+    hit = tipped | (2 * np.abs(shapely.area(shapely.polygons(rings))) < width * shapely.length(rings))
     region = np.zeros(len(geoms), dtype=bool)  # a mask, not np.unique: that loads numpy.ma (10 ms of a short run)
     region[owner[of_part[hit]]] = True
-    return np.flatnonzero(region)
+    ring_owner = owner[of_part]
+    return {int(i): tipped[ring_owner == i] for i in np.flatnonzero(region)}
 
 
 def remove_needles(geoms: np.ndarray, *, angle: float = NEEDLE_ANGLE, width: float = NEEDLE_WIDTH,
@@ -159,10 +167,10 @@ def remove_needles(geoms: np.ndarray, *, angle: float = NEEDLE_ANGLE, width: flo
     lo_x, lo_y, hi_x, hi_y = shapely.total_bounds(geoms)
     w = width * max(hi_x - lo_x, hi_y - lo_y)
     out, removed = geoms.copy(), {}
-    for i in _candidates(geoms, angle, w):
+    for i, tipped in _candidates(geoms, angle, w).items():
         area, valid = abs(shapely.area(geoms[i])), shapely.is_valid(geoms[i])
-        for narrower in NARROWER:
-            g, n = _strip_region(geoms[i], angle, w * narrower)
+        for narrower in NARROWER:  # a ring without a tip at the width has none at a narrower one
+            g, n = _strip_region(geoms[i], angle, w * narrower, tipped)
             if n and abs(shapely.area(g) - area) <= max_change * area and (shapely.is_valid(g) or not valid):
                 out[i], removed[int(i)] = g, n
                 break
