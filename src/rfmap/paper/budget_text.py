@@ -1,7 +1,7 @@
 """The sentences of appendix C's budget section: how each shipped model's steps compare with the paper's epochs,
 which shipped states come before the end of their run, and how often the raw maps of the validated states fold.
 
-Each function reads the training records (a model's metadata, as :attr:`rfmap.Surrogate.meta` holds it) and
+Each function reads the training records (a model's metadata: the ``meta`` dictionary of a loaded :class:`rfmap.Surrogate`) and
 returns text; :func:`budget_glue` returns them all under the names the appendix glues them by.
 """
 from __future__ import annotations
