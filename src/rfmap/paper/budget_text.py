@@ -2,7 +2,8 @@
 which shipped states come before the end of their run, and how often the raw maps of the validated states fold.
 
 Each function reads the training records (a model's metadata: the ``meta`` dictionary of a loaded
-:class:`rfmap.Surrogate`) and returns text; :func:`budget_glue` returns them all under the names the appendix glues them by.
+:class:`rfmap.Surrogate`) and returns text; :func:`budget_glue` returns them all under the names the appendix
+glues them by.
 """
 from __future__ import annotations
 
@@ -111,7 +112,8 @@ def fold_states_text(metas: dict) -> str:
         parts.append(raw_of(never) + " folded at no validated state" + ("" if every else " of the last run"))
     if some:
         other = "that of the other model" if len(some) == 1 else f"those of the other {_models(len(some))}"
-        parts.append(other + " at some states only" if parts else raw_of(some) + " folded at some validated states of the last run only")
+        parts.append(other + " at some states only" if parts
+                     else raw_of(some) + " folded at some validated states of the last run only")
     text = "; ".join(parts)
     return text[0].upper() + text[1:] + "."
 
