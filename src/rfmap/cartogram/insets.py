@@ -111,7 +111,9 @@ class InsetCartogram:
     tol : float
         The tolerance on the largest relative area error (the options' ``tol``).
     min_share : float
-        The share of the total value from which a region is judged (the main inset's ``min_share``).
+        The share of the total value from which a region is judged (the main inset's ``min_share``, filled from the
+        options as for :class:`~rfmap.cartogram.resize.Cartogram`; the class default 0 holds only for one built by
+        hand).
     """
 
     input_features: list

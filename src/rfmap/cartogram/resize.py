@@ -171,7 +171,10 @@ class Cartogram:
         The tolerance on the largest relative area error that :meth:`problems` checks.
     min_share : float
         The share of the total value from which a region is judged: smaller regions do not count in the area errors
-        (:func:`rfmap.cartogram.metrics.judged`).
+        (:func:`rfmap.cartogram.metrics.judged`).  :func:`cartogram` fills it, as ``tol``, from its options
+        (``min_share`` of :class:`~rfmap.cartogram.options.CartogramOptions`, default
+        :data:`~rfmap.cartogram.metrics.MIN_SHARE`, 0.01 %); the class default 0, every region judged, holds only
+        for a ``Cartogram`` built by hand.
     """
 
     input_features: list

@@ -99,9 +99,11 @@ class MapResult:
     mapped_points : ndarray, shape (P, d)
     elements : ndarray, shape (m, d+1)
     field : ndarray
-        The input field: vertex densities, shape (P,), or per-triangle Beltrami coefficients, shape (m,) complex.
+        The input field: vertex densities, shape (P,), or per-triangle Beltrami coefficients, shape (m,) complex
+        (another registered kind: what its :class:`ResultKind` declares).
     kind : str
-        ``'density'`` or ``'beltrami'``.
+        A registered kind of result (:func:`register_result_kind`): ``'density'`` or ``'beltrami'`` for the
+        library's own tasks and solvers, or one that a new task declares.
     time : float
         Seconds spent computing the map.
     info : dict or Mapping

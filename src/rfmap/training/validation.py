@@ -1,9 +1,10 @@
 r"""A held-out validation set: seeded random fields that training never draws.
 
 Training sample ``i`` of step ``t`` is drawn from ``np.random.default_rng([seed, t, i])`` (a three-word seed);
-validation field ``j`` comes from ``np.random.default_rng([VALIDATION_SEED, j])`` (a two-word seed), a different
-random stream for every ``seed``, ``t`` and ``i``.  The paper's test fields are never used to select a model; they
-are reported beside the validation metric only.
+held-out field ``j`` of a stream comes from ``np.random.default_rng([VALIDATION_SEED + stream, j])`` (a two-word
+seed; ``stream`` is 0 for validation and 1 for reports, :data:`rfmap.tasks.heldout.STREAMS`), a different random
+stream for every ``seed``, ``t`` and ``i``.  The paper's test fields are never used to select a model; they are
+reported beside the validation metric only.
 
 The set mixes kinds, sharp ones included, so that folds show up during training:
 
