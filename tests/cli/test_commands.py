@@ -6,6 +6,7 @@ subprocess to check the real entry point, exit status and stderr."""
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -213,6 +214,21 @@ def test_entry_point_as_subprocess(tmp_path):
     assert len(lines) == 1 and "unknown field 'nope'" in lines[0], proc.stderr
     assert not out.exists()
 
+
+def test_closed_pipe_ends_quietly():
+    """``rfmap models | head``: when the reader of the output has gone, the process ends without a traceback or any
+    other line on stderr, with the status a shell reports for a tool ended by SIGPIPE (141)."""
+    from rfmap.cli.commands import PIPE_SIGNAL
+
+    read_end, write_end = os.pipe()
+    os.close(read_end)  # the reader is gone before the first line is written: the write fails every time
+    try:
+        proc = subprocess.run([sys.executable, "-m", "rfmap.cli", "models"], stdout=write_end,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    finally:
+        os.close(write_end)
+    assert proc.stderr == ""
+    assert proc.returncode == 128 + PIPE_SIGNAL == 141
 
 
 @pytest.mark.parametrize("extra, code", [([], 0), (["--max-passes", "1", "--tol", "1e-4"], 1), (["--n", "1"], 2)])

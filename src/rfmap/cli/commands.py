@@ -465,19 +465,30 @@ def main(argv=None) -> int:
 # before they return, and they register nothing to run at exit
 QUICK_EXIT = ("cartogram",)
 
+# the number of the signal SIGPIPE, sent to a process that writes to a pipe whose reader has gone
+PIPE_SIGNAL = 13
+
 
 def entry() -> None:
     """The ``rfmap`` program (console script and ``python -m rfmap.cli``): runs :func:`main` on the process's
-    arguments and exits with its status."""
+    arguments and exits with its status; when the reader of its output goes first (``rfmap models | head``), it
+    ends without a message, with status 141 (128 + the number of SIGPIPE), as a Unix tool does."""
     # after a sub-command of QUICK_EXIT the process exits at once (os._exit, streams flushed) instead of tearing
     # the interpreter down, which frees every module's objects one by one: on a small map that teardown takes a
     # noticeable share of the whole command
     argv = sys.argv[1:]
-    code = main(argv)
-    if argv[:1] and argv[0] in QUICK_EXIT:
+    try:
+        code = main(argv)
+        if argv[:1] and argv[0] in QUICK_EXIT:
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os._exit(code)
         sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(code)
+    except BrokenPipeError:
+        # the reader of the output has gone (``rfmap models | head``): end quietly, as a Unix tool does on
+        # SIGPIPE, with the status a shell reports for one (128 + 13); the output still buffered goes nowhere
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        sys.exit(128 + PIPE_SIGNAL)
     sys.exit(code)
 
 
