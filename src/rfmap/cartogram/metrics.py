@@ -240,7 +240,7 @@ def clean_input_overlaps(regions: np.ndarray, gap_width: float = 0.0) -> tuple[n
     * small: under :data:`SLIVER_SHARE` of the smaller region's area.
 
     The overlaps are found among the regions with their vertices merged as the passes merge them
-    (:func:`_merged`): borders that two neighbours draw from opposite ends, equal to the last bits, then touch instead
+    (``_merged``): borders that two neighbours draw from opposite ends, equal to the last bits, then touch instead
     of overlapping by :math:`10^{-17}` of the map, which would cost an intersection per pair of neighbours; the
     overlaps found are measured on the regions themselves.
 
@@ -362,7 +362,7 @@ def valid_polygons(geoms: np.ndarray) -> np.ndarray:
     lines or points, crumbs under :data:`CRUMB` dropped).  The ``"structure"`` method: the area inside the rings
     (where a ring crossed itself, both lobes) less the holes, in half the time of the default on the long rings of
     a country's subdivisions.  A MultiPolygon is fixed part by part where that is enough
-    (:func:`_valid_by_parts`)."""
+    (``_valid_by_parts``)."""
     return np.array([_polygons(_valid_by_parts(g)) for g in geoms], dtype=object)
 
 
