@@ -181,6 +181,11 @@ def _threads_of(command: str) -> int | None:
     return int(words[words.index("--threads") + 1]) if "--threads" in words[:-1] else None
 
 
+def _steps_of(command: str) -> int | None:
+    words = command.split()
+    return int(words[words.index("--steps") + 1]) if "--steps" in words[:-1] else None
+
+
 def _repeat_cost(metas: dict, shipped: dict[str, str]) -> list[str]:
     """What a repeat of every shipped model from its shipped parent costs, and why it gives comparable, not
     identical, weights: the runs to repeat, their wall time, and their CPU time where the runs recorded their
@@ -192,12 +197,17 @@ def _repeat_cost(metas: dict, shipped: dict[str, str]) -> list[str]:
     known = [(run.wall_time, _threads_of(command)) for run, command in runs if _threads_of(command)]
     unknown = [run.wall_time for run, command in runs if not _threads_of(command)]
     cpu = sum(w * t for w, t in known)
+    capped = sum(run.steps == _steps_of(command) for run, command in runs)
     text = ("Retraining a shipped model is not one command run for a fixed number of steps. Each model is the end "
             "of a chain of runs, each started from the weights of the one before, with its options (learning rate, "
-            "seed, threads, time limit) chosen run by run, and the runs stop at a wall-time limit, not after a set "
-            "number of steps. A repeat, on another machine or on the same machine under another load, trains each "
-            "run for as long but not for as many steps: it gives comparable weights of the same recipe, not "
-            "identical ones, and step counts that differ from those in the table. "
+            "seed, threads, step cap, time limit) chosen run by run, and each run stops at its step cap or its "
+            f"wall-time limit, whichever comes first: of the {len(runs)} runs that a repeat of every model needs, "
+            f"{capped} reached their step "
+            f"cap and {len(runs) - capped} stopped on the clock. A repeat, on another machine or on the same machine "
+            "under another load, does not end its runs where the recorded ones ended: on a faster device the "
+            "step-capped runs end sooner and the others take more steps; on a slower one any run may stop on the "
+            "clock with fewer steps. It gives comparable weights of the same recipe, not identical ones, and step "
+            "counts and wall times that differ from those in the table. "
             f"Repeating every model from its shipped parent means repeating {len(runs)} runs "
             f"({min(per_model)} to {max(per_model)} per model), {_hours(wall)} of wall time in all"
             f"{_from_shipped(metas, shipped)}. "

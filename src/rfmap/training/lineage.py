@@ -12,9 +12,10 @@ output of the repeated chain's previous run.  Where an earlier run of the chain 
 run kept its parent's weights (validation chose none of its states), the weights are those of the run before it:
 :func:`source_run` is the run that trained them, and the runs after it (:func:`idle_runs`) are not repeated.
 
-A repeat trains with the recorded options and seed.  A run with a ``--time-limit`` stops on the clock and its
-learning-rate schedule follows the elapsed time, so on another machine it trains as long, not for the same steps;
-the weights are those of the same recipe, not the same bits.
+A repeat trains with the recorded options and seed.  A run stops at its ``--steps`` or its ``--time-limit``,
+whichever it reaches first, and its learning-rate schedule follows the further along of the two; on another machine
+a run may therefore end at another step or another time than the recorded one, and the weights are those of the
+same recipe, not the same bits.
 
 Nothing here imports PyTorch: it reads the weights' metadata only (the ``.json`` file beside each weight file).
 """
