@@ -518,7 +518,7 @@ def query_points_figure(cloud, grid, *, width: float = TEXT_WIDTH_IN, bins: int 
     for label, rho in rhos.items():
         axes[2].hist(np.clip(rho, lo, hi), bins=np.linspace(lo, hi, bins + 1), alpha=0.6, label=label, density=True)
     axes[2].set(title=r"$\tilde\rho$ on the mapped mesh", xlabel=r"$\tilde\rho$ (1st-99th percentile; the rest"
-                "\nin the end bins)", ylabel="share of triangles\n(density)")
+                "\nin the end bins)", ylabel="fraction of triangles\nper unit of " + r"$\tilde\rho$")
     axes[2].legend()
     return fig
 
@@ -534,7 +534,7 @@ def random_fields_figure(mesh, densities: dict, mu_panels: dict, maps: dict, *, 
 
     dens = list(densities.items())
     rows = -(-len(dens) // 4) + 1
-    fig, axes = plt.subplots(rows, 4, figsize=(width, 2.0 * rows), layout="constrained", squeeze=False)
+    fig, axes = plt.subplots(rows, 4, figsize=(width, 1.5 * rows), layout="constrained", squeeze=False)
     for ax, (title, values) in zip(axes[:-1].ravel(), dens):
         im = plot_density(ax, mesh.points, mesh.elements, values, title=title, colorbar=False)
         add_colorbar(im, ax=ax, fraction=0.046, pad=0.03, label=density_label)
