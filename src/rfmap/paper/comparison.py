@@ -212,8 +212,8 @@ class Comparison:
 
     def verdict_word(self, short: bool = False) -> str:
         """The verdict, its tally of (case, metric) pairs and the clause on the n/c cases with the size of the gap
-        (:func:`.qualified_verdict`): ``'reproduced (3 of 3 comparable); outside this verdict, the n/c case's Std ratio
-        is 1.6 times the paper's'`` with ``short``."""
+        (:func:`.qualified_verdict`): ``'reproduced on the comparable cases (3 of 3); the n/c case's Std ratio is 1.6
+        times the paper's'``, and with ``short`` (the scoreboards' cell) ``'reproduced (3 of 3 comparable)'``."""
         flags, nc = [self.met(c.name, m) for c in self.cases for m in self.metrics], self._nc_ratios()
         return qualified_verdict(flags, [a > b for _, a, b in nc], short=short, factors=[a / b for _, a, b in nc])
 

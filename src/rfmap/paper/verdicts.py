@@ -123,9 +123,10 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     ``k`` is ``0`` or ``n``.  With n/c cases the word is scoped to the comparable cases and followed by
     :func:`nc_clause`: whether each n/c case's Std ratio (:func:`std_ratio`, the share of the input's spread the map
     leaves) by the paper's method is above the paper's (``nc_worse``, one flag per n/c case, ``True`` where it is);
-    with ``short`` the word, its tally named as that of the comparable cases, and the n/c clause marked as outside
-    the verdict (the scoreboards' cell).  ``factors``, one per n/c case, are the paper's method's Std ratio over
-    the paper's: the clause then says by how much a worse case misses.
+    with ``short`` the word and its tally named as that of the comparable cases, without the n/c clause, which the
+    scoreboards' footnotes give (the scoreboards' cell; an item whose cases are all n/c keeps the clause).
+    ``factors``, one per n/c case, are the paper's method's Std ratio over the paper's: the clause then says by how
+    much a worse case misses.
 
     Examples
     --------
@@ -136,22 +137,19 @@ def qualified_verdict(met: list[bool | None], nc_worse: list[bool] | None = None
     'reproduced on the comparable cases (3 of 3)'
     >>> nc
     'the n/c case is worse by Std ratio'
-    >>> print(qualified_verdict([True] * 3, [True], short=True))
-    ... # doctest: +NORMALIZE_WHITESPACE
-    reproduced (3 of 3 comparable); outside this verdict,
-    the n/c case is worse by Std ratio
-    >>> print(qualified_verdict([True] * 3, [True], short=True,
-    ...                         factors=[1.61]))  # doctest: +NORMALIZE_WHITESPACE
-    reproduced (3 of 3 comparable); outside this verdict,
-    the n/c case’s Std ratio is 1.6 times the paper’s
+    >>> qualified_verdict([True] * 3, [True], short=True, factors=[1.61])
+    'reproduced (3 of 3 comparable)'
+    >>> print(qualified_verdict([None], [True], short=True, factors=[1.61]))
+    not comparable; the n/c case’s Std ratio is 1.6 times the paper’s
     """
     flags = [m for m in met if m is not None]
     count = f" ({sum(flags)} of {len(flags)})" if flags else ""
     if not nc_worse:
         return verdict(met) + count
-    if short:  # the scoreboards' cell: the count named as that of the comparable cases, the n/c cases beside it
-        return (f"{verdict(met)}{count[:-1] + ' comparable)' if flags else ''}; "
-                f"{'outside this verdict, ' if flags else ''}{nc_clause(nc_worse, factors)}")
+    if short:  # the scoreboards' cell: the count named as that of the comparable cases; the n/c cases in a footnote
+        if flags:
+            return f"{verdict(met)}{count[:-1]} comparable)"
+        return f"{verdict(met)}; {nc_clause(nc_worse, factors)}"
     scope = " on the comparable cases" if flags else ""
     return f"{verdict(met)}{scope}{count}; {nc_clause(nc_worse, factors)}"
 
