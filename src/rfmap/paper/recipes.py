@@ -36,7 +36,8 @@ def recipe_table(surs: dict) -> Table:
       ``Surrogate.map`` returns them, a folded map regridded or repaired (``TrainConfig.val_repair``);
     * ``folded_maps``: how many held-out maps the network itself folded.
 
-    Older weights were validated on fewer sides, so their numbers are not comparable with those of later runs.
+    The validation sides differ between models (``val_n``): the held-out scores of models validated on different
+    sides are not comparable.
 
     Each column of the Markdown table is in one notation: rates as powers of ten
     (:func:`~rfmap.paper.tables.rate_text`), steps with thousands separators, minutes whole, the held-out scores with
@@ -222,10 +223,11 @@ def differences_table(metas: dict) -> str:
 
 
 def training_settings(meta: dict) -> dict[str, str]:
-    """The settings of a model's training that the book's chapter "08 DEM against DEQ on an extreme density"
-    compares, in words, from its metadata (``Surrogate.meta``): the Beltrami weight λ, the decay of the weight
-    average, the peak learning rate and the seed of the last run, and the steps over its ``--init`` chain
-    (``cumulative_steps``; its earlier runs are ``lineage``).
+    r"""The settings of a model's training that the book's chapter "08 DEM against DEQ on an extreme density"
+    compares, in words, from its metadata (``Surrogate.meta``): the Beltrami weight λ, the fold penalty (its weight
+    and the threshold of :math:`\det J` below which it acts), the decay of the weight average, the peak learning
+    rate and the seed of the last run, and the steps over its ``--init`` chain (``cumulative_steps``; its earlier
+    runs are ``lineage``).
 
     Examples
     --------
@@ -236,7 +238,9 @@ def training_settings(meta: dict) -> dict[str, str]:
     cfg = meta["config"]
     runs = len(meta.get("lineage", [])) + 1
     steps = meta.get("cumulative_steps", meta["steps"])
-    return {"Beltrami weight λ": f"{cfg['loss']['beltrami']:g}",
+    loss = cfg["loss"]
+    return {"Beltrami weight λ": f"{loss['beltrami']:g}",
+            "fold penalty": f"{loss.get('fold', 10.0):g} where det J < {loss.get('fold_threshold', 0.02):g}",
             "weight average (EMA decay)": f"{cfg['ema']:g}" if cfg.get("ema") else "none",
             "peak learning rate of the last run": rate_text(cfg["lr"]),
             "seed of the last run": str(cfg["seed"]),
