@@ -1,7 +1,6 @@
 """The models the book's chapters use: shipped weights at ``full`` scale, tiny models trained on the spot at ``ci``.
 
-This sits above both inference (:mod:`rfmap.surrogate`) and training (:mod:`rfmap.training`): the class that serves
-users never depends on the code that makes its weights.
+A user's own code needs none of this: :meth:`rfmap.Surrogate.pretrained` loads a shipped model.
 """
 from __future__ import annotations
 

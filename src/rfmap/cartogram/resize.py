@@ -123,7 +123,9 @@ _NO_POINTS = np.empty((0, 2))
 def available_methods(surrogate=None) -> tuple[str, ...]:
     """The methods of :func:`cartogram`, :data:`CARTOGRAM_METHODS`; every :class:`rfmap.Surrogate` supports them all.
 
-    ``surrogate`` is deprecated and ignored (passing it warns): call ``available_methods()``."""
+    .. deprecated:: 0.1.0
+       The argument ``surrogate``: it is ignored, and passing it warns.
+    """
     if surrogate is not None:
         warnings.warn("available_methods(surrogate): the argument is ignored and will be removed; call "
                       "available_methods()", DeprecationWarning, stacklevel=2)

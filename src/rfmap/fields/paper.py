@@ -162,7 +162,8 @@ def _prism_peak_3d(x):
 #:   (:data:`RECT_PEAK_BOX`).  The paper leaves its :math:`\mathrm{rect}(x, y)` unspecified: this input is not the
 #:   paper's;
 #: * ``ring``, Eq. (31): :math:`\exp(-(r - 1)^2 / (2 \cdot 0.5^2))` with :math:`r` the distance to
-#:   :math:`(0.5, 0.5)`;
+#:   :math:`(0.5, 0.5)`.  On :math:`[0, 1]^2`, :math:`r \le \sqrt{2}/2`, so the ridge :math:`r = 1` lies outside
+#:   the square: despite its name the density is a bowl, lowest at the centre and rising to the corners;
 #: * ``multi-freq``, the 2D resolution tests: :math:`2 + \sin(4\pi x)\cos(4\pi y) + 0.3\sin(6\pi x)`;
 #: * ``sin-cos-3d``, Eq. (33): :math:`2 + \sin(2\pi x)\cos(2\pi y)\sin(2\pi z)`;
 #: * ``shell-3d``, Eq. (34): :math:`\max g - g(r)` with :math:`g(r) = \exp(-(r - 1)^2 / (2 \cdot 0.5^2))` and

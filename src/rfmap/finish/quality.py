@@ -27,7 +27,9 @@ __all__ = ["QUALITY_MARGIN", "GAIN_RTOL", "PoorMapWarning", "quiet_quality", "de
            "poor_map_message"]
 
 #: :func:`density_quality` calls a map worse than the input when its Std(ρ̃_map) exceeds Std(ρ̃_orig) by more
-#: than this fraction (far above the single-precision measures' error, so that the identity never counts as worse)
+#: than this fraction, far above the relative error of the single-precision measures.  For a near-uniform input,
+#: whose spread (and so the margin it sets) is near zero, the absolute 1e-5 of :func:`density_quality` covers the
+#: round-off instead; between them, the identity never counts as worse
 QUALITY_MARGIN = 1e-4
 
 #: :func:`density_quality` says a map brought no gain when it lowered Std(ρ̃) by less than this fraction of
@@ -77,10 +79,10 @@ def density_quality(mapped: np.ndarray, density: np.ndarray, n: int) -> dict[str
     -------
     dict
         ``std_rho_orig``, ``std_rho_map``, ``min_jacobian``; ``worse``: whether Std(ρ̃_map) exceeds
-        ``(1 + QUALITY_MARGIN) * Std(ρ̃_orig) + 1e-5`` (:data:`QUALITY_MARGIN`; the absolute 1e-5 covers float32
-        round-off) or the map is not finite, i.e.
-        the map undid more than it did; and ``no_gain``: whether Std(ρ̃_map) is not below
-        ``(1 - GAIN_RTOL) * Std(ρ̃_orig)`` (:data:`GAIN_RTOL`; or the map is not finite), i.e. the map did not make
+        ``(1 + QUALITY_MARGIN) * Std(ρ̃_orig) + 1e-5`` or the map is not finite, i.e. the map undid more than it
+        did (the relative :data:`QUALITY_MARGIN` covers the single-precision round-off of a large spread, the
+        absolute 1e-5 that of a near-uniform input, whose spread is near zero); and ``no_gain``: whether
+        Std(ρ̃_map) is not below ``(1 - GAIN_RTOL) * Std(ρ̃_orig)`` (:data:`GAIN_RTOL`; or the map is not finite), i.e. the map did not make
         the density measurably more equal.  A map that is worse brings no gain; the identity brings none either, on
         every grid, whatever the round-off of the two spreads.
     """

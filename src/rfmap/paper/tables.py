@@ -198,8 +198,13 @@ class Headline:
     whether the paper's value is met (``ours <= paper`` for a metric where lower is better).  ``paper_label``
     names that column where the value to meet is a target rather than the paper's; ``classical_label`` names the
     classical solver of its column (the headlines of :mod:`rfmap.paper.reproduce` name the diffusion DEM or the
-    LBS).  Its ``met`` judges the delivered map, so its counts can differ from the scoreboard's, which judges the
-    paper's method (:mod:`rfmap.paper.comparison`).
+    LBS).
+
+    Two criteria of "met" coexist, one per kind of table.  A headline's ``met`` judges the map in its ``ours``
+    column: in the headlines of :mod:`rfmap.paper.reproduce`, the best *delivered* map, and the column's head says
+    so (``ours, best delivered``).  The scoreboard and :meth:`rfmap.paper.comparison.Comparison.met` judge the
+    *paper's method* (native, refined, not repaired) and skip the cases whose input is not the paper's.  The two
+    counts of one paper table can therefore differ.
 
     Build it with :func:`headline`; show it with ``display(Markdown(h.to_markdown()))`` or as the cell's value.
     """

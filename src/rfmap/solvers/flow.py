@@ -199,9 +199,9 @@ class FlowOptions:
         density around it in :math:`[-L, 1+L]^d`.
     tol : float
         Stop after the pass whose :math:`\mathrm{Std}(\tilde\rho_{\text{map}})` is at most ``tol`` (no pass at all
-        when the input's is); 0 leaves the passes to ``max_passes`` and ``stall`` (a caller with its own stopping
-        rule, such as the passes of ``rfmap.cartogram.resize.cartogram``, runs exactly one pass of a density that is not
-        exactly uniform).
+        when the input's is).  ``tol=0`` turns this stop off, leaving the passes to ``max_passes`` and ``stall``: with
+        ``max_passes=1``, exactly one pass runs on any density that is not exactly uniform, for a caller with its own
+        stopping rule.
     rtol : float, optional
         Largest predictor–corrector difference of an accepted step, in grid spacings of the raster's box; default
         ``RTOL`` of the dimension (0.2 in 2D, 0.4 in 3D).

@@ -82,30 +82,34 @@ class TrainConfig:
     largest (:func:`rfmap.core.mesh.jittered_points`).  The defaults of the learning rate, weight decay and schedule
     below are this project's; the ``paper`` presets have the paper's.
 
-    ``schedule`` is ``'cosine'`` (linear warm-up then cosine decay), ``'step'`` (decay by ``gamma`` every ``step_size``
-    steps) or ``'restarts'`` (cosine annealing with warm restarts, ``T0``, ``T_mult``).  ``ema`` > 0 keeps an
-    exponential moving average of the weights (Polyak averaging, :class:`rfmap.training.averaging.WeightAverage`) with
-    that decay; validation, the checkpoint choice and the shipped file then use the averaged weights (0, the default:
-    the weights as trained).  ``teacher`` (density tasks, :class:`rfmap.tasks.teacher.TeacherConfig`): a classical
-    solver's map of a share of each batch's fields as a supervised target beside the data-free losses (default: none,
-    data-free as in the paper).  ``snapshot_every`` > 0 writes the weights every that many steps to ``OUT/snapshots/``
-    (single self-contained files, scored afterwards by ``rfmap validate``).  ``val_repair``: score the held-out maps as
-    ``Surrogate.map`` delivers them (a folded network map regridded or repaired;
-    :func:`rfmap.training.validation.evaluate`) instead of the raw network output; ``val_native``: run the network on
-    the validation grid itself (``Surrogate.map(..., native=True)``) instead of a working grid inside ``n_range``.  A
-    run started with ``init`` validates its parent at step 0, so that the parent competes with every checkpoint.
+    **Optimiser.**  ``schedule`` is ``'cosine'`` (linear warm-up then cosine decay), ``'step'`` (decay by ``gamma``
+    every ``step_size`` steps) or ``'restarts'`` (cosine annealing with warm restarts, ``T0``, ``T_mult``).
+    ``ema`` > 0 keeps an exponential moving average of the weights (Polyak averaging,
+    :class:`rfmap.training.averaging.WeightAverage`) with that decay; validation, the checkpoint choice and the
+    shipped file then use the averaged weights (0, the default: the weights as trained).
 
-    Training grid sides: ``n_sampling`` ``'uniform'`` (every side in ``n_range`` equally often) or ``'log'``
-    (log-uniform: every octave of sizes equally often, a curriculum across the sizes the paper tests) or
-    ``'mixed'`` (half the steps log-uniform, half uniform on the small sides ``[lo, 3 lo]``).
-    ``batch_points`` > 0 sets each step's batch to about that many grid points,
+    **Data.**  Training grid sides: ``n_sampling`` ``'uniform'`` (every side in ``n_range`` equally often) or
+    ``'log'`` (log-uniform: every octave of sizes equally often, a curriculum across the sizes the paper tests) or
+    ``'mixed'`` (half the steps log-uniform, half uniform on the small sides ``[lo, 3 lo]``).  ``batch_points`` > 0
+    sets each step's batch to about that many grid points,
     :math:`B(N) = \mathrm{clip}(\mathrm{round}(P / N^d), 1, \mathtt{batch})`, so that a step costs about the same
-    at every size (0: always ``batch``).  ``grow`` (with ``init``): the parent network is widened to ``model.base``
-    channels by a function-preserving growth (:func:`rfmap.nn.grow.grow_unet`) before training.
+    at every size (0: always ``batch``).  ``teacher`` (density tasks, :class:`rfmap.tasks.teacher.TeacherConfig`): a
+    classical solver's map of a share of each batch's fields as a supervised target beside the data-free losses
+    (default: none, data-free as in the paper).
 
-    ``precision``: ``'fp32'`` or ``'bf16'`` (:data:`rfmap.core.device.PRECISIONS`): with ``'bf16'`` the network's
-    forward and backward pass run under bfloat16 autocast (CUDA, or a CPU with AVX512-BF16/AMX); the losses, the
-    Jacobians, the fold penalty, the optimiser's state and validation stay in float32.
+    **Validation.**  ``val_repair``: score the held-out maps as ``Surrogate.map`` delivers them (a folded network map
+    regridded or repaired; :func:`rfmap.training.validation.evaluate`) instead of the raw network output;
+    ``val_native``: run the network on the validation grid itself (``Surrogate.map(..., native=True)``) instead of a
+    working grid inside ``n_range``.  A run started with ``init`` validates its parent at step 0, so that the parent
+    competes with every checkpoint.
+
+    **Run.**  ``grow`` (with ``init``): the parent network is widened to ``model.base`` channels by a
+    function-preserving growth (:func:`rfmap.nn.grow.grow_unet`) before training.  ``snapshot_every`` > 0 writes the
+    weights every that many steps to ``OUT/snapshots/`` (single self-contained files, scored afterwards by
+    ``rfmap validate``).  ``precision``: ``'fp32'`` or ``'bf16'`` (:data:`rfmap.core.device.PRECISIONS`): with
+    ``'bf16'`` the network's forward and backward pass run under bfloat16 autocast (CUDA, or a CPU with
+    AVX512-BF16/AMX); the losses, the Jacobians, the fold penalty, the optimiser's state and validation stay in
+    float32.
 
     Attributes
     ----------

@@ -206,8 +206,9 @@ def shrinking_batches(metas: dict) -> list[str]:
 
 def budget_markdown(budget, metas: dict, columns: list[str], headers: dict | None = None) -> str:
     """The ``columns`` of a :func:`budget_table` as Markdown (:func:`to_markdown`), with the fields-seen ratio of
-    each model of :func:`shrinking_batches` marked as the upper bound it is (``≤ 3.24``); ``headers`` renames
-    columns for the reader (``{"× fields, assumed batch": "× fields at an assumed batch of 8"}``)."""
+    each model of :func:`shrinking_batches` marked as the upper bound it is (a ``≤`` before the number);
+    ``headers`` renames columns for the reader
+    (``{"× fields, assumed batch": "× fields at an assumed batch of 8"}``)."""
     shown = budget[columns].astype(object)
     col = "× fields, assumed batch"
     if col in columns:

@@ -6,6 +6,9 @@ Folds of a network map are usually a few small clusters, so a patch solve costs 
 leaves the rest of the map exactly as the network made it.  Widespread folds (more than :data:`LOCAL_MIN_CAPPED`
 truncated triangles and more than the share :data:`LOCAL_MAX_CAPPED` of all), a free boundary that crosses itself,
 or a patch that stays folded go to the global rebuild.
+
+The five constants below are tuning constants, not choices a caller makes: they decide how far a patch grows and
+when it is given up for the global rebuild, so they change which rebuild runs and what it costs.
 """
 from __future__ import annotations
 
