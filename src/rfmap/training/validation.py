@@ -150,7 +150,8 @@ def score(summary: dict) -> tuple[int, float]:
     times the others', cannot decide the choice alone.  Beltrami models: ``(0, penalized)``, the mean vertex
     distance with a folded map counted as the identity (see :func:`evaluate`).
 
-    Summaries of older weights, recorded before these entries existed, rank after every summary that has them."""
+    A summary that lacks these entries (one recorded by an earlier version of the package) ranks after every summary
+    that has them."""
     # summaries written before these entries existed: (1, penalized), a fold-free one (1, mean), one with a folded
     # map, whose penalized mean is unknown, (2, capped mean)
     tier, value, _ = score_parts(summary)
