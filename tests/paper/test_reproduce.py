@@ -267,7 +267,7 @@ def test_recipe_table_reads_the_training_recipe_from_the_metadata():
     # the selection score where the metadata records it: a folded map counted as the identity, not its huge Std
     sur.meta["final_metrics"]["mean"].update({"std_rho_map": 40.0, "capped": 0.2, "penalized": 0.25})
     assert recipe_table({"new": sur}).value("new", "unet", "held_out") == 0.25
-    assert recipe_table({"new": sur}).value("new", "unet", "score_kind") == "mean Std, folds as no map"
+    assert recipe_table({"new": sur}).value("new", "unet", "score_kind") == "mean Std, folds as identity"
     # the family score of Std ratios, where recorded, is the score that chose the weights
     sur.meta["final_metrics"]["mean"]["family_score"] = 0.4
     by_family = recipe_table({"new": sur})

@@ -7,10 +7,10 @@ from rfmap.training.validation import score, score_parts
 
 @pytest.mark.parametrize("summary,expected,label", [
     ({"std_rho_map": 0.2, "family_score": 0.4, "penalized": 0.3}, (0, 0.4, "family_score"), "Std ratio by family"),
-    ({"mean_dd": 1e-3, "penalized": 2e-3}, (0, 2e-3, "penalized"), "mean |Δd|, folds as no map"),
-    ({"std_rho_map": 0.2, "penalized": 0.3}, (1, 0.3, "penalized"), "mean Std, folds as no map"),
+    ({"mean_dd": 1e-3, "penalized": 2e-3}, (0, 2e-3, "penalized"), "mean |Δd|, folds as identity"),
+    ({"std_rho_map": 0.2, "penalized": 0.3}, (1, 0.3, "penalized"), "mean Std, folds as identity"),
     ({"std_rho_map": 0.2, "folded_fields": 0}, (1, 0.2, "mean"), "mean Std"),
-    ({"std_rho_map": 0.2, "folded_fields": 1, "capped": 0.5}, (2, 0.5, "capped"), "mean Std, folds as no map"),
+    ({"std_rho_map": 0.2, "folded_fields": 1, "capped": 0.5}, (2, 0.5, "capped"), "mean Std, folds as identity"),
     ({"std_rho_map": 0.2, "n_flipped": 3}, (2, 0.2, "mean"), "mean Std"),
 ])
 def test_score_parts_names_the_entry_that_ranks_a_summary(summary, expected, label):

@@ -45,7 +45,7 @@ def test_learning_curves_can_draw_the_selection_score():
     line, star = ax_val.lines[:2]
     assert list(line.get_ydata()) == [0.3, 0.2, 0.35] and list(line.get_xdata()) == [1000, 1100, 1200]
     assert list(star.get_xdata()) == [1100] and list(star.get_ydata()) == [0.2] and star.get_marker() == "*"
-    assert "folded map = identity" in ax_val.get_ylabel()
+    assert "folds as identity" in ax_val.get_ylabel()
     assert len(ax_val.lines) == 2  # no open circles on the penalized score unless asked for
     ax_marked = learning_curves({"m": meta}, {"m": 100}, score=True, mark_folded=True).axes[1]
     opened = [ln for ln in ax_marked.lines if ln.get_markerfacecolor() == "white"]

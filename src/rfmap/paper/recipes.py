@@ -137,7 +137,7 @@ def _selection(val: dict) -> tuple[float | None, str | None]:
     """The score that chose the kept weights, from a validation summary, and what it is, as
     :func:`rfmap.training.validation.score_parts` ranks them: the checkpoint score (each field's Std(ρ̃_map)
     relative to its Std(ρ̃_orig), averaged by family) where recorded, else the mean metric with every folded map
-    counted as no map, else the plain mean."""
+    counted as the identity, else the plain mean."""
     if not val:
         return None, None
     metric = "|Δd|" if "mean_dd" in val else "Std"
@@ -145,8 +145,8 @@ def _selection(val: dict) -> tuple[float | None, str | None]:
         _, value, what = score_parts(val)
     except KeyError:  # no metric recorded at all
         return None, None
-    return value, {"family_score": "Std ratio by family", "penalized": f"mean {metric}, folds as no map",
-                   "capped": f"mean {metric}, folds as no map", "mean": f"mean {metric}"}[what]
+    return value, {"family_score": "Std ratio by family", "penalized": f"mean {metric}, folds as identity",
+                   "capped": f"mean {metric}, folds as identity", "mean": f"mean {metric}"}[what]
 
 
 #: The settings of a stored training configuration that name or time a run rather than shape what it learns.

@@ -232,7 +232,7 @@ def learning_curves(metas: dict, budgets: dict, *, ncols: int = 1, mark_folded: 
     ``ncols`` models per row (two panels each), 7.2 inches wide in all; ``mark_folded`` draws open markers on the
     validated states whose maps folded on some held-out field. With ``score`` the validation panel draws the score
     that chose the kept weights (:func:`rfmap.training.validation.score`: the checkpoint score where recorded, else
-    the mean with every folded map counted as no map) instead of the plain mean, which one folded map can inflate
+    the mean with every folded map counted as the identity) instead of the plain mean, which one folded map can inflate
     without bound, and a star marks the kept weights at their step, the value the recipe table records; where only
     the plain mean is stored, open circles mark the states with a folded map, which ranked behind every fold-free
     one; with ``mark_folded`` as well, open circles mark them on every score. Values below 0.01 are drawn in units
@@ -301,7 +301,7 @@ def _selection_value(record: dict, key: str) -> tuple[float, str]:
         return float(record["family_score"]), "family score (Std ratio)"
     for k in ("penalized", "capped"):
         if k in record:
-            return float(record[k]), f"{VAL_NAMES[key]}, folded map = identity"
+            return float(record[k]), f"{VAL_NAMES[key]}, folds as identity"
     return float(record[key]), VAL_NAMES[key]
 
 
