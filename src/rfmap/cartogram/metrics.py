@@ -205,13 +205,16 @@ def pass_weights(values: np.ndarray, min_share: float, budget: float = MINOR_BUD
     return np.where(big, values, np.maximum(values, floor))
 
 
-def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tuple[np.ndarray, list]:
+def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA,
+                 valid: np.ndarray | None = None) -> tuple[np.ndarray, list]:
     """Invalid mapped polygons whose fix (``shapely.make_valid``) changes their area by at most ``max_change`` of the
     total area replaced by the fix: a crossing of two edges that the input drew nearly touching, which no map of the
-    vertices alone keeps apart.  Returns the polygons and the indices of those fixed; larger folds stay invalid, for
-    :meth:`~rfmap.cartogram.resize.Cartogram.problems` to report."""
+    vertices alone keeps apart.  ``valid``: ``shapely.is_valid(mapped)``, where the caller has it (its entries of the
+    polygons fixed are then set, so that it stays true of the polygons returned).  Returns the polygons and the
+    indices of those fixed; larger folds stay invalid, for :meth:`~rfmap.cartogram.resize.Cartogram.problems` to
+    report."""
     shapely = _shapely()
-    bad = np.flatnonzero(~shapely.is_valid(mapped))
+    bad = np.flatnonzero(~(shapely.is_valid(mapped) if valid is None else valid))
     if not bad.size:
         return mapped, []
     fixed = valid_polygons(mapped[bad])
@@ -219,6 +222,8 @@ def repair_folds(mapped: np.ndarray, *, max_change: float = REPAIR_AREA) -> tupl
     ok = (change <= max_change) & shapely.is_valid(fixed) & np.isin(shapely.get_type_id(fixed), (3, 6))
     out = mapped.copy()
     out[bad[ok]] = fixed[ok]
+    if valid is not None:
+        valid[bad[ok]] = True
     return out, [int(i) for i in bad[ok]]
 
 
@@ -292,7 +297,7 @@ def _merged(regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float = REPAIR_OVERLAP,
-                    min_share: float = MIN_SHARE) -> tuple[np.ndarray, list]:
+                    min_share: float = MIN_SHARE, valid: np.ndarray | None = None) -> tuple[np.ndarray, list]:
     r"""Sliver overlaps of valid mapped regions, each shared out between its two regions so that they share a border.
 
     An overlap of two regions is removed when it holds more than a thousandth of :data:`REPAIR_AREA` of the total
@@ -315,6 +320,8 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float
     ----------
     mapped : ndarray of shapely geometries, shape (R,)
     values : ndarray, shape (R,)
+    valid : ndarray of bool, shape (R,), optional
+        ``shapely.is_valid(mapped)``, where the caller has it (only valid regions are measured: :func:`overlaps`).
 
     Returns
     -------
@@ -322,7 +329,7 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float
         The polygons and the pairs ``(cut, kept)``: the first gave up the larger share of their overlap.
     """
     shapely = _shapely()
-    left, right, inter = overlaps(mapped)
+    left, right, inter = overlaps(mapped, valid)
     if not left.size:
         return mapped, []
     area = shapely.area(mapped)

@@ -542,8 +542,9 @@ def _repair(mapped: np.ndarray, values: np.ndarray, method: CartogramMethod, inf
     their largest error is lower (none past ``plan.deadline``).  Returns the polygons and the seconds spent in
     ``grid_map``; ``info`` records the repairs and the passes (``info["finish_passes"]``)."""
     tol, min_share = plan.tol, plan.min_share
-    mapped, info["repaired"] = repair_folds(mapped)
-    mapped, info["overlaps_cut"] = repair_overlaps(mapped, values)
+    valid = _shapely().is_valid(mapped)  # measured once for both repairs (repair_folds marks the folds it fixes)
+    mapped, info["repaired"] = repair_folds(mapped, valid=valid)
+    mapped, info["overlaps_cut"] = repair_overlaps(mapped, values, valid=valid)
     info["finish_passes"] = 0
     if not info["overlaps_cut"] or tol is None or (err := _largest_error(mapped, values, min_share)) <= tol:
         return mapped, 0.0
