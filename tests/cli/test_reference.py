@@ -45,3 +45,17 @@ def test_every_table_row_has_two_cells_and_options_render_as_typed():
     prose = re.sub(r"```text\n.*?```|\|---\|---\|", "", text, flags=re.S)
     assert "--" not in re.sub(r"`[^`]*`", "", prose)
     assert all(not row.endswith("| — |") for row in rows), [row for row in rows if row.endswith("| — |")]
+
+
+def test_the_page_names_every_built_in_field():
+    """The prose of book/api/cli.md lists the names ``--field`` accepts: every built-in field, none that is not."""
+    import re
+
+    from rfmap.fields.paper import field_names
+
+    text = (ROOT / "book" / "api" / "cli.md").read_text(encoding="utf-8")
+    para = text[text.index("`--field` takes the name of a built-in field"):]
+    para = para[:para.index("\n\n")]
+    listed = re.findall(r"(?<!\})`([A-Za-z0-9-]+)`", para)  # not the page name of a {doc} link
+    names = [n for n in listed if not n.startswith("--")]
+    assert sorted(names) == sorted(field_names())

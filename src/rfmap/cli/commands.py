@@ -378,7 +378,9 @@ def _add_reproduce(sub) -> None:
     """``rfmap reproduce``."""
     s = sub.add_parser("reproduce", help="write the paper's tables (Markdown and CSV)")
     s.add_argument("experiment", choices=["beltrami", "dem2d", "dem3d"],
-                   help="which group of the paper's tables: beltrami, dem2d or dem3d")
+                   help="which group of the paper's tables, each on the paper's grids whatever RFMAP_SCALE says: "
+                        "beltrami (the model beltrami2d), dem2d (deq2d-square and deq2d-free) or dem3d (dem3d-cube "
+                        "and dem3d-free), with the classical solvers run beside the networks on the CPU")
     s.add_argument("--out", default="reproduction", help="output directory (default: reproduction)")
     s.add_argument("--no-refine", action="store_true", help="skip weight refinement")
     s.add_argument("--symmetrize", nargs="?", const=True, default=False, type=_symmetry_arg, metavar="GROUP",

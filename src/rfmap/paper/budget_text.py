@@ -1,5 +1,6 @@
-"""The sentences of appendix C's budget section: how each shipped model's steps compare with the paper's epochs,
-which shipped states come before the end of their run, and how often the raw maps of the validated states fold.
+"""The sentences of the budget section of chapter 16 (appendix C): how each shipped model's steps compare with the
+paper's epochs, which shipped states come before the end of their run, and how often the raw maps of the validated
+states fold.
 
 Each function reads the training records (a model's metadata: the ``meta`` dictionary of a loaded
 :class:`rfmap.Surrogate`) and returns text; :func:`budget_glue` returns them all under the names the appendix

@@ -45,8 +45,8 @@ COLUMN_TITLES = {
 #: trailing zeros dropped (``0.13``).  The comparison tables of :mod:`rfmap.paper.comparison` print as many digits
 #: with trailing zeros kept (``0.1300``); the short summary tables of
 #: :func:`~rfmap.paper.generalization.pivot_markdown`, :func:`~rfmap.paper.generalization.columns_markdown` and
-#: :class:`Headline` print three (:func:`~rfmap.core.wording.format_sig`), trailing zeros dropped.  The reference's
-#: page on the book's internals sets these rules side by side in one table.
+#: :class:`Headline` print three (:func:`~rfmap.core.wording.format_sig`), trailing zeros dropped.  The table above
+#: sets these rules side by side.
 DIGITS = 4
 
 
