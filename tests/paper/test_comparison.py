@@ -348,3 +348,20 @@ def test_a_table_of_unscored_quantities_has_no_empty_columns():
     assert details[0] == "| case | quantity | paper's method | delivered | flow solver |"
     assert all(line.count("|") == 6 for line in details)
     assert c.to_markdown().splitlines()[0] == "| case | quantity | paper | paper's method | delivered | flow solver | met |"
+
+
+def test_fig10_checks_answer_yes_no_or_tie_for_the_second_model():
+    from types import SimpleNamespace
+
+    from rfmap.paper.verdicts import fig10_checks, fig10_text
+
+    values = {("DEM", "raw"): (5, 0.5), ("DEQ", "raw"): (3, 0.5), ("DEM", "native"): (0, 0.3),
+              ("DEQ", "native"): (2, 0.28), ("DEM", "delivered"): (0, 0.3), ("DEQ", "delivered"): (0, 0.31)}
+    table = SimpleNamespace(cases=[SimpleNamespace(name="DEM"), SimpleNamespace(name="DEQ")],
+                            values={k: {"n_flipped": f, "mean_mu": mu} for k, (f, mu) in values.items()})
+    answers = {m: [word for word, *_ in fig10_checks(table, m).values()] for m in ("raw", "native", "delivered")}
+    assert answers == {"raw": ["yes", "tie"], "native": ["no", "yes"], "delivered": ["tie", "no"]}
+    assert fig10_checks(table, "native")["fewer folded triangles"] == ("no", 2, 0)
+    text = fig10_text(table)
+    assert "DEQ map against DEM map, the paper's method:\n  fewer folded triangles: no (2 against 0)" in text
+    assert text.count("map against") == 3

@@ -37,7 +37,8 @@ from ..fields.paper import get_field, sample_density
 
 __all__ = ["COMPARABLE_RTOL", "VERDICTS", "VERDICT_RULE", "SCORED_METRICS", "input_std", "is_comparable", "std_ratio",
            "verdict", "qualified_verdict", "nc_clause", "nc_phrase", "ratio_text", "met_text", "median_ratio",
-           "every_or_count", "classical_lead", "times_lower", "NEAR_MISS", "close_calls"]
+           "every_or_count", "classical_lead", "times_lower", "NEAR_MISS", "close_calls", "FIG10_METHODS",
+           "fig10_checks", "fig10_text"]
 
 #: The relative agreement of the input's Std(ρ̃_orig) with the paper's for a case to count as the paper's input
 #: (the paper prints six digits).  The inputs rebuilt from formulas that the paper gives completely agree with its
@@ -354,3 +355,38 @@ def close_calls(rows) -> str:
 def _and_join(items: list[str]) -> str:
     """``a``, ``a and b``, ``a, b and c``."""
     return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
+
+
+#: The three kinds of map that the comparison of the paper's Fig. 10 asks its questions of, by their key in a
+#: comparison's values (``"native"`` is the paper's method), with their names in the text.
+FIG10_METHODS = {"raw": "raw network", "native": "the paper's method", "delivered": "delivered"}
+
+
+def fig10_checks(table, method: str) -> dict[str, tuple[str, float, float]]:
+    """The two questions of the paper's Fig. 10 for one method's maps of a two-model comparison
+    (:func:`rfmap.paper.comparison.compare_models`), whose first case is the model without the Beltrami term (DEM,
+    :math:`\\lambda = 0`) and whose second is the model with it: does the second map fold fewer triangles than the
+    first (``"fewer folded triangles"``), and is its mean ``|μ|`` lower (``"lower mean |mu|"``)?
+
+    Returns, per question, the answer (``"yes"``, ``"no"``, or ``"tie"`` where the two values are equal), the second
+    map's value and the first map's.
+    """
+    dem_map, deq_map = (table.values[(c.name, method)] for c in table.cases)
+
+    def answer(a, b):
+        return "tie" if a == b else "yes" if a < b else "no"
+
+    return {check: (answer(deq_map[q], dem_map[q]), deq_map[q], dem_map[q])
+            for check, q in (("fewer folded triangles", "n_flipped"), ("lower mean |mu|", "mean_mu"))}
+
+
+def fig10_text(table) -> str:
+    """:func:`fig10_checks` for the raw network's, the paper's method's and the delivered maps of a two-model
+    comparison, as lines of text: per method, each question's answer with the two values."""
+    without, with_term = (c.name for c in table.cases)
+    lines = []
+    for method, label in FIG10_METHODS.items():
+        lines.append(f"{with_term} map against {without} map, {label}:")
+        lines += [f"  {check}: {word} ({a:.3g} against {b:.3g})"
+                  for check, (word, a, b) in fig10_checks(table, method).items()]
+    return "\n".join(lines)
