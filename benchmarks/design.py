@@ -376,8 +376,8 @@ def default_symmetry(n, repeat, threads):
     from rfmap.nn.symmetry import DEFAULT_SYMMETRY
     from rfmap.training.validation import validation_fields
 
-    names = {"none": "plain", "permutations": "axis orders", "cyclic": "cyclic orders", "flips": "reflections",
-             "full": "all symmetries"}
+    names = {"none": "plain", "permutations": "axis orders (`permutations`)", "cyclic": "cyclic orders (`cyclic`)",
+             "flips": "reflections (`flips`)", "full": "all symmetries (`full`)"}
     rows = []
     for model, d, side, groups in (("deq2d-square", 2, n or 51, ("none", "permutations", "flips", "full")),
                                    ("dem3d-cube", 3, n or 32, ("none", "cyclic", "permutations", "flips"))):

@@ -437,6 +437,14 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
              "(click *The measurement* to open it). Where the numbers do not support the value, a warning box at "
              "the top of the section says so, shows the rows that show it, and says what is known and what was "
              "not measured.", "",
+             "Most settings are judged by {term}`Std(ρ̃)` of the mapped mesh, Std(ρ̃_map): the spread of the "
+             "density that a map leaves, zero for a perfectly equalized density (*more even* means lower). The "
+             "other words of the pipeline are those of the {doc}`glossary`: the {term}`working grid` the network "
+             "runs on, its {term}`raw map`, the {term}`default map`, and the {term}`polish`, in which the flow "
+             "solver starts from the network's map (a *warm* flow) and, with the {term}`guard`, also from the "
+             "identity (a *cold* flow). The models named (`deq2d-square`, `dem3d-cube`, ...) are the shipped "
+             "networks that `rfmap models` lists. N is the side of a grid in points; M, that of the flow "
+             "solver's density raster and velocity table, finer than the grid.", "",
              "The numbers are of two kinds. A *re-measured* decision is measured again by the script "
              "`benchmarks/design.py`, which prints the same table; its section gives the command and the date of "
              "the run. A *record* holds the numbers written down when the value was chosen; the code has changed "
