@@ -390,17 +390,15 @@ def _groups(decisions: list[dict[str, Any]]) -> list[tuple[str, list[dict[str, A
 
 def _glance(decisions: list[dict[str, Any]]) -> list[str]:
     """The page's overview: per group of decisions a list, one item per decision with its name and value, what it
-    controls, the alternatives tried, what the measurement showed and why the value is kept (or that the numbers do
-    not support it). A list rather than a five-column table, whose columns the page's text width would squeeze to a
-    word or two per line."""
+    controls, what the measurement showed and why the value is kept (or that the numbers do not support it); the
+    alternatives tried are in the section's collapsed block. A list rather than a four-column table, whose columns
+    the page's text width would squeeze to a word or two per line."""
     lines = []
     for heading, group in _groups(decisions):
         lines += [f"**{heading}**", ""]
         for d in group:
-            alternatives = "; ".join(d.get("alternatives") or [])
-            tried = f"*Tried instead:* {_sentence(alternatives)} " if alternatives else ""  # no empty field
             lines.append(f"- [{display_name(d)}]({_label(d)}): {readable_value(d)}. "
-                         f"{_sentence(d.get('purpose') or d['what'])} {tried}"
+                         f"{_sentence(d.get('purpose') or d['what'])} "
                          f"*Outcome ({_evidence(d)}):* {_sentence(d.get('outcome'))} "
                          f"*Why this value:* {_sentence(kept_text(d))}")
         lines.append("")
@@ -433,7 +431,8 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
              "re-measure these settings; the chapters do not depend on it, and its collapsed blocks name the "
              "records and code behind each number.", "",
              "The overview below has one entry per setting, grouped by the part of the package it belongs to. The "
-             "sections after it repeat the value and give the criterion; the numbers sit in a collapsed block "
+             "sections after it repeat the value and give the criterion; what else was tried and the numbers sit in "
+             "a collapsed block "
              "(click *The measurement* to open it). Where the numbers do not support the value, a warning box at "
              "the top of the section says so, shows the rows that show it, and says what is known and what was "
              "not measured.", "",
