@@ -53,7 +53,7 @@ LAYERS: dict[str, int] = {
     "rfmap.viz.training": 3, "rfmap.viz.cartograms": 3, "rfmap.viz.studies": 3,
     "rfmap.viz.repairs": 3, "rfmap.viz.wall_time": 3,
     "rfmap.paper": 3, "rfmap.paper.tables": 3, "rfmap.paper.reproduce": 3,
-    "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.benchmarks": 3,
+    "rfmap.paper.generalization": 3, "rfmap.paper.recipes": 3, "rfmap.paper.budget_text": 3, "rfmap.paper.benchmarks": 3,
     "rfmap.paper.flow_studies": 3, "rfmap.paper.design": 3, "rfmap.paper.cartograms": 3, "rfmap.paper.comparison": 3,
     "rfmap.paper.ablations": 3, "rfmap.paper.folding": 3, "rfmap.paper._execution": 3, "rfmap.paper._apidocs": 3,
     "rfmap.cartogram": 3, "rfmap.cartogram.resize": 3, "rfmap.cartogram.options": 3,
