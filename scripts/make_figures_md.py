@@ -326,8 +326,9 @@ SUMMARY = [
      ("05_beltrami_reconstruction", "The Linear Beltrami Solver leaves a mean |Δd| {lbs_dd_lower} that of the "
       "paper's method run here and {lbs_dd_lower_delivered} that of the delivered map, and a lower mean |Δμ| than "
       "the paper's method in {lbs_dmu_lead} of Tables 2 and 3.")],
-    [("06_dem_deq_2d", "*Time, on this page's CPU.* On the paper's 51-grid with the square boundary the flow "
-      "solver maps a density in a median {t4_time_classical}, the paper's method in {t4_time_native};"),
+    [("06_dem_deq_2d", "*Time, on the two-core CPU that built this book (chapters 05, 06 and 11).* On "
+      "the paper's 51-grid with the square boundary the flow solver maps a density in a median "
+      "{t4_time_classical}, the paper's method in {t4_time_native};"),
      ("05_beltrami_reconstruction", "the paper's method takes {t2_time_ratio:.2g} times as long as the Linear "
       "Beltrami Solver per Beltrami map."),
      ("11_fast_classical_and_hybrid", "On the grids that chapter 11 quotes (the square at N = {n2}, the cube at "
