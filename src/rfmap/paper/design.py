@@ -443,7 +443,9 @@ def to_markdown(decisions: list[dict[str, Any]] | None = None, source: str = "sr
              "solver starts from the network's map (a *warm* flow) and, with the {term}`guard`, also from the "
              "identity (a *cold* flow). The models named (`deq2d-square`, `dem3d-cube`, ...) are the shipped "
              "networks that `rfmap models` lists. N is the side of a grid in points; M, that of the flow "
-             "solver's density raster and velocity table, finer than the grid.", "",
+             "solver's density raster and velocity table, finer than the grid. The test densities named "
+             "(sin-cos, ring, octant-3d, ...) are the paper's, with their formulas in {doc}`api/fields`; the "
+             "{term}`sea` is the margin of (nearly) mean density around a free boundary.", "",
              "The numbers are of two kinds. A *re-measured* decision is measured again by the script "
              "`benchmarks/design.py`, which prints the same table; its section gives the command and the date of "
              "the run. A *record* holds the numbers written down when the value was chosen; the code has changed "
