@@ -226,7 +226,7 @@ def kept_state(meta: dict) -> dict:
     kept state's validation summary as :func:`rfmap.training.validation.score_parts` ranks it: the *checkpoint
     score* (:func:`rfmap.training.validation.score`, where the record has it); in older records, the *earlier
     rule*, the held-out mean Std(ρ̃_map) with a folded map counted as the identity (where the record has that
-    mean); and in the oldest, the *fold-free mean*, the lowest plain held-out mean Std(ρ̃_map) among the states
+    mean); and in the oldest, the *first runs' rule*, the lowest plain held-out mean Std(ρ̃_map) among the states
     whose maps fold on no held-out field.
 
     Parameters
@@ -238,11 +238,12 @@ def kept_state(meta: dict) -> dict:
     Returns
     -------
     dict
-        ``step`` (the kept step), ``rule`` (``"checkpoint score"``, ``"earlier rule"`` or ``"fold-free mean"``),
+        ``step`` (the kept step), ``rule`` (``"checkpoint score"``, ``"earlier rule"`` or ``"fold-free mean"``, the
+        first runs' rule),
         ``mean`` (the kept
         state's plain held-out mean), ``folds`` (a list of ``(field, N, flipped triangles)``, one per held-out
-        field on which the kept map folds), ``fold_free_step`` and ``fold_free_mean`` (the state the fold-free
-        mean rule keeps, ``None`` if every state folds) and ``fold_free_score`` (its checkpoint score, or
+        field on which the kept map folds), ``fold_free_step`` and ``fold_free_mean`` (the state the first runs'
+        rule keeps, ``None`` if every state folds) and ``fold_free_score`` (its checkpoint score, or
         ``None``), ``score`` (the kept state's checkpoint score, or ``None``).
     """
     final = meta.get("final_metrics") or {}
@@ -490,8 +491,8 @@ def kept_rules(kept: dict) -> str:
     -------
     str
         For a model chosen by the checkpoint score: its kept step, the held-out fields on which that state's map
-        folds, its plain mean, and the step the fold-free mean rule would have kept (with both states' plain means
-        and checkpoint scores) where it differs; for a model chosen by the earlier rule or the fold-free mean: its
+        folds, its plain mean, and the step the first runs' rule would have kept (with both states' plain means
+        and checkpoint scores) where it differs; for a model chosen by the earlier rule or the first runs' rule: its
         kept step and plain mean.
     """
     out, cross = [], []
