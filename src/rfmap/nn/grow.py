@@ -6,10 +6,10 @@ channel of the parent becomes ``k = base_new / base_old`` identical copies in th
 * a layer *producing* channels copies the parent's weights and bias of each source channel,
   :math:`W'_{j,\cdot} = W_{s(j),\cdot}`, so every copy carries the same activation as its source;
 * a layer *reading* channels splits the parent's weights over the copies of each input channel,
-  :math:`W'_{\cdot,j} = \lambda_j W_{\cdot,s(j)}` with :math:`\sum_{j: s(j)=c} \lambda_j = 1`, so its output is the
+  :math:`W'_{\cdot,j} = \omega_j W_{\cdot,s(j)}` with :math:`\sum_{j: s(j)=c} \omega_j = 1`, so its output is the
   parent's.
 
-The split fractions :math:`\lambda` are drawn at random (positive, independently for every reading layer), which
+The split fractions :math:`\omega_j` are drawn at random (positive, independently for every reading layer), which
 breaks the symmetry between copies: their gradients differ from the first step on, so training can make them
 diverge.  GroupNorm is preserved exactly because the copy map keeps every new group a union of equally many copies
 of the channels of one parent group (mean and biased variance are unchanged); channel statistics (the spatial

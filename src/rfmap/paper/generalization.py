@@ -169,9 +169,9 @@ def distortion_table(surs: dict, count: int = 50, n: int | None = None) -> Table
     For each model and each kind of field (and ``all``): the mean, median and worst Std(ρ̃_map), the mean over fields
     of the mean :math:`|\mu|` over triangles, the largest :math:`|\mu|`, the smallest Jacobian and the flipped
     triangles; the last column is each field's mean :math:`|\mu|` divided by that of the first model on the same
-    field, averaged over the fields.  A DEQ loss (the density loss plus :math:`\lambda` times the Beltrami energy
-    :math:`\int|\mu|^2`, paper Eq. (3)) should lower the mean :math:`|\mu|` against a pure DEM loss at about the
-    same Std(ρ̃_map).
+    field, averaged over the fields.  A DEQ loss (the density loss plus :math:`\lambda_{\mathrm{hr}}` times the
+    Beltrami energy :math:`\int|\mu|^2`, paper Eq. (3)) should lower the mean :math:`|\mu|` against a pure DEM loss
+    at about the same Std(ρ̃_map).
 
     Parameters
     ----------

@@ -365,8 +365,8 @@ FIG10_METHODS = {"raw": "raw network", "native": "the paper's method", "delivere
 def fig10_checks(table, method: str) -> dict[str, tuple[str, float, float]]:
     """The two questions of the paper's Fig. 10 for one method's maps of a two-model comparison
     (:func:`rfmap.paper.comparison.compare_models`), whose first case is the model without the Beltrami term (DEM,
-    :math:`\\lambda = 0`) and whose second is the model with it: does the second map fold fewer triangles than the
-    first (``"fewer folded triangles"``), and is its mean ``|μ|`` lower (``"lower mean |mu|"``)?
+    :math:`\\lambda_{\\mathrm{hr}} = 0`) and whose second is the model with it: does the second map fold fewer
+    triangles than the first (``"fewer folded triangles"``), and is its mean ``|μ|`` lower (``"lower mean |mu|"``)?
 
     Returns, per question, the answer (``"yes"``, ``"no"``, or ``"tie"`` where the two values are equal), the second
     map's value and the first map's.

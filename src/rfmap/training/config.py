@@ -468,8 +468,9 @@ _UNET_FNO_BUDGET = _FNO_DEQ2D_SQUARE.derive(
     paper=dict(model=ModelConfig()),
     paper_note="the paper's recipe for deq2d-square: " + _NOTE_2D + " This preset runs lr 1e-3 instead, as "
                "fno-deq2d-square's does (the paper trains no FNO, nor this partner of it).")
-#: the Beltrami weight alone (for chapter 8's Fig. 10 study): one recipe, trained from scratch twice, once with lambda = 0 (a DEM)
-#: and once with lambda = 0.1 (a DEQ); nothing else differs (study weights, not shipped models)
+#: the Beltrami weight alone (for chapter 8's Fig. 10 study): one recipe, trained from scratch twice, once with
+#: lambda_hr = 0 (a DEM) and once with lambda_hr = 0.1 (a DEQ); nothing else differs (study weights, not shipped
+#: models)
 _ABLATION = {lam: _density2d(
     f"ablation-lambda-{tag}", "square", beltrami=lam, steps=3000, time_limit=0.0,
     description=f"The Beltrami-weight ablation: deq2d-square's recipe (fields, fold penalty, schedule) from "
