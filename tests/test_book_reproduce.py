@@ -81,3 +81,15 @@ def test_the_page_says_what_a_repeat_gives_and_costs():
     assert "untimed first run" not in text
     for internal in ("environment.pickle", ".doctrees", "{glue:text}", ".installed"):
         assert internal not in text, internal
+
+
+def test_the_gpu_example_is_a_shipped_command_with_the_gpu_options():
+    """The GPU example is deq2d-square's retraining command as the page's generated section gives it, followed by
+    the device, precision and thread options, so it can be copied as it stands and cannot drift from the record."""
+    text = PAGE.read_text(encoding="utf-8")
+    block = re.search(r"add the device and precision at the end.*?```bash\n(.*?)```", text, re.S).group(1)
+    words = shlex.split(block.replace("\\\n", " "))
+    meta = load_metadata(WEIGHTS_DIR)["deq2d-square"]
+    recorded = shlex.split(retrain_command(meta, "deq2d-square", shipped_hashes(WEIGHTS_DIR)))
+    assert "..." not in words
+    assert words == recorded + ["--device", "cuda", "--precision", "bf16", "--threads", "4", "--workers", "8"]
