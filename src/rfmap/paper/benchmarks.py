@@ -371,7 +371,8 @@ def hybrid_findings(rows: list[dict[str, Any]], targets: dict) -> dict[str, Any]
           ways; ``ref_worse_coarser``: how many of those (an int) had a default map taken from a coarser working
           grid, because the network's own map folded; ``ref_worse_text``: the sentence that says both;
         * the hybrid's mean time over the flow's in every case of the time table (not only the quoted ones):
-          ``hyb_flow_range`` (``"from 3.32 to 3.88"``), ``hyb_slower_cases`` (the cases where the hybrid took longer,
+          ``hyb_flow_range`` (``"from 3.32 to 3.88"``), ``hyb_std_range`` (the hybrid's mean Std over the best
+          classical solver's, over the same cases), ``hyb_slower_cases`` (the cases where the hybrid took longer,
           ``"all 8 cases"``), ``hyb_cost_text`` (the clause that says both) and ``hyb_verdict`` (``"does not pay"``
           where the hybrid took longer in every case, ``"pays"`` where in none, else ``"pays only in some cases"``).
     """
@@ -448,7 +449,10 @@ def _hybrid_cost(summary: list[dict[str, Any]]) -> dict[str, str]:
         text, verdict = (f"it took longer than the flow alone in {of_count(slower, len(ratios), 'case')} of the"
                          f" time table; its time ranged {span} times"), "pays only in some cases"
     text += " the flow's time"
-    return {"hyb_flow_range": span, "hyb_slower_cases": of_count(slower, len(ratios), "case"),
+    stds = [r["std_ratio"] for r in summary if r["method"] == "hybrid" and "std_ratio" in r]
+    lo_s, hi_s = _ratio_text(min(stds)), _ratio_text(max(stds))
+    return {"hyb_std_range": lo_s if lo_s == hi_s else f"from {lo_s} to {hi_s}",
+            "hyb_flow_range": span, "hyb_slower_cases": of_count(slower, len(ratios), "case"),
             "hyb_cost_text": text, "hyb_verdict": verdict}
 
 
