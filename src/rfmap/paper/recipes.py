@@ -152,9 +152,9 @@ def _selection(val: dict) -> tuple[float | None, str | None]:
 #: The settings of a stored training configuration that name or time a run rather than shape what it learns.
 RUN_SETTINGS = ("name", "description", "seed", "steps", "time_limit", "out", "init")
 #: How :func:`differences_text` names a setting: a dotted key of the stored configuration (``"loss.beltrami"``,
-#: ``"lr"``, ``"ema"``, ``"loss.fold"``, ``"n_range"``, ``"batch"``) -> its name in the text (``"Beltrami weight λ"``,
-#: ``"peak learning rate"``, ...); a setting not listed is named by its key.
-SETTING_NAMES = {"loss.beltrami": "Beltrami weight λ", "lr": "peak learning rate", "ema": "weight average decay",
+#: ``"lr"``, ``"ema"``, ``"loss.fold"``, ``"n_range"``, ``"batch"``) -> its name in the text
+#: (``"Beltrami weight λ_hr"``, ``"peak learning rate"``, ...); a setting not listed is named by its key.
+SETTING_NAMES = {"loss.beltrami": "Beltrami weight λ_hr", "lr": "peak learning rate", "ema": "weight average decay",
                  "loss.fold": "fold penalty", "n_range": "training grid sides", "batch": "batch"}
 
 
@@ -224,7 +224,7 @@ def differences_table(metas: dict) -> str:
 
 def training_settings(meta: dict) -> dict[str, str]:
     r"""The settings of a model's training that the book's chapter "08 DEM against DEQ on an extreme density"
-    compares, in words, from its metadata (``Surrogate.meta``): the Beltrami weight λ, the fold penalty (its weight
+    compares, in words, from its metadata (``Surrogate.meta``): the Beltrami weight λ_hr, the fold penalty (its weight
     and the threshold of :math:`\det J` below which it acts), the decay of the weight average, the peak learning
     rate and the seed of the last run, and the steps over its ``--init`` chain (``cumulative_steps``; its earlier
     runs are ``lineage``).
@@ -239,7 +239,7 @@ def training_settings(meta: dict) -> dict[str, str]:
     runs = len(meta.get("lineage", [])) + 1
     steps = meta.get("cumulative_steps", meta["steps"])
     loss = cfg["loss"]
-    return {"Beltrami weight λ": f"{loss['beltrami']:g}",
+    return {"Beltrami weight λ_hr": f"{loss['beltrami']:g}",
             "fold penalty": f"{loss.get('fold', 10.0):g} where det J < {loss.get('fold_threshold', 0.02):g}",
             "weight average (EMA decay)": f"{cfg['ema']:g}" if cfg.get("ema") else "none",
             "peak learning rate of the last run": rate_text(cfg["lr"]),
