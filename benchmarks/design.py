@@ -23,23 +23,18 @@ import contextlib
 import functools
 import math
 import os
-import platform
 import subprocess
 import sys
 import time
 from dataclasses import dataclass
-from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 import torch
 
-import rfmap
 from rfmap.fields import TEST_FIELDS, sample_density
-from rfmap.paper.design import DESIGN_PATH, record
-
-ROOT = Path(__file__).resolve().parent.parent
+from rfmap.paper.design import DESIGN_PATH, measured_on, record
 
 
 @dataclass(frozen=True)
@@ -226,23 +221,18 @@ def scan_points(n, repeat, threads):
 
 
 # ------------------------------------------------------------------------------------------------ precision
-def _flow_map(name: str, n: int) -> np.ndarray:
-    from rfmap.solvers.flow import solve_flow
-
-    return solve_flow(sample_density(name, n), num_threads=1).mapped_points
-
-
 def element_measures(n, repeat, threads):
     """The mapped element measures of a map (what ``density_quality`` computes) in float32 and in float64: time and
     the relative difference of the Std(rho~_map) they give."""
     from rfmap.core.geometry import grid_element_mean, grid_signed_measures
     from rfmap.core.metrics import density_std
+    from rfmap.solvers.flow import solve_flow
 
     rows = []
     for d, side in ((3, n or 48), (2, 4 * (n or 64))):
         name = TEST_FIELDS["density", d][0]
         density = sample_density(name, side)
-        mapped = _flow_map(name, side)
+        mapped = solve_flow(density, num_threads=1).mapped_points
         pop = grid_element_mean(torch.from_numpy(density.reshape(1, -1)), side, d)[0]
 
         def measures(dtype):
@@ -257,29 +247,29 @@ def element_measures(n, repeat, threads):
     return rows
 
 
-def _velocity_setup(n: int, dtype):
-    """The flow solver's first velocity table of a 3D test density (raster refine 2, ``M = 2 N - 1``) in ``dtype``
-    and the identity grid's vertices as query points (grid_sample order)."""
+def _velocity_setup(n: int, dtype, dim: int = 3):
+    """The flow solver's first velocity table of a test density of dimension ``dim`` (raster refine 2,
+    ``M = 2 N - 1``) in ``dtype`` and the identity grid's vertices as query points (grid_sample order)."""
     from rfmap.core.mesh import grid_points
     from rfmap.solvers.raster import p1_upsample
     from rfmap.solvers.spectral import flow_planes
 
-    raster = p1_upsample(sample_density(TEST_FIELDS["density", 3][0], n), 2)
+    raster = p1_upsample(sample_density(TEST_FIELDS["density", dim][0], n), 2)
     table = torch.from_numpy(flow_planes(raster, 0.0, dtype))[None]
-    q = torch.from_numpy(grid_points(n, 3)).flip(-1).mul(2.0).sub(1.0)
+    q = torch.from_numpy(grid_points(n, dim)).flip(-1).mul(2.0).sub(1.0)
     return table, q, raster.shape[0]
 
 
 def _sample(table: torch.Tensor, q: torch.Tensor, entries: int) -> torch.Tensor:
-    """grid_sample of the points ``q`` (P, 3) in ``table`` split into ``entries`` batch entries over the same
+    """grid_sample of the points ``q`` (P, d) in ``table`` split into ``entries`` batch entries over the same
     (expanded) table, as the flow solver's velocity does."""
-    p = len(q)
+    p, d = q.shape
     rows = -(-p // entries)
-    q = torch.cat([q, q.new_zeros(rows * entries - p, 3)]) if rows * entries != p else q
-    q = q.to(table.dtype).reshape(entries, 1, 1, rows, 3)
+    q = torch.cat([q, q.new_zeros(rows * entries - p, d)]) if rows * entries != p else q
+    q = q.to(table.dtype).reshape(entries, *([1] * (d - 1)), rows, d)
     f = torch.nn.functional.grid_sample(table.expand(entries, *table.shape[1:]), q, mode="bilinear",
                                         padding_mode="border", align_corners=True)
-    return f.reshape(entries, 4, rows).permute(0, 2, 1).reshape(entries * rows, 4)[:p]
+    return f.reshape(entries, d + 1, rows).permute(0, 2, 1).reshape(entries * rows, d + 1)[:p]
 
 
 def velocity_table(n, repeat, threads):
@@ -296,21 +286,41 @@ def velocity_table(n, repeat, threads):
 
 
 def lookup_engine(n, repeat, threads):
-    """One velocity lookup of the 3D flow with the map solver's engine (torch ``grid_sample``, float32 table) and
-    with the cartogram's (numpy :func:`rfmap.core.mesh.multilinear`, float64 table), one thread: whether the two
-    solvers could share one lookup without torch."""
+    """One velocity lookup of the 3D and the 2D flow (every vertex of the N-grid in the table of the refined raster)
+    with the map solver's engine (torch ``grid_sample``, float32 table) and with the cartogram's (numpy
+    :func:`rfmap.core.mesh.multilinear`, float32 table), one thread: whether the two solvers could share one lookup
+    without torch."""
     from rfmap.core.mesh import multilinear
 
-    n = n or 48
-    t32_table, q, m = _velocity_setup(n, np.float32)
-    planes = t32_table[0].double().numpy()  # (4, M, M, M) in grid_sample's axis order
-    u = ((q.double().numpy() + 1.0) / 2.0 * (m - 1))[:, ::-1].copy()  # (P, 3) index units, planes' axis order
-    t_torch, f = best_time(lambda: _sample(t32_table, q, 1), max(3, repeat))
-    t_np, g = best_time(lambda: multilinear(planes, u.copy()), max(3, repeat))
-    rel = float(np.abs(f.double().numpy() - g).max() / np.abs(g).max())
-    return [_row(f"3D N = {n}, M = {m}: one lookup at {len(q):,} points", f"grid_sample, float32: {_ms(t_torch)}",
-                 f"numpy multilinear, float64: {_ms(t_np)} ({t_np / t_torch:.1f} times); largest difference "
-                 f"{rel:.0e} of the largest value")]
+    rows = []
+    for dim, side in ((3, n or 48), (2, 4 * (n or 64) + 1)):
+        table, q, m = _velocity_setup(side, np.float32, dim)
+        planes = table[0].numpy()  # (d + 1, M, ...) in grid_sample's axis order
+        u = ((q.double().numpy() + 1.0) / 2.0 * (m - 1))[:, ::-1].copy()  # (P, d) index units, planes' axis order
+        t_torch, f = best_time(lambda: _sample(table, q, 1), max(3, repeat))
+        t_np, g = best_time(lambda: multilinear(planes, u.copy()), max(3, repeat))
+        rel = float(np.abs(f.double().numpy() - g).max() / np.abs(g).max())
+        rows.append(_row(f"{dim}D N = {side}, M = {m}: one lookup at {len(q):,} points",
+                         f"grid_sample, float32: {_ms(t_torch)}", f"numpy multilinear, float32: {_ms(t_np)} "
+                         f"({t_np / t_torch:.1f} times); largest difference {rel:.0e} of the largest value"))
+    return rows
+
+
+def cartogram_tables(n, repeat, threads):
+    """A flow cartogram of the world's countries with the passes' tables in float32 (``TABLE_DTYPE``) and in
+    float64: the whole call's time (best of ``repeat``), its passes and its largest area error."""
+    from rfmap.cartogram import cartogram
+    from rfmap.cartogram.regions import world_countries
+    from rfmap.solvers import cartoflow
+
+    n, regions, out = n or 256, world_countries(), []
+    for dtype in (np.float32, np.float64):
+        with patched(cartoflow, "TABLE_DTYPE", dtype):
+            t, c = best_time(lambda: cartogram(regions, "pop_est", n=n, method="flow"), max(3, repeat))
+        m = c.metrics()
+        out.append(f"{np.dtype(dtype).name}: {t:.2f} s, {c.info['iterations']} passes, largest area error "
+                   f"{m.max_error:.4f}, {'valid' if m.topology_ok else 'invalid'}")
+    return [_row(f"world's countries by population, flow method, N = {n}", *out)]
 
 
 def batch_per_thread(n, repeat, threads):
@@ -513,8 +523,12 @@ CASES: dict[str, Case] = {
                                      f"{max(3, r)}"),
     "velocity-table-float32": Case(velocity_table, "3D N = 48", lambda n, r, t: f"the flow's first velocity table of "
                                    f"sin-cos-3d at N = {n or 48} (M = {2 * (n or 48) - 1}), best of {max(3, r)}"),
-    "flow-lookup-engine": Case(lookup_engine, "3D N = 48", lambda n, r, t: "the table and points of the "
-                               f"section on the velocity table's precision, one thread, best of {max(3, r)}"),
+    "flow-lookup-engine": Case(lookup_engine, "3D N = 48, 2D N = 257", lambda n, r, t: "the flow's first velocity "
+                               f"tables of sin-cos-3d at N = {n or 48} and sin-cos at N = {4 * (n or 64) + 1}, one "
+                               f"thread, best of {max(3, r)}"),
+    "cartogram-tables-float32": Case(cartogram_tables, "N = 256", lambda n, r, t: "the Natural Earth countries by "
+                                     f"population (rfmap.cartogram.regions.world_countries), N = {n or 256}, one "
+                                     f"thread, best of {max(3, r)}"),
     "grid-sample-per-thread": Case(batch_per_thread, "3D N = 48", lambda n, r, t: "the table and points of "
                                    f"the section on the velocity table's precision, {t} threads and one thread, "
                                    f"best of {max(5, r)}"),
@@ -530,27 +544,6 @@ CASES: dict[str, Case] = {
     "fno-size": Case(fno_size, "2D N = 80", lambda n, r, t: f"one forward and backward pass at batch 4 (the paper's "
                      f"four 2D test densities), N = {n or 80}, one thread, best of {max(3, r)}"),
 }
-
-
-def code_version() -> str:
-    """``rfmap VERSION, commit SHORT`` of the checkout (``+ changes`` when a tracked file of the package differs from
-    the commit; ``src/rfmap/data`` and ``src/rfmap/paper`` do not count), or the version alone outside a git
-    checkout."""
-    version = f"rfmap {rfmap.__version__}"
-    try:
-        sha = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"], capture_output=True,
-                             text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no", "--",
-                                "src/rfmap", ":!src/rfmap/data", ":!src/rfmap/paper"], capture_output=True,
-                               text=True, check=True).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return version
-    return f"{version}, commit {sha}" + (" + changes" if dirty else "")
-
-
-def machine(threads: int) -> str:
-    cpu = platform.processor() or platform.machine()
-    return f"{cpu}, {os.cpu_count()} cores, {'one thread' if threads == 1 else f'{threads} threads'}"
 
 
 def main(argv=None) -> None:
@@ -569,7 +562,6 @@ def main(argv=None) -> None:
             print(f"{name:26s} {case.sizes}")
         return
     torch.set_num_threads(1)
-    version = code_version()
     for name in args.only or list(CASES):
         case = CASES[name]
         t0 = time.perf_counter()
@@ -581,11 +573,8 @@ def main(argv=None) -> None:
         print(f"\n({seconds:.0f} s)")
         if args.record:
             threads = args.threads if name == "grid-sample-per-thread" else 1
-            record(name, path=Path(args.out), results=rows,
-                   data=case.data(args.n, args.repeat, args.threads),
-                   measured={"date": datetime.now(timezone.utc).strftime("%Y-%m-%d"), "code": version,
-                             "machine": machine(threads), "load": round(os.getloadavg()[0], 1),
-                             "seconds": round(seconds)})
+            record(name, path=Path(args.out), results=rows, data=case.data(args.n, args.repeat, args.threads),
+                   measured=measured_on(threads, seconds))
 
 
 if __name__ == "__main__":

@@ -13,6 +13,7 @@ from rfmap.core.mesh import (
     grid_points,
     grid_vertex_weights,
     interpolate,
+    multilinear,
     vertex_weights,
     square_triangles,
 )
@@ -254,3 +255,23 @@ def test_grid_too_large_for_memory_is_refused_before_allocation():
     with pytest.raises(ValueError, match="GiB available"):
         check_grid_memory(1000, 2, available=need - 1)
     assert check_grid_memory(32, 3, available=0) == 32**3 * BYTES_PER_VERTEX[3]  # small grids are never refused
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_multilinear_of_float32_planes_reproduces_multilinear_functions_in_single_precision(dim):
+    """:func:`rfmap.core.mesh.multilinear` of float32 planes (the cartogram flow's tables) returns float32 values of a
+    multilinear function within float32 rounding (1e-6 of its largest value), and of float64 planes float64 values
+    to 1e-12."""
+    rng = np.random.default_rng(3)
+    n = 9 if dim == 2 else 5
+    grid = grid_points(n, dim)
+    fn = _bilinear if dim == 2 else _trilinear
+    coef = rng.normal(size=(2, 8))
+    planes = np.stack([fn(grid, c).reshape((n,) * dim) for c in coef])
+    pts = rng.random((300, dim))
+    expected = np.stack([fn(pts, c) for c in coef], -1)
+    single = multilinear(planes.astype(np.float32), pts * (n - 1))
+    double = multilinear(planes, pts * (n - 1))
+    assert single.dtype == np.float32 and double.dtype == np.float64
+    np.testing.assert_allclose(single, expected, rtol=0, atol=1e-6 * np.abs(expected).max())
+    np.testing.assert_allclose(double, expected, rtol=0, atol=1e-12)

@@ -128,6 +128,35 @@ def test_cosine_transforms_match_their_sums_along_both_axes():
         ct.dct(np.ones((m, m + 1)), 0)
     with pytest.raises(ValueError, match="out must have shape"):
         ct.dct(x, 1, out=np.empty((m, m - 1)))
+
+
+@pytest.mark.parametrize("use_scipy", [False, True])
+def test_single_precision_transforms_match_their_sums_to_float32_rounding(use_scipy):
+    """``CosineTransforms(dtype=np.float32)`` (the cartogram flow's tables) returns float32 tables within float32
+    rounding of the double-precision sums (1e-6 of the largest term times the side), along each axis, by
+    ``numpy.fft`` and by scipy's pocketfft; a float64 ``out`` is refused and other precisions are."""
+    from rfmap.solvers.cosine import CosineTransforms
+
+    m = 65
+    j = np.arange(m)
+    c = 2.0 * np.cos(np.pi * np.outer(j, j) / (m - 1))
+    c[:, 0] /= 2
+    c[:, -1] /= 2
+    i = np.arange(m - 2)
+    s = 2.0 * np.sin(np.pi * np.outer(i + 1, i + 1) / (m - 1))
+    rng = np.random.default_rng(6)
+    ct = CosineTransforms(m, use_scipy=use_scipy, dtype=np.float32)
+    x, z = rng.normal(size=(m, m)), rng.normal(size=(m, m - 2))
+    tol = 1e-6 * 2 * m * max(np.abs(x).max(), np.abs(z).max())
+    # the table of both axes' transforms sums 2M times as many terms: its tolerance is 2M times as large
+    for got, want, bound in ((ct.dct(x, 1), x @ c.T, tol), (ct.dct(x, 0), c @ x, tol), (ct.dst(z, 1), z @ s.T, tol),
+                             (ct.dst(z.T, 0), s @ z.T, tol), (ct.dctn(x), c @ x @ c.T, 2 * m * tol)):
+        assert got.dtype == np.float32
+        assert np.abs(got - want).max() < bound
+    with pytest.raises(ValueError, match="out must be float32"):
+        ct.dct(x, 1, out=np.empty((m, m)))
+    with pytest.raises(ValueError, match="dtype must be float32 or float64"):
+        CosineTransforms(m, dtype=np.float16)
     with pytest.raises(ValueError, match="at least 3"):
         CosineTransforms(2)
     with pytest.raises(ValueError, match="block"):
@@ -521,10 +550,11 @@ def test_edges_are_split_to_cells_of_at_most_the_split_raster(monkeypatch):
 
 
 def test_map_and_cartogram_passes_share_one_velocity():
-    r"""The map solver's pass (float32 ``grid_sample``) and the cartogram pass (float64 bilinear) evaluate one
-    :class:`rfmap.solvers.spectral.FlowVelocity` of the same tables: on a density of a few cosine modes they agree
-    to the float32 tables' precision at random points and times, and at :math:`t = 1` the velocity is the flux over
-    the box mean :math:`\bar\rho`, the formula's denominator."""
+    r"""The map solver's pass (float32 ``grid_sample``) and the cartogram pass (float32 tables by ``numpy.fft``,
+    read by :func:`rfmap.core.mesh.multilinear`) evaluate one :class:`rfmap.solvers.spectral.FlowVelocity` of the
+    same tables: on a density of a few cosine modes they agree to the float32 tables' precision at random points and
+    times, and at :math:`t = 1` the velocity is the float64 flux over the box mean :math:`\bar\rho`, the formula's
+    denominator, to that precision too."""
     from rfmap.solvers import cartoflow, flow, spectral
     n = 33
     x = np.linspace(0.0, 1.0, n)
@@ -539,8 +569,8 @@ def test_map_and_cartogram_passes_share_one_velocity():
         np.testing.assert_allclose(b, a, rtol=0, atol=1e-6 * np.abs(a).max())
     flux = spectral.flow_planes(dens)[:2]
     nodes = np.stack(np.meshgrid(x, x, indexing="ij"), -1).reshape(-1, 2)
-    np.testing.assert_allclose(cart(1.0, nodes), np.moveaxis(flux, 0, -1).reshape(-1, 2) / spectral.box_mean(dens),
-                               rtol=1e-12, atol=1e-14)
+    want = np.moveaxis(flux, 0, -1).reshape(-1, 2) / spectral.box_mean(dens)
+    np.testing.assert_allclose(cart(1.0, nodes), want, rtol=0, atol=1e-6 * np.abs(want).max())
     assert cart.evaluations == 4 and mapped.evaluations == 3
 
 

@@ -345,14 +345,15 @@ def multilinear(planes: np.ndarray, u: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     planes : ndarray, shape (C, W_1, ..., W_d), d in {2, 3}
-        ``C`` fields on a grid of ``W_1 x ... x W_d`` nodes (every ``W_j >= 2``), C-contiguous.
+        ``C`` fields on a grid of ``W_1 x ... x W_d`` nodes (every ``W_j >= 2``), C-contiguous; float32 planes are
+        interpolated in single precision (half the memory read), any other in double.
     u : ndarray, shape (P, d), float64
         Points in index units: node :math:`(i_1, \dots, i_d)` is at :math:`u = (i_1, \dots, i_d)`.  Overwritten
         (clamped, then reduced to the offsets in the cell).
 
     Returns
     -------
-    ndarray, shape (P, C)
+    ndarray, shape (P, C), float32 for float32 planes, else float64
         In Fortran order (each channel contiguous), as :func:`interpolate` returns it.
 
     Warnings
@@ -370,9 +371,11 @@ def multilinear(planes: np.ndarray, u: np.ndarray) -> np.ndarray:
     k = i[:, 0] * strides[0]
     for j in range(1, d):
         k += i[:, j] * strides[j]
+    dtype = np.float32 if planes.dtype == np.float32 else np.float64
+    w_u = u if dtype == np.float64 else u.astype(dtype)  # the offsets in the planes' precision
     corners: list[tuple[int, np.ndarray | None]] = [(0, None)]  # (offset, weight), C order
     for j in range(d):
-        f = u[:, j]
+        f = w_u[:, j]
         g = 1.0 - f
         corners = [(off + b * strides[j], (f if b else g) if w is None else w * (f if b else g))
                    for off, w in corners for b in (0, 1)]
@@ -380,8 +383,8 @@ def multilinear(planes: np.ndarray, u: np.ndarray) -> np.ndarray:
     # channel by channel, returned transposed (Fortran order): the solvers' reductions over the points of a velocity,
     # and of the points it moves, then run along contiguous columns; the solvers pass points computed for the call,
     # so u is overwritten rather than copied
-    out = np.empty((len(flat), len(u)))
-    for plane, acc in zip(flat, out):
+    out = np.empty((len(flat), len(u)), dtype=dtype)
+    for plane, acc in zip(flat.astype(dtype, copy=False), out):
         np.take(plane, idx[0], out=acc)
         acc *= corners[0][1]
         for at, (_, w) in zip(idx[1:], corners[1:]):

@@ -46,10 +46,15 @@ from __future__ import annotations
 import ast
 import importlib
 import json
+import os
+import platform
 import re
+import subprocess
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from rfmap._version import __version__
 from rfmap.paper.tables import power_of_ten, printed_digits
 
 __all__ = ["DESIGN_PATH", "AREAS", "load_decisions", "current_value", "stale_values", "record", "area",
@@ -102,6 +107,28 @@ def record(constant: str, *, path: Path = DESIGN_PATH, **fields: Any) -> dict[st
             Path(path).write_text(json.dumps(data, indent=1, ensure_ascii=False) + "\n", encoding="utf-8")
             return d
     raise KeyError(f"no decision {constant!r} in {path}")
+
+
+def measured_on(threads: int, seconds: float) -> dict[str, Any]:
+    """What a measurement ran on, as :func:`record` stores it under ``measured``: the date (UTC), the code
+    (``rfmap VERSION, commit SHORT``, with ``+ changes`` when a tracked file of the package differs from the commit
+    (``src/rfmap/data`` and ``src/rfmap/paper`` do not count); the version alone outside a git checkout), the machine
+    and thread count, the one-minute load average and the ``seconds`` it took."""
+    version = f"rfmap {__version__}"
+    root = str(Path(__file__).resolve().parents[3])
+    try:
+        sha = subprocess.run(["git", "-C", root, "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                             check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", root, "status", "--porcelain", "--untracked-files=no", "--", "src/rfmap",
+                                ":!src/rfmap/data", ":!src/rfmap/paper"], capture_output=True, text=True,
+                               check=True).stdout.strip()
+        version = f"{version}, commit {sha}" + (" + changes" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        pass
+    cpu = platform.processor() or platform.machine()
+    return {"date": datetime.now(timezone.utc).strftime("%Y-%m-%d"), "code": version,
+            "machine": f"{cpu}, {os.cpu_count()} cores, {'one thread' if threads == 1 else f'{threads} threads'}",
+            "load": round(os.getloadavg()[0], 1), "seconds": round(seconds)}
 
 
 #: The page's groups: a module prefix and the heading of its decisions, in the page's order.  ``rfmap.surrogate``

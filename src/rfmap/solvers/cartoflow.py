@@ -11,8 +11,10 @@ polygons, so this module has no passes, residual rasters or free boundary of its
 
 * The points carried are a cartogram's distinct polygon vertices (a few thousand, where the grid has
   :math:`N^2`), so that no grid map is interpolated between them; or, by default, the ``N``-grid's vertices.
-* The flux and the density are three planes of shape (N*N,); the velocity at a point is their bilinear interpolant,
-  evaluated by four gathers per plane and a weighted sum (:func:`bilinear`), in double precision.
+* The flux and the density are three planes of shape (N*N,), computed and stored in single precision
+  (:data:`TABLE_DTYPE`, as the map solver's velocity table); the velocity at a point is their bilinear interpolant,
+  evaluated by four gathers per plane and a weighted sum (:func:`bilinear`), and the points are carried in double
+  precision.
 * Time steps are predictor--corrector (Heun) pairs (:func:`rfmap.solvers.heun.heun_flow`, the time integration of
   the map solver :mod:`rfmap.solvers.flow` and of :mod:`rfmap.solvers.cartodiffusion` too): a step is accepted when
   :math:`\max|x' - x^*|` is at most ``rtol`` grid spacings and, for the grid, no triangle (each cell cut along its
@@ -37,6 +39,12 @@ from .heun import STALL_BLURS, HeunOptions, Stalled, heun_flow
 from .spectral import FlowVelocity, box_mean, flow_planes
 
 __all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "bilinear", "min_triangle_area", "square_inputs"]
+
+#: Precision of a pass's flux and density tables (the transforms that compute them and the interpolation that reads
+#: them): single precision halves the transforms' time on a cartogram's finest rasters, and its rounding (about 1e-7
+#: of the largest value) is far below the step tolerance (:doc:`Design decisions </book/design>`)
+TABLE_DTYPE = np.float32
+
 
 @dataclass(frozen=True)
 class CartoFlowOptions:
@@ -131,9 +139,10 @@ def min_triangle_area(y: np.ndarray) -> float:
 
 def _velocity(dens: np.ndarray, sigma: float = 0.0) -> FlowVelocity:
     r""":class:`rfmap.solvers.spectral.FlowVelocity` of one density on the (N, N) vertex grid, blurred over
-    ``sigma`` vertex spacings with mirror walls, its tables read bilinearly in double precision."""
+    ``sigma`` vertex spacings with mirror walls, its tables computed and read bilinearly in :data:`TABLE_DTYPE`."""
     n = dens.shape[0]
-    planes = flow_planes(dens, sigma / (n - 1), transforms=CosineTransforms(n)).reshape(3, -1)  # flux x, y, density
+    tr = CosineTransforms(n, dtype=TABLE_DTYPE)
+    planes = flow_planes(dens, sigma / (n - 1), TABLE_DTYPE, transforms=tr).reshape(3, -1)  # flux x, y, density
     return FlowVelocity(lambda pts: _bilinear_planes(planes, n, pts), box_mean(dens))
 
 
