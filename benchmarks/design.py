@@ -309,7 +309,7 @@ def lookup_engine(n, repeat, threads):
 def cartogram_tables(n, repeat, threads):
     """A flow cartogram of the world's countries with the passes' tables in float32 (``TABLE_DTYPE``) and in
     float64: the whole call's time (best of ``repeat``), its passes and its largest area error."""
-    from rfmap.cartogram import cartogram
+    from rfmap.cartogram.resize import cartogram
     from rfmap.cartogram.regions import world_countries
     from rfmap.solvers import cartoflow
 
