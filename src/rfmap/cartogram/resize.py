@@ -104,9 +104,9 @@ GAIN = 1e-9
 #: between mapped vertices stands for a curve, and where the flow squeezes a fjord or an inlet closed while it
 #: stretches its sides, long chords cross
 SPLIT_EDGE = 1.0
-#: The cells of a raster finer than this many per side count as this size's for :data:`SPLIT_EDGE`: a raster refined
-#: for the small regions left (a county map's) need not double the other regions' vertices too (benchmarks/cartogram.py)
-SPLIT_MAX_N = 512
+#: The cells of a raster finer than this many per side count as this size's for :data:`SPLIT_EDGE`: a raster
+#: refined for the small regions left (a county map's) need not double every other region's vertices too
+SPLIT_MAX_N = 1024
 #: The most passes :func:`cartogram` runs after cutting sliver overlaps moved a region beyond the tolerance
 FINISH_PASSES = 6
 #: A pass's raster densities are clipped to within this factor of the sea's (the mean), so that no pass asks a
