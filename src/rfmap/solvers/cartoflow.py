@@ -38,7 +38,8 @@ from .cosine import CosineTransforms
 from .heun import STALL_BLURS, HeunOptions, Stalled, heun_flow
 from .spectral import FlowVelocity, box_mean, flow_planes
 
-__all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "bilinear", "min_triangle_area", "square_inputs", "TABLE_DTYPE"]
+__all__ = ["CartoFlowOptions", "GridFlow", "flow_square", "bilinear", "min_triangle_area", "square_inputs",
+           "TABLE_DTYPE"]
 
 #: Precision of a pass's flux and density tables (the transforms that compute them and the interpolation that reads
 #: them): single precision halves the transforms' time on a cartogram's finest rasters, and its rounding (about 1e-7
