@@ -188,6 +188,55 @@ def test_valid_polygons_fixes_multipolygons_part_by_part_as_make_valid_does(case
     assert shapely.is_valid(fixed) and shapely.get_type_id(fixed) == 6
     assert shapely.equals(fixed, want) and fixed.area == pytest.approx(want.area, rel=1e-12)
 
+@pytest.mark.parametrize("multi", [False, True])
+def test_valid_polygons_drops_only_the_lobes_under_min_lobe_beside_the_largest_piece(multi):
+    """A ring crossed into a big lobe (area 5/11) and a small one (area 1/220): ``min_lobe`` drops the small lobe
+    only when it is larger than the lobe's area, never the largest piece, and never an untouched part (an island of
+    area 0.0025 beside the crossed part, when ``multi``)."""
+    from rfmap.cartogram.metrics import valid_polygons
+
+    crossed = shapely.Polygon([(0, 0), (1, 1), (1, 0.9), (0, 1)])  # y = x crosses y = 1 - x/10 at x = 10/11
+    island = shapely.box(5, 5, 5.05, 5.05)
+    g = shapely.MultiPolygon([crossed, island]) if multi else crossed
+    assert not shapely.is_valid(g)
+    whole = shapely.make_valid(g, method="structure", keep_collapsed=False)
+    lobe = 0.5 * 0.1 * (1 - 10 / 11)
+    assert shapely.area(whole) == pytest.approx(0.5 * 10 / 11 + lobe + multi * 0.0025, rel=1e-12)
+    for min_lobe in (0.0, 0.5 * lobe):  # below the lobe: the same point set as make_valid
+        kept = valid_polygons(np.array([g], dtype=object), min_lobe=min_lobe)[0]
+        assert shapely.is_valid(kept) and shapely.equals(kept, whole)
+    for min_lobe in (2.0 * lobe, 10.0):  # above: the lobe goes, the largest piece (and the island) stay
+        kept = valid_polygons(np.array([g], dtype=object), min_lobe=min_lobe)[0]
+        assert shapely.is_valid(kept)
+        assert shapely.area(kept) == pytest.approx(shapely.area(whole) - lobe, rel=1e-12)
+        assert shapely.get_num_geometries(kept) == shapely.get_num_geometries(whole) - 1
+        assert not multi or shapely.contains(kept, island)
+
+
+def test_topology_updated_from_the_changed_regions_equals_one_measured_anew():
+    """``Topology.updated`` measures only the changed regions and their pairs, and gives :meth:`Topology.of`'s
+    validity and overlaps (as sets of pairs with their areas) after regions were moved onto others, made invalid
+    and made valid again."""
+    from rfmap.cartogram.metrics import Topology
+
+    tiles = np.array([shapely.box(i, j, i + 1, j + 1) for i in range(4) for j in range(4)], dtype=object)
+    tiles[5] = shapely.box(1, 1, 2.3, 2)  # overlaps tile 9 (the box (2, 1, 3, 2)) by 0.3
+    old = Topology.of(tiles)
+    assert {(int(a), int(b)) for a, b in zip(*old.pairs[:2])} == {(5, 9)}
+    new = tiles.copy()
+    new[5] = shapely.box(1, 1, 2, 2)  # the overlap cut
+    new[0] = shapely.box(0, 0, 1.5, 1.2)  # overlaps tiles 1, 4 and 5
+    new[15] = shapely.Polygon([(3, 3), (4, 4), (4, 3), (3, 4)])  # crossed: invalid, its pairs not measured
+    got, want = old.updated(new, [0, 5, 15]), Topology.of(new)
+    assert got.geoms is new and np.array_equal(got.valid, want.valid) and not got.valid[15]
+
+    def pairs(t):
+        return {(int(a), int(b)): float(x) for a, b, x in zip(*t.pairs)}
+    assert set(pairs(got)) == set(pairs(want)) == {(0, 1), (0, 4), (0, 5)}
+    assert all(pairs(got)[k] == pytest.approx(pairs(want)[k], rel=1e-12) for k in pairs(want))
+    assert old.updated(new, []).pairs is old.pairs
+
+
 # ----------------------------------------------------------------------------------------------- equal-area plane
 def lonlat_box(lon0, lat0, lon1, lat1):
     """A longitude/latitude rectangle with a vertex every 0.1 degree (so that its edges mean the same as straight

@@ -426,7 +426,7 @@ def test_longest_edges_per_region():
 
 def test_segmentize_splits_only_the_long_regions_as_segmentize_does():
     from rfmap.cartogram.regions import _longest_edges
-    from rfmap.cartogram.resize import _segmentize
+    from rfmap.cartogram.regions import _segmentize
 
     geoms = np.array([shapely.box(0, 0, 1, 1), shapely.MultiPolygon([shapely.box(2, 0, 2.1, 0.1)]),
                       shapely.MultiPolygon([shapely.box(3, 0, 3.1, 0.1), shapely.box(4, 0, 4.5, 0.1)]),

@@ -16,7 +16,7 @@ import numpy as np
 from ..core.wording import counted
 from .regions import _distinct_vertices, _shapely
 
-__all__ = ["CartogramMetrics", "cartogram_metrics", "overlaps", "judged", "pass_weights", "repair_folds",
+__all__ = ["CartogramMetrics", "Topology", "cartogram_metrics", "overlaps", "judged", "pass_weights", "repair_folds",
            "repair_overlaps", "valid_polygons", "clean_input_overlaps", "boost", "MIN_SHARE", "MINOR_BUDGET", "SPLITS", "SPLIT_COST",
            "REPAIR_AREA", "REPAIR_OVERLAP", "SLIVER_SHAPE", "SLIVER_SHARE", "BOOST_GAIN", "BOOST_CAP"]
 
@@ -111,7 +111,7 @@ class CartogramMetrics:
 
 
 def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: float = 1e-6,
-                      topology: bool = True, min_share: float = 0.0) -> CartogramMetrics:
+                      topology: bool | Topology = True, min_share: float = 0.0) -> CartogramMetrics:
     r"""Relative area errors and topology of mapped regions.
 
     The area error of region :math:`i` is :math:`|A_i / T_i - 1|` with :math:`T_i = (v_i/\sum_j v_j)\sum_j A_j`;
@@ -123,8 +123,9 @@ def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: fl
     mapped : ndarray of shapely geometries, shape (R,)
     values : ndarray, shape (R,), positive
     overlap_tol : float
-    topology : bool
-        ``False`` skips the validity and overlap checks (their counts are then reported as zero).
+    topology : bool or Topology
+        ``False`` skips the validity and overlap checks (their counts are then reported as zero); a
+        :class:`Topology` of ``mapped`` (the same array) is taken instead of measuring them again.
     min_share : float
         The mean and largest error are taken over the regions with :math:`v_i \ge` ``min_share`` :math:`\sum_j v_j`;
         the others are counted in ``n_minor`` and their largest error is ``max_error_minor``.
@@ -139,32 +140,69 @@ def cartogram_metrics(mapped: np.ndarray, values: np.ndarray, *, overlap_tol: fl
     major = judged(values, min_share)
     minor = dict(n_minor=int((~major).sum()), max_error_minor=float(err[~major].max()) if (~major).any() else 0.0)
     err = err[major]
-    if not topology:
+    if topology is False:
         return CartogramMetrics(float(err.mean()), float(err.max()), 0, 0.0, 0, overlap_tol, **minor)
-    valid = shapely.is_valid(mapped)
-    total = float(a.sum())
-    rel = overlaps(mapped, valid)[2] / total  # an invalid polygon's overlaps are not measured: it counts as invalid
+    topo = topology if isinstance(topology, Topology) and topology.geoms is mapped else Topology.of(mapped)
+    valid, total = topo.valid, float(a.sum())
+    rel = topo.pairs[2] / total  # an invalid polygon's overlaps are not measured: it counts as invalid
     return CartogramMetrics(mean_error=float(err.mean()), max_error=float(err.max()),
                             n_invalid=int((~valid).sum()), max_overlap=float(rel.max(initial=0.0)),
                             n_overlapping=int((rel > overlap_tol).sum()), overlap_tol=overlap_tol, **minor)
 
 
-def overlaps(mapped: np.ndarray, valid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def overlaps(mapped: np.ndarray, valid: np.ndarray | None = None,
+             among: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The pairs ``i < j`` of valid regions whose interiors overlap, and the areas of their intersections (shapes
-    (K,)).  Intersections are computed only for the pairs whose interiors meet (``shapely.relate_pattern``
-    ``"T********"``, asked of the pairs whose boxes meet: asking first which of them intersect at all costs more
-    than it saves): neighbours that share a border, as the cartogram's passes keep them, merely touch."""
+    (K,)); with ``among`` (indices), only the pairs that hold one of those regions.  Intersections are computed only
+    for the pairs whose interiors meet (``shapely.relate_pattern`` ``"T********"``, asked of the pairs whose boxes
+    meet: asking first which of them intersect at all costs more than it saves): neighbours that share a border, as
+    the cartogram's passes keep them, merely touch."""
     shapely = _shapely()
     valid = shapely.is_valid(mapped) if valid is None else valid
     idx = np.flatnonzero(valid)
-    left, right = shapely.STRtree(mapped[idx]).query(mapped[idx])  # the pairs whose boxes meet
+    ask = idx if among is None else np.intersect1d(idx, among)
+    left, right = shapely.STRtree(mapped[idx]).query(mapped[ask])  # the pairs whose boxes meet
+    left, right = ask[left], idx[right]
+    if among is not None:  # each pair once, as i < j (a pair of two regions asked about came twice)
+        left, right = np.unique(np.stack([np.minimum(left, right), np.maximum(left, right)]), axis=1)
     keep = left < right
-    left, right = idx[left[keep]], idx[right[keep]]
+    left, right = left[keep], right[keep]
     keep = shapely.relate_pattern(mapped[left], mapped[right], "T********") if left.size else np.zeros(0, bool)
     left, right = left[keep], right[keep]
     inter = shapely.area(shapely.intersection(mapped[left], mapped[right])) if left.size else np.zeros(0)
     pos = inter > 0
     return left[pos], right[pos], inter[pos]
+
+
+@dataclass(frozen=True)
+class Topology:
+    """The validity (R,) of the polygons ``geoms`` (R,) and their overlapping pairs (:func:`overlaps`: ``left``,
+    ``right``, ``inter``), measured once: :func:`cartogram_metrics` and :func:`repair_overlaps` take it for that
+    same array only."""
+
+    geoms: np.ndarray
+    valid: np.ndarray
+    pairs: tuple
+
+    @classmethod
+    def of(cls, geoms: np.ndarray, valid: np.ndarray | None = None) -> "Topology":
+        """Measured (``valid``: ``shapely.is_valid(geoms)``, where the caller has it)."""
+        valid = _shapely().is_valid(geoms) if valid is None else valid
+        return cls(geoms, valid, overlaps(geoms, valid))
+
+    def updated(self, geoms: np.ndarray, changed) -> "Topology":
+        """The topology of ``geoms``, which differ from ``self.geoms`` in the regions ``changed`` only: those are
+        measured again, with every pair that holds one of them; the result is :meth:`of`'s (its pairs in another
+        order)."""
+        changed = np.unique(np.asarray(changed, dtype=np.intp))
+        if not changed.size:
+            return Topology(geoms, self.valid, self.pairs)
+        valid = self.valid.copy()
+        valid[changed] = _shapely().is_valid(geoms[changed])
+        left, right, inter = self.pairs
+        stay = ~(np.isin(left, changed) | np.isin(right, changed))
+        new = overlaps(geoms, valid, among=changed)
+        return Topology(geoms, valid, tuple(np.concatenate([old[stay], fresh]) for old, fresh in zip(self.pairs, new)))
 
 
 def judged(values: np.ndarray, min_share: float) -> np.ndarray:
@@ -297,7 +335,8 @@ def _merged(regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float = REPAIR_OVERLAP,
-                    min_share: float = MIN_SHARE, valid: np.ndarray | None = None) -> tuple[np.ndarray, list]:
+                    min_share: float = MIN_SHARE, valid: np.ndarray | None = None,
+                    topology: Topology | None = None) -> tuple[np.ndarray, list]:
     r"""Sliver overlaps of valid mapped regions, each shared out between its two regions so that they share a border.
 
     An overlap of two regions is removed when it holds more than a thousandth of :data:`REPAIR_AREA` of the total
@@ -322,6 +361,9 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float
     values : ndarray, shape (R,)
     valid : ndarray of bool, shape (R,), optional
         ``shapely.is_valid(mapped)``, where the caller has it (only valid regions are measured: :func:`overlaps`).
+    topology : Topology, optional
+        The validity and overlaps of ``mapped`` (the same array), where the caller has them
+        (:meth:`Topology.updated` then gives the result's from the regions of the pairs cut).
 
     Returns
     -------
@@ -329,7 +371,8 @@ def repair_overlaps(mapped: np.ndarray, values: np.ndarray, *, max_change: float
         The polygons and the pairs ``(cut, kept)``: the first gave up the larger share of their overlap.
     """
     shapely = _shapely()
-    left, right, inter = overlaps(mapped, valid)
+    use = topology is not None and topology.geoms is mapped
+    left, right, inter = topology.pairs if use else overlaps(mapped, valid)
     if not left.size:
         return mapped, []
     area = shapely.area(mapped)
@@ -364,32 +407,52 @@ SPLITS = tuple(np.linspace(0.0, 1.0, 11))
 SPLIT_COST = 1e-3
 
 
-def valid_polygons(geoms: np.ndarray) -> np.ndarray:
+def valid_polygons(geoms: np.ndarray, *, min_lobe: float = 0.0) -> np.ndarray:
     """The polygonal part of ``shapely.make_valid`` of each geometry (R,), as one (Multi)Polygon each (no stray
     lines or points, crumbs under :data:`CRUMB` dropped).  The ``"structure"`` method: the area inside the rings
     (where a ring crossed itself, both lobes) less the holes, in half the time of the default on the long rings of
     a country's subdivisions.  A MultiPolygon is fixed part by part where that is enough
-    (``_valid_by_parts``)."""
-    return np.array([_polygons(_valid_by_parts(g)) for g in geoms], dtype=object)
+    (``_valid_by_parts``).
+
+    With ``min_lobe > 0``, a crossed polygon that falls apart into pieces keeps its largest piece and those of at
+    least ``min_lobe`` area: the lobes that a fold twists off a ring (where a fjord's two shores cross) are dropped
+    instead of piling up as parts of the region over the passes of a cartogram."""
+    return np.array([_polygons(_valid_by_parts(g, min_lobe)) for g in geoms], dtype=object)
 
 
-def _valid_by_parts(g):
+def _valid_by_parts(g, min_lobe: float = 0.0):
     """``shapely.make_valid(g, method="structure")`` of one geometry, cheaper on a MultiPolygon of many parts: only its
     invalid parts are fixed, and only the parts that meet are unioned (:func:`_union_meeting`), with ``make_valid`` of
     the whole as the fallback should that not give a valid MultiPolygon.  ``make_valid`` of the whole unions every
     part with every other, which on a region of a hundred islands costs ten times as much as fixing the one part that
-    crossed itself; the result is the same point set."""
+    crossed itself; the result is the same point set.  Lobes under ``min_lobe`` are dropped
+    (:func:`valid_polygons`)."""
     shapely = _shapely()
     if shapely.get_type_id(g) != 6:
-        return shapely.make_valid(g, method="structure", keep_collapsed=False)
+        return _without_lobes(shapely.make_valid(g, method="structure", keep_collapsed=False), min_lobe)
     parts = shapely.get_parts(g)
     bad = ~shapely.is_valid(parts)
     fixed = iter(shapely.make_valid(parts[bad], method="structure", keep_collapsed=False))
-    parts = np.concatenate([shapely.get_parts(_polygons(next(fixed))) if b else [p] for p, b in zip(parts, bad)])
+    parts = np.concatenate([shapely.get_parts(_without_lobes(next(fixed), min_lobe)) if b else [p]
+                            for p, b in zip(parts, bad)])
     joined = shapely.multipolygons(parts)
-    if not shapely.is_valid(joined):  # parts that overlap or share a border: those unioned
-        joined = _union_meeting(parts)
+    if shapely.is_valid(joined):
+        return joined
+    joined = _union_meeting(parts)  # parts that overlap or share a border: those unioned
     return joined if shapely.is_valid(joined) else shapely.make_valid(g, method="structure", keep_collapsed=False)
+
+
+def _without_lobes(g, min_lobe: float):
+    """The polygonal parts of a fixed polygon ``g`` (:func:`_polygons`) less those of area under ``min_lobe`` other
+    than the largest."""
+    shapely = _shapely()
+    g = _polygons(g)
+    if min_lobe <= 0 or shapely.get_type_id(g) != 6:
+        return g
+    parts = shapely.get_parts(g)
+    area = shapely.area(parts)
+    keep = (area >= min_lobe) | (np.arange(len(parts)) == np.argmax(area))
+    return g if keep.all() else _polygons(shapely.multipolygons(parts[keep]))
 
 
 def _union_meeting(parts: np.ndarray):

@@ -474,6 +474,18 @@ def _longest_edges(regions: np.ndarray) -> np.ndarray:
     return out
 
 
+def _segmentize(regions: np.ndarray, cell: float, long: np.ndarray) -> np.ndarray:
+    """``shapely.segmentize(regions, cell)`` given the regions with an edge longer than ``cell`` (``long``, boolean
+    (R,)): only those are split; the others come out as segmentize leaves them (a one-part MultiPolygon as its
+    Polygon)."""
+    shapely = _shapely()
+    out = regions.copy()
+    out[long] = shapely.segmentize(regions[long], cell)
+    one = ~long & (shapely.get_type_id(regions) == 6) & (shapely.get_num_geometries(regions) == 1)
+    out[one] = shapely.get_geometry(regions[one], 0)
+    return out
+
+
 def _listify(obj):
     """Tuples (as shapely's ``mapping`` writes coordinates) to lists, for a GeoJSON dict that equals its JSON."""
     if isinstance(obj, (list, tuple)):

@@ -69,8 +69,8 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from .metrics import MIN_SHARE, SLIVER_GAP, CartogramMetrics, boost, cartogram_metrics, clean_input_overlaps, \
-    judged, pass_weights, repair_folds, repair_overlaps, valid_polygons
+from .metrics import MIN_SHARE, SLIVER_GAP, CartogramMetrics, Topology, boost, cartogram_metrics, \
+    clean_input_overlaps, judged, pass_weights, repair_folds, repair_overlaps, valid_polygons
 from ..core.mesh import check_grid_memory, check_n
 from ..core.wording import counted
 from .options import CartogramOptions
@@ -79,7 +79,7 @@ from .passmap import at_points as _at_points
 from .output import OUTPUTS, choose_output, crs_member, mapped_features, output_geometries, write_geojson
 from .projection import PlanarFrame
 from .regions import MONTREAL_CANDIDATES, ZERO_FLOOR, _distinct_vertices, _feature_name, _listify, _longest_edges, \
-    _shapely, density_grid, fit_outlines, montreal_election, read_regions, world_countries
+    _segmentize, _shapely, density_grid, fit_outlines, montreal_election, read_regions, world_countries
 from .data import atomic_write
 
 __all__ = [
@@ -107,6 +107,9 @@ SPLIT_EDGE = 1.0
 #: The cells of a raster finer than this many per side count as this size's for :data:`SPLIT_EDGE`: a raster
 #: refined for the small regions left (a county map's) need not double every other region's vertices too
 SPLIT_MAX_N = 1024
+#: The lobes that a region a pass made cross itself sheds beside its largest piece when under this share of a cell of
+#: the pass's raster (:func:`rfmap.cartogram.metrics.valid_polygons`): too small to resolve, they would pile up as parts
+LOBE = 0.1
 #: The most passes :func:`cartogram` runs after cutting sliver overlaps moved a region beyond the tolerance
 FINISH_PASSES = 6
 #: A pass's raster densities are clipped to within this factor of the sea's (the mean), so that no pass asks a
@@ -226,8 +229,9 @@ class Cartogram:
         """Area errors and topology (:func:`~rfmap.cartogram.metrics.cartogram_metrics`) in the equal-area plane
         (:meth:`~rfmap.cartogram.projection.PlanarFrame.equal_area`: the frame itself unless it is equirectangular)."""
         if overlap_tol not in self._metrics:
-            self._metrics[overlap_tol] = cartogram_metrics(self.frame.equal_area(self.mapped), self.values,
-                                                           overlap_tol=overlap_tol, min_share=self.min_share)
+            self._metrics[overlap_tol] = cartogram_metrics(
+                self.frame.equal_area(self.mapped), self.values, overlap_tol=overlap_tol, min_share=self.min_share,
+                topology=self.info.get("topology", True))
         return self._metrics[overlap_tol]
 
     def problems(self, *, overlap_tol: float = 1e-6) -> list[str]:
@@ -440,9 +444,10 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
     (:func:`rfmap.cartogram.metrics.boost`) until :data:`BOOST_PATIENCE` passes in a row fail to lower the largest
     error; every raster's densities are clipped to within :data:`PASS_CONTRAST` times the sea's; past
     ``plan.deadline`` no further pass starts.  With ``plan.split``, a region that a pass made cross itself is
-    replaced by its valid part (``shapely.make_valid``) before its area is measured, so that the next pass corrects
-    a true area (a crossed ring's signed area misleads every later pass).  ``n`` and ``max_n`` count cells per side;
-    the rasters have ``n + 1`` vertices per side.  Returns ``(mapped polygons, info, seconds in grid_map)``."""
+    replaced by its valid part (``shapely.make_valid``, less lobes under :data:`LOBE` of a cell) before its area is
+    measured, so that the next pass corrects a true area (a crossed ring's signed area misleads every later pass).
+    ``n`` and ``max_n`` count cells per side; the rasters have ``n + 1`` vertices per side.  Returns ``(mapped
+    polygons, info, seconds in grid_map)``."""
     n, tol, split, accelerate = plan.n, plan.tol, plan.split, plan.accelerate
     shapely = _shapely()
     current, inverse = _distinct_vertices(regions)
@@ -489,7 +494,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
         mapped = shapely.set_coordinates(regions.copy(), current[inverse])
         bad = np.flatnonzero(~shapely.is_valid(mapped))
         if bad.size and split:  # a region the pass made cross itself: its valid part, whose area the next pass fixes
-            mapped[bad] = valid_polygons(mapped[bad])
+            mapped[bad] = valid_polygons(mapped[bad], min_lobe=LOBE / n ** 2)
             regions = mapped
             stale = True
         area = shapely.area(mapped)
@@ -515,18 +520,6 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
                     "sea": sea, "grids": grids, "timed_out": timed_out}, map_time
 
 
-def _segmentize(regions: np.ndarray, cell: float, long: np.ndarray) -> np.ndarray:
-    """``shapely.segmentize(regions, cell)`` given the regions with an edge longer than ``cell`` (``long``, boolean
-    (R,)): only those are split; the others come out as segmentize leaves them (a one-part MultiPolygon as its
-    Polygon)."""
-    shapely = _shapely()
-    out = regions.copy()
-    out[long] = shapely.segmentize(regions[long], cell)
-    one = ~long & (shapely.get_type_id(regions) == 6) & (shapely.get_num_geometries(regions) == 1)
-    out[one] = shapely.get_geometry(regions[one], 0)
-    return out
-
-
 def _largest_error(mapped: np.ndarray, values: np.ndarray, min_share: float) -> float:
     """The largest relative area error of the judged regions (:func:`rfmap.cartogram.metrics.judged`)."""
     area = _shapely().area(mapped)
@@ -544,9 +537,11 @@ def _repair(mapped: np.ndarray, values: np.ndarray, method: CartogramMethod, inf
     tol, min_share = plan.tol, plan.min_share
     valid = _shapely().is_valid(mapped)  # measured once for both repairs (repair_folds marks the folds it fixes)
     mapped, info["repaired"] = repair_folds(mapped, valid=valid)
-    mapped, info["overlaps_cut"] = repair_overlaps(mapped, values, valid=valid)
+    topology = Topology.of(mapped, valid)
+    mapped, info["overlaps_cut"] = repair_overlaps(mapped, values, topology=topology)
     info["finish_passes"] = 0
     if not info["overlaps_cut"] or tol is None or (err := _largest_error(mapped, values, min_share)) <= tol:
+        info["topology"] = topology.updated(mapped, [k for pair in info["overlaps_cut"] for k in pair])  # for metrics
         return mapped, 0.0
     more, extra, seconds = _passes(mapped, values, method,
                                    replace(plan, n=info["grids"][-1], passes=FINISH_PASSES, accelerate=False))
