@@ -164,19 +164,20 @@ def test_a_region_left_invalid_in_the_equal_area_plane_is_a_problem(monkeypatch)
                for p in c.problems()), c.problems()
 
 
-@pytest.mark.parametrize("seed", [0, 2])
-def test_lobes_shed_by_crossed_regions_are_dropped_before_they_become_needles(seed):
-    """With the default ``LOBE``, the passes drop the sub-cell lobes that a region crossing itself sheds: on the
-    squeezed map the polygons are valid in the cylindrical equal-area plane before any output repair (with
-    ``LOBE = 0`` seed 0 leaves one region crossing itself there, and seed 2 one whose edges must be split), and the
-    output removes needles from at most 15 regions, 60 points in all (with ``LOBE = 0``, from more than 20 regions
-    and 200 points on either seed)."""
-    c = cartogram(squeezed_map(seed=seed), "v", n=128)
-    lat0 = c.frame.projection.lat0
-    before, _ = repair_specks(c.frame.unproject(c.mapped), total_change=REPAIR_AREA)
-    assert shapely.is_valid(before).all()
-    assert shapely.is_valid(shapely.transform(before, lambda xy: cylindrical_equal_area(xy, lat0))).all()
-    repairs = c.info["repaired_output"]
-    assert repairs.split == {} and repairs.invalid_reprojected == []
-    assert len(repairs.needles) <= 15 and sum(repairs.needles.values()) <= 60
-    assert c.info["max_error"][c.info["kept"] - 1] <= c.tol
+def test_lobes_shed_by_crossed_regions_are_dropped_before_they_become_needles(monkeypatch):
+    """The passes drop the sub-cell lobes that a region crossing itself sheds (``LOBE``, ``LOBE_SHARE``), which
+    would collapse into needles: on the squeezed map the polygons come out valid in the cylindrical equal-area plane
+    before any output repair (with ``LOBE = 0`` one region crosses itself there), and the needles the output removes
+    hold under 60 % of the points they hold with ``LOBE = 0``."""
+    def run():
+        c = cartogram(squeezed_map(), "v", n=128)
+        assert not c.problems()
+        lat0 = c.frame.projection.lat0
+        before, _ = repair_specks(c.frame.unproject(c.mapped), total_change=REPAIR_AREA)
+        bent = ~shapely.is_valid(shapely.transform(before, lambda xy: cylindrical_equal_area(xy, lat0)))
+        return int(bent.sum()), sum(c.info["repaired_output"].needles.values())
+
+    bent, points = run()
+    monkeypatch.setattr(resize, "LOBE", 0.0)
+    bent_all, points_all = run()
+    assert bent == 0 < bent_all and points < 0.6 * points_all

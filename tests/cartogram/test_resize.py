@@ -211,6 +211,8 @@ def test_valid_polygons_drops_only_the_lobes_under_min_lobe_beside_the_largest_p
         assert shapely.area(kept) == pytest.approx(shapely.area(whole) - lobe, rel=1e-12)
         assert shapely.get_num_geometries(kept) == shapely.get_num_geometries(whole) - 1
         assert not multi or shapely.contains(kept, island)
+    both = valid_polygons(np.array([g, g], dtype=object), min_lobe=np.array([0.0, 10.0]))  # one threshold each
+    assert shapely.equals(both[0], whole) and shapely.area(both[1]) == pytest.approx(shapely.area(whole) - lobe)
 
 
 def test_topology_updated_from_the_changed_regions_equals_one_measured_anew():

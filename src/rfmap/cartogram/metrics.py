@@ -407,7 +407,7 @@ SPLITS = tuple(np.linspace(0.0, 1.0, 11))
 SPLIT_COST = 1e-3
 
 
-def valid_polygons(geoms: np.ndarray, *, min_lobe: float = 0.0) -> np.ndarray:
+def valid_polygons(geoms: np.ndarray, *, min_lobe: float | np.ndarray = 0.0) -> np.ndarray:
     """The polygonal part of ``shapely.make_valid`` of each geometry (R,), as one (Multi)Polygon each (no stray
     lines or points, crumbs under :data:`CRUMB` dropped).  The ``"structure"`` method: the area inside the rings
     (where a ring crossed itself, both lobes) less the holes, in half the time of the default on the long rings of
@@ -415,9 +415,10 @@ def valid_polygons(geoms: np.ndarray, *, min_lobe: float = 0.0) -> np.ndarray:
     (``_valid_by_parts``).
 
     With ``min_lobe > 0``, a crossed polygon that falls apart into pieces keeps its largest piece and those of at
-    least ``min_lobe`` area: the lobes that a fold twists off a ring (where a fjord's two shores cross) are dropped
-    instead of piling up as parts of the region over the passes of a cartogram."""
-    return np.array([_polygons(_valid_by_parts(g, min_lobe)) for g in geoms], dtype=object)
+    least ``min_lobe`` area (one for all, or one per geometry, (R,)): the lobes that a fold twists off a ring (where
+    a fjord's two shores cross) are dropped instead of piling up as parts of the region over a cartogram's passes."""
+    lobes = np.broadcast_to(np.asarray(min_lobe, dtype=float), (len(geoms),))
+    return np.array([_polygons(_valid_by_parts(g, m)) for g, m in zip(geoms, lobes)], dtype=object)
 
 
 def _valid_by_parts(g, min_lobe: float = 0.0):

@@ -108,10 +108,12 @@ SPLIT_EDGE = 1.0
 #: refined for the small regions left (a county map's) need not double every other region's vertices too
 SPLIT_MAX_N = 1024
 #: The lobes that a region a pass made cross itself sheds beside its largest piece when under this share of a cell of
-#: the pass's raster (:func:`rfmap.cartogram.metrics.valid_polygons`): too small to resolve, they would pile up as parts
-LOBE = 0.1
-#: The most passes :func:`cartogram` runs after cutting sliver overlaps moved a region beyond the tolerance
-FINISH_PASSES = 6
+#: the pass's raster and :data:`LOBE_SHARE` of the region's area (:func:`rfmap.cartogram.metrics.valid_polygons`):
+#: too small to resolve, they would pile up as parts; a region a few cells wide keeps nearly all of its area
+LOBE, LOBE_SHARE = 0.1, 1e-4
+#: The most passes :func:`cartogram` runs after cutting sliver overlaps moved a region beyond the tolerance (they
+#: stop sooner within tolerance, or at a pass that no longer lowers the largest error)
+FINISH_PASSES = 12
 #: A pass's raster densities are clipped to within this factor of the sea's (the mean), so that no pass asks a
 #: region to grow or shrink more than this many times: a city of a few cells that must grow a hundredfold otherwise
 #: squeezes its neighbours into bands thinner than a cell in one pass, and their borders cross (later passes ask
@@ -444,8 +446,9 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
     (:func:`rfmap.cartogram.metrics.boost`) until :data:`BOOST_PATIENCE` passes in a row fail to lower the largest
     error; every raster's densities are clipped to within :data:`PASS_CONTRAST` times the sea's; past
     ``plan.deadline`` no further pass starts.  With ``plan.split``, a region that a pass made cross itself is
-    replaced by its valid part (``shapely.make_valid``, less lobes under :data:`LOBE` of a cell) before its area is
-    measured, so that the next pass corrects a true area (a crossed ring's signed area misleads every later pass).
+    replaced by its valid part (``shapely.make_valid``, less the lobes under :data:`LOBE` of a cell and
+    :data:`LOBE_SHARE` of its area) before its area is measured, so that the next pass corrects a true area (a
+    crossed ring's signed area misleads every later pass).
     ``n`` and ``max_n`` count cells per side; the rasters have ``n + 1`` vertices per side.  Returns ``(mapped
     polygons, info, seconds in grid_map)``."""
     n, tol, split, accelerate = plan.n, plan.tol, plan.split, plan.accelerate
@@ -494,7 +497,7 @@ def _passes(regions: np.ndarray, values: np.ndarray, method: CartogramMethod,
         mapped = shapely.set_coordinates(regions.copy(), current[inverse])
         bad = np.flatnonzero(~shapely.is_valid(mapped))
         if bad.size and split:  # a region the pass made cross itself: its valid part, whose area the next pass fixes
-            mapped[bad] = valid_polygons(mapped[bad], min_lobe=LOBE / n ** 2)
+            mapped[bad] = valid_polygons(mapped[bad], min_lobe=np.minimum(LOBE / n ** 2, LOBE_SHARE * area[bad]))
             regions = mapped
             stale = True
         area = shapely.area(mapped)
