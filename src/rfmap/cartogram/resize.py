@@ -38,6 +38,8 @@ the density :math:`\rho = v_i / a_i` (value over area) of the region under each 
      regions a few cells wide;
    * edges that the classical passes stretched beyond :data:`SPLIT_EDGE` cells (of at most a :data:`SPLIT_MAX_N`
      raster) are split again before the next pass;
+   * a region that a pass made cross itself keeps its valid part less the lobes under :data:`LOBE` of a cell and
+     :data:`LOBE_SHARE` of its area, which would pile up as parts and collapse into needles;
    * (flow) each region's weight is boosted by the share of its error that the last pass left, a secant acceleration
      of the passes (:func:`rfmap.cartogram.metrics.boost`);
    * a fold smaller than the overlap tolerance, where the input draws two edges nearly touching, is repaired
@@ -107,12 +109,12 @@ SPLIT_EDGE = 1.0
 #: The cells of a raster finer than this many per side count as this size's for :data:`SPLIT_EDGE`: a raster
 #: refined for the small regions left (a county map's) need not double every other region's vertices too
 SPLIT_MAX_N = 1024
-#: The lobes that a region a pass made cross itself sheds beside its largest piece when under this share of a cell of
-#: the pass's raster and :data:`LOBE_SHARE` of the region's area (:func:`rfmap.cartogram.metrics.valid_polygons`):
-#: too small to resolve, they would pile up as parts; a region a few cells wide keeps nearly all of its area
-LOBE, LOBE_SHARE = 0.1, 1e-4
-#: The most passes :func:`cartogram` runs after cutting sliver overlaps moved a region beyond the tolerance (they
-#: stop sooner within tolerance, or at a pass that no longer lowers the largest error)
+#: The lobes that a region a pass made cross itself sheds beside its largest piece go when under this share of a cell
+#: of the pass's raster and :data:`LOBE_SHARE` (:func:`rfmap.cartogram.metrics.valid_polygons`): too small to resolve
+LOBE = 0.1
+#: The share of its own area under which a region's lobes may go (:data:`LOBE`): a region of a few cells keeps its area
+LOBE_SHARE = 1e-4
+#: The most passes :func:`cartogram` runs after cutting overlaps moved a region beyond the tolerance (or fewer: as ever)
 FINISH_PASSES = 12
 #: A pass's raster densities are clipped to within this factor of the sea's (the mean), so that no pass asks a
 #: region to grow or shrink more than this many times: a city of a few cells that must grow a hundredfold otherwise
