@@ -114,7 +114,7 @@ SPLIT_MAX_N = 1024
 LOBE = 0.1
 #: The share of its own area under which a region's lobes may go (:data:`LOBE`): a region of a few cells keeps its area
 LOBE_SHARE = 1e-4
-#: The most passes :func:`cartogram` runs after cutting overlaps moved a region beyond the tolerance (or fewer: as ever)
+#: The most passes :func:`cartogram` runs after overlap cuts moved a region beyond the tolerance (fewer once within it)
 FINISH_PASSES = 12
 #: A pass's raster densities are clipped to within this factor of the sea's (the mean), so that no pass asks a
 #: region to grow or shrink more than this many times: a city of a few cells that must grow a hundredfold otherwise
