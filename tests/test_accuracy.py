@@ -38,8 +38,8 @@ DENSITY_RATIO = {
                          "multi-freq": 0.542},
     "dem3d-cube": {"sin-cos-3d": 0.244, "shell-3d": 0.296, "octant-3d": 0.270, "prism-peak-3d": 0.484,
                    "multi-freq-3d": 0.261},
-    "dem3d-cube-native": {"sin-cos-3d": 0.250, "shell-3d": 0.334, "octant-3d": 0.295, "prism-peak-3d": 0.480,
-                          "multi-freq-3d": 0.265},
+    "dem3d-cube-native": {"sin-cos-3d": 0.237, "shell-3d": 0.313, "octant-3d": 0.259, "prism-peak-3d": 0.470,
+                          "multi-freq-3d": 0.257},
     "dem3d-free": {"sin-cos-3d": 0.166, "shell-3d": 0.189, "octant-3d": 0.206, "prism-peak-3d": 0.567,
                    "multi-freq-3d": 0.184},
 }
