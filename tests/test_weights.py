@@ -79,6 +79,20 @@ def test_metadata_records_provenance(name):
         assert stored["grow"] and stored["model"]["base"] == int(words[words.index("--grow") + 1])
         expected["grow"], expected["model"] = True, stored["model"]
         assert any("grown" in rec for rec in meta["lineage"])
+    if "--base" in words:  # a grown network trained on at its width: a run of its lineage grew it
+        base = int(words[words.index("--base") + 1])
+        assert stored["model"]["base"] == base
+        if base != expected["model"]["base"]:
+            assert any("grown" in rec for rec in meta["lineage"])
+        expected["model"] = {**expected["model"], "base": base}
+    for flag, key, kind in (("--precision", "precision", str), ("--snapshot-every", "snapshot_every", int)):
+        if flag in words:
+            assert stored[key] == kind(words[words.index(flag) + 1])
+            expected[key] = stored[key]
+    if "--hard-share" in words:  # the share of hard fields in the random densities
+        share = float(words[words.index("--hard-share") + 1])
+        assert stored["density_field"]["p_hard"] == share
+        expected["density_field"] = {**expected["density_field"], "p_hard": share}
     assert stored == expected
     assert meta["preset"] == "full"
     assert meta["steps"] > 0 and 0 < meta["wall_time"] <= 9000  # one run of at most 150 minutes

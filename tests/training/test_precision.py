@@ -40,15 +40,21 @@ def test_bf16_runs_the_network_in_bfloat16_and_the_loss_in_float32(tmp_path):
 
 @needs_bf16
 def test_bf16_trains_as_well_as_fp32(tmp_path):
-    """120 equal steps from the same seed: the validation family scores (mean Std(rho~_map) / Std(rho~_orig); the
-    identity map scores 1) agree within 5 % (measured for seeds 0, 1, 2: 0.840 / 0.838, 0.776 / 0.786, 0.781 /
-    0.783), and both trained (below 0.9).  After only 40 steps the two paths have not settled (seed 0: 0.92 / 0.99)."""
+    """120 equal steps from each of seeds 0, 1 and 2: the mean over the seeds of the validation family score (mean
+    Std(rho~_map) / Std(rho~_orig); the identity map scores 1) agrees within 5 % between the precisions, and both
+    trained (below 0.9).  One seed alone is not a stable measure, since bf16's rounding depends on the CPU's kernels:
+    fp32 / bf16 per seed measured 0.840 / 0.838, 0.776 / 0.786, 0.781 / 0.783 (means 0.799 / 0.802) on a CPU with
+    AMX, and 0.825 / 0.902, 0.776 / 0.785, 0.781 / 0.779 (means 0.794 / 0.822) on one with AVX512-BF16 only.  After
+    only 40 steps the two paths have not settled (seed 0: 0.92 / 0.99)."""
     cfg = CFG.with_overrides(steps=120, lr=1e-2, val_every=1000, ckpt_every=1000, density_field=None)
     scores = {}
     for p in ("fp32", "bf16"):
-        sur = T.train(cfg.with_overrides(precision=p), tmp_path / p, progress=False)
-        scores[p] = score(sur.meta["final_metrics"]["mean"])[1]
-        assert sur.meta["config"]["precision"] == p
+        runs = []
+        for seed in (0, 1, 2):
+            sur = T.train(cfg.with_overrides(precision=p, seed=seed), tmp_path / f"{p}-{seed}", progress=False)
+            runs.append(score(sur.meta["final_metrics"]["mean"])[1])
+            assert sur.meta["config"]["precision"] == p
+        scores[p] = sum(runs) / len(runs)
     assert max(scores.values()) < 0.9, scores
     assert abs(scores["bf16"] - scores["fp32"]) <= 0.05 * scores["fp32"], scores
 
