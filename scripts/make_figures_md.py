@@ -316,7 +316,9 @@ SUMMARY = [
       "counts; the footnotes of Tables 4 and 5 give its Std ratio on our rectangle beside the paper's.")],
     [("09_dem_3d", "*3D density maps (Tables 7 to 9).* In 3D the network's Std(ρ̃_map) is at most the "
       "paper's on {t7_std_rho_map_met} comparable densities with the cube boundary, on {t8_std_rho_map_met} with "
-      "the free one, and at {t9_std_rho_map_met} grid sides of Table 9. The rectangular prism peak is left out: "
+      "the free one, and at {t9_std_rho_map_met} grid sides of Table 9 (`dem3d-cube-native`, the same network "
+      "trained further and wider, outside the verdict, at {t9n_std_rho_map_met}). The rectangular "
+      "prism peak is left out: "
       "its formula as the paper prints it does not give the paper's input; the footnotes of Tables 7 and 8 give "
       "its Std ratio beside the paper's.")],
     [("06_dem_deq_2d", "*Classical solvers.* On the same meshes the flow solver leaves a lower Std(ρ̃_map) than "
