@@ -147,6 +147,8 @@ def _model_section(label: str, model: str, meta: dict, shipped: dict[str, str], 
         lines.append("- **Kept:** its parent's weights (no validated state of the last run improved on them)."
                      if last.kept == 0 else
                      f"- **Kept:** the weights of step {last.kept:,} (the best validated state).")
+    elif meta.get("selected_step") == last.steps:
+        lines.append(f"- **Kept:** the weights of the last run's last step, {last.steps:,} (the best validated state).")
     head = f"- **Parent of run {source.index}:**" if len(runs) > 1 else "- **Parent:**"
     if parent is None:
         lines.append(f"{head} none (freshly initialised weights).")
