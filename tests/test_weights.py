@@ -63,7 +63,8 @@ def test_metadata_records_provenance(name):
     # overrides given on the recorded command line (e.g. --steps for a warm restart) are what it says they are
     words = meta.get("command", "").split()
     for flag, key, kind in (("--steps", "steps", int), ("--batch", "batch", int), ("--seed", "seed", int),
-                            ("--lr", "lr", float), ("--ema", "ema", float)):
+                            ("--lr", "lr", float), ("--ema", "ema", float), ("--precision", "precision", str),
+                            ("--snapshot-every", "snapshot_every", int)):
         if flag in words:
             assert stored[key] == kind(words[words.index(flag) + 1])
             expected[key] = stored[key]
@@ -85,10 +86,6 @@ def test_metadata_records_provenance(name):
         if base != expected["model"]["base"]:
             assert any("grown" in rec for rec in meta["lineage"])
         expected["model"] = {**expected["model"], "base": base}
-    for flag, key, kind in (("--precision", "precision", str), ("--snapshot-every", "snapshot_every", int)):
-        if flag in words:
-            assert stored[key] == kind(words[words.index(flag) + 1])
-            expected[key] = stored[key]
     if "--hard-share" in words:  # the share of hard fields in the random densities
         share = float(words[words.index("--hard-share") + 1])
         assert stored["density_field"]["p_hard"] == share
